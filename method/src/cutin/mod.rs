@@ -1,0 +1,149 @@
+//! Case 1 of the paper: cut-in (safety, two dimensions).
+//!
+//! A scenario is `x = (R, Ṙ)`, the range and range rate at the moment a
+//! background vehicle cuts in; the event is an accident during the run.
+
+mod exposure_model;
+mod simulation;
+
+pub use exposure_model::{default_grid, CutInExposureModel};
+pub use simulation::{enhanced_ttc, normalised_ettc, CutInPreset, CutInRun, CutInSettings};
+
+use crate::case::{Case, SurrogateEvaluation};
+use crate::mass::GridMass;
+use crate::ndd_table::{parse_table, NddTable, TableError};
+use crate::objective::BoxDistance;
+use crate::vehicle::VehicleModel;
+use thiserror::Error;
+
+/// Why a cut-in case could not be set up.
+#[derive(Debug, Error, PartialEq)]
+pub enum CutInError {
+    #[error("the cut-in case needs a two-dimensional (range, range rate) exposure, got {0} dimension(s)")]
+    Dimensions(usize),
+    #[error(transparent)]
+    Table(#[from] TableError),
+}
+
+/// Parameters of the auxiliary objective `J(x) = mnpETTC(x) + w d(x, Ω)` (paper Table II).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CutInObjective {
+    /// ETTC normalisation U_I (s).
+    pub u_i: f64,
+    /// Ω = [6, 88] m × [−2.4, 1.2] m/s with normalisation U_F = (18, 20).
+    pub common_set: BoxDistance<2>,
+    /// Balance weight w.
+    pub weight: f64,
+}
+
+impl Default for CutInObjective {
+    fn default() -> Self {
+        Self {
+            u_i: 100.0,
+            common_set: BoxDistance {
+                lower: [6.0, -2.4],
+                upper: [88.0, 1.2],
+                scale: [18.0, 20.0],
+            },
+            weight: 1.0,
+        }
+    }
+}
+
+/// The cut-in case: an exposure on a (range, range rate) grid, a simulation
+/// preset and the auxiliary objective.
+#[derive(Debug, Clone)]
+pub struct CutIn {
+    exposure: GridMass,
+    exposure_name: String,
+    settings: CutInSettings,
+    preset: CutInPreset,
+    objective: CutInObjective,
+}
+
+impl CutIn {
+    /// The case on a given exposure (a table or a model evaluated on a grid).
+    pub fn new(
+        exposure: GridMass,
+        exposure_name: impl Into<String>,
+        preset: CutInPreset,
+    ) -> Result<Self, CutInError> {
+        let d = exposure.grid().dimensions();
+        if d != 2 {
+            return Err(CutInError::Dimensions(d));
+        }
+        Ok(Self {
+            exposure,
+            exposure_name: exposure_name.into(),
+            settings: preset.settings(),
+            preset,
+            objective: CutInObjective::default(),
+        })
+    }
+
+    /// The built-in default: the fitted exposure model on the default grid.
+    pub fn builtin(preset: CutInPreset) -> Self {
+        let mass = CutInExposureModel::default().mass_on(default_grid());
+        Self::new(mass, "builtin", preset).expect("the default grid is two-dimensional")
+    }
+
+    /// The case on an exposure table in the authors' layout (see [`crate::ndd_table`]).
+    pub fn from_table(
+        text: &str,
+        exposure_name: impl Into<String>,
+        preset: CutInPreset,
+    ) -> Result<(Self, NddTable), CutInError> {
+        let table = parse_table(text, "range", "range_rate")?;
+        let case = Self::new(table.mass.clone(), exposure_name, preset)?;
+        Ok((case, table))
+    }
+
+    pub fn preset(&self) -> CutInPreset {
+        self.preset
+    }
+
+    pub fn settings(&self) -> &CutInSettings {
+        &self.settings
+    }
+
+    /// Runs `vehicle` in `cell` and returns the full run record.
+    pub fn run(&self, vehicle: &VehicleModel, cell: usize) -> CutInRun {
+        let grid = self.exposure.grid();
+        self.settings.run(
+            vehicle,
+            grid.value(cell, 0),
+            grid.value(cell, 1),
+            self.objective.u_i,
+        )
+    }
+}
+
+impl Case for CutIn {
+    type Vehicle = VehicleModel;
+
+    fn name(&self) -> &'static str {
+        "cut-in"
+    }
+
+    fn exposure(&self) -> &GridMass {
+        &self.exposure
+    }
+
+    fn exposure_name(&self) -> &str {
+        &self.exposure_name
+    }
+
+    fn is_event(&self, vehicle: &VehicleModel, cell: usize) -> bool {
+        self.run(vehicle, cell).accident
+    }
+
+    fn evaluate_surrogate(&self, surrogate: &VehicleModel, cell: usize) -> SurrogateEvaluation {
+        let run = self.run(surrogate, cell);
+        let values = self.exposure.grid().values(cell);
+        let distance = self.objective.common_set.distance(&[values[0], values[1]]);
+        SurrogateEvaluation {
+            challenge: if run.accident { 1.0 } else { 0.0 },
+            objective: run.mnp_ettc + self.objective.weight * distance,
+        }
+    }
+}

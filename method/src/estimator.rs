@@ -1,0 +1,241 @@
+//! Streaming importance-sampling estimation and the stopping rule (SPEC §3).
+//!
+//! Each test contributes `wᵢ yᵢ` (weight times outcome). The estimate is
+//! `μ̂ₙ = (1/n) Σ wᵢ yᵢ`, the sample variance `sₙ² = Σ (wᵢyᵢ − μ̂ₙ)²/(n − 1)`,
+//! and the relative half-width `rₙ = z sₙ / (√n μ̂ₙ)` with
+//! `z = Φ⁻¹(1 − (1 − c)/2)` for confidence level `c`. Moments are kept with
+//! Welford's update, which stays accurate when the weights are tiny.
+
+use serde::{Deserialize, Serialize};
+use statrs::distribution::{ContinuousCDF, Normal};
+use thiserror::Error;
+
+/// Welford accumulator of the weighted outcomes `wᵢ yᵢ`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct ImportanceEstimator {
+    n: u64,
+    events: u64,
+    mean: f64,
+    /// Σ (wᵢyᵢ − μ̂ₙ)².
+    m2: f64,
+}
+
+impl ImportanceEstimator {
+    /// Adds one test with weight `weight` and outcome `event`.
+    pub fn push(&mut self, weight: f64, event: bool) {
+        let x = if event { weight } else { 0.0 };
+        self.n += 1;
+        self.events += u64::from(event);
+        let delta = x - self.mean;
+        self.mean += delta / self.n as f64;
+        self.m2 += delta * (x - self.mean);
+    }
+
+    pub fn tests(&self) -> u64 {
+        self.n
+    }
+
+    pub fn events(&self) -> u64 {
+        self.events
+    }
+
+    /// `μ̂ₙ`.
+    pub fn estimate(&self) -> f64 {
+        self.mean
+    }
+
+    /// `sₙ²` (0 with fewer than two tests).
+    pub fn variance(&self) -> f64 {
+        if self.n < 2 {
+            0.0
+        } else {
+            self.m2 / (self.n - 1) as f64
+        }
+    }
+
+    /// Half-width `z sₙ/√n` of the normal confidence interval.
+    pub fn half_width(&self, z: f64) -> f64 {
+        if self.n == 0 {
+            return f64::INFINITY;
+        }
+        z * (self.variance() / self.n as f64).sqrt()
+    }
+
+    /// `rₙ = z sₙ/(√n μ̂ₙ)`; infinite while `μ̂ₙ = 0`.
+    pub fn relative_half_width(&self, z: f64) -> f64 {
+        if self.mean > 0.0 {
+            self.half_width(z) / self.mean
+        } else {
+            f64::INFINITY
+        }
+    }
+
+    /// The interval `μ̂ₙ ± z sₙ/√n`.
+    pub fn interval(&self, z: f64) -> (f64, f64) {
+        let h = self.half_width(z);
+        (self.mean - h, self.mean + h)
+    }
+}
+
+/// The two-sided normal quantile `z = Φ⁻¹(1 − (1 − c)/2)`; 1.6449 for c = 0.90.
+pub fn z_for_confidence(confidence: f64) -> f64 {
+    Normal::new(0.0, 1.0)
+        .expect("unit normal")
+        .inverse_cdf(1.0 - (1.0 - confidence) / 2.0)
+}
+
+/// Why a stopping rule is invalid.
+#[derive(Debug, Error, PartialEq)]
+pub enum RuleError {
+    #[error("beta = {0} must be in (0, 1)")]
+    Beta(f64),
+    #[error("confidence = {0} must be in (0, 1)")]
+    Confidence(f64),
+    #[error("max_tests must be ≥ 1 and ≥ n_min ({n_min}), got {max_tests}")]
+    MaxTests { max_tests: u64, n_min: u64 },
+}
+
+/// When a campaign stops: at the smallest `n ≥ n_min` with at least
+/// `min_events` events, `μ̂ₙ > 0` and `rₙ ≤ β` (converged), or at `max_tests`
+/// (exhausted).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct StoppingRule {
+    pub beta: f64,
+    pub confidence: f64,
+    pub n_min: u64,
+    pub min_events: u64,
+    pub max_tests: u64,
+}
+
+/// Defaults chosen from coverage measurements; see `docs/statistics.md`.
+pub const DEFAULT_N_MIN: u64 = 30;
+pub const DEFAULT_MIN_EVENTS: u64 = 10;
+pub const DEFAULT_CONFIDENCE: f64 = 0.90;
+
+impl StoppingRule {
+    pub fn new(beta: f64, max_tests: u64) -> Self {
+        Self {
+            beta,
+            confidence: DEFAULT_CONFIDENCE,
+            n_min: DEFAULT_N_MIN,
+            min_events: DEFAULT_MIN_EVENTS,
+            max_tests,
+        }
+    }
+
+    pub fn validate(&self) -> Result<(), RuleError> {
+        if !(self.beta > 0.0 && self.beta < 1.0) {
+            return Err(RuleError::Beta(self.beta));
+        }
+        if !(self.confidence > 0.0 && self.confidence < 1.0) {
+            return Err(RuleError::Confidence(self.confidence));
+        }
+        if self.max_tests == 0 || self.max_tests < self.n_min {
+            return Err(RuleError::MaxTests {
+                max_tests: self.max_tests,
+                n_min: self.n_min,
+            });
+        }
+        Ok(())
+    }
+
+    pub fn z(&self) -> f64 {
+        z_for_confidence(self.confidence)
+    }
+
+    /// The decision after the tests in `estimator`, given `z` from [`Self::z`].
+    pub fn decide(&self, estimator: &ImportanceEstimator, z: f64) -> Decision {
+        let n = estimator.tests();
+        if n >= self.n_min
+            && estimator.events() >= self.min_events
+            && estimator.estimate() > 0.0
+            && estimator.relative_half_width(z) <= self.beta
+        {
+            Decision::Converged
+        } else if n >= self.max_tests {
+            Decision::Exhausted
+        } else {
+            Decision::Continue
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Decision {
+    Continue,
+    Converged,
+    Exhausted,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn welford_matches_the_two_pass_formulas() {
+        let data = [
+            (2.0, true),
+            (0.5, false),
+            (3.0, true),
+            (1e-7, true),
+            (4.0, false),
+        ];
+        let mut e = ImportanceEstimator::default();
+        for &(w, y) in &data {
+            e.push(w, y);
+        }
+        let xs: Vec<f64> = data.iter().map(|&(w, y)| if y { w } else { 0.0 }).collect();
+        let mean = xs.iter().sum::<f64>() / 5.0;
+        let var = xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / 4.0;
+        assert!((e.estimate() - mean).abs() < 1e-15);
+        assert!((e.variance() - var).abs() < 1e-14);
+        assert_eq!(e.events(), 3);
+        let z = z_for_confidence(0.9);
+        assert!((e.relative_half_width(z) - z * (var / 5.0).sqrt() / mean).abs() < 1e-12);
+    }
+
+    #[test]
+    fn z_matches_the_authors_1_645() {
+        assert!((z_for_confidence(0.90) - 1.6448536).abs() < 1e-6);
+        assert!((z_for_confidence(0.95) - 1.9599640).abs() < 1e-6);
+    }
+
+    #[test]
+    fn the_rule_needs_n_min_events_and_precision() {
+        let rule = StoppingRule {
+            beta: 0.5,
+            confidence: 0.9,
+            n_min: 4,
+            min_events: 2,
+            max_tests: 6,
+        };
+        let z = rule.z();
+        let mut e = ImportanceEstimator::default();
+        // Identical positive outcomes: zero variance, but n < n_min.
+        for _ in 0..3 {
+            e.push(1.0, true);
+            assert_eq!(rule.decide(&e, z), Decision::Continue);
+        }
+        e.push(1.0, true);
+        assert_eq!(rule.decide(&e, z), Decision::Converged);
+        // No events at all: exhausted at max_tests.
+        let mut none = ImportanceEstimator::default();
+        for k in 1..=6 {
+            none.push(1.0, false);
+            let expected = if k == 6 {
+                Decision::Exhausted
+            } else {
+                Decision::Continue
+            };
+            assert_eq!(rule.decide(&none, z), expected);
+        }
+        assert!(StoppingRule { beta: 1.0, ..rule }.validate().is_err());
+        assert!(StoppingRule {
+            max_tests: 3,
+            ..rule
+        }
+        .validate()
+        .is_err());
+    }
+}

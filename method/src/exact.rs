@@ -1,0 +1,85 @@
+//! Exact answers on the grid for deterministic vehicles (SPEC §3, §8).
+//!
+//! - `P(A) = Σ_x P(A|x) P(x)` by enumeration;
+//! - the per-test variance of the importance-sampling estimator with
+//!   distribution `q`: `σ² = Σ_x (P(A|x)P(x))²/q(x) − P(A)²`;
+//! - the expected tests to reach relative half-width β:
+//!   `n ≈ z² σ² / (β² μ²)`, and for the NDD baseline (`q = P`, Bernoulli
+//!   outcomes) `n ≈ z² (1 − μ) / (β² μ)`.
+
+use crate::case::Case;
+use crate::sampling::LibraryDistribution;
+use crate::tolerance::PROBABILITY_FLOOR;
+use rayon::prelude::*;
+
+/// The cells where a deterministic `vehicle` has the event, among cells of
+/// positive exposure (the others contribute nothing), in increasing order.
+pub fn event_cells<C: Case>(case: &C, vehicle: &C::Vehicle) -> Vec<usize> {
+    let exposure = case.exposure();
+    (0..case.grid().len())
+        .into_par_iter()
+        .filter(|&cell| exposure.p(cell) > 0.0 && case.is_event(vehicle, cell))
+        .collect()
+}
+
+/// `P(A)` from the event cells.
+pub fn event_probability<C: Case>(case: &C, events: &[usize]) -> f64 {
+    events.iter().map(|&c| case.exposure().p(c)).sum()
+}
+
+/// The analytic per-test variance `σ²` of library sampling.
+pub fn library_variance<C: Case>(case: &C, events: &[usize], q: &LibraryDistribution) -> f64 {
+    let mu = event_probability(case, events);
+    let second: f64 = events
+        .iter()
+        .map(|&c| {
+            let p = case.exposure().p(c);
+            p * p / q.q(c).max(PROBABILITY_FLOOR)
+        })
+        .sum();
+    second - mu * mu
+}
+
+/// `z² σ² / (β² μ²)`: expected library tests to relative half-width β.
+pub fn expected_library_tests(variance: f64, mu: f64, beta: f64, z: f64) -> f64 {
+    z * z * variance / (beta * beta * mu * mu)
+}
+
+/// `z² (1 − μ) / (β² μ)`: expected NDD tests to relative half-width β.
+pub fn expected_ndd_tests(mu: f64, beta: f64, z: f64) -> f64 {
+    z * z * (1.0 - mu) / (beta * beta * mu)
+}
+
+/// All exact figures for one vehicle and one library.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ExactReport {
+    pub probability: f64,
+    pub library_variance: f64,
+    pub library_tests: f64,
+    pub ndd_tests: f64,
+}
+
+impl ExactReport {
+    /// The acceleration ratio NDD tests / library tests.
+    pub fn ratio(&self) -> f64 {
+        self.ndd_tests / self.library_tests
+    }
+}
+
+pub fn exact_report<C: Case>(
+    case: &C,
+    vehicle: &C::Vehicle,
+    q: &LibraryDistribution,
+    beta: f64,
+    z: f64,
+) -> ExactReport {
+    let events = event_cells(case, vehicle);
+    let probability = event_probability(case, &events);
+    let library_variance = library_variance(case, &events, q);
+    ExactReport {
+        probability,
+        library_variance,
+        library_tests: expected_library_tests(library_variance, probability, beta, z),
+        ndd_tests: expected_ndd_tests(probability, beta, z),
+    }
+}

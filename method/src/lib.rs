@@ -1,0 +1,18 @@
+//! The testing-scenario-library method of Feng et al. (2020), pure and
+//! synchronous: grids and exposure models, vehicle models, the cases, library
+//! search, sampling, estimation and exact answers. No I/O beyond parsing text
+//! handed in, no async, no HTTP: usable alone from a program or a benchmark.
+
+pub mod campaign;
+pub mod case;
+pub mod cutin;
+pub mod estimator;
+pub mod exact;
+pub mod grid;
+pub mod library;
+pub mod mass;
+pub mod ndd_table;
+pub mod objective;
+pub mod sampling;
+pub mod tolerance;
+pub mod vehicle;

@@ -1,0 +1,227 @@
+//! Scenario libraries: the critical scenarios `Φ = {x : V(x) > γ}` of a
+//! surrogate model, with their criticality `V(x) = P(S|x) P(x)`.
+
+mod exhaustive;
+mod file;
+mod multistart;
+
+pub use file::LibraryFileError;
+
+use crate::case::Case;
+use crate::grid::Grid;
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+/// How the threshold γ is chosen.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum Threshold {
+    /// `γ = m μ_S / N(X)` (Part I, Corollary 2; the default is m = 1).
+    Relative { m: f64 },
+    /// A fixed γ.
+    Absolute { gamma: f64 },
+}
+
+impl Default for Threshold {
+    fn default() -> Self {
+        Threshold::Relative { m: 1.0 }
+    }
+}
+
+/// A threshold parameter outside its range.
+#[derive(Debug, Error, PartialEq)]
+pub enum ThresholdError {
+    #[error("threshold multiplier m = {0} must be a finite number > 0")]
+    BadMultiplier(f64),
+    #[error("absolute threshold γ = {0} must be a finite number ≥ 0")]
+    BadAbsolute(f64),
+}
+
+impl Threshold {
+    pub fn validate(&self) -> Result<(), ThresholdError> {
+        match *self {
+            Threshold::Relative { m } if !(m.is_finite() && m > 0.0) => {
+                Err(ThresholdError::BadMultiplier(m))
+            }
+            Threshold::Absolute { gamma } if !(gamma.is_finite() && gamma >= 0.0) => {
+                Err(ThresholdError::BadAbsolute(gamma))
+            }
+            _ => Ok(()),
+        }
+    }
+
+    /// γ for an SM event rate `mu_s` on a grid of `cells` scenarios.
+    pub fn gamma(&self, mu_s: f64, cells: usize) -> f64 {
+        match *self {
+            Threshold::Relative { m } => m * mu_s / cells as f64,
+            Threshold::Absolute { gamma } => gamma,
+        }
+    }
+}
+
+/// The search strategy.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "method", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum SearchMethod {
+    /// Evaluate the surrogate on every cell with positive exposure.
+    Exhaustive,
+    /// Local searches of the auxiliary objective from `starts` uniform random
+    /// cells, then a flood fill from every critical optimum.
+    Multistart { starts: usize, seed: u64 },
+}
+
+/// What a search did.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SearchReport {
+    pub method: SearchMethod,
+    /// Distinct cells on which the surrogate was simulated.
+    pub sm_evaluations: usize,
+    /// Share of a reference (exhaustive) library's criticality mass found,
+    /// when one was computed.
+    pub recall: Option<f64>,
+}
+
+/// One library scenario.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct LibraryCell {
+    pub cell: usize,
+    /// `V(x) = P(S|x) P(x)`.
+    pub criticality: f64,
+}
+
+/// The exposure a library was built on.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ExposureRef {
+    pub name: String,
+    pub fingerprint: String,
+}
+
+/// A scenario library. See `docs/library-format.md` for the file format.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Library {
+    pub case: String,
+    /// The case's simulation preset (e.g. `paper-code`).
+    pub preset: String,
+    /// The surrogate model, as its specification.
+    pub surrogate: serde_json::Value,
+    pub exposure: ExposureRef,
+    pub grid: Grid,
+    pub threshold: Threshold,
+    /// The γ used.
+    pub gamma: f64,
+    /// `μ_S = Σ_x V(x)` over the evaluated cells (exact for exhaustive, a
+    /// lower bound for multistart).
+    pub mu_s: f64,
+    /// `W = Σ_{x∈Φ} V(x)`.
+    pub w: f64,
+    pub search: SearchReport,
+    /// Library cells in increasing cell order.
+    pub cells: Vec<LibraryCell>,
+}
+
+/// A library request: threshold and search.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LibraryRequest {
+    pub threshold: Threshold,
+    pub search: SearchMethod,
+}
+
+/// Criticality of every evaluated cell; the raw result of a search.
+pub(crate) struct Evaluated {
+    /// `(cell, V(x))` for every cell with `V > 0`, any order.
+    pub critical: Vec<(usize, f64)>,
+    pub sm_evaluations: usize,
+}
+
+/// Builds a library of `surrogate` on `case`.
+pub fn build_library<C: Case>(
+    case: &C,
+    surrogate: &C::Vehicle,
+    surrogate_spec: serde_json::Value,
+    preset: &str,
+    request: &LibraryRequest,
+) -> Library
+where
+    C::Vehicle: Sync,
+{
+    let evaluated = match request.search {
+        SearchMethod::Exhaustive => exhaustive::search(case, surrogate),
+        SearchMethod::Multistart { starts, seed } => {
+            multistart::search(case, surrogate, &request.threshold, starts, seed)
+        }
+    };
+    let grid = case.grid();
+    let mu_s: f64 = evaluated.critical.iter().map(|&(_, v)| v).sum();
+    let gamma = request.threshold.gamma(mu_s, grid.len());
+    let mut cells: Vec<LibraryCell> = evaluated
+        .critical
+        .into_iter()
+        .filter(|&(_, v)| v > gamma)
+        .map(|(cell, criticality)| LibraryCell { cell, criticality })
+        .collect();
+    cells.sort_by_key(|c| c.cell);
+    let w = cells.iter().map(|c| c.criticality).sum();
+    Library {
+        case: case.name().to_owned(),
+        preset: preset.to_owned(),
+        surrogate: surrogate_spec,
+        exposure: ExposureRef {
+            name: case.exposure_name().to_owned(),
+            fingerprint: case.exposure().fingerprint(),
+        },
+        grid: grid.clone(),
+        threshold: request.threshold,
+        gamma,
+        mu_s,
+        w,
+        search: SearchReport {
+            method: request.search,
+            sm_evaluations: evaluated.sm_evaluations,
+            recall: None,
+        },
+        cells,
+    }
+}
+
+impl Library {
+    /// `N(Φ)`.
+    pub fn size(&self) -> usize {
+        self.cells.len()
+    }
+
+    /// `N(X)`.
+    pub fn total_scenarios(&self) -> usize {
+        self.grid.len()
+    }
+
+    /// The share of `reference`'s criticality mass `W` that this library
+    /// contains: `Σ_{x∈Φ∩Φ_ref} V_ref(x) / W_ref`.
+    pub fn recall_against(&self, reference: &Library) -> f64 {
+        let mine: std::collections::HashSet<usize> = self.cells.iter().map(|c| c.cell).collect();
+        let found: f64 = reference
+            .cells
+            .iter()
+            .filter(|c| mine.contains(&c.cell))
+            .map(|c| c.criticality)
+            .sum();
+        found / reference.w
+    }
+
+    /// Checks that this library belongs to `case` (name, grid and exposure).
+    pub fn check_matches<C: Case>(&self, case: &C) -> Result<(), LibraryFileError> {
+        if self.case != case.name() {
+            return Err(LibraryFileError::WrongCase {
+                library: self.case.clone(),
+                expected: case.name().to_owned(),
+            });
+        }
+        let fingerprint = case.exposure().fingerprint();
+        if self.exposure.fingerprint != fingerprint {
+            return Err(LibraryFileError::WrongExposure {
+                library: format!("{} ({})", self.exposure.name, self.exposure.fingerprint),
+                campaign: format!("{} ({})", case.exposure_name(), fingerprint),
+            });
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,216 @@
+//! Reader for two-dimensional exposure tables in the layout of the authors'
+//! cut-in table: row 0 is an empty corner cell followed by the column-axis
+//! labels; every later row is a row-axis label followed by one probability per
+//! column. The body is a joint probability mass over (row label, column label).
+//!
+//! Errors name the problem and the place as a 1-based line and field number,
+//! the way a spreadsheet or editor shows them.
+
+use crate::grid::{Axis, Grid, GridError};
+use crate::mass::{GridMass, MassError};
+use thiserror::Error;
+
+/// Why a table was rejected.
+#[derive(Debug, Error, PartialEq)]
+pub enum TableError {
+    #[error("the table is empty")]
+    Empty,
+    #[error("the table has a header line but no data rows")]
+    NoRows,
+    #[error("line 1 (the header) must hold an empty corner cell and at least one column label, but it has {fields} field(s)")]
+    HeaderTooShort { fields: usize },
+    #[error("line {line} has {actual} fields but the header has {expected}: every row needs a label and one value per column")]
+    WrongShape {
+        line: usize,
+        expected: usize,
+        actual: usize,
+    },
+    #[error("line {line}, field {field}: `{text}` is not a number")]
+    NotNumeric {
+        line: usize,
+        field: usize,
+        text: String,
+    },
+    #[error("line {line}, field {field}: the value is {value}; probabilities must be finite")]
+    NotFinite {
+        line: usize,
+        field: usize,
+        value: f64,
+    },
+    #[error("line {line}, field {field}: the probability {value} is negative")]
+    Negative {
+        line: usize,
+        field: usize,
+        value: f64,
+    },
+    #[error("labels: {0}")]
+    Labels(GridError),
+    #[error("the probabilities sum to {sum}, which differs from 1 by more than {tolerance}")]
+    SumOff { sum: f64, tolerance: f64 },
+}
+
+/// A validated exposure table.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NddTable {
+    pub mass: GridMass,
+}
+
+impl NddTable {
+    /// The deviation from 1 of the sum as read (zero when none), which the
+    /// reader removed by renormalising; callers report it.
+    pub fn renormalised_by(&self) -> f64 {
+        self.mass.original_sum() - 1.0
+    }
+}
+
+/// Parses `text` as a table whose row labels form axis `row_axis` and whose
+/// column labels form axis `column_axis`.
+pub fn parse_table(text: &str, row_axis: &str, column_axis: &str) -> Result<NddTable, TableError> {
+    let mut lines = text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| (i + 1, l.trim_end_matches('\r')))
+        .filter(|(_, l)| !l.trim().is_empty());
+    let (header_line, header) = lines.next().ok_or(TableError::Empty)?;
+    let header_fields: Vec<&str> = header.split(',').collect();
+    if header_fields.len() < 2 {
+        return Err(TableError::HeaderTooShort {
+            fields: header_fields.len(),
+        });
+    }
+    let columns = header_fields.len() - 1;
+    let column_labels = header_fields[1..]
+        .iter()
+        .enumerate()
+        .map(|(k, text)| number(text, header_line, k + 2))
+        .collect::<Result<Vec<_>, _>>()?;
+
+    let mut row_labels = Vec::new();
+    let mut body = Vec::new();
+    for (line, content) in lines {
+        let fields: Vec<&str> = content.split(',').collect();
+        if fields.len() != columns + 1 {
+            return Err(TableError::WrongShape {
+                line,
+                expected: columns + 1,
+                actual: fields.len(),
+            });
+        }
+        row_labels.push(number(fields[0], line, 1)?);
+        for (k, text) in fields[1..].iter().enumerate() {
+            let field = k + 2;
+            let value = number(text, line, field)?;
+            if !value.is_finite() {
+                return Err(TableError::NotFinite { line, field, value });
+            }
+            if value < 0.0 {
+                return Err(TableError::Negative { line, field, value });
+            }
+            body.push(value);
+        }
+    }
+    if row_labels.is_empty() {
+        return Err(TableError::NoRows);
+    }
+    let grid = Grid::new(vec![
+        Axis::new(row_axis, row_labels).map_err(TableError::Labels)?,
+        Axis::new(column_axis, column_labels).map_err(TableError::Labels)?,
+    ])
+    .map_err(TableError::Labels)?;
+    let mass = GridMass::new(grid, body).map_err(|e| match e {
+        MassError::SumOff { sum, tolerance } => TableError::SumOff { sum, tolerance },
+        // Cells were checked above with their line and field.
+        other => unreachable!("cell check missed {other}"),
+    })?;
+    Ok(NddTable { mass })
+}
+
+fn number(text: &str, line: usize, field: usize) -> Result<f64, TableError> {
+    let trimmed = text.trim().trim_matches('"').trim();
+    trimmed.parse::<f64>().map_err(|_| TableError::NotNumeric {
+        line,
+        field,
+        text: text.trim().to_owned(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<NddTable, TableError> {
+        parse_table(text, "range", "range_rate")
+    }
+
+    #[test]
+    fn reads_a_small_table() {
+        let t = parse(",-1,0,1\n2,0.1,0.2,0.1\n4,0.2,0.3,0.1\n").unwrap();
+        let g = t.mass.grid();
+        assert_eq!(g.len(), 6);
+        assert_eq!(g.values(4), vec![4.0, 0.0]);
+        assert!((t.mass.p(4) - 0.3).abs() < 1e-15);
+        assert!(t.renormalised_by().abs() < 1e-12);
+    }
+
+    #[test]
+    fn small_deviation_is_renormalised_and_reported() {
+        let t = parse(",0,1\n1,0.5,0.50002\n").unwrap();
+        assert!((t.renormalised_by() - 2e-5).abs() < 1e-12);
+        assert!((t.mass.p(0) + t.mass.p(1) - 1.0).abs() < 1e-15);
+    }
+
+    #[test]
+    fn each_problem_names_its_place() {
+        assert_eq!(parse(""), Err(TableError::Empty));
+        assert_eq!(parse(",0,1\n"), Err(TableError::NoRows));
+        assert_eq!(
+            parse(",0,1\n1,0.5\n"),
+            Err(TableError::WrongShape {
+                line: 2,
+                expected: 3,
+                actual: 2
+            })
+        );
+        assert_eq!(
+            parse(",0,1\n1,0.5,abc\n"),
+            Err(TableError::NotNumeric {
+                line: 2,
+                field: 3,
+                text: "abc".into()
+            })
+        );
+        assert!(matches!(
+            parse(",0,1\n1,NaN,1\n"),
+            Err(TableError::NotFinite {
+                line: 2,
+                field: 2,
+                ..
+            })
+        ));
+        assert_eq!(
+            parse(",0,1\n1,1.5,-0.5\n"),
+            Err(TableError::Negative {
+                line: 2,
+                field: 3,
+                value: -0.5
+            })
+        );
+        assert_eq!(
+            parse(",0,1\n1,0.5,0.6\n"),
+            Err(TableError::SumOff {
+                sum: 1.1,
+                tolerance: 1e-4
+            })
+        );
+        assert!(matches!(
+            parse(",1,0\n1,0.5,0.5\n"),
+            Err(TableError::Labels(GridError::NotIncreasing { .. }))
+        ));
+    }
+
+    #[test]
+    fn error_messages_say_where() {
+        let e = parse(",0,1\n1,0.5,x\n").unwrap_err().to_string();
+        assert_eq!(e, "line 2, field 3: `x` is not a number");
+    }
+}

@@ -1,0 +1,235 @@
+//! Test distributions: the ε-greedy library distribution and the NDD
+//! baseline, with exact sampling by alias tables and importance weights.
+//!
+//! Randomness is counter-based: test `i` of a campaign with seed `s` draws
+//! from a ChaCha8 stream keyed by `s` and positioned at stream `i`, so the
+//! scenario of test `i` depends on `(s, i)` alone, not on who runs it or when.
+
+use crate::library::Library;
+use crate::mass::GridMass;
+use crate::tolerance::PROBABILITY_FLOOR;
+use rand::distr::Distribution;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::weighted::WeightedAliasIndex;
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+/// The random stream of test `index` of a campaign with seed `seed`.
+pub fn test_rng(seed: u64, index: u64) -> ChaCha8Rng {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    rng.set_stream(index);
+    rng
+}
+
+/// How the ε share of the library distribution is spread outside the library.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum OutsideSpread {
+    /// `q(x) = ε / (N(X) − N(Φ))` (the paper's form, the default).
+    #[default]
+    Uniform,
+    /// `q(x) = ε P(x) / P(X \ Φ)`: never spends tests on impossible scenarios.
+    Ndd,
+}
+
+#[derive(Debug, Error, PartialEq)]
+pub enum SamplingError {
+    #[error("ε = {0} must be in [0, 1)")]
+    Epsilon(f64),
+    #[error("the library is empty: there is nothing to sample with weight 1 − ε")]
+    EmptyLibrary,
+    #[error("the library's grid has {library} cells but the exposure has {exposure}")]
+    GridMismatch { library: usize, exposure: usize },
+}
+
+/// One drawn test: the scenario and its importance weight `P(x)/q(x)`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Draw {
+    pub cell: usize,
+    pub weight: f64,
+}
+
+/// The ε-greedy library distribution (SPEC §2.4):
+/// `q(x) = (1 − ε) V(x)/W` on the library, and `ε` spread outside it.
+#[derive(Debug, Clone)]
+pub struct LibraryDistribution {
+    exposure: GridMass,
+    cells: Vec<usize>,
+    inside: WeightedAliasIndex<f64>,
+    /// Position in `cells` of each grid cell in the library.
+    in_library: Vec<Option<u32>>,
+    inside_q: Vec<f64>,
+    epsilon: f64,
+    outside: OutsideSpread,
+    outside_cells: usize,
+    /// For the NDD spread: alias over the outside cells with positive exposure.
+    outside_ndd: Option<(Vec<usize>, WeightedAliasIndex<f64>, f64)>,
+}
+
+impl LibraryDistribution {
+    pub fn new(
+        library: &Library,
+        exposure: &GridMass,
+        epsilon: f64,
+        outside: OutsideSpread,
+    ) -> Result<Self, SamplingError> {
+        if !(0.0..1.0).contains(&epsilon) {
+            return Err(SamplingError::Epsilon(epsilon));
+        }
+        let n = exposure.grid().len();
+        if library.total_scenarios() != n {
+            return Err(SamplingError::GridMismatch {
+                library: library.total_scenarios(),
+                exposure: n,
+            });
+        }
+        if library.cells.is_empty() {
+            return Err(SamplingError::EmptyLibrary);
+        }
+        let cells: Vec<usize> = library.cells.iter().map(|c| c.cell).collect();
+        let mut in_library = vec![None; n];
+        for (k, &c) in cells.iter().enumerate() {
+            in_library[c] = Some(k as u32);
+        }
+        let outside_cells = n - cells.len();
+        // With nothing outside, all mass stays in the library.
+        let epsilon = if outside_cells == 0 { 0.0 } else { epsilon };
+        let weights: Vec<f64> = library.cells.iter().map(|c| c.criticality).collect();
+        let inside = WeightedAliasIndex::new(weights).map_err(|_| SamplingError::EmptyLibrary)?;
+        let inside_q = library
+            .cells
+            .iter()
+            .map(|c| (1.0 - epsilon) * c.criticality / library.w)
+            .collect();
+        let outside_ndd = match outside {
+            OutsideSpread::Uniform => None,
+            OutsideSpread::Ndd => {
+                let out: Vec<usize> = (0..n)
+                    .filter(|&c| in_library[c].is_none() && exposure.p(c) > 0.0)
+                    .collect();
+                let mass: Vec<f64> = out.iter().map(|&c| exposure.p(c)).collect();
+                let total: f64 = mass.iter().sum();
+                WeightedAliasIndex::new(mass)
+                    .ok()
+                    .map(|alias| (out, alias, total))
+            }
+        };
+        let epsilon = match (outside, &outside_ndd) {
+            (OutsideSpread::Ndd, None) => 0.0,
+            _ => epsilon,
+        };
+        Ok(Self {
+            exposure: exposure.clone(),
+            cells,
+            inside,
+            in_library,
+            inside_q,
+            epsilon,
+            outside,
+            outside_cells,
+            outside_ndd,
+        })
+    }
+
+    /// The ε actually in force (0 when nothing lies outside the library).
+    pub fn epsilon(&self) -> f64 {
+        self.epsilon
+    }
+
+    /// `q(x)`.
+    pub fn q(&self, cell: usize) -> f64 {
+        if let Some(k) = self.in_library[cell] {
+            return self.inside_q[k as usize];
+        }
+        match (&self.outside, &self.outside_ndd) {
+            (OutsideSpread::Uniform, _) => self.epsilon / self.outside_cells as f64,
+            (OutsideSpread::Ndd, Some((_, _, total))) => {
+                self.epsilon * self.exposure.p(cell) / total
+            }
+            (OutsideSpread::Ndd, None) => 0.0,
+        }
+    }
+
+    /// Whether `cell` is in the library.
+    pub fn contains(&self, cell: usize) -> bool {
+        self.in_library[cell].is_some()
+    }
+
+    /// Draws one scenario.
+    pub fn sample<R: Rng + ?Sized>(&self, rng: &mut R) -> usize {
+        let explore = self.epsilon > 0.0 && rng.random::<f64>() < self.epsilon;
+        if !explore {
+            return self.cells[self.inside.sample(rng)];
+        }
+        match (&self.outside, &self.outside_ndd) {
+            (OutsideSpread::Ndd, Some((out, alias, _))) => out[alias.sample(rng)],
+            _ => self.sample_uniform_outside(rng),
+        }
+    }
+
+    /// Uniform over the cells outside the library: the k-th outside cell for
+    /// a uniform k, found by skipping library cells (which are sorted).
+    fn sample_uniform_outside<R: Rng + ?Sized>(&self, rng: &mut R) -> usize {
+        let k = rng.random_range(0..self.outside_cells);
+        // The k-th cell not in `cells`: the answer is k + (number of library
+        // cells ≤ answer); binary search on the sorted library cells.
+        let (mut lo, mut hi) = (0usize, self.cells.len());
+        while lo < hi {
+            let mid = (lo + hi) / 2;
+            // Library cells before position mid leave cells[mid] − mid outside cells below it.
+            if self.cells[mid] - mid <= k {
+                lo = mid + 1;
+            } else {
+                hi = mid;
+            }
+        }
+        k + lo
+    }
+
+    /// A test's scenario and weight `P(x)/q(x)`.
+    pub fn draw(&self, seed: u64, index: u64) -> Draw {
+        let cell = self.sample(&mut test_rng(seed, index));
+        Draw {
+            cell,
+            weight: self.exposure.p(cell) / self.q(cell).max(PROBABILITY_FLOOR),
+        }
+    }
+}
+
+/// The NDD baseline: `q = P`, every weight 1.
+#[derive(Debug, Clone)]
+pub struct NddDistribution {
+    alias: WeightedAliasIndex<f64>,
+}
+
+impl NddDistribution {
+    pub fn new(exposure: &GridMass) -> Self {
+        let alias = WeightedAliasIndex::new(exposure.masses().to_vec())
+            .expect("a mass function has positive total weight");
+        Self { alias }
+    }
+
+    pub fn draw(&self, seed: u64, index: u64) -> Draw {
+        Draw {
+            cell: self.alias.sample(&mut test_rng(seed, index)),
+            weight: 1.0,
+        }
+    }
+}
+
+/// Either test distribution.
+#[derive(Debug, Clone)]
+pub enum TestDistribution {
+    Library(LibraryDistribution),
+    Ndd(NddDistribution),
+}
+
+impl TestDistribution {
+    pub fn draw(&self, seed: u64, index: u64) -> Draw {
+        match self {
+            TestDistribution::Library(d) => d.draw(seed, index),
+            TestDistribution::Ndd(d) => d.draw(seed, index),
+        }
+    }
+}

@@ -1,0 +1,248 @@
+//! Longitudinal vehicle models: the surrogate model (SM) that builds a library
+//! and the built-in vehicles under test (VUT).
+//!
+//! A model is described by a [`VehicleSpec`] (serde: `{"model": "idm", ...}`,
+//! every parameter optional with the documented default) and validated into a
+//! [`VehicleModel`]. A simulation asks a fresh [`Controller`] per test for an
+//! acceleration at each step; the controller keeps whatever memory the model
+//! has (the switching ACC remembers its last error and output).
+
+mod acc_aeb;
+mod fvdm;
+mod idm;
+mod switching_acc;
+
+pub use acc_aeb::AccAebParams;
+pub use fvdm::FvdmParams;
+pub use idm::IdmParams;
+pub use switching_acc::{SwitchingAccParams, SwitchingAccState};
+
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+/// A parameter outside its valid range.
+#[derive(Debug, Error, PartialEq)]
+#[error("{model}: parameter `{parameter}` = {value} {requirement}")]
+pub struct ParamError {
+    pub model: &'static str,
+    pub parameter: &'static str,
+    pub value: f64,
+    pub requirement: &'static str,
+}
+
+/// Returns an error unless `value` is finite and satisfies `ok`.
+pub(crate) fn check(
+    model: &'static str,
+    parameter: &'static str,
+    value: f64,
+    ok: impl Fn(f64) -> bool,
+    requirement: &'static str,
+) -> Result<(), ParamError> {
+    if value.is_finite() && ok(value) {
+        Ok(())
+    } else {
+        Err(ParamError {
+            model,
+            parameter,
+            value,
+            requirement,
+        })
+    }
+}
+
+/// What a car-following controller sees at one step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FollowerObservation {
+    /// Own speed v (m/s).
+    pub speed: f64,
+    /// Leader's speed (m/s).
+    pub lead_speed: f64,
+    /// Range R: leader's rear bumper to own front bumper (m).
+    pub gap: f64,
+}
+
+/// A vehicle model as written in a request or a file, before validation.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "model", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum VehicleSpec {
+    Idm(IdmParams),
+    Fvdm(FvdmParams),
+    SwitchingAcc(SwitchingAccParams),
+    AccAeb(AccAebParams),
+}
+
+/// A validated vehicle model. Deserialising one validates it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "VehicleSpec", into = "VehicleSpec")]
+pub struct VehicleModel(VehicleSpec);
+
+/// Names of the built-in models, in the order `tslg exact` reports them.
+pub const BUILTIN_MODELS: [&str; 4] = ["idm", "fvdm", "switching-acc", "acc-aeb"];
+
+impl TryFrom<VehicleSpec> for VehicleModel {
+    type Error = ParamError;
+    fn try_from(spec: VehicleSpec) -> Result<Self, ParamError> {
+        match &spec {
+            VehicleSpec::Idm(p) => p.validate(),
+            VehicleSpec::Fvdm(p) => p.validate(),
+            VehicleSpec::SwitchingAcc(p) => p.validate(),
+            VehicleSpec::AccAeb(p) => p.validate(),
+        }?;
+        Ok(Self(spec))
+    }
+}
+
+impl From<VehicleModel> for VehicleSpec {
+    fn from(model: VehicleModel) -> Self {
+        model.0
+    }
+}
+
+/// An unknown built-in model name.
+#[derive(Debug, Error, PartialEq)]
+#[error("unknown vehicle model `{0}`; built-in models are idm, fvdm, switching-acc, acc-aeb")]
+pub struct UnknownModel(pub String);
+
+impl VehicleModel {
+    /// A built-in model with its default parameters.
+    pub fn builtin(name: &str) -> Result<Self, UnknownModel> {
+        let spec = match name {
+            "idm" => VehicleSpec::Idm(IdmParams::default()),
+            "fvdm" => VehicleSpec::Fvdm(FvdmParams::default()),
+            "switching-acc" => VehicleSpec::SwitchingAcc(SwitchingAccParams::default()),
+            "acc-aeb" => VehicleSpec::AccAeb(AccAebParams::default()),
+            other => return Err(UnknownModel(other.to_owned())),
+        };
+        Ok(Self(spec))
+    }
+
+    /// The model's name as used on the command line and in files.
+    pub fn name(&self) -> &'static str {
+        match self.0 {
+            VehicleSpec::Idm(_) => "idm",
+            VehicleSpec::Fvdm(_) => "fvdm",
+            VehicleSpec::SwitchingAcc(_) => "switching-acc",
+            VehicleSpec::AccAeb(_) => "acc-aeb",
+        }
+    }
+
+    pub fn spec(&self) -> &VehicleSpec {
+        &self.0
+    }
+
+    /// A controller with fresh memory, for one test.
+    pub fn controller(&self) -> Controller {
+        Controller {
+            spec: self.0,
+            acc_state: SwitchingAccState::default(),
+        }
+    }
+}
+
+/// One vehicle's controller during one test.
+#[derive(Debug, Clone)]
+pub struct Controller {
+    spec: VehicleSpec,
+    acc_state: SwitchingAccState,
+}
+
+impl Controller {
+    /// The commanded acceleration, clipped to `clip = (a_min, a_max)`.
+    pub fn acceleration(&mut self, obs: &FollowerObservation, clip: (f64, f64)) -> f64 {
+        let raw = match &self.spec {
+            VehicleSpec::Idm(p) => p.acceleration(obs),
+            VehicleSpec::Fvdm(p) => p.acceleration(obs),
+            VehicleSpec::SwitchingAcc(p) => return self.acc_state.acceleration(p, obs, clip),
+            VehicleSpec::AccAeb(p) => p.acceleration(obs),
+        };
+        raw.clamp(clip.0, clip.1)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const CLIP: (f64, f64) = (-3.0, 3.0);
+
+    fn obs(speed: f64, lead_speed: f64, gap: f64) -> FollowerObservation {
+        FollowerObservation {
+            speed,
+            lead_speed,
+            gap,
+        }
+    }
+
+    #[test]
+    fn idm_matches_a_hand_computation() {
+        // v = 20, v_lead = 15, R = 30: s* = 2 + 20 + 20·5/(2√6) = 42.4124,
+        // a = 2 (1 − (20/18)⁴ − (42.4124/26)²) = −6.3696, clipped to −3.
+        let p = IdmParams::default();
+        let a = p.acceleration(&obs(20.0, 15.0, 30.0));
+        let s = 2.0 + 20.0 + 100.0 / (2.0 * 6f64.sqrt());
+        let expected = 2.0 * (1.0 - (20.0f64 / 18.0).powi(4) - (s / 26.0).powi(2));
+        assert!((a - expected).abs() < 1e-12);
+        assert!((a + 6.3696).abs() < 1e-3);
+        let mut c = VehicleModel::builtin("idm").unwrap().controller();
+        assert_eq!(c.acceleration(&obs(20.0, 15.0, 30.0), CLIP), -3.0);
+    }
+
+    #[test]
+    fn idm_at_r_equal_l_brakes_fully() {
+        let mut c = VehicleModel::builtin("idm").unwrap().controller();
+        assert_eq!(c.acceleration(&obs(0.0, 0.0, 4.0), CLIP), -3.0);
+    }
+
+    #[test]
+    fn fvdm_relaxes_toward_the_optimal_speed() {
+        let p = FvdmParams::default();
+        // At R − L = C₂/C₁ the tanh vanishes and the optimal speed is V₁.
+        let gap = 5.0 + 1.57 / 0.13;
+        assert!((p.acceleration(&obs(6.75, 0.0, gap))).abs() < 1e-12);
+        assert!((p.acceleration(&obs(0.0, 0.0, gap)) - 0.85 * 6.75).abs() < 1e-12);
+    }
+
+    #[test]
+    fn switching_acc_brakes_when_ttc_is_below_target_and_integrates_otherwise() {
+        let model = VehicleModel::builtin("switching-acc").unwrap();
+        let mut c = model.controller();
+        // Closing at 10 m/s from 20 m: TTC ≈ 2 s < 5 s → brake.
+        assert_eq!(c.acceleration(&obs(20.0, 10.0, 20.0), CLIP), -3.0);
+        let mut c = model.controller();
+        // TTC = 100/(5.01) = 19.96 s: e = 14.96, first step a = Ki·e·Ts = −2.02.
+        let a = c.acceleration(&obs(20.0, 15.0, 100.0), CLIP);
+        let e = 100.0 / 5.01 - 5.0;
+        assert!((a - (-1.35 * e * 0.1)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn acc_aeb_triggers_the_emergency_brake_on_low_ttc() {
+        let p = AccAebParams::default();
+        assert_eq!(p.acceleration(&obs(20.0, 10.0, 15.0)), -8.0);
+        // Far behind a leader at set speed: cruise toward the set speed.
+        let a = p.acceleration(&obs(25.0, 30.0, 200.0));
+        assert!((a - 1.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn specs_deserialize_with_defaults_and_reject_bad_values() {
+        let m: VehicleModel = serde_json::from_str(r#"{"model":"idm","v0":30}"#).unwrap();
+        match m.spec() {
+            VehicleSpec::Idm(p) => {
+                assert_eq!(p.v0, 30.0);
+                assert_eq!(p.alpha, 2.0);
+            }
+            other => panic!("wrong model {other:?}"),
+        }
+        let err = serde_json::from_str::<VehicleModel>(r#"{"model":"idm","b":-1}"#)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("idm: parameter `b` = -1 must be > 0"), "{err}");
+        assert!(serde_json::from_str::<VehicleModel>(r#"{"model":"idm","bogus":1}"#).is_err());
+        assert!(serde_json::from_str::<VehicleModel>(r#"{"model":"tesla"}"#).is_err());
+        assert_eq!(
+            VehicleModel::builtin("tesla"),
+            Err(UnknownModel("tesla".into()))
+        );
+    }
+}
