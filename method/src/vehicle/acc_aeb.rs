@@ -56,7 +56,7 @@ impl Default for AccAebParams {
             relative_speed_gain: 0.74,
             comfort_deceleration: -2.0,
             max_acceleration: 1.5,
-            aeb_ttc: 2.0,
+            aeb_ttc: 3.0,
             aeb_gap: 2.0,
             aeb_deceleration: -8.0,
         }

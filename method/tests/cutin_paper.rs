@@ -1,0 +1,183 @@
+//! The cut-in case checked against the paper and against exact answers on
+//! the grid. Tests that need the authors' table skip (and say why) when
+//! `../shared/data` is absent; the built-in exposure always runs.
+
+mod common;
+
+use common::{library, median, shared_table, vehicle};
+use tslg_method::campaign::run_campaign;
+use tslg_method::case::Case;
+use tslg_method::cutin::{CutIn, CutInExposureModel, CutInPreset};
+use tslg_method::estimator::{Decision, StoppingRule};
+use tslg_method::exact::exact_report;
+use tslg_method::library::SearchMethod;
+use tslg_method::sampling::{
+    LibraryDistribution, NddDistribution, OutsideSpread, TestDistribution,
+};
+
+fn table_case() -> Option<CutIn> {
+    let text = shared_table()?;
+    Some(
+        CutIn::from_table(&text, "spmd", CutInPreset::PaperCode)
+            .expect("the shared table is valid")
+            .0,
+    )
+}
+
+#[test]
+fn the_idm_library_on_the_authors_table_has_the_papers_184_cells() {
+    let Some(case) = table_case() else { return };
+    let lib = library(&case, "idm", SearchMethod::Exhaustive);
+    assert_eq!(lib.size(), 184);
+    assert_eq!(lib.total_scenarios(), 3420);
+    // 2,863 cells of the table have positive exposure; only those are simulated.
+    assert_eq!(lib.search.sm_evaluations, 2863);
+    assert!((lib.mu_s - 8.662e-4).abs() < 1e-7, "μ_S = {}", lib.mu_s);
+}
+
+#[test]
+fn the_paper_table_preset_gives_a_different_library() {
+    let Some(case) = table_case() else { return };
+    let text = shared_table().unwrap();
+    let table_preset = CutIn::from_table(&text, "spmd", CutInPreset::PaperTable)
+        .unwrap()
+        .0;
+    let code = library(&case, "idm", SearchMethod::Exhaustive);
+    let table = library(&table_preset, "idm", SearchMethod::Exhaustive);
+    assert_ne!(code.size(), table.size());
+    assert!(table.size() > 0);
+}
+
+#[test]
+fn the_builtin_exposure_fits_the_table_as_documented() {
+    let Some(case) = table_case() else { return };
+    let model = CutInExposureModel::default().mass_on(case.grid().clone());
+    let tv = model.total_variation(case.exposure());
+    // docs/models.md states TV 0.058.
+    assert!((0.05..0.062).contains(&tv), "total variation {tv}");
+}
+
+fn check_multistart(case: &CutIn, surrogate: &str) {
+    let exhaustive = library(case, surrogate, SearchMethod::Exhaustive);
+    for seed in 0..5 {
+        let ms = library(
+            case,
+            surrogate,
+            SearchMethod::Multistart { starts: 50, seed },
+        );
+        let recall = ms.recall_against(&exhaustive);
+        eprintln!(
+            "{} {surrogate} seed {seed}: recall {recall:.4}, {} SM evaluations vs {} exhaustive",
+            case.exposure_name(),
+            ms.search.sm_evaluations,
+            exhaustive.search.sm_evaluations
+        );
+        assert!(recall >= 0.95, "seed {seed}: recall {recall}");
+        assert!(ms.search.sm_evaluations < exhaustive.search.sm_evaluations);
+    }
+}
+
+#[test]
+fn multistart_recovers_the_exhaustive_library_with_fewer_evaluations() {
+    let builtin = CutIn::builtin(CutInPreset::PaperCode);
+    check_multistart(&builtin, "idm");
+    check_multistart(&builtin, "fvdm");
+    if let Some(table) = table_case() {
+        check_multistart(&table, "idm");
+        check_multistart(&table, "fvdm");
+    }
+}
+
+struct Coverage {
+    coverage: f64,
+    median_tests: f64,
+    analytic_tests: f64,
+}
+
+/// `runs` seeded library campaigns of `vut` with a library of `surrogate`.
+fn coverage(case: &CutIn, surrogate: &str, vut: &str, runs: u64) -> Coverage {
+    let lib = library(case, surrogate, SearchMethod::Exhaustive);
+    let q = LibraryDistribution::new(&lib, case.exposure(), 0.1, OutsideSpread::Uniform).unwrap();
+    let rule = StoppingRule::new(0.2, 1_000_000);
+    let exact = exact_report(case, &vehicle(vut), &q, rule.beta, rule.z());
+    let distribution = TestDistribution::Library(q);
+    let mut covered = 0;
+    let mut tests = Vec::new();
+    for seed in 0..runs {
+        let r = run_campaign(case, &vehicle(vut), &distribution, &rule, seed);
+        assert_eq!(
+            r.status,
+            Decision::Converged,
+            "seed {seed} did not converge"
+        );
+        covered += u64::from(r.covers(exact.probability));
+        tests.push(r.tests);
+    }
+    let c = Coverage {
+        coverage: covered as f64 / runs as f64,
+        median_tests: median(&mut tests),
+        analytic_tests: exact.library_tests,
+    };
+    eprintln!(
+        "{} library of {surrogate} testing {vut}: P(A) = {:.4e}, coverage {:.3}, median tests {}, analytic {:.0}",
+        case.exposure_name(),
+        exact.probability,
+        c.coverage,
+        c.median_tests,
+        c.analytic_tests
+    );
+    c
+}
+
+#[test]
+fn fvdm_library_testing_idm_covers_the_exact_answer() {
+    let mut cases = vec![CutIn::builtin(CutInPreset::PaperCode)];
+    cases.extend(table_case());
+    for case in &cases {
+        let c = coverage(case, "fvdm", "idm", 200);
+        assert!(c.coverage >= 0.85, "coverage {}", c.coverage);
+        let ratio = c.median_tests / c.analytic_tests;
+        assert!((0.5..=2.0).contains(&ratio), "median/analytic = {ratio}");
+    }
+}
+
+/// The surrogate (IDM) misses much of FVDM's failure region, so the naive
+/// stopping rule can be confidently wrong. Reported, not asserted: it is the
+/// known weakness that a later guard addresses (docs/statistics.md).
+#[test]
+fn reverse_pairing_idm_library_testing_fvdm_is_reported() {
+    let case = CutIn::builtin(CutInPreset::PaperCode);
+    let c = coverage(&case, "idm", "fvdm", 200);
+    assert!(c.coverage.is_finite());
+    if let Some(table) = table_case() {
+        coverage(&table, "idm", "fvdm", 200);
+    }
+}
+
+#[test]
+fn library_and_ndd_campaigns_agree() {
+    let case = CutIn::builtin(CutInPreset::PaperCode);
+    let lib = library(&case, "fvdm", SearchMethod::Exhaustive);
+    let rule = StoppingRule::new(0.2, 2_000_000);
+    let idm = vehicle("idm");
+    let by_library = run_campaign(
+        &case,
+        &idm,
+        &TestDistribution::Library(
+            LibraryDistribution::new(&lib, case.exposure(), 0.1, OutsideSpread::Uniform).unwrap(),
+        ),
+        &rule,
+        7,
+    );
+    let by_ndd = run_campaign(
+        &case,
+        &idm,
+        &TestDistribution::Ndd(NddDistribution::new(case.exposure())),
+        &rule,
+        7,
+    );
+    eprintln!("library {by_library:?}\nndd {by_ndd:?}");
+    assert_eq!(by_ndd.status, Decision::Converged);
+    assert!(by_ndd.tests > 20 * by_library.tests);
+    assert!(by_library.ci_low <= by_ndd.ci_high && by_ndd.ci_low <= by_library.ci_high);
+}
