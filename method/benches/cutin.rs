@@ -1,1 +1,121 @@
-fn main() {}
+//! Cut-in benchmark: simulations per second per core, library build times,
+//! sampling speed. Prints a Markdown table; run with
+//! `cargo bench -p tslg-method --bench cutin`. Each figure is the median of
+//! several repetitions, so one noisy run does not decide it.
+
+use std::hint::black_box;
+use std::time::Instant;
+use tslg_method::campaign::run_campaign;
+use tslg_method::case::Case;
+use tslg_method::cutin::{CutIn, CutInPreset};
+use tslg_method::estimator::StoppingRule;
+use tslg_method::library::{build_library, LibraryRequest, SearchMethod, Threshold};
+use tslg_method::sampling::{LibraryDistribution, OutsideSpread, TestDistribution};
+use tslg_method::vehicle::{VehicleModel, BUILTIN_MODELS};
+
+const REPEATS: usize = 7;
+
+/// Median wall time of `f` in seconds over [`REPEATS`] runs.
+fn median_seconds(mut f: impl FnMut()) -> f64 {
+    let mut times: Vec<f64> = (0..REPEATS)
+        .map(|_| {
+            let t = Instant::now();
+            f();
+            t.elapsed().as_secs_f64()
+        })
+        .collect();
+    times.sort_by(f64::total_cmp);
+    times[REPEATS / 2]
+}
+
+fn main() {
+    println!("| measurement | value |");
+    println!("|---|---|");
+    for preset in [CutInPreset::PaperCode, CutInPreset::PaperTable] {
+        let case = CutIn::builtin(preset);
+        let cells = case.grid().len();
+        for name in BUILTIN_MODELS {
+            let vut = VehicleModel::builtin(name).unwrap();
+            // One thread: every cell of the grid, `rounds` times.
+            let rounds = if preset == CutInPreset::PaperCode {
+                20
+            } else {
+                2
+            };
+            let secs = median_seconds(|| {
+                for _ in 0..rounds {
+                    for cell in 0..cells {
+                        black_box(case.is_event(&vut, black_box(cell)));
+                    }
+                }
+            });
+            println!(
+                "| {preset} simulations/s per core, {name} | {:.3e} |",
+                (rounds * cells) as f64 / secs
+            );
+        }
+    }
+    let case = CutIn::builtin(CutInPreset::PaperCode);
+    let idm = VehicleModel::builtin("idm").unwrap();
+    for (label, search) in [
+        ("exhaustive", SearchMethod::Exhaustive),
+        (
+            "multistart (50 starts)",
+            SearchMethod::Multistart {
+                starts: 50,
+                seed: 0,
+            },
+        ),
+    ] {
+        let request = LibraryRequest {
+            threshold: Threshold::default(),
+            search,
+        };
+        let secs = median_seconds(|| {
+            black_box(build_library(
+                &case,
+                &idm,
+                serde_json::Value::Null,
+                "paper-code",
+                &request,
+            ));
+        });
+        println!(
+            "| library build, IDM, {label}, all threads | {:.2} ms |",
+            secs * 1e3
+        );
+    }
+    let fvdm = VehicleModel::builtin("fvdm").unwrap();
+    let library = build_library(
+        &case,
+        &fvdm,
+        serde_json::Value::Null,
+        "paper-code",
+        &LibraryRequest {
+            threshold: Threshold::default(),
+            search: SearchMethod::Exhaustive,
+        },
+    );
+    let q =
+        LibraryDistribution::new(&library, case.exposure(), 0.1, OutsideSpread::Uniform).unwrap();
+    let draws = 1_000_000u64;
+    let secs = median_seconds(|| {
+        for i in 0..draws {
+            black_box(q.draw(black_box(9), i));
+        }
+    });
+    println!(
+        "| library draws/s per core (scenario + weight) | {:.3e} |",
+        draws as f64 / secs
+    );
+    let distribution = TestDistribution::library(q);
+    let rule = StoppingRule::new(0.2, 10_000_000);
+    let secs = median_seconds(|| {
+        black_box(run_campaign(&case, &idm, &distribution, &rule, 3));
+    });
+    let tests = run_campaign(&case, &idm, &distribution, &rule, 3).tests;
+    println!(
+        "| library campaign, IDM tested with the FVDM library, β 0.2: {tests} tests | {:.2} ms |",
+        secs * 1e3
+    );
+}

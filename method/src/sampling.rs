@@ -221,11 +221,15 @@ impl NddDistribution {
 /// Either test distribution.
 #[derive(Debug, Clone)]
 pub enum TestDistribution {
-    Library(LibraryDistribution),
+    Library(Box<LibraryDistribution>),
     Ndd(NddDistribution),
 }
 
 impl TestDistribution {
+    pub fn library(distribution: LibraryDistribution) -> Self {
+        Self::Library(Box::new(distribution))
+    }
+
     pub fn draw(&self, seed: u64, index: u64) -> Draw {
         match self {
             TestDistribution::Library(d) => d.draw(seed, index),

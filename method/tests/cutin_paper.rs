@@ -100,7 +100,7 @@ fn coverage(case: &CutIn, surrogate: &str, vut: &str, runs: u64) -> Coverage {
     let q = LibraryDistribution::new(&lib, case.exposure(), 0.1, OutsideSpread::Uniform).unwrap();
     let rule = StoppingRule::new(0.2, 1_000_000);
     let exact = exact_report(case, &vehicle(vut), &q, rule.beta, rule.z());
-    let distribution = TestDistribution::Library(q);
+    let distribution = TestDistribution::library(q);
     let mut covered = 0;
     let mut tests = Vec::new();
     for seed in 0..runs {
@@ -163,7 +163,7 @@ fn library_and_ndd_campaigns_agree() {
     let by_library = run_campaign(
         &case,
         &idm,
-        &TestDistribution::Library(
+        &TestDistribution::library(
             LibraryDistribution::new(&lib, case.exposure(), 0.1, OutsideSpread::Uniform).unwrap(),
         ),
         &rule,

@@ -175,7 +175,7 @@ fn the_estimator_is_unbiased_and_its_variance_matches_the_analytic_one() {
 fn campaigns_do_not_depend_on_the_number_of_threads() {
     let (case, lib) = setup();
     let q = LibraryDistribution::new(&lib, case.exposure(), 0.1, OutsideSpread::Uniform).unwrap();
-    let dist = TestDistribution::Library(q);
+    let dist = TestDistribution::library(q);
     let rule = StoppingRule::new(0.2, 100_000);
     let vut = vehicle("acc-aeb");
     let many = run_campaign(&case, &vut, &dist, &rule, 42);

@@ -1,0 +1,194 @@
+//! The `tslg` command: build scenario libraries, run in-process evaluation
+//! campaigns and print exact answers. Each subcommand lives in its own module
+//! under `commands/`; this file holds the argument types.
+
+mod commands;
+mod inputs;
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use std::path::PathBuf;
+
+/// Testing scenario library generation for automated vehicles.
+#[derive(Debug, Parser)]
+#[command(name = "tslg", version, about)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Build or inspect scenario libraries.
+    #[command(subcommand)]
+    Library(LibraryCommand),
+    /// Run one evaluation campaign in this process and print the estimate.
+    Evaluate(EvaluateArgs),
+    /// Print the exact P(A) of each built-in vehicle and the expected number of tests.
+    Exact(ExactArgs),
+    /// Build a library and evaluate every built-in vehicle with it, in this process.
+    Demo(DemoArgs),
+}
+
+#[derive(Debug, Subcommand)]
+pub enum LibraryCommand {
+    /// Search the critical scenarios of a surrogate model and write a library file.
+    Build(BuildArgs),
+    /// Print a summary of a library file.
+    Show {
+        /// The library file.
+        file: PathBuf,
+    },
+}
+
+/// Which case, exposure and simulation preset.
+#[derive(Debug, Clone, Args)]
+pub struct CaseArgs {
+    /// The case. Only `cut-in` exists so far.
+    #[arg(long, default_value = "cut-in")]
+    pub case: String,
+    /// An exposure table in the layout of the authors' cut-in table (row 0: range-rate
+    /// labels; column 0: range labels; body: joint probability). Default: the built-in model.
+    #[arg(long, env = "TSLG_NDD_TABLE")]
+    pub ndd_table: Option<PathBuf>,
+    /// Simulation preset: `paper-code` (the authors' code) or `paper-table` (the paper's Table III).
+    #[arg(long, default_value = "paper-code")]
+    pub preset: String,
+}
+
+#[derive(Debug, Clone, Copy, ValueEnum, PartialEq, Eq)]
+pub enum SearchArg {
+    Exhaustive,
+    Multistart,
+}
+
+#[derive(Debug, Args)]
+pub struct BuildArgs {
+    #[command(flatten)]
+    pub case: CaseArgs,
+    /// The surrogate model: a built-in name (idm, fvdm, switching-acc, acc-aeb)
+    /// or a JSON specification such as '{"model":"idm","v0":25}'.
+    #[arg(long, default_value = "idm")]
+    pub surrogate: String,
+    /// Search strategy.
+    #[arg(long, value_enum, default_value = "exhaustive")]
+    pub search: SearchArg,
+    /// Starting points of the multistart search.
+    #[arg(long, default_value_t = 50)]
+    pub starts: usize,
+    /// Seed of the multistart starting points.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Threshold γ = m·μ_S/N(X) with this m.
+    #[arg(long, default_value_t = 1.0, conflicts_with = "gamma")]
+    pub threshold_m: f64,
+    /// An absolute threshold γ instead.
+    #[arg(long)]
+    pub gamma: Option<f64>,
+    /// Also run the exhaustive search and report the recall of a multistart search.
+    #[arg(long)]
+    pub recall: bool,
+    /// Where to write the library (JSON; see docs/library-format.md).
+    #[arg(long, short)]
+    pub out: PathBuf,
+}
+
+#[derive(Debug, Clone, Copy, ValueEnum, PartialEq, Eq)]
+pub enum MethodArg {
+    Library,
+    Ndd,
+}
+
+#[derive(Debug, Clone, Copy, ValueEnum, PartialEq, Eq)]
+pub enum OutsideArg {
+    Uniform,
+    Ndd,
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct RuleArgs {
+    /// Stop when the relative half-width of the interval is at most β.
+    #[arg(long, default_value_t = 0.2)]
+    pub beta: f64,
+    /// Two-sided confidence level of the interval.
+    #[arg(long, default_value_t = 0.9)]
+    pub confidence: f64,
+    /// Never stop before this many tests.
+    #[arg(long, default_value_t = tslg_method::estimator::DEFAULT_N_MIN)]
+    pub n_min: u64,
+    /// Never stop before this many events.
+    #[arg(long, default_value_t = tslg_method::estimator::DEFAULT_MIN_EVENTS)]
+    pub min_events: u64,
+    /// Give up after this many tests (status `exhausted`).
+    #[arg(long, default_value_t = 10_000_000)]
+    pub max_tests: u64,
+}
+
+#[derive(Debug, Args)]
+pub struct EvaluateArgs {
+    #[command(flatten)]
+    pub case: CaseArgs,
+    /// The vehicle under test: a built-in name or a JSON specification.
+    #[arg(long)]
+    pub vut: String,
+    /// `library` (importance sampling from a library) or `ndd` (the naturalistic baseline).
+    #[arg(long, value_enum, default_value = "library")]
+    pub method: MethodArg,
+    /// The library file (method `library`).
+    #[arg(long, required_if_eq("method", "library"))]
+    pub library: Option<PathBuf>,
+    /// Share ε of tests drawn outside the library.
+    #[arg(long, default_value_t = 0.1)]
+    pub epsilon: f64,
+    /// How ε is spread outside the library.
+    #[arg(long, value_enum, default_value = "uniform")]
+    pub outside: OutsideArg,
+    #[command(flatten)]
+    pub rule: RuleArgs,
+    /// Campaign seed: test i is determined by (seed, i).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Print the result as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct ExactArgs {
+    #[command(flatten)]
+    pub case: CaseArgs,
+    /// The surrogate whose library the expected library tests refer to.
+    #[arg(long, default_value = "idm")]
+    pub surrogate: String,
+    /// ε of the library distribution.
+    #[arg(long, default_value_t = 0.1)]
+    pub epsilon: f64,
+    /// Target relative half-width.
+    #[arg(long, default_value_t = 0.2)]
+    pub beta: f64,
+    /// Confidence level.
+    #[arg(long, default_value_t = 0.9)]
+    pub confidence: f64,
+}
+
+#[derive(Debug, Args)]
+pub struct DemoArgs {
+    #[command(flatten)]
+    pub case: CaseArgs,
+    /// Target relative half-width.
+    #[arg(long, default_value_t = 0.2)]
+    pub beta: f64,
+    /// Campaign seed.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+}
+
+/// Runs a parsed command line.
+pub fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::Library(LibraryCommand::Build(args)) => commands::library::build(&args),
+        Command::Library(LibraryCommand::Show { file }) => commands::library::show(&file),
+        Command::Evaluate(args) => commands::evaluate::run(&args),
+        Command::Exact(args) => commands::exact::run(&args),
+        Command::Demo(args) => commands::demo::run(&args),
+    }
+}

@@ -1,0 +1,323 @@
+//! The `tslg` command, run as a user runs it.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn tslg(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_tslg"))
+        .args(args)
+        .env_remove("TSLG_NDD_TABLE")
+        .output()
+        .expect("tslg runs")
+}
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn shared_table() -> Option<PathBuf> {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/cutin_ndd_spmd.csv");
+    if path.exists() {
+        Some(path)
+    } else {
+        eprintln!(
+            "SKIPPED: needs the authors' cut-in table at {}",
+            path.display()
+        );
+        None
+    }
+}
+
+fn field<'a>(text: &'a str, label: &str) -> &'a str {
+    text.lines()
+        .find_map(|l| l.strip_prefix(label))
+        .unwrap_or_else(|| panic!("no `{label}` in\n{text}"))
+        .trim()
+}
+
+#[test]
+fn library_build_on_the_table_finds_184_cells_by_both_searches() {
+    let Some(table) = shared_table() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("idm.json");
+    let table = table.to_str().unwrap();
+    for search in ["exhaustive", "multistart"] {
+        let o = tslg(&[
+            "library",
+            "build",
+            "--ndd-table",
+            table,
+            "--surrogate",
+            "idm",
+            "--search",
+            search,
+            "--recall",
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let text = stdout(&o);
+        assert!(
+            field(&text, "library size").starts_with("184 of 3420"),
+            "{text}"
+        );
+        assert!(
+            stderr(&o).contains("renormalised"),
+            "the 1.0000006 sum is reported"
+        );
+        if search == "multistart" {
+            assert!(field(&text, "recall").starts_with("100.00%"), "{text}");
+        }
+    }
+    let shown = tslg(&["library", "show", out.to_str().unwrap()]);
+    assert!(shown.status.success());
+    assert!(field(&stdout(&shown), "library size").starts_with("184"));
+}
+
+#[test]
+fn evaluate_prints_an_estimate_near_the_exact_answer() {
+    let dir = tempfile::tempdir().unwrap();
+    let lib = dir.path().join("fvdm.json");
+    let lib = lib.to_str().unwrap();
+    let o = tslg(&["library", "build", "--surrogate", "fvdm", "-o", lib]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = tslg(&[
+        "evaluate",
+        "--library",
+        lib,
+        "--vut",
+        "idm",
+        "--seed",
+        "3",
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let report: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(report["status"], "converged");
+    let estimate = report["estimate"].as_f64().unwrap();
+    let exact = report["exact"].as_f64().unwrap();
+    let half_width = report["half_width"].as_f64().unwrap();
+    assert!(report["relative_half_width"].as_f64().unwrap() <= 0.2);
+    assert!((estimate - exact).abs() < 3.0 * half_width, "{report}");
+    assert!(
+        report["tests"].as_u64().unwrap() > 100,
+        "FVDM library needs hundreds of tests for IDM"
+    );
+    let ndd = tslg(&["evaluate", "--method", "ndd", "--vut", "idm", "--json"]);
+    assert!(ndd.status.success(), "{}", stderr(&ndd));
+    let ndd: serde_json::Value = serde_json::from_slice(&ndd.stdout).unwrap();
+    assert!(ndd["tests"].as_u64().unwrap() > 10_000);
+}
+
+#[test]
+fn exact_reports_every_vehicle_for_both_exposures() {
+    let mut args = vec!["exact"];
+    let table = shared_table();
+    let table_str = table.as_ref().map(|t| t.to_str().unwrap().to_owned());
+    if let Some(t) = &table_str {
+        args.extend(["--ndd-table", t.as_str()]);
+    }
+    let o = tslg(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = stdout(&o);
+    let tables = if table.is_some() { 2 } else { 1 };
+    for vehicle in ["idm", "fvdm", "switching-acc", "acc-aeb"] {
+        let rows: Vec<&str> = text
+            .lines()
+            .filter(|l| l.starts_with(&format!("{vehicle} ")))
+            .collect();
+        assert_eq!(rows.len(), tables, "{text}");
+        for row in rows {
+            let cols: Vec<f64> = row
+                .split_whitespace()
+                .skip(1)
+                .map(|c| c.parse().unwrap())
+                .collect();
+            let (p, library, ndd, ratio) = (cols[0], cols[1], cols[2], cols[3]);
+            assert!(p > 1e-4 && p < 1e-2, "{row}");
+            assert!((ndd / library - ratio).abs() / ratio < 0.05, "{row}");
+        }
+    }
+    if table.is_some() {
+        // The paper's IDM on the SPMD table: P(A) = 8.6621e-4.
+        assert!(text.contains("8.6621e-4"), "{text}");
+    }
+}
+
+fn write(dir: &Path, name: &str, text: &str) -> String {
+    let path = dir.join(name);
+    std::fs::write(&path, text).unwrap();
+    path.to_str().unwrap().to_owned()
+}
+
+#[test]
+fn bad_input_gets_a_message_and_a_non_zero_exit() {
+    let dir = tempfile::tempdir().unwrap();
+    let lib = write(dir.path(), "lib.json", "");
+    let cases: Vec<(Vec<String>, &str)> = vec![
+        (
+            vec![
+                "exact".into(),
+                "--ndd-table".into(),
+                write(dir.path(), "nan.csv", ",0,1\n1,0.5,NaN\n"),
+            ],
+            "line 2, field 3",
+        ),
+        (
+            vec![
+                "exact".into(),
+                "--ndd-table".into(),
+                write(dir.path(), "sum.csv", ",0,1\n1,0.5,0.6\n"),
+            ],
+            "sum to 1.1",
+        ),
+        (
+            vec![
+                "exact".into(),
+                "--ndd-table".into(),
+                write(dir.path(), "shape.csv", ",0,1\n1,0.5\n"),
+            ],
+            "line 2 has 2 fields",
+        ),
+        (
+            vec![
+                "exact".into(),
+                "--ndd-table".into(),
+                dir.path().join("missing.csv").to_str().unwrap().into(),
+            ],
+            "cannot read the NDD table",
+        ),
+        (
+            vec![
+                "evaluate".into(),
+                "--method".into(),
+                "ndd".into(),
+                "--vut".into(),
+                "tesla".into(),
+            ],
+            "unknown vehicle model `tesla`",
+        ),
+        (
+            vec![
+                "evaluate".into(),
+                "--method".into(),
+                "ndd".into(),
+                "--vut".into(),
+                r#"{"model":"idm","b":0}"#.into(),
+            ],
+            "parameter `b` = 0 must be > 0",
+        ),
+        (
+            vec![
+                "evaluate".into(),
+                "--method".into(),
+                "ndd".into(),
+                "--vut".into(),
+                "idm".into(),
+                "--beta".into(),
+                "1.5".into(),
+            ],
+            "beta = 1.5",
+        ),
+        (
+            vec![
+                "evaluate".into(),
+                "--library".into(),
+                lib.clone(),
+                "--vut".into(),
+                "idm".into(),
+            ],
+            "not a library file",
+        ),
+        (
+            vec![
+                "evaluate".into(),
+                "--vut".into(),
+                "idm".into(),
+                "--library".into(),
+                lib,
+                "--epsilon".into(),
+                "1".into(),
+            ],
+            "epsilon",
+        ),
+        (
+            vec![
+                "library".into(),
+                "build".into(),
+                "--preset".into(),
+                "fast".into(),
+                "-o".into(),
+                "x".into(),
+            ],
+            "unknown cut-in preset `fast`",
+        ),
+        (
+            vec![
+                "library".into(),
+                "build".into(),
+                "--case".into(),
+                "flying".into(),
+                "-o".into(),
+                "x".into(),
+            ],
+            "unknown or not yet supported case",
+        ),
+    ];
+    for (args, expected) in cases {
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let o = tslg(&args);
+        assert!(!o.status.success(), "{args:?} succeeded");
+        assert!(
+            stderr(&o).contains(expected),
+            "{args:?}: expected `{expected}` in\n{}",
+            stderr(&o)
+        );
+    }
+}
+
+#[test]
+fn a_library_cannot_be_used_with_another_exposure() {
+    let Some(table) = shared_table() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let lib = dir.path().join("lib.json");
+    let lib = lib.to_str().unwrap();
+    assert!(tslg(&[
+        "library",
+        "build",
+        "--ndd-table",
+        table.to_str().unwrap(),
+        "-o",
+        lib
+    ])
+    .status
+    .success());
+    let o = tslg(&["evaluate", "--library", lib, "--vut", "idm"]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("was built on exposure cutin_ndd_spmd.csv"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+#[test]
+fn demo_evaluates_every_builtin_vehicle() {
+    let o = tslg(&["demo"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = stdout(&o);
+    assert!(
+        text.contains("IDM library of 287 of 3420 scenarios"),
+        "{text}"
+    );
+    for vehicle in ["idm", "fvdm", "switching-acc", "acc-aeb"] {
+        assert!(
+            text.lines().any(|l| l.starts_with(&format!("{vehicle} "))),
+            "{text}"
+        );
+    }
+}
