@@ -140,10 +140,7 @@ pub fn build_library<C: Case>(
     surrogate_spec: serde_json::Value,
     preset: &str,
     request: &LibraryRequest,
-) -> Library
-where
-    C::Vehicle: Sync,
-{
+) -> Library {
     let evaluated = match request.search {
         SearchMethod::Exhaustive => exhaustive::search(case, surrogate),
         SearchMethod::Multistart { starts, seed } => {
