@@ -1,9 +1,13 @@
 //! The `tslg` command: build scenario libraries, run in-process evaluation
-//! campaigns and print exact answers. Each subcommand lives in its own module
-//! under `commands/`; this file holds the argument types.
+//! campaigns, print exact answers, drive a coordinator (`campaign`,
+//! `library create`) and run the whole service locally (`demo`). Each
+//! subcommand lives in its own module under `commands/`; this file holds the
+//! argument types. `service` runs the coordinator and workers, for the two
+//! service binaries and the demo.
 
 mod commands;
 mod inputs;
+pub mod service;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
@@ -25,8 +29,104 @@ pub enum Command {
     Evaluate(EvaluateArgs),
     /// Print the exact P(A) of each built-in vehicle and the expected number of tests.
     Exact(ExactArgs),
-    /// Build a library and evaluate every built-in vehicle with it, in this process.
+    /// Start a local coordinator and workers, build a library and run a library
+    /// campaign and the NDD baseline through them; print both beside the exact answer.
     Demo(DemoArgs),
+    /// Start, watch or cancel campaigns on a running coordinator.
+    #[command(subcommand)]
+    Campaign(CampaignCommand),
+}
+
+/// How to reach a coordinator.
+#[derive(Debug, Clone, Args)]
+pub struct ServerArgs {
+    /// The coordinator's base URL.
+    #[arg(long, env = "TSLG_SERVER", default_value = "http://127.0.0.1:8080")]
+    pub server: String,
+    /// The admin token (needed to start or cancel when the coordinator has one).
+    #[arg(long, env = "TSLG_ADMIN_TOKEN", hide_env_values = true)]
+    pub token: Option<String>,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum CampaignCommand {
+    /// Start a campaign.
+    Start(CampaignStartArgs),
+    /// Print a campaign's state and estimate.
+    Status {
+        /// The campaign's id.
+        id: i64,
+        #[command(flatten)]
+        server: ServerArgs,
+        /// Print JSON.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Cancel a pending or running campaign.
+    Cancel {
+        /// The campaign's id.
+        id: i64,
+        #[command(flatten)]
+        server: ServerArgs,
+    },
+}
+
+#[derive(Debug, Args)]
+pub struct CampaignStartArgs {
+    #[command(flatten)]
+    pub server: ServerArgs,
+    /// The case.
+    #[arg(long, default_value = "cut-in")]
+    pub case: String,
+    /// `library` or `ndd`.
+    #[arg(long, value_enum, default_value = "library")]
+    pub method: MethodArg,
+    /// The library (on the coordinator) to sample from; for `ndd`, the exposure to use.
+    #[arg(long)]
+    pub library_id: Option<i64>,
+    /// The vehicle under test: a built-in name or a JSON specification.
+    #[arg(long)]
+    pub vut: String,
+    /// Share ε of tests drawn outside the library.
+    #[arg(long, default_value_t = 0.1)]
+    pub epsilon: f64,
+    #[command(flatten)]
+    pub rule: RuleArgs,
+    /// Campaign seed: test i is determined by (seed, i).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Wait until the campaign stops, showing progress.
+    #[arg(long)]
+    pub wait: bool,
+    /// Print JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct LibraryCreateArgs {
+    #[command(flatten)]
+    pub server: ServerArgs,
+    #[command(flatten)]
+    pub case: CaseArgs,
+    /// The surrogate model: a built-in name or a JSON specification.
+    #[arg(long, default_value = "idm")]
+    pub surrogate: String,
+    /// Search strategy.
+    #[arg(long, value_enum, default_value = "multistart")]
+    pub search: SearchArg,
+    /// Starting points of the multistart search.
+    #[arg(long, default_value_t = 50)]
+    pub starts: usize,
+    /// Seed of the multistart starting points.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Threshold γ = m·μ_S/N(X) with this m.
+    #[arg(long, default_value_t = 1.0)]
+    pub threshold_m: f64,
+    /// Wait until the build is done.
+    #[arg(long)]
+    pub wait: bool,
 }
 
 #[derive(Debug, Subcommand)]
@@ -38,6 +138,8 @@ pub enum LibraryCommand {
         /// The library file.
         file: PathBuf,
     },
+    /// Ask a running coordinator to build a library.
+    Create(LibraryCreateArgs),
 }
 
 /// Which case, exposure and simulation preset.
@@ -174,12 +276,30 @@ pub struct ExactArgs {
 pub struct DemoArgs {
     #[command(flatten)]
     pub case: CaseArgs,
+    /// The surrogate model the library is built from.
+    #[arg(long, default_value = "idm")]
+    pub surrogate: String,
+    /// The vehicle under test: a built-in name or a JSON specification.
+    #[arg(long, default_value = "idm")]
+    pub vut: String,
     /// Target relative half-width.
     #[arg(long, default_value_t = 0.2)]
     pub beta: f64,
+    /// Share ε of library tests drawn outside the library.
+    #[arg(long, default_value_t = 0.1)]
+    pub epsilon: f64,
     /// Campaign seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Test budget of each campaign.
+    #[arg(long, default_value_t = 10_000_000)]
+    pub max_tests: u64,
+    /// Local workers to start.
+    #[arg(long, default_value_t = 2)]
+    pub workers: usize,
+    /// Keep the coordinator's database in this file (default: a scratch file, removed after).
+    #[arg(long)]
+    pub database: Option<PathBuf>,
 }
 
 /// Runs a parsed command line.
@@ -189,6 +309,14 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Library(LibraryCommand::Show { file }) => commands::library::show(&file),
         Command::Evaluate(args) => commands::evaluate::run(&args),
         Command::Exact(args) => commands::exact::run(&args),
+        Command::Library(LibraryCommand::Create(args)) => commands::campaign::create_library(&args),
         Command::Demo(args) => commands::demo::run(&args),
+        Command::Campaign(CampaignCommand::Start(args)) => commands::campaign::start(&args),
+        Command::Campaign(CampaignCommand::Status { id, server, json }) => {
+            commands::campaign::status(&server, id, json)
+        }
+        Command::Campaign(CampaignCommand::Cancel { id, server }) => {
+            commands::campaign::cancel(&server, id)
+        }
     }
 }

@@ -1,21 +1,28 @@
 //! An in-process campaign: tests drawn from a test distribution, run on a
-//! vehicle, folded into the estimator in index order until the stopping rule
-//! holds. Batches of tests run in parallel, but the fold is sequential in
-//! test index, so the stopping index and the estimate do not depend on the
-//! batch size or the number of threads (the prefix rule of SPEC §7).
+//! vehicle, folded into the prefix estimator in index order until the
+//! stopping rule holds. Batches of tests run in parallel, but the fold is
+//! sequential in test index ([`crate::prefix`]), so the stopping index and the
+//! estimate do not depend on the batch size or the number of threads, and
+//! equal, to the bit, what the coordinator computes from the same seed.
 
-use crate::case::Case;
-use crate::estimator::{Decision, ImportanceEstimator, StoppingRule};
+use crate::estimator::{Decision, StoppingRule};
+use crate::prefix::{PrefixFold, SparseOutcome};
 use crate::sampling::TestDistribution;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-/// The end state of a campaign.
+/// The state of a campaign's estimate.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct CampaignResult {
     pub status: Decision,
+    /// Valid tests in the resolved prefix (`n`).
     pub tests: u64,
     pub events: u64,
+    /// Invalid tests in the resolved prefix.
+    pub invalid: u64,
+    /// Test indices in the resolved prefix (`tests + invalid`); the stop
+    /// index once the campaign has stopped.
+    pub indices: u64,
     pub estimate: f64,
     pub half_width: f64,
     pub relative_half_width: f64,
@@ -24,12 +31,16 @@ pub struct CampaignResult {
 }
 
 impl CampaignResult {
-    fn from_estimator(status: Decision, e: &ImportanceEstimator, z: f64) -> Self {
+    /// The summary of `fold` under a rule with quantile `z`.
+    pub fn from_fold(status: Decision, fold: &PrefixFold, z: f64) -> Self {
+        let e = &fold.estimator;
         let (ci_low, ci_high) = e.interval(z);
         Self {
             status,
             tests: e.tests(),
             events: e.events(),
+            invalid: fold.invalid,
+            indices: fold.indices,
             estimate: e.estimate(),
             half_width: e.half_width(z),
             relative_half_width: e.relative_half_width(z),
@@ -46,38 +57,53 @@ impl CampaignResult {
 
 /// First batch size; batches double up to [`MAX_BATCH`].
 const FIRST_BATCH: u64 = 64;
-const MAX_BATCH: u64 = 16_384;
+const MAX_BATCH: u64 = 65_536;
 
-/// Runs one campaign of `vehicle` on `case` with tests from `distribution`.
-/// The rule must be valid ([`StoppingRule::validate`]).
-pub fn run_campaign<C: Case>(
+/// Runs one campaign on a case given as its event test `is_event(cell)`
+/// with tests from `distribution`. The rule must be valid
+/// ([`StoppingRule::validate`]).
+pub fn run_campaign_with(
+    is_event: &(dyn Fn(usize) -> bool + Sync),
+    distribution: &TestDistribution,
+    rule: &StoppingRule,
+    seed: u64,
+) -> CampaignResult {
+    let z = rule.z();
+    let mut fold = PrefixFold::default();
+    let mut batch = FIRST_BATCH;
+    loop {
+        let from = fold.indices;
+        let to = (from + batch).min(rule.max_tests);
+        let mut events: Vec<(u64, SparseOutcome)> = (from..to)
+            .into_par_iter()
+            .filter_map(|i| {
+                let draw = distribution.draw(seed, i);
+                is_event(draw.cell).then_some((i, SparseOutcome::Event(draw.weight)))
+            })
+            .collect();
+        events.sort_by_key(|&(i, _)| i);
+        let stop = fold
+            .advance(rule, z, to, &events)
+            .expect("weights of a valid distribution are finite and ≥ 0");
+        if let Some(status) = stop {
+            return CampaignResult::from_fold(status, &fold, z);
+        }
+        batch = (batch * 2).min(MAX_BATCH);
+    }
+}
+
+/// [`run_campaign_with`] for a typed case and vehicle.
+pub fn run_campaign<C: crate::case::Case>(
     case: &C,
     vehicle: &C::Vehicle,
     distribution: &TestDistribution,
     rule: &StoppingRule,
     seed: u64,
 ) -> CampaignResult {
-    let z = rule.z();
-    let mut estimator = ImportanceEstimator::default();
-    let mut next = 0u64;
-    let mut batch = FIRST_BATCH;
-    loop {
-        let end = (next + batch).min(rule.max_tests);
-        let outcomes: Vec<(f64, bool)> = (next..end)
-            .into_par_iter()
-            .map(|i| {
-                let draw = distribution.draw(seed, i);
-                (draw.weight, case.is_event(vehicle, draw.cell))
-            })
-            .collect();
-        for (weight, event) in outcomes {
-            estimator.push(weight, event);
-            let decision = rule.decide(&estimator, z);
-            if decision != Decision::Continue {
-                return CampaignResult::from_estimator(decision, &estimator, z);
-            }
-        }
-        next = end;
-        batch = (batch * 2).min(MAX_BATCH);
-    }
+    run_campaign_with(
+        &|cell| case.is_event(vehicle, cell),
+        distribution,
+        rule,
+        seed,
+    )
 }

@@ -1,34 +1,52 @@
 //! Streaming importance-sampling estimation and the stopping rule (SPEC §3).
 //!
-//! Each test contributes `wᵢ yᵢ` (weight times outcome). The estimate is
-//! `μ̂ₙ = (1/n) Σ wᵢ yᵢ`, the sample variance `sₙ² = Σ (wᵢyᵢ − μ̂ₙ)²/(n − 1)`,
-//! and the relative half-width `rₙ = z sₙ / (√n μ̂ₙ)` with
-//! `z = Φ⁻¹(1 − (1 − c)/2)` for confidence level `c`. Moments are kept with
-//! Welford's update, which stays accurate when the weights are tiny.
+//! Each test contributes `xᵢ = wᵢ yᵢ` (weight times outcome). The estimate is
+//! `μ̂ₙ = S₁/n`, the sample variance `sₙ² = (S₂ − S₁²/n)/(n − 1)` with
+//! `S₁ = Σ xᵢ`, `S₂ = Σ xᵢ²`, and the relative half-width
+//! `rₙ = z sₙ / (√n μ̂ₙ)` with `z = Φ⁻¹(1 − (1 − c)/2)` for confidence `c`.
+//!
+//! The state is kept as the power sums rather than Welford's running mean
+//! because a test without the event adds nothing to `S₁` or `S₂`: a run of
+//! `k` such tests is `n += k`, exactly, whoever folds it and in how many
+//! pieces. That is what lets the coordinator store only events and resolved
+//! ranges and still reproduce the in-process estimate to the last bit. The
+//! cancellation in `S₂ − S₁²/n` is harmless here: near the stopping point
+//! `S₂/(S₂ − S₁²/n) ≈ 1 + (z/β)²/n`, a loss of under two bits.
 
 use serde::{Deserialize, Serialize};
 use statrs::distribution::{ContinuousCDF, Normal};
 use thiserror::Error;
 
-/// Welford accumulator of the weighted outcomes `wᵢ yᵢ`.
+/// Power-sum accumulator of the weighted outcomes `wᵢ yᵢ`.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct ImportanceEstimator {
     n: u64,
     events: u64,
-    mean: f64,
-    /// Σ (wᵢyᵢ − μ̂ₙ)².
-    m2: f64,
+    /// `S₁ = Σ wᵢ yᵢ`, summed in test-index order.
+    s1: f64,
+    /// `S₂ = Σ (wᵢ yᵢ)²`.
+    s2: f64,
 }
 
 impl ImportanceEstimator {
+    /// The estimator with the given sums (as persisted by a coordinator).
+    pub fn from_sums(n: u64, events: u64, s1: f64, s2: f64) -> Self {
+        Self { n, events, s1, s2 }
+    }
+
     /// Adds one test with weight `weight` and outcome `event`.
     pub fn push(&mut self, weight: f64, event: bool) {
-        let x = if event { weight } else { 0.0 };
         self.n += 1;
-        self.events += u64::from(event);
-        let delta = x - self.mean;
-        self.mean += delta / self.n as f64;
-        self.m2 += delta * (x - self.mean);
+        if event {
+            self.events += 1;
+            self.s1 += weight;
+            self.s2 += weight * weight;
+        }
+    }
+
+    /// Adds `k` tests without the event.
+    pub fn push_zeros(&mut self, k: u64) {
+        self.n += k;
     }
 
     pub fn tests(&self) -> u64 {
@@ -39,18 +57,27 @@ impl ImportanceEstimator {
         self.events
     }
 
-    /// `μ̂ₙ`.
+    /// `(S₁, S₂)`.
+    pub fn sums(&self) -> (f64, f64) {
+        (self.s1, self.s2)
+    }
+
+    /// `μ̂ₙ` (0 before the first test).
     pub fn estimate(&self) -> f64 {
-        self.mean
+        if self.n == 0 {
+            0.0
+        } else {
+            self.s1 / self.n as f64
+        }
     }
 
     /// `sₙ²` (0 with fewer than two tests).
     pub fn variance(&self) -> f64 {
         if self.n < 2 {
-            0.0
-        } else {
-            self.m2 / (self.n - 1) as f64
+            return 0.0;
         }
+        let n = self.n as f64;
+        ((self.s2 - self.s1 * self.s1 / n) / (n - 1.0)).max(0.0)
     }
 
     /// Half-width `z sₙ/√n` of the normal confidence interval.
@@ -63,8 +90,9 @@ impl ImportanceEstimator {
 
     /// `rₙ = z sₙ/(√n μ̂ₙ)`; infinite while `μ̂ₙ = 0`.
     pub fn relative_half_width(&self, z: f64) -> f64 {
-        if self.mean > 0.0 {
-            self.half_width(z) / self.mean
+        let mean = self.estimate();
+        if mean > 0.0 {
+            self.half_width(z) / mean
         } else {
             f64::INFINITY
         }
@@ -73,7 +101,8 @@ impl ImportanceEstimator {
     /// The interval `μ̂ₙ ± z sₙ/√n`.
     pub fn interval(&self, z: f64) -> (f64, f64) {
         let h = self.half_width(z);
-        (self.mean - h, self.mean + h)
+        let mean = self.estimate();
+        (mean - h, mean + h)
     }
 }
 
@@ -143,16 +172,21 @@ impl StoppingRule {
         z_for_confidence(self.confidence)
     }
 
-    /// The decision after the tests in `estimator`, given `z` from [`Self::z`].
-    pub fn decide(&self, estimator: &ImportanceEstimator, z: f64) -> Decision {
-        let n = estimator.tests();
-        if n >= self.n_min
+    /// Whether the estimate has the precision asked for: `n ≥ n_min`, at
+    /// least `min_events` events, `μ̂ₙ > 0` and `rₙ ≤ β`.
+    pub fn converged(&self, estimator: &ImportanceEstimator, z: f64) -> bool {
+        estimator.tests() >= self.n_min
             && estimator.events() >= self.min_events
             && estimator.estimate() > 0.0
             && estimator.relative_half_width(z) <= self.beta
-        {
+    }
+
+    /// The decision after the tests in `estimator`, given `z` from [`Self::z`],
+    /// when every test was valid (tests = indices).
+    pub fn decide(&self, estimator: &ImportanceEstimator, z: f64) -> Decision {
+        if self.converged(estimator, z) {
             Decision::Converged
-        } else if n >= self.max_tests {
+        } else if estimator.tests() >= self.max_tests {
             Decision::Exhausted
         } else {
             Decision::Continue
@@ -173,7 +207,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn welford_matches_the_two_pass_formulas() {
+    fn power_sums_match_the_two_pass_formulas() {
         let data = [
             (2.0, true),
             (0.5, false),

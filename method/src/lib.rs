@@ -13,6 +13,8 @@ pub mod library;
 pub mod mass;
 pub mod ndd_table;
 pub mod objective;
+pub mod prefix;
+pub mod registry;
 pub mod sampling;
 pub mod tolerance;
 pub mod vehicle;

@@ -1,85 +1,185 @@
-//! `tslg demo`: the whole method in one command, in this process. Builds the
-//! paper's IDM library on the chosen exposure, then evaluates every built-in
-//! vehicle with the library and with the NDD baseline and prints both beside
-//! the exact answer.
+//! `tslg demo`: the whole service in one command. Starts a coordinator on an
+//! embedded SQLite file and local workers, builds the cut-in library through
+//! the API, runs a library campaign and the NDD baseline of the same vehicle
+//! side by side with progress, and prints both beside the exact answer.
 
-use crate::inputs::load_case;
+use crate::commands::remote::{exposure_request, progress_line, vehicle_json};
+use crate::service::LocalService;
 use crate::DemoArgs;
-use std::time::Instant;
-use tslg_method::campaign::run_campaign;
-use tslg_method::case::Case;
-use tslg_method::estimator::StoppingRule;
-use tslg_method::exact::{event_cells, event_probability};
-use tslg_method::library::{build_library, LibraryRequest, SearchMethod, Threshold};
-use tslg_method::sampling::{
-    LibraryDistribution, NddDistribution, OutsideSpread, TestDistribution,
+use std::io::Write;
+use std::time::{Duration, Instant};
+use tslg_api::{
+    CampaignView, CreateCampaign, CreateLibrary, ExposureRequest, LibraryStatus, Method,
+    SearchRequest, ThresholdRequest,
 };
-use tslg_method::vehicle::{VehicleModel, BUILTIN_MODELS};
+use tslg_method::registry::{open_case, ExposureSource};
+use tslg_worker::client::Client;
 
 pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
-    let case = load_case(&args.case)?;
-    let rule = StoppingRule::new(args.beta, 10_000_000);
-    rule.validate()?;
-    let surrogate = VehicleModel::builtin("idm")?;
+    tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()?
+        .block_on(demo(args))
+}
+
+async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
+    anyhow::ensure!(args.workers >= 1, "--workers must be at least 1");
+    let exposure = exposure_request(&args.case)?;
+    let vut = vehicle_json(&args.vut)?;
+    let (database, scratch) = match &args.database {
+        Some(path) => (path.clone(), None),
+        None => {
+            let dir = std::env::temp_dir().join(format!("tslg-demo-{}", std::process::id()));
+            std::fs::create_dir_all(&dir)?;
+            (dir.join("tslg.sqlite"), Some(dir))
+        }
+    };
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let threads = (cores / args.workers).max(1);
+    let service = LocalService::start(
+        &format!("sqlite://{}", database.display()),
+        args.workers,
+        threads,
+    )
+    .await?;
+    println!(
+        "coordinator {} on {}, {} workers × {} threads",
+        service.url,
+        database.display(),
+        args.workers,
+        threads
+    );
+    let outcome = drive(args, &service.url, exposure, vut).await;
+    service.stop().await?;
+    if let Some(dir) = scratch {
+        let _ = std::fs::remove_dir_all(dir);
+    }
+    outcome
+}
+
+async fn drive(
+    args: &DemoArgs,
+    url: &str,
+    exposure: ExposureRequest,
+    vut: serde_json::Value,
+) -> anyhow::Result<()> {
+    let client = Client::new(url, None)?;
     let started = Instant::now();
-    let library = build_library(
-        &case,
-        &surrogate,
-        serde_json::to_value(surrogate)?,
-        case.preset().name(),
-        &LibraryRequest {
-            threshold: Threshold::default(),
-            search: SearchMethod::Multistart {
+    let mut library = client
+        .create_library(&CreateLibrary {
+            case: args.case.case.clone(),
+            preset: Some(args.case.preset.clone()),
+            surrogate: vehicle_json(&args.surrogate)?,
+            exposure: exposure.clone(),
+            search: SearchRequest::Multistart {
                 starts: 50,
                 seed: 0,
             },
-        },
+            threshold: ThresholdRequest::default(),
+        })
+        .await?;
+    while library.status == LibraryStatus::Building {
+        tokio::time::sleep(Duration::from_millis(100)).await;
+        library = client.library(library.id).await?;
+    }
+    anyhow::ensure!(
+        library.status == LibraryStatus::Ready,
+        "the library failed to build: {}",
+        library.error.unwrap_or_default()
     );
     println!(
-        "cut-in, exposure {}, preset {}: IDM library of {} of {} scenarios, {} SM evaluations, {:.2} s",
-        case.exposure_name(),
-        case.preset(),
-        library.size(),
-        library.total_scenarios(),
-        library.search.sm_evaluations,
-        started.elapsed().as_secs_f64()
+        "{} library {} of {}: {} of {} scenarios ({} surrogate runs, {:.2} s), exposure {}",
+        library.case,
+        library.id,
+        args.surrogate,
+        library.size.unwrap_or(0),
+        library.total_scenarios,
+        library.sm_evaluations.unwrap_or(0),
+        started.elapsed().as_secs_f64(),
+        library.exposure
     );
-    let by_library = TestDistribution::library(LibraryDistribution::new(
-        &library,
-        case.exposure(),
-        0.1,
-        OutsideSpread::Uniform,
-    )?);
-    let by_ndd = TestDistribution::Ndd(NddDistribution::new(case.exposure()));
+    let request = |method| CreateCampaign {
+        case: args.case.case.clone(),
+        method,
+        library_id: Some(library.id),
+        vut: vut.clone(),
+        epsilon: args.epsilon,
+        beta: args.beta,
+        confidence: 0.9,
+        max_tests: args.max_tests,
+        seed: args.seed,
+        n_min: None,
+        min_events: None,
+    };
+    let by_library = client.create_campaign(&request(Method::Library)).await?;
+    let by_ndd = client.create_campaign(&request(Method::Ndd)).await?;
+    let (by_library, by_ndd) = watch_both(&client, by_library.id, by_ndd.id).await?;
+    let case_name = args.case.case.clone();
+    let preset = args.case.preset.clone();
+    let source = match exposure {
+        ExposureRequest::Builtin => ExposureSource::Builtin,
+        ExposureRequest::Table { name, text } => ExposureSource::Table { name, text },
+    };
+    let vut_spec = vut.clone();
+    let exact = tokio::task::spawn_blocking(move || {
+        open_case(&case_name, Some(&preset), &source)?.exact_event_probability(&vut_spec)
+    })
+    .await??;
+    print_table(args, &by_library, &by_ndd, exact);
+    Ok(())
+}
+
+async fn watch_both(
+    client: &Client,
+    a: i64,
+    b: i64,
+) -> anyhow::Result<(CampaignView, CampaignView)> {
+    loop {
+        let (x, y) = (client.campaign(a).await?, client.campaign(b).await?);
+        eprint!(
+            "\r\x1b[2K{} | {}",
+            progress_line("library", &x),
+            progress_line("ndd", &y)
+        );
+        let _ = std::io::stderr().flush();
+        if x.status.is_final() && y.status.is_final() {
+            eprintln!();
+            return Ok((x, y));
+        }
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
+}
+
+fn print_table(args: &DemoArgs, by_library: &CampaignView, by_ndd: &CampaignView, exact: f64) {
     println!(
-        "beta {}, confidence {}, epsilon 0.1, seed {}\n",
-        rule.beta, rule.confidence, args.seed
+        "\nvehicle under test {}, β {}, confidence 0.9, ε {}, seed {}\n",
+        args.vut, args.beta, args.epsilon, args.seed
     );
     println!(
-        "{:<14} {:>11} {:>11} {:>25} {:>8} {:>11} {:>8} {:>7}",
-        "vehicle", "exact P(A)", "library", "90% interval", "tests", "NDD", "tests", "ratio"
+        "{:<8} {:>10} {:>7} {:>11} {:>25} {:>8} {:>10}",
+        "method", "tests", "events", "estimate", "90% interval", "covers", "status"
     );
-    for name in BUILTIN_MODELS {
-        let vut = VehicleModel::builtin(name)?;
-        let exact = event_probability(&case, &event_cells(&case, &vut));
-        let lib = run_campaign(&case, &vut, &by_library, &rule, args.seed);
-        let ndd = run_campaign(&case, &vut, &by_ndd, &rule, args.seed);
+    for (name, v) in [("library", by_library), ("ndd", by_ndd)] {
+        let (lo, hi) = (v.ci_low.unwrap_or(f64::NAN), v.ci_high.unwrap_or(f64::NAN));
         println!(
-            "{:<14} {:>11.3e} {:>11.3e} {:>25} {:>8} {:>11.3e} {:>8} {:>7.0}{}",
+            "{:<8} {:>10} {:>7} {:>11.3e} {:>25} {:>8} {:>10}",
             name,
-            exact,
-            lib.estimate,
-            format!("[{:.2e}, {:.2e}]", lib.ci_low, lib.ci_high),
-            lib.tests,
-            ndd.estimate,
-            ndd.tests,
-            ndd.tests as f64 / lib.tests as f64,
-            if lib.covers(exact) {
-                ""
+            v.tests,
+            v.events,
+            v.estimate.unwrap_or(f64::NAN),
+            format!("[{lo:.3e}, {hi:.3e}]"),
+            if lo <= exact && exact <= hi {
+                "yes"
             } else {
-                "  (library interval misses the exact value)"
-            }
+                "no"
+            },
+            v.status.as_str()
         );
     }
-    Ok(())
+    println!("\nexact P(A) by enumeration: {exact:.4e}");
+    println!(
+        "acceleration ratio (NDD tests / library tests): {:.0}",
+        by_ndd.tests as f64 / by_library.tests.max(1) as f64
+    );
 }

@@ -1,6 +1,8 @@
 //! One module per subcommand.
 
+pub mod campaign;
 pub mod demo;
 pub mod evaluate;
 pub mod exact;
 pub mod library;
+pub mod remote;

@@ -1,0 +1,204 @@
+//! Campaigns: start requests, their state and history, and the plan a
+//! worker needs to run their tests.
+
+use crate::library::ExposureRequest;
+use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
+
+/// How tests are drawn.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum Method {
+    /// From the library with ε-greedy exploration, importance-weighted.
+    Library,
+    /// From the naturalistic distribution itself (the baseline), weight 1.
+    Ndd,
+}
+
+impl Method {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Method::Library => "library",
+            Method::Ndd => "ndd",
+        }
+    }
+}
+
+/// `POST /api/v1/campaigns`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct CreateCampaign {
+    /// `cut-in`.
+    pub case: String,
+    pub method: Method,
+    /// The library to sample from (`method: library`). For `ndd` it is
+    /// optional and names the exposure to sample (the built-in one otherwise).
+    #[serde(default)]
+    pub library_id: Option<i64>,
+    /// The vehicle under test, e.g. `{"model": "fvdm"}`.
+    #[schema(value_type = Object)]
+    pub vut: serde_json::Value,
+    /// Share ε of tests drawn outside the library, in [0, 1).
+    #[serde(default = "default_epsilon")]
+    pub epsilon: f64,
+    /// Target relative half-width β, in (0, 1).
+    #[serde(default = "default_beta")]
+    pub beta: f64,
+    /// Confidence level of the interval, in (0, 1).
+    #[serde(default = "default_confidence")]
+    pub confidence: f64,
+    /// Budget of test indices; the campaign is `exhausted` when it is used up.
+    pub max_tests: u64,
+    /// Seed of the campaign's counter-based random streams.
+    #[serde(default)]
+    pub seed: u64,
+    /// Fewest valid tests before the rule may stop (default 30).
+    #[serde(default)]
+    pub n_min: Option<u64>,
+    /// Fewest events before the rule may stop (default 10).
+    #[serde(default)]
+    pub min_events: Option<u64>,
+}
+
+fn default_epsilon() -> f64 {
+    0.1
+}
+fn default_beta() -> f64 {
+    0.2
+}
+fn default_confidence() -> f64 {
+    0.9
+}
+
+/// A campaign's state.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum CampaignStatus {
+    /// Waiting for its library to finish building.
+    Pending,
+    Running,
+    /// Stopped by the rule: relative half-width ≤ β.
+    Converged,
+    /// Stopped at `max_tests` without the precision asked for.
+    Exhausted,
+    Cancelled,
+    /// Could not run (e.g. its library failed to build).
+    Failed,
+}
+
+impl CampaignStatus {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            CampaignStatus::Pending => "pending",
+            CampaignStatus::Running => "running",
+            CampaignStatus::Converged => "converged",
+            CampaignStatus::Exhausted => "exhausted",
+            CampaignStatus::Cancelled => "cancelled",
+            CampaignStatus::Failed => "failed",
+        }
+    }
+
+    pub fn parse(s: &str) -> Option<Self> {
+        Some(match s {
+            "pending" => CampaignStatus::Pending,
+            "running" => CampaignStatus::Running,
+            "converged" => CampaignStatus::Converged,
+            "exhausted" => CampaignStatus::Exhausted,
+            "cancelled" => CampaignStatus::Cancelled,
+            "failed" => CampaignStatus::Failed,
+            _ => return None,
+        })
+    }
+
+    /// Whether the campaign has stopped for good.
+    pub fn is_final(self) -> bool {
+        !matches!(self, CampaignStatus::Pending | CampaignStatus::Running)
+    }
+}
+
+/// `GET /api/v1/campaigns/{id}`. Numbers describe the resolved prefix:
+/// the tests `0..indices`, folded in index order.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct CampaignView {
+    pub id: i64,
+    pub case: String,
+    pub method: Method,
+    pub library_id: Option<i64>,
+    #[schema(value_type = Object)]
+    pub vut: serde_json::Value,
+    pub epsilon: f64,
+    pub beta: f64,
+    pub confidence: f64,
+    pub n_min: u64,
+    pub min_events: u64,
+    pub max_tests: u64,
+    pub seed: u64,
+    pub status: CampaignStatus,
+    /// Why the campaign failed or how it ended, in words.
+    pub status_detail: Option<String>,
+    /// Valid tests in the resolved prefix (`n`).
+    pub tests: u64,
+    pub events: u64,
+    pub invalid: u64,
+    /// Test indices resolved in order (valid and invalid); once stopped,
+    /// the exact stop index.
+    pub indices: u64,
+    /// Test indices handed out to workers so far.
+    pub leased: u64,
+    /// `μ̂ₙ`; absent before the first test.
+    pub estimate: Option<f64>,
+    pub half_width: Option<f64>,
+    /// Absent while the estimate is 0.
+    pub relative_half_width: Option<f64>,
+    pub ci_low: Option<f64>,
+    pub ci_high: Option<f64>,
+    pub created_at: String,
+    pub updated_at: String,
+}
+
+/// `GET /api/v1/campaigns`: every campaign, newest first.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct CampaignList {
+    pub campaigns: Vec<CampaignView>,
+}
+
+/// One point of a campaign's history.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct HistoryPoint {
+    pub tests: u64,
+    pub indices: u64,
+    pub events: u64,
+    pub estimate: f64,
+    pub half_width: f64,
+    pub relative_half_width: Option<f64>,
+    pub ci_low: f64,
+    pub ci_high: f64,
+}
+
+/// `GET /api/v1/campaigns/{id}/history`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct History {
+    pub campaign_id: i64,
+    pub points: Vec<HistoryPoint>,
+}
+
+/// `GET /api/v1/campaigns/{id}/plan`: what a worker needs to reproduce any
+/// test of the campaign from its index (SPEC §7): test `i` draws its
+/// scenario from the stream `(seed, i)`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct CampaignPlan {
+    pub campaign_id: i64,
+    pub case: String,
+    pub preset: String,
+    pub exposure: ExposureRequest,
+    /// The exposure's fingerprint, to check the worker's copy.
+    pub exposure_fingerprint: String,
+    pub method: Method,
+    /// For `method: library`, the library file is at
+    /// `/api/v1/libraries/{library_id}/file`.
+    pub library_id: Option<i64>,
+    pub epsilon: f64,
+    pub seed: u64,
+    #[schema(value_type = Object)]
+    pub vut: serde_json::Value,
+}

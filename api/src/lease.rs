@@ -1,0 +1,135 @@
+//! Leases and results: how workers take tests and report outcomes.
+
+use crate::campaign::CampaignStatus;
+use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
+
+/// `POST /api/v1/leases`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct LeaseRequest {
+    /// The worker's name, unique among live workers.
+    pub worker: String,
+    /// Threads the worker runs tests on; leases are sized for them.
+    pub threads: u32,
+    /// Include each test's scenario and weight in the lease (for clients
+    /// that cannot sample them from the plan); limits the lease size.
+    #[serde(default)]
+    pub include_tests: bool,
+}
+
+/// One test of a lease.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct TestCase {
+    pub index: u64,
+    /// The scenario's grid cell.
+    pub cell: u64,
+    /// The scenario's parameters (for cut-in: range, range rate).
+    pub scenario: Vec<f64>,
+    /// Importance weight `P(x)/q(x)`.
+    pub weight: f64,
+}
+
+/// A contiguous range `start..end` of test indices of one campaign, held
+/// by one worker until it expires. `attempt` counts how often the range
+/// was handed out; heartbeats and results must name it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct Lease {
+    pub id: i64,
+    pub attempt: i64,
+    pub campaign_id: i64,
+    pub start: u64,
+    pub end: u64,
+    /// The first index not yet reported; results continue from here.
+    pub resume_at: u64,
+    /// Seconds until the lease expires without a heartbeat or result.
+    pub ttl_seconds: f64,
+    /// How often to heartbeat while working on it.
+    pub heartbeat_seconds: f64,
+    /// Present when asked for with `include_tests`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tests: Option<Vec<TestCase>>,
+}
+
+/// `POST /api/v1/leases/{id}/heartbeat` and `/release`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct LeaseFence {
+    pub worker: String,
+    pub attempt: i64,
+}
+
+/// The answer to a heartbeat: whether to go on.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct HeartbeatAck {
+    /// False when the campaign stopped or was cancelled: drop the lease.
+    #[serde(rename = "continue")]
+    pub proceed: bool,
+    pub campaign_status: CampaignStatus,
+    pub ttl_seconds: f64,
+}
+
+/// A test with the event.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct EventResult {
+    pub index: u64,
+    /// The test's importance weight as the worker computed it; the
+    /// coordinator checks it against its own.
+    pub weight: f64,
+}
+
+/// A test that could not be run (the vehicle or simulator failed).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct InvalidResult {
+    pub index: u64,
+    pub reason: String,
+}
+
+/// `POST /api/v1/leases/{id}/results`: the outcomes of the tests
+/// `from..to` of the lease. Listed tests are events or invalid; every
+/// other index in the range had no event. Reports continue where the last
+/// one ended (`from` ≤ the lease's `resume_at`); a repeated report is
+/// acknowledged once.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ResultReport {
+    pub worker: String,
+    pub attempt: i64,
+    pub from: u64,
+    pub to: u64,
+    #[serde(default)]
+    pub events: Vec<EventResult>,
+    #[serde(default)]
+    pub invalid: Vec<InvalidResult>,
+    /// Wall-clock seconds the worker spent on these tests, and on how many
+    /// threads; used to size later leases.
+    #[serde(default)]
+    pub compute_seconds: f64,
+    #[serde(default = "one")]
+    pub threads: u32,
+}
+
+fn one() -> u32 {
+    1
+}
+
+/// The answer to a result report.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct ResultAck {
+    /// Tests newly recorded by this report.
+    pub accepted: u64,
+    /// Tests of this report already recorded with the same outcome.
+    pub duplicate: u64,
+    /// Tests ignored because the campaign had already stopped.
+    pub ignored: u64,
+    /// The lease's next index to report.
+    pub resume_at: u64,
+    /// Whether the lease is fully reported.
+    pub lease_done: bool,
+    /// False when the campaign stopped: drop the rest of the lease.
+    #[serde(rename = "continue")]
+    pub proceed: bool,
+    pub campaign_status: CampaignStatus,
+}

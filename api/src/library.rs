@@ -1,0 +1,134 @@
+//! Scenario libraries: build requests and their state.
+
+use serde::{Deserialize, Serialize};
+use utoipa::ToSchema;
+
+/// The exposure model `P(x)` a library is built on.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, ToSchema, Default)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum ExposureRequest {
+    /// The case's built-in exposure model.
+    #[default]
+    Builtin,
+    /// A table uploaded with the request, in the layout of SPEC §4 (for
+    /// cut-in: `range,range_rate,probability` rows, or a matrix).
+    Table {
+        /// A name for the table (e.g. its file name).
+        name: String,
+        /// The table's text.
+        text: String,
+    },
+}
+
+/// How the library search runs.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(tag = "method", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum SearchRequest {
+    /// Simulate the surrogate on every cell with positive exposure.
+    Exhaustive,
+    /// Local searches from `starts` random cells, then a flood fill.
+    Multistart {
+        #[serde(default = "default_starts")]
+        starts: usize,
+        #[serde(default)]
+        seed: u64,
+    },
+}
+
+fn default_starts() -> usize {
+    50
+}
+
+impl Default for SearchRequest {
+    fn default() -> Self {
+        SearchRequest::Multistart {
+            starts: default_starts(),
+            seed: 0,
+        }
+    }
+}
+
+/// The criticality threshold γ.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum ThresholdRequest {
+    /// `γ = m μ_S / N(X)`.
+    Relative { m: f64 },
+    /// A fixed γ.
+    Absolute { gamma: f64 },
+}
+
+impl Default for ThresholdRequest {
+    fn default() -> Self {
+        ThresholdRequest::Relative { m: 1.0 }
+    }
+}
+
+/// `POST /api/v1/libraries`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct CreateLibrary {
+    /// `cut-in`.
+    pub case: String,
+    /// The case's simulation preset; the case's default when absent.
+    #[serde(default)]
+    pub preset: Option<String>,
+    /// The surrogate model, e.g. `{"model": "idm"}`.
+    #[schema(value_type = Object)]
+    pub surrogate: serde_json::Value,
+    #[serde(default)]
+    pub exposure: ExposureRequest,
+    #[serde(default)]
+    pub search: SearchRequest,
+    #[serde(default)]
+    pub threshold: ThresholdRequest,
+}
+
+/// A library's build state.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum LibraryStatus {
+    Building,
+    Ready,
+    Failed,
+}
+
+impl LibraryStatus {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            LibraryStatus::Building => "building",
+            LibraryStatus::Ready => "ready",
+            LibraryStatus::Failed => "failed",
+        }
+    }
+}
+
+/// `GET /api/v1/libraries/{id}`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct LibraryView {
+    pub id: i64,
+    pub case: String,
+    pub preset: String,
+    pub status: LibraryStatus,
+    /// The exposure's name (`builtin` or the table's name).
+    pub exposure: String,
+    /// The exposure's fingerprint; campaigns must use the same exposure.
+    pub exposure_fingerprint: String,
+    #[schema(value_type = Object)]
+    pub surrogate: serde_json::Value,
+    /// `N(Φ)`, once ready.
+    pub size: Option<u64>,
+    /// `N(X)`, the scenarios of the grid.
+    pub total_scenarios: u64,
+    /// Surrogate simulations the search used, once ready.
+    pub sm_evaluations: Option<u64>,
+    /// `μ_S` and `W`, once ready.
+    pub mu_s: Option<f64>,
+    pub w: Option<f64>,
+    /// Seconds the build took, once done.
+    pub build_seconds: Option<f64>,
+    /// Why the build failed.
+    pub error: Option<String>,
+    /// RFC 3339 time of the request.
+    pub created_at: String,
+}

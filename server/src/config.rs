@@ -1,0 +1,83 @@
+//! The coordinator's settings: one clap struct, every flag also readable
+//! from the environment.
+
+use clap::Parser;
+use std::net::SocketAddr;
+
+#[derive(Debug, Clone, Parser)]
+#[command(name = "tslg-server", version, about = "The tslg campaign coordinator")]
+pub struct Config {
+    /// Address to listen on.
+    #[arg(long, env = "TSLG_BIND", default_value = "127.0.0.1:8080")]
+    pub bind: SocketAddr,
+
+    /// SQLite database URL; the file is created when missing.
+    #[arg(
+        long,
+        env = "TSLG_DATABASE_URL",
+        default_value = "sqlite://tslg.sqlite"
+    )]
+    pub database_url: String,
+
+    /// Token workers present as `Authorization: Bearer …` on the lease
+    /// endpoints. When unset, workers need no token.
+    #[arg(long, env = "TSLG_WORKER_TOKEN", hide_env_values = true)]
+    pub worker_token: Option<String>,
+
+    /// Token needed to create libraries and to start or cancel campaigns.
+    /// When unset, anyone who can reach the server may.
+    #[arg(long, env = "TSLG_ADMIN_TOKEN", hide_env_values = true)]
+    pub admin_token: Option<String>,
+
+    /// Seconds a lease lives without a heartbeat or result before it is
+    /// handed out again.
+    #[arg(long, env = "TSLG_LEASE_TTL", default_value_t = 30.0)]
+    pub lease_ttl_seconds: f64,
+
+    /// Seconds of work a lease aims at, on the worker's threads.
+    #[arg(long, env = "TSLG_LEASE_TARGET", default_value_t = 2.0)]
+    pub lease_target_seconds: f64,
+
+    /// Hand out leases of exactly this many tests (no adaptation); for
+    /// experiments and tests.
+    #[arg(long, env = "TSLG_LEASE_SIZE")]
+    pub lease_size: Option<u64>,
+
+    /// Largest request body accepted, in bytes (uploaded tables included).
+    #[arg(long, env = "TSLG_MAX_BODY", default_value_t = 16 * 1024 * 1024)]
+    pub max_body_bytes: usize,
+}
+
+impl Config {
+    /// Settings for an embedded coordinator (the demo, tests).
+    pub fn embedded(database_url: impl Into<String>) -> Self {
+        Self::parse_from(["tslg-server", "--database-url", &database_url.into()])
+    }
+
+    /// Checks ranges clap cannot express.
+    pub fn validate(&self) -> anyhow::Result<()> {
+        anyhow::ensure!(
+            self.lease_ttl_seconds.is_finite() && self.lease_ttl_seconds >= 1.0,
+            "--lease-ttl-seconds {} must be at least 1",
+            self.lease_ttl_seconds
+        );
+        anyhow::ensure!(
+            self.lease_target_seconds.is_finite() && self.lease_target_seconds > 0.0,
+            "--lease-target-seconds {} must be > 0",
+            self.lease_target_seconds
+        );
+        anyhow::ensure!(
+            self.lease_size != Some(0),
+            "--lease-size must be at least 1"
+        );
+        for (name, token) in [
+            ("TSLG_WORKER_TOKEN", &self.worker_token),
+            ("TSLG_ADMIN_TOKEN", &self.admin_token),
+        ] {
+            if let Some(t) = token {
+                anyhow::ensure!(!t.is_empty(), "{name} is set but empty");
+            }
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,151 @@
+//! How many tests a new lease gets.
+//!
+//! A lease should keep a worker busy for about `target` seconds: long enough
+//! that the round trip is negligible, short enough that a lost worker costs
+//! little and the campaign does not overshoot its stop. With `c` the
+//! smoothed cost of one test on one thread and `T` the worker's threads,
+//! `size_time = target · T / c`. Near the goal the lease shrinks further:
+//! from the current prefix, `n_needed ≈ n (rₙ/β)²` tests reach `rₙ = β`
+//! (the half-width shrinks as `1/√n`), so no lease takes more than half of
+//! the tests predicted to be still unleased.
+
+/// Fewest tests in a lease.
+pub const MIN_LEASE: u64 = 16;
+/// Most tests in a lease.
+pub const MAX_LEASE: u64 = 1 << 22;
+/// Tests per thread of a campaign's first leases, before any cost is known.
+pub const FIRST_LEASE_PER_THREAD: u64 = 256;
+/// Leases carrying their tests inline are capped (response size).
+pub const MAX_INLINE_LEASE: u64 = 10_000;
+
+/// What the size depends on.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SizingInput {
+    pub threads: u32,
+    /// Seconds per test on one thread, once measured.
+    pub cost_per_test: Option<f64>,
+    pub target_seconds: f64,
+    /// Indices left in the budget: `max_tests − next_index`.
+    pub budget_left: u64,
+    /// `n_needed − next_index`, when the prefix allows a prediction.
+    pub predicted_unleased: Option<u64>,
+}
+
+pub fn lease_size(input: &SizingInput) -> u64 {
+    let threads = f64::from(input.threads.max(1));
+    let by_time = match input.cost_per_test {
+        Some(c) if c > 0.0 => (input.target_seconds * threads / c).min(MAX_LEASE as f64) as u64,
+        _ => FIRST_LEASE_PER_THREAD * u64::from(input.threads.max(1)),
+    };
+    let by_goal = input
+        .predicted_unleased
+        .map_or(u64::MAX, |left| (left / 2).max(MIN_LEASE));
+    by_time
+        .min(by_goal)
+        .clamp(MIN_LEASE, MAX_LEASE)
+        .min(input.budget_left)
+}
+
+/// Tests still needed beyond `next_index`, predicted from a prefix of `n`
+/// valid tests with `events` events and relative half-width `r`.
+pub fn predicted_unleased(
+    n: u64,
+    events: u64,
+    min_events: u64,
+    r: f64,
+    beta: f64,
+    next_index: u64,
+) -> Option<u64> {
+    if events < min_events.max(2) || !r.is_finite() {
+        return None;
+    }
+    let needed = (n as f64 * (r / beta).powi(2)).min(1e15) as u64;
+    Some(needed.saturating_sub(next_index))
+}
+
+/// The smoothed per-thread cost after a report of `tests` tests that took
+/// `seconds` on `threads` threads: an exponential average with weight 0.3.
+pub fn update_cost(previous: Option<f64>, tests: u64, seconds: f64, threads: u32) -> Option<f64> {
+    if tests == 0 || !(seconds.is_finite() && seconds > 0.0) {
+        return previous;
+    }
+    let sample = seconds * f64::from(threads.max(1)) / tests as f64;
+    Some(match previous {
+        Some(p) => 0.7 * p + 0.3 * sample,
+        None => sample,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn input() -> SizingInput {
+        SizingInput {
+            threads: 4,
+            cost_per_test: None,
+            target_seconds: 2.0,
+            budget_left: u64::MAX,
+            predicted_unleased: None,
+        }
+    }
+
+    #[test]
+    fn cheap_tests_get_large_leases_and_slow_tests_small_ones() {
+        assert_eq!(lease_size(&input()), 1024);
+        // 0.5 µs per test: 2 s on 4 threads is 16 million, capped.
+        let cheap = SizingInput {
+            cost_per_test: Some(5e-7),
+            ..input()
+        };
+        assert_eq!(lease_size(&cheap), MAX_LEASE);
+        // 1 ms per test: 8000 tests.
+        let slow = SizingInput {
+            cost_per_test: Some(1e-3),
+            ..input()
+        };
+        assert_eq!(lease_size(&slow), 8000);
+        // 10 s per test: the minimum.
+        let very_slow = SizingInput {
+            cost_per_test: Some(10.0),
+            ..input()
+        };
+        assert_eq!(lease_size(&very_slow), MIN_LEASE);
+    }
+
+    #[test]
+    fn leases_shrink_near_the_goal_and_respect_the_budget() {
+        let near = SizingInput {
+            cost_per_test: Some(1e-6),
+            predicted_unleased: Some(1000),
+            ..input()
+        };
+        assert_eq!(lease_size(&near), 500);
+        let past = SizingInput {
+            predicted_unleased: Some(0),
+            ..near
+        };
+        assert_eq!(lease_size(&past), MIN_LEASE);
+        let budget = SizingInput {
+            budget_left: 7,
+            ..near
+        };
+        assert_eq!(lease_size(&budget), 7);
+    }
+
+    #[test]
+    fn the_prediction_scales_with_the_squared_precision_ratio() {
+        // n = 100 at r = 0.4 with β = 0.2 needs 400; 150 are leased.
+        assert_eq!(predicted_unleased(100, 12, 10, 0.4, 0.2, 150), Some(250));
+        assert_eq!(predicted_unleased(100, 1, 10, 0.4, 0.2, 150), None);
+        assert_eq!(
+            predicted_unleased(100, 12, 10, f64::INFINITY, 0.2, 150),
+            None
+        );
+        let c = update_cost(None, 1000, 0.5, 2).unwrap();
+        assert!((c - 1e-3).abs() < 1e-15);
+        let c2 = update_cost(Some(c), 1000, 1.0, 2).unwrap();
+        assert!((c2 - (0.7e-3 + 0.3 * 2e-3)).abs() < 1e-15);
+        assert_eq!(update_cost(Some(c), 0, 1.0, 2), Some(c));
+    }
+}

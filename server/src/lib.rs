@@ -1,0 +1,39 @@
+//! The tslg coordinator: stores scenario libraries and running
+//! importance-sampling campaigns in SQLite, hands out ranges of tests to
+//! workers as leases, and folds their results into each campaign's prefix
+//! estimator until the stopping rule holds. See `docs/architecture.md`.
+
+pub mod builder;
+pub mod config;
+pub mod db;
+pub mod error;
+pub mod lease_size;
+pub mod routes;
+pub mod sampler_cache;
+pub mod state;
+pub mod store;
+
+pub use config::Config;
+
+use anyhow::Context;
+use std::future::Future;
+use tokio::net::TcpListener;
+
+/// Runs the coordinator on `listener` until `shutdown` completes, then
+/// finishes the requests in flight.
+pub async fn serve(
+    listener: TcpListener,
+    config: Config,
+    shutdown: impl Future<Output = ()> + Send + 'static,
+) -> anyhow::Result<()> {
+    config.validate()?;
+    let db = db::Database::open(&config.database_url).await?;
+    let state = state::AppState::new(db, config);
+    builder::resume_builds(&state).await?;
+    let address = listener.local_addr()?;
+    tracing::info!(%address, "coordinator listening");
+    axum::serve(listener, routes::router(state))
+        .with_graceful_shutdown(shutdown)
+        .await
+        .context("server error")
+}

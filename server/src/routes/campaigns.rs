@@ -1,0 +1,210 @@
+//! `/api/v1/campaigns`: starting, watching and cancelling campaigns.
+
+use crate::error::{ApiError, ApiJson};
+use crate::routes::ApiPath;
+use crate::state::AppState;
+use crate::store::campaigns::{self, NewCampaign};
+use crate::store::libraries;
+use axum::extract::State;
+use axum::http::{header, StatusCode};
+use axum::response::IntoResponse;
+use axum::Json;
+use tslg_api::{
+    CampaignList, CampaignPlan, CampaignStatus, CampaignView, CreateCampaign, History,
+    LibraryStatus, Method, Problem,
+};
+use tslg_method::estimator::{StoppingRule, DEFAULT_MIN_EVENTS, DEFAULT_N_MIN};
+use tslg_method::registry::{open_case, ExposureSource};
+
+/// Largest accepted test budget.
+const MAX_TESTS_LIMIT: u64 = 1 << 50;
+
+/// Starts a campaign. It runs as soon as its library is ready.
+#[utoipa::path(post, path = "/api/v1/campaigns", request_body = CreateCampaign, responses(
+    (status = 201, body = CampaignView), (status = 400, body = Problem),
+    (status = 401, body = Problem), (status = 422, body = Problem)))]
+pub async fn create(
+    State(state): State<AppState>,
+    ApiJson(req): ApiJson<CreateCampaign>,
+) -> Result<impl IntoResponse, ApiError> {
+    let bad = |m: String| ApiError::Unprocessable(m);
+    if !(0.0..1.0).contains(&req.epsilon) {
+        return Err(bad(format!("epsilon = {} must be in [0, 1)", req.epsilon)));
+    }
+    let rule = StoppingRule {
+        beta: req.beta,
+        confidence: req.confidence,
+        n_min: req.n_min.unwrap_or(DEFAULT_N_MIN),
+        min_events: req.min_events.unwrap_or(DEFAULT_MIN_EVENTS),
+        max_tests: req.max_tests,
+    };
+    rule.validate().map_err(|e| bad(e.to_string()))?;
+    if rule.n_min == 0 {
+        return Err(bad("n_min must be at least 1".into()));
+    }
+    if req.max_tests > MAX_TESTS_LIMIT {
+        return Err(bad(format!(
+            "max_tests = {} exceeds the limit 2^50",
+            req.max_tests
+        )));
+    }
+    if req.vut.get("external").is_some() {
+        return Err(bad(
+            "external vehicles under test ({\"external\": NAME}) are not supported by this \
+             coordinator yet; use a built-in model such as {\"model\": \"idm\"}"
+                .into(),
+        ));
+    }
+    let library = match (req.method, req.library_id) {
+        (Method::Library, None) => {
+            return Err(bad("method `library` needs a library_id".into()));
+        }
+        (_, Some(id)) => Some(
+            libraries::get(&state.db.read, id)
+                .await
+                .map_err(|_| bad(format!("library_id {id} does not name a library")))?,
+        ),
+        (Method::Ndd, None) => None,
+    };
+    if let Some(lib) = &library {
+        if lib.case_name != req.case {
+            return Err(bad(format!(
+                "library {} was built for case `{}`, not `{}`",
+                lib.id, lib.case_name, req.case
+            )));
+        }
+        if lib.status() == LibraryStatus::Failed && req.method == Method::Library {
+            return Err(bad(format!(
+                "library {} failed to build: {}",
+                lib.id,
+                lib.error.as_deref().unwrap_or("unknown reason")
+            )));
+        }
+    }
+    let exposure = match &library {
+        Some(lib) => match &lib.exposure_table {
+            Some(text) => ExposureSource::Table {
+                name: lib.exposure_name.clone(),
+                text: text.clone(),
+            },
+            None => ExposureSource::Builtin,
+        },
+        None => ExposureSource::Builtin,
+    };
+    let preset = library.as_ref().map(|l| l.preset.clone());
+    let (case_name, vut) = (req.case.clone(), req.vut.clone());
+    let source = exposure.clone();
+    let (case, vut) = tokio::task::spawn_blocking(move || {
+        let case = open_case(&case_name, preset.as_deref(), &source)?;
+        let vut = case.normalise_vehicle(&vut)?;
+        Ok::<_, tslg_method::registry::CaseError>((case, vut))
+    })
+    .await
+    .map_err(|e| ApiError::Internal(e.into()))?
+    .map_err(|e| bad(e.to_string()))?;
+    let status = match &library {
+        Some(lib) if req.method == Method::Library && lib.status() == LibraryStatus::Building => {
+            CampaignStatus::Pending
+        }
+        _ => CampaignStatus::Running,
+    };
+    let row = campaigns::insert(
+        &state.db.write,
+        &NewCampaign {
+            case_name: case.name().to_owned(),
+            preset: case.preset(),
+            method: req.method,
+            library_id: req.library_id,
+            exposure_name: case.exposure_name().to_owned(),
+            exposure_fingerprint: case.exposure().fingerprint(),
+            exposure_table: match exposure {
+                ExposureSource::Table { text, .. } => Some(text),
+                ExposureSource::Builtin => None,
+            },
+            vut: vut.to_string(),
+            epsilon: req.epsilon,
+            rule,
+            seed: req.seed,
+            status,
+        },
+    )
+    .await?;
+    let location = format!("/api/v1/campaigns/{}", row.id);
+    Ok((
+        StatusCode::CREATED,
+        [(header::LOCATION, location)],
+        Json(row.view()),
+    ))
+}
+
+/// Every campaign, newest first.
+#[utoipa::path(get, path = "/api/v1/campaigns", responses((status = 200, body = CampaignList)))]
+pub async fn list(State(state): State<AppState>) -> Result<Json<CampaignList>, ApiError> {
+    let rows = campaigns::list(&state.db.read).await?;
+    Ok(Json(CampaignList {
+        campaigns: rows.iter().map(|r| r.view()).collect(),
+    }))
+}
+
+/// One campaign's state and estimate over its resolved prefix.
+#[utoipa::path(get, path = "/api/v1/campaigns/{id}", params(("id" = i64, Path)), responses(
+    (status = 200, body = CampaignView), (status = 404, body = Problem)))]
+pub async fn get_one(
+    State(state): State<AppState>,
+    ApiPath(id): ApiPath<i64>,
+) -> Result<Json<CampaignView>, ApiError> {
+    Ok(Json(campaigns::get(&state.db.read, id).await?.view()))
+}
+
+/// The estimate after each fold of the prefix, in test order.
+#[utoipa::path(get, path = "/api/v1/campaigns/{id}/history", params(("id" = i64, Path)), responses(
+    (status = 200, body = History), (status = 404, body = Problem)))]
+pub async fn history(
+    State(state): State<AppState>,
+    ApiPath(id): ApiPath<i64>,
+) -> Result<Json<History>, ApiError> {
+    let row = campaigns::get(&state.db.read, id).await?;
+    let points = campaigns::history(&state.db.read, &row).await?;
+    Ok(Json(History {
+        campaign_id: id,
+        points,
+    }))
+}
+
+/// What a worker needs to reproduce any test of the campaign.
+#[utoipa::path(get, path = "/api/v1/campaigns/{id}/plan", params(("id" = i64, Path)), responses(
+    (status = 200, body = CampaignPlan), (status = 404, body = Problem)))]
+pub async fn plan(
+    State(state): State<AppState>,
+    ApiPath(id): ApiPath<i64>,
+) -> Result<Json<CampaignPlan>, ApiError> {
+    let row = campaigns::get(&state.db.read, id).await?;
+    Ok(Json(CampaignPlan {
+        campaign_id: row.id,
+        case: row.case_name.clone(),
+        preset: row.preset.clone(),
+        exposure: row.exposure_request(),
+        exposure_fingerprint: row.exposure_fingerprint.clone(),
+        method: row.method(),
+        library_id: if row.method() == Method::Library {
+            row.library_id
+        } else {
+            None
+        },
+        epsilon: row.epsilon,
+        seed: row.seed(),
+        vut: serde_json::from_str(&row.vut).map_err(|e| ApiError::Internal(e.into()))?,
+    }))
+}
+
+/// Cancels a pending or running campaign; its leases are told to stop.
+#[utoipa::path(post, path = "/api/v1/campaigns/{id}/cancel", params(("id" = i64, Path)), responses(
+    (status = 200, body = CampaignView), (status = 404, body = Problem), (status = 409, body = Problem)))]
+pub async fn cancel(
+    State(state): State<AppState>,
+    ApiPath(id): ApiPath<i64>,
+) -> Result<Json<CampaignView>, ApiError> {
+    let row = campaigns::cancel(&state.db.write, id).await?;
+    state.samplers.forget(id);
+    Ok(Json(row.view()))
+}

@@ -1,0 +1,165 @@
+//! `/api/v1/leases`: workers take ranges of tests and report outcomes.
+
+use crate::error::{ApiError, ApiJson};
+use crate::routes::ApiPath;
+use crate::state::AppState;
+use crate::store::{campaigns, leases, results};
+use axum::extract::State;
+use axum::http::StatusCode;
+use axum::response::{IntoResponse, Response};
+use axum::Json;
+use tslg_api::{
+    HeartbeatAck, Lease, LeaseFence, LeaseRequest, Problem, ResultAck, ResultReport, TestCase,
+};
+
+fn check_worker(worker: &str) -> Result<(), ApiError> {
+    if worker.is_empty() || worker.len() > 128 || worker.chars().any(char::is_control) {
+        return Err(ApiError::Unprocessable(
+            "worker must be 1 to 128 printable characters".into(),
+        ));
+    }
+    Ok(())
+}
+
+/// Takes a range of tests of a running campaign; 204 when there is none.
+#[utoipa::path(post, path = "/api/v1/leases", request_body = LeaseRequest, responses(
+    (status = 200, body = Lease), (status = 204, description = "No work right now"),
+    (status = 401, body = Problem), (status = 422, body = Problem)))]
+pub async fn claim(
+    State(state): State<AppState>,
+    ApiJson(req): ApiJson<LeaseRequest>,
+) -> Result<Response, ApiError> {
+    check_worker(&req.worker)?;
+    if !(1..=4096).contains(&req.threads) {
+        return Err(ApiError::Unprocessable(format!(
+            "threads = {} must be in 1..=4096",
+            req.threads
+        )));
+    }
+    let Some(row) = leases::claim(
+        &state.db,
+        &state.config,
+        &req.worker,
+        req.threads,
+        req.include_tests,
+    )
+    .await?
+    else {
+        return Ok(StatusCode::NO_CONTENT.into_response());
+    };
+    let tests = if req.include_tests {
+        let campaign = campaigns::get(&state.db.read, row.campaign_id).await?;
+        let sampler = state.samplers.get(&state.db, &campaign).await?;
+        let (from, to) = (row.resume_at as u64, row.end_index as u64);
+        let list = tokio::task::spawn_blocking(move || {
+            (from..to)
+                .map(|index| {
+                    let draw = sampler.draw(index);
+                    TestCase {
+                        index,
+                        cell: draw.cell as u64,
+                        scenario: sampler.case.scenario(draw.cell),
+                        weight: draw.weight,
+                    }
+                })
+                .collect::<Vec<_>>()
+        })
+        .await
+        .map_err(|e| ApiError::Internal(e.into()))?;
+        Some(list)
+    } else {
+        None
+    };
+    let ttl = state.config.lease_ttl_seconds;
+    Ok(Json(Lease {
+        id: row.id,
+        attempt: row.attempt,
+        campaign_id: row.campaign_id,
+        start: row.start_index as u64,
+        end: row.end_index as u64,
+        resume_at: row.resume_at as u64,
+        ttl_seconds: ttl,
+        heartbeat_seconds: ttl / 3.0,
+        tests,
+    })
+    .into_response())
+}
+
+/// Keeps a lease alive; `continue: false` means drop it.
+#[utoipa::path(post, path = "/api/v1/leases/{id}/heartbeat", params(("id" = i64, Path)),
+    request_body = LeaseFence, responses(
+    (status = 200, body = HeartbeatAck), (status = 404, body = Problem), (status = 409, body = Problem)))]
+pub async fn heartbeat(
+    State(state): State<AppState>,
+    ApiPath(id): ApiPath<i64>,
+    ApiJson(fence): ApiJson<LeaseFence>,
+) -> Result<Json<HeartbeatAck>, ApiError> {
+    Ok(Json(
+        leases::heartbeat(&state.db, &state.config, id, &fence).await?,
+    ))
+}
+
+/// Gives an unfinished lease back, to be handed out again at once.
+#[utoipa::path(post, path = "/api/v1/leases/{id}/release", params(("id" = i64, Path)),
+    request_body = LeaseFence, responses(
+    (status = 204, description = "Released"), (status = 404, body = Problem), (status = 409, body = Problem)))]
+pub async fn release(
+    State(state): State<AppState>,
+    ApiPath(id): ApiPath<i64>,
+    ApiJson(fence): ApiJson<LeaseFence>,
+) -> Result<StatusCode, ApiError> {
+    let lease = leases::release(&state.db, id, &fence).await?;
+    tracing::info!(lease = id, resume_at = lease.resume_at, "lease released");
+    Ok(StatusCode::NO_CONTENT)
+}
+
+/// Reports the outcomes of a range of the lease's tests.
+#[utoipa::path(post, path = "/api/v1/leases/{id}/results", params(("id" = i64, Path)),
+    request_body = ResultReport, responses(
+    (status = 200, body = ResultAck), (status = 404, body = Problem),
+    (status = 409, description = "Not the lease's holder, or a conflicting result", body = Problem),
+    (status = 422, body = Problem)))]
+pub async fn results(
+    State(state): State<AppState>,
+    ApiPath(id): ApiPath<i64>,
+    ApiJson(report): ApiJson<ResultReport>,
+) -> Result<Json<ResultAck>, ApiError> {
+    check_worker(&report.worker)?;
+    let checked = results::check_report(&report)?;
+    if !report.events.is_empty() {
+        verify_weights(&state, id, &report).await?;
+    }
+    let (ack, stopped) = results::record(&state.db, &state.config, id, &report, &checked).await?;
+    if stopped.is_some() {
+        let lease = leases::get(&mut *state.db.read.acquire().await?, id).await?;
+        state.samplers.forget(lease.campaign_id);
+    }
+    Ok(Json(ack))
+}
+
+/// Checks each reported event's weight against the coordinator's own draw
+/// of that test: a mismatch means the worker samples differently (another
+/// version, another library) and its results must not enter the estimate.
+async fn verify_weights(
+    state: &AppState,
+    lease_id: i64,
+    report: &ResultReport,
+) -> Result<(), ApiError> {
+    let lease = leases::get(&mut *state.db.read.acquire().await?, lease_id).await?;
+    let campaign = campaigns::get(&state.db.read, lease.campaign_id).await?;
+    if campaign.status().is_final() {
+        return Ok(());
+    }
+    let sampler = state.samplers.get(&state.db, &campaign).await?;
+    for event in &report.events {
+        let expected = sampler.draw(event.index).weight;
+        if expected.to_bits() != event.weight.to_bits() {
+            return Err(ApiError::Unprocessable(format!(
+                "event at test {} reports weight {:e}, but the campaign's sampler gives {:e}: \
+                 the worker draws different scenarios (another version of tslg?)",
+                event.index, event.weight, expected
+            )));
+        }
+    }
+    Ok(())
+}

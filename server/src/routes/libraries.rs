@@ -1,0 +1,109 @@
+//! `/api/v1/libraries`: build requests, state and files.
+
+use crate::builder::{exposure_source, library_request, spawn_build};
+use crate::error::{ApiError, ApiJson};
+use crate::routes::ApiPath;
+use crate::state::AppState;
+use crate::store::libraries::{self, NewLibrary};
+use axum::extract::State;
+use axum::http::{header, StatusCode};
+use axum::response::IntoResponse;
+use axum::Json;
+use tslg_api::{CreateLibrary, ExposureRequest, LibraryStatus, LibraryView, Problem};
+use tslg_method::registry::open_case;
+
+/// Starts a library build; poll the library until `status` is `ready`.
+#[utoipa::path(post, path = "/api/v1/libraries", request_body = CreateLibrary, responses(
+    (status = 202, description = "Build started", body = LibraryView),
+    (status = 400, body = Problem), (status = 401, body = Problem), (status = 422, body = Problem)))]
+pub async fn create(
+    State(state): State<AppState>,
+    ApiJson(req): ApiJson<CreateLibrary>,
+) -> Result<impl IntoResponse, ApiError> {
+    library_request(&req).map_err(ApiError::Unprocessable)?;
+    if let ExposureRequest::Table { name, .. } = &req.exposure {
+        if name.trim().is_empty() {
+            return Err(ApiError::Unprocessable(
+                "exposure.name must not be empty".into(),
+            ));
+        }
+    }
+    let checked = req.clone();
+    let (case, surrogate) = tokio::task::spawn_blocking(move || {
+        let case = open_case(
+            &checked.case,
+            checked.preset.as_deref(),
+            &exposure_source(&checked),
+        )?;
+        let surrogate = case.normalise_vehicle(&checked.surrogate)?;
+        Ok::<_, tslg_method::registry::CaseError>((case, surrogate))
+    })
+    .await
+    .map_err(|e| ApiError::Internal(e.into()))?
+    .map_err(|e| ApiError::Unprocessable(e.to_string()))?;
+    let table = match &req.exposure {
+        ExposureRequest::Builtin => None,
+        ExposureRequest::Table { text, .. } => Some(text.as_str()),
+    };
+    let request = serde_json::to_string(&req).map_err(|e| ApiError::Internal(e.into()))?;
+    let surrogate = surrogate.to_string();
+    let row = libraries::insert(
+        &state.db.write,
+        &NewLibrary {
+            case_name: case.name(),
+            preset: &case.preset(),
+            request: &request,
+            surrogate: &surrogate,
+            exposure_name: case.exposure_name(),
+            exposure_fingerprint: &case.exposure().fingerprint(),
+            exposure_table: table,
+            total_scenarios: case.exposure().grid().len(),
+        },
+    )
+    .await?;
+    spawn_build(state, row.id);
+    let location = format!("/api/v1/libraries/{}", row.id);
+    Ok((
+        StatusCode::ACCEPTED,
+        [(header::LOCATION, location)],
+        Json(row.view()),
+    ))
+}
+
+/// Every library, newest first.
+#[utoipa::path(get, path = "/api/v1/libraries", responses((status = 200, body = Vec<LibraryView>)))]
+pub async fn list(State(state): State<AppState>) -> Result<Json<Vec<LibraryView>>, ApiError> {
+    let rows = libraries::list(&state.db.read).await?;
+    Ok(Json(rows.iter().map(|r| r.view()).collect()))
+}
+
+/// One library's state.
+#[utoipa::path(get, path = "/api/v1/libraries/{id}", params(("id" = i64, Path)), responses(
+    (status = 200, body = LibraryView), (status = 404, body = Problem)))]
+pub async fn get_one(
+    State(state): State<AppState>,
+    ApiPath(id): ApiPath<i64>,
+) -> Result<Json<LibraryView>, ApiError> {
+    Ok(Json(libraries::get(&state.db.read, id).await?.view()))
+}
+
+/// The library file (format `tslg-library`, see `docs/library-format.md`).
+#[utoipa::path(get, path = "/api/v1/libraries/{id}/file", params(("id" = i64, Path)), responses(
+    (status = 200, description = "The library file", content_type = "application/json"),
+    (status = 404, body = Problem), (status = 409, body = Problem)))]
+pub async fn file(
+    State(state): State<AppState>,
+    ApiPath(id): ApiPath<i64>,
+) -> Result<impl IntoResponse, ApiError> {
+    let row = libraries::get(&state.db.read, id).await?;
+    if row.status() != LibraryStatus::Ready {
+        return Err(ApiError::Conflict(format!(
+            "library {id} is {}, not ready",
+            row.status().as_str()
+        )));
+    }
+    let body = libraries::body(&state.db.read, id)
+        .await?
+        .ok_or_else(|| ApiError::Internal(anyhow::anyhow!("ready library {id} has no body")))?;
+    Ok(([(header::CONTENT_TYPE, "application/json")], body))
+}

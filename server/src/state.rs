@@ -1,0 +1,28 @@
+//! Shared state of the request handlers.
+
+use crate::config::Config;
+use crate::db::Database;
+use crate::sampler_cache::SamplerCache;
+use std::sync::Arc;
+use tokio::sync::Semaphore;
+
+#[derive(Clone)]
+pub struct AppState {
+    pub db: Database,
+    pub config: Arc<Config>,
+    /// Test samplers of the campaigns, built once each.
+    pub samplers: Arc<SamplerCache>,
+    /// Library builds run one at a time: each already uses every core.
+    pub builds: Arc<Semaphore>,
+}
+
+impl AppState {
+    pub fn new(db: Database, config: Config) -> Self {
+        Self {
+            db,
+            config: Arc::new(config),
+            samplers: Arc::new(SamplerCache::default()),
+            builds: Arc::new(Semaphore::new(1)),
+        }
+    }
+}

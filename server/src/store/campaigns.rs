@@ -1,0 +1,264 @@
+//! The `campaigns` and `history` tables.
+
+use crate::error::ApiError;
+use sqlx::SqlitePool;
+use tslg_api::{CampaignStatus, CampaignView, ExposureRequest, HistoryPoint, Method};
+use tslg_method::estimator::{ImportanceEstimator, StoppingRule};
+use tslg_method::prefix::PrefixFold;
+use tslg_method::registry::ExposureSource;
+
+#[derive(Debug, Clone, sqlx::FromRow)]
+pub struct CampaignRow {
+    pub id: i64,
+    pub case_name: String,
+    pub preset: String,
+    pub method: String,
+    pub library_id: Option<i64>,
+    pub exposure_name: String,
+    pub exposure_fingerprint: String,
+    pub exposure_table: Option<String>,
+    pub vut: String,
+    pub epsilon: f64,
+    pub beta: f64,
+    pub confidence: f64,
+    pub n_min: i64,
+    pub min_events: i64,
+    pub max_tests: i64,
+    pub seed: i64,
+    pub status: String,
+    pub status_detail: Option<String>,
+    pub next_index: i64,
+    pub indices: i64,
+    pub tests: i64,
+    pub events: i64,
+    pub invalid: i64,
+    pub s1: f64,
+    pub s2: f64,
+    pub cost_per_test: Option<f64>,
+    pub created_at: String,
+    pub updated_at: String,
+}
+
+pub const COLUMNS: &str = "id, case_name, preset, method, library_id, exposure_name, \
+    exposure_fingerprint, exposure_table, vut, epsilon, beta, confidence, n_min, min_events, \
+    max_tests, seed, status, status_detail, next_index, indices, tests, events, invalid, s1, s2, \
+    cost_per_test, created_at, updated_at";
+
+impl CampaignRow {
+    pub fn status(&self) -> CampaignStatus {
+        CampaignStatus::parse(&self.status).unwrap_or(CampaignStatus::Failed)
+    }
+
+    pub fn method(&self) -> Method {
+        if self.method == "library" {
+            Method::Library
+        } else {
+            Method::Ndd
+        }
+    }
+
+    pub fn seed(&self) -> u64 {
+        self.seed as u64
+    }
+
+    pub fn rule(&self) -> StoppingRule {
+        StoppingRule {
+            beta: self.beta,
+            confidence: self.confidence,
+            n_min: self.n_min as u64,
+            min_events: self.min_events as u64,
+            max_tests: self.max_tests as u64,
+        }
+    }
+
+    /// The prefix estimator as persisted.
+    pub fn fold(&self) -> PrefixFold {
+        PrefixFold {
+            estimator: ImportanceEstimator::from_sums(
+                self.tests as u64,
+                self.events as u64,
+                self.s1,
+                self.s2,
+            ),
+            indices: self.indices as u64,
+            invalid: self.invalid as u64,
+        }
+    }
+
+    pub fn exposure_source(&self) -> ExposureSource {
+        match &self.exposure_table {
+            None => ExposureSource::Builtin,
+            Some(text) => ExposureSource::Table {
+                name: self.exposure_name.clone(),
+                text: text.clone(),
+            },
+        }
+    }
+
+    pub fn exposure_request(&self) -> ExposureRequest {
+        match self.exposure_source() {
+            ExposureSource::Builtin => ExposureRequest::Builtin,
+            ExposureSource::Table { name, text } => ExposureRequest::Table { name, text },
+        }
+    }
+
+    pub fn view(&self) -> CampaignView {
+        let rule = self.rule();
+        let point = point(&self.fold(), rule.z());
+        let started = self.indices > 0;
+        CampaignView {
+            id: self.id,
+            case: self.case_name.clone(),
+            method: self.method(),
+            library_id: self.library_id,
+            vut: serde_json::from_str(&self.vut).unwrap_or_default(),
+            epsilon: self.epsilon,
+            beta: self.beta,
+            confidence: self.confidence,
+            n_min: rule.n_min,
+            min_events: rule.min_events,
+            max_tests: rule.max_tests,
+            seed: self.seed(),
+            status: self.status(),
+            status_detail: self.status_detail.clone(),
+            tests: self.tests as u64,
+            events: self.events as u64,
+            invalid: self.invalid as u64,
+            indices: self.indices as u64,
+            leased: self.next_index as u64,
+            estimate: started.then_some(point.estimate),
+            half_width: (self.tests > 1).then_some(point.half_width),
+            relative_half_width: point.relative_half_width,
+            ci_low: (self.tests > 1).then_some(point.ci_low),
+            ci_high: (self.tests > 1).then_some(point.ci_high),
+            created_at: self.created_at.clone(),
+            updated_at: self.updated_at.clone(),
+        }
+    }
+}
+
+/// The estimate, interval and relative half-width of a prefix.
+pub fn point(fold: &PrefixFold, z: f64) -> HistoryPoint {
+    let e = &fold.estimator;
+    let (ci_low, ci_high) = e.interval(z);
+    let r = e.relative_half_width(z);
+    HistoryPoint {
+        tests: e.tests(),
+        indices: fold.indices,
+        events: e.events(),
+        estimate: e.estimate(),
+        half_width: if e.tests() > 0 { e.half_width(z) } else { 0.0 },
+        relative_half_width: r.is_finite().then_some(r),
+        ci_low: if e.tests() > 0 { ci_low } else { 0.0 },
+        ci_high: if e.tests() > 0 { ci_high } else { 0.0 },
+    }
+}
+
+/// A validated campaign to insert.
+pub struct NewCampaign {
+    pub case_name: String,
+    pub preset: String,
+    pub method: Method,
+    pub library_id: Option<i64>,
+    pub exposure_name: String,
+    pub exposure_fingerprint: String,
+    pub exposure_table: Option<String>,
+    pub vut: String,
+    pub epsilon: f64,
+    pub rule: StoppingRule,
+    pub seed: u64,
+    pub status: CampaignStatus,
+}
+
+pub async fn insert(pool: &SqlitePool, new: &NewCampaign) -> Result<CampaignRow, ApiError> {
+    let sql = format!(
+        "INSERT INTO campaigns (case_name, preset, method, library_id, exposure_name, \
+         exposure_fingerprint, exposure_table, vut, epsilon, beta, confidence, n_min, min_events, \
+         max_tests, seed, status) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) \
+         RETURNING {COLUMNS}"
+    );
+    Ok(sqlx::query_as(&sql)
+        .bind(&new.case_name)
+        .bind(&new.preset)
+        .bind(new.method.as_str())
+        .bind(new.library_id)
+        .bind(&new.exposure_name)
+        .bind(&new.exposure_fingerprint)
+        .bind(&new.exposure_table)
+        .bind(&new.vut)
+        .bind(new.epsilon)
+        .bind(new.rule.beta)
+        .bind(new.rule.confidence)
+        .bind(new.rule.n_min as i64)
+        .bind(new.rule.min_events as i64)
+        .bind(new.rule.max_tests as i64)
+        .bind(new.seed as i64)
+        .bind(new.status.as_str())
+        .fetch_one(pool)
+        .await?)
+}
+
+pub async fn get<'e, E>(executor: E, id: i64) -> Result<CampaignRow, ApiError>
+where
+    E: sqlx::Executor<'e, Database = sqlx::Sqlite>,
+{
+    let sql = format!("SELECT {COLUMNS} FROM campaigns WHERE id = ?");
+    sqlx::query_as(&sql)
+        .bind(id)
+        .fetch_optional(executor)
+        .await?
+        .ok_or_else(|| ApiError::NotFound(format!("campaign {id} does not exist")))
+}
+
+pub async fn list(pool: &SqlitePool) -> Result<Vec<CampaignRow>, ApiError> {
+    let sql = format!("SELECT {COLUMNS} FROM campaigns ORDER BY id DESC");
+    Ok(sqlx::query_as(&sql).fetch_all(pool).await?)
+}
+
+/// Cancels a pending or running campaign and its leases.
+pub async fn cancel(pool: &SqlitePool, id: i64) -> Result<CampaignRow, ApiError> {
+    let mut tx = pool.begin().await?;
+    let row = get(&mut *tx, id).await?;
+    if row.status().is_final() {
+        return Err(ApiError::Conflict(format!(
+            "campaign {id} has already stopped ({})",
+            row.status
+        )));
+    }
+    sqlx::query(
+        "UPDATE campaigns SET status = 'cancelled', status_detail = 'cancelled on request', \
+         updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now') WHERE id = ?",
+    )
+    .bind(id)
+    .execute(&mut *tx)
+    .await?;
+    sqlx::query("UPDATE leases SET state = 'cancelled' WHERE campaign_id = ? AND state = 'active'")
+        .bind(id)
+        .execute(&mut *tx)
+        .await?;
+    let row = get(&mut *tx, id).await?;
+    tx.commit().await?;
+    Ok(row)
+}
+
+/// The persisted history of a campaign's prefix estimate.
+pub async fn history(pool: &SqlitePool, row: &CampaignRow) -> Result<Vec<HistoryPoint>, ApiError> {
+    let rows: Vec<(i64, i64, i64, f64, f64)> = sqlx::query_as(
+        "SELECT indices, tests, events, s1, s2 FROM history WHERE campaign_id = ? ORDER BY indices",
+    )
+    .bind(row.id)
+    .fetch_all(pool)
+    .await?;
+    let z = row.rule().z();
+    Ok(rows
+        .into_iter()
+        .map(|(indices, tests, events, s1, s2)| {
+            let fold = PrefixFold {
+                estimator: ImportanceEstimator::from_sums(tests as u64, events as u64, s1, s2),
+                indices: indices as u64,
+                invalid: (indices - tests) as u64,
+            };
+            point(&fold, z)
+        })
+        .collect())
+}

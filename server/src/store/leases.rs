@@ -1,0 +1,218 @@
+//! The `leases` table: claiming work, heartbeats and releases, each fenced
+//! on (lease id, worker, attempt).
+
+use crate::config::Config;
+use crate::db::{now_ms, Database};
+use crate::error::ApiError;
+use crate::lease_size::{lease_size, predicted_unleased, SizingInput, MAX_INLINE_LEASE};
+use crate::store::campaigns::{self, CampaignRow, COLUMNS as CAMPAIGN_COLUMNS};
+use sqlx::SqliteConnection;
+use tslg_api::{CampaignStatus, HeartbeatAck, LeaseFence};
+
+#[derive(Debug, Clone, sqlx::FromRow)]
+pub struct LeaseRow {
+    pub id: i64,
+    pub campaign_id: i64,
+    pub start_index: i64,
+    pub end_index: i64,
+    pub resume_at: i64,
+    pub attempt: i64,
+    pub worker: String,
+    pub expires_at: i64,
+    pub state: String,
+}
+
+pub const COLUMNS: &str =
+    "id, campaign_id, start_index, end_index, resume_at, attempt, worker, expires_at, state";
+
+fn ttl_ms(config: &Config) -> i64 {
+    (config.lease_ttl_seconds * 1000.0) as i64
+}
+
+/// Hands out work: first a lease that expired (its holder is presumed
+/// lost; the range blocks the prefix), otherwise a new range of the running
+/// campaign that was served least recently, so campaigns share workers in
+/// turn. `None` when there is nothing to do.
+pub async fn claim(
+    db: &Database,
+    config: &Config,
+    worker: &str,
+    threads: u32,
+    inline: bool,
+) -> Result<Option<LeaseRow>, ApiError> {
+    let now = now_ms();
+    let expires = now + ttl_ms(config);
+    let span_limit = if inline {
+        MAX_INLINE_LEASE as i64
+    } else {
+        i64::MAX
+    };
+    let mut tx = db.write.begin().await?;
+    let sql = format!(
+        "UPDATE leases SET attempt = attempt + 1, worker = ?, expires_at = ? \
+         WHERE id = (SELECT l.id FROM leases l JOIN campaigns c ON c.id = l.campaign_id \
+                     WHERE l.state = 'active' AND l.expires_at < ? AND c.status = 'running' \
+                       AND l.end_index - l.resume_at <= ? \
+                     ORDER BY l.campaign_id, l.resume_at LIMIT 1) \
+         RETURNING {COLUMNS}"
+    );
+    let reclaimed: Option<LeaseRow> = sqlx::query_as(&sql)
+        .bind(worker)
+        .bind(expires)
+        .bind(now)
+        .bind(span_limit)
+        .fetch_optional(&mut *tx)
+        .await?;
+    if let Some(lease) = reclaimed {
+        tx.commit().await?;
+        tracing::info!(
+            lease = lease.id,
+            attempt = lease.attempt,
+            worker,
+            "expired lease handed out again"
+        );
+        return Ok(Some(lease));
+    }
+    let sql = format!(
+        "SELECT {CAMPAIGN_COLUMNS} FROM campaigns WHERE status = 'running' AND next_index < max_tests \
+         ORDER BY last_leased_at, id LIMIT 1"
+    );
+    let Some(campaign): Option<CampaignRow> = sqlx::query_as(&sql).fetch_optional(&mut *tx).await?
+    else {
+        return Ok(None);
+    };
+    let mut size = new_lease_size(config, &campaign, threads);
+    if inline {
+        size = size.min(MAX_INLINE_LEASE);
+    }
+    let start = campaign.next_index;
+    let end = start + size as i64;
+    let moved = sqlx::query(
+        "UPDATE campaigns SET next_index = ?, last_leased_at = ? \
+         WHERE id = ? AND next_index = ? AND status = 'running'",
+    )
+    .bind(end)
+    .bind(now)
+    .bind(campaign.id)
+    .bind(start)
+    .execute(&mut *tx)
+    .await?;
+    if moved.rows_affected() != 1 {
+        return Ok(None);
+    }
+    let sql = format!(
+        "INSERT INTO leases (campaign_id, start_index, end_index, resume_at, attempt, worker, \
+         expires_at, state) VALUES (?, ?, ?, ?, 1, ?, ?, 'active') RETURNING {COLUMNS}"
+    );
+    let lease: LeaseRow = sqlx::query_as(&sql)
+        .bind(campaign.id)
+        .bind(start)
+        .bind(end)
+        .bind(start)
+        .bind(worker)
+        .bind(expires)
+        .fetch_one(&mut *tx)
+        .await?;
+    tx.commit().await?;
+    Ok(Some(lease))
+}
+
+fn new_lease_size(config: &Config, campaign: &CampaignRow, threads: u32) -> u64 {
+    let budget_left = (campaign.max_tests - campaign.next_index).max(0) as u64;
+    if let Some(fixed) = config.lease_size {
+        return fixed.min(budget_left);
+    }
+    let rule = campaign.rule();
+    let fold = campaign.fold();
+    let r = fold.estimator.relative_half_width(rule.z());
+    lease_size(&SizingInput {
+        threads,
+        cost_per_test: campaign.cost_per_test,
+        target_seconds: config.lease_target_seconds,
+        budget_left,
+        predicted_unleased: predicted_unleased(
+            fold.estimator.tests(),
+            fold.estimator.events(),
+            rule.min_events,
+            r,
+            rule.beta,
+            campaign.next_index as u64,
+        ),
+    })
+}
+
+pub async fn get(conn: &mut SqliteConnection, id: i64) -> Result<LeaseRow, ApiError> {
+    let sql = format!("SELECT {COLUMNS} FROM leases WHERE id = ?");
+    sqlx::query_as(&sql)
+        .bind(id)
+        .fetch_optional(conn)
+        .await?
+        .ok_or_else(|| ApiError::NotFound(format!("lease {id} does not exist")))
+}
+
+/// Refuses a caller that does not hold the lease in its current attempt.
+pub fn check_fence(lease: &LeaseRow, worker: &str, attempt: i64) -> Result<(), ApiError> {
+    if lease.worker != worker || lease.attempt != attempt {
+        return Err(ApiError::Conflict(format!(
+            "lease {} is held by worker `{}` in attempt {}; this request is from worker `{}` \
+             for attempt {}: the lease expired and was handed out again",
+            lease.id, lease.worker, lease.attempt, worker, attempt
+        )));
+    }
+    Ok(())
+}
+
+/// Extends a held lease, or says the campaign no longer needs it.
+pub async fn heartbeat(
+    db: &Database,
+    config: &Config,
+    id: i64,
+    fence: &LeaseFence,
+) -> Result<HeartbeatAck, ApiError> {
+    let mut tx = db.write.begin().await?;
+    let lease = get(&mut tx, id).await?;
+    check_fence(&lease, &fence.worker, fence.attempt)?;
+    let campaign = campaigns::get(&mut *tx, lease.campaign_id).await?;
+    let status = campaign.status();
+    if lease.state != "active" || status != CampaignStatus::Running {
+        return Ok(HeartbeatAck {
+            proceed: false,
+            campaign_status: status,
+            ttl_seconds: 0.0,
+        });
+    }
+    let updated = sqlx::query(
+        "UPDATE leases SET expires_at = ? WHERE id = ? AND worker = ? AND attempt = ? AND state = 'active'",
+    )
+    .bind(now_ms() + ttl_ms(config))
+    .bind(id)
+    .bind(&fence.worker)
+    .bind(fence.attempt)
+    .execute(&mut *tx)
+    .await?;
+    tx.commit().await?;
+    Ok(HeartbeatAck {
+        proceed: updated.rows_affected() == 1,
+        campaign_status: status,
+        ttl_seconds: config.lease_ttl_seconds,
+    })
+}
+
+/// Gives a lease back unfinished: it expires now and is handed out again
+/// from its first unreported index.
+pub async fn release(db: &Database, id: i64, fence: &LeaseFence) -> Result<LeaseRow, ApiError> {
+    let mut tx = db.write.begin().await?;
+    let lease = get(&mut tx, id).await?;
+    check_fence(&lease, &fence.worker, fence.attempt)?;
+    sqlx::query(
+        "UPDATE leases SET expires_at = 0 WHERE id = ? AND worker = ? AND attempt = ? AND state = 'active'",
+    )
+    .bind(id)
+    .bind(&fence.worker)
+    .bind(fence.attempt)
+    .execute(&mut *tx)
+    .await?;
+    let lease = get(&mut tx, id).await?;
+    tx.commit().await?;
+    Ok(lease)
+}

@@ -1,0 +1,7 @@
+//! Database access, one module per table family. Every write runs on the
+//! single writer connection ([`crate::db::Database::write`]).
+
+pub mod campaigns;
+pub mod leases;
+pub mod libraries;
+pub mod results;

@@ -1,0 +1,412 @@
+//! Recording results and folding the resolved prefix.
+//!
+//! A report covers the indices `from..to` of a lease. The part below the
+//! lease's `resume_at` was reported before: it must match what is stored
+//! (then it is a duplicate, acknowledged and not counted again) or it is a
+//! conflict (409). The part above is recorded: its events and invalid tests
+//! as rows, the rest only as the lease's new `resume_at`. Then the campaign's
+//! prefix estimator folds whatever became resolved in index order, all in
+//! one transaction, so an acknowledged result is always on disk.
+
+use crate::config::Config;
+use crate::db::{now_ms, Database};
+use crate::error::ApiError;
+use crate::lease_size::update_cost;
+use crate::store::campaigns::{self, CampaignRow};
+use crate::store::leases::{self, check_fence};
+use sqlx::SqliteConnection;
+use tslg_api::{CampaignStatus, ResultAck, ResultReport};
+use tslg_method::estimator::Decision;
+use tslg_method::prefix::SparseOutcome;
+
+/// Longest accepted reason of an invalid test.
+const MAX_REASON: usize = 2000;
+
+/// A report checked for shape: sorted, disjoint, inside its range.
+pub struct CheckedReport {
+    pub from: u64,
+    pub to: u64,
+    /// Events and invalid tests, sorted by index.
+    pub outcomes: Vec<(u64, SparseOutcome)>,
+    pub reasons: Vec<(u64, String)>,
+}
+
+pub fn check_report(report: &ResultReport) -> Result<CheckedReport, ApiError> {
+    let bad = |m: String| Err(ApiError::Unprocessable(m));
+    if report.from >= report.to {
+        return bad(format!(
+            "empty range: from {} must be < to {}",
+            report.from, report.to
+        ));
+    }
+    if report.to > i64::MAX as u64 {
+        return bad(format!("to {} is out of range", report.to));
+    }
+    let mut outcomes = Vec::with_capacity(report.events.len() + report.invalid.len());
+    for e in &report.events {
+        if !(e.weight.is_finite() && e.weight >= 0.0) {
+            return bad(format!(
+                "event at test {} has weight {}; weights are finite and ≥ 0",
+                e.index, e.weight
+            ));
+        }
+        outcomes.push((e.index, SparseOutcome::Event(e.weight)));
+    }
+    let mut reasons = Vec::with_capacity(report.invalid.len());
+    for i in &report.invalid {
+        if i.reason.len() > MAX_REASON {
+            return bad(format!(
+                "the reason for invalid test {} exceeds {MAX_REASON} bytes",
+                i.index
+            ));
+        }
+        outcomes.push((i.index, SparseOutcome::Invalid));
+        reasons.push((i.index, i.reason.clone()));
+    }
+    outcomes.sort_by_key(|&(i, _)| i);
+    for pair in outcomes.windows(2) {
+        if pair[0].0 == pair[1].0 {
+            return bad(format!(
+                "test {} is reported more than once in this report",
+                pair[0].0
+            ));
+        }
+    }
+    if let Some(&(i, _)) = outcomes
+        .iter()
+        .find(|&&(i, _)| i < report.from || i >= report.to)
+    {
+        return bad(format!(
+            "test {i} lies outside the reported range {}..{}",
+            report.from, report.to
+        ));
+    }
+    reasons.sort_by_key(|(i, _)| *i);
+    Ok(CheckedReport {
+        from: report.from,
+        to: report.to,
+        outcomes,
+        reasons,
+    })
+}
+
+/// Records a checked report on lease `lease_id` and folds the prefix.
+pub async fn record(
+    db: &Database,
+    config: &Config,
+    lease_id: i64,
+    report: &ResultReport,
+    checked: &CheckedReport,
+) -> Result<(ResultAck, Option<CampaignStatus>), ApiError> {
+    let mut tx = db.write.begin().await?;
+    let lease = leases::get(&mut tx, lease_id).await?;
+    check_fence(&lease, &report.worker, report.attempt)?;
+    let campaign = campaigns::get(&mut *tx, lease.campaign_id).await?;
+    let span = checked.to - checked.from;
+    let (start, end, resume_at) = (
+        lease.start_index as u64,
+        lease.end_index as u64,
+        lease.resume_at as u64,
+    );
+    if campaign.status().is_final() || lease.state == "cancelled" {
+        return Ok((stopped_ack(span, resume_at, end, campaign.status()), None));
+    }
+    if checked.from < start || checked.to > end {
+        return Err(ApiError::Unprocessable(format!(
+            "range {}..{} is not inside lease {lease_id}'s range {start}..{end}",
+            checked.from, checked.to
+        )));
+    }
+    if checked.from > resume_at {
+        return Err(ApiError::Unprocessable(format!(
+            "range {}..{} leaves a gap: lease {lease_id} has results up to {resume_at}; report from there",
+            checked.from, checked.to
+        )));
+    }
+    let overlap_end = checked.to.min(resume_at);
+    if checked.from < overlap_end {
+        compare_with_stored(&mut tx, &campaign, checked, overlap_end).await?;
+    }
+    let new_from = checked.from.max(resume_at);
+    let mut accepted = 0;
+    if new_from < checked.to {
+        accepted = checked.to - new_from;
+        insert_outcomes(&mut tx, campaign.id, checked, new_from).await?;
+        let done = checked.to == end;
+        let moved = sqlx::query(
+            "UPDATE leases SET resume_at = ?, expires_at = ?, state = ? \
+             WHERE id = ? AND worker = ? AND attempt = ? AND resume_at = ? AND state = 'active'",
+        )
+        .bind(checked.to as i64)
+        .bind(now_ms() + (config.lease_ttl_seconds * 1000.0) as i64)
+        .bind(if done { "done" } else { "active" })
+        .bind(lease_id)
+        .bind(&report.worker)
+        .bind(report.attempt)
+        .bind(resume_at as i64)
+        .execute(&mut *tx)
+        .await?;
+        if moved.rows_affected() != 1 {
+            return Err(ApiError::Conflict(format!(
+                "lease {lease_id} changed during this report; send it again"
+            )));
+        }
+        let cost = update_cost(
+            campaign.cost_per_test,
+            accepted,
+            report.compute_seconds,
+            report.threads,
+        );
+        sqlx::query("UPDATE campaigns SET cost_per_test = ? WHERE id = ?")
+            .bind(cost)
+            .bind(campaign.id)
+            .execute(&mut *tx)
+            .await?;
+    }
+    let stopped = fold_prefix(&mut tx, &campaign).await?;
+    tx.commit().await?;
+    let status = stopped.unwrap_or(CampaignStatus::Running);
+    let resume_at = resume_at.max(checked.to);
+    Ok((
+        ResultAck {
+            accepted,
+            duplicate: span - accepted,
+            ignored: 0,
+            resume_at,
+            lease_done: resume_at == end,
+            proceed: stopped.is_none(),
+            campaign_status: status,
+        },
+        stopped,
+    ))
+}
+
+fn stopped_ack(span: u64, resume_at: u64, end: u64, status: CampaignStatus) -> ResultAck {
+    ResultAck {
+        accepted: 0,
+        duplicate: 0,
+        ignored: span,
+        resume_at,
+        lease_done: resume_at == end,
+        proceed: false,
+        campaign_status: status,
+    }
+}
+
+/// Stored outcomes of `campaign` in `from..to`, sorted by index.
+async fn stored_outcomes(
+    conn: &mut SqliteConnection,
+    campaign: i64,
+    from: u64,
+    to: u64,
+) -> Result<Vec<(u64, SparseOutcome)>, ApiError> {
+    let events: Vec<(i64, f64)> = sqlx::query_as(
+        "SELECT test_index, weight FROM events WHERE campaign_id = ? AND test_index >= ? AND test_index < ?",
+    )
+    .bind(campaign)
+    .bind(from as i64)
+    .bind(to as i64)
+    .fetch_all(&mut *conn)
+    .await?;
+    let invalid: Vec<(i64,)> = sqlx::query_as(
+        "SELECT test_index FROM invalid_tests WHERE campaign_id = ? AND test_index >= ? AND test_index < ?",
+    )
+    .bind(campaign)
+    .bind(from as i64)
+    .bind(to as i64)
+    .fetch_all(&mut *conn)
+    .await?;
+    let mut outcomes: Vec<(u64, SparseOutcome)> = events
+        .into_iter()
+        .map(|(i, w)| (i as u64, SparseOutcome::Event(w)))
+        .chain(
+            invalid
+                .into_iter()
+                .map(|(i,)| (i as u64, SparseOutcome::Invalid)),
+        )
+        .collect();
+    outcomes.sort_by_key(|&(i, _)| i);
+    Ok(outcomes)
+}
+
+fn describe(outcome: Option<SparseOutcome>) -> String {
+    match outcome {
+        None => "no_event".into(),
+        Some(SparseOutcome::Invalid) => "invalid".into(),
+        Some(SparseOutcome::Event(w)) => format!("event with weight {w:e}"),
+    }
+}
+
+async fn compare_with_stored(
+    conn: &mut SqliteConnection,
+    campaign: &CampaignRow,
+    checked: &CheckedReport,
+    overlap_end: u64,
+) -> Result<(), ApiError> {
+    let stored = stored_outcomes(conn, campaign.id, checked.from, overlap_end).await?;
+    let reported: Vec<(u64, SparseOutcome)> = checked
+        .outcomes
+        .iter()
+        .copied()
+        .filter(|&(i, _)| i < overlap_end)
+        .collect();
+    let same = |a: &SparseOutcome, b: &SparseOutcome| match (a, b) {
+        (SparseOutcome::Event(x), SparseOutcome::Event(y)) => x.to_bits() == y.to_bits(),
+        (SparseOutcome::Invalid, SparseOutcome::Invalid) => true,
+        _ => false,
+    };
+    if stored.len() == reported.len()
+        && stored
+            .iter()
+            .zip(&reported)
+            .all(|(s, r)| s.0 == r.0 && same(&s.1, &r.1))
+    {
+        return Ok(());
+    }
+    // Find the first index where they differ, to say so.
+    let find = |list: &[(u64, SparseOutcome)], i: u64| list.iter().find(|o| o.0 == i).map(|o| o.1);
+    let index = stored
+        .iter()
+        .chain(&reported)
+        .map(|o| o.0)
+        .filter(|&i| match (find(&stored, i), find(&reported, i)) {
+            (Some(a), Some(b)) => !same(&a, &b),
+            _ => true,
+        })
+        .min()
+        .unwrap_or(checked.from);
+    let detail = format!(
+        "conflicting result for test {index} of campaign {}: recorded as {}, now reported as {}",
+        campaign.id,
+        describe(find(&stored, index)),
+        describe(find(&reported, index)),
+    );
+    tracing::warn!(campaign = campaign.id, test = index, "{detail}");
+    Err(ApiError::Conflict(detail))
+}
+
+async fn insert_outcomes(
+    conn: &mut SqliteConnection,
+    campaign: i64,
+    checked: &CheckedReport,
+    from: u64,
+) -> Result<(), ApiError> {
+    for &(index, outcome) in checked.outcomes.iter().filter(|o| o.0 >= from) {
+        match outcome {
+            SparseOutcome::Event(weight) => {
+                sqlx::query(
+                    "INSERT INTO events (campaign_id, test_index, weight) VALUES (?, ?, ?)",
+                )
+                .bind(campaign)
+                .bind(index as i64)
+                .bind(weight)
+                .execute(&mut *conn)
+                .await?;
+            }
+            SparseOutcome::Invalid => {
+                let reason = checked
+                    .reasons
+                    .binary_search_by_key(&index, |(i, _)| *i)
+                    .map(|k| checked.reasons[k].1.as_str())
+                    .unwrap_or("");
+                sqlx::query(
+                    "INSERT INTO invalid_tests (campaign_id, test_index, reason) VALUES (?, ?, ?)",
+                )
+                .bind(campaign)
+                .bind(index as i64)
+                .bind(reason)
+                .execute(&mut *conn)
+                .await?;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Folds the newly resolved prefix of `campaign` and persists the estimate,
+/// a history point and, when the rule stops the campaign, its final status.
+async fn fold_prefix(
+    conn: &mut SqliteConnection,
+    campaign: &CampaignRow,
+) -> Result<Option<CampaignStatus>, ApiError> {
+    let (open,): (Option<i64>,) = sqlx::query_as(
+        "SELECT MIN(resume_at) FROM leases WHERE campaign_id = ? AND state = 'active'",
+    )
+    .bind(campaign.id)
+    .fetch_one(&mut *conn)
+    .await?;
+    let frontier = open.map_or(campaign.next_index, |r| r.min(campaign.next_index)) as u64;
+    let mut fold = campaign.fold();
+    if frontier <= fold.indices {
+        return Ok(None);
+    }
+    let outcomes = stored_outcomes(conn, campaign.id, fold.indices, frontier).await?;
+    let rule = campaign.rule();
+    let decision = fold
+        .advance(&rule, rule.z(), frontier, &outcomes)
+        .map_err(|e| {
+            anyhow::anyhow!("stored outcomes of campaign {} rejected: {e}", campaign.id)
+        })?;
+    let (status, detail) = match decision {
+        None => (CampaignStatus::Running, None),
+        Some(Decision::Converged) => (
+            CampaignStatus::Converged,
+            Some(format!(
+                "relative half-width ≤ β = {} after test index {}",
+                rule.beta,
+                fold.indices - 1
+            )),
+        ),
+        Some(Decision::Exhausted) | Some(Decision::Continue) => (
+            CampaignStatus::Exhausted,
+            Some(format!(
+                "max_tests = {} used up before the relative half-width reached β = {}",
+                rule.max_tests, rule.beta
+            )),
+        ),
+    };
+    let (s1, s2) = fold.estimator.sums();
+    sqlx::query(
+        "UPDATE campaigns SET indices = ?, tests = ?, events = ?, invalid = ?, s1 = ?, s2 = ?, \
+         status = ?, status_detail = COALESCE(?, status_detail), \
+         updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now') WHERE id = ?",
+    )
+    .bind(fold.indices as i64)
+    .bind(fold.estimator.tests() as i64)
+    .bind(fold.estimator.events() as i64)
+    .bind(fold.invalid as i64)
+    .bind(s1)
+    .bind(s2)
+    .bind(status.as_str())
+    .bind(detail)
+    .bind(campaign.id)
+    .execute(&mut *conn)
+    .await?;
+    sqlx::query(
+        "INSERT OR REPLACE INTO history (campaign_id, indices, tests, events, s1, s2) VALUES (?, ?, ?, ?, ?, ?)",
+    )
+    .bind(campaign.id)
+    .bind(fold.indices as i64)
+    .bind(fold.estimator.tests() as i64)
+    .bind(fold.estimator.events() as i64)
+    .bind(s1)
+    .bind(s2)
+    .execute(&mut *conn)
+    .await?;
+    if decision.is_some() {
+        sqlx::query(
+            "UPDATE leases SET state = 'cancelled' WHERE campaign_id = ? AND state = 'active'",
+        )
+        .bind(campaign.id)
+        .execute(&mut *conn)
+        .await?;
+        tracing::info!(
+            campaign = campaign.id,
+            status = status.as_str(),
+            stop_index = fold.indices,
+            "campaign stopped"
+        );
+        return Ok(Some(status));
+    }
+    Ok(None)
+}

@@ -1,0 +1,112 @@
+//! `tslg campaign start|status|cancel` and `tslg library create`: clients
+//! of a running coordinator.
+
+use crate::commands::remote::{
+    block_on, client, describe, exposure_request, progress_line, vehicle_json,
+};
+use crate::{CampaignStartArgs, LibraryCreateArgs, MethodArg, SearchArg, ServerArgs};
+use std::io::Write;
+use std::time::Duration;
+use tslg_api::{
+    CreateCampaign, CreateLibrary, LibraryStatus, Method, SearchRequest, ThresholdRequest,
+};
+use tslg_worker::client::Client;
+
+pub fn start(args: &CampaignStartArgs) -> anyhow::Result<()> {
+    let client = client(&args.server)?;
+    let request = CreateCampaign {
+        case: args.case.clone(),
+        method: match args.method {
+            MethodArg::Library => Method::Library,
+            MethodArg::Ndd => Method::Ndd,
+        },
+        library_id: args.library_id,
+        vut: vehicle_json(&args.vut)?,
+        epsilon: args.epsilon,
+        beta: args.rule.beta,
+        confidence: args.rule.confidence,
+        max_tests: args.rule.max_tests,
+        seed: args.seed,
+        n_min: Some(args.rule.n_min),
+        min_events: Some(args.rule.min_events),
+    };
+    block_on(async {
+        let view = client.create_campaign(&request).await?;
+        if !args.wait {
+            return print(&view, args.json);
+        }
+        eprintln!("campaign {} started; waiting for it to stop", view.id);
+        let view = watch(&client, view.id).await?;
+        print(&view, args.json)
+    })
+}
+
+/// Polls a campaign until it stops, showing progress on stderr.
+pub async fn watch(client: &Client, id: i64) -> anyhow::Result<tslg_api::CampaignView> {
+    loop {
+        let view = client.campaign(id).await?;
+        eprint!("\r{}", progress_line("campaign", &view));
+        let _ = std::io::stderr().flush();
+        if view.status.is_final() {
+            eprintln!();
+            return Ok(view);
+        }
+        tokio::time::sleep(Duration::from_millis(250)).await;
+    }
+}
+
+fn print(view: &tslg_api::CampaignView, json: bool) -> anyhow::Result<()> {
+    if json {
+        println!("{}", serde_json::to_string_pretty(view)?);
+    } else {
+        println!("{}", describe(view));
+    }
+    Ok(())
+}
+
+pub fn status(server: &ServerArgs, id: i64, json: bool) -> anyhow::Result<()> {
+    let client = client(server)?;
+    block_on(async { print(&client.campaign(id).await?, json) })
+}
+
+pub fn cancel(server: &ServerArgs, id: i64) -> anyhow::Result<()> {
+    let client = client(server)?;
+    block_on(async { print(&client.cancel_campaign(id).await?, false) })
+}
+
+pub fn create_library(args: &LibraryCreateArgs) -> anyhow::Result<()> {
+    let client = client(&args.server)?;
+    let exposure = exposure_request(&args.case)?;
+    let request = CreateLibrary {
+        case: args.case.case.clone(),
+        preset: Some(args.case.preset.clone()),
+        surrogate: vehicle_json(&args.surrogate)?,
+        exposure,
+        search: match args.search {
+            SearchArg::Exhaustive => SearchRequest::Exhaustive,
+            SearchArg::Multistart => SearchRequest::Multistart {
+                starts: args.starts,
+                seed: args.seed,
+            },
+        },
+        threshold: ThresholdRequest::Relative {
+            m: args.threshold_m,
+        },
+    };
+    block_on(async {
+        let mut view = client.create_library(&request).await?;
+        while args.wait && view.status == LibraryStatus::Building {
+            tokio::time::sleep(Duration::from_millis(200)).await;
+            view = client.library(view.id).await?;
+        }
+        println!("{}", serde_json::to_string_pretty(&view)?);
+        if view.status == LibraryStatus::Failed {
+            anyhow::bail!(
+                "library {} failed: {}",
+                view.id,
+                view.error.unwrap_or_default()
+            );
+        }
+        Ok(())
+    })
+}

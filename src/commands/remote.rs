@@ -1,0 +1,95 @@
+//! Talking to a running coordinator: connection arguments, the runtime for
+//! one command, and how a campaign is shown.
+
+use crate::{CaseArgs, ServerArgs};
+use anyhow::Context;
+use tslg_api::CampaignView;
+use tslg_api::ExposureRequest;
+use tslg_worker::client::Client;
+
+pub fn client(args: &ServerArgs) -> anyhow::Result<Client> {
+    anyhow::ensure!(
+        args.server.starts_with("http://") || args.server.starts_with("https://"),
+        "--server {} must be an http:// or https:// URL",
+        args.server
+    );
+    Client::new(&args.server, args.token.clone())
+}
+
+/// Runs one client command on a small runtime.
+pub fn block_on<T>(
+    future: impl std::future::Future<Output = anyhow::Result<T>>,
+) -> anyhow::Result<T> {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()?
+        .block_on(future)
+}
+
+/// A vehicle given as a built-in name or as a JSON object.
+pub fn vehicle_json(text: &str) -> anyhow::Result<serde_json::Value> {
+    if text.trim_start().starts_with('{') {
+        Ok(serde_json::from_str(text).map_err(|e| anyhow::anyhow!("invalid vehicle JSON: {e}"))?)
+    } else {
+        Ok(serde_json::json!({ "model": text }))
+    }
+}
+
+fn sci(value: Option<f64>) -> String {
+    value.map_or("-".into(), |v| format!("{v:.3e}"))
+}
+
+/// One line of progress toward β.
+pub fn progress_line(label: &str, view: &CampaignView) -> String {
+    let r = view
+        .relative_half_width
+        .map_or("∞".into(), |r| format!("{r:.3}"));
+    format!(
+        "{label:<8} #{:<3} {:<9} {:>10} tests {:>6} events  r {r:>6} → β {}",
+        view.id,
+        view.status.as_str(),
+        view.tests,
+        view.events,
+        view.beta
+    )
+}
+
+/// The campaign's state, several lines.
+pub fn describe(view: &CampaignView) -> String {
+    format!(
+        "campaign {} ({} {}, vehicle {}): {}{}\n  tests {} (events {}, invalid {}), stop index {}\n  \
+         estimate {}  interval [{}, {}]  relative half-width {} (β {}, confidence {})",
+        view.id,
+        view.case,
+        view.method.as_str(),
+        view.vut.get("model").and_then(|m| m.as_str()).unwrap_or("?"),
+        view.status.as_str(),
+        view.status_detail.as_ref().map_or(String::new(), |d| format!(" — {d}")),
+        view.tests,
+        view.events,
+        view.invalid,
+        view.indices,
+        sci(view.estimate),
+        sci(view.ci_low),
+        sci(view.ci_high),
+        view.relative_half_width.map_or("-".into(), |r| format!("{r:.3}")),
+        view.beta,
+        view.confidence
+    )
+}
+
+/// The exposure of a request: the table named by `--ndd-table`, uploaded
+/// with the request, or the case's built-in model.
+pub fn exposure_request(case: &CaseArgs) -> anyhow::Result<ExposureRequest> {
+    Ok(match &case.ndd_table {
+        None => ExposureRequest::Builtin,
+        Some(path) => ExposureRequest::Table {
+            name: path.file_name().map_or_else(
+                || path.display().to_string(),
+                |n| n.to_string_lossy().into_owned(),
+            ),
+            text: std::fs::read_to_string(path)
+                .with_context(|| format!("cannot read the NDD table {}", path.display()))?,
+        },
+    })
+}

@@ -1,0 +1,194 @@
+//! A client of the coordinator's HTTP API: the worker's calls (leases,
+//! results, plans) and the user's (libraries, campaigns), with problem
+//! responses turned into [`CallError::Refused`] carrying the server's detail.
+
+use reqwest::StatusCode;
+use serde::de::DeserializeOwned;
+use serde::Serialize;
+use std::time::Duration;
+use tslg_api::{
+    CampaignPlan, CampaignView, CreateCampaign, CreateLibrary, HeartbeatAck, History, Lease,
+    LeaseFence, LeaseRequest, LibraryView, Problem, ResultAck, ResultReport,
+};
+
+/// A failed call: worth retrying, or refused for good.
+#[derive(Debug, thiserror::Error)]
+pub enum CallError {
+    /// The coordinator could not be reached or failed (5xx): retry later.
+    #[error("coordinator unavailable: {0}")]
+    Transient(String),
+    /// The coordinator refused the request (4xx) with this problem.
+    #[error("refused ({status}): {detail}")]
+    Refused { status: u16, detail: String },
+}
+
+#[derive(Clone)]
+pub struct Client {
+    http: reqwest::Client,
+    base: String,
+    token: Option<String>,
+}
+
+impl Client {
+    pub fn new(base: &str, token: Option<String>) -> anyhow::Result<Self> {
+        let http = reqwest::Client::builder()
+            .connect_timeout(Duration::from_secs(5))
+            .timeout(Duration::from_secs(60))
+            .build()?;
+        Ok(Self {
+            http,
+            base: base.trim_end_matches('/').to_owned(),
+            token,
+        })
+    }
+
+    fn request(&self, method: reqwest::Method, path: &str) -> reqwest::RequestBuilder {
+        let builder = self.http.request(method, format!("{}{path}", self.base));
+        match &self.token {
+            Some(t) => builder.bearer_auth(t),
+            None => builder,
+        }
+    }
+
+    async fn send(&self, builder: reqwest::RequestBuilder) -> Result<reqwest::Response, CallError> {
+        let response = builder
+            .send()
+            .await
+            .map_err(|e| CallError::Transient(e.to_string()))?;
+        let status = response.status();
+        if status.is_server_error() {
+            return Err(CallError::Transient(format!("HTTP {status}")));
+        }
+        if status.is_client_error() {
+            let detail = match response.json::<Problem>().await {
+                Ok(p) => p.detail,
+                Err(_) => status.to_string(),
+            };
+            return Err(CallError::Refused {
+                status: status.as_u16(),
+                detail,
+            });
+        }
+        Ok(response)
+    }
+
+    async fn json<T: DeserializeOwned>(
+        &self,
+        builder: reqwest::RequestBuilder,
+    ) -> Result<T, CallError> {
+        self.send(builder)
+            .await?
+            .json()
+            .await
+            .map_err(|e| CallError::Transient(format!("unreadable answer: {e}")))
+    }
+
+    async fn post<B: Serialize, T: DeserializeOwned>(
+        &self,
+        path: &str,
+        body: &B,
+    ) -> Result<T, CallError> {
+        self.json(self.request(reqwest::Method::POST, path).json(body))
+            .await
+    }
+
+    /// A lease, or `None` when there is no work.
+    pub async fn claim(&self, request: &LeaseRequest) -> Result<Option<Lease>, CallError> {
+        let response = self
+            .send(
+                self.request(reqwest::Method::POST, "/api/v1/leases")
+                    .json(request),
+            )
+            .await?;
+        if response.status() == StatusCode::NO_CONTENT {
+            return Ok(None);
+        }
+        response
+            .json()
+            .await
+            .map(Some)
+            .map_err(|e| CallError::Transient(format!("unreadable lease: {e}")))
+    }
+
+    pub async fn heartbeat(
+        &self,
+        lease: i64,
+        fence: &LeaseFence,
+    ) -> Result<HeartbeatAck, CallError> {
+        self.post(&format!("/api/v1/leases/{lease}/heartbeat"), fence)
+            .await
+    }
+
+    pub async fn release(&self, lease: i64, fence: &LeaseFence) -> Result<(), CallError> {
+        self.send(
+            self.request(
+                reqwest::Method::POST,
+                &format!("/api/v1/leases/{lease}/release"),
+            )
+            .json(fence),
+        )
+        .await
+        .map(|_| ())
+    }
+
+    pub async fn report(&self, lease: i64, report: &ResultReport) -> Result<ResultAck, CallError> {
+        self.post(&format!("/api/v1/leases/{lease}/results"), report)
+            .await
+    }
+
+    pub async fn plan(&self, campaign: i64) -> Result<CampaignPlan, CallError> {
+        self.json(self.request(
+            reqwest::Method::GET,
+            &format!("/api/v1/campaigns/{campaign}/plan"),
+        ))
+        .await
+    }
+
+    pub async fn library_file(&self, library: i64) -> Result<String, CallError> {
+        self.send(self.request(
+            reqwest::Method::GET,
+            &format!("/api/v1/libraries/{library}/file"),
+        ))
+        .await?
+        .text()
+        .await
+        .map_err(|e| CallError::Transient(e.to_string()))
+    }
+
+    pub async fn create_library(&self, request: &CreateLibrary) -> Result<LibraryView, CallError> {
+        self.post("/api/v1/libraries", request).await
+    }
+
+    pub async fn library(&self, id: i64) -> Result<LibraryView, CallError> {
+        self.json(self.request(reqwest::Method::GET, &format!("/api/v1/libraries/{id}")))
+            .await
+    }
+
+    pub async fn create_campaign(
+        &self,
+        request: &CreateCampaign,
+    ) -> Result<CampaignView, CallError> {
+        self.post("/api/v1/campaigns", request).await
+    }
+
+    pub async fn campaign(&self, id: i64) -> Result<CampaignView, CallError> {
+        self.json(self.request(reqwest::Method::GET, &format!("/api/v1/campaigns/{id}")))
+            .await
+    }
+
+    pub async fn history(&self, id: i64) -> Result<History, CallError> {
+        self.json(self.request(
+            reqwest::Method::GET,
+            &format!("/api/v1/campaigns/{id}/history"),
+        ))
+        .await
+    }
+
+    pub async fn cancel_campaign(&self, id: i64) -> Result<CampaignView, CallError> {
+        self.post(
+            &format!("/api/v1/campaigns/{id}/cancel"),
+            &serde_json::json!({}),
+        )
+        .await
+    }
+}

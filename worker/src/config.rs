@@ -1,0 +1,84 @@
+//! The worker's settings: one clap struct, every flag also readable from
+//! the environment.
+
+use clap::Parser;
+
+#[derive(Debug, Clone, Parser)]
+#[command(
+    name = "tslg-worker",
+    version,
+    about = "A tslg worker: runs the tests a coordinator hands out"
+)]
+pub struct WorkerConfig {
+    /// The coordinator's base URL.
+    #[arg(long, env = "TSLG_SERVER", default_value = "http://127.0.0.1:8080")]
+    pub server: String,
+
+    /// Threads to simulate on (default: every core).
+    #[arg(long, env = "TSLG_THREADS")]
+    pub threads: Option<usize>,
+
+    /// The worker token, sent as `Authorization: Bearer …`.
+    #[arg(long, env = "TSLG_WORKER_TOKEN", hide_env_values = true)]
+    pub token: Option<String>,
+
+    /// This worker's name, unique among live workers (default: host and
+    /// process id).
+    #[arg(long, env = "TSLG_WORKER_NAME")]
+    pub name: Option<String>,
+
+    /// Longest pause between polls when there is no work (seconds).
+    #[arg(long, env = "TSLG_MAX_BACKOFF", default_value_t = 5.0)]
+    pub max_backoff_seconds: f64,
+
+    /// Exit when there has been no work for this many seconds (default:
+    /// never).
+    #[arg(long, env = "TSLG_EXIT_WHEN_IDLE")]
+    pub exit_when_idle_seconds: Option<f64>,
+}
+
+impl WorkerConfig {
+    /// Settings for a worker in this process (the demo, tests).
+    pub fn local(server: impl Into<String>, threads: usize, name: impl Into<String>) -> Self {
+        Self {
+            server: server.into(),
+            threads: Some(threads),
+            token: None,
+            name: Some(name.into()),
+            max_backoff_seconds: 0.5,
+            exit_when_idle_seconds: None,
+        }
+    }
+
+    pub fn threads(&self) -> usize {
+        self.threads
+            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+            .max(1)
+    }
+
+    pub fn name(&self) -> String {
+        self.name.clone().unwrap_or_else(|| {
+            let host = std::env::var("HOSTNAME")
+                .ok()
+                .or_else(|| std::fs::read_to_string("/etc/hostname").ok())
+                .map(|h| h.trim().to_owned())
+                .filter(|h| !h.is_empty())
+                .unwrap_or_else(|| "worker".into());
+            format!("{host}-{}", std::process::id())
+        })
+    }
+
+    pub fn validate(&self) -> anyhow::Result<()> {
+        anyhow::ensure!(
+            self.server.starts_with("http://") || self.server.starts_with("https://"),
+            "--server {} must be an http:// or https:// URL",
+            self.server
+        );
+        anyhow::ensure!(self.threads != Some(0), "--threads must be at least 1");
+        anyhow::ensure!(
+            self.max_backoff_seconds.is_finite() && self.max_backoff_seconds > 0.0,
+            "--max-backoff-seconds must be > 0"
+        );
+        Ok(())
+    }
+}

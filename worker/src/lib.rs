@@ -1,0 +1,12 @@
+//! The tslg worker: pulls leases from a coordinator, reproduces each test's
+//! scenario from the campaign's plan and the test index, simulates the
+//! vehicle under test on a rayon pool and reports the outcomes.
+
+pub mod backoff;
+pub mod client;
+pub mod config;
+pub mod prepared;
+pub mod run;
+
+pub use config::WorkerConfig;
+pub use run::{run, WorkerSummary};

@@ -1,0 +1,107 @@
+//! A campaign made ready to run: its plan, the library downloaded once per
+//! library and the sampler and vehicle built from them, cached per campaign.
+
+use crate::client::{CallError, Client};
+use std::collections::HashMap;
+use std::sync::Arc;
+use tslg_api::{CampaignPlan, ExposureRequest, Method};
+use tslg_method::library::Library;
+use tslg_method::registry::{open_case, CampaignSampler, EventTest, ExposureSource};
+
+/// What the worker needs to run any test of one campaign.
+pub struct PreparedCampaign {
+    pub sampler: CampaignSampler,
+    pub event_test: EventTest,
+}
+
+impl PreparedCampaign {
+    /// Builds the sampler and vehicle from a plan (CPU work: call off the
+    /// async runtime).
+    pub fn new(plan: &CampaignPlan, library: Option<&Library>) -> anyhow::Result<Self> {
+        let exposure = match &plan.exposure {
+            ExposureRequest::Builtin => ExposureSource::Builtin,
+            ExposureRequest::Table { name, text } => ExposureSource::Table {
+                name: name.clone(),
+                text: text.clone(),
+            },
+        };
+        let case = open_case(&plan.case, Some(&plan.preset), &exposure)?;
+        let fingerprint = case.exposure().fingerprint();
+        anyhow::ensure!(
+            fingerprint == plan.exposure_fingerprint,
+            "campaign {}: this worker's exposure has fingerprint {fingerprint}, the coordinator's {}",
+            plan.campaign_id,
+            plan.exposure_fingerprint
+        );
+        let event_test = case.event_test(&plan.vut)?;
+        let sampler = CampaignSampler::new(case, library, plan.epsilon, plan.seed)?;
+        Ok(Self {
+            sampler,
+            event_test,
+        })
+    }
+}
+
+/// Campaigns and libraries this worker has prepared.
+#[derive(Default)]
+pub struct Cache {
+    campaigns: HashMap<i64, Arc<PreparedCampaign>>,
+    libraries: HashMap<i64, Arc<Library>>,
+}
+
+/// Why a campaign could not be prepared.
+#[derive(Debug, thiserror::Error)]
+pub enum PrepareError {
+    #[error(transparent)]
+    Call(#[from] CallError),
+    #[error("campaign cannot run on this worker: {0}")]
+    Unusable(String),
+}
+
+impl Cache {
+    pub async fn get(
+        &mut self,
+        client: &Client,
+        campaign: i64,
+    ) -> Result<Arc<PreparedCampaign>, PrepareError> {
+        if let Some(p) = self.campaigns.get(&campaign) {
+            return Ok(Arc::clone(p));
+        }
+        let plan = client.plan(campaign).await?;
+        let library = match (plan.method, plan.library_id) {
+            (Method::Library, Some(id)) => Some(self.library(client, id).await?),
+            (Method::Library, None) => {
+                return Err(PrepareError::Unusable(
+                    "library campaign without a library".into(),
+                ))
+            }
+            (Method::Ndd, _) => None,
+        };
+        let prepared =
+            tokio::task::spawn_blocking(move || PreparedCampaign::new(&plan, library.as_deref()))
+                .await
+                .map_err(|e| PrepareError::Unusable(e.to_string()))?
+                .map_err(|e| PrepareError::Unusable(format!("{e:#}")))?;
+        let prepared = Arc::new(prepared);
+        // Keep the cache small: campaigns come and go, libraries stay.
+        if self.campaigns.len() >= 64 {
+            self.campaigns.clear();
+        }
+        self.campaigns.insert(campaign, Arc::clone(&prepared));
+        Ok(prepared)
+    }
+
+    async fn library(&mut self, client: &Client, id: i64) -> Result<Arc<Library>, PrepareError> {
+        if let Some(l) = self.libraries.get(&id) {
+            return Ok(Arc::clone(l));
+        }
+        let text = client.library_file(id).await?;
+        let library = tokio::task::spawn_blocking(move || Library::from_json(&text))
+            .await
+            .map_err(|e| PrepareError::Unusable(e.to_string()))?
+            .map_err(|e| PrepareError::Unusable(format!("library {id}: {e}")))?;
+        let library = Arc::new(library);
+        self.libraries.insert(id, Arc::clone(&library));
+        Ok(library)
+    }
+}
