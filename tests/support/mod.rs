@@ -1,0 +1,263 @@
+//! Helpers of the end-to-end tests: the real `tslg-server` and
+//! `tslg-worker` binaries started as processes on free ports with fresh
+//! databases, and the in-process reference runs they are compared with.
+#![allow(dead_code)]
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+use tslg_api::{CampaignView, CreateCampaign, CreateLibrary, LibraryStatus, LibraryView, Method};
+use tslg_method::campaign::{run_campaign_with, CampaignResult};
+use tslg_method::estimator::StoppingRule;
+use tslg_method::library::{LibraryRequest, SearchMethod, Threshold};
+use tslg_method::registry::{open_case, CampaignSampler, ExposureSource};
+use tslg_worker::client::Client;
+
+/// A `tslg-server` process; killed when dropped.
+pub struct ServerProcess {
+    child: Child,
+    pub url: String,
+    pub address: String,
+    pub database: PathBuf,
+}
+
+impl ServerProcess {
+    /// Starts a coordinator on a free loopback port.
+    pub fn start(database: &Path, extra: &[&str]) -> Self {
+        Self::start_on(database, "127.0.0.1:0", extra)
+    }
+
+    /// Starts a coordinator on `bind`, waiting until it listens.
+    pub fn start_on(database: &Path, bind: &str, extra: &[&str]) -> Self {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_tslg-server"))
+            .args(["--bind", bind, "--database-url"])
+            .arg(format!("sqlite://{}", database.display()))
+            .args(extra)
+            .env("RUST_LOG", "info")
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("start tslg-server");
+        let stderr = child.stderr.take().expect("stderr");
+        let (tx, rx) = mpsc::channel();
+        std::thread::spawn(move || {
+            let mut tx = Some(tx);
+            for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+                if let Some(at) = line.find("address=") {
+                    if let Some(tx) = tx.take() {
+                        let address = line[at + 8..]
+                            .split_whitespace()
+                            .next()
+                            .unwrap_or("")
+                            .to_owned();
+                        let _ = tx.send(address);
+                    }
+                }
+            }
+        });
+        let address = rx
+            .recv_timeout(Duration::from_secs(60))
+            .expect("tslg-server did not report its address");
+        Self {
+            child,
+            url: format!("http://{address}"),
+            address,
+            database: database.to_owned(),
+        }
+    }
+
+    /// SIGKILL: no shutdown, no flush beyond what was committed.
+    pub fn kill(mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+
+    pub fn client(&self) -> Client {
+        Client::new(&self.url, None).expect("client")
+    }
+}
+
+impl Drop for ServerProcess {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// A `tslg-worker` process; killed when dropped.
+pub struct WorkerProcess(pub Child);
+
+impl WorkerProcess {
+    pub fn start(url: &str, threads: usize, name: &str) -> Self {
+        let child = Command::new(env!("CARGO_BIN_EXE_tslg-worker"))
+            .args([
+                "--server",
+                url,
+                "--threads",
+                &threads.to_string(),
+                "--name",
+                name,
+            ])
+            .args(["--max-backoff-seconds", "0.3"])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("start tslg-worker");
+        Self(child)
+    }
+
+    /// SIGTERM, then waits for the worker to exit by itself.
+    pub fn terminate(mut self) -> std::process::ExitStatus {
+        let _ = Command::new("kill")
+            .args(["-TERM", &self.0.id().to_string()])
+            .status();
+        self.0.wait().expect("wait")
+    }
+}
+
+impl Drop for WorkerProcess {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// A fresh scratch directory.
+pub fn scratch() -> tempfile::TempDir {
+    tempfile::tempdir().expect("tempdir")
+}
+
+/// Builds a library on the coordinator and waits until it is ready.
+pub async fn ready_library(client: &Client, surrogate: &str, exhaustive: bool) -> LibraryView {
+    let request = CreateLibrary {
+        case: "cut-in".into(),
+        preset: None,
+        surrogate: serde_json::json!({ "model": surrogate }),
+        exposure: Default::default(),
+        search: if exhaustive {
+            tslg_api::SearchRequest::Exhaustive
+        } else {
+            Default::default()
+        },
+        threshold: Default::default(),
+    };
+    let mut view = client
+        .create_library(&request)
+        .await
+        .expect("create library");
+    let started = Instant::now();
+    while view.status == LibraryStatus::Building {
+        assert!(
+            started.elapsed() < Duration::from_secs(120),
+            "library build hangs"
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+        view = client.library(view.id).await.expect("library");
+    }
+    assert_eq!(view.status, LibraryStatus::Ready, "{:?}", view.error);
+    view
+}
+
+/// A campaign request with the defaults the tests vary from.
+pub fn campaign(
+    method: Method,
+    library_id: i64,
+    vut: &str,
+    beta: f64,
+    seed: u64,
+) -> CreateCampaign {
+    CreateCampaign {
+        case: "cut-in".into(),
+        method,
+        library_id: Some(library_id),
+        vut: serde_json::json!({ "model": vut }),
+        epsilon: 0.1,
+        beta,
+        confidence: 0.9,
+        max_tests: 10_000_000,
+        seed,
+        n_min: None,
+        min_events: None,
+    }
+}
+
+/// Polls a campaign until it stops.
+pub async fn finished(client: &Client, id: i64, limit: Duration) -> CampaignView {
+    let started = Instant::now();
+    loop {
+        let view = client.campaign(id).await.expect("campaign");
+        if view.status.is_final() {
+            return view;
+        }
+        assert!(
+            started.elapsed() < limit,
+            "campaign {id} did not stop in {limit:?}: {view:?}"
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+/// The same campaign run in this process (built-in exposure, exhaustive
+/// library of `surrogate` when `library`).
+pub fn in_process(surrogate: Option<&str>, request: &CreateCampaign) -> CampaignResult {
+    let case = open_case("cut-in", None, &ExposureSource::Builtin).unwrap();
+    let library = surrogate.map(|s| {
+        case.build_library(
+            &serde_json::json!({ "model": s }),
+            &LibraryRequest {
+                threshold: Threshold::default(),
+                search: SearchMethod::Exhaustive,
+            },
+        )
+        .unwrap()
+    });
+    let test = case.event_test(&request.vut).unwrap();
+    let sampler =
+        CampaignSampler::new(case, library.as_ref(), request.epsilon, request.seed).unwrap();
+    let rule = StoppingRule {
+        beta: request.beta,
+        confidence: request.confidence,
+        n_min: request.n_min.unwrap_or(30),
+        min_events: request.min_events.unwrap_or(10),
+        max_tests: request.max_tests,
+    };
+    run_campaign_with(
+        &|cell| test(cell),
+        &sampler.distribution,
+        &rule,
+        request.seed,
+    )
+}
+
+/// Asserts that a service campaign ended exactly where the in-process run did.
+pub fn assert_same(view: &CampaignView, reference: &CampaignResult) {
+    assert_eq!(view.indices, reference.indices, "stop index");
+    assert_eq!(view.tests, reference.tests, "tests");
+    assert_eq!(view.events, reference.events, "events");
+    let bits = |x: Option<f64>| x.map(f64::to_bits);
+    assert_eq!(
+        bits(view.estimate),
+        Some(reference.estimate.to_bits()),
+        "estimate"
+    );
+    assert_eq!(
+        bits(view.ci_low),
+        Some(reference.ci_low.to_bits()),
+        "ci_low"
+    );
+    assert_eq!(
+        bits(view.ci_high),
+        Some(reference.ci_high.to_bits()),
+        "ci_high"
+    );
+}
+
+/// The exact P(A) of a built-in vehicle on the built-in exposure.
+pub fn exact(vut: &str) -> f64 {
+    open_case("cut-in", None, &ExposureSource::Builtin)
+        .unwrap()
+        .exact_event_probability(&serde_json::json!({ "model": vut }))
+        .unwrap()
+}
