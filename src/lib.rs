@@ -35,6 +35,8 @@ pub enum Command {
     /// Start, watch or cancel campaigns on a running coordinator.
     #[command(subcommand)]
     Campaign(CampaignCommand),
+    /// Check that a coordinator answers and its database works (exit 0 if so).
+    Health(ServerArgs),
 }
 
 /// How to reach a coordinator.
@@ -318,5 +320,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Campaign(CampaignCommand::Cancel { id, server }) => {
             commands::campaign::cancel(&server, id)
         }
+        Command::Health(server) => commands::campaign::health(&server),
     }
 }

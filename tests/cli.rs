@@ -306,18 +306,35 @@ fn a_library_cannot_be_used_with_another_exposure() {
 }
 
 #[test]
-fn demo_evaluates_every_builtin_vehicle() {
-    let o = tslg(&["demo"]);
+fn demo_runs_both_campaigns_through_a_local_service_and_prints_the_table() {
+    let o = tslg(&[
+        "demo",
+        "--vut",
+        "fvdm",
+        "--surrogate",
+        "fvdm",
+        "--seed",
+        "3",
+    ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let text = stdout(&o);
+    assert!(text.contains("2 workers"), "{text}");
+    assert!(text.contains("cut-in library 1 of fvdm"), "{text}");
+    for method in ["library", "ndd"] {
+        let row = text
+            .lines()
+            .find(|l| l.starts_with(&format!("{method} ")))
+            .unwrap_or_else(|| panic!("no {method} row in {text}"));
+        assert!(row.ends_with("converged"), "{row}");
+    }
+    // The exact P(A) of the FVDM on the built-in exposure (docs/models.md).
     assert!(
-        text.contains("IDM library of 287 of 3420 scenarios"),
+        text.contains("exact P(A) by enumeration: 5.3608e-3"),
         "{text}"
     );
-    for vehicle in ["idm", "fvdm", "switching-acc", "acc-aeb"] {
-        assert!(
-            text.lines().any(|l| l.starts_with(&format!("{vehicle} "))),
-            "{text}"
-        );
-    }
+    assert!(
+        text.contains("acceleration ratio (NDD tests / library tests): "),
+        "{text}"
+    );
+    assert!(stderr(&o).contains("converged"), "progress is shown");
 }

@@ -69,6 +69,15 @@ pub fn status(server: &ServerArgs, id: i64, json: bool) -> anyhow::Result<()> {
     block_on(async { print(&client.campaign(id).await?, json) })
 }
 
+pub fn health(server: &ServerArgs) -> anyhow::Result<()> {
+    let client = client(server)?;
+    block_on(async {
+        let health = client.health().await?;
+        println!("{} (tslg {})", health.status, health.version);
+        Ok(())
+    })
+}
+
 pub fn cancel(server: &ServerArgs, id: i64) -> anyhow::Result<()> {
     let client = client(server)?;
     block_on(async { print(&client.cancel_campaign(id).await?, false) })

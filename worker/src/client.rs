@@ -155,6 +155,11 @@ impl Client {
         .map_err(|e| CallError::Transient(e.to_string()))
     }
 
+    pub async fn health(&self) -> Result<tslg_api::Health, CallError> {
+        self.json(self.request(reqwest::Method::GET, "/healthz"))
+            .await
+    }
+
     pub async fn create_library(&self, request: &CreateLibrary) -> Result<LibraryView, CallError> {
         self.post("/api/v1/libraries", request).await
     }

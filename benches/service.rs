@@ -1,0 +1,143 @@
+//! Service overhead: the same cheap NDD baseline (IDM on cut-in, ~1 µs per
+//! test) run in this process and through a local coordinator with one
+//! worker on the same cores, and the lease round-trip time. Prints a
+//! Markdown table for docs/benchmarks.md.
+//!
+//! `cargo bench --bench service` (set TSLG_BENCH_TESTS to change the size).
+
+use std::time::{Duration, Instant};
+use tslg::service::LocalService;
+use tslg_api::{CreateCampaign, LeaseRequest, Method, ResultReport};
+use tslg_method::campaign::run_campaign_with;
+use tslg_method::estimator::StoppingRule;
+use tslg_method::registry::{open_case, CampaignSampler, ExposureSource};
+use tslg_worker::client::Client;
+
+fn request(tests: u64) -> CreateCampaign {
+    CreateCampaign {
+        case: "cut-in".into(),
+        method: Method::Ndd,
+        library_id: None,
+        vut: serde_json::json!({"model": "idm"}),
+        epsilon: 0.1,
+        // Never reached: the campaign runs to its budget.
+        beta: 1e-6,
+        confidence: 0.9,
+        max_tests: tests,
+        seed: 1,
+        n_min: None,
+        min_events: None,
+    }
+}
+
+fn in_process(tests: u64) -> f64 {
+    let case = open_case("cut-in", None, &ExposureSource::Builtin).unwrap();
+    let test = case
+        .event_test(&serde_json::json!({"model": "idm"}))
+        .unwrap();
+    let sampler = CampaignSampler::new(case, None, 0.1, 1).unwrap();
+    let rule = StoppingRule::new(1e-6, tests);
+    let started = Instant::now();
+    let result = run_campaign_with(&|c| test(c), &sampler.distribution, &rule, 1);
+    assert_eq!(result.indices, tests);
+    started.elapsed().as_secs_f64()
+}
+
+async fn through_service(tests: u64, threads: usize) -> anyhow::Result<f64> {
+    let dir = tempfile::tempdir()?;
+    let url = format!("sqlite://{}", dir.path().join("bench.sqlite").display());
+    let service = LocalService::start(&url, 1, threads).await?;
+    let client = Client::new(&service.url, None)?;
+    let started = Instant::now();
+    let id = client.create_campaign(&request(tests)).await?.id;
+    loop {
+        let view = client.campaign(id).await?;
+        if view.status.is_final() {
+            assert_eq!(view.indices, tests);
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+    let seconds = started.elapsed().as_secs_f64();
+    service.stop().await?;
+    Ok(seconds)
+}
+
+/// Claim-and-report round trips of tiny leases with no worker running.
+async fn round_trips(count: usize) -> anyhow::Result<Vec<f64>> {
+    let dir = tempfile::tempdir()?;
+    let url = format!("sqlite://{}", dir.path().join("rtt.sqlite").display());
+    let service = LocalService::start(&url, 0, 1).await?;
+    let client = Client::new(&service.url, None)?;
+    client.create_campaign(&request(u64::MAX >> 20)).await?;
+    let mut times = Vec::with_capacity(count);
+    for _ in 0..count {
+        let started = Instant::now();
+        let lease = client
+            .claim(&LeaseRequest {
+                worker: "bench".into(),
+                threads: 1,
+                include_tests: false,
+            })
+            .await?
+            .expect("work");
+        let report = ResultReport {
+            worker: "bench".into(),
+            attempt: lease.attempt,
+            from: lease.start,
+            to: lease.end,
+            events: vec![],
+            invalid: vec![],
+            compute_seconds: 0.0,
+            threads: 1,
+        };
+        client.report(lease.id, &report).await?;
+        times.push(started.elapsed().as_secs_f64() * 1e3);
+    }
+    service.stop().await?;
+    times.sort_by(f64::total_cmp);
+    Ok(times)
+}
+
+fn main() -> anyhow::Result<()> {
+    let tests: u64 = std::env::var("TSLG_BENCH_TESTS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(20_000_000);
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()?;
+    let mut local = Vec::new();
+    let mut service = Vec::new();
+    for _ in 0..3 {
+        local.push(in_process(tests));
+        service.push(runtime.block_on(through_service(tests, cores))?);
+    }
+    let best = |v: &[f64]| v.iter().copied().fold(f64::INFINITY, f64::min);
+    let (l, s) = (best(&local), best(&service));
+    println!("NDD baseline, cut-in IDM, {tests} tests, {cores} cores (best of 3)\n");
+    println!("| runner | seconds | tests/s |");
+    println!("|---|---:|---:|");
+    println!(
+        "| in-process (rayon, {cores} threads) | {l:.2} | {:.3e} |",
+        tests as f64 / l
+    );
+    println!(
+        "| service (1 worker × {cores} threads, embedded coordinator) | {s:.2} | {:.3e} |",
+        tests as f64 / s
+    );
+    println!("\nthroughput ratio service / in-process: {:.3}\n", l / s);
+    let rtt = runtime.block_on(round_trips(1000))?;
+    let q = |p: f64| rtt[((rtt.len() - 1) as f64 * p) as usize];
+    println!("| lease round trip (claim + report, 1000 trips) | p50 ms | p90 ms | p99 ms |");
+    println!("|---|---:|---:|---:|");
+    println!(
+        "| loopback, SQLite WAL | {:.2} | {:.2} | {:.2} |",
+        q(0.5),
+        q(0.9),
+        q(0.99)
+    );
+    Ok(())
+}
