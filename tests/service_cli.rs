@@ -1,0 +1,142 @@
+//! The `tslg` client commands against a real coordinator and worker, and
+//! invalid outcomes through the service.
+
+mod support;
+
+use std::process::Command;
+use support::*;
+use tslg_api::{CampaignView, InvalidResult, LeaseRequest, LibraryView, Method, ResultReport};
+
+fn tslg(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_tslg"))
+        .args(args)
+        .output()
+        .expect("run tslg")
+}
+
+#[test]
+fn library_create_and_campaign_start_status_cancel_drive_a_coordinator() {
+    let dir = scratch();
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &[]);
+    let _worker = WorkerProcess::start(&server.url, 1, "w1");
+    let url = server.url.as_str();
+    let o = tslg(&[
+        "library",
+        "create",
+        "--server",
+        url,
+        "--surrogate",
+        "fvdm",
+        "--search",
+        "exhaustive",
+        "--wait",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let library: LibraryView = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!((library.size, library.total_scenarios), (Some(329), 3420));
+    let id = library.id.to_string();
+    let o = tslg(&[
+        "campaign",
+        "start",
+        "--server",
+        url,
+        "--library-id",
+        &id,
+        "--vut",
+        "idm",
+        "--seed",
+        "7",
+        "--wait",
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let view: CampaignView = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(view.status.as_str(), "converged");
+    assert_same(
+        &view,
+        &in_process(Some("fvdm"), &campaign(Method::Library, 0, "idm", 0.2, 7)),
+    );
+    let o = tslg(&["campaign", "status", &view.id.to_string(), "--server", url]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        text.contains("converged") && text.contains(&format!("stop index {}", view.indices)),
+        "{text}"
+    );
+    // A long NDD baseline, cancelled; cancelling again is refused.
+    let o = tslg(&[
+        "campaign", "start", "--server", url, "--method", "ndd", "--vut", "idm", "--beta", "0.001",
+        "--json",
+    ]);
+    let ndd: CampaignView = serde_json::from_slice(&o.stdout).unwrap();
+    let o = tslg(&["campaign", "cancel", &ndd.id.to_string(), "--server", url]);
+    assert!(String::from_utf8_lossy(&o.stdout).contains("cancelled"));
+    let o = tslg(&["campaign", "cancel", &ndd.id.to_string(), "--server", url]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("refused (409)"));
+    let o = tslg(&[
+        "campaign",
+        "start",
+        "--server",
+        url,
+        "--library-id",
+        &id,
+        "--vut",
+        "idm",
+        "--beta",
+        "2",
+    ]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("beta = 2 must be in (0, 1)"));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn invalid_tests_use_indices_but_are_not_counted_as_tests() {
+    let dir = scratch();
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &["--lease-size", "100"]);
+    let client = server.client();
+    let library = ready_library(&client, "idm", true).await;
+    let id = client
+        .create_campaign(&campaign(Method::Ndd, library.id, "idm", 0.2, 1))
+        .await
+        .unwrap()
+        .id;
+    let lease = client
+        .claim(&LeaseRequest {
+            worker: "w".into(),
+            threads: 1,
+            include_tests: false,
+        })
+        .await
+        .unwrap()
+        .unwrap();
+    let reason = |index| InvalidResult {
+        index,
+        reason: "simulator crashed".into(),
+    };
+    let report = ResultReport {
+        worker: "w".into(),
+        attempt: 1,
+        from: 0,
+        to: 100,
+        events: vec![],
+        invalid: vec![reason(5), reason(6)],
+        compute_seconds: 0.0,
+        threads: 1,
+    };
+    client.report(lease.id, &report).await.unwrap();
+    let view = client.campaign(id).await.unwrap();
+    assert_eq!(
+        (view.indices, view.tests, view.invalid, view.events),
+        (100, 98, 2, 0)
+    );
+    // Reporting the same tests as valid now conflicts.
+    let flipped = ResultReport {
+        invalid: vec![reason(5)],
+        ..report
+    };
+    let err = client.report(lease.id, &flipped).await.unwrap_err();
+    assert!(
+        err.to_string().contains("conflicting result for test 6"),
+        "{err}"
+    );
+}
