@@ -24,8 +24,8 @@ fn report(worker: &str, attempt: i64, from: u64, to: u64, events: &[EventResult]
             .filter(|e| (from..to).contains(&e.index))
             .collect(),
         invalid: vec![],
-        compute_seconds: 0.0,
-        threads: 1,
+        compute_seconds: 0.5,
+        threads: 2,
     }
 }
 
@@ -124,6 +124,10 @@ async fn results_are_idempotent_fenced_on_the_attempt_and_leases_expire_and_retu
     assert_eq!((again.accepted, again.duplicate), (0, 50));
     let view = client.campaign(id).await.unwrap();
     assert_eq!(view.indices, 50, "the prefix is exactly the reported range");
+    assert_eq!(
+        view.worker_seconds, 1.0,
+        "0.5 s on 2 threads, charged once though reported twice"
+    );
 
     // A conflicting outcome for a recorded test: 409, nothing changes.
     let mut flipped = events.clone();

@@ -145,6 +145,9 @@ pub struct CampaignView {
     pub indices: u64,
     /// Test indices handed out to workers so far.
     pub leased: u64,
+    /// Thread-seconds workers spent on this campaign's accepted results:
+    /// the measure by which running campaigns share the workers.
+    pub worker_seconds: f64,
     /// `μ̂ₙ`; absent before the first test.
     pub estimate: Option<f64>,
     pub half_width: Option<f64>,

@@ -31,10 +31,18 @@ impl ServerProcess {
 
     /// Starts a coordinator on `bind`, waiting until it listens.
     pub fn start_on(database: &Path, bind: &str, extra: &[&str]) -> Self {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_tslg-server"))
+        let mut command = Command::new(env!("CARGO_BIN_EXE_tslg-server"));
+        command
             .args(["--bind", bind, "--database-url"])
             .arg(format!("sqlite://{}", database.display()))
-            .args(extra)
+            .args(extra);
+        Self::spawn(command, database)
+    }
+
+    /// Starts a prepared `tslg-server` command (its bind address must be
+    /// free or port 0), waiting until it reports the address it listens on.
+    pub fn spawn(mut command: Command, database: &Path) -> Self {
+        let mut child = command
             .env("RUST_LOG", "info")
             .stdout(Stdio::null())
             .stderr(Stdio::piped())

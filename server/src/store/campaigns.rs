@@ -35,6 +35,7 @@ pub struct CampaignRow {
     pub s1: f64,
     pub s2: f64,
     pub cost_per_test: Option<f64>,
+    pub worker_seconds: f64,
     pub created_at: String,
     pub updated_at: String,
 }
@@ -42,7 +43,7 @@ pub struct CampaignRow {
 pub const COLUMNS: &str = "id, case_name, preset, method, library_id, exposure_name, \
     exposure_fingerprint, exposure_table, vut, epsilon, beta, confidence, n_min, min_events, \
     max_tests, seed, status, status_detail, next_index, indices, tests, events, invalid, s1, s2, \
-    cost_per_test, created_at, updated_at";
+    cost_per_test, worker_seconds, created_at, updated_at";
 
 impl CampaignRow {
     pub fn status(&self) -> CampaignStatus {
@@ -126,6 +127,7 @@ impl CampaignRow {
             invalid: self.invalid as u64,
             indices: self.indices as u64,
             leased: self.next_index as u64,
+            worker_seconds: self.worker_seconds,
             estimate: started.then_some(point.estimate),
             half_width: (self.tests > 1).then_some(point.half_width),
             relative_half_width: point.relative_half_width,

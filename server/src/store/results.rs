@@ -14,7 +14,7 @@ use crate::error::ApiError;
 use crate::lease_size::update_cost;
 use crate::store::campaigns::{self, CampaignRow};
 use crate::store::leases::{self, check_fence};
-use sqlx::SqliteConnection;
+use sqlx::{QueryBuilder, Sqlite, SqliteConnection};
 use tslg_api::{CampaignStatus, ResultAck, ResultReport};
 use tslg_method::estimator::Decision;
 use tslg_method::prefix::SparseOutcome;
@@ -157,11 +157,16 @@ pub async fn record(
             report.compute_seconds,
             report.threads,
         );
-        sqlx::query("UPDATE campaigns SET cost_per_test = ? WHERE id = ?")
-            .bind(cost)
-            .bind(campaign.id)
-            .execute(&mut *tx)
-            .await?;
+        let worker_seconds = spent_thread_seconds(report, accepted, span);
+        sqlx::query(
+            "UPDATE campaigns SET cost_per_test = ?, worker_seconds = worker_seconds + ? \
+             WHERE id = ?",
+        )
+        .bind(cost)
+        .bind(worker_seconds)
+        .bind(campaign.id)
+        .execute(&mut *tx)
+        .await?;
     }
     let stopped = fold_prefix(&mut tx, &campaign).await?;
     tx.commit().await?;
@@ -179,6 +184,17 @@ pub async fn record(
         },
         stopped,
     ))
+}
+
+/// Thread-seconds a report cost, prorated to the tests it newly resolved:
+/// `compute_seconds · threads · accepted / span` (a partly duplicate report
+/// is charged only for its new tests, so nothing is counted twice).
+fn spent_thread_seconds(report: &ResultReport, accepted: u64, span: u64) -> f64 {
+    let seconds = report.compute_seconds;
+    if span == 0 || !(seconds.is_finite() && seconds > 0.0) {
+        return 0.0;
+    }
+    seconds * f64::from(report.threads.max(1)) * accepted as f64 / span as f64
 }
 
 fn stopped_ack(span: u64, resume_at: u64, end: u64, status: CampaignStatus) -> ResultAck {
@@ -285,40 +301,56 @@ async fn compare_with_stored(
     Err(ApiError::Conflict(detail))
 }
 
+/// Rows per multi-row `INSERT`: 3 bound values each, far below SQLite's
+/// limit of 32 766 variables, and large enough that a report with thousands
+/// of events costs a handful of statements rather than one per event.
+const INSERT_BATCH: usize = 1000;
+
 async fn insert_outcomes(
     conn: &mut SqliteConnection,
     campaign: i64,
     checked: &CheckedReport,
     from: u64,
 ) -> Result<(), ApiError> {
-    for &(index, outcome) in checked.outcomes.iter().filter(|o| o.0 >= from) {
-        match outcome {
-            SparseOutcome::Event(weight) => {
-                sqlx::query(
-                    "INSERT INTO events (campaign_id, test_index, weight) VALUES (?, ?, ?)",
-                )
-                .bind(campaign)
-                .bind(index as i64)
-                .bind(weight)
-                .execute(&mut *conn)
-                .await?;
-            }
-            SparseOutcome::Invalid => {
-                let reason = checked
-                    .reasons
-                    .binary_search_by_key(&index, |(i, _)| *i)
-                    .map(|k| checked.reasons[k].1.as_str())
-                    .unwrap_or("");
-                sqlx::query(
-                    "INSERT INTO invalid_tests (campaign_id, test_index, reason) VALUES (?, ?, ?)",
-                )
-                .bind(campaign)
-                .bind(index as i64)
-                .bind(reason)
-                .execute(&mut *conn)
-                .await?;
-            }
-        }
+    let new = || checked.outcomes.iter().filter(move |o| o.0 >= from);
+    let events: Vec<(u64, f64)> = new()
+        .filter_map(|&(i, o)| match o {
+            SparseOutcome::Event(w) => Some((i, w)),
+            SparseOutcome::Invalid => None,
+        })
+        .collect();
+    for batch in events.chunks(INSERT_BATCH) {
+        QueryBuilder::<Sqlite>::new("INSERT INTO events (campaign_id, test_index, weight) ")
+            .push_values(batch, |mut row, &(index, weight)| {
+                row.push_bind(campaign)
+                    .push_bind(index as i64)
+                    .push_bind(weight);
+            })
+            .build()
+            .execute(&mut *conn)
+            .await?;
+    }
+    let invalid: Vec<(u64, &str)> = new()
+        .filter(|o| matches!(o.1, SparseOutcome::Invalid))
+        .map(|&(index, _)| {
+            let reason = checked
+                .reasons
+                .binary_search_by_key(&index, |(i, _)| *i)
+                .map(|k| checked.reasons[k].1.as_str())
+                .unwrap_or("");
+            (index, reason)
+        })
+        .collect();
+    for batch in invalid.chunks(INSERT_BATCH) {
+        QueryBuilder::<Sqlite>::new("INSERT INTO invalid_tests (campaign_id, test_index, reason) ")
+            .push_values(batch, |mut row, &(index, reason)| {
+                row.push_bind(campaign)
+                    .push_bind(index as i64)
+                    .push_bind(reason);
+            })
+            .build()
+            .execute(&mut *conn)
+            .await?;
     }
     Ok(())
 }

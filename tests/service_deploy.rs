@@ -1,0 +1,152 @@
+//! The deployment contract of `docker-compose.yml`: the coordinator and the
+//! workers are configured only through the environment variables the
+//! compose file sets, tokens are enforced, and the health check command
+//! works. (No container engine runs in CI; this is what the containers run.)
+
+mod support;
+
+use std::collections::BTreeSet;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+use support::*;
+use tslg_api::{CampaignStatus, Method};
+use tslg_worker::client::{CallError, Client};
+
+const ADMIN: &str = "admin-secret-4f1c";
+const WORKER: &str = "worker-secret-9a2e";
+
+/// `TSLG_*` variables that `docker-compose.yml` sets for its services.
+fn compose_variables() -> BTreeSet<String> {
+    let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/docker-compose.yml"))
+        .expect("docker-compose.yml");
+    text.lines()
+        .filter_map(|line| {
+            let key = line.trim().split(':').next()?;
+            (key.starts_with("TSLG_") && key.chars().all(|c| c.is_ascii_uppercase() || c == '_'))
+                .then(|| key.to_owned())
+        })
+        .collect()
+}
+
+fn help(binary: &str) -> String {
+    let out = Command::new(binary).arg("--help").output().expect("--help");
+    assert!(out.status.success());
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+#[test]
+fn every_variable_the_compose_file_sets_is_read_by_the_binary_it_is_set_for() {
+    let variables = compose_variables();
+    for expected in [
+        "TSLG_BIND",
+        "TSLG_DATABASE_URL",
+        "TSLG_ADMIN_TOKEN",
+        "TSLG_WORKER_TOKEN",
+        "TSLG_SERVER",
+    ] {
+        assert!(
+            variables.contains(expected),
+            "compose file lacks {expected}"
+        );
+    }
+    let server = help(env!("CARGO_BIN_EXE_tslg-server"));
+    let worker = help(env!("CARGO_BIN_EXE_tslg-worker"));
+    for variable in &variables {
+        let read = format!("[env: {variable}");
+        assert!(
+            server.contains(&read) || worker.contains(&read),
+            "{variable} is set in docker-compose.yml but read by neither binary"
+        );
+    }
+}
+
+/// A worker configured as in the compose file; `stderr` captured or dropped.
+fn worker_from_env(url: &str, token: &str, name: &str, stderr: Stdio) -> std::process::Child {
+    Command::new(env!("CARGO_BIN_EXE_tslg-worker"))
+        .env("TSLG_SERVER", url)
+        .env("TSLG_WORKER_TOKEN", token)
+        .env("TSLG_WORKER_NAME", name)
+        .env("TSLG_THREADS", "1")
+        .env("TSLG_MAX_BACKOFF", "0.3")
+        .stdout(Stdio::null())
+        .stderr(stderr)
+        .spawn()
+        .expect("start tslg-worker")
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_coordinator_and_workers_configured_from_the_environment_enforce_tokens_and_converge() {
+    let dir = scratch();
+    let database = dir.path().join("db.sqlite");
+    let mut command = Command::new(env!("CARGO_BIN_EXE_tslg-server"));
+    command
+        .env("TSLG_BIND", "127.0.0.1:0")
+        .env(
+            "TSLG_DATABASE_URL",
+            format!("sqlite://{}", database.display()),
+        )
+        .env("TSLG_ADMIN_TOKEN", ADMIN)
+        .env("TSLG_WORKER_TOKEN", WORKER);
+    let server = ServerProcess::spawn(command, &database);
+
+    // The compose health check.
+    let health = Command::new(env!("CARGO_BIN_EXE_tslg"))
+        .args(["health", "--server", &server.url])
+        .output()
+        .unwrap();
+    assert!(health.status.success(), "{health:?}");
+    assert!(String::from_utf8_lossy(&health.stdout).starts_with("ok"));
+
+    // Without a token, or with the worker's, nobody starts work.
+    let request = || {
+        let mut r = campaign(Method::Ndd, 0, "idm", 0.2, 3);
+        r.library_id = None;
+        r
+    };
+    for token in [None, Some(WORKER.to_owned())] {
+        let refused = Client::new(&server.url, token)
+            .unwrap()
+            .create_campaign(&request())
+            .await;
+        assert!(
+            matches!(refused, Err(CallError::Refused { status: 401, .. })),
+            "{refused:?}"
+        );
+    }
+
+    // A worker with the wrong token stops with a clear message.
+    let wrong = worker_from_env(&server.url, "not-the-token", "intruder", Stdio::piped());
+    let out = wait_with_limit(wrong, Duration::from_secs(30));
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("refused this worker's token"), "{stderr}");
+
+    // Right tokens: the campaign converges on the environment-configured workers.
+    let mut workers = [
+        worker_from_env(&server.url, WORKER, "w1", Stdio::null()),
+        worker_from_env(&server.url, WORKER, "w2", Stdio::null()),
+    ];
+    let admin = Client::new(&server.url, Some(ADMIN.to_owned())).unwrap();
+    let id = admin.create_campaign(&request()).await.unwrap().id;
+    let view = finished(&admin, id, Duration::from_secs(120)).await;
+    assert_eq!(view.status, CampaignStatus::Converged, "{view:?}");
+    let exact = exact("idm");
+    assert!(view.ci_low.unwrap() <= exact && exact <= view.ci_high.unwrap());
+    for worker in &mut workers {
+        let _ = worker.kill();
+        let _ = worker.wait();
+    }
+}
+
+/// Waits for a process to exit by itself, killing it after `limit`.
+fn wait_with_limit(mut child: std::process::Child, limit: Duration) -> std::process::Output {
+    let started = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if started.elapsed() > limit {
+            let _ = child.kill();
+            panic!("process did not exit within {limit:?}");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    child.wait_with_output().unwrap()
+}

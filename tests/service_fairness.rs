@@ -1,0 +1,76 @@
+//! Fair sharing: campaigns running at once get comparable worker time,
+//! and a campaign started while a long one runs is not starved by it.
+
+mod support;
+
+use std::time::Duration;
+use support::*;
+use tslg_api::{CampaignStatus, CampaignView, Method};
+use tslg_worker::client::Client;
+
+/// Polls until `ready` holds for the campaign.
+async fn wait_for(client: &Client, id: i64, ready: impl Fn(&CampaignView) -> bool) -> CampaignView {
+    for _ in 0..1200 {
+        let view = client.campaign(id).await.expect("campaign");
+        if ready(&view) {
+            return view;
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    panic!("campaign {id} never got there");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn two_long_campaigns_share_the_workers_in_comparable_worker_time() {
+    let dir = scratch();
+    // Short leases, so a few seconds hold many turns.
+    let server = ServerProcess::start(
+        &dir.path().join("db.sqlite"),
+        &["--lease-target-seconds", "0.2"],
+    );
+    let _workers = [
+        WorkerProcess::start(&server.url, 1, "w1"),
+        WorkerProcess::start(&server.url, 1, "w2"),
+    ];
+    let client = server.client();
+    let library = ready_library(&client, "fvdm", true).await;
+    // β so small that neither campaign can stop during the test.
+    let long = |method| {
+        let mut request = campaign(method, library.id, "idm", 0.001, 5);
+        request.max_tests = 1 << 50;
+        request
+    };
+    let first = client.create_campaign(&long(Method::Ndd)).await.unwrap();
+    // The first campaign has the workers to itself for a while.
+    let alone = wait_for(&client, first.id, |v| v.worker_seconds > 1.0).await;
+    let second = client
+        .create_campaign(&long(Method::Library))
+        .await
+        .unwrap();
+    wait_for(&client, second.id, |v| v.worker_seconds > 0.0).await;
+    let first_mark = client.campaign(first.id).await.unwrap().worker_seconds;
+    let second_mark = client.campaign(second.id).await.unwrap().worker_seconds;
+    tokio::time::sleep(Duration::from_secs(4)).await;
+    let a = client.cancel_campaign(first.id).await.unwrap();
+    let b = client.cancel_campaign(second.id).await.unwrap();
+    for view in [&a, &b] {
+        assert_eq!(view.status, CampaignStatus::Cancelled, "{view:?}");
+        assert!(view.indices > 0, "no progress: {view:?}");
+    }
+    let spent_a = a.worker_seconds - first_mark;
+    let spent_b = b.worker_seconds - second_mark;
+    assert!(
+        spent_a > 0.5 && spent_b > 0.5,
+        "both advance: {spent_a:.2} s and {spent_b:.2} s of worker time"
+    );
+    let share = spent_a.min(spent_b) / spent_a.max(spent_b);
+    assert!(
+        share > 0.6,
+        "unfair split of worker time while both ran: {spent_a:.2} s vs {spent_b:.2} s \
+         (first campaign alone before: {:.2} s)",
+        alone.worker_seconds
+    );
+    // Worker time is what is shared, not test counts: the two methods
+    // cost differently per test, and both counts still grew.
+    assert!(a.leased > alone.leased && b.leased > 0);
+}
