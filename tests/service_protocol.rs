@@ -343,7 +343,7 @@ async fn bad_requests_get_precise_problems_and_the_server_keeps_serving() {
     assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY);
     assert_eq!(
         problem["detail"],
-        json!("unknown case `lane-keep`; known cases: cut-in")
+        json!("unknown case `lane-keep`; known cases: cut-in, highway-exit")
     );
 
     let libraries = format!("{}/api/v1/libraries", server.url);

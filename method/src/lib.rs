@@ -9,6 +9,7 @@ pub mod cutin;
 pub mod estimator;
 pub mod exact;
 pub mod grid;
+pub mod highway;
 pub mod library;
 pub mod mass;
 pub mod ndd_table;

@@ -7,6 +7,7 @@
 use crate::case::Case;
 use crate::cutin::{CutIn, CutInError, CutInPreset};
 use crate::exact::{event_cells, event_probability};
+use crate::highway::{HighwayExit, HighwayPreset};
 use crate::library::{build_library, Library, LibraryFileError, LibraryRequest};
 use crate::mass::GridMass;
 use crate::sampling::{
@@ -18,7 +19,7 @@ use std::sync::Arc;
 use thiserror::Error;
 
 /// Names of the cases [`open_case`] knows.
-pub const CASES: [&str; 1] = ["cut-in"];
+pub const CASES: [&str; 2] = ["cut-in", "highway-exit"];
 
 /// Where a case's exposure `P(x)` comes from.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
@@ -107,6 +108,24 @@ pub fn open_case(
             Ok(Arc::new(Registered {
                 case: Arc::new(opened),
                 preset: preset_name,
+            }))
+        }
+        "highway-exit" => {
+            let preset: HighwayPreset = match preset {
+                None => HighwayPreset::default(),
+                Some(p) => p.parse().map_err(CaseError::Preset)?,
+            };
+            if let ExposureSource::Table { name, .. } = exposure {
+                return Err(CaseError::Exposure {
+                    name: name.clone(),
+                    reason: "the highway-exit case has only its built-in exposure model \
+                             (docs/models.md); omit the table"
+                        .into(),
+                });
+            }
+            Ok(Arc::new(Registered {
+                case: Arc::new(HighwayExit::builtin(preset)),
+                preset: preset.name().to_owned(),
             }))
         }
         other => Err(CaseError::UnknownCase(other.to_owned())),
@@ -276,7 +295,7 @@ mod tests {
             .unwrap();
         assert_eq!(
             err.to_string(),
-            "unknown case `lane-keep`; known cases: cut-in"
+            "unknown case `lane-keep`; known cases: cut-in, highway-exit"
         );
         let err = open_case("cut-in", Some("fast"), &ExposureSource::Builtin)
             .err()
@@ -300,5 +319,38 @@ mod tests {
         assert!(err.to_string().contains("alpha"), "{err}");
         let err = case.event_test(&json!({"model": "tesla"})).err().unwrap();
         assert!(err.to_string().contains("unknown variant `tesla`"), "{err}");
+    }
+
+    #[test]
+    fn the_highway_exit_case_opens_by_name_with_its_presets_and_only_its_own_exposure() {
+        let coarse = open_case("highway-exit", Some("coarse"), &ExposureSource::Builtin).unwrap();
+        assert_eq!(
+            (coarse.name(), coarse.preset()),
+            ("highway-exit", "coarse".into())
+        );
+        assert_eq!(coarse.exposure().grid().len(), 16 * 6 * 16 * 6);
+        assert_eq!(coarse.scenario(0), vec![-100.0, 20.0, -100.0, 20.0]);
+        let spec = coarse
+            .normalise_vehicle(&json!({"model": "gap-seeker"}))
+            .unwrap();
+        assert_eq!(spec["front_gap"], json!(0.8), "every parameter written out");
+        let err = coarse
+            .normalise_vehicle(&json!({"model": "mobil", "politeness": 2}))
+            .unwrap_err();
+        assert!(err.to_string().contains("politeness"), "{err}");
+        assert!(coarse.normalise_vehicle(&json!({"model": "idm"})).is_err());
+        let table = ExposureSource::Table {
+            name: "t.csv".into(),
+            text: "0,1\n1,1".into(),
+        };
+        let err = open_case("highway-exit", None, &table).err().unwrap();
+        assert!(
+            err.to_string().contains("only its built-in exposure"),
+            "{err}"
+        );
+        let err = open_case("highway-exit", Some("fine"), &ExposureSource::Builtin)
+            .err()
+            .unwrap();
+        assert!(err.to_string().contains("presets are paper"), "{err}");
     }
 }

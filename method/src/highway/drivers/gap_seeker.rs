@@ -1,0 +1,263 @@
+//! A vehicle under test of our own design (the paper's, Nilsson et al.
+//! 2016, is not available): a rule-based controller that accepts gaps by
+//! time gaps and closing time, and steers its speed toward the nearest gap
+//! with a proportional controller. It differs from the MOBIL surrogate on
+//! purpose: it knows the BVs will not yield, it never plans ahead, and it
+//! grows bolder as the exit approaches.
+//!
+//! In the left lane, at every step, with `s = max(s_min, (L − p)/D_u)`
+//! capped at 1 (the urgency scale: 1 far from the exit, down to `s_min`
+//! within `D_u` of it):
+//!
+//! - **accept** the right lane at the VUT's position when the task's safe
+//!   time gaps hold (`|p − b| − ℓ ≥ t_min u`), the bumper gap to
+//!   the BV ahead is at least `s·h_f·v` and to the BV behind at least
+//!   `s·h_r·u` (its speed `u`), both at least 1 m, and a faster BV behind
+//!   needs at least `s·T_c` to close the gap;
+//! - otherwise **seek** a slot: a stretch of the right lane that meets the
+//!   unscaled time gaps now, moving with the BV that bounds it; the one it
+//!   can reach soonest (full comfort acceleration or braking relative to
+//!   the slot) before the exit.
+//!   The command is `a = k_p (target − p) + k_v (u_slot − v)` within the
+//!   comfort bounds `[a_brake, a_accel]`, speeds kept in `[v_min, v_max]`.
+//!
+//! In the right lane it follows the BV ahead by IDM with its own desired
+//! speed and headway.
+
+use super::{
+    follow_in_right_lane, neighbours, safe_gaps, within_speed_bounds, Action, DriverView, Idm, Lane,
+};
+use crate::highway::world::{Bv, ExitWorld};
+use crate::vehicle::{check, ParamError};
+use serde::{Deserialize, Serialize};
+
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct GapSeekerParams {
+    /// Accepted time gap to the new leader, at own speed (s).
+    pub front_gap: f64,
+    /// Accepted time gap of the new follower, at its speed (s).
+    pub rear_gap: f64,
+    /// Shortest accepted time for a faster follower to close the gap (s).
+    pub closing_time: f64,
+    /// Distance to the exit below which the thresholds shrink (m).
+    pub urgency_distance: f64,
+    /// Smallest urgency scale.
+    pub min_scale: f64,
+    /// Position and speed gains of the slot seeker (1/s², 1/s).
+    pub k_position: f64,
+    pub k_speed: f64,
+    /// Comfort bounds of the seeker's commands (m/s²).
+    pub brake: f64,
+    pub accelerate: f64,
+    /// IDM in the right lane: desired speed (m/s) and headway (s).
+    pub v0: f64,
+    pub headway: f64,
+}
+
+impl Default for GapSeekerParams {
+    fn default() -> Self {
+        Self {
+            front_gap: 0.8,
+            rear_gap: 0.6,
+            closing_time: 4.0,
+            urgency_distance: 60.0,
+            min_scale: 0.3,
+            k_position: 0.5,
+            k_speed: 1.2,
+            brake: -3.0,
+            accelerate: 1.5,
+            v0: 36.0,
+            headway: 1.0,
+        }
+    }
+}
+
+impl GapSeekerParams {
+    pub fn validate(&self) -> Result<(), ParamError> {
+        let m = "gap-seeker";
+        check(m, "front_gap", self.front_gap, |x| x >= 0.0, "must be ≥ 0")?;
+        check(m, "rear_gap", self.rear_gap, |x| x >= 0.0, "must be ≥ 0")?;
+        check(
+            m,
+            "closing_time",
+            self.closing_time,
+            |x| x >= 0.0,
+            "must be ≥ 0",
+        )?;
+        check(
+            m,
+            "urgency_distance",
+            self.urgency_distance,
+            |x| x > 0.0,
+            "must be > 0",
+        )?;
+        check(
+            m,
+            "min_scale",
+            self.min_scale,
+            |x| x > 0.0 && x <= 1.0,
+            "must be in (0, 1]",
+        )?;
+        check(
+            m,
+            "k_position",
+            self.k_position,
+            |x| x >= 0.0,
+            "must be ≥ 0",
+        )?;
+        check(m, "k_speed", self.k_speed, |x| x >= 0.0, "must be ≥ 0")?;
+        check(m, "brake", self.brake, |x| x < 0.0, "must be < 0")?;
+        check(m, "accelerate", self.accelerate, |x| x > 0.0, "must be > 0")?;
+        check(m, "v0", self.v0, |x| x > 0.0, "must be > 0")?;
+        check(m, "headway", self.headway, |x| x >= 0.0, "must be ≥ 0")
+    }
+
+    fn idm(&self) -> Idm {
+        Idm {
+            v0: self.v0,
+            headway: self.headway,
+            ..Idm::HIGHWAY
+        }
+    }
+}
+
+#[derive(Debug, Clone)]
+pub struct GapSeekerDriver {
+    params: GapSeekerParams,
+    idm: Idm,
+}
+
+impl GapSeekerDriver {
+    pub fn new(params: GapSeekerParams) -> Self {
+        Self {
+            idm: params.idm(),
+            params,
+        }
+    }
+
+    pub fn act(&mut self, view: &DriverView) -> Action {
+        if view.lane == Lane::Right {
+            return Action {
+                accel: follow_in_right_lane(&self.idm, view),
+                change_lane: false,
+            };
+        }
+        let world = view.world;
+        let to_exit = world.exit - view.position;
+        let scale = (to_exit / self.params.urgency_distance).clamp(self.params.min_scale, 1.0);
+        if self.accepts(view, scale) {
+            return Action {
+                accel: 0.0,
+                change_lane: true,
+            };
+        }
+        let command = match self.best_slot(view) {
+            Some((target, slot_speed)) => {
+                self.params.k_position * (target - view.position)
+                    + self.params.k_speed * (slot_speed - view.speed)
+            }
+            None => 0.0,
+        };
+        Action {
+            accel: within_speed_bounds(
+                world,
+                view.speed,
+                command.clamp(self.params.brake, self.params.accelerate),
+            ),
+            change_lane: false,
+        }
+    }
+
+    fn accepts(&self, view: &DriverView, scale: f64) -> bool {
+        let (world, p, v) = (view.world, view.position, view.speed);
+        let bvs = &view.traffic.bvs;
+        if !safe_gaps(world, bvs, p) {
+            return false;
+        }
+        let n = neighbours(bvs, p);
+        let front_ok = n.ahead.is_none_or(|a| {
+            let gap = a.position - p - world.length;
+            gap >= 1.0 && gap >= scale * self.params.front_gap * v
+        });
+        let rear_ok = n.behind.is_none_or(|b| {
+            let gap = p - b.position - world.length;
+            let closing = b.speed - v;
+            gap >= 1.0
+                && gap >= scale * self.params.rear_gap * b.speed
+                && (closing <= 0.0 || gap / closing >= scale * self.params.closing_time)
+        });
+        front_ok && rear_ok
+    }
+
+    /// The slot reached soonest (its nearest point, 2 m inside) and the
+    /// speed it moves at. A slot is a stretch of the right lane that meets
+    /// the unscaled time gaps now; the time to reach it is that of a full
+    /// comfort acceleration (slots ahead) or braking (slots behind) relative
+    /// to the slot, and slots not reached before the exit are skipped unless
+    /// none is.
+    fn best_slot(&self, view: &DriverView) -> Option<(f64, f64)> {
+        let (world, p, v) = (view.world, view.position, view.speed);
+        let (front, rear) = (view.traffic.front(), view.traffic.rear());
+        let after = |bv: Bv| bv.position + world.length + self.params.rear_gap * bv.speed;
+        let before = |bv: Bv| bv.position - world.length - self.params.front_gap * v;
+        // (lower, upper, speed) of the slots ahead of, between and behind the BVs.
+        let slots = [
+            (after(front), f64::INFINITY, front.speed.max(v)),
+            (after(rear), before(front), 0.5 * (front.speed + rear.speed)),
+            (f64::NEG_INFINITY, before(rear), rear.speed),
+        ];
+        let margin = 2.0;
+        let candidates: Vec<(f64, f64, f64)> = slots
+            .into_iter()
+            .filter(|(lo, hi, _)| hi - lo > 2.0 * margin)
+            .map(|(lo, hi, speed)| {
+                let target = p.clamp(lo + margin, hi - margin);
+                (
+                    target,
+                    speed,
+                    self.time_to_reach(world, target - p, v, speed),
+                )
+            })
+            .collect();
+        let reachable = |&&(_, _, t): &&(f64, f64, f64)| t.is_finite() && p + v * t < world.exit;
+        let soonest = |a: &&(f64, f64, f64), b: &&(f64, f64, f64)| a.2.total_cmp(&b.2);
+        candidates
+            .iter()
+            .filter(reachable)
+            .min_by(soonest)
+            .or_else(|| candidates.iter().min_by(soonest))
+            .map(|&(target, speed, _)| (target, speed))
+    }
+
+    /// Time to close a distance `d` (target − own position) to a point
+    /// moving at `u`, accelerating at `accelerate` up to `v_max` (target
+    /// ahead) or braking at `brake` down to `v_min` (target behind): the
+    /// first `t` with `∫₀ᵗ (v(s) − u) ds = d`; infinite when the speed bound
+    /// stops the VUT from ever getting there.
+    fn time_to_reach(&self, world: &ExitWorld, d: f64, v: f64, u: f64) -> f64 {
+        if d == 0.0 {
+            return 0.0;
+        }
+        // Work in the direction of travel toward the target: gain = ±(v − u).
+        let (a, bound, sign) = if d > 0.0 {
+            (self.params.accelerate, world.speed.1, 1.0)
+        } else {
+            (-self.params.brake, world.speed.0, -1.0)
+        };
+        let (dist, w, w_end) = (d.abs(), sign * (v - u), sign * (bound - u));
+        let t1 = (sign * (bound - v) / a).max(0.0);
+        // Phase 1: w t + ½ a t² = dist, if reached before the speed bound.
+        let root = (-w + (w * w + 2.0 * a * dist).sqrt()) / a;
+        if root <= t1 {
+            return root;
+        }
+        // Phase 2: at the bound, closing at w_end.
+        let covered = w * t1 + 0.5 * a * t1 * t1;
+        if w_end <= 0.0 {
+            f64::INFINITY
+        } else {
+            t1 + (dist - covered) / w_end
+        }
+    }
+}

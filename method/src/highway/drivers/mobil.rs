@@ -1,0 +1,254 @@
+//! The surrogate model: MOBIL gap acceptance (Kesting et al. 2007) with a
+//! short-horizon predictive speed plan toward a gap, and IDM longitudinal
+//! control.
+//!
+//! In the left lane, at every step:
+//!
+//! 1. **Merge now** if the right lane at the VUT's position is safe: the
+//!    task's safe time gaps hold (`|p − b| − ℓ ≥ t_min u` for each BV) and
+//!    MOBIL's safety criterion holds: neither the VUT behind its new
+//!    leader nor the new follower behind the VUT would need to brake harder
+//!    than `b_safe` (IDM accelerations `ã ≥ −b_safe`, `ã_new ≥ −b_safe`).
+//!    The lane change is mandatory (the exit), so the incentive criterion is
+//!    always met once it is safe.
+//! 2. Otherwise follow a **speed plan**, renewed every `replan` seconds: for
+//!    each constant acceleration `a_c` of a fixed set in `[a_min, a_max]`,
+//!    predict the VUT (speeds kept in `[v_min, v_max]`) and the BVs
+//!    (constant speeds) every `plan_step` seconds up to `plan_horizon`, and
+//!    find the first instant `τ` before the exit at which merging passes the
+//!    safety criterion. Its value is the MOBIL utility there,
+//!    `U = ã − a + p (ã_new − a_new + ã_old − a_old)` (the left lane is empty,
+//!    so the old-follower term is 0), minus `wait_cost · τ`. The plan with
+//!    the largest value is applied; with none feasible the VUT cruises (IDM,
+//!    free road).
+//!
+//! In the right lane the VUT follows the BV ahead by IDM. The BVs do not
+//! react, so a merge in front of a faster BV that MOBIL judged safe (it
+//! assumes the follower brakes up to `b_safe`) can still end in a collision.
+
+use super::{neighbours, safe_gaps, within_speed_bounds, Action, DriverView, Idm, Lane};
+use crate::highway::world::{Bv, ExitWorld};
+use crate::vehicle::{check, ParamError};
+use serde::{Deserialize, Serialize};
+
+/// Plan accelerations (m/s²), clamped to the world's bounds.
+const PLAN_ACCELS: [f64; 10] = [-4.0, -3.0, -2.0, -1.0, -0.5, 0.0, 0.5, 1.0, 1.5, 2.0];
+
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct MobilParams {
+    /// Politeness factor p.
+    pub politeness: f64,
+    /// Safe braking b_safe imposed on anyone by a lane change (m/s²).
+    pub b_safe: f64,
+    /// Time between plan renewals (s).
+    pub replan: f64,
+    /// Prediction step (s) and horizon (s) of the speed plan.
+    pub plan_step: f64,
+    pub plan_horizon: f64,
+    /// Utility lost per second of waiting for a gap (m/s² per s).
+    pub wait_cost: f64,
+    /// IDM: desired speed v₀ (m/s), headway T (s), jam gap s₀ (m),
+    /// acceleration α and comfortable braking b (m/s²), exponent δ.
+    pub v0: f64,
+    pub headway: f64,
+    pub s0: f64,
+    pub alpha: f64,
+    pub b: f64,
+    pub delta: f64,
+}
+
+impl Default for MobilParams {
+    fn default() -> Self {
+        let idm = Idm::HIGHWAY;
+        Self {
+            politeness: 0.1,
+            b_safe: 4.0,
+            replan: 0.5,
+            plan_step: 0.5,
+            plan_horizon: 8.0,
+            wait_cost: 0.2,
+            v0: idm.v0,
+            headway: idm.headway,
+            s0: idm.s0,
+            alpha: idm.alpha,
+            b: idm.b,
+            delta: idm.delta,
+        }
+    }
+}
+
+impl MobilParams {
+    pub fn validate(&self) -> Result<(), ParamError> {
+        let m = "mobil";
+        check(
+            m,
+            "politeness",
+            self.politeness,
+            |x| (0.0..=1.0).contains(&x),
+            "must be in [0, 1]",
+        )?;
+        check(m, "b_safe", self.b_safe, |x| x > 0.0, "must be > 0")?;
+        check(m, "replan", self.replan, |x| x > 0.0, "must be > 0")?;
+        check(
+            m,
+            "plan_step",
+            self.plan_step,
+            |x| x >= 0.05,
+            "must be ≥ 0.05",
+        )?;
+        check(
+            m,
+            "plan_horizon",
+            self.plan_horizon,
+            |x| (0.0..=60.0).contains(&x),
+            "must be in [0, 60]",
+        )?;
+        check(m, "wait_cost", self.wait_cost, |x| x >= 0.0, "must be ≥ 0")?;
+        self.idm().validate(m)
+    }
+
+    pub fn idm(&self) -> Idm {
+        Idm {
+            alpha: self.alpha,
+            b: self.b,
+            v0: self.v0,
+            headway: self.headway,
+            s0: self.s0,
+            delta: self.delta,
+        }
+    }
+}
+
+#[derive(Debug, Clone)]
+pub struct MobilDriver {
+    params: MobilParams,
+    idm: Idm,
+    /// The plan's acceleration and when it is renewed.
+    plan: Option<f64>,
+    replan_at: f64,
+}
+
+impl MobilDriver {
+    pub fn new(params: MobilParams) -> Self {
+        Self {
+            idm: params.idm(),
+            params,
+            plan: None,
+            replan_at: 0.0,
+        }
+    }
+
+    pub fn act(&mut self, view: &DriverView) -> Action {
+        if view.lane == Lane::Right {
+            return Action {
+                accel: super::follow_in_right_lane(&self.idm, view),
+                change_lane: false,
+            };
+        }
+        let bvs = view.traffic.bvs;
+        if self
+            .merge_utility(view.world, view.position, view.speed, &bvs)
+            .is_some()
+        {
+            return Action {
+                accel: self
+                    .idm
+                    .accel(view.speed, None)
+                    .clamp(view.world.accel.0, view.world.accel.1),
+                change_lane: true,
+            };
+        }
+        if self.plan.is_none() || view.time + 1e-9 >= self.replan_at {
+            self.plan = self.best_plan(view);
+            self.replan_at = view.time + self.params.replan;
+        }
+        let accel = self
+            .plan
+            .unwrap_or_else(|| self.idm.accel(view.speed, None))
+            .clamp(view.world.accel.0, view.world.accel.1);
+        let accel = within_speed_bounds(view.world, view.speed, accel);
+        Action {
+            accel,
+            change_lane: false,
+        }
+    }
+
+    /// MOBIL at a (possibly predicted) state: `None` when merging is unsafe,
+    /// else the utility `ã − a + p (ã_new − a_new)`.
+    fn merge_utility(&self, world: &ExitWorld, p: f64, v: f64, bvs: &[Bv; 2]) -> Option<f64> {
+        if !safe_gaps(world, bvs, p) {
+            return None;
+        }
+        let n = neighbours(bvs, p);
+        let lead = n.ahead.map(|l| (l.position - p - world.length, l.speed));
+        let own_after = self.idm.accel(v, lead);
+        if own_after < -self.params.b_safe {
+            return None;
+        }
+        let mut follower_gain = 0.0;
+        if let Some(f) = n.behind {
+            let after = self
+                .idm
+                .accel(f.speed, Some((p - f.position - world.length, v)));
+            if after < -self.params.b_safe {
+                return None;
+            }
+            // The follower's leader before the change: the other BV, if ahead of it.
+            let before_lead = bvs
+                .iter()
+                .filter(|o| o.position > f.position)
+                .map(|o| (o.position - f.position - world.length, o.speed))
+                .next();
+            follower_gain = after - self.idm.accel(f.speed, before_lead);
+        }
+        let own_before = self.idm.accel(v, None);
+        Some(own_after - own_before + self.params.politeness * follower_gain)
+    }
+
+    /// The best constant-acceleration plan toward a safe merge, if any.
+    fn best_plan(&self, view: &DriverView) -> Option<f64> {
+        let world = view.world;
+        let h = self.params.plan_step;
+        let points = (self.params.plan_horizon / h).floor() as usize;
+        let mut best: Option<(f64, f64)> = None;
+        for a in PLAN_ACCELS.map(|a| a.clamp(world.accel.0, world.accel.1)) {
+            let (mut p, mut v) = (view.position, view.speed);
+            for k in 1..=points {
+                let tau = k as f64 * h;
+                (p, v) = advance(world, p, v, a, h);
+                if p >= world.exit {
+                    break;
+                }
+                let bvs = view.traffic.bvs.map(|bv| Bv {
+                    position: bv.position + bv.speed * tau,
+                    speed: bv.speed,
+                });
+                if let Some(u) = self.merge_utility(world, p, v, &bvs) {
+                    let value = u - self.params.wait_cost * tau;
+                    if best.is_none_or(|(_, b)| value > b) {
+                        best = Some((a, value));
+                    }
+                    break;
+                }
+            }
+        }
+        best.map(|(a, _)| a)
+    }
+}
+
+/// Constant acceleration `a` for `h` seconds with the speed kept in the
+/// world's `[v_min, v_max]`.
+fn advance(world: &ExitWorld, p: f64, v: f64, a: f64, h: f64) -> (f64, f64) {
+    let target = if a >= 0.0 {
+        world.speed.1
+    } else {
+        world.speed.0
+    };
+    if a == 0.0 || (target - v) / a >= h {
+        (p + v * h + 0.5 * a * h * h, v + a * h)
+    } else {
+        let t1 = ((target - v) / a).max(0.0);
+        (p + v * t1 + 0.5 * a * t1 * t1 + target * (h - t1), target)
+    }
+}

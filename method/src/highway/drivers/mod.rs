@@ -1,0 +1,247 @@
+//! Lane-change controllers of the highway-exit case: the surrogate model
+//! (`mobil`: MOBIL gap acceptance with a predictive speed plan and IDM) and
+//! a different controller of our own design (`gap-seeker`). See
+//! `docs/models.md` for both.
+//!
+//! A vehicle is written as `{"model": "mobil", …}` with every parameter
+//! optional; deserialising validates it. A run asks a fresh [`Driver`] for
+//! an [`Action`] at every step.
+
+mod gap_seeker;
+mod mobil;
+
+pub use gap_seeker::GapSeekerParams;
+pub use mobil::MobilParams;
+
+use super::world::{Bv, ExitWorld, Traffic};
+use super::zone::blocked;
+use crate::vehicle::{check, ParamError};
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+/// The lane the VUT is in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Lane {
+    Left,
+    Right,
+}
+
+/// What a driver sees at one step.
+#[derive(Debug, Clone, Copy)]
+pub struct DriverView<'a> {
+    pub world: &'a ExitWorld,
+    pub time: f64,
+    pub position: f64,
+    pub speed: f64,
+    pub lane: Lane,
+    pub traffic: &'a Traffic,
+}
+
+/// What a driver does at one step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Action {
+    pub accel: f64,
+    /// Change into the right lane now (ignored once there).
+    pub change_lane: bool,
+}
+
+/// A highway-exit vehicle as written, before validation.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "model", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum ExitVehicleSpec {
+    Mobil(MobilParams),
+    GapSeeker(GapSeekerParams),
+}
+
+/// A validated highway-exit vehicle.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "ExitVehicleSpec", into = "ExitVehicleSpec")]
+pub struct ExitVehicle(ExitVehicleSpec);
+
+/// Built-in highway-exit vehicles.
+pub const EXIT_MODELS: [&str; 2] = ["mobil", "gap-seeker"];
+
+/// An unknown built-in name.
+#[derive(Debug, Error, PartialEq)]
+#[error("unknown highway-exit vehicle `{0}`; built-in models are mobil, gap-seeker")]
+pub struct UnknownExitModel(pub String);
+
+impl TryFrom<ExitVehicleSpec> for ExitVehicle {
+    type Error = ParamError;
+    fn try_from(spec: ExitVehicleSpec) -> Result<Self, ParamError> {
+        match &spec {
+            ExitVehicleSpec::Mobil(p) => p.validate(),
+            ExitVehicleSpec::GapSeeker(p) => p.validate(),
+        }?;
+        Ok(Self(spec))
+    }
+}
+
+impl From<ExitVehicle> for ExitVehicleSpec {
+    fn from(vehicle: ExitVehicle) -> Self {
+        vehicle.0
+    }
+}
+
+impl ExitVehicle {
+    pub fn builtin(name: &str) -> Result<Self, UnknownExitModel> {
+        match name {
+            "mobil" => Ok(Self(ExitVehicleSpec::Mobil(MobilParams::default()))),
+            "gap-seeker" => Ok(Self(ExitVehicleSpec::GapSeeker(GapSeekerParams::default()))),
+            other => Err(UnknownExitModel(other.to_owned())),
+        }
+    }
+
+    pub fn name(&self) -> &'static str {
+        match self.0 {
+            ExitVehicleSpec::Mobil(_) => "mobil",
+            ExitVehicleSpec::GapSeeker(_) => "gap-seeker",
+        }
+    }
+
+    /// A fresh driver for one run.
+    pub fn driver(&self) -> Driver {
+        match self.0 {
+            ExitVehicleSpec::Mobil(p) => Driver::Mobil(mobil::MobilDriver::new(p)),
+            ExitVehicleSpec::GapSeeker(p) => Driver::GapSeeker(gap_seeker::GapSeekerDriver::new(p)),
+        }
+    }
+}
+
+/// A driver with its memory for one run.
+#[derive(Debug, Clone)]
+pub enum Driver {
+    Mobil(mobil::MobilDriver),
+    GapSeeker(gap_seeker::GapSeekerDriver),
+}
+
+impl Driver {
+    pub fn act(&mut self, view: &DriverView) -> Action {
+        match self {
+            Driver::Mobil(d) => d.act(view),
+            Driver::GapSeeker(d) => d.act(view),
+        }
+    }
+}
+
+/// The Intelligent Driver Model in its standard form (Treiber et al. 2000)
+/// on bumper gaps `s`:
+/// `a = α (1 − (v/v₀)^δ − (s*/s)²)`,
+/// `s* = s₀ + max(0, vT + v (v − v_lead) / (2 √(α b)))`.
+/// Unlike the cut-in case's IDM (which follows the authors' code and does
+/// not clip `s*`), a faster leader never makes this one brake.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Idm {
+    pub alpha: f64,
+    pub b: f64,
+    pub v0: f64,
+    pub headway: f64,
+    pub s0: f64,
+    pub delta: f64,
+}
+
+impl Idm {
+    /// Highway values: α 1.5 m/s², b 2 m/s², T 1.2 s, s₀ 2 m, δ 4,
+    /// v₀ 33 m/s (≈ 120 km/h).
+    pub const HIGHWAY: Idm = Idm {
+        alpha: 1.5,
+        b: 2.0,
+        v0: 33.0,
+        headway: 1.2,
+        s0: 2.0,
+        delta: 4.0,
+    };
+
+    pub fn validate(&self, model: &'static str) -> Result<(), ParamError> {
+        check(model, "alpha", self.alpha, |x| x > 0.0, "must be > 0")?;
+        check(model, "b", self.b, |x| x > 0.0, "must be > 0")?;
+        check(model, "v0", self.v0, |x| x > 0.0, "must be > 0")?;
+        check(model, "headway", self.headway, |x| x >= 0.0, "must be ≥ 0")?;
+        check(model, "s0", self.s0, |x| x >= 0.0, "must be ≥ 0")?;
+        check(model, "delta", self.delta, |x| x > 0.0, "must be > 0")
+    }
+
+    /// The acceleration at `speed` behind `leader` (bumper gap, speed), or on
+    /// a free road. A gap ≤ 0 gives `−∞` (the caller's braking bound).
+    pub fn accel(&self, speed: f64, leader: Option<(f64, f64)>) -> f64 {
+        let free = self.alpha * (1.0 - (speed / self.v0).powf(self.delta));
+        let Some((gap, lead_speed)) = leader else {
+            return free;
+        };
+        if gap <= 0.0 {
+            return f64::NEG_INFINITY;
+        }
+        let dynamic = speed * self.headway
+            + speed * (speed - lead_speed) / (2.0 * (self.alpha * self.b).sqrt());
+        let desired = self.s0 + dynamic.max(0.0);
+        free - self.alpha * (desired / gap).powi(2)
+    }
+}
+
+/// The right-lane neighbours of a point `p`: the nearest BV at or ahead of
+/// it and the nearest behind it. Of two BVs at the same position the slower
+/// is the one ahead and the faster the one behind (the more constraining
+/// either way), so nothing depends on the BVs' labels.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Neighbours {
+    pub ahead: Option<Bv>,
+    pub behind: Option<Bv>,
+}
+
+pub fn neighbours(bvs: &[Bv; 2], position: f64) -> Neighbours {
+    let mut n = Neighbours {
+        ahead: None,
+        behind: None,
+    };
+    for &bv in bvs {
+        if bv.position >= position {
+            if n.ahead
+                .is_none_or(|a| (bv.position, bv.speed) < (a.position, a.speed))
+            {
+                n.ahead = Some(bv);
+            }
+        } else if n
+            .behind
+            .is_none_or(|b| (bv.position, bv.speed) > (b.position, b.speed))
+        {
+            n.behind = Some(bv);
+        }
+    }
+    n
+}
+
+/// Whether a lane change at `position` keeps every BV at least its safe
+/// time gap away, `|p − b| − ℓ ≥ t_min u`: the task's definition of a safe
+/// lane change (the feasible zone's), which both controllers respect.
+pub fn safe_gaps(world: &ExitWorld, bvs: &[Bv; 2], position: f64) -> bool {
+    bvs.iter().all(|bv| {
+        let (low, high) = blocked(world, bv.position, bv.speed);
+        !(low < position && position < high)
+    })
+}
+
+/// Whether a vehicle at `position` overlaps a BV (bumper gap < 0 either way).
+pub fn overlaps(world: &ExitWorld, bvs: &[Bv; 2], position: f64) -> bool {
+    bvs.iter()
+        .any(|bv| (bv.position - position).abs() < world.length)
+}
+
+/// Right-lane car following: IDM behind the nearest BV ahead, within the
+/// physical acceleration bounds.
+pub fn follow_in_right_lane(idm: &Idm, view: &DriverView) -> f64 {
+    let ahead = neighbours(&view.traffic.bvs, view.position)
+        .ahead
+        .map(|bv| (bv.position - view.position - view.world.length, bv.speed));
+    idm.accel(view.speed, ahead)
+        .clamp(view.world.emergency_brake, view.world.accel.1)
+}
+
+/// `accel` cut so that the speed after one step stays in `[v_min, v_max]`:
+/// both controllers keep to the lane-change boundary's speeds in the left
+/// lane.
+pub fn within_speed_bounds(world: &ExitWorld, speed: f64, accel: f64) -> f64 {
+    accel.clamp(
+        (world.speed.0 - speed) / world.dt,
+        (world.speed.1 - speed) / world.dt,
+    )
+}

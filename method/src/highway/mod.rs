@@ -1,0 +1,176 @@
+//! Case 2 of the paper: highway exit (functionality, four dimensions).
+//!
+//! A scenario is `x = (p₁, v₁, p₂, v₂)`, the initial positions and speeds of
+//! two background vehicles in the right lane; the event is a task failure:
+//! the VUT did not reach the off-ramp in the right lane (it stayed in the
+//! left lane, or collided).
+
+pub mod drivers;
+mod exposure_model;
+pub mod simulation;
+pub mod world;
+pub mod zone;
+
+pub use drivers::{ExitVehicle, EXIT_MODELS};
+pub use exposure_model::{exit_grid, ExitExposureModel};
+pub use simulation::{ExitOutcome, ExitRun};
+pub use world::ExitWorld;
+
+use crate::case::{Case, SurrogateEvaluation};
+use crate::mass::GridMass;
+use crate::objective::BoxDistance;
+use std::str::FromStr;
+
+/// The grid resolution of the case.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum HighwayPreset {
+    /// The paper's grid: 5 m and 1 m/s steps, 1,640,961 scenarios.
+    #[default]
+    Paper,
+    /// 20 m and 4 m/s steps, 9,216 scenarios: the same world for quick runs
+    /// and tests.
+    Coarse,
+}
+
+impl HighwayPreset {
+    pub fn name(self) -> &'static str {
+        match self {
+            HighwayPreset::Paper => "paper",
+            HighwayPreset::Coarse => "coarse",
+        }
+    }
+
+    /// (position step, speed step).
+    pub fn steps(self) -> (f64, f64) {
+        match self {
+            HighwayPreset::Paper => (5.0, 1.0),
+            HighwayPreset::Coarse => (20.0, 4.0),
+        }
+    }
+}
+
+impl FromStr for HighwayPreset {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "paper" => Ok(HighwayPreset::Paper),
+            "coarse" => Ok(HighwayPreset::Coarse),
+            other => Err(format!(
+                "unknown highway-exit preset `{other}`; presets are paper (61 × 21 × 61 × 21 grid), coarse (16 × 6 × 16 × 6)"
+            )),
+        }
+    }
+}
+
+/// The auxiliary objective `J(x) = S(F)/U_S + w d(x, Ω)` (paper Table VI).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ExitObjective {
+    /// Area normaliser U_S (m·s): the area of the lane-change boundary.
+    pub u_s: f64,
+    /// Ω, the most frequent scenarios, as a box on `(v₁, R, v₂)`:
+    /// speeds within one standard deviation of the exposure's mean speed,
+    /// ranges holding the central 80% of headways at that speed; normalised
+    /// by the axes' spans (20 m/s, 300 m).
+    pub common_set: BoxDistance<3>,
+    /// Balance weight w.
+    pub weight: f64,
+}
+
+impl Default for ExitObjective {
+    fn default() -> Self {
+        Self {
+            u_s: 500.0,
+            common_set: BoxDistance {
+                lower: [26.0, 25.0, 26.0],
+                upper: [33.0, 90.0, 33.0],
+                scale: [20.0, 300.0, 20.0],
+            },
+            weight: 1.0,
+        }
+    }
+}
+
+/// The highway-exit case.
+#[derive(Debug, Clone)]
+pub struct HighwayExit {
+    exposure: GridMass,
+    world: ExitWorld,
+    preset: HighwayPreset,
+    objective: ExitObjective,
+}
+
+impl HighwayExit {
+    /// The built-in exposure model on the preset's grid.
+    pub fn builtin(preset: HighwayPreset) -> Self {
+        let (dp, dv) = preset.steps();
+        Self {
+            exposure: ExitExposureModel::default().mass_on(exit_grid(dp, dv)),
+            world: ExitWorld::paper(),
+            preset,
+            objective: ExitObjective::default(),
+        }
+    }
+
+    pub fn preset(&self) -> HighwayPreset {
+        self.preset
+    }
+
+    pub fn world(&self) -> &ExitWorld {
+        &self.world
+    }
+
+    /// The scenario of a cell: `[p₁, v₁, p₂, v₂]`.
+    pub fn scenario(&self, cell: usize) -> [f64; 4] {
+        let g = self.exposure.grid();
+        [0, 1, 2, 3].map(|axis| g.value(cell, axis))
+    }
+
+    pub fn run(&self, vehicle: &ExitVehicle, cell: usize) -> ExitRun {
+        simulation::run(&self.world, vehicle, self.scenario(cell))
+    }
+
+    /// `J(x)` of a scenario.
+    pub fn objective(&self, x: [f64; 4]) -> f64 {
+        let area = zone::zone_area(&self.world, x);
+        let distance = self
+            .objective
+            .common_set
+            .distance(&[x[1], x[0] - x[2], x[3]]);
+        area / self.objective.u_s + self.objective.weight * distance
+    }
+}
+
+impl Case for HighwayExit {
+    type Vehicle = ExitVehicle;
+
+    fn name(&self) -> &'static str {
+        "highway-exit"
+    }
+
+    fn exposure(&self) -> &GridMass {
+        &self.exposure
+    }
+
+    fn exposure_name(&self) -> &str {
+        "builtin"
+    }
+
+    fn is_event(&self, vehicle: &ExitVehicle, cell: usize) -> bool {
+        self.run(vehicle, cell).outcome.is_failure()
+    }
+
+    fn evaluate_surrogate(&self, surrogate: &ExitVehicle, cell: usize) -> SurrogateEvaluation {
+        SurrogateEvaluation {
+            challenge: self.surrogate_challenge(surrogate, cell),
+            objective: self.objective(self.scenario(cell)),
+        }
+    }
+
+    fn surrogate_challenge(&self, surrogate: &ExitVehicle, cell: usize) -> f64 {
+        if self.is_event(surrogate, cell) {
+            1.0
+        } else {
+            0.0
+        }
+    }
+}
