@@ -5,7 +5,7 @@ mod support;
 
 use std::process::Command;
 use support::*;
-use tslg_api::{CampaignView, InvalidResult, LeaseRequest, LibraryView, Method, ResultReport};
+use tslg_api::{CampaignView, InvalidResult, LibraryView, Method, ResultReport};
 
 fn tslg(args: &[&str]) -> std::process::Output {
     Command::new(env!("CARGO_BIN_EXE_tslg"))
@@ -100,15 +100,7 @@ async fn invalid_tests_use_indices_but_are_not_counted_as_tests() {
         .await
         .unwrap()
         .id;
-    let lease = client
-        .claim(&LeaseRequest {
-            worker: "w".into(),
-            threads: 1,
-            include_tests: false,
-        })
-        .await
-        .unwrap()
-        .unwrap();
+    let lease = claim(&client, "w").await.unwrap();
     let reason = |index| InvalidResult {
         index,
         reason: "simulator crashed".into(),

@@ -169,15 +169,7 @@ async fn results_are_idempotent_fenced_on_the_attempt_and_leases_expire_and_retu
 
     // The lease expires; it is handed out again from where it stopped.
     tokio::time::sleep(Duration::from_millis(1300)).await;
-    let again = client
-        .claim(&LeaseRequest {
-            worker: "w2".into(),
-            threads: 1,
-            include_tests: false,
-        })
-        .await
-        .unwrap()
-        .expect("the expired lease");
+    let again = claim(&client, "w2").await.expect("the expired lease");
     assert_eq!(
         (again.id, again.attempt, again.resume_at),
         (lease.id, 2, 50)
@@ -215,15 +207,7 @@ async fn results_are_idempotent_fenced_on_the_attempt_and_leases_expire_and_retu
     );
 
     // Cancelled: later results are acknowledged and ignored.
-    let next = client
-        .claim(&LeaseRequest {
-            worker: "w2".into(),
-            threads: 1,
-            include_tests: false,
-        })
-        .await
-        .unwrap()
-        .expect("a new lease");
+    let next = claim(&client, "w2").await.expect("a new lease");
     client.cancel_campaign(id).await.unwrap();
     let late = client
         .report(next.id, &report("w2", 1, 100, 200, &[]))

@@ -6,7 +6,7 @@ mod support;
 
 use std::time::{Duration, Instant};
 use support::*;
-use tslg_api::{CampaignStatus, LeaseRequest, Method};
+use tslg_api::{CampaignStatus, Method};
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_coordinator_killed_mid_campaign_continues_from_its_database_to_the_same_answer() {
@@ -78,15 +78,7 @@ async fn a_worker_stopped_by_sigterm_gives_its_lease_back() {
     assert!(status.success(), "worker exit status {status}");
     // Released, not left to expire (the TTL is 30 s): it is available at once,
     // from the first index the worker did not report.
-    let lease = client
-        .claim(&LeaseRequest {
-            worker: "w2".into(),
-            threads: 1,
-            include_tests: false,
-        })
-        .await
-        .unwrap()
-        .expect("the released lease");
+    let lease = claim(&client, "w2").await.expect("the released lease");
     assert_eq!((lease.start, lease.attempt), (0, 2));
     let view = client.campaign(id).await.unwrap();
     assert_eq!(

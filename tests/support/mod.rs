@@ -8,7 +8,10 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
-use tslg_api::{CampaignView, CreateCampaign, CreateLibrary, LibraryStatus, LibraryView, Method};
+use tslg_api::{
+    CampaignView, CreateCampaign, CreateLibrary, Lease, LeaseRequest, LibraryStatus, LibraryView,
+    Method,
+};
 use tslg_method::campaign::{run_campaign_with, CampaignResult};
 use tslg_method::estimator::StoppingRule;
 use tslg_method::library::{LibraryRequest, SearchMethod, Threshold};
@@ -191,20 +194,42 @@ pub fn campaign(
     }
 }
 
-/// Polls a campaign until it stops.
-pub async fn finished(client: &Client, id: i64, limit: Duration) -> CampaignView {
+/// Polls a campaign until `ready` holds for it, failing after `limit`.
+pub async fn wait_for(
+    client: &Client,
+    id: i64,
+    limit: Duration,
+    ready: impl Fn(&CampaignView) -> bool,
+) -> CampaignView {
     let started = Instant::now();
     loop {
         let view = client.campaign(id).await.expect("campaign");
-        if view.status.is_final() {
+        if ready(&view) {
             return view;
         }
         assert!(
             started.elapsed() < limit,
-            "campaign {id} did not stop in {limit:?}: {view:?}"
+            "campaign {id} not there in {limit:?}: {view:?}"
         );
         tokio::time::sleep(Duration::from_millis(50)).await;
     }
+}
+
+/// Polls a campaign until it stops.
+pub async fn finished(client: &Client, id: i64, limit: Duration) -> CampaignView {
+    wait_for(client, id, limit, |view| view.status.is_final()).await
+}
+
+/// Asks for a lease as `worker` (one thread, no inline tests).
+pub async fn claim(client: &Client, worker: &str) -> Option<Lease> {
+    client
+        .claim(&LeaseRequest {
+            worker: worker.into(),
+            threads: 1,
+            include_tests: false,
+        })
+        .await
+        .expect("lease request")
 }
 
 /// The same campaign run in this process (built-in exposure, exhaustive

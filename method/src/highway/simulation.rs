@@ -27,14 +27,6 @@ impl ExitOutcome {
     pub fn is_failure(self) -> bool {
         self != ExitOutcome::Exited
     }
-
-    pub fn name(self) -> &'static str {
-        match self {
-            ExitOutcome::Exited => "exited",
-            ExitOutcome::FailedToExit => "failed to exit",
-            ExitOutcome::Collision => "collision",
-        }
-    }
 }
 
 /// The record of a run.

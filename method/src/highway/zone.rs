@@ -109,8 +109,8 @@ pub fn zone(world: &ExitWorld, x: [f64; 4]) -> Vec<ZoneSlice> {
 
 /// `S(F)` by the trapezoid rule over the steps (m·s).
 pub fn zone_area(world: &ExitWorld, x: [f64; 4]) -> f64 {
-    let slices = zone(world, x);
-    trapezoid(world.dt, slices.iter().map(ZoneSlice::length))
+    let lengths: Vec<f64> = zone(world, x).iter().map(ZoneSlice::length).collect();
+    trapezoid(world.dt, &lengths)
 }
 
 /// The area of the reachable region alone (no BVs), by the same rule.
@@ -118,14 +118,15 @@ pub fn reachable_area(world: &ExitWorld) -> f64 {
     let lengths: Vec<f64> = (0..=world.zone_steps())
         .map(|k| reachable(world, k as f64 * world.dt).map_or(0.0, |(low, high)| high - low))
         .collect();
-    trapezoid(world.dt, lengths.into_iter())
+    trapezoid(world.dt, &lengths)
 }
 
-fn trapezoid(dt: f64, lengths: impl ExactSizeIterator<Item = f64>) -> f64 {
+fn trapezoid(dt: f64, lengths: &[f64]) -> f64 {
     let last = lengths.len().saturating_sub(1);
     dt * lengths
+        .iter()
         .enumerate()
-        .map(|(k, len)| if k == 0 || k == last { 0.5 * len } else { len })
+        .map(|(k, &len)| if k == 0 || k == last { 0.5 * len } else { len })
         .sum::<f64>()
 }
 
