@@ -5,20 +5,9 @@ mod support;
 
 use std::time::Duration;
 use support::*;
-use tslg_api::{CampaignStatus, CampaignView, Method};
-use tslg_worker::client::Client;
+use tslg_api::{CampaignStatus, Method};
 
-/// Polls until `ready` holds for the campaign.
-async fn wait_for(client: &Client, id: i64, ready: impl Fn(&CampaignView) -> bool) -> CampaignView {
-    for _ in 0..1200 {
-        let view = client.campaign(id).await.expect("campaign");
-        if ready(&view) {
-            return view;
-        }
-        tokio::time::sleep(Duration::from_millis(50)).await;
-    }
-    panic!("campaign {id} never got there");
-}
+const LIMIT: Duration = Duration::from_secs(60);
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn two_long_campaigns_share_the_workers_in_comparable_worker_time() {
@@ -42,15 +31,15 @@ async fn two_long_campaigns_share_the_workers_in_comparable_worker_time() {
     };
     let first = client.create_campaign(&long(Method::Ndd)).await.unwrap();
     // The first campaign has the workers to itself for a while.
-    let alone = wait_for(&client, first.id, |v| v.worker_seconds > 1.0).await;
+    let alone = wait_for(&client, first.id, LIMIT, |v| v.worker_seconds > 1.0).await;
     let second = client
         .create_campaign(&long(Method::Library))
         .await
         .unwrap();
-    wait_for(&client, second.id, |v| v.worker_seconds > 0.0).await;
+    wait_for(&client, second.id, LIMIT, |v| v.worker_seconds > 0.0).await;
     let first_mark = client.campaign(first.id).await.unwrap().worker_seconds;
     let second_mark = client.campaign(second.id).await.unwrap().worker_seconds;
-    tokio::time::sleep(Duration::from_secs(4)).await;
+    tokio::time::sleep(Duration::from_secs(6)).await;
     let a = client.cancel_campaign(first.id).await.unwrap();
     let b = client.cancel_campaign(second.id).await.unwrap();
     for view in [&a, &b] {
@@ -63,9 +52,12 @@ async fn two_long_campaigns_share_the_workers_in_comparable_worker_time() {
         spent_a > 0.5 && spent_b > 0.5,
         "both advance: {spent_a:.2} s and {spent_b:.2} s of worker time"
     );
+    // Within a factor of 2: lease sizes follow a noisy cost estimate, and
+    // the time a worker waits for a report's acknowledgement (longer for
+    // the library campaign's many events) is not simulation time.
     let share = spent_a.min(spent_b) / spent_a.max(spent_b);
     assert!(
-        share > 0.6,
+        share > 0.5,
         "unfair split of worker time while both ran: {spent_a:.2} s vs {spent_b:.2} s \
          (first campaign alone before: {:.2} s)",
         alone.worker_seconds

@@ -31,8 +31,12 @@ fn ttl_ms(config: &Config) -> i64 {
 
 /// Hands out work: first a lease that expired (its holder is presumed
 /// lost; the range blocks the prefix), otherwise a new range of the running
-/// campaign that was served least recently, so campaigns share workers in
-/// turn. `None` when there is nothing to do.
+/// campaign whose turn comes first. A lease moves its campaign's turn to
+/// when the lease's work is expected to be done,
+/// `now + size · cost_per_test / threads`, so campaigns get comparable
+/// worker time even while their lease sizes differ (a campaign's first
+/// leases, before its cost is known, are small). `None` when there is
+/// nothing to do.
 pub async fn claim(
     db: &Database,
     config: &Config,
@@ -75,7 +79,7 @@ pub async fn claim(
     }
     let sql = format!(
         "SELECT {CAMPAIGN_COLUMNS} FROM campaigns WHERE status = 'running' AND next_index < max_tests \
-         ORDER BY last_leased_at, id LIMIT 1"
+         ORDER BY next_turn_at, id LIMIT 1"
     );
     let Some(campaign): Option<CampaignRow> = sqlx::query_as(&sql).fetch_optional(&mut *tx).await?
     else {
@@ -88,11 +92,11 @@ pub async fn claim(
     let start = campaign.next_index;
     let end = start + size as i64;
     let moved = sqlx::query(
-        "UPDATE campaigns SET next_index = ?, last_leased_at = ? \
+        "UPDATE campaigns SET next_index = ?, next_turn_at = ? \
          WHERE id = ? AND next_index = ? AND status = 'running'",
     )
     .bind(end)
-    .bind(now)
+    .bind(now + expected_ms(&campaign, size, threads))
     .bind(campaign.id)
     .bind(start)
     .execute(&mut *tx)
@@ -115,6 +119,13 @@ pub async fn claim(
         .await?;
     tx.commit().await?;
     Ok(Some(lease))
+}
+
+/// Milliseconds of work a lease of `size` tests is expected to take on
+/// `threads` threads; 0 while the campaign's cost is unknown.
+fn expected_ms(campaign: &CampaignRow, size: u64, threads: u32) -> i64 {
+    let cost = campaign.cost_per_test.unwrap_or(0.0);
+    (size as f64 * cost / f64::from(threads.max(1)) * 1000.0).round() as i64
 }
 
 fn new_lease_size(config: &Config, campaign: &CampaignRow, threads: u32) -> u64 {
