@@ -48,6 +48,9 @@ pub struct MobilParams {
     pub plan_horizon: f64,
     /// Utility lost per second of waiting for a gap (m/s² per s).
     pub wait_cost: f64,
+    /// Bounds of the plan's accelerations (m/s²), within the world's.
+    pub brake: f64,
+    pub accelerate: f64,
     /// IDM: desired speed v₀ (m/s), headway T (s), jam gap s₀ (m),
     /// acceleration α and comfortable braking b (m/s²), exponent δ.
     pub v0: f64,
@@ -68,6 +71,8 @@ impl Default for MobilParams {
             plan_step: 0.5,
             plan_horizon: 8.0,
             wait_cost: 0.2,
+            brake: -4.0,
+            accelerate: 2.0,
             v0: idm.v0,
             headway: idm.headway,
             s0: idm.s0,
@@ -212,7 +217,11 @@ impl MobilDriver {
         let h = self.params.plan_step;
         let points = (self.params.plan_horizon / h).floor() as usize;
         let mut best: Option<(f64, f64)> = None;
-        for a in PLAN_ACCELS.map(|a| a.clamp(world.accel.0, world.accel.1)) {
+        let (low, high) = (
+            self.params.brake.max(world.accel.0),
+            self.params.accelerate.min(world.accel.1),
+        );
+        for a in PLAN_ACCELS.map(|a| a.clamp(low, high)) {
             let (mut p, mut v) = (view.position, view.speed);
             for k in 1..=points {
                 let tau = k as f64 * h;
