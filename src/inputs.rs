@@ -12,16 +12,23 @@ use tslg_method::vehicle::VehicleModel;
 /// The cut-in case on the requested exposure and preset. A table whose sum
 /// was off 1 by a little is renormalised, and the user is told.
 pub fn load_case(args: &CaseArgs) -> anyhow::Result<CutIn> {
+    if !tslg_method::registry::CASES.contains(&args.case.as_str()) {
+        bail!(
+            "unknown case `{}`; known cases: {}",
+            args.case,
+            tslg_method::registry::CASES.join(", ")
+        );
+    }
     if args.case != "cut-in" {
         bail!(
-            "unknown or not yet supported case `{}`; supported: cut-in",
+            "case `{}` is not supported by the offline commands (library build, evaluate, exact), which run cut-in only; every case runs through the service (tslg demo --case, tslg campaign start)",
             args.case
         );
     }
-    let preset: CutInPreset = args
-        .preset
-        .parse()
-        .map_err(|e: String| anyhow::anyhow!(e))?;
+    let preset: CutInPreset = match &args.preset {
+        None => CutInPreset::default(),
+        Some(p) => p.parse().map_err(|e: String| anyhow::anyhow!(e))?,
+    };
     let Some(path) = &args.ndd_table else {
         return Ok(CutIn::builtin(preset));
     };

@@ -111,15 +111,16 @@ pub struct LibraryCreateArgs {
     pub server: ServerArgs,
     #[command(flatten)]
     pub case: CaseArgs,
-    /// The surrogate model: a built-in name or a JSON specification.
-    #[arg(long, default_value = "idm")]
-    pub surrogate: String,
+    /// The surrogate model: a built-in name or a JSON specification
+    /// (default: the case's, idm or mobil).
+    #[arg(long)]
+    pub surrogate: Option<String>,
     /// Search strategy.
     #[arg(long, value_enum, default_value = "multistart")]
     pub search: SearchArg,
-    /// Starting points of the multistart search.
-    #[arg(long, default_value_t = 50)]
-    pub starts: usize,
+    /// Starting points of the multistart search (default: 50 cut-in, 100 highway-exit).
+    #[arg(long)]
+    pub starts: Option<usize>,
     /// Seed of the multistart starting points.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -147,16 +148,44 @@ pub enum LibraryCommand {
 /// Which case, exposure and simulation preset.
 #[derive(Debug, Clone, Args)]
 pub struct CaseArgs {
-    /// The case. Only `cut-in` exists so far.
+    /// The case: `cut-in` or `highway-exit` (the offline commands `library build`,
+    /// `evaluate` and `exact` support cut-in only; the service runs both).
     #[arg(long, default_value = "cut-in")]
     pub case: String,
     /// An exposure table in the layout of the authors' cut-in table (row 0: range-rate
     /// labels; column 0: range labels; body: joint probability). Default: the built-in model.
     #[arg(long, env = "TSLG_NDD_TABLE")]
     pub ndd_table: Option<PathBuf>,
-    /// Simulation preset: `paper-code` (the authors' code) or `paper-table` (the paper's Table III).
-    #[arg(long, default_value = "paper-code")]
-    pub preset: String,
+    /// Simulation preset. cut-in: `paper-code` (the authors' code, default) or
+    /// `paper-table` (the paper's Table III); highway-exit: `paper` (the 61 × 21 × 61 × 21
+    /// grid, default) or `coarse` (16 × 6 × 16 × 6).
+    #[arg(long)]
+    pub preset: Option<String>,
+}
+
+impl CaseArgs {
+    /// The built-in vehicle used when `--surrogate` or `--vut` is not given:
+    /// `idm` for cut-in, `mobil` for highway-exit.
+    pub fn default_vehicle(&self) -> &'static str {
+        match self.case.as_str() {
+            "highway-exit" => "mobil",
+            _ => "idm",
+        }
+    }
+
+    /// `given`, or the case's default vehicle.
+    pub fn vehicle_or_default<'a>(&self, given: &'a Option<String>) -> &'a str {
+        given.as_deref().unwrap_or(self.default_vehicle())
+    }
+
+    /// Starting points of a multistart search when not given: 50 for
+    /// cut-in, 100 for highway-exit (the paper's).
+    pub fn default_starts(&self) -> usize {
+        match self.case.as_str() {
+            "highway-exit" => 100,
+            _ => 50,
+        }
+    }
 }
 
 #[derive(Debug, Clone, Copy, ValueEnum, PartialEq, Eq)]
@@ -278,12 +307,14 @@ pub struct ExactArgs {
 pub struct DemoArgs {
     #[command(flatten)]
     pub case: CaseArgs,
-    /// The surrogate model the library is built from.
-    #[arg(long, default_value = "idm")]
-    pub surrogate: String,
-    /// The vehicle under test: a built-in name or a JSON specification.
-    #[arg(long, default_value = "idm")]
-    pub vut: String,
+    /// The surrogate model the library is built from (default: idm for cut-in,
+    /// mobil for highway-exit).
+    #[arg(long)]
+    pub surrogate: Option<String>,
+    /// The vehicle under test: a built-in name or a JSON specification
+    /// (default: the surrogate's model).
+    #[arg(long)]
+    pub vut: Option<String>,
     /// Target relative half-width.
     #[arg(long, default_value_t = 0.2)]
     pub beta: f64,

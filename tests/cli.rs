@@ -265,7 +265,18 @@ fn bad_input_gets_a_message_and_a_non_zero_exit() {
                 "-o".into(),
                 "x".into(),
             ],
-            "unknown or not yet supported case",
+            "unknown case `flying`; known cases: cut-in, highway-exit",
+        ),
+        (
+            vec![
+                "library".into(),
+                "build".into(),
+                "--case".into(),
+                "highway-exit".into(),
+                "-o".into(),
+                "x".into(),
+            ],
+            "every case runs through the service",
         ),
     ];
     for (args, expected) in cases {
@@ -337,4 +348,28 @@ fn demo_runs_both_campaigns_through_a_local_service_and_prints_the_table() {
         "{text}"
     );
     assert!(stderr(&o).contains("converged"), "progress is shown");
+}
+
+#[test]
+fn the_highway_exit_demo_reports_exact_and_analytic_figures() {
+    let o = tslg(&["demo", "--case", "highway-exit", "--preset", "coarse"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = stdout(&o);
+    assert!(
+        text.contains("highway-exit library 1 of mobil: 5 of 9216 scenarios (4320 surrogate runs"),
+        "{text}"
+    );
+    for method in ["library", "ndd"] {
+        let row = text
+            .lines()
+            .find(|l| l.starts_with(&format!("{method} ")))
+            .unwrap_or_else(|| panic!("no {method} row in {text}"));
+        assert!(row.ends_with("converged"), "{row}");
+    }
+    // The exact P(A) of the MOBIL surrogate on the coarse grid (docs/models.md).
+    assert!(
+        text.contains("exact P(A) by enumeration: 1.0114e-3"),
+        "{text}"
+    );
+    assert!(text.contains(" analytic ("), "{text}");
 }

@@ -6,7 +6,8 @@
 
 use crate::case::Case;
 use crate::cutin::{CutIn, CutInError, CutInPreset};
-use crate::exact::{event_cells, event_probability};
+use crate::estimator::z_for_confidence;
+use crate::exact::{event_cells, event_probability, exact_report, ExactReport};
 use crate::highway::{HighwayExit, HighwayPreset};
 use crate::library::{build_library, Library, LibraryFileError, LibraryRequest};
 use crate::mass::GridMass;
@@ -71,6 +72,18 @@ pub trait ScenarioCase: Send + Sync {
     fn event_test(&self, vehicle: &serde_json::Value) -> Result<EventTest, CaseError>;
     /// The exact `P(A)` of a vehicle by enumeration of the grid.
     fn exact_event_probability(&self, vehicle: &serde_json::Value) -> Result<f64, CaseError>;
+    /// `P(A)` with the expected tests of a library campaign (ε spread
+    /// uniformly outside `library`, as campaigns do) and of the NDD baseline
+    /// to relative half-width `beta` at `confidence`: the analytic
+    /// acceleration ratio (SPEC §3).
+    fn exact_report(
+        &self,
+        vehicle: &serde_json::Value,
+        library: &Library,
+        epsilon: f64,
+        beta: f64,
+        confidence: f64,
+    ) -> Result<ExactReport, CaseError>;
     /// Builds a library of `surrogate` (CPU-heavy: call off any async runtime).
     fn build_library(
         &self,
@@ -231,6 +244,31 @@ where
         Ok(event_probability(
             self.case.as_ref(),
             &event_cells(self.case.as_ref(), &vehicle),
+        ))
+    }
+
+    fn exact_report(
+        &self,
+        spec: &serde_json::Value,
+        library: &Library,
+        epsilon: f64,
+        beta: f64,
+        confidence: f64,
+    ) -> Result<ExactReport, CaseError> {
+        let vehicle = self.vehicle(spec)?;
+        self.check_library(library)?;
+        let q = LibraryDistribution::new(
+            library,
+            self.case.exposure(),
+            epsilon,
+            OutsideSpread::Uniform,
+        )?;
+        Ok(exact_report(
+            self.case.as_ref(),
+            &vehicle,
+            &q,
+            beta,
+            z_for_confidence(confidence),
         ))
     }
 

@@ -88,13 +88,13 @@ pub fn create_library(args: &LibraryCreateArgs) -> anyhow::Result<()> {
     let exposure = exposure_request(&args.case)?;
     let request = CreateLibrary {
         case: args.case.case.clone(),
-        preset: Some(args.case.preset.clone()),
-        surrogate: vehicle_json(&args.surrogate)?,
+        preset: args.case.preset.clone(),
+        surrogate: vehicle_json(args.case.vehicle_or_default(&args.surrogate))?,
         exposure,
         search: match args.search {
             SearchArg::Exhaustive => SearchRequest::Exhaustive,
             SearchArg::Multistart => SearchRequest::Multistart {
-                starts: args.starts,
+                starts: args.starts.unwrap_or(args.case.default_starts()),
                 seed: args.seed,
             },
         },
