@@ -28,7 +28,7 @@ impl Method {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct CreateCampaign {
-    /// `cut-in`.
+    /// `cut-in` or `highway-exit`.
     pub case: String,
     pub method: Method,
     /// The library to sample from (`method: library`). For `ndd` it is

@@ -68,7 +68,7 @@ impl Default for ThresholdRequest {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct CreateLibrary {
-    /// `cut-in`.
+    /// `cut-in` or `highway-exit`.
     pub case: String,
     /// The case's simulation preset; the case's default when absent.
     #[serde(default)]

@@ -81,7 +81,11 @@ fn main() {
     );
     for seed in [0, 1, 2] {
         let t = Instant::now();
-        let multistart = library(&case, &mobil, SearchMethod::Multistart { starts: 100, seed });
+        let multistart = library(
+            &case,
+            &mobil,
+            SearchMethod::Multistart { starts: 100, seed },
+        );
         println!(
             "| multistart (100 starts, seed {seed}): {} cells, {} surrogate runs, recall {:.3} | {:.2} s |",
             multistart.size(),
