@@ -27,6 +27,7 @@ fn request(tests: u64) -> CreateCampaign {
         seed: 1,
         n_min: None,
         min_events: None,
+        outside: Default::default(),
     }
 }
 
@@ -35,7 +36,7 @@ fn in_process(tests: u64) -> f64 {
     let test = case
         .event_test(&serde_json::json!({"model": "idm"}))
         .unwrap();
-    let sampler = CampaignSampler::new(case, None, 0.1, 1).unwrap();
+    let sampler = CampaignSampler::new(case, None, 0.1, Default::default(), 1).unwrap();
     let rule = StoppingRule::new(1e-6, tests);
     let started = Instant::now();
     let result = run_campaign_with(&|c| test(c), &sampler.distribution, &rule, 1);

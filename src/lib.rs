@@ -92,6 +92,10 @@ pub struct CampaignStartArgs {
     /// Share ε of tests drawn outside the library.
     #[arg(long, default_value_t = 0.1)]
     pub epsilon: f64,
+    /// How ε is spread outside the library: `uniform` (the paper's) or `ndd`
+    /// (in proportion to P(x), bounded weights).
+    #[arg(long, value_enum, default_value = "uniform")]
+    pub outside: OutsideArg,
     #[command(flatten)]
     pub rule: RuleArgs,
     /// Campaign seed: test i is determined by (seed, i).
@@ -237,6 +241,22 @@ pub enum OutsideArg {
     Ndd,
 }
 
+impl OutsideArg {
+    pub fn spread(self) -> tslg_method::sampling::OutsideSpread {
+        match self {
+            OutsideArg::Uniform => tslg_method::sampling::OutsideSpread::Uniform,
+            OutsideArg::Ndd => tslg_method::sampling::OutsideSpread::Ndd,
+        }
+    }
+
+    pub fn wire(self) -> tslg_api::Outside {
+        match self {
+            OutsideArg::Uniform => tslg_api::Outside::Uniform,
+            OutsideArg::Ndd => tslg_api::Outside::Ndd,
+        }
+    }
+}
+
 #[derive(Debug, Clone, Args)]
 pub struct RuleArgs {
     /// Stop when the relative half-width of the interval is at most β.
@@ -321,6 +341,9 @@ pub struct DemoArgs {
     /// Share ε of library tests drawn outside the library.
     #[arg(long, default_value_t = 0.1)]
     pub epsilon: f64,
+    /// How ε is spread outside the library: `uniform` (the paper's) or `ndd`.
+    #[arg(long, value_enum, default_value = "uniform")]
+    pub outside: OutsideArg,
     /// Campaign seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,

@@ -79,7 +79,7 @@ async fn results_are_idempotent_fenced_on_the_attempt_and_leases_expire_and_retu
         )
         .unwrap();
     let test = case.event_test(&json!({"model": "idm"})).unwrap();
-    let sampler = CampaignSampler::new(case, Some(&lib), 0.1, 3).unwrap();
+    let sampler = CampaignSampler::new(case, Some(&lib), 0.1, Default::default(), 3).unwrap();
     let tests = lease.tests.clone().expect("inline tests");
     assert_eq!(tests.len(), 100);
     let mut events = Vec::new();

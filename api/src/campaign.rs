@@ -24,6 +24,28 @@ impl Method {
     }
 }
 
+/// How a library campaign spreads its exploration share ε outside the library.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, ToSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum Outside {
+    /// `q(x) = ε / (N(X) − N(Φ))`, the paper's form.
+    #[default]
+    Uniform,
+    /// `q(x) = ε P(x) / P(X \ Φ)`: weights outside the library stay below
+    /// `P(X \ Φ)/ε`, so a vehicle that fails outside the library costs tests
+    /// but never an unbounded weight.
+    Ndd,
+}
+
+impl Outside {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Outside::Uniform => "uniform",
+            Outside::Ndd => "ndd",
+        }
+    }
+}
+
 /// `POST /api/v1/campaigns`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
@@ -41,6 +63,9 @@ pub struct CreateCampaign {
     /// Share ε of tests drawn outside the library, in [0, 1).
     #[serde(default = "default_epsilon")]
     pub epsilon: f64,
+    /// How ε is spread outside the library (default `uniform`).
+    #[serde(default)]
+    pub outside: Outside,
     /// Target relative half-width β, in (0, 1).
     #[serde(default = "default_beta")]
     pub beta: f64,
@@ -127,6 +152,7 @@ pub struct CampaignView {
     #[schema(value_type = Object)]
     pub vut: serde_json::Value,
     pub epsilon: f64,
+    pub outside: Outside,
     pub beta: f64,
     pub confidence: f64,
     pub n_min: u64,
@@ -201,6 +227,8 @@ pub struct CampaignPlan {
     /// `/api/v1/libraries/{library_id}/file`.
     pub library_id: Option<i64>,
     pub epsilon: f64,
+    #[serde(default)]
+    pub outside: Outside,
     pub seed: u64,
     #[schema(value_type = Object)]
     pub vut: serde_json::Value,

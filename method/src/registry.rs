@@ -73,14 +73,15 @@ pub trait ScenarioCase: Send + Sync {
     /// The exact `P(A)` of a vehicle by enumeration of the grid.
     fn exact_event_probability(&self, vehicle: &serde_json::Value) -> Result<f64, CaseError>;
     /// `P(A)` with the expected tests of a library campaign (ε spread
-    /// uniformly outside `library`, as campaigns do) and of the NDD baseline
-    /// to relative half-width `beta` at `confidence`: the analytic
-    /// acceleration ratio (SPEC §3).
+    /// outside `library` by `outside`) and of the NDD baseline to relative
+    /// half-width `beta` at `confidence`: the analytic acceleration ratio
+    /// (SPEC §3).
     fn exact_report(
         &self,
         vehicle: &serde_json::Value,
         library: &Library,
         epsilon: f64,
+        outside: OutsideSpread,
         beta: f64,
         confidence: f64,
     ) -> Result<ExactReport, CaseError>;
@@ -155,12 +156,13 @@ pub struct CampaignSampler {
 }
 
 impl CampaignSampler {
-    /// Tests from `library` with exploration share `epsilon` (spread
-    /// uniformly outside it), or from the NDD when `library` is `None`.
+    /// Tests from `library` with exploration share `epsilon` spread
+    /// outside it by `outside`, or from the NDD when `library` is `None`.
     pub fn new(
         case: Arc<dyn ScenarioCase>,
         library: Option<&Library>,
         epsilon: f64,
+        outside: OutsideSpread,
         seed: u64,
     ) -> Result<Self, CaseError> {
         let distribution = match library {
@@ -170,7 +172,7 @@ impl CampaignSampler {
                     library,
                     case.exposure(),
                     epsilon,
-                    OutsideSpread::Uniform,
+                    outside,
                 )?)
             }
             None => TestDistribution::Ndd(NddDistribution::new(case.exposure())),
@@ -252,17 +254,13 @@ where
         spec: &serde_json::Value,
         library: &Library,
         epsilon: f64,
+        outside: OutsideSpread,
         beta: f64,
         confidence: f64,
     ) -> Result<ExactReport, CaseError> {
         let vehicle = self.vehicle(spec)?;
         self.check_library(library)?;
-        let q = LibraryDistribution::new(
-            library,
-            self.case.exposure(),
-            epsilon,
-            OutsideSpread::Uniform,
-        )?;
+        let q = LibraryDistribution::new(library, self.case.exposure(), epsilon, outside)?;
         Ok(exact_report(
             self.case.as_ref(),
             &vehicle,

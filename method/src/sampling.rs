@@ -33,6 +33,19 @@ pub enum OutsideSpread {
     Ndd,
 }
 
+impl std::str::FromStr for OutsideSpread {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "uniform" => Ok(OutsideSpread::Uniform),
+            "ndd" => Ok(OutsideSpread::Ndd),
+            other => Err(format!(
+                "unknown outside spread `{other}`; spreads are uniform, ndd"
+            )),
+        }
+    }
+}
+
 #[derive(Debug, Error, PartialEq)]
 pub enum SamplingError {
     #[error("ε = {0} must be in [0, 1)")]

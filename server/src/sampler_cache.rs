@@ -63,6 +63,7 @@ fn build(row: &CampaignRow, library: Option<&str>) -> anyhow::Result<CampaignSam
         case,
         library.as_ref(),
         row.epsilon,
+        row.outside().as_str().parse().map_err(anyhow::Error::msg)?,
         row.seed(),
     )?)
 }

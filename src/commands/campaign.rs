@@ -23,6 +23,7 @@ pub fn start(args: &CampaignStartArgs) -> anyhow::Result<()> {
         library_id: args.library_id,
         vut: vehicle_json(&args.vut)?,
         epsilon: args.epsilon,
+        outside: args.outside.wire(),
         beta: args.rule.beta,
         confidence: args.rule.confidence,
         max_tests: args.rule.max_tests,

@@ -104,6 +104,7 @@ async fn drive(
         library_id: Some(library.id),
         vut: vut.clone(),
         epsilon: args.epsilon,
+        outside: args.outside.wire(),
         beta: args.beta,
         confidence: 0.9,
         max_tests: args.max_tests,
@@ -122,12 +123,13 @@ async fn drive(
     };
     let vut_spec = vut.clone();
     let library_file = Library::from_json(&client.library_file(library.id).await?)?;
-    let (epsilon, beta) = (args.epsilon, args.beta);
+    let (epsilon, outside, beta) = (args.epsilon, args.outside.spread(), args.beta);
     let exact = tokio::task::spawn_blocking(move || {
         open_case(&case_name, preset.as_deref(), &source)?.exact_report(
             &vut_spec,
             &library_file,
             epsilon,
+            outside,
             beta,
             0.9,
         )

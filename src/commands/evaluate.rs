@@ -1,15 +1,13 @@
 //! `tslg evaluate`: one campaign in this process.
 
 use crate::inputs::{check_epsilon, load_case, parse_vehicle, read_library, stopping_rule};
-use crate::{EvaluateArgs, MethodArg, OutsideArg};
+use crate::{EvaluateArgs, MethodArg};
 use anyhow::Context;
 use serde::Serialize;
 use tslg_method::campaign::{run_campaign, CampaignResult};
 use tslg_method::case::Case;
 use tslg_method::exact::{event_cells, event_probability};
-use tslg_method::sampling::{
-    LibraryDistribution, NddDistribution, OutsideSpread, TestDistribution,
-};
+use tslg_method::sampling::{LibraryDistribution, NddDistribution, TestDistribution};
 
 #[derive(Serialize)]
 struct Report {
@@ -35,10 +33,7 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
                 .context("--library is required with --method library")?;
             let library = read_library(path)?;
             library.check_matches(&case)?;
-            let outside = match args.outside {
-                OutsideArg::Uniform => OutsideSpread::Uniform,
-                OutsideArg::Ndd => OutsideSpread::Ndd,
-            };
+            let outside = args.outside.spread();
             TestDistribution::library(
                 LibraryDistribution::new(&library, case.exposure(), args.epsilon, outside)
                     .context("cannot sample from this library")?,

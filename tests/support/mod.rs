@@ -191,6 +191,7 @@ pub fn campaign(
         seed,
         n_min: None,
         min_events: None,
+        outside: Default::default(),
     }
 }
 
@@ -247,8 +248,14 @@ pub fn in_process(surrogate: Option<&str>, request: &CreateCampaign) -> Campaign
         .unwrap()
     });
     let test = case.event_test(&request.vut).unwrap();
-    let sampler =
-        CampaignSampler::new(case, library.as_ref(), request.epsilon, request.seed).unwrap();
+    let sampler = CampaignSampler::new(
+        case,
+        library.as_ref(),
+        request.epsilon,
+        request.outside.as_str().parse().unwrap(),
+        request.seed,
+    )
+    .unwrap();
     let rule = StoppingRule {
         beta: request.beta,
         confidence: request.confidence,

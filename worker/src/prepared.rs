@@ -34,7 +34,8 @@ impl PreparedCampaign {
             plan.exposure_fingerprint
         );
         let event_test = case.event_test(&plan.vut)?;
-        let sampler = CampaignSampler::new(case, library, plan.epsilon, plan.seed)?;
+        let outside = plan.outside.as_str().parse().map_err(anyhow::Error::msg)?;
+        let sampler = CampaignSampler::new(case, library, plan.epsilon, outside, plan.seed)?;
         Ok(Self {
             sampler,
             event_test,

@@ -123,6 +123,7 @@ pub async fn create(
             },
             vut: vut.to_string(),
             epsilon: req.epsilon,
+            outside: req.outside,
             rule,
             seed: req.seed,
             status,
@@ -192,6 +193,7 @@ pub async fn plan(
             None
         },
         epsilon: row.epsilon,
+        outside: row.outside(),
         seed: row.seed(),
         vut: serde_json::from_str(&row.vut).map_err(|e| ApiError::Internal(e.into()))?,
     }))

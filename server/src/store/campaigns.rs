@@ -2,7 +2,7 @@
 
 use crate::error::ApiError;
 use sqlx::SqlitePool;
-use tslg_api::{CampaignStatus, CampaignView, ExposureRequest, HistoryPoint, Method};
+use tslg_api::{CampaignStatus, CampaignView, ExposureRequest, HistoryPoint, Method, Outside};
 use tslg_method::estimator::{ImportanceEstimator, StoppingRule};
 use tslg_method::prefix::PrefixFold;
 use tslg_method::registry::ExposureSource;
@@ -19,6 +19,7 @@ pub struct CampaignRow {
     pub exposure_table: Option<String>,
     pub vut: String,
     pub epsilon: f64,
+    pub outside: String,
     pub beta: f64,
     pub confidence: f64,
     pub n_min: i64,
@@ -41,13 +42,21 @@ pub struct CampaignRow {
 }
 
 pub const COLUMNS: &str = "id, case_name, preset, method, library_id, exposure_name, \
-    exposure_fingerprint, exposure_table, vut, epsilon, beta, confidence, n_min, min_events, \
-    max_tests, seed, status, status_detail, next_index, indices, tests, events, invalid, s1, s2, \
+    exposure_fingerprint, exposure_table, vut, epsilon, outside, beta, confidence, n_min, \
+    min_events, max_tests, seed, status, status_detail, next_index, indices, tests, events, invalid, s1, s2, \
     cost_per_test, worker_seconds, created_at, updated_at";
 
 impl CampaignRow {
     pub fn status(&self) -> CampaignStatus {
         CampaignStatus::parse(&self.status).unwrap_or(CampaignStatus::Failed)
+    }
+
+    pub fn outside(&self) -> Outside {
+        if self.outside == "ndd" {
+            Outside::Ndd
+        } else {
+            Outside::Uniform
+        }
     }
 
     pub fn method(&self) -> Method {
@@ -114,6 +123,7 @@ impl CampaignRow {
             library_id: self.library_id,
             vut: serde_json::from_str(&self.vut).unwrap_or_default(),
             epsilon: self.epsilon,
+            outside: self.outside(),
             beta: self.beta,
             confidence: self.confidence,
             n_min: rule.n_min,
@@ -167,6 +177,7 @@ pub struct NewCampaign {
     pub exposure_table: Option<String>,
     pub vut: String,
     pub epsilon: f64,
+    pub outside: Outside,
     pub rule: StoppingRule,
     pub seed: u64,
     pub status: CampaignStatus,
@@ -175,8 +186,8 @@ pub struct NewCampaign {
 pub async fn insert(pool: &SqlitePool, new: &NewCampaign) -> Result<CampaignRow, ApiError> {
     let sql = format!(
         "INSERT INTO campaigns (case_name, preset, method, library_id, exposure_name, \
-         exposure_fingerprint, exposure_table, vut, epsilon, beta, confidence, n_min, min_events, \
-         max_tests, seed, status) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) \
+         exposure_fingerprint, exposure_table, vut, epsilon, outside, beta, confidence, n_min, \
+         min_events, max_tests, seed, status) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) \
          RETURNING {COLUMNS}"
     );
     Ok(sqlx::query_as(&sql)
@@ -189,6 +200,7 @@ pub async fn insert(pool: &SqlitePool, new: &NewCampaign) -> Result<CampaignRow,
         .bind(&new.exposure_table)
         .bind(&new.vut)
         .bind(new.epsilon)
+        .bind(new.outside.as_str())
         .bind(new.rule.beta)
         .bind(new.rule.confidence)
         .bind(new.rule.n_min as i64)
