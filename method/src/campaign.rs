@@ -68,6 +68,23 @@ pub fn run_campaign_with(
     rule: &StoppingRule,
     seed: u64,
 ) -> CampaignResult {
+    run_indexed_campaign(
+        &|i| {
+            let draw = distribution.draw(seed, i);
+            is_event(draw.cell).then_some(draw.weight)
+        },
+        rule,
+    )
+}
+
+/// Runs one campaign whose test `i` is `event_weight(i)`: the importance
+/// weight when the test had the event, `None` otherwise. For cases whose
+/// tests draw while they run (car-following), where the weight depends on
+/// the vehicle's trajectory.
+pub fn run_indexed_campaign(
+    event_weight: &(dyn Fn(u64) -> Option<f64> + Sync),
+    rule: &StoppingRule,
+) -> CampaignResult {
     let z = rule.z();
     let mut fold = PrefixFold::default();
     let mut batch = FIRST_BATCH;
@@ -76,10 +93,7 @@ pub fn run_campaign_with(
         let to = (from + batch).min(rule.max_tests);
         let mut events: Vec<(u64, SparseOutcome)> = (from..to)
             .into_par_iter()
-            .filter_map(|i| {
-                let draw = distribution.draw(seed, i);
-                is_event(draw.cell).then_some((i, SparseOutcome::Event(draw.weight)))
-            })
+            .filter_map(|i| event_weight(i).map(|w| (i, SparseOutcome::Event(w))))
             .collect();
         events.sort_by_key(|&(i, _)| i);
         let stop = fold

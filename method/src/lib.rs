@@ -4,8 +4,10 @@
 //! handed in, no async, no HTTP: usable alone from a program or a benchmark.
 
 pub mod campaign;
+pub mod carfollow;
 pub mod case;
 pub mod cutin;
+pub mod density;
 pub mod estimator;
 pub mod exact;
 pub mod grid;

@@ -22,9 +22,9 @@
 //! grid, so near the ends of the road section, where not every range fits,
 //! the leader position is slightly less than uniform.
 
+use crate::density::normal;
 use crate::grid::{Axis, Grid};
 use crate::mass::GridMass;
-use std::f64::consts::PI;
 
 /// Parameters of the synthetic car-following exposure.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -49,11 +49,6 @@ impl Default for ExitExposureModel {
             headway_log_sd: 0.5,
         }
     }
-}
-
-fn normal(x: f64, mean: f64, sd: f64) -> f64 {
-    let z = (x - mean) / sd;
-    (-0.5 * z * z).exp() / (sd * (2.0 * PI).sqrt())
 }
 
 impl ExitExposureModel {

@@ -1,0 +1,184 @@
+//! Car-following tests: the initial state and the BV's actions are drawn
+//! while the test runs, from the state the vehicle under test produces
+//! (SPEC §6).
+//!
+//! - **NDD**: `s₁ ~ P(s)`, `u_k ~ P(u|v_k)`; weight 1.
+//! - **Library**: `s₁ ~ q(s) = (1 − ε) P(S|s) P(s) / μ_S + ε P(s)` and, in
+//!   each decision at grid state `s_k` (the nearest to the continuous
+//!   state), `u_k ~ q(u|s_k) = (1 − ε) Q(s_k, u)/P(S|s_k) + ε P(u|v_k)`
+//!   where `P(S|s_k) > 0`, else the NDD. The weight is
+//!   `P(s₁)/q(s₁) · Π_k P(u_k|v_k)/q(u_k|s_k)`, kept as its logarithm.
+//!
+//! The NDD action law is read at the BV speed of the nearest grid state
+//! (clamped to the grid), so the weights use exactly the law the NDD
+//! baseline samples from. Every draw comes from the counter-based stream of
+//! `(seed, index)`, so a test is reproducible from its index alone.
+
+use super::exposure_model::FollowExposureModel;
+use super::library::PolicyLibrary;
+use super::states::StateGrid;
+use super::world::{advance, FollowWorld};
+use crate::sampling::test_rng;
+use crate::vehicle::VehicleModel;
+use rand::Rng;
+use rand_distr::weighted::WeightedAliasIndex;
+use rand_distr::Distribution;
+use std::sync::Arc;
+
+/// One car-following test.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FollowTest {
+    pub accident: bool,
+    /// `ln w`: 0 for the NDD.
+    pub log_weight: f64,
+    /// The initial grid state.
+    pub initial_state: usize,
+}
+
+impl FollowTest {
+    pub fn weight(&self) -> f64 {
+        self.log_weight.exp()
+    }
+}
+
+/// Draws `k` with probability `p[k]` by inverse CDF (31 actions: a scan is
+/// exact and cheaper than building an alias table per state).
+fn draw_index(p: &[f64], r: f64) -> usize {
+    let mut acc = 0.0;
+    for (k, &pk) in p.iter().enumerate() {
+        acc += pk;
+        if r < acc {
+            return k;
+        }
+    }
+    p.iter().rposition(|&pk| pk > 0.0).unwrap_or(0)
+}
+
+/// What tests of a campaign are drawn from.
+#[derive(Debug, Clone)]
+pub struct FollowSampler {
+    world: FollowWorld,
+    grid: StateGrid,
+    /// `P(u|v)` per grid speed index, `speeds × actions`.
+    ndd_actions: Vec<f64>,
+    /// `P(s)` and the initial-state distribution `q(s)` (= `P(s)` for the NDD).
+    initial: Vec<f64>,
+    initial_q: Vec<f64>,
+    initial_alias: Arc<WeightedAliasIndex<f64>>,
+    library: Option<(Arc<PolicyLibrary>, f64)>,
+}
+
+impl FollowSampler {
+    /// The NDD baseline.
+    pub fn ndd(world: FollowWorld, grid: StateGrid, exposure: &FollowExposureModel) -> Self {
+        let initial = exposure.initial_states(&world, &grid);
+        Self::build(world, grid, exposure, initial.clone(), initial, None)
+    }
+
+    /// Library sampling with exploration share `epsilon`.
+    pub fn library(
+        world: FollowWorld,
+        grid: StateGrid,
+        exposure: &FollowExposureModel,
+        library: Arc<PolicyLibrary>,
+        epsilon: f64,
+    ) -> Self {
+        let initial = exposure.initial_states(&world, &grid);
+        let mu: f64 = initial
+            .iter()
+            .zip(&library.challenge)
+            .map(|(p, c)| p * c)
+            .sum();
+        let q = initial
+            .iter()
+            .zip(&library.challenge)
+            .map(|(p, c)| {
+                if mu > 0.0 {
+                    (1.0 - epsilon) * p * c / mu + epsilon * p
+                } else {
+                    *p
+                }
+            })
+            .collect();
+        Self::build(world, grid, exposure, initial, q, Some((library, epsilon)))
+    }
+
+    fn build(
+        world: FollowWorld,
+        grid: StateGrid,
+        exposure: &FollowExposureModel,
+        initial: Vec<f64>,
+        initial_q: Vec<f64>,
+        library: Option<(Arc<PolicyLibrary>, f64)>,
+    ) -> Self {
+        let ndd_actions = (0..grid.speed.1)
+            .flat_map(|i| exposure.actions(&world, grid.speed.0 + i as f64 * grid.step))
+            .collect();
+        let initial_alias = Arc::new(
+            WeightedAliasIndex::new(initial_q.clone()).expect("a positive initial distribution"),
+        );
+        Self {
+            world,
+            grid,
+            ndd_actions,
+            initial,
+            initial_q,
+            initial_alias,
+            library,
+        }
+    }
+
+    /// `q(s₁)` of a grid state.
+    pub fn initial_q(&self, s: usize) -> f64 {
+        self.initial_q[s]
+    }
+
+    /// Runs test `index` of a campaign with seed `seed` on `vut`.
+    pub fn run(&self, vut: &VehicleModel, seed: u64, index: u64) -> FollowTest {
+        let mut rng = test_rng(seed, index);
+        let s1 = self.initial_alias.sample(&mut rng);
+        let mut log_weight = (self.initial[s1] / self.initial_q[s1]).ln();
+        let mut controller = vut.controller();
+        let mut x = self.grid.state(s1);
+        let actions = self.world.actions;
+        let mut mixed = vec![0.0; actions];
+        for _ in 0..self.world.decisions {
+            let iv = self.grid.speed_index(x.bv_speed);
+            let ndd = &self.ndd_actions[iv * actions..(iv + 1) * actions];
+            let r: f64 = rng.random();
+            let guided = self.library.as_ref().and_then(|(library, epsilon)| {
+                let s = self.grid.nearest(&x)?;
+                let total = library.challenge[s];
+                (total > 0.0).then(|| {
+                    let row = &library.q[s * actions..(s + 1) * actions];
+                    for ((m, q), p) in mixed.iter_mut().zip(row).zip(ndd) {
+                        *m = (1.0 - epsilon) * q / total + epsilon * p;
+                    }
+                })
+            });
+            let k = match guided {
+                Some(()) => {
+                    let k = draw_index(&mixed, r);
+                    log_weight += (ndd[k] / mixed[k]).ln();
+                    k
+                }
+                None => draw_index(ndd, r),
+            };
+            match advance(&self.world, x, self.world.action(k), &mut controller) {
+                None => {
+                    return FollowTest {
+                        accident: true,
+                        log_weight,
+                        initial_state: s1,
+                    }
+                }
+                Some(next) => x = next,
+            }
+        }
+        FollowTest {
+            accident: false,
+            log_weight,
+            initial_state: s1,
+        }
+    }
+}
