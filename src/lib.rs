@@ -37,6 +37,30 @@ pub enum Command {
     Campaign(CampaignCommand),
     /// Check that a coordinator answers and its database works (exit 0 if so).
     Health(ServerArgs),
+    /// Learn the car-following library of a surrogate and print its action
+    /// distribution at one state beside the naturalistic one.
+    Policy(PolicyArgs),
+}
+
+#[derive(Debug, Clone, Copy, ValueEnum, PartialEq, Eq)]
+pub enum SolverArg {
+    /// Backward dynamic programming.
+    Dp,
+    /// The paper's TD(0) (α 0.1, until every |δ| < 1e-10).
+    Td,
+}
+
+#[derive(Debug, Args)]
+pub struct PolicyArgs {
+    /// The state `v_BV,R,Ṙ` (m/s, m, m/s); looked up at the nearest grid state.
+    #[arg(long, default_value = "38,6,-2", allow_hyphen_values = true)]
+    pub state: String,
+    /// The surrogate: `idm` or `acc-aeb` (highway versions, docs/models.md).
+    #[arg(long, default_value = "idm")]
+    pub surrogate: String,
+    /// How the Q-values are computed.
+    #[arg(long, value_enum, default_value = "dp")]
+    pub solver: SolverArg,
 }
 
 /// How to reach a coordinator.
@@ -375,5 +399,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
             commands::campaign::cancel(&server, id)
         }
         Command::Health(server) => commands::campaign::health(&server),
+        Command::Policy(args) => commands::policy::run(&args),
     }
 }

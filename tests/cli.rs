@@ -373,3 +373,28 @@ fn the_highway_exit_demo_reports_exact_and_analytic_figures() {
     );
     assert!(text.contains(" analytic ("), "{text}");
 }
+
+#[test]
+fn policy_prints_the_car_following_librarys_action_distribution_at_the_papers_state() {
+    let o = tslg(&["policy", "--state", "38,6,-2"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = stdout(&o);
+    assert!(text.contains("zone Dangerous"), "{text}");
+    // The learned distribution peaks at a hard but not the hardest braking.
+    assert!(text.contains("peaks at u = -3.6 m/s²"), "{text}");
+    // Row of u = −3.6: the NDD gives it well under 0.1%, the library most of its mass.
+    let row = text
+        .lines()
+        .find(|l| l.trim_start().starts_with("-3.6 "))
+        .expect("a row for u = -3.6");
+    let cols: Vec<f64> = row.split_whitespace().map(|c| c.parse().unwrap()).collect();
+    assert!(cols[1] < 1e-3 && cols[2] > 0.3, "{row}");
+    for (state, expected) in [
+        ("38,6", "must be three numbers"),
+        ("30,200,0", "beyond the grid"),
+    ] {
+        let o = tslg(&["policy", "--state", state]);
+        assert!(!o.status.success());
+        assert!(stderr(&o).contains(expected), "{}", stderr(&o));
+    }
+}

@@ -5,4 +5,5 @@ pub mod demo;
 pub mod evaluate;
 pub mod exact;
 pub mod library;
+pub mod policy;
 pub mod remote;

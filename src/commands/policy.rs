@@ -1,0 +1,96 @@
+//! `tslg policy`: the car-following library's action distribution at one
+//! state, `P(u|s, S) = Q(s, u) / Σ_u Q(s, u)`, beside the naturalistic
+//! `P(u|v)` (SPEC §6; the paper's example is s = (38, 6, −2)).
+
+use crate::{PolicyArgs, SolverArg};
+use anyhow::{bail, Context};
+use std::time::Instant;
+use tslg_method::carfollow::{
+    dynamic_programming, highway_vehicle, temporal_difference, FollowExposureModel, FollowState,
+    FollowWorld, StateGrid, Transitions, Zone, FOLLOW_MODELS,
+};
+
+/// `v,R,Ṙ` as three numbers.
+fn parse_state(text: &str) -> anyhow::Result<FollowState> {
+    let values: Vec<f64> = text
+        .split(',')
+        .map(|v| v.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .with_context(|| format!("--state `{text}` must be three numbers v,R,Ṙ"))?;
+    let [bv_speed, range, range_rate] = values[..] else {
+        bail!("--state `{text}` must be three numbers v,R,Ṙ");
+    };
+    if values.iter().any(|v| !v.is_finite()) {
+        bail!("--state `{text}` must be finite");
+    }
+    Ok(FollowState {
+        bv_speed,
+        range,
+        range_rate,
+    })
+}
+
+pub fn run(args: &PolicyArgs) -> anyhow::Result<()> {
+    let state = parse_state(&args.state)?;
+    let surrogate = highway_vehicle(&args.surrogate).with_context(|| {
+        format!(
+            "unknown car-following surrogate `{}`; models are {}",
+            args.surrogate,
+            FOLLOW_MODELS.join(", ")
+        )
+    })?;
+    let (world, grid, exposure) = (
+        FollowWorld::paper(),
+        StateGrid::paper(),
+        FollowExposureModel::default(),
+    );
+    let Some(s) = grid.nearest(&state) else {
+        bail!(
+            "--state range {} m is beyond the grid (at most 115 m): the vehicles are not following",
+            state.range
+        );
+    };
+    let started = Instant::now();
+    let transitions = Transitions::compute(&world, grid, &exposure, &surrogate);
+    let library = match args.solver {
+        SolverArg::Dp => dynamic_programming(&transitions, 1e-12),
+        SolverArg::Td => temporal_difference(&transitions, 0.1, 1e-10, 0),
+    };
+    let at = grid.state(s);
+    println!(
+        "library of {} by {:?} in {:.2} s; state (v {}, R {}, Ṙ {}), zone {:?}, P(S|s) = {:.4e}",
+        args.surrogate,
+        args.solver,
+        started.elapsed().as_secs_f64(),
+        at.bv_speed,
+        at.range,
+        at.range_rate,
+        transitions.zones[s],
+        library.challenge[s]
+    );
+    let ndd = exposure.actions(&world, at.bv_speed);
+    let guided = library.action_distribution(s);
+    if transitions.zones[s] != Zone::Dangerous || guided.is_none() {
+        println!("not a dangerous state: library tests act by the NDD here");
+    }
+    println!("\n{:>6} {:>12} {:>12}", "u", "NDD P(u|v)", "P(u|s, S)");
+    for k in 0..world.actions {
+        let library_p = guided.as_ref().map_or(f64::NAN, |g| g[k]);
+        println!(
+            "{:>6.1} {:>12.4e} {:>12.4e}",
+            world.action(k),
+            ndd[k],
+            library_p
+        );
+    }
+    if let Some(g) = &guided {
+        let peak = (0..world.actions)
+            .max_by(|&a, &b| g[a].total_cmp(&g[b]))
+            .expect("actions");
+        println!(
+            "\nthe library's distribution peaks at u = {:.1} m/s²",
+            world.action(peak)
+        );
+    }
+    Ok(())
+}
