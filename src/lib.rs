@@ -113,13 +113,8 @@ pub struct CampaignStartArgs {
     /// The vehicle under test: a built-in name or a JSON specification.
     #[arg(long)]
     pub vut: String,
-    /// Share ε of tests drawn outside the library.
-    #[arg(long, default_value_t = 0.1)]
-    pub epsilon: f64,
-    /// How ε is spread outside the library: `uniform` (the paper's) or `ndd`
-    /// (in proportion to P(x), bounded weights).
-    #[arg(long, value_enum, default_value = "uniform")]
-    pub outside: OutsideArg,
+    #[command(flatten)]
+    pub exploration: ExplorationArgs,
     #[command(flatten)]
     pub rule: RuleArgs,
     /// Campaign seed: test i is determined by (seed, i).
@@ -281,6 +276,18 @@ impl OutsideArg {
     }
 }
 
+/// How a library campaign explores outside the library.
+#[derive(Debug, Clone, Copy, Args)]
+pub struct ExplorationArgs {
+    /// Share ε of library tests drawn outside the library.
+    #[arg(long, default_value_t = 0.1)]
+    pub epsilon: f64,
+    /// How ε is spread outside the library: `uniform` (the paper's) or `ndd`
+    /// (in proportion to P(x), so weights outside the library stay bounded).
+    #[arg(long, value_enum, default_value = "uniform")]
+    pub outside: OutsideArg,
+}
+
 #[derive(Debug, Clone, Args)]
 pub struct RuleArgs {
     /// Stop when the relative half-width of the interval is at most β.
@@ -313,12 +320,8 @@ pub struct EvaluateArgs {
     /// The library file (method `library`).
     #[arg(long, required_if_eq("method", "library"))]
     pub library: Option<PathBuf>,
-    /// Share ε of tests drawn outside the library.
-    #[arg(long, default_value_t = 0.1)]
-    pub epsilon: f64,
-    /// How ε is spread outside the library.
-    #[arg(long, value_enum, default_value = "uniform")]
-    pub outside: OutsideArg,
+    #[command(flatten)]
+    pub exploration: ExplorationArgs,
     #[command(flatten)]
     pub rule: RuleArgs,
     /// Campaign seed: test i is determined by (seed, i).
@@ -362,12 +365,8 @@ pub struct DemoArgs {
     /// Target relative half-width.
     #[arg(long, default_value_t = 0.2)]
     pub beta: f64,
-    /// Share ε of library tests drawn outside the library.
-    #[arg(long, default_value_t = 0.1)]
-    pub epsilon: f64,
-    /// How ε is spread outside the library: `uniform` (the paper's) or `ndd`.
-    #[arg(long, value_enum, default_value = "uniform")]
-    pub outside: OutsideArg,
+    #[command(flatten)]
+    pub exploration: ExplorationArgs,
     /// Campaign seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,

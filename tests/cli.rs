@@ -316,6 +316,17 @@ fn a_library_cannot_be_used_with_another_exposure() {
     );
 }
 
+/// The demo's table has a `library` and an `ndd` row, both converged.
+fn assert_both_campaigns_converged(text: &str) {
+    for method in ["library", "ndd"] {
+        let row = text
+            .lines()
+            .find(|l| l.starts_with(&format!("{method} ")))
+            .unwrap_or_else(|| panic!("no {method} row in {text}"));
+        assert!(row.ends_with("converged"), "{row}");
+    }
+}
+
 #[test]
 fn demo_runs_both_campaigns_through_a_local_service_and_prints_the_table() {
     let o = tslg(&[
@@ -331,13 +342,7 @@ fn demo_runs_both_campaigns_through_a_local_service_and_prints_the_table() {
     let text = stdout(&o);
     assert!(text.contains("2 workers"), "{text}");
     assert!(text.contains("cut-in library 1 of fvdm"), "{text}");
-    for method in ["library", "ndd"] {
-        let row = text
-            .lines()
-            .find(|l| l.starts_with(&format!("{method} ")))
-            .unwrap_or_else(|| panic!("no {method} row in {text}"));
-        assert!(row.ends_with("converged"), "{row}");
-    }
+    assert_both_campaigns_converged(&text);
     // The exact P(A) of the FVDM on the built-in exposure (docs/models.md).
     assert!(
         text.contains("exact P(A) by enumeration: 5.3608e-3"),
@@ -359,13 +364,7 @@ fn the_highway_exit_demo_reports_exact_and_analytic_figures() {
         text.contains("highway-exit library 1 of mobil: 5 of 9216 scenarios (4320 surrogate runs"),
         "{text}"
     );
-    for method in ["library", "ndd"] {
-        let row = text
-            .lines()
-            .find(|l| l.starts_with(&format!("{method} ")))
-            .unwrap_or_else(|| panic!("no {method} row in {text}"));
-        assert!(row.ends_with("converged"), "{row}");
-    }
+    assert_both_campaigns_converged(&text);
     // The exact P(A) of the MOBIL surrogate on the coarse grid (docs/models.md).
     assert!(
         text.contains("exact P(A) by enumeration: 1.0114e-3"),

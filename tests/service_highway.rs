@@ -5,9 +5,9 @@
 
 mod support;
 
-use std::time::{Duration, Instant};
+use std::time::Duration;
 use support::*;
-use tslg_api::{CampaignStatus, CreateCampaign, CreateLibrary, LibraryStatus, Method, Outside};
+use tslg_api::{CampaignStatus, CreateCampaign, CreateLibrary, Method, Outside};
 use tslg_method::registry::{open_case, ExposureSource};
 
 fn exact(vut: &serde_json::Value) -> f64 {
@@ -49,24 +49,18 @@ async fn highway_exit_library_and_ndd_campaigns_cover_the_exact_failure_rate() {
         WorkerProcess::start(&server.url, 1, "w2"),
     ];
     let client = server.client();
-    let mut library = client
-        .create_library(&CreateLibrary {
+    let library = build_library(
+        &client,
+        &CreateLibrary {
             case: "highway-exit".into(),
             preset: Some("coarse".into()),
             surrogate: serde_json::json!({ "model": "mobil" }),
             exposure: Default::default(),
             search: tslg_api::SearchRequest::Exhaustive,
             threshold: Default::default(),
-        })
-        .await
-        .unwrap();
-    let started = Instant::now();
-    while library.status == LibraryStatus::Building {
-        assert!(started.elapsed() < Duration::from_secs(120), "build hangs");
-        tokio::time::sleep(Duration::from_millis(50)).await;
-        library = client.library(library.id).await.unwrap();
-    }
-    assert_eq!(library.status, LibraryStatus::Ready, "{:?}", library.error);
+        },
+    )
+    .await;
     assert_eq!(library.total_scenarios, 16 * 6 * 16 * 6);
     // Every cell with positive exposure (BV 1 ahead of BV 2) is simulated once.
     assert_eq!(library.sm_evaluations, Some(4320));

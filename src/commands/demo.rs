@@ -103,8 +103,8 @@ async fn drive(
         method,
         library_id: Some(library.id),
         vut: vut.clone(),
-        epsilon: args.epsilon,
-        outside: args.outside.wire(),
+        epsilon: args.exploration.epsilon,
+        outside: args.exploration.outside.wire(),
         beta: args.beta,
         confidence: 0.9,
         max_tests: args.max_tests,
@@ -123,7 +123,11 @@ async fn drive(
     };
     let vut_spec = vut.clone();
     let library_file = Library::from_json(&client.library_file(library.id).await?)?;
-    let (epsilon, outside, beta) = (args.epsilon, args.outside.spread(), args.beta);
+    let (epsilon, outside, beta) = (
+        args.exploration.epsilon,
+        args.exploration.outside.spread(),
+        args.beta,
+    );
     let exact = tokio::task::spawn_blocking(move || {
         open_case(&case_name, preset.as_deref(), &source)?.exact_report(
             &vut_spec,
@@ -194,7 +198,7 @@ fn print_table(
         "\nvehicle under test {}, β {}, confidence 0.9, ε {}, seed {}\n",
         demo_vut(args),
         args.beta,
-        args.epsilon,
+        args.exploration.epsilon,
         args.seed
     );
     println!(

@@ -23,7 +23,7 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
     let case = load_case(&args.case)?;
     let vut = parse_vehicle(&args.vut, "vehicle under test")?;
     let rule = stopping_rule(&args.rule)?;
-    check_epsilon(args.epsilon)?;
+    check_epsilon(args.exploration.epsilon)?;
     let distribution = match args.method {
         MethodArg::Ndd => TestDistribution::Ndd(NddDistribution::new(case.exposure())),
         MethodArg::Library => {
@@ -33,10 +33,15 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
                 .context("--library is required with --method library")?;
             let library = read_library(path)?;
             library.check_matches(&case)?;
-            let outside = args.outside.spread();
+            let outside = args.exploration.outside.spread();
             TestDistribution::library(
-                LibraryDistribution::new(&library, case.exposure(), args.epsilon, outside)
-                    .context("cannot sample from this library")?,
+                LibraryDistribution::new(
+                    &library,
+                    case.exposure(),
+                    args.exploration.epsilon,
+                    outside,
+                )
+                .context("cannot sample from this library")?,
             )
         }
     };

@@ -140,7 +140,7 @@ pub fn scratch() -> tempfile::TempDir {
     tempfile::tempdir().expect("tempdir")
 }
 
-/// Builds a library on the coordinator and waits until it is ready.
+/// Builds a cut-in library on the coordinator and waits until it is ready.
 pub async fn ready_library(client: &Client, surrogate: &str, exhaustive: bool) -> LibraryView {
     let request = CreateLibrary {
         case: "cut-in".into(),
@@ -154,8 +154,13 @@ pub async fn ready_library(client: &Client, surrogate: &str, exhaustive: bool) -
         },
         threshold: Default::default(),
     };
+    build_library(client, &request).await
+}
+
+/// Builds the library `request` asks for and waits until it is ready.
+pub async fn build_library(client: &Client, request: &CreateLibrary) -> LibraryView {
     let mut view = client
-        .create_library(&request)
+        .create_library(request)
         .await
         .expect("create library");
     let started = Instant::now();

@@ -84,6 +84,14 @@ impl FollowExposureModel {
         weights.into_iter().map(|w| w / total).collect()
     }
 
+    /// `P(u|v)` at every grid speed, `speeds × actions` (row `i` for the
+    /// speed `v_min + i · step`).
+    pub fn actions_by_speed(&self, world: &FollowWorld, grid: &StateGrid) -> Vec<f64> {
+        (0..grid.speed.1)
+            .flat_map(|i| self.actions(world, grid.speed.0 + i as f64 * grid.step))
+            .collect()
+    }
+
     /// `P(u|v)` over the world's actions.
     pub fn actions(&self, world: &FollowWorld, speed: f64) -> Vec<f64> {
         let accel_scale = self.accel_scale * ((40.0 - speed) / 10.0).clamp(0.2, 1.0);

@@ -84,8 +84,13 @@ impl Transitions {
                 }
             })
             .collect();
+        // P(u|v) depends on the BV's speed only: one law per grid speed.
+        let by_speed = exposure.actions_by_speed(world, &grid);
         let action_probability = (0..grid.len())
-            .flat_map(|s| exposure.actions(world, grid.state(s).bv_speed))
+            .flat_map(|s| {
+                let i = grid.speed_index(grid.state(s).bv_speed);
+                by_speed[i * actions..(i + 1) * actions].iter().copied()
+            })
             .collect();
         Self {
             grid,

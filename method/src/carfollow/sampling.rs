@@ -111,9 +111,7 @@ impl FollowSampler {
         initial_q: Vec<f64>,
         library: Option<(Arc<PolicyLibrary>, f64)>,
     ) -> Self {
-        let ndd_actions = (0..grid.speed.1)
-            .flat_map(|i| exposure.actions(&world, grid.speed.0 + i as f64 * grid.step))
-            .collect();
+        let ndd_actions = exposure.actions_by_speed(&world, &grid);
         let initial_alias = Arc::new(
             WeightedAliasIndex::new(initial_q.clone()).expect("a positive initial distribution"),
         );
@@ -126,11 +124,6 @@ impl FollowSampler {
             initial_alias,
             library,
         }
-    }
-
-    /// `q(s₁)` of a grid state.
-    pub fn initial_q(&self, s: usize) -> f64 {
-        self.initial_q[s]
     }
 
     /// Runs test `index` of a campaign with seed `seed` on `vut`.
