@@ -8,9 +8,9 @@
 use std::time::{Duration, Instant};
 use tslg::service::LocalService;
 use tslg_api::{CreateCampaign, LeaseRequest, Method, ResultReport};
-use tslg_method::campaign::run_campaign_with;
+use tslg_method::campaign::run_indexed_campaign;
 use tslg_method::estimator::StoppingRule;
-use tslg_method::registry::{open_case, CampaignSampler, ExposureSource};
+use tslg_method::registry::{open_case, ExposureSource};
 use tslg_worker::client::Client;
 
 fn request(tests: u64) -> CreateCampaign {
@@ -27,19 +27,30 @@ fn request(tests: u64) -> CreateCampaign {
         seed: 1,
         n_min: None,
         min_events: None,
-        outside: Default::default(),
+        outside: None,
     }
 }
 
 fn in_process(tests: u64) -> f64 {
     let case = open_case("cut-in", None, &ExposureSource::Builtin).unwrap();
-    let test = case
-        .event_test(&serde_json::json!({"model": "idm"}))
+    let campaign = case
+        .campaign(
+            None,
+            &serde_json::json!({"model": "idm"}),
+            0.1,
+            Default::default(),
+            1,
+        )
         .unwrap();
-    let sampler = CampaignSampler::new(case, None, 0.1, Default::default(), 1).unwrap();
     let rule = StoppingRule::new(1e-6, tests);
     let started = Instant::now();
-    let result = run_campaign_with(&|c| test(c), &sampler.distribution, &rule, 1);
+    let result = run_indexed_campaign(
+        &|i| {
+            let outcome = campaign.run(i);
+            outcome.event.then_some(outcome.weight)
+        },
+        &rule,
+    );
     assert_eq!(result.indices, tests);
     started.elapsed().as_secs_f64()
 }

@@ -138,18 +138,22 @@ pub struct LibraryCreateArgs {
     /// (default: the case's, idm or mobil).
     #[arg(long)]
     pub surrogate: Option<String>,
-    /// Search strategy.
-    #[arg(long, value_enum, default_value = "multistart")]
-    pub search: SearchArg,
+    /// Search strategy (default: the case's, multistart for grid cases,
+    /// dynamic-programming for car-following).
+    #[arg(long, value_enum)]
+    pub search: Option<SearchArg>,
     /// Starting points of the multistart search (default: 50 cut-in, 100 highway-exit).
     #[arg(long)]
     pub starts: Option<usize>,
-    /// Seed of the multistart starting points.
+    /// Seed of the multistart starting points or of the TD update order.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Threshold γ = m·μ_S/N(X) with this m.
-    #[arg(long, default_value_t = 1.0)]
-    pub threshold_m: f64,
+    /// Learning rate of temporal-difference learning.
+    #[arg(long, default_value_t = 0.1)]
+    pub alpha: f64,
+    /// Threshold γ = m·μ_S/N(X) with this m (grid cases; default 1).
+    #[arg(long)]
+    pub threshold_m: Option<f64>,
     /// Wait until the build is done.
     #[arg(long)]
     pub wait: bool,
@@ -171,8 +175,9 @@ pub enum LibraryCommand {
 /// Which case, exposure and simulation preset.
 #[derive(Debug, Clone, Args)]
 pub struct CaseArgs {
-    /// The case: `cut-in` or `highway-exit` (the offline commands `library build`,
-    /// `evaluate` and `exact` support cut-in only; the service runs both).
+    /// The case: `cut-in`, `highway-exit` or `car-following` (the offline
+    /// commands `library build`, `evaluate` and `exact` support cut-in only;
+    /// the service runs all three).
     #[arg(long, default_value = "cut-in")]
     pub case: String,
     /// An exposure table in the layout of the authors' cut-in table (row 0: range-rate
@@ -181,7 +186,8 @@ pub struct CaseArgs {
     pub ndd_table: Option<PathBuf>,
     /// Simulation preset. cut-in: `paper-code` (the authors' code, default) or
     /// `paper-table` (the paper's Table III); highway-exit: `paper` (the 61 × 21 × 61 × 21
-    /// grid, default) or `coarse` (16 × 6 × 16 × 6).
+    /// grid, default) or `coarse` (16 × 6 × 16 × 6); car-following: `paper` (the
+    /// built-in exposure, default) or `risky` (short headways, harsh braking).
     #[arg(long)]
     pub preset: Option<String>,
 }
@@ -213,8 +219,14 @@ impl CaseArgs {
 
 #[derive(Debug, Clone, Copy, ValueEnum, PartialEq, Eq)]
 pub enum SearchArg {
+    /// Grid cases: every cell.
     Exhaustive,
+    /// Grid cases: local searches and a flood fill.
     Multistart,
+    /// Car-following: Q-values by backward dynamic programming.
+    DynamicProgramming,
+    /// Car-following: Q-values by TD(0).
+    TemporalDifference,
 }
 
 #[derive(Debug, Args)]
@@ -284,8 +296,9 @@ pub struct ExplorationArgs {
     pub epsilon: f64,
     /// How ε is spread outside the library: `uniform` (the paper's) or `ndd`
     /// (in proportion to P(x), so weights outside the library stay bounded).
-    #[arg(long, value_enum, default_value = "uniform")]
-    pub outside: OutsideArg,
+    /// Default: the case's, uniform for grid cases, ndd for car-following.
+    #[arg(long, value_enum)]
+    pub outside: Option<OutsideArg>,
 }
 
 #[derive(Debug, Clone, Args)]
@@ -354,8 +367,8 @@ pub struct ExactArgs {
 pub struct DemoArgs {
     #[command(flatten)]
     pub case: CaseArgs,
-    /// The surrogate model the library is built from (default: idm for cut-in,
-    /// mobil for highway-exit).
+    /// The surrogate model the library is built from (default: idm for cut-in
+    /// and car-following, mobil for highway-exit).
     #[arg(long)]
     pub surrogate: Option<String>,
     /// The vehicle under test: a built-in name or a JSON specification

@@ -30,7 +30,7 @@ fn request(
         library_id: Some(library_id),
         vut: vut.clone(),
         epsilon: 0.1,
-        outside,
+        outside: Some(outside),
         beta: 0.2,
         confidence: 0.9,
         max_tests: 2_000_000,
@@ -56,7 +56,7 @@ async fn highway_exit_library_and_ndd_campaigns_cover_the_exact_failure_rate() {
             preset: Some("coarse".into()),
             surrogate: serde_json::json!({ "model": "mobil" }),
             exposure: Default::default(),
-            search: tslg_api::SearchRequest::Exhaustive,
+            search: Some(tslg_api::SearchRequest::Exhaustive),
             threshold: Default::default(),
         },
     )

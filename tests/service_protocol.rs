@@ -10,7 +10,8 @@ use serde_json::{json, Value};
 use std::time::Duration;
 use support::*;
 use tslg_api::{EventResult, Lease, LeaseRequest, Method, ResultAck, ResultReport};
-use tslg_method::registry::{open_case, CampaignSampler, ExposureSource};
+use tslg_method::library::SearchMethod;
+use tslg_method::registry::{open_case, BuildRequest, ExposureSource, LibrarySearch};
 
 fn report(worker: &str, attempt: i64, from: u64, to: u64, events: &[EventResult]) -> ResultReport {
     ResultReport {
@@ -72,28 +73,36 @@ async fn results_are_idempotent_fenced_on_the_attempt_and_leases_expire_and_retu
     let lib = case
         .build_library(
             &json!({"model": "idm"}),
-            &tslg_method::library::LibraryRequest {
-                threshold: Default::default(),
-                search: tslg_method::library::SearchMethod::Exhaustive,
+            &BuildRequest {
+                threshold: None,
+                search: Some(LibrarySearch::Cells(SearchMethod::Exhaustive)),
             },
         )
         .unwrap();
-    let test = case.event_test(&json!({"model": "idm"})).unwrap();
-    let sampler = CampaignSampler::new(case, Some(&lib), 0.1, Default::default(), 3).unwrap();
+    let campaign = case
+        .campaign(
+            Some(&lib.file),
+            &json!({"model": "idm"}),
+            0.1,
+            Default::default(),
+            3,
+        )
+        .unwrap();
     let tests = lease.tests.clone().expect("inline tests");
     assert_eq!(tests.len(), 100);
     let mut events = Vec::new();
     for t in &tests {
-        let draw = sampler.draw(t.index);
+        let planned = campaign.planned(t.index).unwrap();
         assert_eq!(
             (t.cell, t.weight.to_bits()),
-            (draw.cell as u64, draw.weight.to_bits())
+            (planned.cell as u64, planned.weight.to_bits())
         );
-        assert_eq!(t.scenario, sampler.case.scenario(draw.cell));
-        if test(draw.cell) {
+        assert_eq!(t.scenario, planned.scenario);
+        let outcome = campaign.run(t.index);
+        if outcome.event {
             events.push(EventResult {
                 index: t.index,
-                weight: draw.weight,
+                weight: outcome.weight,
             });
         }
     }
@@ -327,7 +336,7 @@ async fn bad_requests_get_precise_problems_and_the_server_keeps_serving() {
     assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY);
     assert_eq!(
         problem["detail"],
-        json!("unknown case `lane-keep`; known cases: cut-in, highway-exit")
+        json!("unknown case `lane-keep`; known cases: cut-in, highway-exit, car-following")
     );
 
     let libraries = format!("{}/api/v1/libraries", server.url);
@@ -348,6 +357,36 @@ async fn bad_requests_get_precise_problems_and_the_server_keeps_serving() {
         problem["detail"].as_str().unwrap().contains("starts = 0"),
         "{problem}"
     );
+    // Each case takes only its own kind of search.
+    for (body, detail) in [
+        (
+            json!({"case": "car-following", "surrogate": {"model": "idm"}, "search": {"method": "exhaustive"}}),
+            "search.method is dynamic-programming or temporal-difference",
+        ),
+        (
+            json!({"case": "car-following", "surrogate": {"model": "idm"}, "threshold": {"kind": "relative", "m": 2}}),
+            "it takes no threshold",
+        ),
+        (
+            json!({"case": "car-following", "surrogate": {"model": "idm"}, "search": {"method": "temporal-difference", "alpha": 0}}),
+            "alpha = 0 must be in (0, 1]",
+        ),
+        (
+            json!({"case": "car-following", "preset": "dense", "surrogate": {"model": "idm"}}),
+            "presets are paper",
+        ),
+        (
+            json!({"case": "cut-in", "surrogate": {"model": "idm"}, "search": {"method": "dynamic-programming"}}),
+            "search.method is exhaustive or multistart",
+        ),
+    ] {
+        let (status, problem) = post(&http, &libraries, &body).await;
+        assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY, "{body}");
+        assert!(
+            problem["detail"].as_str().unwrap().contains(detail),
+            "{body}: {problem}"
+        );
+    }
 
     // Malformed JSON, unknown ids, bad ids, wrong methods, unknown routes.
     let raw = http

@@ -28,7 +28,8 @@ impl Method {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, ToSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum Outside {
-    /// `q(x) = ε / (N(X) − N(Φ))`, the paper's form.
+    /// `q(x) = ε / (N(X) − N(Φ))`, the paper's form (car-following: ε
+    /// uniform over the states and over the 31 actions).
     #[default]
     Uniform,
     /// `q(x) = ε P(x) / P(X \ Φ)`: weights outside the library stay below
@@ -50,7 +51,7 @@ impl Outside {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct CreateCampaign {
-    /// `cut-in` or `highway-exit`.
+    /// `cut-in`, `highway-exit` or `car-following`.
     pub case: String,
     pub method: Method,
     /// The library to sample from (`method: library`). For `ndd` it is
@@ -63,9 +64,10 @@ pub struct CreateCampaign {
     /// Share ε of tests drawn outside the library, in [0, 1).
     #[serde(default = "default_epsilon")]
     pub epsilon: f64,
-    /// How ε is spread outside the library (default `uniform`).
+    /// How ε is spread outside the library; the case's default when absent
+    /// (`uniform` for grid cases, `ndd` for car-following).
     #[serde(default)]
-    pub outside: Outside,
+    pub outside: Option<Outside>,
     /// Target relative half-width β, in (0, 1).
     #[serde(default = "default_beta")]
     pub beta: f64,

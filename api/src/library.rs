@@ -20,16 +20,27 @@ pub enum ExposureRequest {
     },
 }
 
-/// How the library search runs.
+/// How the library is searched (grid cases) or learned (car-following).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, ToSchema)]
 #[serde(tag = "method", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum SearchRequest {
-    /// Simulate the surrogate on every cell with positive exposure.
+    /// Grid cases: simulate the surrogate on every cell with positive exposure.
     Exhaustive,
-    /// Local searches from `starts` random cells, then a flood fill.
+    /// Grid cases: local searches from `starts` random cells, then a flood
+    /// fill (the default, with 50 starts).
     Multistart {
         #[serde(default = "default_starts")]
         starts: usize,
+        #[serde(default)]
+        seed: u64,
+    },
+    /// Car-following: Q-values by backward dynamic programming (the default).
+    DynamicProgramming,
+    /// Car-following: Q-values by the paper's TD(0) with learning rate
+    /// `alpha` in (0, 1]; the same fixed point as dynamic programming.
+    TemporalDifference {
+        #[serde(default = "default_alpha")]
+        alpha: f64,
         #[serde(default)]
         seed: u64,
     },
@@ -39,13 +50,8 @@ fn default_starts() -> usize {
     50
 }
 
-impl Default for SearchRequest {
-    fn default() -> Self {
-        SearchRequest::Multistart {
-            starts: default_starts(),
-            seed: 0,
-        }
-    }
+fn default_alpha() -> f64 {
+    0.1
 }
 
 /// The criticality threshold γ.
@@ -58,17 +64,11 @@ pub enum ThresholdRequest {
     Absolute { gamma: f64 },
 }
 
-impl Default for ThresholdRequest {
-    fn default() -> Self {
-        ThresholdRequest::Relative { m: 1.0 }
-    }
-}
-
 /// `POST /api/v1/libraries`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct CreateLibrary {
-    /// `cut-in` or `highway-exit`.
+    /// `cut-in`, `highway-exit` or `car-following`.
     pub case: String,
     /// The case's simulation preset; the case's default when absent.
     #[serde(default)]
@@ -78,10 +78,13 @@ pub struct CreateLibrary {
     pub surrogate: serde_json::Value,
     #[serde(default)]
     pub exposure: ExposureRequest,
+    /// The case's default when absent: multistart (50 starts) for grid
+    /// cases, dynamic programming for car-following.
     #[serde(default)]
-    pub search: SearchRequest,
+    pub search: Option<SearchRequest>,
+    /// Grid cases only; `relative` with m = 1 when absent.
     #[serde(default)]
-    pub threshold: ThresholdRequest,
+    pub threshold: Option<ThresholdRequest>,
 }
 
 /// A library's build state.

@@ -7,6 +7,7 @@ use tslg_method::campaign::run_indexed_campaign;
 use tslg_method::carfollow::library::Next;
 use tslg_method::carfollow::*;
 use tslg_method::estimator::StoppingRule;
+use tslg_method::sampling::OutsideSpread;
 
 struct Built {
     transitions: Transitions,
@@ -148,12 +149,25 @@ fn library_and_ndd_campaigns_agree_and_the_library_needs_far_fewer_tests() {
         &Transitions::compute(&world, grid, &exposure, &idm),
         1e-13,
     ));
-    let rule = StoppingRule::new(0.2, 5_000_000);
-    for vut in ["idm", "acc-aeb"] {
+    // The ACC+AEB's 0.3 s actuator lag makes it fail in states the IDM
+    // survives, which the library reaches only by exploration: its estimate
+    // rests on rare heavy tests, so it needs a larger n_min (its analytic
+    // count is about 16,000 tests against 380,000 for the NDD).
+    for (vut, n_min, speed_up) in [("idm", 30, 1000), ("acc-aeb", 20_000, 10)] {
         let vut = highway_vehicle(vut).unwrap();
-        let by_library = FollowSampler::library(world, grid, &exposure, library.clone(), 0.1);
+        let by_library = FollowSampler::library(
+            world,
+            grid,
+            &exposure,
+            library.clone(),
+            0.1,
+            OutsideSpread::Ndd,
+        )
+        .unwrap();
         let by_ndd = FollowSampler::ndd(world, grid, &exposure);
-        let run = |sampler: &FollowSampler, seed| {
+        let run = |sampler: &FollowSampler, seed, n_min| {
+            let mut rule = StoppingRule::new(0.2, 5_000_000);
+            rule.n_min = n_min;
             run_indexed_campaign(
                 &|i| {
                     let t = sampler.run(&vut, seed, i);
@@ -162,12 +176,17 @@ fn library_and_ndd_campaigns_agree_and_the_library_needs_far_fewer_tests() {
                 &rule,
             )
         };
-        let (l, n) = (run(&by_library, 3), run(&by_ndd, 4));
+        let (l, n) = (run(&by_library, 3, n_min), run(&by_ndd, 4, 30));
         assert!(
             l.ci_low <= n.ci_high && n.ci_low <= l.ci_high,
             "{l:?} vs {n:?}"
         );
-        assert!(l.tests * 1000 < n.tests, "{} vs {} tests", l.tests, n.tests);
+        assert!(
+            l.tests * speed_up < n.tests,
+            "{} vs {} tests",
+            l.tests,
+            n.tests
+        );
     }
 }
 
@@ -177,7 +196,15 @@ fn library_weights_average_one_and_tests_are_reproducible() {
     let world = FollowWorld::paper();
     let grid = StateGrid::paper();
     let exposure = FollowExposureModel::default();
-    let sampler = FollowSampler::library(world, grid, &exposure, Arc::new(b.dp.clone()), 0.1);
+    let sampler = FollowSampler::library(
+        world,
+        grid,
+        &exposure,
+        Arc::new(b.dp.clone()),
+        0.1,
+        OutsideSpread::Ndd,
+    )
+    .unwrap();
     let idm = highway_vehicle("idm").unwrap();
     // E_q[P/q] = 1 for the whole path, whatever the vehicle does.
     let n = 40_000;
@@ -188,4 +215,58 @@ fn library_weights_average_one_and_tests_are_reproducible() {
     assert!((mean - 1.0).abs() < 0.05, "mean weight {mean}");
     assert_eq!(sampler.run(&idm, 1, 17), sampler.run(&idm, 1, 17));
     assert_ne!(sampler.run(&idm, 1, 17), sampler.run(&idm, 2, 17));
+}
+
+#[test]
+fn the_binary_library_file_round_trips_and_rejects_damage() {
+    use tslg_method::carfollow::file::{PolicyFileError, PolicyHeader, VERSION};
+    let b = built();
+    let file = PolicyLibraryFile {
+        header: PolicyHeader {
+            version: VERSION,
+            case: "car-following".into(),
+            preset: "paper".into(),
+            surrogate: serde_json::json!({"model": "idm"}),
+            exposure: tslg_method::library::ExposureRef {
+                name: "builtin".into(),
+                fingerprint: "0".into(),
+            },
+            solver: PolicySolver::DynamicProgramming,
+            iterations: b.dp.iterations,
+            states: b.dp.challenge.len(),
+            actions: b.dp.actions,
+            mu_s: 0.0,
+            library_states: 0,
+            library_exposure: 0.0,
+            sm_evaluations: 0,
+        },
+        library: b.dp.clone(),
+    };
+    let bytes = file.to_bytes();
+    // Only the dangerous rows are stored: far below the dense 11 MB.
+    let rows = b.dp.challenge.iter().filter(|&&c| c > 0.0).count();
+    assert!(bytes.len() < 1_200_000, "{} bytes", bytes.len());
+    assert!(bytes.len() > rows * (4 + 8 * 31), "{} bytes", bytes.len());
+    let read = PolicyLibraryFile::from_bytes(&bytes).unwrap();
+    assert_eq!(read, file, "every Q-value read back bit for bit");
+    let cut = PolicyLibraryFile::from_bytes(&bytes[..bytes.len() - 3]).unwrap_err();
+    assert!(
+        cut.to_string().contains("ends inside the Q-values"),
+        "{cut}"
+    );
+    let mut longer = bytes.clone();
+    longer.push(0);
+    assert!(PolicyLibraryFile::from_bytes(&longer)
+        .unwrap_err()
+        .to_string()
+        .contains("1 bytes follow"));
+    // A negative Q-value in the last row.
+    let mut bad = bytes.clone();
+    let at = bad.len() - 8;
+    bad[at..].copy_from_slice(&(-0.5f64).to_le_bytes());
+    assert!(matches!(
+        PolicyLibraryFile::from_bytes(&bad),
+        Err(PolicyFileError::BadRow { .. })
+    ));
+    assert!(PolicyLibraryFile::from_bytes(b"{\"format\":\"tslg-library\"}").is_err());
 }

@@ -5,26 +5,43 @@ use crate::state::AppState;
 use crate::store::libraries::{self, Built};
 use std::time::Instant;
 use tslg_api::{CreateLibrary, SearchRequest, ThresholdRequest};
-use tslg_method::library::{Library, LibraryRequest, SearchMethod, Threshold};
-use tslg_method::registry::{open_case, ExposureSource};
+use tslg_method::carfollow::PolicySolver;
+use tslg_method::library::{SearchMethod, Threshold};
+use tslg_method::registry::{open_case, BuildRequest, BuiltLibrary, ExposureSource, LibrarySearch};
 
-/// The method's threshold and search from the request, validated.
-pub fn library_request(req: &CreateLibrary) -> Result<LibraryRequest, String> {
+/// The method's threshold and search from the request, validated; what the
+/// request leaves out is the case's default.
+pub fn build_request(req: &CreateLibrary) -> Result<BuildRequest, String> {
     let threshold = match req.threshold {
-        ThresholdRequest::Relative { m } => Threshold::Relative { m },
-        ThresholdRequest::Absolute { gamma } => Threshold::Absolute { gamma },
+        None => None,
+        Some(ThresholdRequest::Relative { m }) => Some(Threshold::Relative { m }),
+        Some(ThresholdRequest::Absolute { gamma }) => Some(Threshold::Absolute { gamma }),
     };
-    threshold.validate().map_err(|e| e.to_string())?;
+    if let Some(t) = threshold {
+        t.validate().map_err(|e| e.to_string())?;
+    }
     let search = match req.search {
-        SearchRequest::Exhaustive => SearchMethod::Exhaustive,
-        SearchRequest::Multistart { starts, seed } => {
+        None => None,
+        Some(SearchRequest::Exhaustive) => Some(LibrarySearch::Cells(SearchMethod::Exhaustive)),
+        Some(SearchRequest::Multistart { starts, seed }) => {
             if !(1..=100_000).contains(&starts) {
                 return Err(format!("search.starts = {starts} must be in 1..=100000"));
             }
-            SearchMethod::Multistart { starts, seed }
+            Some(LibrarySearch::Cells(SearchMethod::Multistart {
+                starts,
+                seed,
+            }))
+        }
+        Some(SearchRequest::DynamicProgramming) => {
+            Some(LibrarySearch::Policy(PolicySolver::DynamicProgramming))
+        }
+        Some(SearchRequest::TemporalDifference { alpha, seed }) => {
+            let solver = PolicySolver::TemporalDifference { alpha, seed };
+            solver.validate()?;
+            Some(LibrarySearch::Policy(solver))
         }
     };
-    Ok(LibraryRequest { threshold, search })
+    Ok(BuildRequest { threshold, search })
 }
 
 /// The exposure source of a request.
@@ -38,11 +55,11 @@ pub fn exposure_source(req: &CreateLibrary) -> ExposureSource {
     }
 }
 
-fn build(req: &CreateLibrary) -> Result<(Library, f64), String> {
+fn build(req: &CreateLibrary) -> Result<(BuiltLibrary, f64), String> {
     let started = Instant::now();
     let case = open_case(&req.case, req.preset.as_deref(), &exposure_source(req))
         .map_err(|e| e.to_string())?;
-    let request = library_request(req)?;
+    let request = build_request(req)?;
     let library = case
         .build_library(&req.surrogate, &request)
         .map_err(|e| e.to_string())?;
@@ -66,26 +83,21 @@ async fn run_build(state: &AppState, id: i64) -> anyhow::Result<()> {
     let outcome = tokio::task::spawn_blocking(move || build(&req)).await?;
     match outcome {
         Ok((library, seconds)) => {
-            let body = library.to_json();
             libraries::mark_ready(
                 &state.db.write,
                 id,
                 &Built {
-                    body: &body,
-                    size: library.size(),
-                    sm_evaluations: library.search.sm_evaluations,
+                    file: &library.file,
+                    media_type: library.media_type,
+                    size: library.size,
+                    sm_evaluations: library.sm_evaluations,
                     mu_s: library.mu_s,
                     w: library.w,
                     seconds,
                 },
             )
             .await?;
-            tracing::info!(
-                library = id,
-                size = library.size(),
-                seconds,
-                "library ready"
-            );
+            tracing::info!(library = id, size = library.size, seconds, "library ready");
         }
         Err(reason) => {
             libraries::mark_failed(&state.db.write, id, &reason).await?;

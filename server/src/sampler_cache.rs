@@ -1,6 +1,6 @@
-//! The coordinator's copy of each campaign's test sampler, built once (off
-//! the async runtime) from the same plan the workers get. It checks the
-//! weights workers report and lists tests for clients that ask for them.
+//! The coordinator's copy of each campaign's tests, built once (off the
+//! async runtime) from the same plan the workers get. It checks the events
+//! workers report and lists tests for clients that ask for them.
 
 use crate::db::Database;
 use crate::error::ApiError;
@@ -9,12 +9,11 @@ use crate::store::libraries;
 use anyhow::Context;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
-use tslg_method::library::Library;
-use tslg_method::registry::{open_case, CampaignSampler};
+use tslg_method::registry::{open_case, CampaignTests};
 
 #[derive(Default)]
 pub struct SamplerCache {
-    samplers: Mutex<HashMap<i64, Arc<CampaignSampler>>>,
+    samplers: Mutex<HashMap<i64, Arc<dyn CampaignTests>>>,
 }
 
 impl SamplerCache {
@@ -22,26 +21,26 @@ impl SamplerCache {
         &self,
         db: &Database,
         row: &CampaignRow,
-    ) -> Result<Arc<CampaignSampler>, ApiError> {
+    ) -> Result<Arc<dyn CampaignTests>, ApiError> {
         if let Some(sampler) = self.lock().get(&row.id) {
             return Ok(Arc::clone(sampler));
         }
-        let body = match row.library_id {
+        let file = match row.library_id {
             Some(id) if row.method == "library" => Some(
-                libraries::body(&db.read, id)
+                libraries::file(&db.read, id)
                     .await?
-                    .with_context(|| format!("library {id} of campaign {} has no body", row.id))?,
+                    .with_context(|| format!("library {id} of campaign {} has no file", row.id))?
+                    .bytes,
             ),
             _ => None,
         };
         let row = row.clone();
         let id = row.id;
-        let sampler = tokio::task::spawn_blocking(move || build(&row, body.as_deref()))
+        let tests = tokio::task::spawn_blocking(move || build(&row, file.as_deref()))
             .await
-            .context("sampler build task failed")??;
-        let sampler = Arc::new(sampler);
-        self.lock().insert(id, Arc::clone(&sampler));
-        Ok(sampler)
+            .context("campaign build task failed")??;
+        self.lock().insert(id, Arc::clone(&tests));
+        Ok(tests)
     }
 
     /// Drops the sampler of a campaign that has stopped.
@@ -49,19 +48,19 @@ impl SamplerCache {
         self.lock().remove(&campaign_id);
     }
 
-    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<i64, Arc<CampaignSampler>>> {
+    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<i64, Arc<dyn CampaignTests>>> {
         self.samplers
             .lock()
             .unwrap_or_else(|poisoned| poisoned.into_inner())
     }
 }
 
-fn build(row: &CampaignRow, library: Option<&str>) -> anyhow::Result<CampaignSampler> {
+fn build(row: &CampaignRow, file: Option<&[u8]>) -> anyhow::Result<Arc<dyn CampaignTests>> {
     let case = open_case(&row.case_name, Some(&row.preset), &row.exposure_source())?;
-    let library = library.map(Library::from_json).transpose()?;
-    Ok(CampaignSampler::new(
-        case,
-        library.as_ref(),
+    let vut: serde_json::Value = serde_json::from_str(&row.vut)?;
+    Ok(case.campaign(
+        file,
+        &vut,
         row.epsilon,
         row.outside().as_str().parse().map_err(anyhow::Error::msg)?,
         row.seed(),

@@ -4,7 +4,7 @@
 use crate::commands::remote::{
     block_on, client, describe, exposure_request, progress_line, vehicle_json,
 };
-use crate::{CampaignStartArgs, LibraryCreateArgs, MethodArg, SearchArg, ServerArgs};
+use crate::{CampaignStartArgs, LibraryCreateArgs, MethodArg, OutsideArg, SearchArg, ServerArgs};
 use std::io::Write;
 use std::time::Duration;
 use tslg_api::{
@@ -23,7 +23,7 @@ pub fn start(args: &CampaignStartArgs) -> anyhow::Result<()> {
         library_id: args.library_id,
         vut: vehicle_json(&args.vut)?,
         epsilon: args.exploration.epsilon,
-        outside: args.exploration.outside.wire(),
+        outside: args.exploration.outside.map(OutsideArg::wire),
         beta: args.rule.beta,
         confidence: args.rule.confidence,
         max_tests: args.rule.max_tests,
@@ -92,16 +92,19 @@ pub fn create_library(args: &LibraryCreateArgs) -> anyhow::Result<()> {
         preset: args.case.preset.clone(),
         surrogate: vehicle_json(args.case.vehicle_or_default(&args.surrogate))?,
         exposure,
-        search: match args.search {
+        search: args.search.map(|search| match search {
             SearchArg::Exhaustive => SearchRequest::Exhaustive,
             SearchArg::Multistart => SearchRequest::Multistart {
                 starts: args.starts.unwrap_or(args.case.default_starts()),
                 seed: args.seed,
             },
-        },
-        threshold: ThresholdRequest::Relative {
-            m: args.threshold_m,
-        },
+            SearchArg::DynamicProgramming => SearchRequest::DynamicProgramming,
+            SearchArg::TemporalDifference => SearchRequest::TemporalDifference {
+                alpha: args.alpha,
+                seed: args.seed,
+            },
+        }),
+        threshold: args.threshold_m.map(|m| ThresholdRequest::Relative { m }),
     };
     block_on(async {
         let mut view = client.create_library(&request).await?;

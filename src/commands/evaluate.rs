@@ -1,7 +1,7 @@
 //! `tslg evaluate`: one campaign in this process.
 
 use crate::inputs::{check_epsilon, load_case, parse_vehicle, read_library, stopping_rule};
-use crate::{EvaluateArgs, MethodArg};
+use crate::{EvaluateArgs, MethodArg, OutsideArg};
 use anyhow::Context;
 use serde::Serialize;
 use tslg_method::campaign::{run_campaign, CampaignResult};
@@ -33,7 +33,10 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
                 .context("--library is required with --method library")?;
             let library = read_library(path)?;
             library.check_matches(&case)?;
-            let outside = args.exploration.outside.spread();
+            let outside = args
+                .exploration
+                .outside
+                .map_or(Default::default(), OutsideArg::spread);
             TestDistribution::library(
                 LibraryDistribution::new(
                     &library,

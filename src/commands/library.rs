@@ -18,6 +18,10 @@ pub fn build(args: &BuildArgs) -> anyhow::Result<()> {
     };
     threshold.validate().context("invalid threshold")?;
     let search = match args.search {
+        SearchArg::DynamicProgramming | SearchArg::TemporalDifference => bail!(
+            "dynamic-programming and temporal-difference learn car-following libraries, \
+             which the service builds: tslg library create --case car-following"
+        ),
         SearchArg::Exhaustive => SearchMethod::Exhaustive,
         SearchArg::Multistart => {
             if args.starts == 0 {

@@ -12,10 +12,10 @@ use tslg_api::{
     CampaignView, CreateCampaign, CreateLibrary, Lease, LeaseRequest, LibraryStatus, LibraryView,
     Method,
 };
-use tslg_method::campaign::{run_campaign_with, CampaignResult};
+use tslg_method::campaign::{run_indexed_campaign, CampaignResult};
 use tslg_method::estimator::StoppingRule;
-use tslg_method::library::{LibraryRequest, SearchMethod, Threshold};
-use tslg_method::registry::{open_case, CampaignSampler, ExposureSource};
+use tslg_method::library::SearchMethod;
+use tslg_method::registry::{open_case, BuildRequest, ExposureSource, LibrarySearch};
 use tslg_worker::client::Client;
 
 /// A `tslg-server` process; killed when dropped.
@@ -147,12 +147,8 @@ pub async fn ready_library(client: &Client, surrogate: &str, exhaustive: bool) -
         preset: None,
         surrogate: serde_json::json!({ "model": surrogate }),
         exposure: Default::default(),
-        search: if exhaustive {
-            tslg_api::SearchRequest::Exhaustive
-        } else {
-            Default::default()
-        },
-        threshold: Default::default(),
+        search: exhaustive.then_some(tslg_api::SearchRequest::Exhaustive),
+        threshold: None,
     };
     build_library(client, &request).await
 }
@@ -239,28 +235,37 @@ pub async fn claim(client: &Client, worker: &str) -> Option<Lease> {
 }
 
 /// The same campaign run in this process (built-in exposure, exhaustive
-/// library of `surrogate` when `library`).
+/// cut-in library of `surrogate` when `library`).
 pub fn in_process(surrogate: Option<&str>, request: &CreateCampaign) -> CampaignResult {
     let case = open_case("cut-in", None, &ExposureSource::Builtin).unwrap();
     let library = surrogate.map(|s| {
         case.build_library(
             &serde_json::json!({ "model": s }),
-            &LibraryRequest {
-                threshold: Threshold::default(),
-                search: SearchMethod::Exhaustive,
+            &BuildRequest {
+                threshold: None,
+                search: Some(LibrarySearch::Cells(SearchMethod::Exhaustive)),
             },
         )
         .unwrap()
     });
-    let test = case.event_test(&request.vut).unwrap();
-    let sampler = CampaignSampler::new(
-        case,
-        library.as_ref(),
-        request.epsilon,
-        request.outside.as_str().parse().unwrap(),
-        request.seed,
-    )
-    .unwrap();
+    in_process_with_file(library.map(|l| l.file).as_deref(), None, request)
+}
+
+/// The campaign `request` run in this process on the library `file` (the
+/// NDD when `None`) of the case's `preset`.
+pub fn in_process_with_file(
+    file: Option<&[u8]>,
+    preset: Option<&str>,
+    request: &CreateCampaign,
+) -> CampaignResult {
+    let case = open_case(&request.case, preset, &ExposureSource::Builtin).unwrap();
+    let outside = match request.outside {
+        Some(o) => o.as_str().parse().unwrap(),
+        None => case.default_outside(),
+    };
+    let tests = case
+        .campaign(file, &request.vut, request.epsilon, outside, request.seed)
+        .unwrap();
     let rule = StoppingRule {
         beta: request.beta,
         confidence: request.confidence,
@@ -268,11 +273,12 @@ pub fn in_process(surrogate: Option<&str>, request: &CreateCampaign) -> Campaign
         min_events: request.min_events.unwrap_or(10),
         max_tests: request.max_tests,
     };
-    run_campaign_with(
-        &|cell| test(cell),
-        &sampler.distribution,
+    run_indexed_campaign(
+        &|index| {
+            let outcome = tests.run(index);
+            outcome.event.then_some(outcome.weight)
+        },
         &rule,
-        request.seed,
     )
 }
 

@@ -144,15 +144,18 @@ impl Client {
         .await
     }
 
-    pub async fn library_file(&self, library: i64) -> Result<String, CallError> {
-        self.send(self.request(
-            reqwest::Method::GET,
-            &format!("/api/v1/libraries/{library}/file"),
-        ))
-        .await?
-        .text()
-        .await
-        .map_err(|e| CallError::Transient(e.to_string()))
+    /// The library file's bytes, in its case's format.
+    pub async fn library_file(&self, library: i64) -> Result<Vec<u8>, CallError> {
+        let bytes = self
+            .send(self.request(
+                reqwest::Method::GET,
+                &format!("/api/v1/libraries/{library}/file"),
+            ))
+            .await?
+            .bytes()
+            .await
+            .map_err(|e| CallError::Transient(e.to_string()))?;
+        Ok(bytes.to_vec())
     }
 
     pub async fn health(&self) -> Result<tslg_api::Health, CallError> {

@@ -1,23 +1,22 @@
-//! A campaign made ready to run: its plan, the library downloaded once per
-//! library and the sampler and vehicle built from them, cached per campaign.
+//! A campaign made ready to run: its plan, the library file downloaded once
+//! per library (JSON for grid cases, the binary Q-table for car-following)
+//! and the campaign's tests built from them, cached per campaign.
 
 use crate::client::{CallError, Client};
 use std::collections::HashMap;
 use std::sync::Arc;
 use tslg_api::{CampaignPlan, ExposureRequest, Method};
-use tslg_method::library::Library;
-use tslg_method::registry::{open_case, CampaignSampler, EventTest, ExposureSource};
+use tslg_method::registry::{open_case, CampaignTests, ExposureSource};
 
 /// What the worker needs to run any test of one campaign.
 pub struct PreparedCampaign {
-    pub sampler: CampaignSampler,
-    pub event_test: EventTest,
+    pub tests: Arc<dyn CampaignTests>,
 }
 
 impl PreparedCampaign {
     /// Builds the sampler and vehicle from a plan (CPU work: call off the
     /// async runtime).
-    pub fn new(plan: &CampaignPlan, library: Option<&Library>) -> anyhow::Result<Self> {
+    pub fn new(plan: &CampaignPlan, library: Option<&[u8]>) -> anyhow::Result<Self> {
         let exposure = match &plan.exposure {
             ExposureRequest::Builtin => ExposureSource::Builtin,
             ExposureRequest::Table { name, text } => ExposureSource::Table {
@@ -26,20 +25,16 @@ impl PreparedCampaign {
             },
         };
         let case = open_case(&plan.case, Some(&plan.preset), &exposure)?;
-        let fingerprint = case.exposure().fingerprint();
+        let fingerprint = case.exposure_fingerprint();
         anyhow::ensure!(
             fingerprint == plan.exposure_fingerprint,
             "campaign {}: this worker's exposure has fingerprint {fingerprint}, the coordinator's {}",
             plan.campaign_id,
             plan.exposure_fingerprint
         );
-        let event_test = case.event_test(&plan.vut)?;
         let outside = plan.outside.as_str().parse().map_err(anyhow::Error::msg)?;
-        let sampler = CampaignSampler::new(case, library, plan.epsilon, outside, plan.seed)?;
-        Ok(Self {
-            sampler,
-            event_test,
-        })
+        let tests = case.campaign(library, &plan.vut, plan.epsilon, outside, plan.seed)?;
+        Ok(Self { tests })
     }
 }
 
@@ -47,7 +42,9 @@ impl PreparedCampaign {
 #[derive(Default)]
 pub struct Cache {
     campaigns: HashMap<i64, Arc<PreparedCampaign>>,
-    libraries: HashMap<i64, Arc<Library>>,
+    /// Library files by id: a library is downloaded once, whatever number
+    /// of campaigns use it.
+    libraries: HashMap<i64, Arc<Vec<u8>>>,
 }
 
 /// Why a campaign could not be prepared.
@@ -78,11 +75,12 @@ impl Cache {
             }
             (Method::Ndd, _) => None,
         };
-        let prepared =
-            tokio::task::spawn_blocking(move || PreparedCampaign::new(&plan, library.as_deref()))
-                .await
-                .map_err(|e| PrepareError::Unusable(e.to_string()))?
-                .map_err(|e| PrepareError::Unusable(format!("{e:#}")))?;
+        let prepared = tokio::task::spawn_blocking(move || {
+            PreparedCampaign::new(&plan, library.as_deref().map(Vec::as_slice))
+        })
+        .await
+        .map_err(|e| PrepareError::Unusable(e.to_string()))?
+        .map_err(|e| PrepareError::Unusable(format!("{e:#}")))?;
         let prepared = Arc::new(prepared);
         // Keep the cache small: campaigns come and go, libraries stay.
         if self.campaigns.len() >= 64 {
@@ -92,17 +90,12 @@ impl Cache {
         Ok(prepared)
     }
 
-    async fn library(&mut self, client: &Client, id: i64) -> Result<Arc<Library>, PrepareError> {
+    async fn library(&mut self, client: &Client, id: i64) -> Result<Arc<Vec<u8>>, PrepareError> {
         if let Some(l) = self.libraries.get(&id) {
             return Ok(Arc::clone(l));
         }
-        let text = client.library_file(id).await?;
-        let library = tokio::task::spawn_blocking(move || Library::from_json(&text))
-            .await
-            .map_err(|e| PrepareError::Unusable(e.to_string()))?
-            .map_err(|e| PrepareError::Unusable(format!("library {id}: {e}")))?;
-        let library = Arc::new(library);
-        self.libraries.insert(id, Arc::clone(&library));
-        Ok(library)
+        let file = Arc::new(client.library_file(id).await?);
+        self.libraries.insert(id, Arc::clone(&file));
+        Ok(file)
     }
 }

@@ -17,6 +17,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tokio::sync::watch;
 use tslg_api::{EventResult, InvalidResult, Lease, LeaseFence, LeaseRequest, ResultReport};
+use tslg_method::registry::TestOutcome;
 
 /// Times a test whose simulation panics is tried before it is reported
 /// `invalid`.
@@ -260,13 +261,10 @@ pub fn run_range(
 ) -> (Vec<EventResult>, Vec<InvalidResult>) {
     let mut found: Vec<(u64, Result<f64, String>)> = (from..to)
         .into_par_iter()
-        .filter_map(|index| {
-            let draw = p.sampler.draw(index);
-            match run_one(p, draw.cell) {
-                Ok(true) => Some((index, Ok(draw.weight))),
-                Ok(false) => None,
-                Err(reason) => Some((index, Err(reason))),
-            }
+        .filter_map(|index| match run_one(p, index) {
+            Ok(outcome) if outcome.event => Some((index, Ok(outcome.weight))),
+            Ok(_) => None,
+            Err(reason) => Some((index, Err(reason))),
         })
         .collect();
     found.sort_by_key(|(i, _)| *i);
@@ -281,11 +279,11 @@ pub fn run_range(
     (events, invalid)
 }
 
-fn run_one(p: &PreparedCampaign, cell: usize) -> Result<bool, String> {
+fn run_one(p: &PreparedCampaign, index: u64) -> Result<TestOutcome, String> {
     let mut last = String::new();
     for _ in 0..INVALID_TRIES {
-        match catch_unwind(AssertUnwindSafe(|| (p.event_test)(cell))) {
-            Ok(event) => return Ok(event),
+        match catch_unwind(AssertUnwindSafe(|| p.tests.run(index))) {
+            Ok(outcome) => return Ok(outcome),
             Err(panic) => {
                 last = panic
                     .downcast_ref::<&str>()

@@ -4,13 +4,17 @@
 //! `Q(s, u)` over 45,885 states and 31 actions, learned for a surrogate
 //! model, and tests sample the BV's actions from it while they run.
 
+pub mod case;
 mod exposure_model;
+pub mod file;
 pub mod library;
 pub mod sampling;
 pub mod states;
 pub mod world;
 
+pub use case::{CarFollowing, FollowPreset, PolicySolver};
 pub use exposure_model::FollowExposureModel;
+pub use file::PolicyLibraryFile;
 pub use library::{dynamic_programming, temporal_difference, PolicyLibrary, Transitions, Zone};
 pub use sampling::{FollowSampler, FollowTest};
 pub use states::StateGrid;
@@ -18,18 +22,11 @@ pub use world::{FollowState, FollowWorld};
 
 use crate::vehicle::VehicleModel;
 
-/// The built-in vehicles of this case: the cut-in models' parameters are
-/// tuned for 20 m/s (the IDM's desired speed is 18 m/s, the FVDM's top speed
-/// 14.7 m/s), so on a highway at 20–40 m/s they would brake for speed alone.
-/// Here the IDM (the surrogate) desires 36 m/s and measures the bumper gap
-/// (`length` 0, as `R` here); the ACC+AEB is set to 36 m/s.
+/// A built-in model by name with this case's defaults
+/// ([`CarFollowing::vehicle`]): the highway IDM (the surrogate) and the
+/// ACC+AEB with a 0.3 s actuator lag.
 pub fn highway_vehicle(name: &str) -> Option<VehicleModel> {
-    let spec = match name {
-        "idm" => serde_json::json!({"model": "idm", "v0": 36.0, "length": 0.0}),
-        "acc-aeb" => serde_json::json!({"model": "acc-aeb", "set_speed": 36.0}),
-        _ => return None,
-    };
-    Some(serde_json::from_value(spec).expect("valid built-in parameters"))
+    CarFollowing::vehicle(&serde_json::json!({ "model": name })).ok()
 }
 
 /// Names [`highway_vehicle`] knows.

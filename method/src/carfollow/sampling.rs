@@ -3,10 +3,13 @@
 //! (SPEC §6).
 //!
 //! - **NDD**: `s₁ ~ P(s)`, `u_k ~ P(u|v_k)`; weight 1.
-//! - **Library**: `s₁ ~ q(s) = (1 − ε) P(S|s) P(s) / μ_S + ε P(s)` and, in
+//! - **Library**: `s₁ ~ q(s) = (1 − ε) P(S|s) P(s) / μ_S + ε e(s)` and, in
 //!   each decision at grid state `s_k` (the nearest to the continuous
-//!   state), `u_k ~ q(u|s_k) = (1 − ε) Q(s_k, u)/P(S|s_k) + ε P(u|v_k)`
-//!   where `P(S|s_k) > 0`, else the NDD. The weight is
+//!   state), `u_k ~ q(u|s_k) = (1 − ε) Q(s_k, u)/P(S|s_k) + ε e(u|v_k)`
+//!   where `P(S|s_k) > 0`, else the NDD. The exploration laws `e` are the
+//!   NDD's (`e(s) = P(s)`, `e(u|v) = P(u|v)`: every per-step ratio is at
+//!   most `1/ε`) or uniform (`1/N(X)` over the states, `1/31` over the
+//!   actions: the paper's ε-greedy form). The weight is
 //!   `P(s₁)/q(s₁) · Π_k P(u_k|v_k)/q(u_k|s_k)`, kept as its logarithm.
 //!
 //! The NDD action law is read at the BV speed of the nearest grid state
@@ -18,7 +21,7 @@ use super::exposure_model::FollowExposureModel;
 use super::library::PolicyLibrary;
 use super::states::StateGrid;
 use super::world::{advance, FollowWorld};
-use crate::sampling::test_rng;
+use crate::sampling::{test_rng, OutsideSpread, SamplingError};
 use crate::vehicle::VehicleModel;
 use rand::Rng;
 use rand_distr::weighted::WeightedAliasIndex;
@@ -65,7 +68,15 @@ pub struct FollowSampler {
     initial: Vec<f64>,
     initial_q: Vec<f64>,
     initial_alias: Arc<WeightedAliasIndex<f64>>,
-    library: Option<(Arc<PolicyLibrary>, f64)>,
+    library: Option<LibraryMix>,
+}
+
+/// The library's share and how ε explores.
+#[derive(Debug, Clone)]
+struct LibraryMix {
+    library: Arc<PolicyLibrary>,
+    epsilon: f64,
+    outside: OutsideSpread,
 }
 
 impl FollowSampler {
@@ -75,32 +86,52 @@ impl FollowSampler {
         Self::build(world, grid, exposure, initial.clone(), initial, None)
     }
 
-    /// Library sampling with exploration share `epsilon`.
+    /// Library sampling with exploration share `epsilon` spread by
+    /// `outside`.
     pub fn library(
         world: FollowWorld,
         grid: StateGrid,
         exposure: &FollowExposureModel,
         library: Arc<PolicyLibrary>,
         epsilon: f64,
-    ) -> Self {
+        outside: OutsideSpread,
+    ) -> Result<Self, SamplingError> {
+        if !(0.0..1.0).contains(&epsilon) {
+            return Err(SamplingError::Epsilon(epsilon));
+        }
+        if library.challenge.len() != grid.len() {
+            return Err(SamplingError::GridMismatch {
+                library: library.challenge.len(),
+                exposure: grid.len(),
+            });
+        }
         let initial = exposure.initial_states(&world, &grid);
         let mu: f64 = initial
             .iter()
             .zip(&library.challenge)
             .map(|(p, c)| p * c)
             .sum();
+        if mu <= 0.0 {
+            return Err(SamplingError::EmptyLibrary);
+        }
+        let states = grid.len() as f64;
         let q = initial
             .iter()
             .zip(&library.challenge)
             .map(|(p, c)| {
-                if mu > 0.0 {
-                    (1.0 - epsilon) * p * c / mu + epsilon * p
-                } else {
-                    *p
-                }
+                let explore = match outside {
+                    OutsideSpread::Ndd => *p,
+                    OutsideSpread::Uniform => 1.0 / states,
+                };
+                (1.0 - epsilon) * p * c / mu + epsilon * explore
             })
             .collect();
-        Self::build(world, grid, exposure, initial, q, Some((library, epsilon)))
+        let mix = LibraryMix {
+            library,
+            epsilon,
+            outside,
+        };
+        Ok(Self::build(world, grid, exposure, initial, q, Some(mix)))
     }
 
     fn build(
@@ -109,7 +140,7 @@ impl FollowSampler {
         exposure: &FollowExposureModel,
         initial: Vec<f64>,
         initial_q: Vec<f64>,
-        library: Option<(Arc<PolicyLibrary>, f64)>,
+        library: Option<LibraryMix>,
     ) -> Self {
         let ndd_actions = exposure.actions_by_speed(&world, &grid);
         let initial_alias = Arc::new(
@@ -139,13 +170,18 @@ impl FollowSampler {
             let iv = self.grid.speed_index(x.bv_speed);
             let ndd = &self.ndd_actions[iv * actions..(iv + 1) * actions];
             let r: f64 = rng.random();
-            let guided = self.library.as_ref().and_then(|(library, epsilon)| {
+            let guided = self.library.as_ref().and_then(|mix| {
                 let s = self.grid.nearest(&x)?;
-                let total = library.challenge[s];
+                let total = mix.library.challenge[s];
                 (total > 0.0).then(|| {
-                    let row = &library.q[s * actions..(s + 1) * actions];
+                    let row = &mix.library.q[s * actions..(s + 1) * actions];
+                    let uniform = 1.0 / actions as f64;
                     for ((m, q), p) in mixed.iter_mut().zip(row).zip(ndd) {
-                        *m = (1.0 - epsilon) * q / total + epsilon * p;
+                        let explore = match mix.outside {
+                            OutsideSpread::Ndd => *p,
+                            OutsideSpread::Uniform => uniform,
+                        };
+                        *m = (1.0 - mix.epsilon) * q / total + mix.epsilon * explore;
                     }
                 })
             });

@@ -90,7 +90,7 @@ pub fn advance(
             lead_speed: bv,
             gap: range,
         };
-        let a_own = vut.acceleration(&obs, world.vut_accel).clamp(
+        let a_own = vut.acceleration(&obs, world.vut_accel, dt).clamp(
             (world.vut_speed.0 - own) / dt,
             (world.vut_speed.1 - own) / dt,
         );

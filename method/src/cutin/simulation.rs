@@ -161,10 +161,12 @@ impl CutInSettings {
                 lead_speed,
                 gap,
             };
-            let a = controller.acceleration(&obs, self.acceleration).clamp(
-                (self.speed.0 - speed) / self.dt,
-                (self.speed.1 - speed) / self.dt,
-            );
+            let a = controller
+                .acceleration(&obs, self.acceleration, self.dt)
+                .clamp(
+                    (self.speed.0 - speed) / self.dt,
+                    (self.speed.1 - speed) / self.dt,
+                );
             mnp_ettc = mnp_ettc.min(normalised_ettc(gap, lead_speed - speed, -a, u_i));
             gap += (lead_speed - speed) * self.dt - a * self.dt * self.dt / 2.0;
             speed += a * self.dt;

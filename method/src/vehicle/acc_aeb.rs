@@ -12,6 +12,11 @@
 //!   or when `R < s_aeb`, apply `a_aeb` instead (the simulation clips it to its
 //!   own braking bound).
 //!
+//! - **actuator**: the brake and drive deliver the commanded acceleration
+//!   through a first-order lag of time constant `τ` (`actuator_lag`; 0, the
+//!   default, is an ideal actuator). Longitudinal ACC models commonly use
+//!   τ ≈ 0.3–0.6 s (Rajamani, ch. 5).
+//!
 //! The gains keep the discrete loop stable at the 1 s step of the `paper-code`
 //! preset (`k_r dt < 2`, `k_s dt² < 1`).
 
@@ -43,6 +48,8 @@ pub struct AccAebParams {
     pub aeb_gap: f64,
     /// AEB deceleration a_aeb (m/s², negative).
     pub aeb_deceleration: f64,
+    /// Actuator lag τ (s): 0 delivers every command at once.
+    pub actuator_lag: f64,
 }
 
 impl Default for AccAebParams {
@@ -59,6 +66,7 @@ impl Default for AccAebParams {
             aeb_ttc: 3.0,
             aeb_gap: 2.0,
             aeb_deceleration: -8.0,
+            actuator_lag: 0.0,
         }
     }
 }
@@ -109,6 +117,13 @@ impl AccAebParams {
             self.aeb_deceleration,
             negative,
             "must be < 0",
+        )?;
+        check(
+            M,
+            "actuator_lag",
+            self.actuator_lag,
+            non_negative,
+            "must be ≥ 0",
         )
     }
 

@@ -135,6 +135,7 @@ impl VehicleModel {
         Controller {
             spec: self.0,
             acc_state: SwitchingAccState::default(),
+            delivered: None,
         }
     }
 }
@@ -144,18 +145,33 @@ impl VehicleModel {
 pub struct Controller {
     spec: VehicleSpec,
     acc_state: SwitchingAccState,
+    /// The acceleration the actuator delivered at the last step (for a
+    /// model with an actuator lag).
+    delivered: Option<f64>,
 }
 
 impl Controller {
-    /// The commanded acceleration, clipped to `clip = (a_min, a_max)`.
-    pub fn acceleration(&mut self, obs: &FollowerObservation, clip: (f64, f64)) -> f64 {
-        let raw = match &self.spec {
-            VehicleSpec::Idm(p) => p.acceleration(obs),
-            VehicleSpec::Fvdm(p) => p.acceleration(obs),
+    /// The acceleration over the next step of `dt` seconds, clipped to
+    /// `clip = (a_min, a_max)`. A model with an actuator lag τ delivers a
+    /// first-order response to its command `c`:
+    /// `a ← a + (c − a)(1 − e^{−Δt/τ})`, starting from the first command.
+    pub fn acceleration(&mut self, obs: &FollowerObservation, clip: (f64, f64), dt: f64) -> f64 {
+        let (command, lag) = match &self.spec {
+            VehicleSpec::Idm(p) => (p.acceleration(obs), 0.0),
+            VehicleSpec::Fvdm(p) => (p.acceleration(obs), 0.0),
             VehicleSpec::SwitchingAcc(p) => return self.acc_state.acceleration(p, obs, clip),
-            VehicleSpec::AccAeb(p) => p.acceleration(obs),
+            VehicleSpec::AccAeb(p) => (p.acceleration(obs), p.actuator_lag),
         };
-        raw.clamp(clip.0, clip.1)
+        let command = command.clamp(clip.0, clip.1);
+        if lag <= 0.0 {
+            return command;
+        }
+        let delivered = match self.delivered {
+            None => command,
+            Some(a) => a + (command - a) * (1.0 - (-dt / lag).exp()),
+        };
+        self.delivered = Some(delivered);
+        delivered
     }
 }
 
@@ -184,13 +200,13 @@ mod tests {
         assert!((a - expected).abs() < 1e-12);
         assert!((a + 6.3696).abs() < 1e-3);
         let mut c = VehicleModel::builtin("idm").unwrap().controller();
-        assert_eq!(c.acceleration(&obs(20.0, 15.0, 30.0), CLIP), -3.0);
+        assert_eq!(c.acceleration(&obs(20.0, 15.0, 30.0), CLIP, 0.1), -3.0);
     }
 
     #[test]
     fn idm_at_r_equal_l_brakes_fully() {
         let mut c = VehicleModel::builtin("idm").unwrap().controller();
-        assert_eq!(c.acceleration(&obs(0.0, 0.0, 4.0), CLIP), -3.0);
+        assert_eq!(c.acceleration(&obs(0.0, 0.0, 4.0), CLIP, 0.1), -3.0);
     }
 
     #[test]
@@ -207,10 +223,10 @@ mod tests {
         let model = VehicleModel::builtin("switching-acc").unwrap();
         let mut c = model.controller();
         // Closing at 10 m/s from 20 m: TTC ≈ 2 s < 5 s → brake.
-        assert_eq!(c.acceleration(&obs(20.0, 10.0, 20.0), CLIP), -3.0);
+        assert_eq!(c.acceleration(&obs(20.0, 10.0, 20.0), CLIP, 0.1), -3.0);
         let mut c = model.controller();
         // TTC = 100/(5.01) = 19.96 s: e = 14.96, first step a = Ki·e·Ts = −2.02.
-        let a = c.acceleration(&obs(20.0, 15.0, 100.0), CLIP);
+        let a = c.acceleration(&obs(20.0, 15.0, 100.0), CLIP, 0.1);
         let e = 100.0 / 5.01 - 5.0;
         assert!((a - (-1.35 * e * 0.1)).abs() < 1e-12);
     }
@@ -222,6 +238,31 @@ mod tests {
         // Far behind a leader at set speed: cruise toward the set speed.
         let a = p.acceleration(&obs(25.0, 30.0, 200.0));
         assert!((a - 1.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn an_actuator_lag_delivers_a_first_order_response_to_the_command() {
+        let model: VehicleModel =
+            serde_json::from_str(r#"{"model":"acc-aeb","actuator_lag":0.5}"#).unwrap();
+        let mut c = model.controller();
+        // Cruising below the set speed far behind: the first command (1.5)
+        // is delivered at once.
+        assert!((c.acceleration(&obs(25.0, 30.0, 200.0), (-4.0, 2.0), 0.1) - 1.5).abs() < 1e-12);
+        // Then the AEB commands −8, clipped to −4: after one 0.1 s step the
+        // delivered value moved (1 − e^{−0.2}) of the way.
+        let a = c.acceleration(&obs(20.0, 10.0, 15.0), (-4.0, 2.0), 0.1);
+        let expected = 1.5 + (-4.0 - 1.5) * (1.0 - (-0.2f64).exp());
+        assert!((a - expected).abs() < 1e-12, "{a} vs {expected}");
+        // Without a lag the command is delivered as is.
+        let mut ideal = VehicleModel::builtin("acc-aeb").unwrap().controller();
+        ideal.acceleration(&obs(25.0, 30.0, 200.0), (-4.0, 2.0), 0.1);
+        assert_eq!(
+            ideal.acceleration(&obs(20.0, 10.0, 15.0), (-4.0, 2.0), 0.1),
+            -4.0
+        );
+        let err = serde_json::from_str::<VehicleModel>(r#"{"model":"acc-aeb","actuator_lag":-1}"#)
+            .unwrap_err();
+        assert!(err.to_string().contains("actuator_lag"), "{err}");
     }
 
     #[test]

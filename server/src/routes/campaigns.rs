@@ -11,10 +11,11 @@ use axum::response::IntoResponse;
 use axum::Json;
 use tslg_api::{
     CampaignList, CampaignPlan, CampaignStatus, CampaignView, CreateCampaign, History,
-    LibraryStatus, Method, Problem,
+    LibraryStatus, Method, Outside, Problem,
 };
 use tslg_method::estimator::{StoppingRule, DEFAULT_MIN_EVENTS, DEFAULT_N_MIN};
 use tslg_method::registry::{open_case, ExposureSource};
+use tslg_method::sampling::OutsideSpread;
 
 /// Largest accepted test budget.
 const MAX_TESTS_LIMIT: u64 = 1 << 50;
@@ -102,6 +103,10 @@ pub async fn create(
     .await
     .map_err(|e| ApiError::Internal(e.into()))?
     .map_err(|e| bad(e.to_string()))?;
+    let outside = req.outside.unwrap_or(match case.default_outside() {
+        OutsideSpread::Uniform => Outside::Uniform,
+        OutsideSpread::Ndd => Outside::Ndd,
+    });
     let status = match &library {
         Some(lib) if req.method == Method::Library && lib.status() == LibraryStatus::Building => {
             CampaignStatus::Pending
@@ -116,14 +121,14 @@ pub async fn create(
             method: req.method,
             library_id: req.library_id,
             exposure_name: case.exposure_name().to_owned(),
-            exposure_fingerprint: case.exposure().fingerprint(),
+            exposure_fingerprint: case.exposure_fingerprint(),
             exposure_table: match exposure {
                 ExposureSource::Table { text, .. } => Some(text),
                 ExposureSource::Builtin => None,
             },
             vut: vut.to_string(),
             epsilon: req.epsilon,
-            outside: req.outside,
+            outside,
             rule,
             seed: req.seed,
             status,

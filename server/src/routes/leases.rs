@@ -49,23 +49,29 @@ pub async fn claim(
     };
     let tests = if req.include_tests {
         let campaign = campaigns::get(&state.db.read, row.campaign_id).await?;
-        let sampler = state.samplers.get(&state.db, &campaign).await?;
+        let tests = state.samplers.get(&state.db, &campaign).await?;
         let (from, to) = (row.resume_at as u64, row.end_index as u64);
         let list = tokio::task::spawn_blocking(move || {
             (from..to)
                 .map(|index| {
-                    let draw = sampler.draw(index);
-                    TestCase {
+                    let planned = tests.planned(index)?;
+                    Some(TestCase {
                         index,
-                        cell: draw.cell as u64,
-                        scenario: sampler.case.scenario(draw.cell),
-                        weight: draw.weight,
-                    }
+                        cell: planned.cell as u64,
+                        scenario: planned.scenario,
+                        weight: planned.weight,
+                    })
                 })
-                .collect::<Vec<_>>()
+                .collect::<Option<Vec<_>>>()
         })
         .await
-        .map_err(|e| ApiError::Internal(e.into()))?;
+        .map_err(|e| ApiError::Internal(e.into()))?
+        .ok_or_else(|| {
+            ApiError::Internal(anyhow::anyhow!(
+                "campaign {} has no planned tests but was leased with include_tests",
+                campaign.id
+            ))
+        })?;
         Some(list)
     } else {
         None
@@ -137,9 +143,10 @@ pub async fn results(
     Ok(Json(ack))
 }
 
-/// Checks each reported event's weight against the coordinator's own draw
-/// of that test: a mismatch means the worker samples differently (another
-/// version, another library) and its results must not enter the estimate.
+/// Checks each reported event against the coordinator's own copy of that
+/// test (its draw, or for sequential scenarios a replay): a mismatch means
+/// the worker samples differently (another version, another library) and its
+/// results must not enter the estimate.
 async fn verify_weights(
     state: &AppState,
     lease_id: i64,
@@ -150,16 +157,18 @@ async fn verify_weights(
     if campaign.status().is_final() {
         return Ok(());
     }
-    let sampler = state.samplers.get(&state.db, &campaign).await?;
-    for event in &report.events {
-        let expected = sampler.draw(event.index).weight;
-        if expected.to_bits() != event.weight.to_bits() {
-            return Err(ApiError::Unprocessable(format!(
-                "event at test {} reports weight {:e}, but the campaign's sampler gives {:e}: \
-                 the worker draws different scenarios (another version of tslg?)",
-                event.index, event.weight, expected
-            )));
-        }
-    }
-    Ok(())
+    let tests = state.samplers.get(&state.db, &campaign).await?;
+    let events = report.events.clone();
+    let checked = tokio::task::spawn_blocking(move || {
+        events
+            .iter()
+            .try_for_each(|e| tests.check_event(e.index, e.weight))
+    })
+    .await
+    .map_err(|e| ApiError::Internal(e.into()))?;
+    checked.map_err(|reason| {
+        ApiError::Unprocessable(format!(
+            "{reason}: the worker draws different scenarios (another version of tslg?)"
+        ))
+    })
 }

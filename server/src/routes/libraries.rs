@@ -1,6 +1,6 @@
 //! `/api/v1/libraries`: build requests, state and files.
 
-use crate::builder::{exposure_source, library_request, spawn_build};
+use crate::builder::{build_request, exposure_source, spawn_build};
 use crate::error::{ApiError, ApiJson};
 use crate::routes::ApiPath;
 use crate::state::AppState;
@@ -20,7 +20,7 @@ pub async fn create(
     State(state): State<AppState>,
     ApiJson(req): ApiJson<CreateLibrary>,
 ) -> Result<impl IntoResponse, ApiError> {
-    library_request(&req).map_err(ApiError::Unprocessable)?;
+    let request = build_request(&req).map_err(ApiError::Unprocessable)?;
     if let ExposureRequest::Table { name, .. } = &req.exposure {
         if name.trim().is_empty() {
             return Err(ApiError::Unprocessable(
@@ -35,6 +35,7 @@ pub async fn create(
             checked.preset.as_deref(),
             &exposure_source(&checked),
         )?;
+        case.check_request(&request)?;
         let surrogate = case.normalise_vehicle(&checked.surrogate)?;
         Ok::<_, tslg_method::registry::CaseError>((case, surrogate))
     })
@@ -55,9 +56,9 @@ pub async fn create(
             request: &request,
             surrogate: &surrogate,
             exposure_name: case.exposure_name(),
-            exposure_fingerprint: &case.exposure().fingerprint(),
+            exposure_fingerprint: &case.exposure_fingerprint(),
             exposure_table: table,
-            total_scenarios: case.exposure().grid().len(),
+            total_scenarios: case.total_scenarios(),
         },
     )
     .await?;
@@ -87,9 +88,11 @@ pub async fn get_one(
     Ok(Json(libraries::get(&state.db.read, id).await?.view()))
 }
 
-/// The library file (format `tslg-library`, see `docs/library-format.md`).
+/// The library file in its case's format (`docs/library-format.md`): JSON
+/// (`tslg-library`) for the grid cases, the binary Q-table for car-following.
 #[utoipa::path(get, path = "/api/v1/libraries/{id}/file", params(("id" = i64, Path)), responses(
-    (status = 200, description = "The library file", content_type = "application/json"),
+    (status = 200, description = "The library file: application/json for grid cases, \
+     application/vnd.tslg.policy-library for car-following", content_type = "application/octet-stream"),
     (status = 404, body = Problem), (status = 409, body = Problem)))]
 pub async fn file(
     State(state): State<AppState>,
@@ -102,8 +105,8 @@ pub async fn file(
             row.status().as_str()
         )));
     }
-    let body = libraries::body(&state.db.read, id)
+    let file = libraries::file(&state.db.read, id)
         .await?
-        .ok_or_else(|| ApiError::Internal(anyhow::anyhow!("ready library {id} has no body")))?;
-    Ok(([(header::CONTENT_TYPE, "application/json")], body))
+        .ok_or_else(|| ApiError::Internal(anyhow::anyhow!("ready library {id} has no file")))?;
+    Ok(([(header::CONTENT_TYPE, file.media_type)], file.bytes))
 }

@@ -8,6 +8,7 @@ use crate::lease_size::{lease_size, predicted_unleased, SizingInput, MAX_INLINE_
 use crate::store::campaigns::{self, CampaignRow, COLUMNS as CAMPAIGN_COLUMNS};
 use sqlx::SqliteConnection;
 use tslg_api::{CampaignStatus, HeartbeatAck, LeaseFence};
+use tslg_method::registry::SEQUENTIAL_CASES;
 
 #[derive(Debug, Clone, sqlx::FromRow)]
 pub struct LeaseRow {
@@ -51,12 +52,20 @@ pub async fn claim(
     } else {
         i64::MAX
     };
+    // A client that needs each test's scenario in the lease can only take
+    // campaigns whose scenarios are fixed before the test runs.
+    let planned_only = if inline {
+        let sequential: Vec<String> = SEQUENTIAL_CASES.iter().map(|c| format!("'{c}'")).collect();
+        format!("AND c.case_name NOT IN ({})", sequential.join(", "))
+    } else {
+        String::new()
+    };
     let mut tx = db.write.begin().await?;
     let sql = format!(
         "UPDATE leases SET attempt = attempt + 1, worker = ?, expires_at = ? \
          WHERE id = (SELECT l.id FROM leases l JOIN campaigns c ON c.id = l.campaign_id \
                      WHERE l.state = 'active' AND l.expires_at < ? AND c.status = 'running' \
-                       AND l.end_index - l.resume_at <= ? \
+                       AND l.end_index - l.resume_at <= ? {planned_only} \
                      ORDER BY l.campaign_id, l.resume_at LIMIT 1) \
          RETURNING {COLUMNS}"
     );
@@ -78,8 +87,8 @@ pub async fn claim(
         return Ok(Some(lease));
     }
     let sql = format!(
-        "SELECT {CAMPAIGN_COLUMNS} FROM campaigns WHERE status = 'running' AND next_index < max_tests \
-         ORDER BY next_turn_at, id LIMIT 1"
+        "SELECT {CAMPAIGN_COLUMNS} FROM campaigns c WHERE status = 'running' \
+         AND next_index < max_tests {planned_only} ORDER BY next_turn_at, id LIMIT 1"
     );
     let Some(campaign): Option<CampaignRow> = sqlx::query_as(&sql).fetch_optional(&mut *tx).await?
     else {

@@ -109,18 +109,32 @@ pub async fn building(pool: &SqlitePool) -> Result<Vec<LibraryRow>, ApiError> {
     Ok(sqlx::query_as(&sql).fetch_all(pool).await?)
 }
 
-/// The library file, once ready.
-pub async fn body(pool: &SqlitePool, id: i64) -> Result<Option<String>, ApiError> {
-    let row: Option<(Option<String>,)> = sqlx::query_as("SELECT body FROM libraries WHERE id = ?")
-        .bind(id)
-        .fetch_optional(pool)
-        .await?;
-    Ok(row.and_then(|(b,)| b))
+/// A library file and its media type.
+pub struct LibraryFile {
+    pub bytes: Vec<u8>,
+    pub media_type: String,
 }
 
-/// A finished build: the library and its summary.
+/// The library file, once ready.
+pub async fn file(pool: &SqlitePool, id: i64) -> Result<Option<LibraryFile>, ApiError> {
+    let row: Option<(Option<Vec<u8>>, Option<String>)> =
+        sqlx::query_as("SELECT file, media_type FROM libraries WHERE id = ?")
+            .bind(id)
+            .fetch_optional(pool)
+            .await?;
+    Ok(match row {
+        Some((Some(bytes), media_type)) => Some(LibraryFile {
+            bytes,
+            media_type: media_type.unwrap_or_else(|| "application/octet-stream".into()),
+        }),
+        _ => None,
+    })
+}
+
+/// A finished build: the library file and its summary.
 pub struct Built<'a> {
-    pub body: &'a str,
+    pub file: &'a [u8],
+    pub media_type: &'a str,
     pub size: usize,
     pub sm_evaluations: usize,
     pub mu_s: f64,
@@ -132,10 +146,11 @@ pub struct Built<'a> {
 pub async fn mark_ready(pool: &SqlitePool, id: i64, built: &Built<'_>) -> Result<(), ApiError> {
     let mut tx = pool.begin().await?;
     sqlx::query(
-        "UPDATE libraries SET status = 'ready', body = ?, size = ?, sm_evaluations = ?, \
-         mu_s = ?, w = ?, build_seconds = ? WHERE id = ?",
+        "UPDATE libraries SET status = 'ready', file = ?, media_type = ?, size = ?, \
+         sm_evaluations = ?, mu_s = ?, w = ?, build_seconds = ? WHERE id = ?",
     )
-    .bind(built.body)
+    .bind(built.file)
+    .bind(built.media_type)
     .bind(built.size as i64)
     .bind(built.sm_evaluations as i64)
     .bind(built.mu_s)

@@ -1,0 +1,257 @@
+//! The car-following case as a service runs it: a preset (world, grid and
+//! exposure), the case's vehicle defaults, library learning and campaign
+//! samplers.
+
+use super::exposure_model::FollowExposureModel;
+use super::library::{dynamic_programming, temporal_difference, PolicyLibrary, Transitions, Zone};
+use super::sampling::FollowSampler;
+use super::states::StateGrid;
+use super::world::FollowWorld;
+use crate::vehicle::VehicleModel;
+use serde::{Deserialize, Serialize};
+use std::str::FromStr;
+
+/// The world and exposure in force.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum FollowPreset {
+    /// The paper's world and grid with the built-in exposure
+    /// (`docs/models.md`): `P(A)` of the order of 10⁻⁶.
+    #[default]
+    Paper,
+    /// The same world and grid on a road with short headways (median 0.8 s)
+    /// and harsher braking (`λ_brake` 1.5 m/s²): `P(A)` of the order of
+    /// 10⁻³, so NDD baselines finish in seconds (tests and quick demos).
+    Risky,
+}
+
+impl FollowPreset {
+    pub fn name(self) -> &'static str {
+        match self {
+            FollowPreset::Paper => "paper",
+            FollowPreset::Risky => "risky",
+        }
+    }
+
+    pub fn exposure(self) -> FollowExposureModel {
+        match self {
+            FollowPreset::Paper => FollowExposureModel::default(),
+            FollowPreset::Risky => FollowExposureModel {
+                brake_scale: 1.5,
+                headway_median: 0.8,
+                ..FollowExposureModel::default()
+            },
+        }
+    }
+}
+
+impl FromStr for FollowPreset {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "paper" => Ok(FollowPreset::Paper),
+            "risky" => Ok(FollowPreset::Risky),
+            other => Err(format!(
+                "unknown car-following preset `{other}`; presets are paper (the built-in \
+                 exposure), risky (short headways, harsh braking)"
+            )),
+        }
+    }
+}
+
+/// How the Q-values are computed (SPEC §6): both reach the same fixed point.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "method", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum PolicySolver {
+    /// Backward dynamic programming to a largest change below 10⁻¹³.
+    DynamicProgramming,
+    /// The paper's TD(0) with learning rate `alpha`, until every `|δ|` of a
+    /// sweep is below 10⁻¹⁰.
+    TemporalDifference { alpha: f64, seed: u64 },
+}
+
+/// Tolerances of the two solvers: tight enough that DP and TD agree to
+/// about 10⁻¹⁰ (far below any weight's precision) in under a second each.
+pub const DP_TOLERANCE: f64 = 1e-13;
+pub const TD_TOLERANCE: f64 = 1e-10;
+
+impl PolicySolver {
+    pub fn validate(&self) -> Result<(), String> {
+        match *self {
+            PolicySolver::TemporalDifference { alpha, .. }
+                if !(alpha.is_finite() && alpha > 0.0 && alpha <= 1.0) =>
+            {
+                Err(format!(
+                    "TD learning rate alpha = {alpha} must be in (0, 1]"
+                ))
+            }
+            _ => Ok(()),
+        }
+    }
+
+    pub fn solve(&self, transitions: &Transitions) -> PolicyLibrary {
+        match *self {
+            PolicySolver::DynamicProgramming => dynamic_programming(transitions, DP_TOLERANCE),
+            PolicySolver::TemporalDifference { alpha, seed } => {
+                temporal_difference(transitions, alpha, TD_TOLERANCE, seed)
+            }
+        }
+    }
+}
+
+/// A learned library with what its build cost.
+#[derive(Debug, Clone)]
+pub struct LearnedPolicy {
+    pub library: PolicyLibrary,
+    /// `μ_S = Σ_s P(s) P(S|s)`: the surrogate's accident rate on the grid chain.
+    pub mu_s: f64,
+    /// `P(Φ) = Σ_{s : P(S|s) > 0} P(s)`: the exposure of the library's states.
+    pub library_exposure: f64,
+    /// States with `P(S|s) > 0`.
+    pub library_states: usize,
+    /// One-decision surrogate simulations: a 30-decision zone run per
+    /// state plus one per dangerous state and action.
+    pub sm_evaluations: usize,
+}
+
+/// The car-following case with one preset.
+#[derive(Debug, Clone)]
+pub struct CarFollowing {
+    pub preset: FollowPreset,
+    pub world: FollowWorld,
+    pub grid: StateGrid,
+    pub exposure: FollowExposureModel,
+    /// `P(s)` on the grid.
+    pub initial: Vec<f64>,
+}
+
+impl CarFollowing {
+    pub fn new(preset: FollowPreset) -> Self {
+        let world = FollowWorld::paper();
+        let grid = StateGrid::paper();
+        let exposure = preset.exposure();
+        let initial = exposure.initial_states(&world, &grid);
+        Self {
+            preset,
+            world,
+            grid,
+            exposure,
+            initial,
+        }
+    }
+
+    /// A fingerprint of `P(s)` and `P(u|v)` (FNV-1a over their bits): a
+    /// library and a campaign must use the same exposure.
+    pub fn fingerprint(&self) -> String {
+        const OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
+        const PRIME: u64 = 0x0000_0100_0000_01b3;
+        let mut hash = OFFSET;
+        let actions = self.exposure.actions_by_speed(&self.world, &self.grid);
+        for x in self.initial.iter().chain(&actions) {
+            for byte in x.to_bits().to_le_bytes() {
+                hash ^= u64::from(byte);
+                hash = hash.wrapping_mul(PRIME);
+            }
+        }
+        format!("{hash:016x}")
+    }
+
+    /// A vehicle from its specification, with this case's defaults for what
+    /// it leaves out: the cut-in models are tuned for 20 m/s, so here the
+    /// IDM desires 36 m/s and measures the bumper gap (`length` 0), and the
+    /// ACC+AEB is set to 36 m/s with a 0.3 s actuator lag (a production
+    /// brake, and a vehicle distinct from the surrogate).
+    pub fn vehicle(spec: &serde_json::Value) -> Result<VehicleModel, String> {
+        let defaults = match spec.get("model").and_then(|m| m.as_str()) {
+            Some("idm") => serde_json::json!({"v0": 36.0, "length": 0.0}),
+            Some("acc-aeb") => serde_json::json!({"set_speed": 36.0, "actuator_lag": 0.3}),
+            _ => serde_json::json!({}),
+        };
+        let mut merged = defaults;
+        if let (Some(m), Some(given)) = (merged.as_object_mut(), spec.as_object()) {
+            for (k, v) in given {
+                m.insert(k.clone(), v.clone());
+            }
+        } else {
+            return Err("a vehicle is a JSON object such as {\"model\": \"idm\"}".into());
+        }
+        serde_json::from_value(merged).map_err(|e| e.to_string())
+    }
+
+    /// Learns the library of `surrogate` with `solver`.
+    pub fn learn(&self, surrogate: &VehicleModel, solver: PolicySolver) -> LearnedPolicy {
+        let transitions = Transitions::compute(&self.world, self.grid, &self.exposure, surrogate);
+        let library = solver.solve(&transitions);
+        let dangerous = transitions
+            .zones
+            .iter()
+            .filter(|&&z| z == Zone::Dangerous)
+            .count();
+        let (mut mu_s, mut library_exposure, mut library_states) = (0.0, 0.0, 0);
+        for (p, c) in self.initial.iter().zip(&library.challenge) {
+            if *c > 0.0 {
+                mu_s += p * c;
+                library_exposure += p;
+                library_states += 1;
+            }
+        }
+        LearnedPolicy {
+            library,
+            mu_s,
+            library_exposure,
+            library_states,
+            sm_evaluations: self.grid.len() + dangerous * self.world.actions,
+        }
+    }
+
+    /// The NDD baseline's sampler.
+    pub fn ndd_sampler(&self) -> FollowSampler {
+        FollowSampler::ndd(self.world, self.grid, &self.exposure)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    #[test]
+    fn vehicles_take_the_cases_defaults_and_keep_what_is_given() {
+        let idm = CarFollowing::vehicle(&json!({"model": "idm"})).unwrap();
+        let spec = serde_json::to_value(idm).unwrap();
+        assert_eq!(
+            (spec["v0"].clone(), spec["length"].clone()),
+            (json!(36.0), json!(0.0))
+        );
+        let slow = CarFollowing::vehicle(&json!({"model": "idm", "v0": 30})).unwrap();
+        assert_eq!(serde_json::to_value(slow).unwrap()["v0"], json!(30.0));
+        let acc =
+            serde_json::to_value(CarFollowing::vehicle(&json!({"model": "acc-aeb"})).unwrap())
+                .unwrap();
+        assert_eq!(acc["actuator_lag"], json!(0.3));
+        let err = CarFollowing::vehicle(&json!({"model": "idm", "alpha": -1})).unwrap_err();
+        assert!(err.contains("parameter `alpha`"), "{err}");
+        assert!(CarFollowing::vehicle(&json!("idm")).is_err());
+    }
+
+    #[test]
+    fn presets_parse_and_differ_in_exposure() {
+        assert_eq!("risky".parse::<FollowPreset>(), Ok(FollowPreset::Risky));
+        let err = "fast".parse::<FollowPreset>().unwrap_err();
+        assert!(err.contains("presets are paper"), "{err}");
+        let (paper, risky) = (
+            CarFollowing::new(FollowPreset::Paper),
+            CarFollowing::new(FollowPreset::Risky),
+        );
+        assert_ne!(paper.fingerprint(), risky.fingerprint());
+        assert_eq!(
+            paper.fingerprint(),
+            CarFollowing::new(FollowPreset::Paper).fingerprint()
+        );
+        assert!(PolicySolver::TemporalDifference {
+            alpha: 0.0,
+            seed: 0
+        }
+        .validate()
+        .is_err());
+    }
+}

@@ -1,0 +1,241 @@
+//! The adapter for the car-following case: libraries are policies in the
+//! compact binary file format, and a test samples the BV's actions while it
+//! runs, so its weight depends on what the vehicle under test does. The
+//! coordinator checks a reported accident by replaying the test (300 steps,
+//! microseconds).
+
+use super::{
+    BuildRequest, BuiltLibrary, CampaignTests, CaseError, LibrarySearch, PlannedTest, ScenarioCase,
+    TestOutcome,
+};
+use crate::carfollow::case::{CarFollowing, PolicySolver};
+use crate::carfollow::file::{PolicyHeader, PolicyLibraryFile, MEDIA_TYPE, VERSION};
+use crate::carfollow::sampling::FollowSampler;
+use crate::exact::ExactReport;
+use crate::library::{ExposureRef, LibraryFileError};
+use crate::sampling::OutsideSpread;
+use crate::vehicle::VehicleModel;
+use std::sync::Arc;
+
+const NAME: &str = "car-following";
+
+pub(super) struct FollowScenarioCase {
+    case: CarFollowing,
+    fingerprint: String,
+}
+
+impl FollowScenarioCase {
+    pub(super) fn new(case: CarFollowing) -> Self {
+        let fingerprint = case.fingerprint();
+        Self { case, fingerprint }
+    }
+
+    fn vehicle(&self, spec: &serde_json::Value) -> Result<VehicleModel, CaseError> {
+        CarFollowing::vehicle(spec).map_err(|reason| CaseError::Vehicle { case: NAME, reason })
+    }
+
+    fn solver(&self, request: &BuildRequest) -> Result<PolicySolver, CaseError> {
+        let bad = |reason: &str| CaseError::Request {
+            case: NAME,
+            reason: reason.into(),
+        };
+        if request.threshold.is_some() {
+            return Err(bad(
+                "its library holds every state with P(S|s) > 0; it takes no threshold",
+            ));
+        }
+        let solver = match request.search {
+            None => PolicySolver::DynamicProgramming,
+            Some(LibrarySearch::Policy(solver)) => solver,
+            Some(LibrarySearch::Cells(_)) => {
+                return Err(bad(
+                    "its library is a policy learned over states: search.method is \
+                     dynamic-programming or temporal-difference",
+                ))
+            }
+        };
+        solver.validate().map_err(|reason| bad(&reason))?;
+        Ok(solver)
+    }
+
+    /// Reads a library file and checks it was built for this preset and
+    /// exposure.
+    fn library(&self, file: &[u8]) -> Result<PolicyLibraryFile, CaseError> {
+        let read = PolicyLibraryFile::from_bytes(file)?;
+        let h = &read.header;
+        if h.case != NAME {
+            return Err(LibraryFileError::WrongCase {
+                library: h.case.clone(),
+                expected: NAME.into(),
+            }
+            .into());
+        }
+        if h.exposure.fingerprint != self.fingerprint || h.states != self.case.grid.len() {
+            return Err(LibraryFileError::WrongExposure {
+                library: format!("{} ({})", h.exposure.fingerprint, h.preset),
+                campaign: format!("{} ({})", self.fingerprint, self.case.preset.name()),
+            }
+            .into());
+        }
+        Ok(read)
+    }
+}
+
+impl ScenarioCase for FollowScenarioCase {
+    fn name(&self) -> &'static str {
+        NAME
+    }
+
+    fn preset(&self) -> String {
+        self.case.preset.name().to_owned()
+    }
+
+    fn exposure_name(&self) -> &str {
+        "builtin"
+    }
+
+    fn exposure_fingerprint(&self) -> String {
+        self.fingerprint.clone()
+    }
+
+    fn total_scenarios(&self) -> usize {
+        self.case.grid.len()
+    }
+
+    fn default_outside(&self) -> OutsideSpread {
+        OutsideSpread::Ndd
+    }
+
+    fn normalise_vehicle(&self, spec: &serde_json::Value) -> Result<serde_json::Value, CaseError> {
+        let vehicle = self.vehicle(spec)?;
+        Ok(serde_json::to_value(vehicle).expect("vehicle specifications serialise"))
+    }
+
+    fn check_request(&self, request: &BuildRequest) -> Result<(), CaseError> {
+        self.solver(request).map(|_| ())
+    }
+
+    fn build_library(
+        &self,
+        surrogate: &serde_json::Value,
+        request: &BuildRequest,
+    ) -> Result<BuiltLibrary, CaseError> {
+        let solver = self.solver(request)?;
+        let vehicle = self.vehicle(surrogate)?;
+        let learned = self.case.learn(&vehicle, solver);
+        let file = PolicyLibraryFile {
+            header: PolicyHeader {
+                version: VERSION,
+                case: NAME.into(),
+                preset: self.preset(),
+                surrogate: serde_json::to_value(vehicle).expect("specifications serialise"),
+                exposure: ExposureRef {
+                    name: "builtin".into(),
+                    fingerprint: self.fingerprint.clone(),
+                },
+                solver,
+                iterations: learned.library.iterations,
+                states: self.case.grid.len(),
+                actions: self.case.world.actions,
+                mu_s: learned.mu_s,
+                library_states: learned.library_states,
+                library_exposure: learned.library_exposure,
+                sm_evaluations: learned.sm_evaluations,
+            },
+            library: learned.library,
+        };
+        Ok(BuiltLibrary {
+            file: file.to_bytes(),
+            media_type: MEDIA_TYPE,
+            size: learned.library_states,
+            sm_evaluations: learned.sm_evaluations,
+            mu_s: learned.mu_s,
+            w: learned.mu_s,
+        })
+    }
+
+    fn campaign(
+        &self,
+        file: Option<&[u8]>,
+        vut: &serde_json::Value,
+        epsilon: f64,
+        outside: OutsideSpread,
+        seed: u64,
+    ) -> Result<Arc<dyn CampaignTests>, CaseError> {
+        let vut = self.vehicle(vut)?;
+        let sampler = match file {
+            Some(file) => FollowSampler::library(
+                self.case.world,
+                self.case.grid,
+                &self.case.exposure,
+                Arc::new(self.library(file)?.library),
+                epsilon,
+                outside,
+            )?,
+            None => self.case.ndd_sampler(),
+        };
+        Ok(Arc::new(FollowCampaign { sampler, vut, seed }))
+    }
+
+    fn exact_event_probability(&self, _: &serde_json::Value) -> Result<f64, CaseError> {
+        Err(no_exact_answer())
+    }
+
+    fn exact_report(
+        &self,
+        _: &serde_json::Value,
+        _: &[u8],
+        _: f64,
+        _: OutsideSpread,
+        _: f64,
+        _: f64,
+    ) -> Result<ExactReport, CaseError> {
+        Err(no_exact_answer())
+    }
+}
+
+fn no_exact_answer() -> CaseError {
+    CaseError::NoExactAnswer(
+        "car-following scenarios are sequences of 33 dimensions: no enumeration gives an \
+         exact P(A); compare with a long NDD campaign instead"
+            .into(),
+    )
+}
+
+/// A car-following campaign: test `i` samples its initial state and the
+/// BV's 30 actions from the stream `(seed, i)` as the vehicle drives.
+struct FollowCampaign {
+    sampler: FollowSampler,
+    vut: VehicleModel,
+    seed: u64,
+}
+
+impl CampaignTests for FollowCampaign {
+    fn run(&self, index: u64) -> TestOutcome {
+        let test = self.sampler.run(&self.vut, self.seed, index);
+        TestOutcome {
+            event: test.accident,
+            weight: test.weight(),
+        }
+    }
+
+    fn check_event(&self, index: u64, weight: f64) -> Result<(), String> {
+        let replay = self.run(index);
+        if !replay.event {
+            return Err(format!(
+                "test {index} is reported as an accident, but replaying it gives none"
+            ));
+        }
+        if replay.weight.to_bits() != weight.to_bits() {
+            return Err(format!(
+                "event at test {index} reports weight {weight:e}, but replaying it gives {:e}",
+                replay.weight
+            ));
+        }
+        Ok(())
+    }
+
+    fn planned(&self, _: u64) -> Option<PlannedTest> {
+        None
+    }
+}

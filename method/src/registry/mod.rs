@@ -1,0 +1,239 @@
+//! The cases a service can run, behind one object-safe interface, so the
+//! coordinator and the worker handle every case with the same code: a case is
+//! opened by name with a preset and an exposure source, vehicles are given as
+//! JSON specifications, libraries are files in the case's own format, and a
+//! campaign's tests are run (worker) and checked (coordinator) by index.
+//! Adding a case means one arm in [`open_case`].
+
+mod cells;
+mod follow;
+
+use crate::carfollow::case::{CarFollowing, FollowPreset, PolicySolver};
+use crate::carfollow::file::PolicyFileError;
+use crate::cutin::{CutIn, CutInError, CutInPreset};
+use crate::exact::ExactReport;
+use crate::highway::{HighwayExit, HighwayPreset};
+use crate::library::{LibraryFileError, SearchMethod, Threshold};
+use crate::sampling::{OutsideSpread, SamplingError};
+use cells::Registered;
+use follow::FollowScenarioCase;
+use serde::{Deserialize, Serialize};
+use std::sync::Arc;
+use thiserror::Error;
+
+/// Names of the cases [`open_case`] knows.
+pub const CASES: [&str; 3] = ["cut-in", "highway-exit", "car-following"];
+
+/// Cases whose tests sample their scenario while they run: a lease cannot
+/// list their scenarios in advance ([`CampaignTests::planned`] is `None`).
+pub const SEQUENTIAL_CASES: [&str; 1] = ["car-following"];
+
+/// Where a case's exposure `P(x)` comes from.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum ExposureSource {
+    /// The case's documented built-in exposure model.
+    Builtin,
+    /// A table in the layout of SPEC §4 (see [`crate::ndd_table`]).
+    Table { name: String, text: String },
+}
+
+/// Why a case, a vehicle or a library could not be used.
+#[derive(Debug, Error, PartialEq)]
+pub enum CaseError {
+    #[error("unknown case `{0}`; known cases: {known}", known = CASES.join(", "))]
+    UnknownCase(String),
+    #[error("{0}")]
+    Preset(String),
+    #[error("exposure table `{name}` rejected: {reason}")]
+    Exposure { name: String, reason: String },
+    #[error("invalid vehicle for case {case}: {reason}")]
+    Vehicle { case: &'static str, reason: String },
+    #[error("invalid library request for case {case}: {reason}")]
+    Request { case: &'static str, reason: String },
+    #[error(transparent)]
+    Library(#[from] LibraryFileError),
+    #[error(transparent)]
+    Policy(#[from] PolicyFileError),
+    #[error(transparent)]
+    Sampling(#[from] SamplingError),
+    #[error("{0}")]
+    NoExactAnswer(String),
+}
+
+/// How a library is searched or learned.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum LibrarySearch {
+    /// Over the cells of a grid case (cut-in, highway-exit).
+    Cells(SearchMethod),
+    /// Q-values of the car-following case.
+    Policy(PolicySolver),
+}
+
+/// A build request; what is `None` takes the case's default.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct BuildRequest {
+    pub threshold: Option<Threshold>,
+    pub search: Option<LibrarySearch>,
+}
+
+/// A built library: its file in the case's format and its summary.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BuiltLibrary {
+    pub file: Vec<u8>,
+    /// The file's media type (JSON for grid cases, binary for car-following).
+    pub media_type: &'static str,
+    /// `N(Φ)`: library cells, or states with `P(S|s) > 0`.
+    pub size: usize,
+    pub sm_evaluations: usize,
+    pub mu_s: f64,
+    /// `W`: the criticality mass inside the library.
+    pub w: f64,
+}
+
+/// What one test gave.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TestOutcome {
+    pub event: bool,
+    /// The importance weight `P/q` of the whole test.
+    pub weight: f64,
+}
+
+/// A test whose scenario and weight are fixed before it runs (grid cases).
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlannedTest {
+    pub cell: usize,
+    /// The scenario's parameters.
+    pub scenario: Vec<f64>,
+    pub weight: f64,
+}
+
+/// Every test of one campaign, reproducible from its index (SPEC §7): the
+/// coordinator and the worker build the same object from the same plan.
+pub trait CampaignTests: Send + Sync {
+    /// Runs test `index` on the campaign's vehicle (worker side; a vehicle
+    /// that panics is the caller's to catch).
+    fn run(&self, index: u64) -> TestOutcome;
+    /// Checks a reported event against the campaign's own test `index`: a
+    /// mismatch means the reporter samples differently (another version,
+    /// another library) and its results must not enter the estimate.
+    fn check_event(&self, index: u64, weight: f64) -> Result<(), String>;
+    /// The scenario and weight of test `index` when they are fixed before the
+    /// test runs; `None` for sequential scenarios sampled while they run.
+    fn planned(&self, index: u64) -> Option<PlannedTest>;
+}
+
+/// A case opened for a service: everything the coordinator and the worker
+/// need, without knowing which case it is.
+pub trait ScenarioCase: Send + Sync {
+    /// `cut-in`, …
+    fn name(&self) -> &'static str;
+    /// The simulation preset in force.
+    fn preset(&self) -> String;
+    fn exposure_name(&self) -> &str;
+    /// A fingerprint of the exposure; libraries and campaigns must share it.
+    fn exposure_fingerprint(&self) -> String;
+    /// `N(X)`: the grid's scenarios (for car-following, its initial states).
+    fn total_scenarios(&self) -> usize;
+    /// How a campaign spreads ε when the request does not say.
+    fn default_outside(&self) -> OutsideSpread;
+    /// The vehicle specification validated and written out in full (every
+    /// parameter with its value), as it is stored.
+    fn normalise_vehicle(&self, spec: &serde_json::Value) -> Result<serde_json::Value, CaseError>;
+    /// Checks a build request before it is queued.
+    fn check_request(&self, request: &BuildRequest) -> Result<(), CaseError>;
+    /// Builds a library of `surrogate` (CPU-heavy: call off any async runtime).
+    fn build_library(
+        &self,
+        surrogate: &serde_json::Value,
+        request: &BuildRequest,
+    ) -> Result<BuiltLibrary, CaseError>;
+    /// The tests of a campaign of `vut`: from the library `file` with
+    /// exploration `epsilon` spread by `outside`, or from the NDD when
+    /// `file` is `None`.
+    fn campaign(
+        &self,
+        file: Option<&[u8]>,
+        vut: &serde_json::Value,
+        epsilon: f64,
+        outside: OutsideSpread,
+        seed: u64,
+    ) -> Result<Arc<dyn CampaignTests>, CaseError>;
+    /// The exact `P(A)` of a vehicle by enumeration of the grid.
+    fn exact_event_probability(&self, vehicle: &serde_json::Value) -> Result<f64, CaseError>;
+    /// `P(A)` with the expected tests of a library campaign and of the NDD
+    /// baseline to relative half-width `beta` at `confidence`: the analytic
+    /// acceleration ratio (SPEC §3).
+    fn exact_report(
+        &self,
+        vehicle: &serde_json::Value,
+        file: &[u8],
+        epsilon: f64,
+        outside: OutsideSpread,
+        beta: f64,
+        confidence: f64,
+    ) -> Result<ExactReport, CaseError>;
+}
+
+/// Opens `case` with `preset` (the case's default when `None`) on `exposure`.
+pub fn open_case(
+    case: &str,
+    preset: Option<&str>,
+    exposure: &ExposureSource,
+) -> Result<Arc<dyn ScenarioCase>, CaseError> {
+    let builtin_only = |case: &str| {
+        if let ExposureSource::Table { name, .. } = exposure {
+            return Err(CaseError::Exposure {
+                name: name.clone(),
+                reason: format!(
+                    "the {case} case has only its built-in exposure model \
+                     (docs/models.md); omit the table"
+                ),
+            });
+        }
+        Ok(())
+    };
+    match case {
+        "cut-in" => {
+            let preset: CutInPreset = match preset {
+                None => CutInPreset::default(),
+                Some(p) => p.parse().map_err(CaseError::Preset)?,
+            };
+            let opened = match exposure {
+                ExposureSource::Builtin => CutIn::builtin(preset),
+                ExposureSource::Table { name, text } => {
+                    CutIn::from_table(text, name.clone(), preset)
+                        .map(|(case, _)| case)
+                        .map_err(|e: CutInError| CaseError::Exposure {
+                            name: name.clone(),
+                            reason: e.to_string(),
+                        })?
+                }
+            };
+            Ok(Arc::new(Registered::new(opened, preset.name())))
+        }
+        "highway-exit" => {
+            let preset: HighwayPreset = match preset {
+                None => HighwayPreset::default(),
+                Some(p) => p.parse().map_err(CaseError::Preset)?,
+            };
+            builtin_only(case)?;
+            Ok(Arc::new(Registered::new(
+                HighwayExit::builtin(preset),
+                preset.name(),
+            )))
+        }
+        "car-following" => {
+            let preset: FollowPreset = match preset {
+                None => FollowPreset::default(),
+                Some(p) => p.parse().map_err(CaseError::Preset)?,
+            };
+            builtin_only(case)?;
+            Ok(Arc::new(FollowScenarioCase::new(CarFollowing::new(preset))))
+        }
+        other => Err(CaseError::UnknownCase(other.to_owned())),
+    }
+}
+
+#[cfg(test)]
+mod tests;

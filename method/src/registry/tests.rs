@@ -1,0 +1,211 @@
+use super::*;
+use crate::exact::event_cells;
+use crate::library::{Library, SearchMethod};
+use serde_json::json;
+
+#[test]
+fn the_registered_cut_in_case_answers_like_the_typed_one() {
+    let case = open_case("cut-in", None, &ExposureSource::Builtin).unwrap();
+    let typed = CutIn::builtin(CutInPreset::default());
+    let idm = crate::vehicle::VehicleModel::builtin("idm").unwrap();
+    let events = event_cells(&typed, &idm);
+    let p = case
+        .exact_event_probability(&json!({"model": "idm"}))
+        .unwrap();
+    assert_eq!(p, crate::exact::event_probability(&typed, &events));
+    let built = case
+        .build_library(
+            &json!({"model": "idm"}),
+            &BuildRequest {
+                threshold: None,
+                search: Some(LibrarySearch::Cells(SearchMethod::Exhaustive)),
+            },
+        )
+        .unwrap();
+    assert_eq!(built.size, 287);
+    assert_eq!(built.media_type, "application/json");
+    let library = Library::from_json(std::str::from_utf8(&built.file).unwrap()).unwrap();
+    assert_eq!(library.size(), 287);
+    // A library campaign's tests: their cells are the library's draws and
+    // their events the typed case's.
+    let tests = case
+        .campaign(
+            Some(&built.file),
+            &json!({"model": "idm"}),
+            0.1,
+            OutsideSpread::Uniform,
+            3,
+        )
+        .unwrap();
+    for index in 0..200 {
+        let planned = tests.planned(index).unwrap();
+        let outcome = tests.run(index);
+        assert_eq!(outcome.weight, planned.weight);
+        assert_eq!(outcome.event, events.binary_search(&planned.cell).is_ok());
+        assert_eq!(tests.check_event(index, planned.weight), Ok(()));
+        assert!(tests.check_event(index, planned.weight * 2.0).is_err());
+    }
+}
+
+#[test]
+fn bad_names_vehicles_requests_and_tables_get_precise_errors() {
+    let err = open_case("lane-keep", None, &ExposureSource::Builtin)
+        .err()
+        .unwrap();
+    assert_eq!(
+        err.to_string(),
+        "unknown case `lane-keep`; known cases: cut-in, highway-exit, car-following"
+    );
+    let err = open_case("cut-in", Some("fast"), &ExposureSource::Builtin)
+        .err()
+        .unwrap();
+    assert!(err.to_string().contains("fast"), "{err}");
+    let table = ExposureSource::Table {
+        name: "t.csv".into(),
+        text: "range,range_rate\n1,x".into(),
+    };
+    let err = open_case("cut-in", None, &table).err().unwrap();
+    assert!(
+        err.to_string()
+            .starts_with("exposure table `t.csv` rejected: "),
+        "{err}"
+    );
+    let case = open_case("cut-in", None, &ExposureSource::Builtin).unwrap();
+    let err = case
+        .normalise_vehicle(&json!({"model": "idm", "alpha": -1.0}))
+        .unwrap_err();
+    assert!(err.to_string().contains("alpha"), "{err}");
+    let err = case
+        .normalise_vehicle(&json!({"model": "tesla"}))
+        .unwrap_err();
+    assert!(err.to_string().contains("unknown variant `tesla`"), "{err}");
+    let err = case
+        .check_request(&BuildRequest {
+            threshold: None,
+            search: Some(LibrarySearch::Policy(PolicySolver::DynamicProgramming)),
+        })
+        .unwrap_err();
+    assert!(
+        err.to_string().contains("exhaustive or multistart"),
+        "{err}"
+    );
+}
+
+#[test]
+fn the_highway_exit_case_opens_by_name_with_its_presets_and_only_its_own_exposure() {
+    let coarse = open_case("highway-exit", Some("coarse"), &ExposureSource::Builtin).unwrap();
+    assert_eq!(
+        (coarse.name(), coarse.preset()),
+        ("highway-exit", "coarse".into())
+    );
+    assert_eq!(coarse.total_scenarios(), 16 * 6 * 16 * 6);
+    let ndd = coarse
+        .campaign(
+            None,
+            &json!({"model": "mobil"}),
+            0.1,
+            OutsideSpread::Uniform,
+            0,
+        )
+        .unwrap();
+    let first = ndd.planned(0).unwrap();
+    assert_eq!(first.scenario.len(), 4);
+    assert_eq!(first.weight, 1.0);
+    let spec = coarse
+        .normalise_vehicle(&json!({"model": "gap-seeker"}))
+        .unwrap();
+    assert_eq!(spec["front_gap"], json!(0.8), "every parameter written out");
+    let err = coarse
+        .normalise_vehicle(&json!({"model": "mobil", "politeness": 2}))
+        .unwrap_err();
+    assert!(err.to_string().contains("politeness"), "{err}");
+    assert!(coarse.normalise_vehicle(&json!({"model": "idm"})).is_err());
+    let table = ExposureSource::Table {
+        name: "t.csv".into(),
+        text: "0,1\n1,1".into(),
+    };
+    let err = open_case("highway-exit", None, &table).err().unwrap();
+    assert!(
+        err.to_string().contains("only its built-in exposure"),
+        "{err}"
+    );
+    let err = open_case("highway-exit", Some("fine"), &ExposureSource::Builtin)
+        .err()
+        .unwrap();
+    assert!(err.to_string().contains("presets are paper"), "{err}");
+}
+
+#[test]
+fn the_car_following_case_learns_a_policy_file_and_replays_reported_accidents() {
+    let case = open_case("car-following", Some("risky"), &ExposureSource::Builtin).unwrap();
+    assert_eq!(
+        (case.name(), case.preset()),
+        ("car-following", "risky".into())
+    );
+    assert_eq!(case.total_scenarios(), 45_885);
+    assert_eq!(case.default_outside(), OutsideSpread::Ndd);
+    let err = case
+        .check_request(&BuildRequest {
+            threshold: Some(crate::library::Threshold::default()),
+            search: None,
+        })
+        .unwrap_err();
+    assert!(err.to_string().contains("takes no threshold"), "{err}");
+    let err = case
+        .check_request(&BuildRequest {
+            threshold: None,
+            search: Some(LibrarySearch::Cells(SearchMethod::Exhaustive)),
+        })
+        .unwrap_err();
+    assert!(err.to_string().contains("dynamic-programming"), "{err}");
+    let built = case
+        .build_library(&json!({"model": "idm"}), &BuildRequest::default())
+        .unwrap();
+    assert!(built.size > 0 && built.mu_s > 0.0, "{built:?}");
+    assert!(built.file.len() < 4 << 20, "{} bytes", built.file.len());
+    let tests = case
+        .campaign(
+            Some(&built.file),
+            &json!({"model": "acc-aeb"}),
+            0.1,
+            OutsideSpread::Ndd,
+            5,
+        )
+        .unwrap();
+    assert!(tests.planned(0).is_none());
+    let (mut accidents, mut safe) = (0, 0);
+    for index in 0..400 {
+        let outcome = tests.run(index);
+        let check = tests.check_event(index, outcome.weight);
+        if outcome.event {
+            accidents += 1;
+            assert_eq!(check, Ok(()));
+            assert!(tests.check_event(index, outcome.weight * 1.5).is_err());
+        } else {
+            safe += 1;
+            let err = check.unwrap_err();
+            assert!(err.contains("replaying it gives none"), "{err}");
+        }
+    }
+    assert!(
+        accidents > 0 && safe > 0,
+        "{accidents} accidents, {safe} safe"
+    );
+    // Another preset's library is refused by fingerprint.
+    let paper = open_case("car-following", None, &ExposureSource::Builtin).unwrap();
+    let err = paper
+        .campaign(
+            Some(&built.file),
+            &json!({"model": "idm"}),
+            0.1,
+            OutsideSpread::Ndd,
+            0,
+        )
+        .err()
+        .unwrap();
+    assert!(err.to_string().contains("risky"), "{err}");
+    let err = paper
+        .exact_event_probability(&json!({"model": "idm"}))
+        .unwrap_err();
+    assert!(err.to_string().contains("no enumeration"), "{err}");
+}
