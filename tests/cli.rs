@@ -374,6 +374,33 @@ fn the_highway_exit_demo_reports_exact_and_analytic_figures() {
 }
 
 #[test]
+fn the_car_following_demo_compares_library_and_ndd_intervals() {
+    let o = tslg(&[
+        "demo",
+        "--case",
+        "car-following",
+        "--preset",
+        "risky",
+        "--vut",
+        "acc-aeb",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = stdout(&o);
+    // The IDM's library on the risky preset: the states with P(S|s) > 0.
+    assert!(
+        text.contains("car-following library 1 of idm: 3575 of 45885 states"),
+        "{text}"
+    );
+    assert!(text.contains("vehicle under test acc-aeb"), "{text}");
+    assert_both_campaigns_converged(&text);
+    assert!(text.contains("no exact P(A) for this case"), "{text}");
+    assert!(text.contains("measured"), "{text}");
+    let o = tslg(&["demo", "--case", "car-following", "--preset", "dense"]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("presets are paper"), "{}", stderr(&o));
+}
+
+#[test]
 fn policy_prints_the_car_following_librarys_action_distribution_at_the_papers_state() {
     let o = tslg(&["policy", "--state", "38,6,-2"]);
     assert!(o.status.success(), "{}", stderr(&o));

@@ -88,8 +88,14 @@ async fn drive(
         "the library failed to build: {}",
         library.error.unwrap_or_default()
     );
+    // A car-following library is a policy over initial states.
+    let unit = if library.case == "car-following" {
+        "states"
+    } else {
+        "scenarios"
+    };
     println!(
-        "{} library {} of {}: {} of {} scenarios ({} surrogate runs, {:.2} s), exposure {}",
+        "{} library {} of {}: {} of {} {unit} ({} surrogate runs, {:.2} s), exposure {}",
         library.case,
         library.id,
         args.case.vehicle_or_default(&args.surrogate),

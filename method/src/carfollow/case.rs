@@ -158,12 +158,11 @@ impl CarFollowing {
     /// A vehicle from its specification, with this case's defaults for what
     /// it leaves out: the cut-in models are tuned for 20 m/s, so here the
     /// IDM desires 36 m/s and measures the bumper gap (`length` 0), and the
-    /// ACC+AEB is set to 36 m/s with a 0.3 s actuator lag (a production
-    /// brake, and a vehicle distinct from the surrogate).
+    /// ACC+AEB is set to 36 m/s.
     pub fn vehicle(spec: &serde_json::Value) -> Result<VehicleModel, String> {
         let defaults = match spec.get("model").and_then(|m| m.as_str()) {
             Some("idm") => serde_json::json!({"v0": 36.0, "length": 0.0}),
-            Some("acc-aeb") => serde_json::json!({"set_speed": 36.0, "actuator_lag": 0.3}),
+            Some("acc-aeb") => serde_json::json!({"set_speed": 36.0}),
             _ => serde_json::json!({}),
         };
         let mut merged = defaults;
@@ -227,7 +226,16 @@ mod tests {
         let acc =
             serde_json::to_value(CarFollowing::vehicle(&json!({"model": "acc-aeb"})).unwrap())
                 .unwrap();
-        assert_eq!(acc["actuator_lag"], json!(0.3));
+        assert_eq!(
+            (acc["set_speed"].clone(), acc["actuator_lag"].clone()),
+            (json!(36.0), json!(0.0))
+        );
+        let lagged =
+            CarFollowing::vehicle(&json!({"model": "acc-aeb", "actuator_lag": 0.3})).unwrap();
+        assert_eq!(
+            serde_json::to_value(lagged).unwrap()["set_speed"],
+            json!(36.0)
+        );
         let err = CarFollowing::vehicle(&json!({"model": "idm", "alpha": -1})).unwrap_err();
         assert!(err.contains("parameter `alpha`"), "{err}");
         assert!(CarFollowing::vehicle(&json!("idm")).is_err());

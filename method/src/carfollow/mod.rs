@@ -24,7 +24,7 @@ use crate::vehicle::VehicleModel;
 
 /// A built-in model by name with this case's defaults
 /// ([`CarFollowing::vehicle`]): the highway IDM (the surrogate) and the
-/// ACC+AEB with a 0.3 s actuator lag.
+/// ACC+AEB set to 36 m/s.
 pub fn highway_vehicle(name: &str) -> Option<VehicleModel> {
     CarFollowing::vehicle(&serde_json::json!({ "model": name })).ok()
 }
