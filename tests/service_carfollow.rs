@@ -29,6 +29,19 @@ fn request(method: Method, library_id: i64, vut: &str, seed: u64) -> CreateCampa
     }
 }
 
+/// The IDM's library on the risky preset, learned by `search` (the
+/// case's default, dynamic programming, when `None`).
+fn library_request(search: Option<SearchRequest>) -> CreateLibrary {
+    CreateLibrary {
+        case: "car-following".into(),
+        preset: Some("risky".into()),
+        surrogate: serde_json::json!({ "model": "idm" }),
+        exposure: Default::default(),
+        search,
+        threshold: None,
+    }
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn car_following_library_campaigns_agree_with_ndd_baselines_with_far_fewer_tests() {
     let dir = scratch();
@@ -38,18 +51,7 @@ async fn car_following_library_campaigns_agree_with_ndd_baselines_with_far_fewer
         WorkerProcess::start(&server.url, 1, "w2"),
     ];
     let client = server.client();
-    let library = build_library(
-        &client,
-        &CreateLibrary {
-            case: "car-following".into(),
-            preset: Some("risky".into()),
-            surrogate: serde_json::json!({ "model": "idm" }),
-            exposure: Default::default(),
-            search: None,
-            threshold: None,
-        },
-    )
-    .await;
+    let library = build_library(&client, &library_request(None)).await;
     assert_eq!(library.total_scenarios, 45_885);
     let size = library.size.unwrap();
     assert!((1_000..10_000).contains(&size), "{size} library states");
@@ -119,17 +121,10 @@ async fn car_following_library_campaigns_agree_with_ndd_baselines_with_far_fewer
     // TD(0) through the service reaches the same library.
     let td = build_library(
         &client,
-        &CreateLibrary {
-            case: "car-following".into(),
-            preset: Some("risky".into()),
-            surrogate: serde_json::json!({ "model": "idm" }),
-            exposure: Default::default(),
-            search: Some(SearchRequest::TemporalDifference {
-                alpha: 0.1,
-                seed: 3,
-            }),
-            threshold: None,
-        },
+        &library_request(Some(SearchRequest::TemporalDifference {
+            alpha: 0.1,
+            seed: 3,
+        })),
     )
     .await;
     assert_eq!(td.size, library.size);

@@ -121,3 +121,53 @@ pub fn run_campaign<C: crate::case::Case>(
         seed,
     )
 }
+
+/// What campaigns with seeds `0..campaigns` of one configuration did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SeededCoverage {
+    pub campaigns: u64,
+    /// Campaigns whose interval contains the reference value.
+    pub covered: u64,
+    pub mean_tests: f64,
+    pub mean_estimate: f64,
+}
+
+impl SeededCoverage {
+    pub fn coverage(&self) -> f64 {
+        self.covered as f64 / self.campaigns as f64
+    }
+}
+
+/// Runs one campaign per seed `0..campaigns`, test `i` of seed `s` being
+/// `event_weight(s, i)`, and counts the intervals that contain `truth`:
+/// the empirical coverage of the interval (nominal: the rule's confidence).
+pub fn seeded_coverage(
+    event_weight: &(dyn Fn(u64, u64) -> Option<f64> + Sync),
+    rule: &StoppingRule,
+    campaigns: u64,
+    truth: f64,
+) -> SeededCoverage {
+    let runs: Vec<CampaignResult> = (0..campaigns)
+        .map(|seed| run_indexed_campaign(&|i| event_weight(seed, i), rule))
+        .collect();
+    let n = runs.len().max(1) as f64;
+    SeededCoverage {
+        campaigns,
+        covered: runs.iter().filter(|r| r.covers(truth)).count() as u64,
+        mean_tests: runs.iter().map(|r| r.tests as f64).sum::<f64>() / n,
+        mean_estimate: runs.iter().map(|r| r.estimate).sum::<f64>() / n,
+    }
+}
+
+/// The mean weight of tests `0..n` (0 for a test without the event) and its
+/// standard error `√((m₂ − m²)/n)`: a reference value by brute force where
+/// no enumeration exists.
+pub fn mean_weight(event_weight: &(dyn Fn(u64) -> Option<f64> + Sync), n: u64) -> (f64, f64) {
+    let (s1, s2) = (0..n)
+        .into_par_iter()
+        .map(|i| event_weight(i).map_or((0.0, 0.0), |w| (w, w * w)))
+        .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+    let mean = s1 / n as f64;
+    let variance = (s2 / n as f64 - mean * mean).max(0.0);
+    (mean, (variance / n as f64).sqrt())
+}

@@ -2,9 +2,8 @@
 //! Q-values by dynamic programming and by TD(0), the shape of the learned
 //! action distribution, and the weights of tests sampled from it.
 
-use rayon::prelude::*;
 use std::sync::{Arc, OnceLock};
-use tslg_method::campaign::run_indexed_campaign;
+use tslg_method::campaign::{mean_weight, run_indexed_campaign, seeded_coverage};
 use tslg_method::carfollow::library::Next;
 use tslg_method::carfollow::*;
 use tslg_method::estimator::StoppingRule;
@@ -270,36 +269,13 @@ fn library_intervals_cover_a_high_precision_reference_across_seeds() {
     // (standard error ≈ 0.3%), then 200 seeded campaigns at β = 0.2.
     let sampler = risky_library_sampler();
     let idm = highway_vehicle("idm").unwrap();
-    let n = 400_000u64;
-    let truth: f64 = (0..n)
-        .into_par_iter()
-        .map(|i| {
-            let t = sampler.run(&idm, u64::MAX, i);
-            if t.accident {
-                t.weight()
-            } else {
-                0.0
-            }
-        })
-        .sum::<f64>()
-        / n as f64;
-    let rule = StoppingRule::new(0.2, 1_000_000);
-    let runs: Vec<_> = (0..200)
-        .map(|seed| {
-            run_indexed_campaign(
-                &|i| {
-                    let t = sampler.run(&idm, seed, i);
-                    t.accident.then(|| t.weight())
-                },
-                &rule,
-            )
-        })
-        .collect();
-    let covered = runs
-        .iter()
-        .filter(|r| r.ci_low <= truth && truth <= r.ci_high)
-        .count();
-    let mean = runs.iter().map(|r| r.estimate).sum::<f64>() / runs.len() as f64;
+    let weight = |seed, i| {
+        let t = sampler.run(&idm, seed, i);
+        t.accident.then(|| t.weight())
+    };
+    let (truth, _) = mean_weight(&|i| weight(u64::MAX, i), 400_000);
+    let c = seeded_coverage(&weight, &StoppingRule::new(0.2, 1_000_000), 200, truth);
+    let (covered, mean) = (c.covered, c.mean_estimate);
     // docs/statistics.md: 0.900 over 1,000 campaigns.
     assert!(covered >= 170, "{covered} of 200 intervals cover {truth:e}");
     assert!(
