@@ -10,7 +10,9 @@ mod support;
 
 use std::time::Duration;
 use support::*;
-use tslg_api::{CampaignStatus, CreateCampaign, CreateLibrary, Method, Outside, SearchRequest};
+use tslg_api::{
+    CampaignStatus, CreateCampaign, CreateLibrary, LeaseRequest, Method, Outside, SearchRequest,
+};
 
 fn request(method: Method, library_id: i64, vut: &str, seed: u64) -> CreateCampaign {
     CreateCampaign {
@@ -77,6 +79,24 @@ async fn car_following_library_campaigns_agree_with_ndd_baselines_with_far_fewer
     assert_eq!(&file[..8], b"TSLGPOL\0");
     assert!(file.len() < 1_200_000, "{} bytes", file.len());
 
+    // Without exploration the estimate would miss every accident outside
+    // the library: refused when the campaign is created.
+    let refused = http
+        .post(format!("{}/api/v1/campaigns", server.url))
+        .json(&CreateCampaign {
+            epsilon: 0.0,
+            ..request(Method::Library, library.id, "idm", 7)
+        })
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(refused.status(), reqwest::StatusCode::UNPROCESSABLE_ENTITY);
+    let problem: serde_json::Value = refused.json().await.unwrap();
+    assert!(
+        problem["detail"].as_str().unwrap().contains("ε = 0"),
+        "{problem}"
+    );
+
     // The surrogate, and the ACC+AEB: another controller, whose failures
     // the IDM's library covers (docs/statistics.md has the coverage of both).
     for vut in ["idm", "acc-aeb"] {
@@ -89,6 +109,17 @@ async fn car_following_library_campaigns_agree_with_ndd_baselines_with_far_fewer
             .create_campaign(&request(Method::Ndd, library.id, vut, 8))
             .await
             .unwrap();
+        // A client that needs each test's scenario in its lease gets none
+        // of these campaigns: their scenarios exist only as the tests run.
+        let inline = client
+            .claim(&LeaseRequest {
+                worker: "inline".into(),
+                threads: 1,
+                include_tests: true,
+            })
+            .await
+            .unwrap();
+        assert!(inline.is_none(), "{inline:?}");
         let l = finished(&client, by_library.id, Duration::from_secs(240)).await;
         let n = finished(&client, by_ndd.id, Duration::from_secs(240)).await;
         for view in [&l, &n] {

@@ -25,7 +25,11 @@ fn main() {
     let idm = highway_vehicle("idm").expect("built-in");
     for preset in [FollowPreset::Paper, FollowPreset::Risky] {
         let case = CarFollowing::new(preset);
-        let library = Arc::new(case.learn(&idm, PolicySolver::DynamicProgramming).library);
+        let library = Arc::new(
+            case.learn(&idm, PolicySolver::DynamicProgramming)
+                .expect("a library")
+                .library,
+        );
         let sampler = FollowSampler::library(
             case.world,
             case.grid,

@@ -52,6 +52,12 @@ pub enum SamplingError {
     Epsilon(f64),
     #[error("the library is empty: there is nothing to sample with weight 1 − ε")]
     EmptyLibrary,
+    #[error(
+        "ε = 0 gives the states and actions outside a car-following library probability 0, \
+         and some accidents (even the surrogate's own, from states between grid points) lie \
+         there: the estimate would be biased low; use ε > 0"
+    )]
+    NoExploration,
     #[error("the library's grid has {library} cells but the exposure has {exposure}")]
     GridMismatch { library: usize, exposure: usize },
 }

@@ -137,7 +137,11 @@ fn risky() -> &'static (CarFollowing, Arc<PolicyLibrary>) {
     RISKY.get_or_init(|| {
         let case = CarFollowing::new(FollowPreset::Risky);
         let idm = highway_vehicle("idm").unwrap();
-        let library = Arc::new(case.learn(&idm, PolicySolver::DynamicProgramming).library);
+        let library = Arc::new(
+            case.learn(&idm, PolicySolver::DynamicProgramming)
+                .expect("a library")
+                .library,
+        );
         (case, library)
     })
 }
@@ -261,6 +265,15 @@ fn the_binary_library_file_round_trips_and_rejects_damage() {
         Err(PolicyFileError::BadRow { .. })
     ));
     assert!(PolicyLibraryFile::from_bytes(b"{\"format\":\"tslg-library\"}").is_err());
+    // A reader that knows its grid refuses another table size before
+    // allocating it.
+    let err = PolicyLibraryFile::from_bytes_for(&bytes, b.dp.challenge.len(), 30).unwrap_err();
+    assert!(err.to_string().contains("× 31 actions"), "{err}");
+    // Another version is named as such, whatever its header holds.
+    let mut future = file.clone();
+    future.header.version = 2;
+    let err = PolicyLibraryFile::from_bytes(&future.to_bytes()).unwrap_err();
+    assert_eq!(err, PolicyFileError::Version(2));
 }
 
 #[test]

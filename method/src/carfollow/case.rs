@@ -3,7 +3,10 @@
 //! samplers.
 
 use super::exposure_model::FollowExposureModel;
-use super::library::{dynamic_programming, temporal_difference, PolicyLibrary, Transitions, Zone};
+use super::library::{
+    dynamic_programming, temporal_difference, PolicyLibrary, Transitions, Zone, DP_MAX_SWEEPS,
+    TD_MAX_UPDATES,
+};
 use super::sampling::FollowSampler;
 use super::states::StateGrid;
 use super::world::FollowWorld;
@@ -69,6 +72,10 @@ pub enum PolicySolver {
     TemporalDifference { alpha: f64, seed: u64 },
 }
 
+/// The smallest TD learning rate accepted: TD needs about 3 × 10⁶/α
+/// updates on the paper's grid (2.8 × 10⁷ at α = 0.1).
+pub const MIN_ALPHA: f64 = 1e-3;
+
 /// Tolerances of the two solvers: tight enough that DP and TD agree to
 /// about 10⁻¹⁰ (far below any weight's precision) in under a second each.
 pub const DP_TOLERANCE: f64 = 1e-13;
@@ -88,13 +95,24 @@ impl PolicySolver {
         }
     }
 
-    pub fn solve(&self, transitions: &Transitions) -> PolicyLibrary {
-        match *self {
-            PolicySolver::DynamicProgramming => dynamic_programming(transitions, DP_TOLERANCE),
-            PolicySolver::TemporalDifference { alpha, seed } => {
-                temporal_difference(transitions, alpha, TD_TOLERANCE, seed)
-            }
+    /// The library, or why the solver stopped short of its tolerance.
+    pub fn solve(&self, transitions: &Transitions) -> Result<PolicyLibrary, String> {
+        let (library, cap) = match *self {
+            PolicySolver::DynamicProgramming => (
+                dynamic_programming(transitions, DP_TOLERANCE),
+                DP_MAX_SWEEPS,
+            ),
+            PolicySolver::TemporalDifference { alpha, seed } => (
+                temporal_difference(transitions, alpha, TD_TOLERANCE, seed),
+                TD_MAX_UPDATES,
+            ),
+        };
+        if library.iterations >= cap {
+            return Err(format!(
+                "the solver stopped after {cap} iterations without reaching its tolerance"
+            ));
         }
+        Ok(library)
     }
 }
 
@@ -176,10 +194,15 @@ impl CarFollowing {
         serde_json::from_value(merged).map_err(|e| e.to_string())
     }
 
-    /// Learns the library of `surrogate` with `solver`.
-    pub fn learn(&self, surrogate: &VehicleModel, solver: PolicySolver) -> LearnedPolicy {
+    /// Learns the library of `surrogate` with `solver`; fails when the
+    /// solver does not converge or the surrogate has no accident at all.
+    pub fn learn(
+        &self,
+        surrogate: &VehicleModel,
+        solver: PolicySolver,
+    ) -> Result<LearnedPolicy, String> {
         let transitions = Transitions::compute(&self.world, self.grid, &self.exposure, surrogate);
-        let library = solver.solve(&transitions);
+        let library = solver.solve(&transitions)?;
         let dangerous = transitions
             .zones
             .iter()
@@ -193,13 +216,20 @@ impl CarFollowing {
                 library_states += 1;
             }
         }
-        LearnedPolicy {
+        if mu_s <= 0.0 {
+            return Err(
+                "the surrogate has no accident from any state with positive exposure: the \
+                 library would be empty"
+                    .into(),
+            );
+        }
+        Ok(LearnedPolicy {
             library,
             mu_s,
             library_exposure,
             library_states,
             sm_evaluations: self.grid.len() + dangerous * self.world.actions,
-        }
+        })
     }
 
     /// The NDD baseline's sampler.

@@ -136,7 +136,22 @@ impl PolicyLibraryFile {
         &self.library.q[s * a..(s + 1) * a]
     }
 
+    /// Reads a file of any table size (up to 2²⁸ values).
     pub fn from_bytes(bytes: &[u8]) -> Result<Self, PolicyFileError> {
+        Self::read(bytes, None)
+    }
+
+    /// Reads a file whose table must have `states × actions` entries; the
+    /// header is checked before anything is allocated.
+    pub fn from_bytes_for(
+        bytes: &[u8],
+        states: usize,
+        actions: usize,
+    ) -> Result<Self, PolicyFileError> {
+        Self::read(bytes, Some((states, actions)))
+    }
+
+    fn read(bytes: &[u8], expected: Option<(usize, usize)>) -> Result<Self, PolicyFileError> {
         let mut r = Reader { bytes, at: 0 };
         if r.take(MAGIC.len(), "magic number")? != MAGIC {
             return Err(PolicyFileError::Malformed(
@@ -144,12 +159,24 @@ impl PolicyLibraryFile {
             ));
         }
         let header_len = r.u32("header length")? as usize;
-        let header: PolicyHeader = serde_json::from_slice(r.take(header_len, "header")?)
-            .map_err(|e| PolicyFileError::Malformed(format!("header: {e}")))?;
-        if header.version != VERSION {
-            return Err(PolicyFileError::Version(header.version));
+        let text = r.take(header_len, "header")?;
+        // The version first: another version's header may have other fields.
+        #[derive(Deserialize)]
+        struct Versioned {
+            version: u32,
         }
+        let malformed = |e: serde_json::Error| PolicyFileError::Malformed(format!("header: {e}"));
+        let versioned: Versioned = serde_json::from_slice(text).map_err(malformed)?;
+        if versioned.version != VERSION {
+            return Err(PolicyFileError::Version(versioned.version));
+        }
+        let header: PolicyHeader = serde_json::from_slice(text).map_err(malformed)?;
         let (states, actions) = (header.states, header.actions);
+        if let Some((s, a)) = expected.filter(|&e| e != (states, actions)) {
+            return Err(PolicyFileError::Malformed(format!(
+                "its table has {states} states × {actions} actions; this case has {s} × {a}"
+            )));
+        }
         if states == 0 || actions == 0 || states.checked_mul(actions).is_none_or(|n| n > 1 << 28) {
             return Err(PolicyFileError::Malformed(format!(
                 "header: {states} states × {actions} actions is not a table this build reads"

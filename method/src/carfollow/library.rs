@@ -178,6 +178,11 @@ impl PolicyLibrary {
     }
 }
 
+/// The solvers stop here whether or not the tolerance held; a library that
+/// reached a cap is not at the fixed point.
+pub const DP_MAX_SWEEPS: u64 = 10_000;
+pub const TD_MAX_UPDATES: u64 = 20_000_000_000;
+
 /// Backward dynamic programming: Gauss–Seidel value iteration
 /// `P(S|s) ← Σ_u P(u|s) P(S|T(s, u))` over the dangerous states, in order
 /// of increasing range (the direction most transitions of a dangerous state
@@ -199,7 +204,7 @@ pub fn dynamic_programming(t: &Transitions, tolerance: f64) -> PolicyLibrary {
             change = change.max((value - challenge[s]).abs());
             challenge[s] = value;
         }
-        if change < tolerance || sweeps >= 10_000 {
+        if change < tolerance || sweeps >= DP_MAX_SWEEPS {
             break;
         }
     }
@@ -244,7 +249,7 @@ pub fn temporal_difference(
             challenge[i / t.actions] += alpha * delta;
             updates += 1;
         }
-        if largest < tolerance || updates >= 50_000_000_000 {
+        if largest < tolerance || updates >= TD_MAX_UPDATES {
             break;
         }
     }

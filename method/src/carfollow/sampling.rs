@@ -99,6 +99,9 @@ impl FollowSampler {
         if !(0.0..1.0).contains(&epsilon) {
             return Err(SamplingError::Epsilon(epsilon));
         }
+        if epsilon == 0.0 {
+            return Err(SamplingError::NoExploration);
+        }
         if library.challenge.len() != grid.len() {
             return Err(SamplingError::GridMismatch {
                 library: library.challenge.len(),

@@ -10,12 +10,13 @@ use super::{
 };
 use crate::carfollow::case::{CarFollowing, PolicySolver};
 use crate::carfollow::file::{PolicyHeader, PolicyLibraryFile, MEDIA_TYPE, VERSION};
+use crate::carfollow::library::PolicyLibrary;
 use crate::carfollow::sampling::FollowSampler;
 use crate::exact::ExactReport;
 use crate::library::{ExposureRef, LibraryFileError};
 use crate::sampling::OutsideSpread;
 use crate::vehicle::VehicleModel;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex, Weak};
 
 const NAME: &str = "car-following";
 
@@ -61,7 +62,8 @@ impl FollowScenarioCase {
     /// Reads a library file and checks it was built for this preset and
     /// exposure.
     fn library(&self, file: &[u8]) -> Result<PolicyLibraryFile, CaseError> {
-        let read = PolicyLibraryFile::from_bytes(file)?;
+        let read =
+            PolicyLibraryFile::from_bytes_for(file, self.case.grid.len(), self.case.world.actions)?;
         let h = &read.header;
         if h.case != NAME {
             return Err(LibraryFileError::WrongCase {
@@ -70,7 +72,7 @@ impl FollowScenarioCase {
             }
             .into());
         }
-        if h.exposure.fingerprint != self.fingerprint || h.states != self.case.grid.len() {
+        if h.exposure.fingerprint != self.fingerprint {
             return Err(LibraryFileError::WrongExposure {
                 library: format!("{} ({})", h.exposure.fingerprint, h.preset),
                 campaign: format!("{} ({})", self.fingerprint, self.case.preset.name()),
@@ -78,6 +80,40 @@ impl FollowScenarioCase {
             .into());
         }
         Ok(read)
+    }
+}
+
+/// Decoded libraries by a hash of their file, held weakly: campaigns on
+/// the same library share one 11 MB table, which is freed with the last.
+static DECODED: Mutex<Vec<(u64, Weak<PolicyLibrary>)>> = Mutex::new(Vec::new());
+
+/// FNV-1a over the file's bytes.
+fn file_hash(file: &[u8]) -> u64 {
+    file.iter().fold(0xcbf2_9ce4_8422_2325, |hash, &byte| {
+        (hash ^ u64::from(byte)).wrapping_mul(0x0000_0100_0000_01b3)
+    })
+}
+
+impl FollowScenarioCase {
+    fn shared_library(&self, file: &[u8]) -> Result<Arc<PolicyLibrary>, CaseError> {
+        let hash = file_hash(file);
+        let found = {
+            let mut decoded = DECODED.lock().unwrap_or_else(|p| p.into_inner());
+            decoded.retain(|(_, weak)| weak.strong_count() > 0);
+            decoded
+                .iter()
+                .find(|(h, _)| *h == hash)
+                .and_then(|(_, weak)| weak.upgrade())
+        };
+        // Each file is still read and checked against this case.
+        let library = self.library(file)?.library;
+        if let Some(shared) = found.filter(|s| **s == library) {
+            return Ok(shared);
+        }
+        let library = Arc::new(library);
+        let mut decoded = DECODED.lock().unwrap_or_else(|p| p.into_inner());
+        decoded.push((hash, Arc::downgrade(&library)));
+        Ok(library)
     }
 }
 
@@ -122,7 +158,10 @@ impl ScenarioCase for FollowScenarioCase {
     ) -> Result<BuiltLibrary, CaseError> {
         let solver = self.solver(request)?;
         let vehicle = self.vehicle(surrogate)?;
-        let learned = self.case.learn(&vehicle, solver);
+        let learned = self
+            .case
+            .learn(&vehicle, solver)
+            .map_err(CaseError::Build)?;
         let file = PolicyLibraryFile {
             header: PolicyHeader {
                 version: VERSION,
@@ -168,7 +207,7 @@ impl ScenarioCase for FollowScenarioCase {
                 self.case.world,
                 self.case.grid,
                 &self.case.exposure,
-                Arc::new(self.library(file)?.library),
+                self.shared_library(file)?,
                 epsilon,
                 outside,
             )?,

@@ -59,6 +59,8 @@ pub enum CaseError {
     Sampling(#[from] SamplingError),
     #[error("{0}")]
     NoExactAnswer(String),
+    #[error("the library could not be built: {0}")]
+    Build(String),
 }
 
 /// How a library is searched or learned.

@@ -93,20 +93,48 @@ pub async fn create(
         None => ExposureSource::Builtin,
     };
     let preset = library.as_ref().map(|l| l.preset.clone());
-    let (case_name, vut) = (req.case.clone(), req.vut.clone());
+    // A ready library's file, to prepare the campaign's tests now: what a
+    // worker could not prepare must be refused here, not leased forever.
+    let file = match &library {
+        Some(lib) if req.method == Method::Library && lib.status() == LibraryStatus::Ready => Some(
+            libraries::file(&state.db.read, lib.id)
+                .await?
+                .ok_or_else(|| {
+                    ApiError::Internal(anyhow::anyhow!("ready library {} has no file", lib.id))
+                })?
+                .bytes,
+        ),
+        _ => None,
+    };
+    let prepare = req.method == Method::Ndd || file.is_some();
+    let (case_name, vut, epsilon, requested, seed) = (
+        req.case.clone(),
+        req.vut.clone(),
+        req.epsilon,
+        req.outside,
+        req.seed,
+    );
     let source = exposure.clone();
-    let (case, vut) = tokio::task::spawn_blocking(move || {
+    let (case, vut, outside) = tokio::task::spawn_blocking(move || {
         let case = open_case(&case_name, preset.as_deref(), &source)?;
         let vut = case.normalise_vehicle(&vut)?;
-        Ok::<_, tslg_method::registry::CaseError>((case, vut))
+        let outside = match requested {
+            Some(Outside::Uniform) => OutsideSpread::Uniform,
+            Some(Outside::Ndd) => OutsideSpread::Ndd,
+            None => case.default_outside(),
+        };
+        if prepare {
+            case.campaign(file.as_deref(), &vut, epsilon, outside, seed)?;
+        }
+        Ok::<_, tslg_method::registry::CaseError>((case, vut, outside))
     })
     .await
     .map_err(|e| ApiError::Internal(e.into()))?
     .map_err(|e| bad(e.to_string()))?;
-    let outside = req.outside.unwrap_or(match case.default_outside() {
+    let outside = match outside {
         OutsideSpread::Uniform => Outside::Uniform,
         OutsideSpread::Ndd => Outside::Ndd,
-    });
+    };
     let status = match &library {
         Some(lib) if req.method == Method::Library && lib.status() == LibraryStatus::Building => {
             CampaignStatus::Pending
