@@ -48,10 +48,7 @@ fn library_request(search: Option<SearchRequest>) -> CreateLibrary {
 async fn car_following_library_campaigns_agree_with_ndd_baselines_with_far_fewer_tests() {
     let dir = scratch();
     let server = ServerProcess::start(&dir.path().join("db.sqlite"), &[]);
-    let _workers = [
-        WorkerProcess::start(&server.url, 1, "w1"),
-        WorkerProcess::start(&server.url, 1, "w2"),
-    ];
+    let _workers = two_workers(&server.url);
     let client = server.client();
     let library = build_library(&client, &library_request(None)).await;
     assert_eq!(library.total_scenarios, 45_885);

@@ -12,10 +12,7 @@ use tslg_api::{CampaignStatus, Method};
 async fn library_and_ndd_campaigns_converge_through_the_service_and_cover_the_exact_value() {
     let dir = scratch();
     let server = ServerProcess::start(&dir.path().join("db.sqlite"), &[]);
-    let _workers = [
-        WorkerProcess::start(&server.url, 1, "w1"),
-        WorkerProcess::start(&server.url, 1, "w2"),
-    ];
+    let _workers = two_workers(&server.url);
     let client = server.client();
     let library = ready_library(&client, "fvdm", true).await;
     let exact = exact("idm");
@@ -100,10 +97,7 @@ async fn an_ndd_baseline_of_over_a_million_tests_stores_far_fewer_rows_than_test
     let dir = scratch();
     let database = dir.path().join("db.sqlite");
     let server = ServerProcess::start(&database, &[]);
-    let _workers = [
-        WorkerProcess::start(&server.url, 1, "w1"),
-        WorkerProcess::start(&server.url, 1, "w2"),
-    ];
+    let _workers = two_workers(&server.url);
     let client = server.client();
     let library = ready_library(&client, "idm", false).await;
     let request = campaign(Method::Ndd, library.id, "idm", 0.045, 5);

@@ -17,10 +17,7 @@ async fn two_long_campaigns_share_the_workers_in_comparable_worker_time() {
         &dir.path().join("db.sqlite"),
         &["--lease-target-seconds", "0.2"],
     );
-    let _workers = [
-        WorkerProcess::start(&server.url, 1, "w1"),
-        WorkerProcess::start(&server.url, 1, "w2"),
-    ];
+    let _workers = two_workers(&server.url);
     let client = server.client();
     let library = ready_library(&client, "fvdm", true).await;
     // β so small that neither campaign can stop during the test.

@@ -44,10 +44,7 @@ fn request(
 async fn highway_exit_library_and_ndd_campaigns_cover_the_exact_failure_rate() {
     let dir = scratch();
     let server = ServerProcess::start(&dir.path().join("db.sqlite"), &[]);
-    let _workers = [
-        WorkerProcess::start(&server.url, 1, "w1"),
-        WorkerProcess::start(&server.url, 1, "w2"),
-    ];
+    let _workers = two_workers(&server.url);
     let client = server.client();
     let library = build_library(
         &client,

@@ -43,6 +43,11 @@ impl SamplerCache {
         Ok(tests)
     }
 
+    /// Keeps tests already built for a campaign (at its creation).
+    pub fn insert(&self, campaign_id: i64, tests: Arc<dyn CampaignTests>) {
+        self.lock().insert(campaign_id, tests);
+    }
+
     /// Drops the sampler of a campaign that has stopped.
     pub fn forget(&self, campaign_id: i64) {
         self.lock().remove(&campaign_id);

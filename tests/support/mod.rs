@@ -135,6 +135,14 @@ impl Drop for WorkerProcess {
     }
 }
 
+/// Two one-thread workers, `w1` and `w2`, on the coordinator at `url`.
+pub fn two_workers(url: &str) -> [WorkerProcess; 2] {
+    [
+        WorkerProcess::start(url, 1, "w1"),
+        WorkerProcess::start(url, 1, "w2"),
+    ]
+}
+
 /// A fresh scratch directory.
 pub fn scratch() -> tempfile::TempDir {
     tempfile::tempdir().expect("tempdir")

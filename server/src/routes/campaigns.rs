@@ -115,7 +115,7 @@ pub async fn create(
         req.seed,
     );
     let source = exposure.clone();
-    let (case, vut, outside) = tokio::task::spawn_blocking(move || {
+    let (case, vut, outside, tests) = tokio::task::spawn_blocking(move || {
         let case = open_case(&case_name, preset.as_deref(), &source)?;
         let vut = case.normalise_vehicle(&vut)?;
         let outside = match requested {
@@ -123,10 +123,12 @@ pub async fn create(
             Some(Outside::Ndd) => OutsideSpread::Ndd,
             None => case.default_outside(),
         };
-        if prepare {
-            case.campaign(file.as_deref(), &vut, epsilon, outside, seed)?;
-        }
-        Ok::<_, tslg_method::registry::CaseError>((case, vut, outside))
+        let tests = if prepare {
+            Some(case.campaign(file.as_deref(), &vut, epsilon, outside, seed)?)
+        } else {
+            None
+        };
+        Ok::<_, tslg_method::registry::CaseError>((case, vut, outside, tests))
     })
     .await
     .map_err(|e| ApiError::Internal(e.into()))?
@@ -163,6 +165,9 @@ pub async fn create(
         },
     )
     .await?;
+    if let Some(tests) = tests {
+        state.samplers.insert(row.id, tests);
+    }
     let location = format!("/api/v1/campaigns/{}", row.id);
     Ok((
         StatusCode::CREATED,
