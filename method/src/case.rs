@@ -2,6 +2,7 @@
 //! that yields an outcome for a vehicle model. Library search, sampling,
 //! estimation and exact answers are written against this trait only.
 
+use crate::external::{DriverError, ExternalMode, ExternalVehicle};
 use crate::grid::Grid;
 use crate::mass::GridMass;
 
@@ -34,6 +35,32 @@ pub trait Case: Sync {
     /// Whether `vehicle` has the event `A` in scenario `cell`. Vehicles are
     /// deterministic, so `P(A|x)` is this as 0 or 1.
     fn is_event(&self, vehicle: &Self::Vehicle, cell: usize) -> bool;
+
+    /// The constants an external program is told at each reset (time
+    /// step, horizon, bounds, lanes).
+    fn external_world(&self) -> serde_json::Value;
+
+    /// Whether an external program has the event in scenario `cell`: in
+    /// step mode this case's simulation asks it for a control at every
+    /// step; in episode mode it is handed [`Case::external_scenario`] and
+    /// reports the outcome. The caller has sent the test's `reset`.
+    fn external_event(
+        &self,
+        vut: &mut dyn ExternalVehicle,
+        mode: ExternalMode,
+        cell: usize,
+    ) -> Result<bool, DriverError>;
+
+    /// Scenario `cell` by its axes' names, as episode mode sends it.
+    fn external_scenario(&self, cell: usize) -> serde_json::Value {
+        let grid = self.grid();
+        grid.axes()
+            .iter()
+            .enumerate()
+            .map(|(axis, a)| (a.name().to_owned(), grid.value(cell, axis).into()))
+            .collect::<serde_json::Map<_, _>>()
+            .into()
+    }
 
     /// One surrogate run at `cell` for library search.
     fn evaluate_surrogate(&self, surrogate: &Self::Vehicle, cell: usize) -> SurrogateEvaluation;

@@ -10,6 +10,7 @@ pub mod cutin;
 pub mod density;
 pub mod estimator;
 pub mod exact;
+pub mod external;
 pub mod grid;
 pub mod highway;
 pub mod library;

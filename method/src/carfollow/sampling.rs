@@ -20,9 +20,9 @@
 use super::exposure_model::FollowExposureModel;
 use super::library::PolicyLibrary;
 use super::states::StateGrid;
-use super::world::{advance, FollowWorld};
+use super::world::{advance_with, FollowWorld, Odometer};
 use crate::sampling::{test_rng, OutsideSpread, SamplingError};
-use crate::vehicle::VehicleModel;
+use crate::vehicle::{FollowDriver, VehicleModel};
 use rand::Rng;
 use rand_distr::weighted::WeightedAliasIndex;
 use rand_distr::Distribution;
@@ -162,10 +162,22 @@ impl FollowSampler {
 
     /// Runs test `index` of a campaign with seed `seed` on `vut`.
     pub fn run(&self, vut: &VehicleModel, seed: u64, index: u64) -> FollowTest {
+        let Ok(test) = self.run_with(&mut vut.controller(), seed, index);
+        test
+    }
+
+    /// Runs test `index` of a campaign with seed `seed` with a fresh
+    /// `driver` as the vehicle under test; a driver error ends the test.
+    pub fn run_with<D: FollowDriver>(
+        &self,
+        driver: &mut D,
+        seed: u64,
+        index: u64,
+    ) -> Result<FollowTest, D::Error> {
         let mut rng = test_rng(seed, index);
         let s1 = self.initial_alias.sample(&mut rng);
         let mut log_weight = (self.initial[s1] / self.initial_q[s1]).ln();
-        let mut controller = vut.controller();
+        let mut odometer = Odometer::default();
         let mut x = self.grid.state(s1);
         let actions = self.world.actions;
         let mut mixed = vec![0.0; actions];
@@ -196,21 +208,22 @@ impl FollowSampler {
                 }
                 None => draw_index(ndd, r),
             };
-            match advance(&self.world, x, self.world.action(k), &mut controller) {
+            let action = self.world.action(k);
+            match advance_with(&self.world, x, action, driver, &mut odometer)? {
                 None => {
-                    return FollowTest {
+                    return Ok(FollowTest {
                         accident: true,
                         log_weight,
                         initial_state: s1,
-                    }
+                    })
                 }
                 Some(next) => x = next,
             }
         }
-        FollowTest {
+        Ok(FollowTest {
             accident: false,
             log_weight,
             initial_state: s1,
-        }
+        })
     }
 }

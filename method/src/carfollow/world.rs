@@ -4,7 +4,7 @@
 //! decisions both vehicles move with a 0.1 s step. An accident is a range
 //! (bumper gap) `R ≤ 1 m` at any step.
 
-use crate::vehicle::{Controller, FollowerObservation};
+use crate::vehicle::{Controller, FollowDriver, FollowStep, FollowerObservation};
 
 /// The world's constants. [`FollowWorld::paper`] holds the paper's values.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -68,42 +68,75 @@ impl FollowState {
     }
 }
 
-/// One BV decision: the BV holds `u` (cut so its speed stays in bounds) for
-/// `steps_per_decision` steps while `vut` follows. Per step: the VUT's
-/// command is clipped to its bounds and to what keeps its speed in bounds;
-/// each vehicle moves `v Δt + a Δt²/2`, then `v += a Δt`. Returns the new
-/// state, or `None` when the range fell to `accident_range` or below.
+/// How far a test has come: fine steps taken and the VUT's distance
+/// driven, for the observations of an external program.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Odometer {
+    pub step: usize,
+    pub position: f64,
+}
+
+/// One BV decision with a built-in controller ([`advance_with`]).
 pub fn advance(
     world: &FollowWorld,
     state: FollowState,
     u: f64,
     vut: &mut Controller,
 ) -> Option<FollowState> {
+    let Ok(next) = advance_with(world, state, u, vut, &mut Odometer::default());
+    next
+}
+
+/// One BV decision: the BV holds `u` (cut so its speed stays in bounds) for
+/// `steps_per_decision` steps while `vut` follows. Per step: the VUT's
+/// command is clipped to its bounds and to what keeps its speed in bounds;
+/// each vehicle moves `v Δt + a Δt²/2`, then `v += a Δt`. Returns the new
+/// state, or `None` when the range fell to `accident_range` or below; a
+/// driver error ends the test with that error.
+pub fn advance_with<D: FollowDriver>(
+    world: &FollowWorld,
+    state: FollowState,
+    u: f64,
+    vut: &mut D,
+    odometer: &mut Odometer,
+) -> Result<Option<FollowState>, D::Error> {
     let dt = world.dt;
     let mut bv = state.bv_speed;
     let mut own = state.vut_speed();
     let mut range = state.range;
     for _ in 0..world.steps_per_decision {
         let a_bv = u.clamp((world.bv_speed.0 - bv) / dt, (world.bv_speed.1 - bv) / dt);
-        let obs = FollowerObservation {
-            speed: own,
-            lead_speed: bv,
-            gap: range,
+        let step = FollowStep {
+            step: odometer.step,
+            time: odometer.step as f64 * dt,
+            position: odometer.position,
+            obs: FollowerObservation {
+                speed: own,
+                lead_speed: bv,
+                gap: range,
+            },
+            clip: world.vut_accel,
+            dt,
         };
-        let a_own = vut.acceleration(&obs, world.vut_accel, dt).clamp(
-            (world.vut_speed.0 - own) / dt,
-            (world.vut_speed.1 - own) / dt,
-        );
+        let a_own = vut
+            .decide(&step)?
+            .clamp(world.vut_accel.0, world.vut_accel.1)
+            .clamp(
+                (world.vut_speed.0 - own) / dt,
+                (world.vut_speed.1 - own) / dt,
+            );
         range += (bv - own) * dt + 0.5 * (a_bv - a_own) * dt * dt;
+        odometer.position += own * dt + 0.5 * a_own * dt * dt;
+        odometer.step += 1;
         bv += a_bv * dt;
         own += a_own * dt;
         if range <= world.accident_range {
-            return None;
+            return Ok(None);
         }
     }
-    Some(FollowState {
+    Ok(Some(FollowState {
         bv_speed: bv,
         range,
         range_rate: bv - own,
-    })
+    }))
 }

@@ -10,6 +10,9 @@ pub use exposure_model::{default_grid, CutInExposureModel};
 pub use simulation::{enhanced_ttc, normalised_ettc, CutInPreset, CutInRun, CutInSettings};
 
 use crate::case::{Case, SurrogateEvaluation};
+use crate::external::{
+    DriverError, ExternalFollower, ExternalMode, ExternalVehicle, NOMINAL_LENGTH,
+};
 use crate::mass::GridMass;
 use crate::ndd_table::{parse_table, NddTable, TableError};
 use crate::objective::BoxDistance;
@@ -135,6 +138,38 @@ impl Case for CutIn {
 
     fn is_event(&self, vehicle: &VehicleModel, cell: usize) -> bool {
         self.run(vehicle, cell).accident
+    }
+
+    /// The simulation settings (`initial_speed`, `dt`, `steps`,
+    /// `acceleration` and `speed` bounds, `accident_gap` with `inclusive`)
+    /// and the one-lane layout.
+    fn external_world(&self) -> serde_json::Value {
+        let mut world = serde_json::to_value(self.settings).expect("settings serialise");
+        world["lanes"] = 1.into();
+        world["vehicle_length"] = NOMINAL_LENGTH.into();
+        world["preset"] = self.preset.name().into();
+        world
+    }
+
+    fn external_event(
+        &self,
+        vut: &mut dyn ExternalVehicle,
+        mode: ExternalMode,
+        cell: usize,
+    ) -> Result<bool, DriverError> {
+        match mode {
+            ExternalMode::Step => {
+                let grid = self.exposure.grid();
+                let run = self.settings.run_with(
+                    &mut ExternalFollower { vut },
+                    grid.value(cell, 0),
+                    grid.value(cell, 1),
+                    self.objective.u_i,
+                )?;
+                Ok(run.accident)
+            }
+            ExternalMode::Episode => Ok(vut.episode(&self.external_scenario(cell))?.event),
+        }
     }
 
     fn evaluate_surrogate(&self, surrogate: &VehicleModel, cell: usize) -> SurrogateEvaluation {

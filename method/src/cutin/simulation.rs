@@ -1,7 +1,7 @@
 //! The cut-in simulation: after the cut-in the leader keeps its speed and the
 //! vehicle under test follows it for a fixed horizon.
 
-use crate::vehicle::{FollowerObservation, VehicleModel};
+use crate::vehicle::{FollowDriver, FollowStep, FollowerObservation, VehicleModel};
 use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::str::FromStr;
@@ -138,51 +138,73 @@ impl CutInSettings {
     }
 
     /// Runs `vehicle` after a cut-in at range `range` and range rate
-    /// `range_rate`. Per step: the controller's acceleration is clipped to the
+    /// `range_rate` (see [`CutInSettings::run_with`]).
+    pub fn run(&self, vehicle: &VehicleModel, range: f64, range_rate: f64, u_i: f64) -> CutInRun {
+        let Ok(run) = self.run_with(&mut vehicle.controller(), range, range_rate, u_i);
+        run
+    }
+
+    /// Runs a fresh `driver` after a cut-in at range `range` and range rate
+    /// `range_rate`. Per step: the driver's acceleration is clipped to the
     /// acceleration bounds and then to what keeps the speed in bounds;
     /// positions advance by `v dt + a dt²/2`, then `v += a dt`; the leader
-    /// moves at constant speed. `u_i` normalises the ETTC.
-    pub fn run(&self, vehicle: &VehicleModel, range: f64, range_rate: f64, u_i: f64) -> CutInRun {
-        let mut controller = vehicle.controller();
+    /// moves at constant speed. `u_i` normalises the ETTC. A driver error
+    /// ends the run with that error.
+    pub fn run_with<D: FollowDriver>(
+        &self,
+        driver: &mut D,
+        range: f64,
+        range_rate: f64,
+        u_i: f64,
+    ) -> Result<CutInRun, D::Error> {
         let lead_speed = self.initial_speed + range_rate;
         let mut speed = self.initial_speed;
+        let mut position = 0.0;
         let mut gap = range;
         let mut mnp_ettc: f64 = 1.0;
         if self.is_accident(gap) {
-            return CutInRun {
+            return Ok(CutInRun {
                 accident: true,
                 accident_step: Some(0),
                 mnp_ettc: 0.0,
-            };
+            });
         }
         for step in 1..=self.steps {
-            let obs = FollowerObservation {
-                speed,
-                lead_speed,
-                gap,
-            };
-            let a = controller
-                .acceleration(&obs, self.acceleration, self.dt)
+            let a = driver
+                .decide(&FollowStep {
+                    step: step - 1,
+                    time: (step - 1) as f64 * self.dt,
+                    position,
+                    obs: FollowerObservation {
+                        speed,
+                        lead_speed,
+                        gap,
+                    },
+                    clip: self.acceleration,
+                    dt: self.dt,
+                })?
+                .clamp(self.acceleration.0, self.acceleration.1)
                 .clamp(
                     (self.speed.0 - speed) / self.dt,
                     (self.speed.1 - speed) / self.dt,
                 );
             mnp_ettc = mnp_ettc.min(normalised_ettc(gap, lead_speed - speed, -a, u_i));
             gap += (lead_speed - speed) * self.dt - a * self.dt * self.dt / 2.0;
+            position += speed * self.dt + a * self.dt * self.dt / 2.0;
             speed += a * self.dt;
             if self.is_accident(gap) {
-                return CutInRun {
+                return Ok(CutInRun {
                     accident: true,
                     accident_step: Some(step),
                     mnp_ettc: 0.0,
-                };
+                });
             }
         }
-        CutInRun {
+        Ok(CutInRun {
             accident: false,
             accident_step: None,
             mnp_ettc,
-        }
+        })
     }
 }
 

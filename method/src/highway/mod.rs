@@ -7,6 +7,7 @@
 
 pub mod drivers;
 mod exposure_model;
+pub mod external;
 pub mod simulation;
 pub mod world;
 pub mod zone;
@@ -17,6 +18,7 @@ pub use simulation::{ExitOutcome, ExitRun};
 pub use world::ExitWorld;
 
 use crate::case::{Case, SurrogateEvaluation};
+use crate::external::{DriverError, ExternalMode, ExternalVehicle};
 use crate::mass::GridMass;
 use crate::objective::BoxDistance;
 use std::str::FromStr;
@@ -157,6 +159,31 @@ impl Case for HighwayExit {
 
     fn is_event(&self, vehicle: &ExitVehicle, cell: usize) -> bool {
         self.run(vehicle, cell).outcome.is_failure()
+    }
+
+    fn external_world(&self) -> serde_json::Value {
+        let mut world = external::world_block(&self.world);
+        world["preset"] = self.preset.name().into();
+        world
+    }
+
+    fn external_event(
+        &self,
+        vut: &mut dyn ExternalVehicle,
+        mode: ExternalMode,
+        cell: usize,
+    ) -> Result<bool, DriverError> {
+        match mode {
+            ExternalMode::Step => {
+                let run = simulation::run_with(
+                    &self.world,
+                    &mut external::ExternalExitDriver { vut },
+                    self.scenario(cell),
+                )?;
+                Ok(run.outcome.is_failure())
+            }
+            ExternalMode::Episode => Ok(vut.episode(&self.external_scenario(cell))?.event),
+        }
     }
 
     fn evaluate_surrogate(&self, surrogate: &ExitVehicle, cell: usize) -> SurrogateEvaluation {

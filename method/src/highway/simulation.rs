@@ -12,7 +12,7 @@
 //! `p = L`: in the right lane it exits, in the left lane it failed to exit
 //! (as after `max_time`).
 
-use super::drivers::{overlaps, safe_gaps, DriverView, ExitVehicle, Lane};
+use super::drivers::{overlaps, safe_gaps, DriverView, ExitDriver, ExitVehicle, Lane};
 use super::world::{ExitWorld, Traffic};
 
 /// How a run ended. Failures are the event `A`.
@@ -39,8 +39,19 @@ pub struct ExitRun {
     pub lane_change: Option<(f64, f64)>,
 }
 
+/// Runs a built-in vehicle on scenario `x`.
 pub fn run(world: &ExitWorld, vehicle: &ExitVehicle, x: [f64; 4]) -> ExitRun {
-    let mut driver = vehicle.driver();
+    let Ok(run) = run_with(world, &mut vehicle.driver(), x);
+    run
+}
+
+/// Runs a fresh `driver` on scenario `x`; a driver error ends the run with
+/// that error.
+pub fn run_with<D: ExitDriver>(
+    world: &ExitWorld,
+    driver: &mut D,
+    x: [f64; 4],
+) -> Result<ExitRun, D::Error> {
     let mut traffic = Traffic::new(x);
     let (mut p, mut v) = (0.0, world.start_speed);
     let mut lane = Lane::Left;
@@ -53,22 +64,22 @@ pub fn run(world: &ExitWorld, vehicle: &ExitVehicle, x: [f64; 4]) -> ExitRun {
     };
     for k in 0..steps {
         let time = k as f64 * world.dt;
-        let action = driver.act(&DriverView {
+        let action = driver.decide(&DriverView {
             world,
             time,
             position: p,
             speed: v,
             lane,
             traffic: &traffic,
-        });
+        })?;
         if lane == Lane::Left && action.change_lane {
             lane = Lane::Right;
             lane_change = Some((time, p));
             if overlaps(world, &traffic.bvs, p) {
-                return end(ExitOutcome::Collision, k, lane_change);
+                return Ok(end(ExitOutcome::Collision, k, lane_change));
             }
             if !safe_gaps(world, &traffic.bvs, p) {
-                return end(ExitOutcome::FailedToExit, k, lane_change);
+                return Ok(end(ExitOutcome::FailedToExit, k, lane_change));
             }
         }
         let a = action
@@ -79,15 +90,15 @@ pub fn run(world: &ExitWorld, vehicle: &ExitVehicle, x: [f64; 4]) -> ExitRun {
         v += a * world.dt;
         traffic.step(world);
         if lane == Lane::Right && overlaps(world, &traffic.bvs, p) {
-            return end(ExitOutcome::Collision, k + 1, lane_change);
+            return Ok(end(ExitOutcome::Collision, k + 1, lane_change));
         }
         if p >= world.exit {
             let outcome = match lane {
                 Lane::Right => ExitOutcome::Exited,
                 Lane::Left => ExitOutcome::FailedToExit,
             };
-            return end(outcome, k + 1, lane_change);
+            return Ok(end(outcome, k + 1, lane_change));
         }
     }
-    end(ExitOutcome::FailedToExit, steps, lane_change)
+    Ok(end(ExitOutcome::FailedToExit, steps, lane_change))
 }

@@ -2,6 +2,7 @@
 //! vehicles are serde types, libraries of cells in the JSON library format,
 //! and tests drawn as a cell and a weight before the vehicle runs.
 
+use super::vut::{runner, CampaignVehicle, Runner};
 use super::{
     BuildRequest, BuiltLibrary, CampaignTests, CaseError, LibrarySearch, PlannedTest, ScenarioCase,
     TestOutcome,
@@ -9,6 +10,7 @@ use super::{
 use crate::case::Case;
 use crate::estimator::z_for_confidence;
 use crate::exact::{event_cells, event_probability, exact_report, ExactReport};
+use crate::external::{DriverError, ExternalVehicle, ExternalVut, TestStart};
 use crate::library::{build_library, Library, LibraryRequest, SearchMethod};
 use crate::sampling::{LibraryDistribution, NddDistribution, OutsideSpread, TestDistribution};
 use serde::de::DeserializeOwned;
@@ -40,6 +42,21 @@ where
             case: self.case.name(),
             reason: e.to_string(),
         })
+    }
+
+    /// A built-in model or an external program (both modes: a grid
+    /// scenario is fixed before the test runs).
+    fn campaign_vehicle(
+        &self,
+        spec: &serde_json::Value,
+    ) -> Result<CampaignVehicle<C::Vehicle>, CaseError> {
+        CampaignVehicle::parse(self.case.name(), spec, true, |spec| self.vehicle(spec))
+    }
+
+    /// A built-in model, for what runs on the coordinator (`purpose`).
+    fn builtin(&self, spec: &serde_json::Value, purpose: &str) -> Result<C::Vehicle, CaseError> {
+        self.campaign_vehicle(spec)?
+            .into_builtin(self.case.name(), purpose)
     }
 
     fn library(&self, file: &[u8]) -> Result<Library, CaseError> {
@@ -98,8 +115,11 @@ where
     }
 
     fn normalise_vehicle(&self, spec: &serde_json::Value) -> Result<serde_json::Value, CaseError> {
-        let vehicle = self.vehicle(spec)?;
-        Ok(serde_json::to_value(vehicle).expect("vehicle specifications serialise"))
+        let normal = match self.campaign_vehicle(spec)? {
+            CampaignVehicle::Builtin(v) => serde_json::to_value(v),
+            CampaignVehicle::External(e) => serde_json::to_value(e),
+        };
+        Ok(normal.expect("vehicle specifications serialise"))
     }
 
     fn check_request(&self, request: &BuildRequest) -> Result<(), CaseError> {
@@ -111,7 +131,7 @@ where
         surrogate: &serde_json::Value,
         request: &BuildRequest,
     ) -> Result<BuiltLibrary, CaseError> {
-        let vehicle = self.vehicle(surrogate)?;
+        let vehicle = self.builtin(surrogate, "a library's surrogate")?;
         let spec = serde_json::to_value(&vehicle).expect("vehicle specifications serialise");
         let request = LibraryRequest {
             threshold: request.threshold.unwrap_or_default(),
@@ -136,7 +156,7 @@ where
         outside: OutsideSpread,
         seed: u64,
     ) -> Result<Arc<dyn CampaignTests>, CaseError> {
-        let vehicle = self.vehicle(vut)?;
+        let vehicle = self.campaign_vehicle(vut)?;
         let distribution = match file {
             Some(file) => TestDistribution::library(LibraryDistribution::new(
                 &self.library(file)?,
@@ -147,6 +167,7 @@ where
             None => TestDistribution::Ndd(NddDistribution::new(self.case.exposure())),
         };
         Ok(Arc::new(CellCampaign {
+            world: self.case.external_world(),
             case: Arc::clone(&self.case),
             vehicle,
             distribution,
@@ -155,7 +176,7 @@ where
     }
 
     fn exact_event_probability(&self, spec: &serde_json::Value) -> Result<f64, CaseError> {
-        let vehicle = self.vehicle(spec)?;
+        let vehicle = self.builtin(spec, "an exact answer")?;
         Ok(event_probability(
             self.case.as_ref(),
             &event_cells(self.case.as_ref(), &vehicle),
@@ -171,7 +192,7 @@ where
         beta: f64,
         confidence: f64,
     ) -> Result<ExactReport, CaseError> {
-        let vehicle = self.vehicle(spec)?;
+        let vehicle = self.builtin(spec, "an exact answer")?;
         let library = self.library(file)?;
         let q = LibraryDistribution::new(&library, self.case.exposure(), epsilon, outside)?;
         Ok(exact_report(
@@ -188,9 +209,11 @@ where
 /// `(seed, i)`, then the vehicle runs that scenario.
 struct CellCampaign<C: Case> {
     case: Arc<C>,
-    vehicle: C::Vehicle,
+    vehicle: CampaignVehicle<C::Vehicle>,
     distribution: TestDistribution,
     seed: u64,
+    /// The world block of each `reset` sent to a program.
+    world: serde_json::Value,
 }
 
 impl<C> CampaignTests for CellCampaign<C>
@@ -198,12 +221,30 @@ where
     C: Case + Send + 'static,
     C::Vehicle: Send + Sync,
 {
-    fn run(&self, index: u64) -> TestOutcome {
+    fn external(&self) -> Option<&ExternalVut> {
+        self.vehicle.external()
+    }
+
+    fn run_with(
+        &self,
+        index: u64,
+        program: Option<&mut dyn ExternalVehicle>,
+    ) -> Result<TestOutcome, DriverError> {
         let draw = self.distribution.draw(self.seed, index);
-        TestOutcome {
-            event: self.case.is_event(&self.vehicle, draw.cell),
+        let start = TestStart {
+            case: self.case.name(),
+            mode: Default::default(),
+            index,
+            world: &self.world,
+        };
+        let event = match runner(&self.vehicle, program, start)? {
+            Runner::Builtin(vehicle) => self.case.is_event(vehicle, draw.cell),
+            Runner::Program(program, mode) => self.case.external_event(program, mode, draw.cell)?,
+        };
+        Ok(TestOutcome {
+            event,
             weight: draw.weight,
-        }
+        })
     }
 
     fn check_event(&self, index: u64, weight: f64) -> Result<(), String> {

@@ -1,9 +1,11 @@
 //! The adapter for the car-following case: libraries are policies in the
 //! compact binary file format, and a test samples the BV's actions while it
 //! runs, so its weight depends on what the vehicle under test does. The
-//! coordinator checks a reported accident by replaying the test (300 steps,
-//! microseconds).
+//! coordinator checks a reported accident of a built-in vehicle by replaying
+//! the test (300 steps, microseconds); an external program's cannot be
+//! replayed there.
 
+use super::vut::{runner, CampaignVehicle, Runner};
 use super::{
     BuildRequest, BuiltLibrary, CampaignTests, CaseError, LibrarySearch, PlannedTest, ScenarioCase,
     TestOutcome,
@@ -13,6 +15,9 @@ use crate::carfollow::file::{PolicyHeader, PolicyLibraryFile, MEDIA_TYPE, VERSIO
 use crate::carfollow::library::PolicyLibrary;
 use crate::carfollow::sampling::FollowSampler;
 use crate::exact::ExactReport;
+use crate::external::{
+    DriverError, ExternalFollower, ExternalVehicle, ExternalVut, TestStart, NOMINAL_LENGTH,
+};
 use crate::library::{ExposureRef, LibraryFileError};
 use crate::sampling::OutsideSpread;
 use crate::vehicle::VehicleModel;
@@ -33,6 +38,33 @@ impl FollowScenarioCase {
 
     fn vehicle(&self, spec: &serde_json::Value) -> Result<VehicleModel, CaseError> {
         CarFollowing::vehicle(spec).map_err(|reason| CaseError::Vehicle { case: NAME, reason })
+    }
+
+    /// A built-in model or an external program in step mode.
+    fn campaign_vehicle(
+        &self,
+        spec: &serde_json::Value,
+    ) -> Result<CampaignVehicle<VehicleModel>, CaseError> {
+        CampaignVehicle::parse(NAME, spec, false, |spec| self.vehicle(spec))
+    }
+
+    /// The world block of each `reset` sent to a program.
+    fn external_world(&self) -> serde_json::Value {
+        let w = &self.case.world;
+        serde_json::json!({
+            "preset": self.case.preset.name(),
+            "dt": w.dt,
+            "steps_per_decision": w.steps_per_decision,
+            "decisions": w.decisions,
+            "steps": w.steps_per_decision * w.decisions,
+            "acceleration": [w.vut_accel.0, w.vut_accel.1],
+            "speed": [w.vut_speed.0, w.vut_speed.1],
+            "lead_speed": [w.bv_speed.0, w.bv_speed.1],
+            "lead_actions": {"min": w.u_min, "step": w.u_step, "count": w.actions},
+            "accident_range": w.accident_range,
+            "lanes": 1,
+            "vehicle_length": NOMINAL_LENGTH,
+        })
     }
 
     fn solver(&self, request: &BuildRequest) -> Result<PolicySolver, CaseError> {
@@ -143,8 +175,11 @@ impl ScenarioCase for FollowScenarioCase {
     }
 
     fn normalise_vehicle(&self, spec: &serde_json::Value) -> Result<serde_json::Value, CaseError> {
-        let vehicle = self.vehicle(spec)?;
-        Ok(serde_json::to_value(vehicle).expect("vehicle specifications serialise"))
+        let normal = match self.campaign_vehicle(spec)? {
+            CampaignVehicle::Builtin(v) => serde_json::to_value(v),
+            CampaignVehicle::External(e) => serde_json::to_value(e),
+        };
+        Ok(normal.expect("vehicle specifications serialise"))
     }
 
     fn check_request(&self, request: &BuildRequest) -> Result<(), CaseError> {
@@ -157,7 +192,9 @@ impl ScenarioCase for FollowScenarioCase {
         request: &BuildRequest,
     ) -> Result<BuiltLibrary, CaseError> {
         let solver = self.solver(request)?;
-        let vehicle = self.vehicle(surrogate)?;
+        let vehicle = self
+            .campaign_vehicle(surrogate)?
+            .into_builtin(NAME, "a library's surrogate")?;
         let learned = self
             .case
             .learn(&vehicle, solver)
@@ -201,7 +238,7 @@ impl ScenarioCase for FollowScenarioCase {
         outside: OutsideSpread,
         seed: u64,
     ) -> Result<Arc<dyn CampaignTests>, CaseError> {
-        let vut = self.vehicle(vut)?;
+        let vut = self.campaign_vehicle(vut)?;
         let sampler = match file {
             Some(file) => FollowSampler::library(
                 self.case.world,
@@ -213,7 +250,12 @@ impl ScenarioCase for FollowScenarioCase {
             )?,
             None => self.case.ndd_sampler(),
         };
-        Ok(Arc::new(FollowCampaign { sampler, vut, seed }))
+        Ok(Arc::new(FollowCampaign {
+            sampler,
+            vut,
+            seed,
+            world: self.external_world(),
+        }))
     }
 
     fn exact_event_probability(&self, _: &serde_json::Value) -> Result<f64, CaseError> {
@@ -245,20 +287,51 @@ fn no_exact_answer() -> CaseError {
 /// BV's 30 actions from the stream `(seed, i)` as the vehicle drives.
 struct FollowCampaign {
     sampler: FollowSampler,
-    vut: VehicleModel,
+    vut: CampaignVehicle<VehicleModel>,
     seed: u64,
+    world: serde_json::Value,
 }
 
 impl CampaignTests for FollowCampaign {
-    fn run(&self, index: u64) -> TestOutcome {
-        let test = self.sampler.run(&self.vut, self.seed, index);
-        TestOutcome {
-            event: test.accident,
-            weight: test.weight(),
-        }
+    fn external(&self) -> Option<&ExternalVut> {
+        self.vut.external()
     }
 
+    fn run_with(
+        &self,
+        index: u64,
+        program: Option<&mut dyn ExternalVehicle>,
+    ) -> Result<TestOutcome, DriverError> {
+        let start = TestStart {
+            case: NAME,
+            mode: Default::default(),
+            index,
+            world: &self.world,
+        };
+        let test = match runner(&self.vut, program, start)? {
+            Runner::Builtin(vut) => self.sampler.run(vut, self.seed, index),
+            Runner::Program(vut, _) => {
+                self.sampler
+                    .run_with(&mut ExternalFollower { vut }, self.seed, index)?
+            }
+        };
+        Ok(TestOutcome {
+            event: test.accident,
+            weight: test.weight(),
+        })
+    }
+
+    /// Replays a built-in vehicle's test. An external program's test
+    /// cannot be replayed on the coordinator, and its weight depends on the
+    /// program's trajectory: only its range is checked, `0 < w < ∞`.
     fn check_event(&self, index: u64, weight: f64) -> Result<(), String> {
+        if self.vut.external().is_some() {
+            return if weight.is_finite() && weight > 0.0 {
+                Ok(())
+            } else {
+                Err(format!("event at test {index} reports weight {weight:e}"))
+            };
+        }
         let replay = self.run(index);
         if !replay.event {
             return Err(format!(

@@ -7,11 +7,13 @@
 
 mod cells;
 mod follow;
+mod vut;
 
 use crate::carfollow::case::{CarFollowing, FollowPreset, PolicySolver};
 use crate::carfollow::file::PolicyFileError;
 use crate::cutin::{CutIn, CutInError, CutInPreset};
 use crate::exact::ExactReport;
+use crate::external::{DriverError, ExternalVehicle, ExternalVut};
 use crate::highway::{HighwayExit, HighwayPreset};
 use crate::library::{LibraryFileError, SearchMethod, Threshold};
 use crate::sampling::{OutsideSpread, SamplingError};
@@ -113,12 +115,29 @@ pub struct PlannedTest {
 /// Every test of one campaign, reproducible from its index (SPEC §7): the
 /// coordinator and the worker build the same object from the same plan.
 pub trait CampaignTests: Send + Sync {
-    /// Runs test `index` on the campaign's vehicle (worker side; a vehicle
-    /// that panics is the caller's to catch).
-    fn run(&self, index: u64) -> TestOutcome;
+    /// The external program the campaign's vehicle under test is, if it is
+    /// one.
+    fn external(&self) -> Option<&ExternalVut>;
+    /// Runs test `index` with `program` as the vehicle under test (sent a
+    /// `reset` first), or on the campaign's built-in model when `program`
+    /// is `None`. An error is the program's fault: the test has no valid
+    /// outcome. A built-in vehicle that panics is the caller's to catch.
+    fn run_with(
+        &self,
+        index: u64,
+        program: Option<&mut dyn ExternalVehicle>,
+    ) -> Result<TestOutcome, DriverError>;
+    /// Runs test `index` on the campaign's built-in model.
+    ///
+    /// # Panics
+    /// When the campaign's vehicle is an external program.
+    fn run(&self, index: u64) -> TestOutcome {
+        self.run_with(index, None).unwrap_or_else(|e| panic!("{e}"))
+    }
     /// Checks a reported event against the campaign's own test `index`: a
     /// mismatch means the reporter samples differently (another version,
-    /// another library) and its results must not enter the estimate.
+    /// another library) and its results must not enter the estimate. What
+    /// depends on an external program's behaviour cannot be checked here.
     fn check_event(&self, index: u64, weight: f64) -> Result<(), String>;
     /// The scenario and weight of test `index` when they are fixed before the
     /// test runs; `None` for sequential scenarios sampled while they run.
@@ -140,7 +159,8 @@ pub trait ScenarioCase: Send + Sync {
     /// How a campaign spreads ε when the request does not say.
     fn default_outside(&self) -> OutsideSpread;
     /// The vehicle specification validated and written out in full (every
-    /// parameter with its value), as it is stored.
+    /// parameter with its value), as it is stored. An external program is
+    /// `{"external": NAME, "mode": "step" | "episode"}`.
     fn normalise_vehicle(&self, spec: &serde_json::Value) -> Result<serde_json::Value, CaseError>;
     /// Checks a build request before it is queued.
     fn check_request(&self, request: &BuildRequest) -> Result<(), CaseError>;

@@ -61,6 +61,36 @@ pub struct FollowerObservation {
     pub gap: f64,
 }
 
+/// One control step of a follower, as its driver sees it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FollowStep {
+    /// Steps since the test started, and `time = step · dt` (s).
+    pub step: usize,
+    pub time: f64,
+    /// Own front bumper from where the test started (m).
+    pub position: f64,
+    pub obs: FollowerObservation,
+    /// The world's acceleration bounds `(a_min, a_max)`.
+    pub clip: (f64, f64),
+    pub dt: f64,
+}
+
+/// Whatever drives a follower: a built-in [`Controller`] (which cannot
+/// fail, `Error = Infallible`, so the built-in path costs nothing extra) or
+/// an external program ([`crate::external::ExternalFollower`]).
+pub trait FollowDriver {
+    type Error;
+    /// The commanded acceleration for the next step.
+    fn decide(&mut self, step: &FollowStep) -> Result<f64, Self::Error>;
+}
+
+impl FollowDriver for Controller {
+    type Error = std::convert::Infallible;
+    fn decide(&mut self, step: &FollowStep) -> Result<f64, Self::Error> {
+        Ok(self.acceleration(&step.obs, step.clip, step.dt))
+    }
+}
+
 /// A vehicle model as written in a request or a file, before validation.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "model", rename_all = "kebab-case", deny_unknown_fields)]

@@ -124,6 +124,20 @@ impl Driver {
     }
 }
 
+/// Whatever drives the VUT on the highway: a built-in [`Driver`] (which
+/// cannot fail) or an external program (see [`super::external`]).
+pub trait ExitDriver {
+    type Error;
+    fn decide(&mut self, view: &DriverView) -> Result<Action, Self::Error>;
+}
+
+impl ExitDriver for Driver {
+    type Error = std::convert::Infallible;
+    fn decide(&mut self, view: &DriverView) -> Result<Action, Self::Error> {
+        Ok(self.act(view))
+    }
+}
+
 /// The Intelligent Driver Model in its standard form (Treiber et al. 2000)
 /// on bumper gaps `s`:
 /// `a = α (1 − (v/v₀)^δ − (s*/s)²)`,

@@ -1,0 +1,297 @@
+//! The vehicle under test as an external program, without I/O: what a test
+//! tells the program and what the program answers (protocol version
+//! [`PROTOCOL_VERSION`], specified in `docs/vut-protocol.md`), and the trait a
+//! runner implements to carry the messages (the worker's child process, or
+//! an in-process double in tests).
+//!
+//! Each case translates its simulation state into an [`Observation`] with
+//! the adapters here ([`ExternalFollower`] for one-lane cases; the highway
+//! has its own), so a program sees every case in one vocabulary: its own
+//! vehicle (`ego`), the other vehicles, lanes and time.
+
+use crate::vehicle::{FollowDriver, FollowStep};
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+/// The protocol version this build speaks.
+pub const PROTOCOL_VERSION: u32 = 1;
+
+/// Longest program name.
+pub const MAX_NAME_LENGTH: usize = 64;
+
+/// The length of every vehicle in the one-lane worlds (cut-in,
+/// car-following), where only the bumper gap enters the dynamics; it fixes
+/// the vehicles' `position`s (front bumpers) for programs that want them.
+pub const NOMINAL_LENGTH: f64 = 5.0;
+
+/// How a program is driven.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ExternalMode {
+    /// Closed loop: the worker simulates the world and asks for a control
+    /// at every step.
+    #[default]
+    Step,
+    /// The worker sends the whole scenario and the program reports the
+    /// outcome (a test track, a heavy simulator).
+    Episode,
+}
+
+impl ExternalMode {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ExternalMode::Step => "step",
+            ExternalMode::Episode => "episode",
+        }
+    }
+}
+
+/// A campaign's vehicle under test when it is a program:
+/// `{"external": "NAME", "mode": "step"}`. Workers map `NAME` to a command
+/// (`tslg-worker --vut-exec NAME=COMMAND`).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExternalVut {
+    pub external: String,
+    #[serde(default)]
+    pub mode: ExternalMode,
+}
+
+impl ExternalVut {
+    /// `None` when `spec` names no external program (a built-in model);
+    /// otherwise the parsed, validated specification or why it is not one.
+    pub fn from_spec(spec: &serde_json::Value) -> Option<Result<Self, String>> {
+        spec.get("external")?;
+        Some(
+            serde_json::from_value::<ExternalVut>(spec.clone())
+                .map_err(|e| format!("external vehicle: {e}"))
+                .and_then(|vut| check_program_name(&vut.external).map(|()| vut)),
+        )
+    }
+
+    /// The key a campaign requires and a worker offers: `NAME:case:mode`.
+    pub fn requirement(&self, case: &str) -> String {
+        requirement(&self.external, case, self.mode)
+    }
+}
+
+/// `NAME:case:mode`, the unit of routing between campaigns and workers.
+pub fn requirement(name: &str, case: &str, mode: ExternalMode) -> String {
+    format!("{name}:{case}:{}", mode.as_str())
+}
+
+/// Program names are 1 to 64 of `A–Z a–z 0–9 . _ -`: they appear in URLs,
+/// logs and command lines.
+pub fn check_program_name(name: &str) -> Result<(), String> {
+    let ok = !name.is_empty()
+        && name.len() <= MAX_NAME_LENGTH
+        && name
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || matches!(b, b'.' | b'_' | b'-'));
+    if ok {
+        Ok(())
+    } else {
+        Err(format!(
+            "external program name `{name}` must be 1 to {MAX_NAME_LENGTH} characters of \
+             A-Z, a-z, 0-9, '.', '_' and '-'"
+        ))
+    }
+}
+
+/// The start of one test (`reset`): the program drops everything it
+/// remembers of earlier tests.
+#[derive(Debug, Clone, Serialize)]
+pub struct TestStart<'a> {
+    pub case: &'a str,
+    pub mode: ExternalMode,
+    /// The test's index in its campaign.
+    pub index: u64,
+    /// The case's constants: time step, horizon, bounds, lanes.
+    pub world: &'a serde_json::Value,
+}
+
+/// The vehicle under test's own state. Positions are front bumpers (m)
+/// along the road, 0 where the test starts; lane 0 is the rightmost.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Ego {
+    pub position: f64,
+    pub speed: f64,
+    pub lane: u32,
+}
+
+/// Another vehicle.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Other {
+    pub id: u32,
+    pub position: f64,
+    pub speed: f64,
+    pub lane: u32,
+    /// The bumper gap as the simulation measures it (its rear bumper to the
+    /// ego's front bumper), present only for the vehicle directly ahead in
+    /// the ego's lane.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gap: Option<f64>,
+}
+
+/// What the program sees at one control step.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Observation {
+    /// Control step `k` since the test started; `time = k · dt`.
+    pub step: u32,
+    pub time: f64,
+    pub ego: Ego,
+    pub vehicles: Vec<Other>,
+}
+
+/// The program's answer to an observation.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Control {
+    /// Commanded acceleration (m/s²); the world clips it to its bounds.
+    pub acceleration: f64,
+    /// Change into the lane to the right now (highway exit only).
+    #[serde(default)]
+    pub change_lane: bool,
+}
+
+/// The program's answer to a whole scenario.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EpisodeOutcome {
+    /// Whether the event happened (an accident; on the highway exit, a
+    /// failure to exit).
+    pub event: bool,
+    /// Anything the program wants logged.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub note: Option<String>,
+}
+
+/// Why a test with an external program has no valid outcome: the reason
+/// goes into the `invalid` record.
+#[derive(Debug, Clone, PartialEq, Eq, Error)]
+#[error("{0}")]
+pub struct DriverError(pub String);
+
+/// A channel to a program acting as the vehicle under test. One value
+/// serves one test at a time.
+pub trait ExternalVehicle {
+    /// Starts a test.
+    fn reset(&mut self, start: &TestStart) -> Result<(), DriverError>;
+    /// One control step (step mode).
+    fn step(&mut self, observation: &Observation) -> Result<Control, DriverError>;
+    /// A whole scenario given by its named parameters (episode mode).
+    fn episode(&mut self, scenario: &serde_json::Value) -> Result<EpisodeOutcome, DriverError>;
+}
+
+/// Checks a control before the world applies it.
+pub fn checked_control(control: Control) -> Result<Control, DriverError> {
+    if control.acceleration.is_finite() {
+        Ok(control)
+    } else {
+        Err(DriverError(format!(
+            "the program answered a non-finite acceleration {}",
+            control.acceleration
+        )))
+    }
+}
+
+/// A program driving the follower of a one-lane world (cut-in,
+/// car-following): the leader is vehicle 1, [`NOMINAL_LENGTH`] long,
+/// `gap` ahead.
+pub struct ExternalFollower<'a> {
+    pub vut: &'a mut dyn ExternalVehicle,
+}
+
+impl FollowDriver for ExternalFollower<'_> {
+    type Error = DriverError;
+
+    fn decide(&mut self, s: &FollowStep) -> Result<f64, DriverError> {
+        let observation = Observation {
+            step: s.step as u32,
+            time: s.time,
+            ego: Ego {
+                position: s.position,
+                speed: s.obs.speed,
+                lane: 0,
+            },
+            vehicles: vec![Other {
+                id: 1,
+                position: s.position + s.obs.gap + NOMINAL_LENGTH,
+                speed: s.obs.lead_speed,
+                lane: 0,
+                gap: Some(s.obs.gap),
+            }],
+        };
+        Ok(checked_control(self.vut.step(&observation)?)?.acceleration)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    #[test]
+    fn external_specifications_parse_validate_and_route() {
+        assert!(ExternalVut::from_spec(&json!({"model": "idm"})).is_none());
+        let vut = ExternalVut::from_spec(&json!({"external": "py-idm"}))
+            .unwrap()
+            .unwrap();
+        assert_eq!(vut.mode, ExternalMode::Step);
+        assert_eq!(vut.requirement("cut-in"), "py-idm:cut-in:step");
+        let episode = ExternalVut::from_spec(&json!({"external": "track", "mode": "episode"}))
+            .unwrap()
+            .unwrap();
+        assert_eq!(
+            episode.requirement("highway-exit"),
+            "track:highway-exit:episode"
+        );
+        for bad in [
+            json!({"external": ""}),
+            json!({"external": "a b"}),
+            json!({"external": "x:y"}),
+            json!({"external": "a".repeat(65)}),
+            json!({"external": "ok", "mode": "batch"}),
+            json!({"external": "ok", "model": "idm"}),
+            json!({"external": 3}),
+        ] {
+            assert!(
+                ExternalVut::from_spec(&bad).unwrap().is_err(),
+                "accepted {bad}"
+            );
+        }
+    }
+
+    #[test]
+    fn messages_have_the_documented_shape() {
+        let o = Observation {
+            step: 3,
+            time: 0.3,
+            ego: Ego {
+                position: 6.0,
+                speed: 20.0,
+                lane: 0,
+            },
+            vehicles: vec![Other {
+                id: 1,
+                position: 31.0,
+                speed: 15.0,
+                lane: 0,
+                gap: Some(20.0),
+            }],
+        };
+        assert_eq!(
+            serde_json::to_value(&o).unwrap(),
+            json!({"step": 3, "time": 0.3, "ego": {"position": 6.0, "speed": 20.0, "lane": 0},
+                   "vehicles": [{"id": 1, "position": 31.0, "speed": 15.0, "lane": 0, "gap": 20.0}]})
+        );
+        let c: Control = serde_json::from_value(json!({"acceleration": -1.5})).unwrap();
+        assert!(!c.change_lane);
+        assert!(checked_control(Control {
+            acceleration: f64::NAN,
+            change_lane: false
+        })
+        .is_err());
+    }
+}
