@@ -52,7 +52,7 @@ pub fn observation(view: &DriverView) -> Observation {
             position: bv.position,
             speed: bv.speed,
             lane: RIGHT_LANE,
-            gap: (ahead == Some(*bv)).then(|| bv.position - view.position - world.length),
+            gap: (ahead == Some(*bv)).then_some(bv.position - view.position - world.length),
         })
         .collect();
     Observation {
