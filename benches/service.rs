@@ -90,6 +90,8 @@ async fn round_trips(count: usize) -> anyhow::Result<Vec<f64>> {
                 worker: "bench".into(),
                 threads: 1,
                 include_tests: false,
+                offers: Vec::new(),
+                unhealthy: Vec::new(),
             })
             .await?
             .expect("work");

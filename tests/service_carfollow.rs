@@ -113,6 +113,8 @@ async fn car_following_library_campaigns_agree_with_ndd_baselines_with_far_fewer
                 worker: "inline".into(),
                 threads: 1,
                 include_tests: true,
+                offers: Vec::new(),
+                unhealthy: Vec::new(),
             })
             .await
             .unwrap();

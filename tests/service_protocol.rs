@@ -60,6 +60,8 @@ async fn results_are_idempotent_fenced_on_the_attempt_and_leases_expire_and_retu
             worker: "w1".into(),
             threads: 1,
             include_tests: true,
+            offers: Vec::new(),
+            unhealthy: Vec::new(),
         })
         .await
         .unwrap()

@@ -16,6 +16,45 @@ pub struct LeaseRequest {
     /// that cannot sample them from the plan); limits the lease size.
     #[serde(default)]
     pub include_tests: bool,
+    /// The external vehicles this worker runs, as `NAME:case:mode` (from
+    /// each program's handshake). Campaigns of an external vehicle are
+    /// leased only to workers offering it; built-in vehicles to any.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub offers: Vec<String>,
+    /// Programs this worker stopped running after repeated failures.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub unhealthy: Vec<UnhealthyProgram>,
+}
+
+/// An external program a worker has stopped offering: it failed
+/// `failures` tests in a row; it is tried again after a rest.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct UnhealthyProgram {
+    pub name: String,
+    /// The last failure.
+    pub reason: String,
+    pub failures: u32,
+}
+
+/// `GET /api/v1/workers`: the workers seen since the coordinator started.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct WorkerList {
+    pub workers: Vec<WorkerView>,
+}
+
+/// A worker as its lease requests describe it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct WorkerView {
+    pub name: String,
+    pub threads: u32,
+    /// Seconds since its last lease request.
+    pub last_seen_seconds: f64,
+    /// Whether it asked for work within the last minute.
+    pub live: bool,
+    pub offers: Vec<String>,
+    /// Empty when every program it runs is healthy.
+    pub unhealthy: Vec<UnhealthyProgram>,
 }
 
 /// One test of a lease.

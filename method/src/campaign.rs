@@ -85,6 +85,17 @@ pub fn run_indexed_campaign(
     event_weight: &(dyn Fn(u64) -> Option<f64> + Sync),
     rule: &StoppingRule,
 ) -> CampaignResult {
+    run_outcome_campaign(&|i| event_weight(i).map(SparseOutcome::Event), rule)
+}
+
+/// Runs one campaign whose test `i` has the outcome `outcome(i)`: an event
+/// with its weight, invalid (it takes an index but enters neither sum), or
+/// `None` for no event. A service campaign whose workers report the same
+/// outcomes stops at the same index with the same estimate.
+pub fn run_outcome_campaign(
+    outcome: &(dyn Fn(u64) -> Option<SparseOutcome> + Sync),
+    rule: &StoppingRule,
+) -> CampaignResult {
     let z = rule.z();
     let mut fold = PrefixFold::default();
     let mut batch = FIRST_BATCH;
@@ -93,7 +104,7 @@ pub fn run_indexed_campaign(
         let to = (from + batch).min(rule.max_tests);
         let mut events: Vec<(u64, SparseOutcome)> = (from..to)
             .into_par_iter()
-            .filter_map(|i| event_weight(i).map(|w| (i, SparseOutcome::Event(w))))
+            .filter_map(|i| outcome(i).map(|o| (i, o)))
             .collect();
         events.sort_by_key(|&(i, _)| i);
         let stop = fold

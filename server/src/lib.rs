@@ -12,6 +12,7 @@ pub mod routes;
 pub mod sampler_cache;
 pub mod state;
 pub mod store;
+pub mod workers;
 
 pub use config::Config;
 

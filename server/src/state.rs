@@ -3,6 +3,7 @@
 use crate::config::Config;
 use crate::db::Database;
 use crate::sampler_cache::SamplerCache;
+use crate::workers::WorkerRegistry;
 use std::sync::Arc;
 use tokio::sync::Semaphore;
 
@@ -14,6 +15,8 @@ pub struct AppState {
     pub samplers: Arc<SamplerCache>,
     /// Library builds run one at a time: each already uses every core.
     pub builds: Arc<Semaphore>,
+    /// The workers seen, from their lease requests.
+    pub workers: Arc<WorkerRegistry>,
 }
 
 impl AppState {
@@ -23,6 +26,7 @@ impl AppState {
             config: Arc::new(config),
             samplers: Arc::new(SamplerCache::default()),
             builds: Arc::new(Semaphore::new(1)),
+            workers: Arc::new(WorkerRegistry::default()),
         }
     }
 }

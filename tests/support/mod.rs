@@ -12,9 +12,10 @@ use tslg_api::{
     CampaignView, CreateCampaign, CreateLibrary, Lease, LeaseRequest, LibraryStatus, LibraryView,
     Method,
 };
-use tslg_method::campaign::{run_indexed_campaign, CampaignResult};
+use tslg_method::campaign::{run_outcome_campaign, CampaignResult};
 use tslg_method::estimator::StoppingRule;
 use tslg_method::library::SearchMethod;
+use tslg_method::prefix::SparseOutcome;
 use tslg_method::registry::{open_case, BuildRequest, ExposureSource, LibrarySearch};
 use tslg_worker::client::Client;
 
@@ -102,6 +103,11 @@ pub struct WorkerProcess(pub Child);
 
 impl WorkerProcess {
     pub fn start(url: &str, threads: usize, name: &str) -> Self {
+        Self::start_with(url, threads, name, &[])
+    }
+
+    /// A worker with `extra` arguments (such as `--vut-exec NAME=COMMAND`).
+    pub fn start_with(url: &str, threads: usize, name: &str, extra: &[&str]) -> Self {
         let child = Command::new(env!("CARGO_BIN_EXE_tslg-worker"))
             .args([
                 "--server",
@@ -112,6 +118,7 @@ impl WorkerProcess {
                 name,
             ])
             .args(["--max-backoff-seconds", "0.3"])
+            .args(extra)
             .stdout(Stdio::null())
             .stderr(Stdio::null())
             .spawn()
@@ -237,6 +244,8 @@ pub async fn claim(client: &Client, worker: &str) -> Option<Lease> {
             worker: worker.into(),
             threads: 1,
             include_tests: false,
+            offers: Vec::new(),
+            unhealthy: Vec::new(),
         })
         .await
         .expect("lease request")
@@ -266,6 +275,17 @@ pub fn in_process_with_file(
     preset: Option<&str>,
     request: &CreateCampaign,
 ) -> CampaignResult {
+    in_process_with_invalid(file, preset, request, &|_| false)
+}
+
+/// [`in_process_with_file`] where the tests `invalid` picks have no valid
+/// outcome, as a worker reports tests its vehicle failed to run.
+pub fn in_process_with_invalid(
+    file: Option<&[u8]>,
+    preset: Option<&str>,
+    request: &CreateCampaign,
+    invalid: &(dyn Fn(u64) -> bool + Sync),
+) -> CampaignResult {
     let case = open_case(&request.case, preset, &ExposureSource::Builtin).unwrap();
     let outside = match request.outside {
         Some(o) => o.as_str().parse().unwrap(),
@@ -281,10 +301,15 @@ pub fn in_process_with_file(
         min_events: request.min_events.unwrap_or(10),
         max_tests: request.max_tests,
     };
-    run_indexed_campaign(
+    run_outcome_campaign(
         &|index| {
+            if invalid(index) {
+                return Some(SparseOutcome::Invalid);
+            }
             let outcome = tests.run(index);
-            outcome.event.then_some(outcome.weight)
+            outcome
+                .event
+                .then_some(SparseOutcome::Event(outcome.weight))
         },
         &rule,
     )
@@ -295,6 +320,7 @@ pub fn assert_same(view: &CampaignView, reference: &CampaignResult) {
     assert_eq!(view.indices, reference.indices, "stop index");
     assert_eq!(view.tests, reference.tests, "tests");
     assert_eq!(view.events, reference.events, "events");
+    assert_eq!(view.invalid, reference.invalid, "invalid");
     let bits = |x: Option<f64>| x.map(f64::to_bits);
     assert_eq!(
         bits(view.estimate),

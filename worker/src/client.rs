@@ -192,6 +192,12 @@ impl Client {
         .await
     }
 
+    /// The workers the coordinator has seen.
+    pub async fn workers(&self) -> Result<tslg_api::WorkerList, CallError> {
+        self.json(self.request(reqwest::Method::GET, "/api/v1/workers"))
+            .await
+    }
+
     pub async fn cancel_campaign(&self, id: i64) -> Result<CampaignView, CallError> {
         self.post(
             &format!("/api/v1/campaigns/{id}/cancel"),

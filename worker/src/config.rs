@@ -35,6 +35,30 @@ pub struct WorkerConfig {
     /// never).
     #[arg(long, env = "TSLG_EXIT_WHEN_IDLE")]
     pub exit_when_idle_seconds: Option<f64>,
+
+    /// An external vehicle under test, `NAME=COMMAND` (repeatable):
+    /// campaigns with `"vut": {"external": "NAME"}` run COMMAND, split into
+    /// words like a shell does, over the protocol of docs/vut-protocol.md.
+    #[arg(long = "vut-exec", value_name = "NAME=COMMAND")]
+    pub vut_exec: Vec<String>,
+
+    /// Time limit of one test (and of the handshake) of an external
+    /// program, in seconds.
+    #[arg(long = "vut-timeout", env = "TSLG_VUT_TIMEOUT", default_value_t = 60.0)]
+    pub vut_timeout_seconds: f64,
+
+    /// Failed tests in a row after which an external program is unhealthy
+    /// and no longer offered.
+    #[arg(long, env = "TSLG_VUT_MAX_FAILURES", default_value_t = 5)]
+    pub vut_max_failures: u32,
+
+    /// Seconds an unhealthy program rests before it is tried again.
+    #[arg(
+        long = "vut-cooldown",
+        env = "TSLG_VUT_COOLDOWN",
+        default_value_t = 60.0
+    )]
+    pub vut_cooldown_seconds: f64,
 }
 
 impl WorkerConfig {
@@ -47,6 +71,10 @@ impl WorkerConfig {
             name: Some(name.into()),
             max_backoff_seconds: 0.5,
             exit_when_idle_seconds: None,
+            vut_exec: Vec::new(),
+            vut_timeout_seconds: 60.0,
+            vut_max_failures: 5,
+            vut_cooldown_seconds: 60.0,
         }
     }
 
@@ -78,6 +106,20 @@ impl WorkerConfig {
         anyhow::ensure!(
             self.max_backoff_seconds.is_finite() && self.max_backoff_seconds > 0.0,
             "--max-backoff-seconds must be > 0"
+        );
+        anyhow::ensure!(
+            self.vut_timeout_seconds.is_finite()
+                && self.vut_timeout_seconds > 0.0
+                && self.vut_timeout_seconds <= 86_400.0,
+            "--vut-timeout must be in (0, 86400] seconds"
+        );
+        anyhow::ensure!(
+            self.vut_max_failures >= 1,
+            "--vut-max-failures must be at least 1"
+        );
+        anyhow::ensure!(
+            self.vut_cooldown_seconds.is_finite() && self.vut_cooldown_seconds >= 0.0,
+            "--vut-cooldown must be ≥ 0 seconds"
         );
         Ok(())
     }

@@ -5,6 +5,7 @@
 pub mod backoff;
 pub mod client;
 pub mod config;
+pub mod external;
 pub mod prepared;
 pub mod run;
 

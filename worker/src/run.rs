@@ -7,6 +7,7 @@
 use crate::backoff::Backoff;
 use crate::client::{CallError, Client};
 use crate::config::WorkerConfig;
+use crate::external::{Program, ProgramRun, ProgramSettings, Programs};
 use crate::prepared::{Cache, PrepareError, PreparedCampaign};
 use rand::SeedableRng;
 use rayon::prelude::*;
@@ -41,6 +42,7 @@ struct Worker {
     threads: usize,
     pool: Arc<rayon::ThreadPool>,
     cache: Cache,
+    programs: Arc<Programs>,
     stop: watch::Receiver<bool>,
     summary: WorkerSummary,
 }
@@ -58,6 +60,16 @@ pub async fn run(
         .num_threads(threads)
         .thread_name(move |i| format!("tslg-sim-{i}"))
         .build()?;
+    let settings = ProgramSettings {
+        worker: name.clone(),
+        timeout: Duration::from_secs_f64(config.vut_timeout_seconds),
+        max_failures: config.vut_max_failures,
+        cooldown: Duration::from_secs_f64(config.vut_cooldown_seconds),
+    };
+    let specs = config.vut_exec.clone();
+    let programs = tokio::task::spawn_blocking(move || Programs::start(&specs, &settings))
+        .await?
+        .map_err(anyhow::Error::msg)?;
     let (tx, stop) = watch::channel(false);
     tokio::spawn(async move {
         shutdown.await;
@@ -69,6 +81,7 @@ pub async fn run(
         threads,
         pool: Arc::new(pool),
         cache: Cache::default(),
+        programs: Arc::new(programs),
         stop,
         summary: WorkerSummary::default(),
     };
@@ -78,10 +91,16 @@ pub async fn run(
     let mut rng = rand::rngs::StdRng::from_os_rng();
     let mut idle_since = Instant::now();
     while !worker.stopping() {
+        if worker.programs.any_rested() {
+            let programs = Arc::clone(&worker.programs);
+            tokio::task::spawn_blocking(move || programs.probe_rested()).await?;
+        }
         let request = LeaseRequest {
             worker: worker.name.clone(),
             threads: threads as u32,
             include_tests: false,
+            offers: worker.programs.offers(),
+            unhealthy: worker.programs.unhealthy(),
         };
         match worker.client.claim(&request).await {
             Ok(Some(lease)) => {
@@ -150,6 +169,21 @@ impl Worker {
                 });
             }
         };
+        let program = match prepared.tests.external() {
+            None => None,
+            Some(vut) => match self.programs.get(&vut.external) {
+                Some(program) => Some(Arc::clone(program)),
+                None => {
+                    let _ = self.client.release(lease.id, &fence).await;
+                    anyhow::bail!(
+                        "campaign {} tests the external program `{}`, which this worker does \
+                         not run",
+                        lease.campaign_id,
+                        vut.external
+                    );
+                }
+            },
+        };
         let proceed = Arc::new(AtomicBool::new(true));
         let heartbeat = tokio::spawn(heartbeat(
             self.client.clone(),
@@ -163,18 +197,29 @@ impl Worker {
         while at < lease.end && proceed.load(Ordering::Relaxed) && !self.stopping() {
             let to = (at + chunk).min(lease.end);
             let started = Instant::now();
-            let (pool, p) = (Arc::clone(&self.pool), Arc::clone(&prepared));
-            let (events, invalid) =
-                tokio::task::spawn_blocking(move || pool.install(|| run_range(&p, at, to))).await?;
+            let (pool, p, program) = (
+                Arc::clone(&self.pool),
+                Arc::clone(&prepared),
+                program.clone(),
+            );
+            let campaign = lease.campaign_id;
+            let ran = tokio::task::spawn_blocking(move || {
+                pool.install(|| run_range(&p, program.as_deref(), campaign, at, to))
+            })
+            .await?;
             let seconds = started.elapsed().as_secs_f64();
-            let found = events.len() as u64;
+            if ran.end == at {
+                // The program turned unhealthy before this chunk ran.
+                break;
+            }
+            let found = ran.events.len() as u64;
             let report = ResultReport {
                 worker: self.name.clone(),
                 attempt: lease.attempt,
                 from: at,
-                to,
-                events,
-                invalid,
+                to: ran.end,
+                events: ran.events,
+                invalid: ran.invalid,
                 compute_seconds: seconds,
                 threads: self.threads as u32,
             };
@@ -182,8 +227,8 @@ impl Worker {
                 Ok(ack) => {
                     self.summary.tests += ack.accepted;
                     self.summary.events += found;
-                    at = to;
-                    if !ack.proceed {
+                    at = report.to;
+                    if !ack.proceed || at < to {
                         break;
                     }
                 }
@@ -192,13 +237,22 @@ impl Worker {
                     return Err(e.into());
                 }
             }
-            let rate = (to - report.from) as f64 / seconds.max(1e-6);
+            let rate = (report.to - report.from) as f64 / seconds.max(1e-6);
             chunk = ((rate * CHUNK_SECONDS) as u64).clamp(16, 1 << 22);
         }
         heartbeat.abort();
-        if at < lease.end && self.stopping() {
+        let unhealthy = program.as_ref().and_then(|p| p.unhealthy());
+        if at < lease.end && (self.stopping() || unhealthy.is_some()) {
             self.client.release(lease.id, &fence).await?;
-            tracing::info!(lease = lease.id, at, "lease given back on shutdown");
+            match unhealthy {
+                Some(u) => tracing::warn!(
+                    lease = lease.id,
+                    at,
+                    program = %u.name,
+                    "lease given back: the external program is unhealthy"
+                ),
+                None => tracing::info!(lease = lease.id, at, "lease given back on shutdown"),
+            }
         }
         Ok(())
     }
@@ -252,45 +306,79 @@ async fn heartbeat(
     }
 }
 
-/// Runs tests `from..to` in parallel; returns the events and invalid tests
-/// in index order.
+/// What a range of tests gave.
+#[derive(Debug, Default)]
+pub struct RangeRun {
+    /// Tests `from..end` ran; `end < to` when an external program turned
+    /// unhealthy, and the rest is left for others.
+    pub end: u64,
+    pub events: Vec<EventResult>,
+    pub invalid: Vec<InvalidResult>,
+}
+
+/// Runs tests `from..to` in parallel, on the campaign's built-in vehicle or
+/// with `program`; returns the events and invalid tests in index order.
 pub fn run_range(
     p: &PreparedCampaign,
+    program: Option<&Program>,
+    campaign: i64,
     from: u64,
     to: u64,
-) -> (Vec<EventResult>, Vec<InvalidResult>) {
-    let mut found: Vec<(u64, Result<f64, String>)> = (from..to)
+) -> RangeRun {
+    let mut found: Vec<(u64, ProgramRun)> = (from..to)
         .into_par_iter()
-        .filter_map(|index| match run_one(p, index) {
-            Ok(outcome) if outcome.event => Some((index, Ok(outcome.weight))),
-            Ok(_) => None,
-            Err(reason) => Some((index, Err(reason))),
+        .filter_map(|index| {
+            let run = match program {
+                Some(program) => program.run_test(p.tests.as_ref(), campaign, index),
+                None => match run_builtin(p, index) {
+                    Ok(outcome) => ProgramRun::Done(outcome),
+                    Err(reason) => ProgramRun::Invalid(reason),
+                },
+            };
+            match run {
+                ProgramRun::Done(outcome) if !outcome.event => None,
+                other => Some((index, other)),
+            }
         })
         .collect();
     found.sort_by_key(|(i, _)| *i);
-    let mut events = Vec::new();
-    let mut invalid = Vec::new();
-    for (index, outcome) in found {
-        match outcome {
-            Ok(weight) => events.push(EventResult { index, weight }),
-            Err(reason) => invalid.push(InvalidResult { index, reason }),
+    let end = found
+        .iter()
+        .find(|(_, run)| *run == ProgramRun::Skipped)
+        .map_or(to, |(i, _)| *i);
+    let mut ran = RangeRun {
+        end,
+        ..RangeRun::default()
+    };
+    for (index, run) in found.into_iter().take_while(|(i, _)| *i < end) {
+        match run {
+            ProgramRun::Done(outcome) => ran.events.push(EventResult {
+                index,
+                weight: outcome.weight,
+            }),
+            ProgramRun::Invalid(reason) => ran.invalid.push(InvalidResult { index, reason }),
+            ProgramRun::Skipped => unreachable!("skipped tests are past the end"),
         }
     }
-    (events, invalid)
+    ran
 }
 
-fn run_one(p: &PreparedCampaign, index: u64) -> Result<TestOutcome, String> {
+/// The message a panic carried.
+pub(crate) fn panic_message(panic: &(dyn std::any::Any + Send)) -> String {
+    panic
+        .downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| panic.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "unknown panic".into())
+}
+
+fn run_builtin(p: &PreparedCampaign, index: u64) -> Result<TestOutcome, String> {
     let mut last = String::new();
     for _ in 0..INVALID_TRIES {
-        match catch_unwind(AssertUnwindSafe(|| p.tests.run(index))) {
-            Ok(outcome) => return Ok(outcome),
-            Err(panic) => {
-                last = panic
-                    .downcast_ref::<&str>()
-                    .map(|s| s.to_string())
-                    .or_else(|| panic.downcast_ref::<String>().cloned())
-                    .unwrap_or_else(|| "unknown panic".into());
-            }
+        match catch_unwind(AssertUnwindSafe(|| p.tests.run_with(index, None))) {
+            Ok(Ok(outcome)) => return Ok(outcome),
+            Ok(Err(e)) => return Err(e.0),
+            Err(panic) => last = panic_message(panic.as_ref()),
         }
     }
     Err(format!(

@@ -14,6 +14,7 @@ use tslg_api::{
     LibraryStatus, Method, Outside, Problem,
 };
 use tslg_method::estimator::{StoppingRule, DEFAULT_MIN_EVENTS, DEFAULT_N_MIN};
+use tslg_method::external::ExternalVut;
 use tslg_method::registry::{open_case, ExposureSource};
 use tslg_method::sampling::OutsideSpread;
 
@@ -48,13 +49,6 @@ pub async fn create(
             "max_tests = {} exceeds the limit 2^50",
             req.max_tests
         )));
-    }
-    if req.vut.get("external").is_some() {
-        return Err(bad(
-            "external vehicles under test ({\"external\": NAME}) are not supported by this \
-             coordinator yet; use a built-in model such as {\"model\": \"idm\"}"
-                .into(),
-        ));
     }
     let library = match (req.method, req.library_id) {
         (Method::Library, None) => {
@@ -137,6 +131,10 @@ pub async fn create(
         OutsideSpread::Uniform => Outside::Uniform,
         OutsideSpread::Ndd => Outside::Ndd,
     };
+    // Only workers offering an external program get its tests.
+    let requires = ExternalVut::from_spec(&vut)
+        .and_then(Result::ok)
+        .map(|e| e.requirement(case.name()));
     let status = match &library {
         Some(lib) if req.method == Method::Library && lib.status() == LibraryStatus::Building => {
             CampaignStatus::Pending
@@ -157,6 +155,7 @@ pub async fn create(
                 ExposureSource::Builtin => None,
             },
             vut: vut.to_string(),
+            requires,
             epsilon: req.epsilon,
             outside,
             rule,

@@ -10,7 +10,14 @@ use axum::response::{IntoResponse, Response};
 use axum::Json;
 use tslg_api::{
     HeartbeatAck, Lease, LeaseFence, LeaseRequest, Problem, ResultAck, ResultReport, TestCase,
+    WorkerList,
 };
+use tslg_method::external::{check_program_name, ExternalMode};
+
+/// Most programs' offers and unhealthy reports one request may carry.
+const MAX_OFFERS: usize = 256;
+const MAX_UNHEALTHY: usize = 64;
+const MAX_UNHEALTHY_REASON: usize = 4000;
 
 fn check_worker(worker: &str) -> Result<(), ApiError> {
     if worker.is_empty() || worker.len() > 128 || worker.chars().any(char::is_control) {
@@ -36,12 +43,15 @@ pub async fn claim(
             req.threads
         )));
     }
+    check_programs(&req)?;
+    state.workers.seen(&req);
     let Some(row) = leases::claim(
         &state.db,
         &state.config,
         &req.worker,
         req.threads,
         req.include_tests,
+        &req.offers,
     )
     .await?
     else {
@@ -89,6 +99,59 @@ pub async fn claim(
         tests,
     })
     .into_response())
+}
+
+/// Checks the external programs a lease request offers (`NAME:case:mode`)
+/// and reports unhealthy.
+fn check_programs(req: &LeaseRequest) -> Result<(), ApiError> {
+    let bad = |m: String| Err(ApiError::Unprocessable(m));
+    if req.offers.len() > MAX_OFFERS {
+        return bad(format!(
+            "offers lists {} entries; at most {MAX_OFFERS}",
+            req.offers.len()
+        ));
+    }
+    for offer in &req.offers {
+        let parts: Vec<&str> = offer.split(':').collect();
+        let [name, case, mode] = parts[..] else {
+            return bad(format!("offer `{offer}` must be NAME:case:mode"));
+        };
+        check_program_name(name).map_err(ApiError::Unprocessable)?;
+        if case.is_empty() || case.len() > 64 {
+            return bad(format!(
+                "offer `{offer}`: the case must be 1 to 64 characters"
+            ));
+        }
+        if serde_json::from_value::<ExternalMode>(mode.into()).is_err() {
+            return bad(format!("offer `{offer}`: the mode must be step or episode"));
+        }
+    }
+    if req.unhealthy.len() > MAX_UNHEALTHY {
+        return bad(format!(
+            "unhealthy lists {} programs; at most {MAX_UNHEALTHY}",
+            req.unhealthy.len()
+        ));
+    }
+    for u in &req.unhealthy {
+        check_program_name(&u.name).map_err(ApiError::Unprocessable)?;
+        if u.reason.len() > MAX_UNHEALTHY_REASON {
+            return bad(format!(
+                "the reason program `{}` is unhealthy exceeds {MAX_UNHEALTHY_REASON} bytes",
+                u.name
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The workers seen since the coordinator started, most recent first:
+/// their threads, the external programs they offer and those they report
+/// unhealthy.
+#[utoipa::path(get, path = "/api/v1/workers", responses((status = 200, body = WorkerList)))]
+pub async fn workers(State(state): State<AppState>) -> Json<WorkerList> {
+    Json(WorkerList {
+        workers: state.workers.list(),
+    })
 }
 
 /// Keeps a lease alive; `continue: false` means drop it.

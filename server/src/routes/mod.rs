@@ -41,7 +41,8 @@ pub fn router(state: AppState) -> Router {
         .route("/api/v1/libraries/{id}", get(libraries::get_one))
         .route("/api/v1/campaigns", get(campaigns::list))
         .route("/api/v1/campaigns/{id}", get(campaigns::get_one))
-        .route("/api/v1/campaigns/{id}/history", get(campaigns::history));
+        .route("/api/v1/campaigns/{id}/history", get(campaigns::history))
+        .route("/api/v1/workers", get(leases::workers));
     let limit = state.config.max_body_bytes;
     admin
         .merge(worker)

@@ -26,6 +26,7 @@ use utoipa::OpenApi;
         super::leases::heartbeat,
         super::leases::release,
         super::leases::results,
+        super::leases::workers,
     )
 )]
 pub struct ApiDoc;

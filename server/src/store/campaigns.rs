@@ -18,6 +18,8 @@ pub struct CampaignRow {
     pub exposure_fingerprint: String,
     pub exposure_table: Option<String>,
     pub vut: String,
+    /// `NAME:case:mode` of an external vehicle under test.
+    pub requires: Option<String>,
     pub epsilon: f64,
     pub outside: String,
     pub beta: f64,
@@ -42,7 +44,7 @@ pub struct CampaignRow {
 }
 
 pub const COLUMNS: &str = "id, case_name, preset, method, library_id, exposure_name, \
-    exposure_fingerprint, exposure_table, vut, epsilon, outside, beta, confidence, n_min, \
+    exposure_fingerprint, exposure_table, vut, requires, epsilon, outside, beta, confidence, n_min, \
     min_events, max_tests, seed, status, status_detail, next_index, indices, tests, events, invalid, s1, s2, \
     cost_per_test, worker_seconds, created_at, updated_at";
 
@@ -176,6 +178,7 @@ pub struct NewCampaign {
     pub exposure_fingerprint: String,
     pub exposure_table: Option<String>,
     pub vut: String,
+    pub requires: Option<String>,
     pub epsilon: f64,
     pub outside: Outside,
     pub rule: StoppingRule,
@@ -186,8 +189,9 @@ pub struct NewCampaign {
 pub async fn insert(pool: &SqlitePool, new: &NewCampaign) -> Result<CampaignRow, ApiError> {
     let sql = format!(
         "INSERT INTO campaigns (case_name, preset, method, library_id, exposure_name, \
-         exposure_fingerprint, exposure_table, vut, epsilon, outside, beta, confidence, n_min, \
-         min_events, max_tests, seed, status) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) \
+         exposure_fingerprint, exposure_table, vut, requires, epsilon, outside, beta, confidence, \
+         n_min, min_events, max_tests, seed, status) \
+         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) \
          RETURNING {COLUMNS}"
     );
     Ok(sqlx::query_as(&sql)
@@ -199,6 +203,7 @@ pub async fn insert(pool: &SqlitePool, new: &NewCampaign) -> Result<CampaignRow,
         .bind(&new.exposure_fingerprint)
         .bind(&new.exposure_table)
         .bind(&new.vut)
+        .bind(&new.requires)
         .bind(new.epsilon)
         .bind(new.outside.as_str())
         .bind(new.rule.beta)

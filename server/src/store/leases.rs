@@ -36,14 +36,16 @@ fn ttl_ms(config: &Config) -> i64 {
 /// when the lease's work is expected to be done,
 /// `now + size · cost_per_test / threads`, so campaigns get comparable
 /// worker time even while their lease sizes differ (a campaign's first
-/// leases, before its cost is known, are small). `None` when there is
-/// nothing to do.
+/// leases, before its cost is known, are small). Campaigns of an external
+/// vehicle go only to workers that `offers` it (`NAME:case:mode`). `None`
+/// when there is nothing to do.
 pub async fn claim(
     db: &Database,
     config: &Config,
     worker: &str,
     threads: u32,
     inline: bool,
+    offers: &[String],
 ) -> Result<Option<LeaseRow>, ApiError> {
     let now = now_ms();
     let expires = now + ttl_ms(config);
@@ -60,12 +62,14 @@ pub async fn claim(
     } else {
         String::new()
     };
+    let offered = serde_json::to_string(offers).expect("strings serialise");
+    let runnable = "AND (c.requires IS NULL OR c.requires IN (SELECT value FROM json_each(?)))";
     let mut tx = db.write.begin().await?;
     let sql = format!(
         "UPDATE leases SET attempt = attempt + 1, worker = ?, expires_at = ? \
          WHERE id = (SELECT l.id FROM leases l JOIN campaigns c ON c.id = l.campaign_id \
                      WHERE l.state = 'active' AND l.expires_at < ? AND c.status = 'running' \
-                       AND l.end_index - l.resume_at <= ? {planned_only} \
+                       AND l.end_index - l.resume_at <= ? {planned_only} {runnable} \
                      ORDER BY l.campaign_id, l.resume_at LIMIT 1) \
          RETURNING {COLUMNS}"
     );
@@ -74,6 +78,7 @@ pub async fn claim(
         .bind(expires)
         .bind(now)
         .bind(span_limit)
+        .bind(&offered)
         .fetch_optional(&mut *tx)
         .await?;
     if let Some(lease) = reclaimed {
@@ -88,9 +93,12 @@ pub async fn claim(
     }
     let sql = format!(
         "SELECT {CAMPAIGN_COLUMNS} FROM campaigns c WHERE status = 'running' \
-         AND next_index < max_tests {planned_only} ORDER BY next_turn_at, id LIMIT 1"
+         AND next_index < max_tests {planned_only} {runnable} ORDER BY next_turn_at, id LIMIT 1"
     );
-    let Some(campaign): Option<CampaignRow> = sqlx::query_as(&sql).fetch_optional(&mut *tx).await?
+    let Some(campaign): Option<CampaignRow> = sqlx::query_as(&sql)
+        .bind(&offered)
+        .fetch_optional(&mut *tx)
+        .await?
     else {
         return Ok(None);
     };

@@ -1,0 +1,59 @@
+#!/usr/bin/env python3
+"""An external vehicle under test for tslg: the IDM of SPEC section 4, in
+step mode, for the cut-in and car-following cases. Standard library only.
+
+    tslg-worker --vut-exec py-idm="python3 examples/python/idm_vut.py"
+
+then start a campaign with "vut": {"external": "py-idm"}. The protocol
+(one JSON object per line on stdin and stdout) is docs/vut-protocol.md.
+"""
+import json
+import math
+import sys
+
+# The built-in IDM's parameters: the cut-in calibration (paper Table III)
+# and the car-following case's highway values (v0 36 m/s, no length).
+PARAMS = {
+    "cut-in": dict(alpha=2.0, v0=18.0, delta=4.0, s0=2.0, length=4.0, headway=1.0, b=3.0),
+    "car-following": dict(alpha=2.0, v0=36.0, delta=4.0, s0=2.0, length=0.0, headway=1.0, b=3.0),
+}
+
+
+def idm(p, speed, lead_speed, gap):
+    """a = alpha (1 - (v/v0)^delta - (s*/(R - L))^2), evaluated as written."""
+    desired = p["s0"] + speed * p["headway"] + speed * (speed - lead_speed) / (
+        2.0 * math.sqrt(p["alpha"] * p["b"]))
+    if gap == p["length"]:
+        return -math.inf  # no room at all: brake as hard as allowed
+    interaction = desired / (gap - p["length"])
+    return p["alpha"] * (1.0 - (speed / p["v0"]) ** p["delta"] - interaction * interaction)
+
+
+def respond(message, state):
+    """The reply to one message; `state` is what this test remembers."""
+    kind = message["type"]
+    if kind == "hello":
+        return {"type": "hello", "protocol": 1, "name": "py-idm",
+                "cases": {case: ["step"] for case in PARAMS}}
+    if kind == "reset":
+        if message["case"] not in PARAMS or message["mode"] != "step":
+            return {"type": "error", "message": f"cannot drive {message['case']} in {message['mode']} mode"}
+        state.clear()  # nothing from the last test survives
+        state.update(PARAMS[message["case"]], limits=message["world"]["acceleration"])
+        return {"type": "ready"}
+    if kind == "step":
+        lead = next(v for v in message["vehicles"] if "gap" in v)
+        a = idm(state, message["ego"]["speed"], lead["speed"], lead["gap"])
+        low, high = state["limits"]
+        return {"type": "control", "acceleration": min(max(a, low), high)}
+    return {"type": "error", "message": f"unexpected message {kind}"}
+
+
+def main():
+    state = {}
+    for line in sys.stdin:  # the worker closes stdin to stop us
+        print(json.dumps(respond(json.loads(line), state)), flush=True)
+
+
+if __name__ == "__main__":
+    main()

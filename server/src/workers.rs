@@ -1,0 +1,89 @@
+//! The workers seen since the coordinator started, from their lease
+//! requests: threads, the external programs they offer and those they
+//! report unhealthy. Kept in memory: workers announce themselves with every
+//! request, so a restarted coordinator knows them again within seconds.
+
+use std::collections::HashMap;
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
+use tslg_api::{LeaseRequest, UnhealthyProgram, WorkerView};
+
+/// A worker not heard from this long is not live.
+const LIVE: Duration = Duration::from_secs(60);
+/// Workers kept at most; the longest unseen goes first.
+const MAX_WORKERS: usize = 4096;
+
+struct Entry {
+    threads: u32,
+    offers: Vec<String>,
+    unhealthy: Vec<UnhealthyProgram>,
+    last_seen: Instant,
+}
+
+#[derive(Default)]
+pub struct WorkerRegistry {
+    workers: Mutex<HashMap<String, Entry>>,
+}
+
+impl WorkerRegistry {
+    /// Records a lease request; logs programs turning unhealthy or healthy.
+    pub fn seen(&self, request: &LeaseRequest) {
+        let mut workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
+        let before: Vec<String> = workers
+            .get(&request.worker)
+            .map(|e| e.unhealthy.iter().map(|u| u.name.clone()).collect())
+            .unwrap_or_default();
+        for u in &request.unhealthy {
+            if !before.contains(&u.name) {
+                tracing::warn!(
+                    worker = %request.worker,
+                    program = %u.name,
+                    failures = u.failures,
+                    reason = %u.reason,
+                    "worker reports an external program unhealthy"
+                );
+            }
+        }
+        for name in before {
+            if !request.unhealthy.iter().any(|u| u.name == name) {
+                tracing::info!(worker = %request.worker, program = %name, "external program healthy again");
+            }
+        }
+        if workers.len() >= MAX_WORKERS && !workers.contains_key(&request.worker) {
+            let oldest = workers
+                .iter()
+                .min_by_key(|(_, e)| e.last_seen)
+                .map(|(name, _)| name.clone());
+            if let Some(oldest) = oldest {
+                workers.remove(&oldest);
+            }
+        }
+        workers.insert(
+            request.worker.clone(),
+            Entry {
+                threads: request.threads,
+                offers: request.offers.clone(),
+                unhealthy: request.unhealthy.clone(),
+                last_seen: Instant::now(),
+            },
+        );
+    }
+
+    /// Every worker, most recently seen first.
+    pub fn list(&self) -> Vec<WorkerView> {
+        let workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
+        let mut list: Vec<WorkerView> = workers
+            .iter()
+            .map(|(name, e)| WorkerView {
+                name: name.clone(),
+                threads: e.threads,
+                last_seen_seconds: e.last_seen.elapsed().as_secs_f64(),
+                live: e.last_seen.elapsed() < LIVE,
+                offers: e.offers.clone(),
+                unhealthy: e.unhealthy.clone(),
+            })
+            .collect();
+        list.sort_by(|a, b| a.last_seen_seconds.total_cmp(&b.last_seen_seconds));
+        list
+    }
+}

@@ -1,0 +1,394 @@
+//! External vehicles under test: programs the worker starts
+//! (`--vut-exec NAME=COMMAND`) and drives over the JSON-lines protocol of
+//! `docs/vut-protocol.md`.
+//!
+//! Each program keeps a pool of running processes, one per simulation
+//! thread at most. A test takes a process, sends `reset`, runs (step or
+//! episode mode) within the per-test deadline and gives the process back. A
+//! process that crashes, hangs, prints garbage or exits is killed and
+//! replaced, and the test is tried once more; a test that fails twice is
+//! `invalid` with the reason. After `max_failures` failed tests in a row
+//! the program is *unhealthy*: the worker stops offering it (and says so in
+//! its lease requests) instead of burning the campaign, rests it for
+//! `cooldown`, and offers it again once a fresh process answers the
+//! handshake.
+
+mod process;
+pub mod protocol;
+
+pub use process::{Capabilities, Fault, ProgramProcess};
+
+use protocol::{Reply, Request};
+use std::collections::BTreeMap;
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::str::FromStr;
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::{Duration, Instant};
+use tslg_api::UnhealthyProgram;
+use tslg_method::external::{
+    check_program_name, requirement, Control, DriverError, EpisodeOutcome, ExternalVehicle,
+    Observation, TestStart,
+};
+use tslg_method::registry::{CampaignTests, TestOutcome, CASES};
+
+/// Times a test is tried with a fresh or intact process before it is
+/// reported `invalid`.
+pub const TRIES: usize = 2;
+
+/// Longest reason of an invalid test (the coordinator takes 2000 bytes).
+const MAX_REASON: usize = 1800;
+
+/// `NAME=COMMAND`: COMMAND is split into words as a POSIX shell would
+/// (quotes and backslashes, no expansion) and run directly.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ProgramSpec {
+    pub name: String,
+    pub command: Vec<String>,
+}
+
+impl FromStr for ProgramSpec {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        let (name, command) = s
+            .split_once('=')
+            .ok_or_else(|| format!("--vut-exec `{s}` must be NAME=COMMAND"))?;
+        check_program_name(name)?;
+        let command = shlex::split(command)
+            .ok_or_else(|| format!("--vut-exec {name}: unbalanced quotes in `{command}`"))?;
+        if command.is_empty() {
+            return Err(format!("--vut-exec {name}: the command is empty"));
+        }
+        Ok(Self {
+            name: name.to_owned(),
+            command,
+        })
+    }
+}
+
+/// How programs are run and judged.
+#[derive(Debug, Clone)]
+pub struct ProgramSettings {
+    /// The worker's name, sent in the handshake.
+    pub worker: String,
+    /// Per-test time limit (also for the handshake).
+    pub timeout: Duration,
+    /// Failed tests in a row that make a program unhealthy.
+    pub max_failures: u32,
+    /// Rest of an unhealthy program before it is tried again.
+    pub cooldown: Duration,
+}
+
+/// What running one test with a program gave.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ProgramRun {
+    Done(TestOutcome),
+    /// No valid outcome; the reason.
+    Invalid(String),
+    /// Not run: the program is unhealthy.
+    Skipped,
+}
+
+#[derive(Debug, Default)]
+struct Health {
+    /// Failed tests in a row.
+    failures: u32,
+    unhealthy: Option<(Instant, String)>,
+}
+
+/// One `--vut-exec` program.
+pub struct Program {
+    spec: ProgramSpec,
+    settings: ProgramSettings,
+    capabilities: Capabilities,
+    idle: Mutex<Vec<ProgramProcess>>,
+    health: Mutex<Health>,
+}
+
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+impl Program {
+    /// Starts the program once: its handshake tells what it offers. A
+    /// program that cannot start is a configuration error.
+    pub fn start(spec: ProgramSpec, settings: ProgramSettings) -> Result<Self, String> {
+        let (process, capabilities) =
+            ProgramProcess::start(&spec.command, &settings.worker, settings.timeout)
+                .map_err(|f| format!("--vut-exec {}: the program {f}", spec.name))?;
+        for case in capabilities.cases.keys() {
+            if !CASES.contains(&case.as_str()) {
+                tracing::warn!(program = %spec.name, case, "the program offers an unknown case");
+            }
+        }
+        tracing::info!(program = %spec.name, cases = ?capabilities.cases, "external program ready");
+        Ok(Self {
+            spec,
+            settings,
+            capabilities,
+            idle: Mutex::new(vec![process]),
+            health: Mutex::new(Health::default()),
+        })
+    }
+
+    pub fn name(&self) -> &str {
+        &self.spec.name
+    }
+
+    pub fn capabilities(&self) -> &Capabilities {
+        &self.capabilities
+    }
+
+    /// `NAME:case:mode` for every known case and mode of the handshake;
+    /// nothing while unhealthy.
+    pub fn offers(&self) -> Vec<String> {
+        if lock(&self.health).unhealthy.is_some() {
+            return Vec::new();
+        }
+        self.capabilities
+            .cases
+            .iter()
+            .filter(|(case, _)| CASES.contains(&case.as_str()))
+            .flat_map(|(case, modes)| modes.iter().map(|m| requirement(self.name(), case, *m)))
+            .collect()
+    }
+
+    pub fn unhealthy(&self) -> Option<UnhealthyProgram> {
+        let health = lock(&self.health);
+        health
+            .unhealthy
+            .as_ref()
+            .map(|(_, reason)| UnhealthyProgram {
+                name: self.spec.name.clone(),
+                reason: reason.clone(),
+                failures: health.failures,
+            })
+    }
+
+    /// Whether the program is unhealthy and has rested long enough to be
+    /// tried again.
+    pub fn rested(&self) -> bool {
+        lock(&self.health)
+            .unhealthy
+            .as_ref()
+            .is_some_and(|(since, _)| since.elapsed() >= self.settings.cooldown)
+    }
+
+    /// Tries a rested program: healthy again when a fresh process answers
+    /// the handshake, else it rests once more. Blocking.
+    pub fn probe(&self) {
+        if !self.rested() {
+            return;
+        }
+        match self.spawn() {
+            Ok(process) => {
+                *lock(&self.health) = Health::default();
+                lock(&self.idle).push(process);
+                tracing::info!(program = %self.spec.name, "external program healthy again");
+            }
+            Err(fault) => {
+                let reason = format!("the program {fault}");
+                tracing::warn!(program = %self.spec.name, %reason, "external program still unhealthy");
+                let mut health = lock(&self.health);
+                health.unhealthy = Some((Instant::now(), reason));
+            }
+        }
+    }
+
+    fn spawn(&self) -> Result<ProgramProcess, Fault> {
+        ProgramProcess::start(
+            &self.spec.command,
+            &self.settings.worker,
+            self.settings.timeout,
+        )
+        .map(|(process, _)| process)
+    }
+
+    /// Runs test `index` of `tests` (campaign `campaign`) with this
+    /// program: a process from the pool, or a new one.
+    pub fn run_test(&self, tests: &dyn CampaignTests, campaign: i64, index: u64) -> ProgramRun {
+        if lock(&self.health).unhealthy.is_some() {
+            return ProgramRun::Skipped;
+        }
+        let mut last = String::new();
+        for _ in 0..TRIES {
+            let taken = lock(&self.idle).pop();
+            let mut process = match taken.map_or_else(|| self.spawn(), Ok) {
+                Ok(process) => process,
+                Err(fault) => {
+                    last = fault.to_string();
+                    continue;
+                }
+            };
+            let mut session = Session {
+                process: &mut process,
+                campaign,
+                deadline: Instant::now() + self.settings.timeout,
+                fault: None,
+            };
+            let result = catch_unwind(AssertUnwindSafe(|| {
+                tests.run_with(index, Some(&mut session))
+            }));
+            let fault = session.fault.take();
+            match result {
+                Ok(Ok(outcome)) => {
+                    lock(&self.idle).push(process);
+                    lock(&self.health).failures = 0;
+                    return ProgramRun::Done(outcome);
+                }
+                Ok(Err(DriverError(reason))) => {
+                    last = reason;
+                    // A refusal leaves the conversation intact; anything
+                    // else leaves the process in an unknown state: drop
+                    // (kill) it.
+                    if fault.is_some_and(|f| !f.is_broken()) {
+                        lock(&self.idle).push(process);
+                    }
+                }
+                Err(panic) => last = crate::run::panic_message(panic.as_ref()),
+            }
+        }
+        let mut reason = format!(
+            "external program `{}`: {last} (tried {TRIES} times)",
+            self.spec.name
+        );
+        if reason.len() > MAX_REASON {
+            let cut = (0..=MAX_REASON)
+                .rev()
+                .find(|&i| reason.is_char_boundary(i))
+                .unwrap_or(0);
+            reason.truncate(cut);
+            reason.push('…');
+        }
+        self.record_failure(&reason);
+        ProgramRun::Invalid(reason)
+    }
+
+    fn record_failure(&self, reason: &str) {
+        let mut health = lock(&self.health);
+        health.failures += 1;
+        if health.failures >= self.settings.max_failures && health.unhealthy.is_none() {
+            tracing::error!(
+                program = %self.spec.name,
+                failures = health.failures,
+                reason,
+                "external program unhealthy: no longer offered until it has rested"
+            );
+            health.unhealthy = Some((Instant::now(), reason.to_owned()));
+            drop(health);
+            lock(&self.idle).clear();
+        }
+    }
+}
+
+/// One test's conversation with a process, within the test's deadline.
+struct Session<'a> {
+    process: &'a mut ProgramProcess,
+    campaign: i64,
+    deadline: Instant,
+    /// The first fault, to decide whether the process can be reused.
+    fault: Option<Fault>,
+}
+
+impl Session<'_> {
+    fn call(&mut self, request: &Request, expected: &'static str) -> Result<Reply, DriverError> {
+        self.process
+            .call(request, expected, self.deadline)
+            .map_err(|fault| {
+                let error = DriverError(format!("the program {fault}"));
+                self.fault.get_or_insert(fault);
+                error
+            })
+    }
+}
+
+impl ExternalVehicle for Session<'_> {
+    fn reset(&mut self, start: &TestStart) -> Result<(), DriverError> {
+        let request = Request::Reset {
+            campaign: self.campaign,
+            start,
+        };
+        self.call(&request, "ready").map(|_| ())
+    }
+
+    fn step(&mut self, observation: &Observation) -> Result<Control, DriverError> {
+        match self.call(&Request::Step(observation), "control")? {
+            Reply::Control(control) => Ok(control),
+            other => Err(DriverError(format!("unexpected `{}`", other.kind()))),
+        }
+    }
+
+    fn episode(&mut self, scenario: &serde_json::Value) -> Result<EpisodeOutcome, DriverError> {
+        match self.call(&Request::Episode { scenario }, "outcome")? {
+            Reply::Outcome(outcome) => Ok(outcome),
+            other => Err(DriverError(format!("unexpected `{}`", other.kind()))),
+        }
+    }
+}
+
+/// Every `--vut-exec` program of a worker, by name.
+#[derive(Default)]
+pub struct Programs {
+    by_name: BTreeMap<String, Arc<Program>>,
+}
+
+impl Programs {
+    /// Parses and starts every program (blocking: the handshakes).
+    pub fn start(specs: &[String], settings: &ProgramSettings) -> Result<Self, String> {
+        let mut by_name = BTreeMap::new();
+        for text in specs {
+            let spec: ProgramSpec = text.parse()?;
+            if by_name.contains_key(&spec.name) {
+                return Err(format!("--vut-exec {}: the name is given twice", spec.name));
+            }
+            let name = spec.name.clone();
+            by_name.insert(name, Arc::new(Program::start(spec, settings.clone())?));
+        }
+        Ok(Self { by_name })
+    }
+
+    pub fn get(&self, name: &str) -> Option<&Arc<Program>> {
+        self.by_name.get(name)
+    }
+
+    pub fn offers(&self) -> Vec<String> {
+        self.by_name.values().flat_map(|p| p.offers()).collect()
+    }
+
+    pub fn unhealthy(&self) -> Vec<UnhealthyProgram> {
+        self.by_name
+            .values()
+            .filter_map(|p| p.unhealthy())
+            .collect()
+    }
+
+    pub fn any_rested(&self) -> bool {
+        self.by_name.values().any(|p| p.rested())
+    }
+
+    /// Tries every rested program again (blocking).
+    pub fn probe_rested(&self) {
+        for program in self.by_name.values() {
+            program.probe();
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn program_specs_parse_like_a_shell_and_reject_bad_names() {
+        let spec: ProgramSpec = r#"py-idm=python3 "my vut.py" --v0 36"#.parse().unwrap();
+        assert_eq!(spec.name, "py-idm");
+        assert_eq!(spec.command, ["python3", "my vut.py", "--v0", "36"]);
+        let err = "py-idm".parse::<ProgramSpec>().unwrap_err();
+        assert!(err.contains("NAME=COMMAND"), "{err}");
+        let err = "a b=python3".parse::<ProgramSpec>().unwrap_err();
+        assert!(err.contains("must be 1 to 64"), "{err}");
+        let err = "x=python3 'open".parse::<ProgramSpec>().unwrap_err();
+        assert!(err.contains("unbalanced quotes"), "{err}");
+        let err = "x=  ".parse::<ProgramSpec>().unwrap_err();
+        assert!(err.contains("empty"), "{err}");
+    }
+}
