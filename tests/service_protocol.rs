@@ -297,9 +297,9 @@ async fn bad_requests_get_precise_problems_and_the_server_keeps_serving() {
             "v0",
         ),
         (
-            with("vut", json!({"external": "mine"})),
+            with("vut", json!({"external": "mine", "speed": 3})),
             StatusCode::UNPROCESSABLE_ENTITY,
-            "external vehicles",
+            "unknown field `speed`",
         ),
         (
             with("library_id", json!(999)),
