@@ -163,8 +163,10 @@ async fn crashes_hangs_garbage_and_early_exits_cost_only_the_tests_they_spoil() 
     // reset arrives; the program is then killed and restarted (a refusal
     // keeps it) and the test tried once more before it is reported
     // invalid.
+    let markers = dir.path().join("markers");
+    std::fs::create_dir(&markers).unwrap();
     let faults = [
-        ("crash", 7, "exited (exit status: 1)"),
+        ("crash", 7, "exited (exit status: 1); stderr: Traceback"),
         ("hang", 20, "no answer within the per-test timeout of 0.5 s"),
         (
             "garbage",
@@ -173,6 +175,8 @@ async fn crashes_hangs_garbage_and_early_exits_cost_only_the_tests_they_spoil() 
         ),
         ("exit", 7, "exited (exit status: 0)"),
         ("refuse", 7, "reported an error: injected refusal"),
+        // Fails the first try only: the retry on a new process succeeds.
+        ("crash-once", 7, ""),
     ];
     let _workers: Vec<WorkerProcess> = faults
         .iter()
@@ -180,7 +184,7 @@ async fn crashes_hangs_garbage_and_early_exits_cost_only_the_tests_they_spoil() 
             let exec = python(
                 &format!("py-{fault}"),
                 "tests/fixtures/faulty_vut.py",
-                &format!("{fault} {every} 3"),
+                &format!("{fault} {every} 3 {}", markers.display()),
             );
             WorkerProcess::start_with(
                 &server.url,
@@ -206,7 +210,8 @@ async fn crashes_hangs_garbage_and_early_exits_cost_only_the_tests_they_spoil() 
         let view = converged(&client, id).await;
         // Exactly the spoiled tests are invalid, and the estimate is the
         // one of the same campaign with those tests left out.
-        let spoiled = |i: u64| i % every == 3;
+        let once = *fault == "crash-once";
+        let spoiled = |i: u64| !once && i % every == 3;
         let reference = in_process_with_invalid(
             Some(&library_file(&client, library.id).await),
             None,
@@ -214,7 +219,7 @@ async fn crashes_hangs_garbage_and_early_exits_cost_only_the_tests_they_spoil() 
             &spoiled,
         );
         assert_same(&view, &reference);
-        assert!(view.invalid > 0, "{fault}: {view:?}");
+        assert_eq!(view.invalid == 0, once, "{fault}: {view:?}");
         assert!(
             view.ci_low.unwrap() <= exact && exact <= view.ci_high.unwrap(),
             "{fault}: {exact} outside {view:?}"
@@ -328,6 +333,19 @@ async fn only_workers_offering_a_program_get_its_tests() {
         .unwrap()
         .expect("a lease for the offering worker");
     assert_eq!(lease.campaign_id, id);
+    // A lease given back is handed out again only to an offering worker.
+    let fence = tslg_api::LeaseFence {
+        worker: "probe".into(),
+        attempt: lease.attempt,
+    };
+    client.release(lease.id, &fence).await.unwrap();
+    assert!(client.claim(&ask(&[])).await.unwrap().is_none());
+    let again = client
+        .claim(&ask(&["track:cut-in:episode"]))
+        .await
+        .unwrap()
+        .expect("the released lease");
+    assert_eq!((again.id, again.attempt), (lease.id, lease.attempt + 1));
     // Bad offers and vehicles are refused with the reason.
     let err = client.claim(&ask(&["track:cut-in"])).await.unwrap_err();
     assert!(err.to_string().contains("must be NAME:case:mode"), "{err}");

@@ -40,16 +40,30 @@ pub trait Case: Sync {
     /// step, horizon, bounds, lanes).
     fn external_world(&self) -> serde_json::Value;
 
+    /// Whether an external program driving in step mode has the event in
+    /// scenario `cell`: this case's simulation asks it for a control at
+    /// every step.
+    fn external_step_event(
+        &self,
+        vut: &mut dyn ExternalVehicle,
+        cell: usize,
+    ) -> Result<bool, DriverError>;
+
     /// Whether an external program has the event in scenario `cell`: in
-    /// step mode this case's simulation asks it for a control at every
-    /// step; in episode mode it is handed [`Case::external_scenario`] and
-    /// reports the outcome. The caller has sent the test's `reset`.
+    /// step mode by [`Case::external_step_event`]; in episode mode it is
+    /// handed [`Case::external_scenario`] and reports the outcome. The
+    /// caller has sent the test's `reset`.
     fn external_event(
         &self,
         vut: &mut dyn ExternalVehicle,
         mode: ExternalMode,
         cell: usize,
-    ) -> Result<bool, DriverError>;
+    ) -> Result<bool, DriverError> {
+        match mode {
+            ExternalMode::Step => self.external_step_event(vut, cell),
+            ExternalMode::Episode => Ok(vut.episode(&self.external_scenario(cell))?.event),
+        }
+    }
 
     /// Scenario `cell` by its axes' names, as episode mode sends it.
     fn external_scenario(&self, cell: usize) -> serde_json::Value {

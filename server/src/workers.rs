@@ -11,7 +11,7 @@ use tslg_api::{LeaseRequest, UnhealthyProgram, WorkerView};
 /// A worker not heard from this long is not live.
 const LIVE: Duration = Duration::from_secs(60);
 /// Workers kept at most; the longest unseen goes first.
-const MAX_WORKERS: usize = 4096;
+const MAX_WORKERS: usize = 1024;
 
 struct Entry {
     threads: u32,

@@ -70,9 +70,12 @@ pub async fn run(
     let programs = tokio::task::spawn_blocking(move || Programs::start(&specs, &settings))
         .await?
         .map_err(anyhow::Error::msg)?;
+    let programs = Arc::new(programs);
     let (tx, stop) = watch::channel(false);
+    let stopping = Arc::clone(&programs);
     tokio::spawn(async move {
         shutdown.await;
+        stopping.stop();
         let _ = tx.send(true);
     });
     let mut worker = Worker {
@@ -81,7 +84,7 @@ pub async fn run(
         threads,
         pool: Arc::new(pool),
         cache: Cache::default(),
-        programs: Arc::new(programs),
+        programs,
         stop,
         summary: WorkerSummary::default(),
     };

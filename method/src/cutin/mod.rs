@@ -10,9 +10,7 @@ pub use exposure_model::{default_grid, CutInExposureModel};
 pub use simulation::{enhanced_ttc, normalised_ettc, CutInPreset, CutInRun, CutInSettings};
 
 use crate::case::{Case, SurrogateEvaluation};
-use crate::external::{
-    DriverError, ExternalFollower, ExternalMode, ExternalVehicle, NOMINAL_LENGTH,
-};
+use crate::external::{DriverError, ExternalFollower, ExternalVehicle, NOMINAL_LENGTH};
 use crate::mass::GridMass;
 use crate::ndd_table::{parse_table, NddTable, TableError};
 use crate::objective::BoxDistance;
@@ -151,25 +149,19 @@ impl Case for CutIn {
         world
     }
 
-    fn external_event(
+    fn external_step_event(
         &self,
         vut: &mut dyn ExternalVehicle,
-        mode: ExternalMode,
         cell: usize,
     ) -> Result<bool, DriverError> {
-        match mode {
-            ExternalMode::Step => {
-                let grid = self.exposure.grid();
-                let run = self.settings.run_with(
-                    &mut ExternalFollower { vut },
-                    grid.value(cell, 0),
-                    grid.value(cell, 1),
-                    self.objective.u_i,
-                )?;
-                Ok(run.accident)
-            }
-            ExternalMode::Episode => Ok(vut.episode(&self.external_scenario(cell))?.event),
-        }
+        let grid = self.exposure.grid();
+        let run = self.settings.run_with(
+            &mut ExternalFollower { vut },
+            grid.value(cell, 0),
+            grid.value(cell, 1),
+            self.objective.u_i,
+        )?;
+        Ok(run.accident)
     }
 
     fn evaluate_surrogate(&self, surrogate: &VehicleModel, cell: usize) -> SurrogateEvaluation {

@@ -84,8 +84,6 @@ impl ExitDriver for ExternalExitDriver<'_> {
     }
 }
 
-/// `ExitWorld` itself is plain data; this keeps the world block and the
-/// simulation from drifting apart in a test.
 #[cfg(test)]
 mod tests {
     use super::*;

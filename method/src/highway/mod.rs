@@ -18,7 +18,7 @@ pub use simulation::{ExitOutcome, ExitRun};
 pub use world::ExitWorld;
 
 use crate::case::{Case, SurrogateEvaluation};
-use crate::external::{DriverError, ExternalMode, ExternalVehicle};
+use crate::external::{DriverError, ExternalVehicle};
 use crate::mass::GridMass;
 use crate::objective::BoxDistance;
 use std::str::FromStr;
@@ -167,23 +167,17 @@ impl Case for HighwayExit {
         world
     }
 
-    fn external_event(
+    fn external_step_event(
         &self,
         vut: &mut dyn ExternalVehicle,
-        mode: ExternalMode,
         cell: usize,
     ) -> Result<bool, DriverError> {
-        match mode {
-            ExternalMode::Step => {
-                let run = simulation::run_with(
-                    &self.world,
-                    &mut external::ExternalExitDriver { vut },
-                    self.scenario(cell),
-                )?;
-                Ok(run.outcome.is_failure())
-            }
-            ExternalMode::Episode => Ok(vut.episode(&self.external_scenario(cell))?.event),
-        }
+        let run = simulation::run_with(
+            &self.world,
+            &mut external::ExternalExitDriver { vut },
+            self.scenario(cell),
+        )?;
+        Ok(run.outcome.is_failure())
     }
 
     fn evaluate_surrogate(&self, surrogate: &ExitVehicle, cell: usize) -> SurrogateEvaluation {

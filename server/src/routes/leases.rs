@@ -16,7 +16,7 @@ use tslg_method::external::{check_program_name, ExternalMode};
 
 /// Most programs' offers and unhealthy reports one request may carry.
 const MAX_OFFERS: usize = 256;
-const MAX_UNHEALTHY: usize = 64;
+const MAX_UNHEALTHY: usize = 16;
 const MAX_UNHEALTHY_REASON: usize = 4000;
 
 fn check_worker(worker: &str) -> Result<(), ApiError> {

@@ -22,6 +22,7 @@ use protocol::{Reply, Request};
 use std::collections::BTreeMap;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::str::FromStr;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 use tslg_api::UnhealthyProgram;
@@ -102,6 +103,7 @@ pub struct Program {
     capabilities: Capabilities,
     idle: Mutex<Vec<ProgramProcess>>,
     health: Mutex<Health>,
+    stopped: AtomicBool,
 }
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -112,8 +114,9 @@ impl Program {
     /// Starts the program once: its handshake tells what it offers. A
     /// program that cannot start is a configuration error.
     pub fn start(spec: ProgramSpec, settings: ProgramSettings) -> Result<Self, String> {
+        let deadline = Instant::now() + settings.timeout;
         let (process, capabilities) =
-            ProgramProcess::start(&spec.command, &settings.worker, settings.timeout)
+            ProgramProcess::start(&spec.command, &settings.worker, settings.timeout, deadline)
                 .map_err(|f| format!("--vut-exec {}: the program {f}", spec.name))?;
         for case in capabilities.cases.keys() {
             if !CASES.contains(&case.as_str()) {
@@ -127,6 +130,7 @@ impl Program {
             capabilities,
             idle: Mutex::new(vec![process]),
             health: Mutex::new(Health::default()),
+            stopped: AtomicBool::new(false),
         })
     }
 
@@ -179,14 +183,14 @@ impl Program {
         if !self.rested() {
             return;
         }
-        match self.spawn() {
+        match self.spawn(Instant::now() + self.settings.timeout) {
             Ok(process) => {
                 *lock(&self.health) = Health::default();
                 lock(&self.idle).push(process);
                 tracing::info!(program = %self.spec.name, "external program healthy again");
             }
             Err(fault) => {
-                let reason = format!("the program {fault}");
+                let reason = clip_reason(format!("the program {fault}"));
                 tracing::warn!(program = %self.spec.name, %reason, "external program still unhealthy");
                 let mut health = lock(&self.health);
                 health.unhealthy = Some((Instant::now(), reason));
@@ -194,35 +198,57 @@ impl Program {
         }
     }
 
-    fn spawn(&self) -> Result<ProgramProcess, Fault> {
+    /// A new process, its handshake done by `deadline`.
+    fn spawn(&self, deadline: Instant) -> Result<ProgramProcess, Fault> {
         ProgramProcess::start(
             &self.spec.command,
             &self.settings.worker,
             self.settings.timeout,
+            deadline,
         )
         .map(|(process, _)| process)
+    }
+
+    /// An idle process that printed nothing since its last test (one that
+    /// did is dropped: its answers would shift), or a new one.
+    fn checkout(&self, deadline: Instant) -> Result<ProgramProcess, Fault> {
+        loop {
+            let Some(mut process) = lock(&self.idle).pop() else {
+                return self.spawn(deadline);
+            };
+            if process.is_quiet() {
+                return Ok(process);
+            }
+            tracing::warn!(program = %self.spec.name, "dropped a process that printed between tests");
+        }
+    }
+
+    /// Stops running tests: what is asked for now is skipped (shutdown).
+    pub fn stop(&self) {
+        self.stopped.store(true, Ordering::Relaxed);
     }
 
     /// Runs test `index` of `tests` (campaign `campaign`) with this
     /// program: a process from the pool, or a new one.
     pub fn run_test(&self, tests: &dyn CampaignTests, campaign: i64, index: u64) -> ProgramRun {
-        if lock(&self.health).unhealthy.is_some() {
+        if self.stopped.load(Ordering::Relaxed) || lock(&self.health).unhealthy.is_some() {
             return ProgramRun::Skipped;
         }
         let mut last = String::new();
         for _ in 0..TRIES {
-            let taken = lock(&self.idle).pop();
-            let mut process = match taken.map_or_else(|| self.spawn(), Ok) {
+            // The whole try, a new process's handshake included.
+            let deadline = Instant::now() + self.settings.timeout;
+            let mut process = match self.checkout(deadline) {
                 Ok(process) => process,
                 Err(fault) => {
-                    last = fault.to_string();
+                    last = format!("the program {fault}");
                     continue;
                 }
             };
             let mut session = Session {
                 process: &mut process,
                 campaign,
-                deadline: Instant::now() + self.settings.timeout,
+                deadline,
                 fault: None,
             };
             let result = catch_unwind(AssertUnwindSafe(|| {
@@ -232,7 +258,10 @@ impl Program {
             match result {
                 Ok(Ok(outcome)) => {
                     lock(&self.idle).push(process);
-                    lock(&self.health).failures = 0;
+                    let mut health = lock(&self.health);
+                    if health.unhealthy.is_none() {
+                        health.failures = 0;
+                    }
                     return ProgramRun::Done(outcome);
                 }
                 Ok(Err(DriverError(reason))) => {
@@ -247,18 +276,10 @@ impl Program {
                 Err(panic) => last = crate::run::panic_message(panic.as_ref()),
             }
         }
-        let mut reason = format!(
+        let reason = clip_reason(format!(
             "external program `{}`: {last} (tried {TRIES} times)",
             self.spec.name
-        );
-        if reason.len() > MAX_REASON {
-            let cut = (0..=MAX_REASON)
-                .rev()
-                .find(|&i| reason.is_char_boundary(i))
-                .unwrap_or(0);
-            reason.truncate(cut);
-            reason.push('…');
-        }
+        ));
         self.record_failure(&reason);
         ProgramRun::Invalid(reason)
     }
@@ -278,6 +299,19 @@ impl Program {
             lock(&self.idle).clear();
         }
     }
+}
+
+/// `reason` cut to [`MAX_REASON`] bytes.
+fn clip_reason(mut reason: String) -> String {
+    if reason.len() > MAX_REASON {
+        let cut = (0..=MAX_REASON)
+            .rev()
+            .find(|&i| reason.is_char_boundary(i))
+            .unwrap_or(0);
+        reason.truncate(cut);
+        reason.push('…');
+    }
+    reason
 }
 
 /// One test's conversation with a process, within the test's deadline.
@@ -363,6 +397,14 @@ impl Programs {
 
     pub fn any_rested(&self) -> bool {
         self.by_name.values().any(|p| p.rested())
+    }
+
+    /// Stops every program's tests (shutdown): the running chunk ends with
+    /// the tests begun.
+    pub fn stop(&self) {
+        for program in self.by_name.values() {
+            program.stop();
+        }
     }
 
     /// Tries every rested program again (blocking).

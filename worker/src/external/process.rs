@@ -1,16 +1,19 @@
 //! One running external program: a child process with JSON lines on its
-//! stdin and stdout. A reader thread turns stdout into lines on a channel,
-//! so every wait has a deadline (a program that hangs is killed, not waited
-//! for); another keeps the last lines of stderr for the failure reason.
-//! Dropping the process kills it.
+//! stdin and stdout, in a process group of its own. A reader thread turns
+//! stdout into lines on a bounded channel, so every wait has a deadline; a
+//! watchdog thread kills the group when a request's deadline passes, so a
+//! write to a program that stopped reading cannot block either; another
+//! thread keeps the last lines of stderr for the failure reason. Dropping
+//! the process kills the group (the program and anything it started).
 
 use super::protocol::{Reply, Request, MAX_LINE};
 use std::collections::{BTreeMap, VecDeque};
 use std::fmt;
 use std::io::{BufRead, BufReader, Read, Write};
+use std::os::unix::process::CommandExt;
 use std::process::{Child, ChildStdin, Command, Stdio};
-use std::sync::mpsc::{self, Receiver, RecvTimeoutError};
-use std::sync::{Arc, Mutex};
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError, TryRecvError};
+use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
 use tslg_method::external::{ExternalMode, PROTOCOL_VERSION};
 
@@ -46,15 +49,8 @@ impl fmt::Display for Fault {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Fault::Spawn(e) => write!(f, "could not be started: {e}"),
-            Fault::Exited { status, stderr } if stderr.is_empty() => {
-                write!(f, "exited ({status}) in the middle of a test")
-            }
-            Fault::Exited { status, stderr } => {
-                write!(
-                    f,
-                    "exited ({status}) in the middle of a test; stderr: {stderr}"
-                )
-            }
+            Fault::Exited { status, stderr } if stderr.is_empty() => write!(f, "exited ({status})"),
+            Fault::Exited { status, stderr } => write!(f, "exited ({status}); stderr: {stderr}"),
             Fault::Timeout { seconds } => write!(
                 f,
                 "gave no answer within the per-test timeout of {seconds} s and was killed"
@@ -78,22 +74,83 @@ enum Line {
     Closed,
 }
 
+/// Lines a program may print ahead of the worker reading them.
+const PENDING_LINES: usize = 16;
+
+/// Kills a process group when an armed deadline passes.
+#[derive(Default)]
+struct Watchdog {
+    /// The armed deadline, and whether the process is gone.
+    state: Mutex<(Option<Instant>, bool)>,
+    wake: Condvar,
+}
+
+impl Watchdog {
+    fn arm(&self, deadline: Option<Instant>) {
+        let mut state = self.state.lock().unwrap_or_else(|p| p.into_inner());
+        state.0 = deadline;
+        self.wake.notify_one();
+    }
+
+    fn finish(&self) {
+        self.state.lock().unwrap_or_else(|p| p.into_inner()).1 = true;
+        self.wake.notify_one();
+    }
+
+    fn watch(&self, group: i32) {
+        let mut state = self.state.lock().unwrap_or_else(|p| p.into_inner());
+        loop {
+            if state.1 {
+                return;
+            }
+            state = match state.0 {
+                None => self.wake.wait(state).unwrap_or_else(|p| p.into_inner()),
+                Some(deadline) if Instant::now() >= deadline => {
+                    kill_group(group);
+                    state.0 = None;
+                    state
+                }
+                Some(deadline) => {
+                    let wait = deadline.saturating_duration_since(Instant::now());
+                    self.wake
+                        .wait_timeout(state, wait)
+                        .unwrap_or_else(|p| p.into_inner())
+                        .0
+                }
+            };
+        }
+    }
+}
+
+/// SIGKILL to every process of the group.
+fn kill_group(group: i32) {
+    // SAFETY: kill(2) with a negative pid signals a process group; it takes
+    // no pointers and cannot violate memory safety.
+    unsafe {
+        libc::kill(-group, libc::SIGKILL);
+    }
+}
+
 pub struct ProgramProcess {
     /// The per-test time limit, for the reason of a timeout.
     timeout: Duration,
     child: Child,
+    group: i32,
     stdin: ChildStdin,
     lines: Receiver<Line>,
     stderr: Arc<Mutex<VecDeque<String>>>,
+    watchdog: Arc<Watchdog>,
 }
 
 impl ProgramProcess {
     /// Starts `command` (program and arguments) and does the handshake
-    /// within `timeout`.
+    /// by `deadline`; `timeout` is the per-test limit the reason of a
+    /// timeout names.
     pub fn start(
         command: &[String],
         worker: &str,
         timeout: Duration,
+        deadline: Instant,
     ) -> Result<(Self, Capabilities), Fault> {
         let (program, args) = command
             .split_first()
@@ -103,12 +160,17 @@ impl ProgramProcess {
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
+            .process_group(0)
             .spawn()
             .map_err(|e| Fault::Spawn(format!("{program}: {e}")))?;
+        let group = child.id() as i32;
+        let watchdog = Arc::new(Watchdog::default());
+        let watching = Arc::clone(&watchdog);
+        std::thread::spawn(move || watching.watch(group));
         let stdin = child.stdin.take().expect("piped stdin");
         let stdout = child.stdout.take().expect("piped stdout");
         let stderr_pipe = child.stderr.take().expect("piped stderr");
-        let (tx, lines) = mpsc::channel();
+        let (tx, lines) = mpsc::sync_channel(PENDING_LINES);
         std::thread::spawn(move || read_lines(stdout, tx));
         let stderr = Arc::new(Mutex::new(VecDeque::new()));
         let tail = Arc::clone(&stderr);
@@ -116,16 +178,17 @@ impl ProgramProcess {
         let mut process = Self {
             timeout,
             child,
+            group,
             stdin,
             lines,
             stderr,
+            watchdog,
         };
-        let deadline = Instant::now() + timeout;
-        process.send(&Request::Hello {
+        let hello = Request::Hello {
             protocol: PROTOCOL_VERSION,
             worker,
-        })?;
-        match process.receive(deadline)? {
+        };
+        match process.call(&hello, "hello", deadline)? {
             Reply::Hello {
                 protocol: PROTOCOL_VERSION,
                 name,
@@ -150,7 +213,7 @@ impl ProgramProcess {
             .and_then(|()| self.stdin.flush())
             .is_err()
         {
-            return Err(self.exited());
+            return Err(self.gone());
         }
         Ok(())
     }
@@ -180,27 +243,66 @@ impl ProgramProcess {
             Line::TooLong => Err(Fault::Garbage {
                 detail: format!("a line longer than {MAX_LINE} bytes"),
             }),
-            Line::Closed => Err(self.exited()),
+            Line::Closed => Err(self.gone()),
         }
     }
 
-    /// Sends `request` and waits for a reply of kind `expected`.
+    /// The fault of a program whose pipes closed: killed by the watchdog at
+    /// the deadline, or exited by itself.
+    fn gone(&mut self) -> Fault {
+        let armed = self.watchdog.state.lock().map(|s| s.0).unwrap_or(None);
+        if armed.is_none_or(|deadline| Instant::now() < deadline) {
+            return self.exited();
+        }
+        self.kill();
+        Fault::Timeout {
+            seconds: self.timeout.as_secs_f64(),
+        }
+    }
+
+    /// Sends `request` and waits for a reply of kind `expected`, all by
+    /// `deadline` (the watchdog kills the program then, even in a write).
+    /// A line printed before the request is a breach: answers would shift.
     pub fn call(
         &mut self,
         request: &Request,
         expected: &'static str,
         deadline: Instant,
     ) -> Result<Reply, Fault> {
-        self.send(request)?;
-        let reply = self.receive(deadline)?;
-        if reply.kind() == expected {
-            Ok(reply)
-        } else {
-            Err(unexpected(expected, &reply))
+        self.watchdog.arm(Some(deadline));
+        let reply = self.unprompted().and_then(|()| {
+            self.send(request)?;
+            self.receive(deadline)
+        });
+        self.watchdog.arm(None);
+        match reply? {
+            reply if reply.kind() == expected => Ok(reply),
+            other => Err(unexpected(expected, &other)),
+        }
+    }
+
+    /// Whether the program has printed nothing since its last reply; a
+    /// process that has is not given another test.
+    pub fn is_quiet(&mut self) -> bool {
+        self.unprompted().is_ok()
+    }
+
+    /// An error if a line is waiting that no request asked for.
+    fn unprompted(&mut self) -> Result<(), Fault> {
+        match self.lines.try_recv() {
+            Err(TryRecvError::Empty) => Ok(()),
+            Ok(Line::Text(text)) => Err(Fault::Garbage {
+                detail: format!("it printed `{}` without being asked", clip(&text)),
+            }),
+            Ok(Line::TooLong) => Err(Fault::Garbage {
+                detail: format!("a line longer than {MAX_LINE} bytes"),
+            }),
+            Ok(Line::Closed) | Err(TryRecvError::Disconnected) => Err(self.exited()),
         }
     }
 
     fn kill(&mut self) {
+        kill_group(self.group);
         let _ = self.child.kill();
         let _ = self.child.wait();
     }
@@ -233,6 +335,7 @@ impl ProgramProcess {
 impl Drop for ProgramProcess {
     fn drop(&mut self) {
         self.kill();
+        self.watchdog.finish();
     }
 }
 
@@ -255,7 +358,7 @@ fn tail_text(tail: &VecDeque<String>) -> String {
     tail.iter().cloned().collect::<Vec<_>>().join(" | ")
 }
 
-fn read_lines(stdout: impl Read, tx: mpsc::Sender<Line>) {
+fn read_lines(stdout: impl Read, tx: mpsc::SyncSender<Line>) {
     let mut reader = BufReader::new(stdout);
     loop {
         let mut buffer = Vec::new();
@@ -297,5 +400,80 @@ fn keep_tail(stderr: impl Read, tail: Arc<Mutex<VecDeque<String>>>) {
             }
             tail.push_back(clip(&line));
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn python(code: &str) -> Vec<String> {
+        vec!["python3".into(), "-c".into(), code.into()]
+    }
+
+    const HELLO: &str = r#"import json, os, sys, time
+print(json.dumps({"type": "hello", "protocol": 1, "name": str(os.getpid()), "cases": {}}), flush=True)
+"#;
+
+    fn start(command: &[String]) -> (ProgramProcess, Capabilities) {
+        let timeout = Duration::from_secs(10);
+        ProgramProcess::start(command, "test", timeout, Instant::now() + timeout).unwrap()
+    }
+
+    /// Whether process `pid` is gone (or a zombie nobody has reaped yet).
+    fn dead(pid: &str) -> bool {
+        std::fs::read_to_string(format!("/proc/{pid}/stat"))
+            .map_or(true, |stat| stat.split_whitespace().nth(2) == Some("Z"))
+    }
+
+    #[test]
+    fn a_second_reply_is_a_breach_not_the_next_answer() {
+        let code = format!(
+            "{HELLO}for line in sys.stdin:\n    print(json.dumps({{\"type\": \"ready\"}}))\n    \
+             print(json.dumps({{\"type\": \"ready\"}}), flush=True)\n"
+        );
+        let (mut p, _) = start(&python(&code));
+        let world = serde_json::json!({});
+        let start = tslg_method::external::TestStart {
+            case: "cut-in",
+            mode: ExternalMode::Step,
+            index: 0,
+            world: &world,
+        };
+        let reset = Request::Reset {
+            campaign: 1,
+            start: &start,
+        };
+        let deadline = Instant::now() + Duration::from_secs(10);
+        assert!(p.call(&reset, "ready", deadline).is_ok());
+        std::thread::sleep(Duration::from_millis(200));
+        assert!(!p.is_quiet(), "the extra line is noticed between tests");
+        let fault = p.call(&reset, "ready", deadline).unwrap_err();
+        assert!(fault.to_string().contains("without being asked"), "{fault}");
+    }
+
+    #[test]
+    fn a_timeout_kills_the_program_and_what_it_started() {
+        // A shell that runs the program as its child: the timeout must kill
+        // both, not only the shell.
+        let code = format!("{HELLO}sys.stdin.readline()\ntime.sleep(3600)\n");
+        let quoted = code.replace('\'', "'\\''");
+        let shell = vec![
+            "sh".to_owned(),
+            "-c".to_owned(),
+            format!("python3 -c '{quoted}'; true"),
+        ];
+        let (mut p, capabilities) = start(&shell);
+        let pid = capabilities.name.unwrap();
+        assert!(!dead(&pid));
+        let deadline = Instant::now() + Duration::from_millis(300);
+        let hello = Request::Hello {
+            protocol: 1,
+            worker: "test",
+        };
+        let fault = p.call(&hello, "hello", deadline).unwrap_err();
+        assert!(matches!(fault, Fault::Timeout { .. }), "{fault}");
+        std::thread::sleep(Duration::from_millis(200));
+        assert!(dead(&pid), "the program {pid} outlived the timeout");
     }
 }
