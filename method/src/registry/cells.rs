@@ -115,11 +115,7 @@ where
     }
 
     fn normalise_vehicle(&self, spec: &serde_json::Value) -> Result<serde_json::Value, CaseError> {
-        let normal = match self.campaign_vehicle(spec)? {
-            CampaignVehicle::Builtin(v) => serde_json::to_value(v),
-            CampaignVehicle::External(e) => serde_json::to_value(e),
-        };
-        Ok(normal.expect("vehicle specifications serialise"))
+        Ok(self.campaign_vehicle(spec)?.to_spec())
     }
 
     fn check_request(&self, request: &BuildRequest) -> Result<(), CaseError> {

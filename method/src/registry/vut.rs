@@ -53,6 +53,18 @@ impl<V> CampaignVehicle<V> {
         }
     }
 
+    /// The specification written out in full, as it is stored.
+    pub(super) fn to_spec(&self) -> serde_json::Value
+    where
+        V: serde::Serialize,
+    {
+        let spec = match self {
+            Self::Builtin(v) => serde_json::to_value(v),
+            Self::External(e) => serde_json::to_value(e),
+        };
+        spec.expect("vehicle specifications serialise")
+    }
+
     pub(super) fn external(&self) -> Option<&ExternalVut> {
         match self {
             Self::Builtin(_) => None,
