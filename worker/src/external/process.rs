@@ -411,7 +411,10 @@ mod tests {
         vec!["python3".into(), "-c".into(), code.into()]
     }
 
+    /// Answers the worker's `hello` request (read first, so that no later
+    /// reply of the test program answers it).
     const HELLO: &str = r#"import json, os, sys, time
+sys.stdin.readline()
 print(json.dumps({"type": "hello", "protocol": 1, "name": str(os.getpid()), "cases": {}}), flush=True)
 "#;
 
@@ -432,9 +435,8 @@ print(json.dumps({"type": "hello", "protocol": 1, "name": str(os.getpid()), "cas
             "{HELLO}for line in sys.stdin:\n    print(json.dumps({{\"type\": \"ready\"}}))\n    \
              print(json.dumps({{\"type\": \"ready\"}}), flush=True)\n"
         );
-        let (mut p, _) = start(&python(&code));
         let world = serde_json::json!({});
-        let start = tslg_method::external::TestStart {
+        let test = tslg_method::external::TestStart {
             case: "cut-in",
             mode: ExternalMode::Step,
             index: 0,
@@ -442,12 +444,19 @@ print(json.dumps({"type": "hello", "protocol": 1, "name": str(os.getpid()), "cas
         };
         let reset = Request::Reset {
             campaign: 1,
-            start: &start,
+            start: &test,
         };
         let deadline = Instant::now() + Duration::from_secs(10);
+        // Between tests the extra line marks the process as not reusable.
+        let (mut p, _) = start(&python(&code));
         assert!(p.call(&reset, "ready", deadline).is_ok());
         std::thread::sleep(Duration::from_millis(200));
         assert!(!p.is_quiet(), "the extra line is noticed between tests");
+        // Without that check the next request fails rather than taking the
+        // stale line as its answer.
+        let (mut p, _) = start(&python(&code));
+        assert!(p.call(&reset, "ready", deadline).is_ok());
+        std::thread::sleep(Duration::from_millis(200));
         let fault = p.call(&reset, "ready", deadline).unwrap_err();
         assert!(fault.to_string().contains("without being asked"), "{fault}");
     }
