@@ -183,6 +183,14 @@ pub struct CampaignView {
     pub relative_half_width: Option<f64>,
     pub ci_low: Option<f64>,
     pub ci_high: Option<f64>,
+    /// Valid tests predicted to reach β from the current prefix:
+    /// `n (rₙ/β)²`, since the half-width shrinks as `1/√n`; absent before
+    /// `min_events` events (and at least 2).
+    pub predicted_tests: Option<u64>,
+    /// Tests accepted per second over the last minute, while running.
+    pub tests_per_second: Option<f64>,
+    /// `(predicted_tests − tests) / tests_per_second`, while running.
+    pub seconds_left: Option<f64>,
     pub created_at: String,
     pub updated_at: String,
 }

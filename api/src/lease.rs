@@ -55,6 +55,12 @@ pub struct WorkerView {
     pub offers: Vec<String>,
     /// Empty when every program it runs is healthy.
     pub unhealthy: Vec<UnhealthyProgram>,
+    /// Tests of its reports accepted since the coordinator started.
+    #[serde(default)]
+    pub tests: u64,
+    /// How many of those were invalid.
+    #[serde(default)]
+    pub invalid: u64,
 }
 
 /// One test of a lease.

@@ -7,11 +7,13 @@ pub mod builder;
 pub mod config;
 pub mod db;
 pub mod error;
+pub mod history;
 pub mod lease_size;
 pub mod routes;
 pub mod sampler_cache;
 pub mod state;
 pub mod store;
+pub mod throughput;
 pub mod workers;
 
 pub use config::Config;

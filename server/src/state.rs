@@ -3,6 +3,7 @@
 use crate::config::Config;
 use crate::db::Database;
 use crate::sampler_cache::SamplerCache;
+use crate::throughput::Throughput;
 use crate::workers::WorkerRegistry;
 use std::sync::Arc;
 use tokio::sync::Semaphore;
@@ -17,6 +18,8 @@ pub struct AppState {
     pub builds: Arc<Semaphore>,
     /// The workers seen, from their lease requests.
     pub workers: Arc<WorkerRegistry>,
+    /// Tests per second of the running campaigns.
+    pub throughput: Arc<Throughput>,
 }
 
 impl AppState {
@@ -27,6 +30,7 @@ impl AppState {
             samplers: Arc::new(SamplerCache::default()),
             builds: Arc::new(Semaphore::new(1)),
             workers: Arc::new(WorkerRegistry::default()),
+            throughput: Arc::new(Throughput::default()),
         }
     }
 }

@@ -18,6 +18,9 @@ struct Entry {
     offers: Vec<String>,
     unhealthy: Vec<UnhealthyProgram>,
     last_seen: Instant,
+    /// Tests of its reports accepted, and how many were invalid.
+    tests: u64,
+    invalid: u64,
 }
 
 #[derive(Default)]
@@ -58,15 +61,41 @@ impl WorkerRegistry {
                 workers.remove(&oldest);
             }
         }
-        workers.insert(
-            request.worker.clone(),
-            Entry {
-                threads: request.threads,
-                offers: request.offers.clone(),
-                unhealthy: request.unhealthy.clone(),
+        let entry = workers
+            .entry(request.worker.clone())
+            .or_insert_with(|| Entry {
+                threads: 0,
+                offers: Vec::new(),
+                unhealthy: Vec::new(),
                 last_seen: Instant::now(),
-            },
-        );
+                tests: 0,
+                invalid: 0,
+            });
+        entry.threads = request.threads;
+        entry.offers = request.offers.clone();
+        entry.unhealthy = request.unhealthy.clone();
+        entry.last_seen = Instant::now();
+    }
+
+    /// Counts a report's accepted tests toward the worker that sent it (one
+    /// not seen by a lease request since the coordinator started is not
+    /// listed, so not counted).
+    pub fn reported(&self, worker: &str, tests: u64, invalid: u64) {
+        let mut workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(entry) = workers.get_mut(worker) {
+            entry.tests += tests;
+            entry.invalid += invalid;
+            entry.last_seen = Instant::now();
+        }
+    }
+
+    /// Workers heard from within the last minute.
+    pub fn live(&self) -> usize {
+        let workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
+        workers
+            .values()
+            .filter(|e| e.last_seen.elapsed() < LIVE)
+            .count()
     }
 
     /// Every worker, most recently seen first.
@@ -81,6 +110,8 @@ impl WorkerRegistry {
                 live: e.last_seen.elapsed() < LIVE,
                 offers: e.offers.clone(),
                 unhealthy: e.unhealthy.clone(),
+                tests: e.tests,
+                invalid: e.invalid,
             })
             .collect();
         list.sort_by(|a, b| a.last_seen_seconds.total_cmp(&b.last_seen_seconds));

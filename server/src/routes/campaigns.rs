@@ -1,7 +1,8 @@
 //! `/api/v1/campaigns`: starting, watching and cancelling campaigns.
 
 use crate::error::{ApiError, ApiJson};
-use crate::routes::ApiPath;
+use crate::history;
+use crate::routes::{ApiPath, ApiQuery};
 use crate::state::AppState;
 use crate::store::campaigns::{self, NewCampaign};
 use crate::store::libraries;
@@ -180,7 +181,7 @@ pub async fn create(
 pub async fn list(State(state): State<AppState>) -> Result<Json<CampaignList>, ApiError> {
     let rows = campaigns::list(&state.db.read).await?;
     Ok(Json(CampaignList {
-        campaigns: rows.iter().map(|r| r.view()).collect(),
+        campaigns: rows.iter().map(|r| live_view(&state, r)).collect(),
     }))
 }
 
@@ -191,21 +192,51 @@ pub async fn get_one(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
 ) -> Result<Json<CampaignView>, ApiError> {
-    Ok(Json(campaigns::get(&state.db.read, id).await?.view()))
+    Ok(Json(live_view(
+        &state,
+        &campaigns::get(&state.db.read, id).await?,
+    )))
 }
 
-/// The estimate after each fold of the prefix, in test order.
-#[utoipa::path(get, path = "/api/v1/campaigns/{id}/history", params(("id" = i64, Path)), responses(
-    (status = 200, body = History), (status = 404, body = Problem)))]
+/// A campaign's view with its current rate and the time left.
+pub fn live_view(state: &AppState, row: &campaigns::CampaignRow) -> CampaignView {
+    let mut view = row.view();
+    state.throughput.fill(&mut view);
+    view
+}
+
+/// `?points=N` of the history read.
+#[derive(Debug, serde::Deserialize, utoipa::IntoParams)]
+#[serde(deny_unknown_fields)]
+#[into_params(parameter_in = Query)]
+pub struct HistoryQuery {
+    /// The most points to return (2 to 5000, default 300), logarithmically
+    /// spaced in the number of tests.
+    points: Option<usize>,
+}
+
+/// The estimate in the course of the campaign, in test order, from the
+/// first fold to the current prefix, at most `points` of them spaced
+/// logarithmically in the number of tests.
+#[utoipa::path(get, path = "/api/v1/campaigns/{id}/history", params(("id" = i64, Path), HistoryQuery),
+    responses((status = 200, body = History), (status = 400, body = Problem), (status = 404, body = Problem)))]
 pub async fn history(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
+    ApiQuery(query): ApiQuery<HistoryQuery>,
 ) -> Result<Json<History>, ApiError> {
+    let max = query.points.unwrap_or(history::DEFAULT_POINTS);
+    if !(2..=history::MAX_POINTS).contains(&max) {
+        return Err(ApiError::BadRequest(format!(
+            "points = {max} must be in 2..={}",
+            history::MAX_POINTS
+        )));
+    }
     let row = campaigns::get(&state.db.read, id).await?;
     let points = campaigns::history(&state.db.read, &row).await?;
     Ok(Json(History {
         campaign_id: id,
-        points,
+        points: history::log_downsample(points, max),
     }))
 }
 
@@ -245,5 +276,6 @@ pub async fn cancel(
 ) -> Result<Json<CampaignView>, ApiError> {
     let row = campaigns::cancel(&state.db.write, id).await?;
     state.samplers.forget(id);
+    state.throughput.forget(id);
     Ok(Json(row.view()))
 }

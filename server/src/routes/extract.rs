@@ -1,7 +1,7 @@
-//! Path parameters whose rejection is a problem response.
+//! Path and query parameters whose rejection is a problem response.
 
 use crate::error::ApiError;
-use axum::extract::{FromRequestParts, Path};
+use axum::extract::{FromRequestParts, Path, Query};
 use axum::http::request::Parts;
 use serde::de::DeserializeOwned;
 
@@ -19,6 +19,27 @@ where
             Ok(Path(value)) => Ok(ApiPath(value)),
             Err(rejection) => Err(ApiError::BadRequest(format!(
                 "invalid path parameter: {}",
+                rejection.body_text()
+            ))),
+        }
+    }
+}
+
+/// Query parameters whose rejection is a problem response.
+pub struct ApiQuery<T>(pub T);
+
+impl<T, S> FromRequestParts<S> for ApiQuery<T>
+where
+    T: DeserializeOwned + Send,
+    S: Send + Sync,
+{
+    type Rejection = ApiError;
+
+    async fn from_request_parts(parts: &mut Parts, state: &S) -> Result<Self, Self::Rejection> {
+        match Query::<T>::from_request_parts(parts, state).await {
+            Ok(Query(value)) => Ok(ApiQuery(value)),
+            Err(rejection) => Err(ApiError::BadRequest(format!(
+                "invalid query: {}",
                 rejection.body_text()
             ))),
         }

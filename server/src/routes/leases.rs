@@ -198,12 +198,21 @@ pub async fn results(
     if !report.events.is_empty() {
         verify_weights(&state, id, &report).await?;
     }
-    let (ack, stopped) = results::record(&state.db, &state.config, id, &report, &checked).await?;
-    if stopped.is_some() {
-        let lease = leases::get(&mut *state.db.read.acquire().await?, id).await?;
-        state.samplers.forget(lease.campaign_id);
+    let recorded = results::record(&state.db, &state.config, id, &report, &checked).await?;
+    let accepted = recorded.ack.accepted;
+    // The accepted tests are the range's tail (the rest were duplicates).
+    let invalid = report
+        .invalid
+        .iter()
+        .filter(|i| i.index >= report.to - accepted)
+        .count() as u64;
+    state.workers.reported(&report.worker, accepted, invalid);
+    state.throughput.accepted(recorded.campaign_id, accepted);
+    if recorded.stopped.is_some() {
+        state.samplers.forget(recorded.campaign_id);
+        state.throughput.forget(recorded.campaign_id);
     }
-    Ok(Json(ack))
+    Ok(Json(recorded.ack))
 }
 
 /// Checks each reported event against the coordinator's own copy of that

@@ -10,7 +10,7 @@ mod leases;
 mod libraries;
 pub mod openapi;
 
-pub use extract::ApiPath;
+pub use extract::{ApiPath, ApiQuery};
 
 use crate::error::{problem, ApiError};
 use crate::state::AppState;

@@ -1,6 +1,7 @@
 //! The `campaigns` and `history` tables.
 
 use crate::error::ApiError;
+use crate::lease_size::predicted_unleased;
 use sqlx::SqlitePool;
 use tslg_api::{CampaignStatus, CampaignView, ExposureRequest, HistoryPoint, Method, Outside};
 use tslg_method::estimator::{ImportanceEstimator, StoppingRule};
@@ -114,6 +115,15 @@ impl CampaignRow {
         }
     }
 
+    /// `n (rₙ/β)²` valid tests, at least `n_min`, once the prefix has
+    /// `min_events` events (and at least 2); see [`crate::lease_size`].
+    fn predicted_tests(&self, rule: &StoppingRule, point: &HistoryPoint) -> Option<u64> {
+        let r = point.relative_half_width?;
+        let needed =
+            predicted_unleased(point.tests, point.events, rule.min_events, r, rule.beta, 0)?;
+        Some(needed.max(rule.n_min).max(point.tests))
+    }
+
     pub fn view(&self) -> CampaignView {
         let rule = self.rule();
         let point = point(&self.fold(), rule.z());
@@ -145,6 +155,9 @@ impl CampaignRow {
             relative_half_width: point.relative_half_width,
             ci_low: (self.tests > 1).then_some(point.ci_low),
             ci_high: (self.tests > 1).then_some(point.ci_high),
+            predicted_tests: self.predicted_tests(&rule, &point),
+            tests_per_second: None,
+            seconds_left: None,
             created_at: self.created_at.clone(),
             updated_at: self.updated_at.clone(),
         }
@@ -260,7 +273,8 @@ pub async fn cancel(pool: &SqlitePool, id: i64) -> Result<CampaignRow, ApiError>
     Ok(row)
 }
 
-/// The persisted history of a campaign's prefix estimate.
+/// The persisted history of a campaign's prefix estimate (thinned as
+/// [`crate::history`] says), ending at the campaign's current prefix.
 pub async fn history(pool: &SqlitePool, row: &CampaignRow) -> Result<Vec<HistoryPoint>, ApiError> {
     let rows: Vec<(i64, i64, i64, f64, f64)> = sqlx::query_as(
         "SELECT indices, tests, events, s1, s2 FROM history WHERE campaign_id = ? ORDER BY indices",
@@ -269,7 +283,7 @@ pub async fn history(pool: &SqlitePool, row: &CampaignRow) -> Result<Vec<History
     .fetch_all(pool)
     .await?;
     let z = row.rule().z();
-    Ok(rows
+    let mut points: Vec<HistoryPoint> = rows
         .into_iter()
         .map(|(indices, tests, events, s1, s2)| {
             let fold = PrefixFold {
@@ -279,5 +293,10 @@ pub async fn history(pool: &SqlitePool, row: &CampaignRow) -> Result<Vec<History
             };
             point(&fold, z)
         })
-        .collect())
+        .collect();
+    let current = row.fold();
+    if current.indices > points.last().map_or(0, |p| p.indices) {
+        points.push(point(&current, z));
+    }
+    Ok(points)
 }

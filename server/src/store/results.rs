@@ -11,6 +11,7 @@
 use crate::config::Config;
 use crate::db::{now_ms, Database};
 use crate::error::ApiError;
+use crate::history;
 use crate::lease_size::update_cost;
 use crate::store::campaigns::{self, CampaignRow};
 use crate::store::leases::{self, check_fence};
@@ -97,7 +98,7 @@ pub async fn record(
     lease_id: i64,
     report: &ResultReport,
     checked: &CheckedReport,
-) -> Result<(ResultAck, Option<CampaignStatus>), ApiError> {
+) -> Result<Recorded, ApiError> {
     let mut tx = db.write.begin().await?;
     let lease = leases::get(&mut tx, lease_id).await?;
     check_fence(&lease, &report.worker, report.attempt)?;
@@ -109,7 +110,11 @@ pub async fn record(
         lease.resume_at as u64,
     );
     if campaign.status().is_final() || lease.state == "cancelled" {
-        return Ok((stopped_ack(span, resume_at, end, campaign.status()), None));
+        return Ok(Recorded {
+            ack: stopped_ack(span, resume_at, end, campaign.status()),
+            stopped: None,
+            campaign_id: campaign.id,
+        });
     }
     if checked.from < start || checked.to > end {
         return Err(ApiError::Unprocessable(format!(
@@ -172,8 +177,8 @@ pub async fn record(
     tx.commit().await?;
     let status = stopped.unwrap_or(CampaignStatus::Running);
     let resume_at = resume_at.max(checked.to);
-    Ok((
-        ResultAck {
+    Ok(Recorded {
+        ack: ResultAck {
             accepted,
             duplicate: span - accepted,
             ignored: 0,
@@ -183,7 +188,16 @@ pub async fn record(
             campaign_status: status,
         },
         stopped,
-    ))
+        campaign_id: campaign.id,
+    })
+}
+
+/// What recording a report did.
+pub struct Recorded {
+    pub ack: ResultAck,
+    /// The campaign's final status, when this report stopped it.
+    pub stopped: Option<CampaignStatus>,
+    pub campaign_id: i64,
 }
 
 /// Thread-seconds a report cost, prorated to the tests it newly resolved:
@@ -414,17 +428,24 @@ async fn fold_prefix(
     .bind(campaign.id)
     .execute(&mut *conn)
     .await?;
-    sqlx::query(
-        "INSERT OR REPLACE INTO history (campaign_id, indices, tests, events, s1, s2) VALUES (?, ?, ?, ?, ?, ?)",
-    )
-    .bind(campaign.id)
-    .bind(fold.indices as i64)
-    .bind(fold.estimator.tests() as i64)
-    .bind(fold.estimator.events() as i64)
-    .bind(s1)
-    .bind(s2)
-    .execute(&mut *conn)
-    .await?;
+    let (last_stored,): (Option<i64>,) =
+        sqlx::query_as("SELECT MAX(indices) FROM history WHERE campaign_id = ?")
+            .bind(campaign.id)
+            .fetch_one(&mut *conn)
+            .await?;
+    if decision.is_some() || history::worth_storing(last_stored.map(|i| i as u64), fold.indices) {
+        sqlx::query(
+            "INSERT OR REPLACE INTO history (campaign_id, indices, tests, events, s1, s2) VALUES (?, ?, ?, ?, ?, ?)",
+        )
+        .bind(campaign.id)
+        .bind(fold.indices as i64)
+        .bind(fold.estimator.tests() as i64)
+        .bind(fold.estimator.events() as i64)
+        .bind(s1)
+        .bind(s2)
+        .execute(&mut *conn)
+        .await?;
+    }
     if decision.is_some() {
         sqlx::query(
             "UPDATE leases SET state = 'cancelled' WHERE campaign_id = ? AND state = 'active'",

@@ -1,0 +1,204 @@
+//! A campaign's figures: the estimate `μ̂ₙ` with its interval band and the
+//! relative half-width `z·σ̂ₙ/(√n·μ̂ₙ)` with the β line, both against the
+//! number of valid tests `n` on a log axis, as in the paper's result figures.
+//! Points with `n = 0` have no place on a log axis and are left out.
+
+use crate::style::{count, number, BAND, ESTIMATE, FONT, LIMIT, SIZE};
+use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
+use plotters::prelude::*;
+use std::fmt::Write;
+use tslg_api::{CampaignView, HistoryPoint};
+
+/// Why a figure could not be drawn (it is drawn into a string, so this is
+/// a bug in the figure, not an I/O error).
+#[derive(Debug, thiserror::Error)]
+#[error("cannot draw the figure: {0}")]
+pub struct FigureError(pub String);
+
+pub(crate) fn fail(e: impl std::fmt::Display) -> FigureError {
+    FigureError(e.to_string())
+}
+
+/// The points that have a place on a log axis of tests.
+fn plotted(points: &[HistoryPoint]) -> impl DoubleEndedIterator<Item = &HistoryPoint> {
+    points.iter().filter(|p| p.tests > 0)
+}
+
+/// `[first, last]` tests, widened around a single point.
+fn test_range(points: &[HistoryPoint]) -> (f64, f64) {
+    let mut tests = plotted(points).map(|p| p.tests as f64);
+    let first = tests.next().unwrap_or(1.0);
+    let last = tests.next_back().unwrap_or(first);
+    if last > first {
+        (first, last)
+    } else {
+        ((first / 2.0).max(1.0), first * 2.0)
+    }
+}
+
+/// The estimate with its interval band against tests. The y axis runs from
+/// 0 to a little above the largest estimate and the last interval's upper
+/// end; the band is clipped to it (early intervals are wide).
+pub fn estimate_svg(view: &CampaignView, points: &[HistoryPoint]) -> Result<String, FigureError> {
+    let (x0, x1) = test_range(points);
+    let top = plotted(points)
+        .map(|p| p.estimate)
+        .chain(plotted(points).last().map(|p| p.ci_high))
+        .fold(0.0f64, f64::max);
+    let y1 = if top > 0.0 { top * 1.15 } else { 1e-6 };
+    let clip = |y: f64| y.clamp(0.0, y1);
+    let mut band: Vec<(f64, f64)> = plotted(points)
+        .map(|p| (p.tests as f64, clip(p.ci_high)))
+        .collect();
+    band.extend(
+        plotted(points)
+            .rev()
+            .map(|p| (p.tests as f64, clip(p.ci_low))),
+    );
+    let line: Vec<(f64, f64)> = plotted(points)
+        .map(|p| (p.tests as f64, clip(p.estimate)))
+        .collect();
+    let title = format!(
+        "Campaign {}: estimate of P(A), {} ({} tests)",
+        view.id,
+        view.status.as_str(),
+        count(view.tests as f64)
+    );
+    draw(&title, (x0..x1).log_scale(), 0.0..y1, "P(A)", |chart| {
+        let interval = format!("{:.0}% interval", view.confidence * 100.0);
+        chart
+            .draw_series(std::iter::once(Polygon::new(band, BAND.filled())))
+            .map_err(fail)?
+            .label(interval)
+            .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 18, y + 5)], BAND.filled()));
+        chart
+            .draw_series(LineSeries::new(line, ESTIMATE.stroke_width(2)))
+            .map_err(fail)?
+            .label("estimate")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], ESTIMATE.stroke_width(2)));
+        Ok(())
+    })
+}
+
+/// The relative half-width against tests, both on log axes, with the line
+/// at β where the campaign stops.
+pub fn relative_half_width_svg(
+    view: &CampaignView,
+    points: &[HistoryPoint],
+) -> Result<String, FigureError> {
+    let (x0, x1) = test_range(points);
+    let line: Vec<(f64, f64)> = plotted(points)
+        .filter_map(|p| p.relative_half_width.map(|r| (p.tests as f64, r)))
+        .filter(|&(_, r)| r > 0.0)
+        .collect();
+    let low = line.iter().map(|&(_, r)| r).fold(view.beta, f64::min);
+    let high = line.iter().map(|&(_, r)| r).fold(view.beta, f64::max);
+    let title = format!(
+        "Campaign {}: relative half-width, β = {}",
+        view.id,
+        number(view.beta)
+    );
+    let beta = view.beta;
+    let y = (low / 1.5..high * 1.5).log_scale();
+    draw(
+        &title,
+        (x0..x1).log_scale(),
+        y,
+        "relative half-width",
+        |chart| {
+            chart
+                .draw_series(DashedLineSeries::new(
+                    [(x0, beta), (x1, beta)],
+                    6,
+                    4,
+                    LIMIT.stroke_width(2),
+                ))
+                .map_err(fail)?
+                .label(format!("β = {}", number(beta)))
+                .legend(|(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 18, y)], LIMIT.stroke_width(2))
+                });
+            chart
+                .draw_series(LineSeries::new(line, ESTIMATE.stroke_width(2)))
+                .map_err(fail)?
+                .label("relative half-width")
+                .legend(|(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 18, y)], ESTIMATE.stroke_width(2))
+                });
+            Ok(())
+        },
+    )
+}
+
+type Chart<'a, X, Y> = ChartContext<'a, SVGBackend<'a>, Cartesian2d<X, Y>>;
+
+/// One plot of `title` with tests on x, the series drawn by `series`, and
+/// a legend.
+fn draw<XR, YR, X, Y>(
+    title: &str,
+    x: XR,
+    y: YR,
+    y_label: &str,
+    series: impl for<'a> FnOnce(&mut Chart<'a, X, Y>) -> Result<(), FigureError>,
+) -> Result<String, FigureError>
+where
+    XR: AsRangedCoord<CoordDescType = X, Value = f64>,
+    YR: AsRangedCoord<CoordDescType = Y, Value = f64>,
+    X: Ranged<ValueType = f64> + ValueFormatter<f64>,
+    Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
+{
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();
+        root.fill(&WHITE).map_err(fail)?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, (FONT, 18))
+            .margin(12)
+            .x_label_area_size(42)
+            .y_label_area_size(72)
+            .build_cartesian_2d(x, y)
+            .map_err(fail)?;
+        chart
+            .configure_mesh()
+            .x_desc("tests")
+            .y_desc(y_label)
+            .x_labels(8)
+            .y_labels(8)
+            .bold_line_style(BLACK.mix(0.15))
+            .light_line_style(BLACK.mix(0.03))
+            .x_label_formatter(&|v| count(*v))
+            .y_label_formatter(&|v| number(*v))
+            .label_style((FONT, 13))
+            .draw()
+            .map_err(fail)?;
+        series(&mut chart)?;
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK.mix(0.4))
+            .label_font((FONT, 13))
+            .draw()
+            .map_err(fail)?;
+        root.present().map_err(fail)?;
+    }
+    Ok(svg)
+}
+
+/// The numbers behind the figures, one row per point.
+pub fn history_csv(points: &[HistoryPoint]) -> String {
+    let mut csv = String::from(
+        "tests,indices,events,estimate,half_width,relative_half_width,ci_low,ci_high\n",
+    );
+    for p in points {
+        let r = p
+            .relative_half_width
+            .map_or(String::new(), |r| r.to_string());
+        let _ = writeln!(
+            csv,
+            "{},{},{},{},{},{},{},{}",
+            p.tests, p.indices, p.events, p.estimate, p.half_width, r, p.ci_low, p.ci_high
+        );
+    }
+    csv
+}

@@ -1,0 +1,217 @@
+//! The figures parse as SVG (XML) and hold the series they claim, at the
+//! positions their data give.
+
+use roxmltree::Document;
+use tslg_api::{CampaignStatus, CampaignView, HistoryPoint, Method, Outside};
+use tslg_figures::{
+    estimate_svg, heatmaps_svg, history_csv, relative_half_width_svg, Heatmap, HeatmapAxis,
+};
+
+fn view() -> CampaignView {
+    CampaignView {
+        id: 7,
+        case: "cut-in".into(),
+        method: Method::Library,
+        library_id: Some(1),
+        vut: serde_json::json!({"model": "idm"}),
+        epsilon: 0.1,
+        outside: Outside::Uniform,
+        beta: 0.2,
+        confidence: 0.9,
+        n_min: 30,
+        min_events: 5,
+        max_tests: 1_000_000,
+        seed: 1,
+        status: CampaignStatus::Running,
+        status_detail: None,
+        tests: 4000,
+        events: 80,
+        invalid: 0,
+        indices: 4000,
+        leased: 4100,
+        worker_seconds: 1.0,
+        estimate: Some(1e-4),
+        half_width: Some(3e-5),
+        relative_half_width: Some(0.3),
+        ci_low: Some(7e-5),
+        ci_high: Some(1.3e-4),
+        predicted_tests: Some(9000),
+        tests_per_second: Some(1000.0),
+        seconds_left: Some(5.0),
+        created_at: String::new(),
+        updated_at: String::new(),
+    }
+}
+
+/// A history whose relative half-width falls as 1/√n from 2 at n = 10.
+fn history() -> Vec<HistoryPoint> {
+    let mut points = vec![HistoryPoint {
+        tests: 0,
+        indices: 0,
+        events: 0,
+        estimate: 0.0,
+        half_width: 0.0,
+        relative_half_width: None,
+        ci_low: 0.0,
+        ci_high: 0.0,
+    }];
+    for k in 1..=40u64 {
+        let n = (10.0 * 1.2f64.powi(k as i32)).round() as u64;
+        let r = 2.0 * (10.0 / n as f64).sqrt();
+        let estimate = 1e-4 * (1.0 + 0.3 / k as f64);
+        points.push(HistoryPoint {
+            tests: n,
+            indices: n,
+            events: k,
+            estimate,
+            half_width: r * estimate,
+            relative_half_width: Some(r),
+            ci_low: estimate * (1.0 - r),
+            ci_high: estimate * (1.0 + r),
+        });
+    }
+    points
+}
+
+fn texts(doc: &Document) -> Vec<String> {
+    doc.descendants()
+        .filter(|n| n.has_tag_name("text"))
+        .filter_map(|n| n.text().map(|t| t.trim().to_owned()))
+        .collect()
+}
+
+/// The point lists of the polylines drawn in `colour`.
+fn lines(doc: &Document, colour: &str) -> Vec<Vec<(f64, f64)>> {
+    doc.descendants()
+        .filter(|n| n.has_tag_name("polyline") && n.attribute("stroke") == Some(colour))
+        .map(|n| {
+            n.attribute("points")
+                .unwrap()
+                .split_whitespace()
+                .map(|xy| {
+                    let (x, y) = xy.split_once(',').unwrap();
+                    (x.parse().unwrap(), y.parse().unwrap())
+                })
+                .collect()
+        })
+        .collect()
+}
+
+#[test]
+fn the_estimate_figure_holds_the_line_and_the_band_of_every_plotted_point() {
+    let svg = estimate_svg(&view(), &history()).unwrap();
+    let doc = Document::parse(&svg).expect("valid XML");
+    assert_eq!(doc.root_element().tag_name().name(), "svg");
+    let texts = texts(&doc);
+    for label in ["estimate", "90% interval", "tests", "P(A)"] {
+        assert!(
+            texts.iter().any(|t| t == label),
+            "no `{label}` in {texts:?}"
+        );
+    }
+    // The line: one vertex per point with n > 0 (40), left to right.
+    let line = lines(&doc, "#1F5DA6")
+        .into_iter()
+        .max_by_key(|l| l.len())
+        .unwrap();
+    assert_eq!(line.len(), 40);
+    assert!(line.windows(2).all(|w| w[0].0 <= w[1].0));
+    // The band: upper and lower edge of the 40 points, and it contains the line.
+    let band = doc
+        .descendants()
+        .find(|n| n.has_tag_name("polygon") && n.attribute("fill") == Some("#A0C4E8"))
+        .expect("the interval band");
+    assert_eq!(
+        band.attribute("points").unwrap().split_whitespace().count(),
+        80
+    );
+}
+
+#[test]
+fn the_half_width_figure_falls_on_a_log_axis_and_draws_beta() {
+    let svg = relative_half_width_svg(&view(), &history()).unwrap();
+    let doc = Document::parse(&svg).expect("valid XML");
+    let texts = texts(&doc);
+    assert!(texts.iter().any(|t| t == "β = 0.2"), "{texts:?}");
+    assert!(texts.iter().any(|t| t == "relative half-width"));
+    let line = lines(&doc, "#1F5DA6")
+        .into_iter()
+        .max_by_key(|l| l.len())
+        .unwrap();
+    assert_eq!(line.len(), 40);
+    // r ∝ n^(-1/2) on log–log axes is a straight line of slope −1/2 in
+    // data units: equal steps in ln n give equal pixel steps in both axes.
+    let (first, last) = (line[0], line[39]);
+    let (mid_x, mid_y) = line[20];
+    let along = (mid_x - first.0) / (last.0 - first.0);
+    let expected_y = first.1 + along * (last.1 - first.1);
+    assert!((mid_y - expected_y).abs() <= 2.0, "{mid_y} vs {expected_y}");
+    assert!(last.1 > first.1, "r falls: y grows downwards in SVG");
+    // β is a dashed horizontal line: red segments at one height (the one
+    // other red segment is the legend's sample).
+    let beta = lines(&doc, "#C82828");
+    let level = |segment: &Vec<(f64, f64)>| segment.iter().all(|p| p.1 == segment[0].1);
+    assert!(beta.iter().all(level));
+    let height = beta[0][0].1;
+    let dashes = beta.iter().filter(|s| s[0].1 == height).count();
+    assert!(
+        dashes > 10 && dashes == beta.len() - 1,
+        "{dashes} of {}",
+        beta.len()
+    );
+}
+
+#[test]
+fn the_csv_has_every_point_with_its_numbers() {
+    let csv = history_csv(&history());
+    let rows: Vec<&str> = csv.lines().collect();
+    assert_eq!(rows.len(), 42);
+    assert!(rows[0].starts_with("tests,indices,events,estimate"));
+    let last: Vec<&str> = rows[41].split(',').collect();
+    let point = history().pop().unwrap();
+    assert_eq!(last[0].parse::<u64>().unwrap(), point.tests);
+    assert_eq!(last[3].parse::<f64>().unwrap(), point.estimate);
+    assert_eq!(
+        last[5].parse::<f64>().unwrap(),
+        point.relative_half_width.unwrap()
+    );
+    assert_eq!(rows[1], "0,0,0,0,0,,0,0");
+}
+
+#[test]
+fn a_heatmap_draws_one_cell_per_positive_value_and_rejects_a_wrong_shape() {
+    let axis = |label: &str, n: usize| HeatmapAxis {
+        label: label.into(),
+        centres: (0..n).map(|k| k as f64 * 2.0).collect(),
+    };
+    let values: Vec<f64> = (0..12)
+        .map(|k| {
+            if k % 3 == 0 {
+                0.0
+            } else {
+                10f64.powi(-(k as i32))
+            }
+        })
+        .collect();
+    let map = Heatmap {
+        title: "P(x)".into(),
+        x: axis("range", 4),
+        y: axis("range rate", 3),
+        values,
+    };
+    let svg = heatmaps_svg("Library 1", &[map.clone(), map.clone()]).unwrap();
+    let doc = Document::parse(&svg).expect("valid XML");
+    let cells = doc
+        .descendants()
+        .filter(|n| n.has_tag_name("rect") && n.attribute("fill") != Some("#FFFFFF"))
+        .count();
+    assert_eq!(cells, 2 * 8, "8 positive cells per map");
+    let wrong = Heatmap {
+        values: vec![1.0; 5],
+        ..map
+    };
+    assert!(heatmaps_svg("x", &[wrong])
+        .unwrap_err()
+        .to_string()
+        .contains("5 values for a 4 × 3 grid"));
+}

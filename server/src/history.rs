@@ -1,0 +1,134 @@
+//! A campaign's history for plots, kept small at both ends.
+//!
+//! Storage keeps a fold's point only when its resolved prefix has grown by
+//! the factor [`STORE_RATIO`] since the last kept point (and always the
+//! point where the campaign stopped), so a campaign of `n` tests keeps about
+//! `ln n / ln 1.01` points however small its result batches: about 1,700 for
+//! 10⁷ tests. Reads pick at most `points` of those, logarithmically spaced in
+//! the number of resolved tests, which is how the plots draw them.
+
+use tslg_api::HistoryPoint;
+
+/// A fold's point is stored when `indices ≥ STORE_RATIO · last stored`.
+pub const STORE_RATIO: f64 = 1.01;
+/// Points a history read returns when it does not say.
+pub const DEFAULT_POINTS: usize = 300;
+/// The most points a history read may ask for.
+pub const MAX_POINTS: usize = 5000;
+
+/// Whether a fold that resolved `indices` is stored after `last_stored`.
+pub fn worth_storing(last_stored: Option<u64>, indices: u64) -> bool {
+    last_stored.is_none_or(|last| indices as f64 >= last as f64 * STORE_RATIO)
+}
+
+/// At most `max` of `points` (in index order), the first and the last among
+/// them, the others the first at or after each of the targets
+/// `x₀ · (x_last / x₀)^(k / (max − 1))` in resolved indices `x`.
+pub fn log_downsample(points: Vec<HistoryPoint>, max: usize) -> Vec<HistoryPoint> {
+    let max = max.max(2);
+    if points.len() <= max {
+        return points;
+    }
+    let first = points[0].indices.max(1) as f64;
+    let last = points[points.len() - 1].indices.max(1) as f64;
+    let ratio = (last / first).ln() / (max - 1) as f64;
+    let mut kept = Vec::with_capacity(max);
+    let mut next = 0usize;
+    for k in 0..max {
+        let target = first * (ratio * k as f64).exp();
+        while next < points.len() - 1 && (points[next].indices as f64) < target * (1.0 - 1e-12) {
+            next += 1;
+        }
+        if kept.last() != Some(&next) {
+            kept.push(next);
+        }
+    }
+    if kept.last() != Some(&(points.len() - 1)) {
+        kept.push(points.len() - 1);
+    }
+    let mut chosen = kept.into_iter().peekable();
+    points
+        .into_iter()
+        .enumerate()
+        .filter_map(|(i, p)| match chosen.peek() {
+            Some(&c) if c == i => {
+                chosen.next();
+                Some(p)
+            }
+            _ => None,
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn at(indices: u64) -> HistoryPoint {
+        HistoryPoint {
+            tests: indices,
+            indices,
+            events: 0,
+            estimate: 0.0,
+            half_width: 0.0,
+            relative_half_width: None,
+            ci_low: 0.0,
+            ci_high: 0.0,
+        }
+    }
+
+    /// What storage keeps of a campaign folded in batches of `batch` up to `n`.
+    fn stored(batch: u64, n: u64) -> Vec<HistoryPoint> {
+        let mut kept: Vec<HistoryPoint> = Vec::new();
+        let mut indices = 0;
+        while indices < n {
+            indices = (indices + batch).min(n);
+            if worth_storing(kept.last().map(|p| p.indices), indices) || indices == n {
+                kept.push(at(indices));
+            }
+        }
+        kept
+    }
+
+    #[test]
+    fn a_ten_million_test_baseline_returns_a_few_hundred_log_spaced_points() {
+        // Results of 100 tests at a time: 10⁵ folds.
+        let kept = stored(100, 10_000_000);
+        // Every fold up to 10⁴ (each grows the prefix by ≥ 1 %), then one
+        // per 1 %: 99 + ln(10³) / ln(1.01) ≈ 793 at most.
+        assert!((700..800).contains(&kept.len()), "{}", kept.len());
+        let read = log_downsample(kept, DEFAULT_POINTS);
+        assert!(
+            (200..=DEFAULT_POINTS).contains(&read.len()),
+            "{}",
+            read.len()
+        );
+        assert_eq!(read.first().unwrap().indices, 100);
+        assert_eq!(read.last().unwrap().indices, 10_000_000);
+        // Evenly spread on a log axis: every decade holds about its share.
+        for decade in 3..7 {
+            let (low, high) = (10u64.pow(decade), 10u64.pow(decade + 1));
+            let inside = read
+                .iter()
+                .filter(|p| (low..high).contains(&p.indices))
+                .count();
+            assert!((50..=80).contains(&inside), "decade 1e{decade}: {inside}");
+        }
+        assert!(read.windows(2).all(|w| w[0].indices < w[1].indices));
+    }
+
+    #[test]
+    fn short_histories_are_returned_whole_and_the_stop_is_always_kept() {
+        let whole: Vec<_> = (1..=50).map(at).collect();
+        assert_eq!(log_downsample(whole.clone(), 300), whole);
+        // Storage: every fold while each grows the prefix by 1 %, then sparser.
+        let kept = stored(1, 1000);
+        assert_eq!(
+            kept[..100].iter().map(|p| p.indices).collect::<Vec<_>>(),
+            (1..=100).collect::<Vec<_>>()
+        );
+        assert_eq!(kept.last().unwrap().indices, 1000);
+        let two = log_downsample(kept, 2);
+        assert_eq!(two.iter().map(|p| p.indices).collect::<Vec<_>>(), [1, 1000]);
+    }
+}
