@@ -11,5 +11,6 @@ pub mod campaign;
 pub mod heatmap;
 mod style;
 
+pub use campaign::FigureError;
 pub use campaign::{estimate_svg, history_csv, relative_half_width_svg};
 pub use heatmap::{heatmaps_svg, Heatmap, HeatmapAxis};

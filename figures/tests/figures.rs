@@ -189,7 +189,7 @@ fn a_heatmap_draws_one_cell_per_positive_value_and_rejects_a_wrong_shape() {
             if k % 3 == 0 {
                 0.0
             } else {
-                10f64.powi(-(k as i32))
+                10f64.powi(-k)
             }
         })
         .collect();

@@ -32,6 +32,11 @@ pub trait Case: Sync {
         self.exposure().grid()
     }
 
+    /// The two grid axes a library's picture is projected onto.
+    fn picture_axes(&self) -> (usize, usize) {
+        (0, 1)
+    }
+
     /// Whether `vehicle` has the event `A` in scenario `cell`. Vehicles are
     /// deterministic, so `P(A|x)` is this as 0 or 1.
     fn is_event(&self, vehicle: &Self::Vehicle, cell: usize) -> bool;

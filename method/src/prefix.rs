@@ -59,6 +59,21 @@ impl PrefixFold {
         to: u64,
         outcomes: &[(u64, SparseOutcome)],
     ) -> Result<Option<Decision>, FoldError> {
+        self.advance_observed(rule, z, to, outcomes, &mut |_| {})
+    }
+
+    /// [`PrefixFold::advance`], showing `observe` the fold on both sides of
+    /// each outcome (before it, after the tests without the event that lead
+    /// to it, and after it), so a history can follow a long report's course
+    /// rather than jump over it. The final state is not shown.
+    pub fn advance_observed(
+        &mut self,
+        rule: &StoppingRule,
+        z: f64,
+        to: u64,
+        outcomes: &[(u64, SparseOutcome)],
+        observe: &mut dyn FnMut(&PrefixFold),
+    ) -> Result<Option<Decision>, FoldError> {
         let from = self.indices;
         let mut previous = None;
         for &(index, outcome) in outcomes {
@@ -82,9 +97,11 @@ impl PrefixFold {
             if let Some(stop) = self.fold_zeros(rule, z, index - self.indices) {
                 return Ok(Some(stop));
             }
+            observe(self);
             if let Some(stop) = self.fold_one(rule, z, outcome) {
                 return Ok(Some(stop));
             }
+            observe(self);
         }
         Ok(self.fold_zeros(rule, z, to.saturating_sub(self.indices)))
     }
@@ -204,6 +221,47 @@ mod tests {
                 at = to;
             }
             assert_eq!(fold, reference, "seed {seed}");
+        }
+    }
+
+    #[test]
+    fn observed_states_are_the_folds_of_the_prefixes_around_each_outcome() {
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let tests: Vec<Option<Option<f64>>> = (0..2000)
+            .map(|_| match rng.random::<f64>() {
+                u if u < 0.005 => None,
+                u if u < 0.03 => Some(Some(rng.random_range(0.01..3.0))),
+                _ => Some(None),
+            })
+            .collect();
+        let rule = StoppingRule {
+            beta: 0.01,
+            confidence: 0.9,
+            n_min: 10,
+            min_events: 5,
+            max_tests: 5000,
+        };
+        let z = rule.z();
+        let outcomes = sparse(&tests, 0, 2000);
+        let mut seen = Vec::new();
+        let mut fold = PrefixFold::default();
+        let stop = fold
+            .advance_observed(&rule, z, 2000, &outcomes, &mut |state| seen.push(*state))
+            .unwrap();
+        assert_eq!(stop, None);
+        // Two states per outcome: just before it and just after it.
+        assert_eq!(seen.len(), 2 * outcomes.len());
+        for (k, &(index, _)) in outcomes.iter().enumerate() {
+            assert_eq!(seen[2 * k].indices, index);
+            assert_eq!(seen[2 * k + 1].indices, index + 1);
+        }
+        for state in &seen {
+            let mut prefix = PrefixFold::default();
+            let to = state.indices as usize;
+            prefix
+                .advance(&rule, z, to as u64, &sparse(&tests, 0, to))
+                .unwrap();
+            assert_eq!(*state, prefix);
         }
     }
 

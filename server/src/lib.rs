@@ -9,6 +9,7 @@ pub mod db;
 pub mod error;
 pub mod history;
 pub mod lease_size;
+pub mod metrics;
 pub mod routes;
 pub mod sampler_cache;
 pub mod state;

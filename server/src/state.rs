@@ -2,6 +2,7 @@
 
 use crate::config::Config;
 use crate::db::Database;
+use crate::metrics::Metrics;
 use crate::sampler_cache::SamplerCache;
 use crate::throughput::Throughput;
 use crate::workers::WorkerRegistry;
@@ -20,6 +21,8 @@ pub struct AppState {
     pub workers: Arc<WorkerRegistry>,
     /// Tests per second of the running campaigns.
     pub throughput: Arc<Throughput>,
+    /// Request latencies, for `/metrics`.
+    pub metrics: Arc<Metrics>,
 }
 
 impl AppState {
@@ -31,6 +34,7 @@ impl AppState {
             builds: Arc::new(Semaphore::new(1)),
             workers: Arc::new(WorkerRegistry::default()),
             throughput: Arc::new(Throughput::default()),
+            metrics: Arc::new(Metrics::default()),
         }
     }
 }

@@ -89,13 +89,14 @@ impl WorkerRegistry {
         }
     }
 
-    /// Workers heard from within the last minute.
-    pub fn live(&self) -> usize {
+    /// Workers heard from within the last minute, and all workers known.
+    pub fn counts(&self) -> (usize, usize) {
         let workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
-        workers
+        let live = workers
             .values()
             .filter(|e| e.last_seen.elapsed() < LIVE)
-            .count()
+            .count();
+        (live, workers.len())
     }
 
     /// Every worker, most recently seen first.

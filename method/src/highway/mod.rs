@@ -157,6 +157,12 @@ impl Case for HighwayExit {
         "builtin"
     }
 
+    /// The two background vehicles' positions `p1, p2`: where they are
+    /// decides whether the exit lane change is feasible.
+    fn picture_axes(&self) -> (usize, usize) {
+        (0, 2)
+    }
+
     fn is_event(&self, vehicle: &ExitVehicle, cell: usize) -> bool {
         self.run(vehicle, cell).outcome.is_failure()
     }

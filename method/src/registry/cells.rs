@@ -2,6 +2,7 @@
 //! vehicles are serde types, libraries of cells in the JSON library format,
 //! and tests drawn as a cell and a weight before the vehicle runs.
 
+use super::picture::{project, PictureMap};
 use super::vut::{runner, CampaignVehicle, Runner};
 use super::{
     BuildRequest, BuiltLibrary, CampaignTests, CaseError, LibrarySearch, PlannedTest, ScenarioCase,
@@ -169,6 +170,22 @@ where
             distribution,
             seed,
         }))
+    }
+
+    fn library_picture(&self, file: &[u8]) -> Result<Vec<PictureMap>, CaseError> {
+        let library = self.library(file)?;
+        let grid = self.case.grid();
+        let exposure = self.case.exposure();
+        let (x, y) = self.case.picture_axes();
+        // The library's own distribution: q(x) = V(x) / W on its cells.
+        let mut q = vec![0.0; grid.len()];
+        for c in &library.cells {
+            q[c.cell] = c.criticality / library.w;
+        }
+        Ok(vec![
+            project(grid, |cell| exposure.p(cell), x, y, "exposure P(x)"),
+            project(grid, |cell| q[cell], x, y, "library q(x) = V(x)/W"),
+        ])
     }
 
     fn exact_event_probability(&self, spec: &serde_json::Value) -> Result<f64, CaseError> {

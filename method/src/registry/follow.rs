@@ -5,6 +5,7 @@
 //! the test (300 steps, microseconds); an external program's cannot be
 //! replayed there.
 
+use super::picture::PictureMap;
 use super::vut::{runner, CampaignVehicle, Runner};
 use super::{
     BuildRequest, BuiltLibrary, CampaignTests, CaseError, LibrarySearch, PlannedTest, ScenarioCase,
@@ -252,6 +253,47 @@ impl ScenarioCase for FollowScenarioCase {
             seed,
             world: self.external_world(),
         }))
+    }
+
+    /// Initial states over range and range rate (summed over the BV's
+    /// speed): `P(s)` beside the library's `q(s) = P(s) P(S|s) / μ_S`.
+    fn library_picture(&self, file: &[u8]) -> Result<Vec<PictureMap>, CaseError> {
+        let library = self.library(file)?.library;
+        let (grid, initial) = (&self.case.grid, &self.case.initial);
+        let mu: f64 = initial
+            .iter()
+            .zip(&library.challenge)
+            .map(|(p, c)| p * c)
+            .sum();
+        let axis = |(first, n): (f64, usize)| -> Vec<f64> {
+            (0..n).map(|k| first + k as f64 * grid.step).collect()
+        };
+        let map = |title: &str, value: &dyn Fn(usize) -> f64| {
+            // s = (i_v · n_R + i_R) · n_Ṙ + i_Ṙ, so s mod (n_R · n_Ṙ) drops i_v.
+            let plane = grid.range.1 * grid.range_rate.1;
+            let mut values = vec![0.0; plane];
+            for s in 0..grid.len() {
+                values[s % plane] += value(s);
+            }
+            PictureMap {
+                title: title.to_owned(),
+                x_label: "range R (m)".into(),
+                x_centres: axis(grid.range),
+                y_label: "range rate Ṙ (m/s)".into(),
+                y_centres: axis(grid.range_rate),
+                values,
+            }
+        };
+        Ok(vec![
+            map("exposure P(s)", &|s| initial[s]),
+            map("library q(s) = P(s) P(S|s) / μ", &|s| {
+                if mu > 0.0 {
+                    initial[s] * library.challenge[s] / mu
+                } else {
+                    0.0
+                }
+            }),
+        ])
     }
 
     fn exact_event_probability(&self, _: &serde_json::Value) -> Result<f64, CaseError> {

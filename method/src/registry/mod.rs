@@ -7,7 +7,10 @@
 
 mod cells;
 mod follow;
+mod picture;
 mod vut;
+
+pub use picture::PictureMap;
 
 use crate::carfollow::case::{CarFollowing, FollowPreset, PolicySolver};
 use crate::carfollow::file::PolicyFileError;
@@ -181,6 +184,9 @@ pub trait ScenarioCase: Send + Sync {
         outside: OutsideSpread,
         seed: u64,
     ) -> Result<Arc<dyn CampaignTests>, CaseError>;
+    /// The picture of a library file: the exposure beside the library's
+    /// sampling distribution (ε = 0), projected onto two axes.
+    fn library_picture(&self, file: &[u8]) -> Result<Vec<PictureMap>, CaseError>;
     /// The exact `P(A)` of a vehicle by enumeration of the grid.
     fn exact_event_probability(&self, vehicle: &serde_json::Value) -> Result<f64, CaseError>;
     /// `P(A)` with the expected tests of a library campaign and of the NDD

@@ -1,4 +1,5 @@
 use super::*;
+use crate::case::Case;
 use crate::exact::event_cells;
 use crate::library::{Library, SearchMethod};
 use serde_json::json;
@@ -37,6 +38,26 @@ fn the_registered_cut_in_case_answers_like_the_typed_one() {
             3,
         )
         .unwrap();
+    // Its picture: P(x) on the 45 × 76 grid beside q(x) = V(x)/W, which
+    // is positive on exactly the library's cells.
+    let picture = case.library_picture(&built.file).unwrap();
+    assert_eq!(picture.len(), 2);
+    let (exposure, q) = (&picture[0], &picture[1]);
+    assert_eq!(
+        (exposure.x_label.as_str(), exposure.y_label.as_str()),
+        ("range", "range_rate")
+    );
+    assert_eq!(exposure.values.len(), 45 * 76);
+    assert!((exposure.values.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+    for (cell, &p) in exposure.values.iter().enumerate() {
+        assert_eq!(p, typed.exposure().p(cell));
+    }
+    assert_eq!(q.values.iter().filter(|&&v| v > 0.0).count(), 287);
+    assert!((q.values.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+    for c in &library.cells {
+        assert_eq!(q.values[c.cell], c.criticality / library.w);
+    }
+    assert!(case.library_picture(b"{}").is_err());
     for index in 0..200 {
         let planned = tests.planned(index).unwrap();
         let outcome = tests.run(index);

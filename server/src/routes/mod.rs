@@ -1,10 +1,13 @@
-//! The HTTP routes. Reads are public; the lease endpoints and the files
+//! The HTTP routes: the API under `/api/v1`, the dashboard at `/` and
+//! metrics at `/metrics`. Reads are public; the lease endpoints and the files
 //! workers download need the worker (or admin) token when one is set;
 //! creating and cancelling need the admin token when one is set.
 
 mod auth;
 mod campaigns;
+mod dashboard;
 mod extract;
+mod figures;
 mod health;
 mod leases;
 mod libraries;
@@ -42,7 +45,25 @@ pub fn router(state: AppState) -> Router {
         .route("/api/v1/campaigns", get(campaigns::list))
         .route("/api/v1/campaigns/{id}", get(campaigns::get_one))
         .route("/api/v1/campaigns/{id}/history", get(campaigns::history))
-        .route("/api/v1/workers", get(leases::workers));
+        .route("/api/v1/workers", get(leases::workers))
+        .route(
+            "/api/v1/campaigns/{id}/figures/estimate.svg",
+            get(figures::estimate),
+        )
+        .route(
+            "/api/v1/campaigns/{id}/figures/relative-half-width.svg",
+            get(figures::relative_half_width),
+        )
+        .route(
+            "/api/v1/libraries/{id}/figures/picture.svg",
+            get(figures::library_picture),
+        )
+        .route("/metrics", get(crate::metrics::scrape))
+        .route("/", get(dashboard::index))
+        .route("/campaigns/{id}", get(dashboard::campaign))
+        .route("/libraries/{id}", get(dashboard::library))
+        .route("/assets/dashboard.js", get(dashboard::script))
+        .route("/assets/dashboard.css", get(dashboard::style));
     let limit = state.config.max_body_bytes;
     admin
         .merge(worker)
@@ -50,6 +71,7 @@ pub fn router(state: AppState) -> Router {
         .fallback(not_found)
         .method_not_allowed_fallback(method_not_allowed)
         .layer(DefaultBodyLimit::max(limit))
+        .layer(from_fn_with_state(state.clone(), crate::metrics::observe))
         .layer(tower_http::trace::TraceLayer::new_for_http())
         .with_state(state)
 }

@@ -27,6 +27,9 @@ use utoipa::OpenApi;
         super::leases::release,
         super::leases::results,
         super::leases::workers,
+        super::figures::estimate,
+        super::figures::relative_half_width,
+        super::figures::library_picture,
     )
 )]
 pub struct ApiDoc;

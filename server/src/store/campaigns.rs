@@ -99,13 +99,7 @@ impl CampaignRow {
     }
 
     pub fn exposure_source(&self) -> ExposureSource {
-        match &self.exposure_table {
-            None => ExposureSource::Builtin,
-            Some(text) => ExposureSource::Table {
-                name: self.exposure_name.clone(),
-                text: text.clone(),
-            },
-        }
+        super::exposure_source(&self.exposure_name, self.exposure_table.as_ref())
     }
 
     pub fn exposure_request(&self) -> ExposureRequest {

@@ -30,6 +30,10 @@ const COLUMNS: &str = "id, case_name, preset, status, request, surrogate, exposu
     build_seconds, error, created_at";
 
 impl LibraryRow {
+    pub fn exposure_source(&self) -> tslg_method::registry::ExposureSource {
+        super::exposure_source(&self.exposure_name, self.exposure_table.as_ref())
+    }
+
     pub fn status(&self) -> LibraryStatus {
         match self.status.as_str() {
             "ready" => LibraryStatus::Ready,

@@ -388,8 +388,21 @@ async fn fold_prefix(
     }
     let outcomes = stored_outcomes(conn, campaign.id, fold.indices, frontier).await?;
     let rule = campaign.rule();
+    let (last_stored,): (Option<i64>,) =
+        sqlx::query_as("SELECT MAX(indices) FROM history WHERE campaign_id = ?")
+            .bind(campaign.id)
+            .fetch_one(&mut *conn)
+            .await?;
+    // History points inside this fold, at most one per 1 % of growth.
+    let mut last_stored = last_stored.map(|i| i as u64);
+    let mut course = Vec::new();
     let decision = fold
-        .advance(&rule, rule.z(), frontier, &outcomes)
+        .advance_observed(&rule, rule.z(), frontier, &outcomes, &mut |state| {
+            if history::worth_storing(last_stored, state.indices) {
+                last_stored = Some(state.indices);
+                course.push(*state);
+            }
+        })
         .map_err(|e| {
             anyhow::anyhow!("stored outcomes of campaign {} rejected: {e}", campaign.id)
         })?;
@@ -428,21 +441,23 @@ async fn fold_prefix(
     .bind(campaign.id)
     .execute(&mut *conn)
     .await?;
-    let (last_stored,): (Option<i64>,) =
-        sqlx::query_as("SELECT MAX(indices) FROM history WHERE campaign_id = ?")
-            .bind(campaign.id)
-            .fetch_one(&mut *conn)
-            .await?;
-    if decision.is_some() || history::worth_storing(last_stored.map(|i| i as u64), fold.indices) {
-        sqlx::query(
-            "INSERT OR REPLACE INTO history (campaign_id, indices, tests, events, s1, s2) VALUES (?, ?, ?, ?, ?, ?)",
+    if decision.is_some() || history::worth_storing(last_stored, fold.indices) {
+        course.push(fold);
+    }
+    for batch in course.chunks(INSERT_BATCH) {
+        QueryBuilder::<Sqlite>::new(
+            "INSERT OR REPLACE INTO history (campaign_id, indices, tests, events, s1, s2) ",
         )
-        .bind(campaign.id)
-        .bind(fold.indices as i64)
-        .bind(fold.estimator.tests() as i64)
-        .bind(fold.estimator.events() as i64)
-        .bind(s1)
-        .bind(s2)
+        .push_values(batch, |mut row, state| {
+            let (s1, s2) = state.estimator.sums();
+            row.push_bind(campaign.id)
+                .push_bind(state.indices as i64)
+                .push_bind(state.estimator.tests() as i64)
+                .push_bind(state.estimator.events() as i64)
+                .push_bind(s1)
+                .push_bind(s2);
+        })
+        .build()
         .execute(&mut *conn)
         .await?;
     }

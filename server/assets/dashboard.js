@@ -1,0 +1,198 @@
+// The tslg dashboard: polls the coordinator's JSON API and redraws. No
+// framework and no build step; the figures are SVG drawn by the server.
+'use strict';
+
+const params = new URLSearchParams(location.search);
+// ?refresh=MS sets the polling period (default 2 s).
+const REFRESH = Math.max(100, Number(params.get('refresh')) || 2000);
+const page = document.body.dataset.page;
+const pageId = document.body.dataset.id;
+
+async function json(url) {
+  const response = await fetch(url, { cache: 'no-store' });
+  if (!response.ok) throw new Error(`${url}: HTTP ${response.status}`);
+  return response.json();
+}
+
+async function text(url) {
+  const response = await fetch(url, { cache: 'no-store' });
+  if (!response.ok) throw new Error(`${url}: HTTP ${response.status}`);
+  return response.text();
+}
+
+const fmt = {
+  count: (v) => (v == null ? '–' : Number(v).toLocaleString('en-US')),
+  sci: (v) => (v == null ? '–' : v === 0 ? '0' : v.toExponential(3)),
+  ratio: (v) => (v == null ? '–' : v.toFixed(3)),
+  rate: (v) => (v == null ? '–' : v >= 100 ? Math.round(v).toLocaleString('en-US') : v.toFixed(1)),
+  seconds(s) {
+    if (s == null) return '–';
+    if (s < 60) return `${Math.round(s)} s`;
+    if (s < 3600) return `${Math.floor(s / 60)} min ${Math.round(s % 60)} s`;
+    if (s < 86400) return `${Math.floor(s / 3600)} h ${Math.round((s % 3600) / 60)} min`;
+    return `${(s / 86400).toFixed(1)} d`;
+  },
+  interval: (c) => (c.ci_low == null ? '–' : `[${fmt.sci(c.ci_low)}, ${fmt.sci(c.ci_high)}]`),
+  vehicle: (v) => (v.model ?? (v.external ? `external ${v.external}` : JSON.stringify(v))),
+};
+
+// Share of the way to β: tests done of those predicted, since the
+// relative half-width shrinks as 1/√n.
+function progress(c) {
+  if (c.status === 'converged') return 1;
+  if (!c.predicted_tests) return 0;
+  return Math.min(1, c.tests / c.predicted_tests);
+}
+
+function el(tag, attrs = {}, ...children) {
+  const node = document.createElement(tag);
+  for (const [k, v] of Object.entries(attrs)) {
+    if (k === 'class') node.className = v;
+    else if (k.startsWith('data-')) node.setAttribute(k, v);
+    else node[k] = v;
+  }
+  for (const child of children) node.append(child instanceof Node ? child : String(child));
+  return node;
+}
+
+function bar(share, done) {
+  const inner = el('div');
+  inner.style.width = `${(share * 100).toFixed(1)}%`;
+  return el('div', { class: done ? 'bar done' : 'bar' }, inner);
+}
+
+// A numeric cell that carries its exact value in data-value.
+function num(field, value, shown) {
+  return el('td', { class: 'num', 'data-field': field, 'data-value': value ?? '' }, shown);
+}
+
+function fill(table, rows, empty) {
+  const body = document.querySelector(`#${table} tbody`);
+  if (rows.length === 0) {
+    body.replaceChildren(el('tr', { class: 'empty' }, el('td', { colSpan: 20 }, empty)));
+  } else {
+    body.replaceChildren(...rows);
+  }
+}
+
+function campaignRow(c) {
+  const r = c.relative_half_width;
+  const halfWidth = el('td', { 'data-field': 'relative_half_width', 'data-value': r ?? '' },
+    bar(progress(c), c.status === 'converged'), `${fmt.ratio(r)} → ${c.beta}`);
+  return el('tr', { id: `campaign-${c.id}`, 'data-status': c.status },
+    el('td', {}, el('a', { href: `/campaigns/${c.id}` }, c.id)),
+    el('td', {}, c.case),
+    el('td', {}, c.method === 'library' && c.library_id != null
+      ? el('a', { href: `/libraries/${c.library_id}` }, `library ${c.library_id}`) : c.method),
+    el('td', {}, fmt.vehicle(c.vut)),
+    el('td', { class: `status-${c.status}`, 'data-field': 'status' }, c.status),
+    num('tests', c.tests, fmt.count(c.tests)),
+    num('events', c.events, fmt.count(c.events)),
+    num('estimate', c.estimate, fmt.sci(c.estimate)),
+    el('td', { 'data-field': 'interval' }, fmt.interval(c)),
+    halfWidth,
+    num('tests_per_second', c.tests_per_second, fmt.rate(c.tests_per_second)),
+    num('seconds_left', c.seconds_left, fmt.seconds(c.seconds_left)));
+}
+
+function workerRow(w) {
+  const share = w.tests > 0 ? w.invalid / w.tests : null;
+  const health = w.unhealthy.length === 0
+    ? el('td', {}, w.live ? 'live' : 'not seen for a minute')
+    : el('td', { class: 'unhealthy', title: w.unhealthy.map((u) => `${u.name}: ${u.reason}`).join('\n') },
+      `unhealthy: ${w.unhealthy.map((u) => u.name).join(', ')}`);
+  return el('tr', { id: `worker-${w.name}` },
+    el('td', {}, w.name),
+    num('threads', w.threads, w.threads),
+    num('last_seen_seconds', w.last_seen_seconds, fmt.seconds(w.last_seen_seconds) + ' ago'),
+    num('tests', w.tests, fmt.count(w.tests)),
+    num('invalid_share', share, share == null ? '–' : `${(share * 100).toFixed(2)} %`),
+    el('td', {}, w.offers.join(', ') || 'built-in vehicles'),
+    health);
+}
+
+function libraryRow(l) {
+  return el('tr', { id: `library-${l.id}` },
+    el('td', {}, el('a', { href: `/libraries/${l.id}` }, l.id)),
+    el('td', {}, l.case),
+    el('td', {}, fmt.vehicle(l.surrogate)),
+    el('td', { class: `status-${l.status}` }, l.status),
+    num('size', l.size, fmt.count(l.size)),
+    num('total_scenarios', l.total_scenarios, fmt.count(l.total_scenarios)),
+    num('mu_s', l.mu_s, fmt.sci(l.mu_s)),
+    num('build_seconds', l.build_seconds, fmt.seconds(l.build_seconds)));
+}
+
+function stamp() {
+  document.getElementById('updated').textContent = `updated ${new Date().toLocaleTimeString()}`;
+}
+
+function set(id, value, exact) {
+  const node = document.getElementById(id);
+  node.textContent = value;
+  if (exact !== undefined) node.dataset.value = exact ?? '';
+}
+
+async function indexPage() {
+  const [campaigns, workers, libraries] = await Promise.all([
+    json('/api/v1/campaigns'), json('/api/v1/workers'), json('/api/v1/libraries')]);
+  fill('campaigns', campaigns.campaigns.map(campaignRow), 'no campaigns yet');
+  fill('workers', workers.workers.map(workerRow), 'no workers seen yet');
+  fill('libraries', libraries.map(libraryRow), 'no libraries yet');
+  return true;
+}
+
+async function campaignPage() {
+  const c = await json(`/api/v1/campaigns/${pageId}`);
+  set('status', c.status);
+  document.getElementById('status').className = `status-${c.status}`;
+  set('tests', fmt.count(c.tests), c.tests);
+  set('events', fmt.count(c.events), c.events);
+  set('invalid', fmt.count(c.invalid), c.invalid);
+  set('estimate', fmt.sci(c.estimate), c.estimate);
+  set('interval', fmt.interval(c));
+  set('relative-half-width', fmt.ratio(c.relative_half_width), c.relative_half_width);
+  set('beta', c.beta);
+  set('rate', fmt.rate(c.tests_per_second), c.tests_per_second);
+  set('left', fmt.seconds(c.seconds_left), c.seconds_left);
+  set('detail', c.status_detail ?? `${c.case}, ${c.method}, vehicle ${fmt.vehicle(c.vut)}, seed ${c.seed}`);
+  const share = progress(c);
+  document.getElementById('progress').style.width = `${(share * 100).toFixed(1)}%`;
+  const [estimate, halfWidth] = await Promise.all([
+    text(`/api/v1/campaigns/${pageId}/figures/estimate.svg`),
+    text(`/api/v1/campaigns/${pageId}/figures/relative-half-width.svg`)]);
+  document.getElementById('estimate-figure').innerHTML = estimate;
+  document.getElementById('half-width-figure').innerHTML = halfWidth;
+  return !['converged', 'exhausted', 'cancelled', 'failed'].includes(c.status);
+}
+
+async function libraryPage() {
+  const l = await json(`/api/v1/libraries/${pageId}`);
+  set('case', l.case);
+  set('surrogate', fmt.vehicle(l.surrogate));
+  set('status', l.status);
+  set('size', fmt.count(l.size), l.size);
+  set('total', fmt.count(l.total_scenarios), l.total_scenarios);
+  set('mu-s', fmt.sci(l.mu_s), l.mu_s);
+  set('evaluations', fmt.count(l.sm_evaluations), l.sm_evaluations);
+  set('build', l.progress ? `${fmt.count(l.progress.done)} of ${fmt.count(l.progress.total)}` : fmt.seconds(l.build_seconds));
+  set('detail', l.error ?? `exposure ${l.exposure}, created ${l.created_at}`);
+  if (l.status !== 'ready') return l.status === 'building';
+  document.getElementById('picture').innerHTML = await text(`/api/v1/libraries/${pageId}/figures/picture.svg`);
+  return false;
+}
+
+const pages = { index: indexPage, campaign: campaignPage, library: libraryPage };
+
+async function poll() {
+  let again = true;
+  try {
+    again = await pages[page]();
+    stamp();
+  } catch (error) {
+    document.getElementById('updated').textContent = `update failed: ${error.message}`;
+  }
+  if (again) setTimeout(poll, REFRESH);
+}
+
+poll();

@@ -1,0 +1,235 @@
+//! `/metrics` in the Prometheus text exposition format (version 0.0.4).
+//!
+//! Request latencies are observed as they happen (a histogram by method,
+//! route template and status). Everything about campaigns, leases and
+//! libraries is read from the database at scrape time, so the numbers
+//! survive a restart and agree with the API: totals over all campaigns are
+//! counters (`_total`: they only grow, as campaigns are never deleted), the
+//! state of things now are gauges.
+
+use crate::error::ApiError;
+use crate::state::AppState;
+use axum::extract::{MatchedPath, Request, State};
+use axum::http::header;
+use axum::middleware::Next;
+use axum::response::{IntoResponse, Response};
+use prometheus::{
+    Encoder, HistogramOpts, HistogramVec, IntCounter, IntGauge, IntGaugeVec, Opts, Registry,
+    TextEncoder,
+};
+use std::time::Instant;
+use tslg_api::CampaignStatus;
+
+/// Latency buckets in seconds: 0.5 ms to 10 s.
+const LATENCY_BUCKETS: [f64; 14] = [
+    0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0,
+];
+
+/// The metrics observed while serving.
+pub struct Metrics {
+    registry: Registry,
+    latency: HistogramVec,
+}
+
+impl Default for Metrics {
+    fn default() -> Self {
+        let registry = Registry::new();
+        let latency = HistogramVec::new(
+            HistogramOpts::new(
+                "tslg_http_request_duration_seconds",
+                "Time to answer an HTTP request, by method, route template and status.",
+            )
+            .buckets(LATENCY_BUCKETS.to_vec()),
+            &["method", "route", "status"],
+        )
+        .expect("valid histogram");
+        registry
+            .register(Box::new(latency.clone()))
+            .expect("registered once");
+        Self { registry, latency }
+    }
+}
+
+/// Middleware: observes each request's latency under its route template
+/// (`/api/v1/campaigns/{id}`, so ids do not multiply the series).
+pub async fn observe(State(state): State<AppState>, request: Request, next: Next) -> Response {
+    let started = Instant::now();
+    let method = request.method().to_string();
+    let route = request
+        .extensions()
+        .get::<MatchedPath>()
+        .map_or_else(|| "unmatched".to_owned(), |p| p.as_str().to_owned());
+    let response = next.run(request).await;
+    state
+        .metrics
+        .latency
+        .with_label_values(&[method.as_str(), route.as_str(), response.status().as_str()])
+        .observe(started.elapsed().as_secs_f64());
+    response
+}
+
+/// Counts read from the database for one scrape.
+#[derive(Default)]
+struct Snapshot {
+    campaigns: Vec<(String, i64)>,
+    libraries: Vec<(String, i64)>,
+    resolved: i64,
+    events: i64,
+    invalid: i64,
+    outstanding: i64,
+    expired: i64,
+    reclaimed: i64,
+}
+
+async fn snapshot(state: &AppState) -> Result<Snapshot, ApiError> {
+    let pool = &state.db.read;
+    let campaigns = sqlx::query_as("SELECT status, COUNT(*) FROM campaigns GROUP BY status")
+        .fetch_all(pool)
+        .await?;
+    let libraries = sqlx::query_as("SELECT status, COUNT(*) FROM libraries GROUP BY status")
+        .fetch_all(pool)
+        .await?;
+    let (resolved, events, invalid): (i64, i64, i64) = sqlx::query_as(
+        "SELECT COALESCE(SUM(indices), 0), COALESCE(SUM(events), 0), COALESCE(SUM(invalid), 0) \
+         FROM campaigns",
+    )
+    .fetch_one(pool)
+    .await?;
+    let now = crate::db::now_ms();
+    let (outstanding, expired, reclaimed): (i64, i64, i64) = sqlx::query_as(
+        "SELECT COALESCE(SUM(state = 'active' AND expires_at >= ?), 0), \
+                COALESCE(SUM(state = 'active' AND expires_at < ?), 0), \
+                COALESCE(SUM(attempt - 1), 0) FROM leases",
+    )
+    .bind(now)
+    .bind(now)
+    .fetch_one(pool)
+    .await?;
+    Ok(Snapshot {
+        campaigns,
+        libraries,
+        resolved,
+        events,
+        invalid,
+        outstanding,
+        expired,
+        reclaimed,
+    })
+}
+
+fn gauge_vec(registry: &Registry, name: &str, help: &str, label: &str) -> IntGaugeVec {
+    let gauge = IntGaugeVec::new(Opts::new(name, help), &[label]).expect("valid gauge");
+    registry
+        .register(Box::new(gauge.clone()))
+        .expect("registered once");
+    gauge
+}
+
+fn counter(registry: &Registry, name: &str, help: &str, value: i64) {
+    let counter = IntCounter::new(name, help).expect("valid counter");
+    counter.inc_by(value.max(0) as u64);
+    registry
+        .register(Box::new(counter))
+        .expect("registered once");
+}
+
+fn gauge(registry: &Registry, name: &str, help: &str, value: i64) {
+    let gauge = IntGauge::new(name, help).expect("valid gauge");
+    gauge.set(value);
+    registry.register(Box::new(gauge)).expect("registered once");
+}
+
+/// The metrics of this moment, as a registry of its own.
+fn scrape_registry(s: &Snapshot, live: usize, known: usize) -> Registry {
+    let r = Registry::new();
+    let campaigns = gauge_vec(&r, "tslg_campaigns", "Campaigns by status.", "status");
+    for status in [
+        CampaignStatus::Pending,
+        CampaignStatus::Running,
+        CampaignStatus::Converged,
+        CampaignStatus::Exhausted,
+        CampaignStatus::Cancelled,
+        CampaignStatus::Failed,
+    ] {
+        let n = s
+            .campaigns
+            .iter()
+            .find(|(k, _)| k == status.as_str())
+            .map_or(0, |c| c.1);
+        campaigns.with_label_values(&[status.as_str()]).set(n);
+    }
+    let libraries = gauge_vec(
+        &r,
+        "tslg_libraries",
+        "Scenario libraries by status.",
+        "status",
+    );
+    for status in ["building", "ready", "failed"] {
+        let n = s
+            .libraries
+            .iter()
+            .find(|(k, _)| k == status)
+            .map_or(0, |c| c.1);
+        libraries.with_label_values(&[status]).set(n);
+    }
+    counter(
+        &r,
+        "tslg_tests_resolved_total",
+        "Test indices resolved in order over all campaigns (valid and invalid).",
+        s.resolved,
+    );
+    counter(
+        &r,
+        "tslg_events_total",
+        "Tests with the event, over all campaigns.",
+        s.events,
+    );
+    counter(
+        &r,
+        "tslg_invalid_tests_total",
+        "Tests recorded invalid (an external vehicle failed them), over all campaigns.",
+        s.invalid,
+    );
+    gauge(
+        &r,
+        "tslg_leases_outstanding",
+        "Leases held by workers and not expired.",
+        s.outstanding,
+    );
+    gauge(
+        &r,
+        "tslg_leases_expired",
+        "Leases expired and not yet handed out again.",
+        s.expired,
+    );
+    counter(
+        &r,
+        "tslg_leases_reclaimed_total",
+        "Expired or released leases handed out again.",
+        s.reclaimed,
+    );
+    let workers = gauge_vec(
+        &r,
+        "tslg_workers",
+        "Workers seen since the coordinator started: live (asked for work within a minute) or stale.",
+        "state",
+    );
+    workers.with_label_values(&["live"]).set(live as i64);
+    workers
+        .with_label_values(&["stale"])
+        .set((known - live) as i64);
+    r
+}
+
+/// `GET /metrics`.
+pub async fn scrape(State(state): State<AppState>) -> Result<Response, ApiError> {
+    let snapshot = snapshot(&state).await?;
+    let (live, known) = state.workers.counts();
+    let mut families = state.metrics.registry.gather();
+    families.extend(scrape_registry(&snapshot, live, known).gather());
+    let mut body = Vec::new();
+    TextEncoder::new()
+        .encode(&families, &mut body)
+        .map_err(|e| ApiError::Internal(e.into()))?;
+    Ok(([(header::CONTENT_TYPE, prometheus::TEXT_FORMAT)], body).into_response())
+}

@@ -1,0 +1,113 @@
+//! The figures as SVG: a campaign's estimate and relative half-width
+//! against tests, and a library's picture. The dashboard shows these and
+//! `tslg campaign report` writes the same ones (`tslg-figures`).
+
+use crate::error::ApiError;
+use crate::routes::ApiPath;
+use crate::state::AppState;
+use crate::store::{campaigns, libraries};
+use axum::extract::State;
+use axum::http::header;
+use axum::response::{IntoResponse, Response};
+use tslg_api::LibraryStatus;
+use tslg_figures::{FigureError, Heatmap, HeatmapAxis};
+use tslg_method::registry::{open_case, PictureMap};
+
+fn svg(figure: Result<String, FigureError>) -> Result<Response, ApiError> {
+    let figure = figure.map_err(|e| ApiError::Internal(e.into()))?;
+    Ok((
+        [
+            (header::CONTENT_TYPE, "image/svg+xml"),
+            (header::CACHE_CONTROL, "no-store"),
+        ],
+        figure,
+    )
+        .into_response())
+}
+
+/// The campaign's view (with its live rate) and its history as plotted.
+async fn campaign(
+    state: &AppState,
+    id: i64,
+) -> Result<(tslg_api::CampaignView, Vec<tslg_api::HistoryPoint>), ApiError> {
+    let row = campaigns::get(&state.db.read, id).await?;
+    let points = campaigns::history(&state.db.read, &row).await?;
+    let points = crate::history::log_downsample(points, crate::history::DEFAULT_POINTS);
+    Ok((super::campaigns::live_view(state, &row), points))
+}
+
+/// The estimate with its interval band against tests (log axis).
+#[utoipa::path(get, path = "/api/v1/campaigns/{id}/figures/estimate.svg", params(("id" = i64, Path)),
+    responses((status = 200, content_type = "image/svg+xml", body = String), (status = 404, body = tslg_api::Problem)))]
+pub async fn estimate(
+    State(state): State<AppState>,
+    ApiPath(id): ApiPath<i64>,
+) -> Result<Response, ApiError> {
+    let (view, points) = campaign(&state, id).await?;
+    svg(tslg_figures::estimate_svg(&view, &points))
+}
+
+/// The relative half-width against tests with the line at β (log axes).
+#[utoipa::path(get, path = "/api/v1/campaigns/{id}/figures/relative-half-width.svg", params(("id" = i64, Path)),
+    responses((status = 200, content_type = "image/svg+xml", body = String), (status = 404, body = tslg_api::Problem)))]
+pub async fn relative_half_width(
+    State(state): State<AppState>,
+    ApiPath(id): ApiPath<i64>,
+) -> Result<Response, ApiError> {
+    let (view, points) = campaign(&state, id).await?;
+    svg(tslg_figures::relative_half_width_svg(&view, &points))
+}
+
+/// The exposure beside the library's sampling distribution, projected onto
+/// two axes (cut-in: range × range rate; highway exit: the two background
+/// vehicles' positions; car-following: initial range × range rate).
+#[utoipa::path(get, path = "/api/v1/libraries/{id}/figures/picture.svg", params(("id" = i64, Path)),
+    responses((status = 200, content_type = "image/svg+xml", body = String), (status = 404, body = tslg_api::Problem),
+        (status = 409, body = tslg_api::Problem)))]
+pub async fn library_picture(
+    State(state): State<AppState>,
+    ApiPath(id): ApiPath<i64>,
+) -> Result<Response, ApiError> {
+    let row = libraries::get(&state.db.read, id).await?;
+    if row.status() != LibraryStatus::Ready {
+        return Err(ApiError::Conflict(format!(
+            "library {id} is {}, not ready: it has no picture yet",
+            row.status().as_str()
+        )));
+    }
+    let file = libraries::file(&state.db.read, id)
+        .await?
+        .ok_or_else(|| ApiError::Internal(anyhow::anyhow!("ready library {id} has no file")))?;
+    let surrogate: serde_json::Value = serde_json::from_str(&row.surrogate).unwrap_or_default();
+    let title = format!(
+        "Library {id}: {}, surrogate {}, {} of {} scenarios",
+        row.case_name,
+        surrogate["model"].as_str().unwrap_or("?"),
+        row.size.unwrap_or(0),
+        row.total_scenarios
+    );
+    let maps = tokio::task::spawn_blocking(move || -> anyhow::Result<Vec<PictureMap>> {
+        let case = open_case(&row.case_name, Some(&row.preset), &row.exposure_source())?;
+        Ok(case.library_picture(&file.bytes)?)
+    })
+    .await
+    .map_err(|e| ApiError::Internal(e.into()))?
+    .map_err(ApiError::Internal)?;
+    let maps: Vec<Heatmap> = maps.into_iter().map(heatmap).collect();
+    svg(tslg_figures::heatmaps_svg(&title, &maps))
+}
+
+fn heatmap(map: PictureMap) -> Heatmap {
+    Heatmap {
+        title: map.title,
+        x: HeatmapAxis {
+            label: map.x_label,
+            centres: map.x_centres,
+        },
+        y: HeatmapAxis {
+            label: map.y_label,
+            centres: map.y_centres,
+        },
+        values: map.values,
+    }
+}
