@@ -88,6 +88,27 @@ pub enum CampaignCommand {
         #[arg(long)]
         json: bool,
     },
+    /// Show a progress bar toward β until the campaign stops, then its state.
+    Watch {
+        /// The campaign's id.
+        id: i64,
+        #[command(flatten)]
+        server: ServerArgs,
+        /// Print JSON.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Write the campaign's figures (SVG) and numbers (CSV, JSON) to a directory.
+    Report {
+        /// The campaign's id.
+        id: i64,
+        #[command(flatten)]
+        server: ServerArgs,
+        /// The directory to write estimate.svg, relative-half-width.svg,
+        /// history.csv and campaign.json to (created if missing).
+        #[arg(long)]
+        out: PathBuf,
+    },
     /// Cancel a pending or running campaign.
     Cancel {
         /// The campaign's id.
@@ -406,6 +427,12 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Campaign(CampaignCommand::Start(args)) => commands::campaign::start(&args),
         Command::Campaign(CampaignCommand::Status { id, server, json }) => {
             commands::campaign::status(&server, id, json)
+        }
+        Command::Campaign(CampaignCommand::Watch { id, server, json }) => {
+            commands::campaign::watch_command(&server, id, json)
+        }
+        Command::Campaign(CampaignCommand::Report { id, server, out }) => {
+            commands::campaign::report(&server, id, &out)
         }
         Command::Campaign(CampaignCommand::Cancel { id, server }) => {
             commands::campaign::cancel(&server, id)

@@ -106,6 +106,13 @@ impl LibraryStatus {
     }
 }
 
+/// How far a library build has come.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct BuildProgress {
+    pub done: u64,
+    pub total: u64,
+}
+
 /// `GET /api/v1/libraries/{id}`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct LibraryView {
@@ -132,6 +139,10 @@ pub struct LibraryView {
     pub build_seconds: Option<f64>,
     /// Why the build failed.
     pub error: Option<String>,
+    /// While building: the search's work items done of its total (cells
+    /// for exhaustive search, starts for multistart, surrogate transitions
+    /// for car-following). Absent while queued behind another build.
+    pub progress: Option<BuildProgress>,
     /// RFC 3339 time of the request.
     pub created_at: String,
 }

@@ -185,13 +185,7 @@ fn a_heatmap_draws_one_cell_per_positive_value_and_rejects_a_wrong_shape() {
         centres: (0..n).map(|k| k as f64 * 2.0).collect(),
     };
     let values: Vec<f64> = (0..12)
-        .map(|k| {
-            if k % 3 == 0 {
-                0.0
-            } else {
-                10f64.powi(-k)
-            }
-        })
+        .map(|k| if k % 3 == 0 { 0.0 } else { 10f64.powi(-k) })
         .collect();
     let map = Heatmap {
         title: "P(x)".into(),

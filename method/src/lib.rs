@@ -18,6 +18,7 @@ pub mod mass;
 pub mod ndd_table;
 pub mod objective;
 pub mod prefix;
+pub mod progress;
 pub mod registry;
 pub mod sampling;
 pub mod tolerance;

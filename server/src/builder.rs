@@ -3,10 +3,13 @@
 
 use crate::state::AppState;
 use crate::store::libraries::{self, Built};
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
-use tslg_api::{CreateLibrary, SearchRequest, ThresholdRequest};
+use tslg_api::{BuildProgress, CreateLibrary, LibraryView, SearchRequest, ThresholdRequest};
 use tslg_method::carfollow::PolicySolver;
 use tslg_method::library::{SearchMethod, Threshold};
+use tslg_method::progress::Progress;
 use tslg_method::registry::{open_case, BuildRequest, BuiltLibrary, ExposureSource, LibrarySearch};
 
 /// The method's threshold and search from the request, validated; what the
@@ -55,15 +58,45 @@ pub fn exposure_source(req: &CreateLibrary) -> ExposureSource {
     }
 }
 
-fn build(req: &CreateLibrary) -> Result<(BuiltLibrary, f64), String> {
+fn build(req: &CreateLibrary, progress: &Progress) -> Result<(BuiltLibrary, f64), String> {
     let started = Instant::now();
     let case = open_case(&req.case, req.preset.as_deref(), &exposure_source(req))
         .map_err(|e| e.to_string())?;
     let request = build_request(req)?;
     let library = case
-        .build_library(&req.surrogate, &request)
+        .build_library_observed(&req.surrogate, &request, progress)
         .map_err(|e| e.to_string())?;
     Ok((library, started.elapsed().as_secs_f64()))
+}
+
+/// The progress of the builds under way, by library id.
+#[derive(Default)]
+pub struct BuildTracker {
+    running: Mutex<HashMap<i64, Arc<Progress>>>,
+}
+
+impl BuildTracker {
+    fn begin(&self, id: i64) -> Arc<Progress> {
+        let progress = Arc::new(Progress::default());
+        self.lock().insert(id, Arc::clone(&progress));
+        progress
+    }
+
+    fn end(&self, id: i64) {
+        self.lock().remove(&id);
+    }
+
+    /// Fills the progress of a library being built.
+    pub fn fill(&self, view: &mut LibraryView) {
+        if let Some(progress) = self.lock().get(&view.id) {
+            let (done, total) = progress.get();
+            view.progress = Some(BuildProgress { done, total });
+        }
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<i64, Arc<Progress>>> {
+        self.running.lock().unwrap_or_else(|p| p.into_inner())
+    }
 }
 
 /// Builds library `id` in the background and records the result.
@@ -80,7 +113,10 @@ async fn run_build(state: &AppState, id: i64) -> anyhow::Result<()> {
     let row = libraries::get(&state.db.read, id).await?;
     let req: CreateLibrary = serde_json::from_str(&row.request)?;
     tracing::info!(library = id, case = %req.case, "library build started");
-    let outcome = tokio::task::spawn_blocking(move || build(&req)).await?;
+    let progress = state.build_progress.begin(id);
+    let outcome = tokio::task::spawn_blocking(move || build(&req, &progress)).await;
+    state.build_progress.end(id);
+    let outcome = outcome?;
     match outcome {
         Ok((library, seconds)) => {
             libraries::mark_ready(

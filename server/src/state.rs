@@ -1,5 +1,6 @@
 //! Shared state of the request handlers.
 
+use crate::builder::BuildTracker;
 use crate::config::Config;
 use crate::db::Database;
 use crate::metrics::Metrics;
@@ -17,6 +18,8 @@ pub struct AppState {
     pub samplers: Arc<SamplerCache>,
     /// Library builds run one at a time: each already uses every core.
     pub builds: Arc<Semaphore>,
+    /// How far the running library build has come.
+    pub build_progress: Arc<BuildTracker>,
     /// The workers seen, from their lease requests.
     pub workers: Arc<WorkerRegistry>,
     /// Tests per second of the running campaigns.
@@ -32,6 +35,7 @@ impl AppState {
             config: Arc::new(config),
             samplers: Arc::new(SamplerCache::default()),
             builds: Arc::new(Semaphore::new(1)),
+            build_progress: Arc::new(BuildTracker::default()),
             workers: Arc::new(WorkerRegistry::default()),
             throughput: Arc::new(Throughput::default()),
             metrics: Arc::new(Metrics::default()),

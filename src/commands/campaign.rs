@@ -1,14 +1,15 @@
 //! `tslg campaign start|status|cancel` and `tslg library create`: clients
 //! of a running coordinator.
 
-use crate::commands::remote::{
-    block_on, client, describe, exposure_request, progress_line, vehicle_json,
-};
+use crate::commands::progress::{BuildBar, CampaignBars};
+use crate::commands::remote::{block_on, client, describe, exposure_request, vehicle_json};
 use crate::{CampaignStartArgs, LibraryCreateArgs, MethodArg, OutsideArg, SearchArg, ServerArgs};
-use std::io::Write;
+use anyhow::Context;
+use std::path::Path;
 use std::time::Duration;
 use tslg_api::{
-    CreateCampaign, CreateLibrary, LibraryStatus, Method, SearchRequest, ThresholdRequest,
+    CreateCampaign, CreateLibrary, LibraryStatus, LibraryView, Method, SearchRequest,
+    ThresholdRequest,
 };
 use tslg_worker::client::Client;
 
@@ -42,18 +43,53 @@ pub fn start(args: &CampaignStartArgs) -> anyhow::Result<()> {
     })
 }
 
-/// Polls a campaign until it stops, showing progress on stderr.
+/// Polls a campaign until it stops, showing a progress bar on stderr.
 pub async fn watch(client: &Client, id: i64) -> anyhow::Result<tslg_api::CampaignView> {
+    let bars = CampaignBars::new(&[&format!("#{id}")]);
     loop {
         let view = client.campaign(id).await?;
-        eprint!("\r{}", progress_line("campaign", &view));
-        let _ = std::io::stderr().flush();
+        bars.update(0, &view);
         if view.status.is_final() {
-            eprintln!();
             return Ok(view);
         }
         tokio::time::sleep(Duration::from_millis(250)).await;
     }
+}
+
+/// `tslg campaign watch ID`: a progress bar until the campaign stops, then
+/// its state.
+pub fn watch_command(server: &ServerArgs, id: i64, json: bool) -> anyhow::Result<()> {
+    let client = client(server)?;
+    block_on(async { print(&watch(&client, id).await?, json) })
+}
+
+/// `tslg campaign report ID --out DIR`: the dashboard's figures as SVG
+/// files, and the numbers behind them as CSV and JSON.
+pub fn report(server: &ServerArgs, id: i64, out: &Path) -> anyhow::Result<()> {
+    let client = client(server)?;
+    let (view, history) =
+        block_on(async { Ok((client.campaign(id).await?, client.history(id).await?)) })?;
+    std::fs::create_dir_all(out)
+        .with_context(|| format!("cannot create the directory {}", out.display()))?;
+    let files = [
+        (
+            "estimate.svg",
+            tslg_figures::estimate_svg(&view, &history.points)?,
+        ),
+        (
+            "relative-half-width.svg",
+            tslg_figures::relative_half_width_svg(&view, &history.points)?,
+        ),
+        ("history.csv", tslg_figures::history_csv(&history.points)),
+        ("campaign.json", serde_json::to_string_pretty(&view)? + "\n"),
+    ];
+    for (name, content) in files {
+        let path = out.join(name);
+        std::fs::write(&path, content)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        println!("{}", path.display());
+    }
+    Ok(())
 }
 
 fn print(view: &tslg_api::CampaignView, json: bool) -> anyhow::Result<()> {
@@ -107,11 +143,12 @@ pub fn create_library(args: &LibraryCreateArgs) -> anyhow::Result<()> {
         threshold: args.threshold_m.map(|m| ThresholdRequest::Relative { m }),
     };
     block_on(async {
-        let mut view = client.create_library(&request).await?;
-        while args.wait && view.status == LibraryStatus::Building {
-            tokio::time::sleep(Duration::from_millis(200)).await;
-            view = client.library(view.id).await?;
-        }
+        let view = client.create_library(&request).await?;
+        let view = if args.wait {
+            wait_for_library(&client, view).await?
+        } else {
+            view
+        };
         println!("{}", serde_json::to_string_pretty(&view)?);
         if view.status == LibraryStatus::Failed {
             anyhow::bail!(
@@ -122,4 +159,19 @@ pub fn create_library(args: &LibraryCreateArgs) -> anyhow::Result<()> {
         }
         Ok(())
     })
+}
+
+/// Polls a library until its build ends, showing its progress on stderr.
+pub async fn wait_for_library(
+    client: &Client,
+    mut view: LibraryView,
+) -> anyhow::Result<LibraryView> {
+    let bar = BuildBar::new(view.id);
+    while view.status == LibraryStatus::Building {
+        bar.update(&view);
+        tokio::time::sleep(Duration::from_millis(200)).await;
+        view = client.library(view.id).await?;
+    }
+    bar.finish(&view);
+    Ok(view)
 }

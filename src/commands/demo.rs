@@ -4,10 +4,11 @@
 //! side by side with progress, and prints both beside the exact answer (or,
 //! for car-following, where no enumeration exists, beside each other).
 
-use crate::commands::remote::{exposure_request, progress_line, vehicle_json};
+use crate::commands::campaign::wait_for_library;
+use crate::commands::progress::CampaignBars;
+use crate::commands::remote::{exposure_request, vehicle_json};
 use crate::service::LocalService;
 use crate::DemoArgs;
-use std::io::Write;
 use std::time::{Duration, Instant};
 use tslg_api::{
     CampaignView, CreateCampaign, CreateLibrary, ExposureRequest, LibraryStatus, Method, Outside,
@@ -79,10 +80,7 @@ async fn drive(
             threshold: None,
         })
         .await?;
-    while library.status == LibraryStatus::Building {
-        tokio::time::sleep(Duration::from_millis(100)).await;
-        library = client.library(library.id).await?;
-    }
+    library = wait_for_library(&client, library).await?;
     anyhow::ensure!(
         library.status == LibraryStatus::Ready,
         "the library failed to build: {}",
@@ -184,16 +182,12 @@ async fn watch_both(
     a: i64,
     b: i64,
 ) -> anyhow::Result<(CampaignView, CampaignView)> {
+    let bars = CampaignBars::new(&["library", "ndd"]);
     loop {
         let (x, y) = (client.campaign(a).await?, client.campaign(b).await?);
-        eprint!(
-            "\r\x1b[2K{} | {}",
-            progress_line("library", &x),
-            progress_line("ndd", &y)
-        );
-        let _ = std::io::stderr().flush();
+        bars.update(0, &x);
+        bars.update(1, &y);
         if x.status.is_final() && y.status.is_final() {
-            eprintln!();
             return Ok((x, y));
         }
         tokio::time::sleep(Duration::from_millis(200)).await;

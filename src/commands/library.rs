@@ -1,11 +1,14 @@
 //! `tslg library build` and `tslg library show`.
 
+use crate::commands::progress::with_progress;
 use crate::inputs::{load_case, parse_vehicle, read_library};
 use crate::{BuildArgs, SearchArg};
 use anyhow::{bail, Context};
 use std::path::Path;
 use std::time::Instant;
-use tslg_method::library::{build_library, Library, LibraryRequest, SearchMethod, Threshold};
+use tslg_method::library::{
+    build_library_observed, Library, LibraryRequest, SearchMethod, Threshold,
+};
 
 pub fn build(args: &BuildArgs) -> anyhow::Result<()> {
     let case = load_case(&args.case)?;
@@ -36,25 +39,31 @@ pub fn build(args: &BuildArgs) -> anyhow::Result<()> {
     let spec = serde_json::to_value(surrogate)?;
     let preset = case.preset().name();
     let started = Instant::now();
-    let mut library = build_library(
-        &case,
-        &surrogate,
-        spec.clone(),
-        preset,
-        &LibraryRequest { threshold, search },
-    );
-    let elapsed = started.elapsed();
-    if args.recall && search != SearchMethod::Exhaustive {
-        let reference = build_library(
+    let mut library = with_progress("search", |progress| {
+        build_library_observed(
             &case,
             &surrogate,
-            spec,
+            spec.clone(),
             preset,
-            &LibraryRequest {
-                threshold,
-                search: SearchMethod::Exhaustive,
-            },
-        );
+            &LibraryRequest { threshold, search },
+            progress,
+        )
+    });
+    let elapsed = started.elapsed();
+    if args.recall && search != SearchMethod::Exhaustive {
+        let reference = with_progress("recall", |progress| {
+            build_library_observed(
+                &case,
+                &surrogate,
+                spec,
+                preset,
+                &LibraryRequest {
+                    threshold,
+                    search: SearchMethod::Exhaustive,
+                },
+                progress,
+            )
+        });
         library.search.recall = Some(library.recall_against(&reference));
     }
     std::fs::write(&args.out, library.to_json())

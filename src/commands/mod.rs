@@ -6,4 +6,5 @@ pub mod evaluate;
 pub mod exact;
 pub mod library;
 pub mod policy;
+pub mod progress;
 pub mod remote;

@@ -51,7 +51,9 @@ pub fn run(args: &PolicyArgs) -> anyhow::Result<()> {
         );
     };
     let started = Instant::now();
-    let transitions = Transitions::compute(&world, grid, &exposure, &surrogate);
+    let transitions = crate::commands::progress::with_progress("transitions", |progress| {
+        Transitions::compute_observed(&world, grid, &exposure, &surrogate, progress)
+    });
     let library = match args.solver {
         SolverArg::Dp => dynamic_programming(&transitions, 1e-12),
         SolverArg::Td => temporal_difference(&transitions, 0.1, 1e-10, 0),

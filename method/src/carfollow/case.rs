@@ -10,6 +10,7 @@ use super::library::{
 use super::sampling::FollowSampler;
 use super::states::StateGrid;
 use super::world::FollowWorld;
+use crate::progress::Progress;
 use crate::vehicle::VehicleModel;
 use serde::{Deserialize, Serialize};
 use std::str::FromStr;
@@ -201,7 +202,24 @@ impl CarFollowing {
         surrogate: &VehicleModel,
         solver: PolicySolver,
     ) -> Result<LearnedPolicy, String> {
-        let transitions = Transitions::compute(&self.world, self.grid, &self.exposure, surrogate);
+        self.learn_observed(surrogate, solver, &Progress::default())
+    }
+
+    /// [`CarFollowing::learn`], counting the surrogate's transitions in
+    /// `progress` (the solver that follows takes a small share of the time).
+    pub fn learn_observed(
+        &self,
+        surrogate: &VehicleModel,
+        solver: PolicySolver,
+        progress: &Progress,
+    ) -> Result<LearnedPolicy, String> {
+        let transitions = Transitions::compute_observed(
+            &self.world,
+            self.grid,
+            &self.exposure,
+            surrogate,
+            progress,
+        );
         let library = solver.solve(&transitions)?;
         let dangerous = transitions
             .zones

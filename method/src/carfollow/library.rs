@@ -23,6 +23,7 @@
 use super::exposure_model::FollowExposureModel;
 use super::states::StateGrid;
 use super::world::{advance, FollowState, FollowWorld};
+use crate::progress::Progress;
 use crate::vehicle::VehicleModel;
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
@@ -65,14 +66,31 @@ impl Transitions {
         exposure: &FollowExposureModel,
         surrogate: &VehicleModel,
     ) -> Self {
+        Self::compute_observed(world, grid, exposure, surrogate, &Progress::default())
+    }
+
+    /// [`Transitions::compute`], counting in `progress` each state's zone
+    /// run and each state-action transition.
+    pub fn compute_observed(
+        world: &FollowWorld,
+        grid: StateGrid,
+        exposure: &FollowExposureModel,
+        surrogate: &VehicleModel,
+        progress: &Progress,
+    ) -> Self {
+        let actions = world.actions;
+        progress.start((grid.len() * (1 + actions)) as u64);
         let zones: Vec<Zone> = (0..grid.len())
             .into_par_iter()
-            .map(|s| zone(world, grid.state(s), surrogate))
+            .map(|s| {
+                progress.add(1);
+                zone(world, grid.state(s), surrogate)
+            })
             .collect();
-        let actions = world.actions;
         let next: Vec<Next> = (0..grid.len() * actions)
             .into_par_iter()
             .map(|i| {
+                progress.add(1);
                 let (s, k) = (i / actions, i % actions);
                 if zones[s] != Zone::Dangerous {
                     return Next::Free;

@@ -3,12 +3,15 @@
 
 use super::Evaluated;
 use crate::case::Case;
+use crate::progress::Progress;
 use rayon::prelude::*;
 
-pub(crate) fn search<C: Case>(case: &C, surrogate: &C::Vehicle) -> Evaluated {
+pub(crate) fn search<C: Case>(case: &C, surrogate: &C::Vehicle, progress: &Progress) -> Evaluated {
     let exposure = case.exposure();
+    progress.start(exposure.grid().len() as u64);
     let (critical, evaluations) = (0..exposure.grid().len())
         .into_par_iter()
+        .inspect(|_| progress.add(1))
         .filter(|&cell| exposure.p(cell) > 0.0)
         .map(|cell| {
             let v = case.surrogate_challenge(surrogate, cell) * exposure.p(cell);

@@ -9,6 +9,7 @@ pub use file::LibraryFileError;
 
 use crate::case::Case;
 use crate::grid::Grid;
+use crate::progress::Progress;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
@@ -141,10 +142,30 @@ pub fn build_library<C: Case>(
     preset: &str,
     request: &LibraryRequest,
 ) -> Library {
+    build_library_observed(
+        case,
+        surrogate,
+        surrogate_spec,
+        preset,
+        request,
+        &Progress::default(),
+    )
+}
+
+/// [`build_library`], counting the cells (exhaustive) or starts
+/// (multistart) searched in `progress`.
+pub fn build_library_observed<C: Case>(
+    case: &C,
+    surrogate: &C::Vehicle,
+    surrogate_spec: serde_json::Value,
+    preset: &str,
+    request: &LibraryRequest,
+    progress: &Progress,
+) -> Library {
     let evaluated = match request.search {
-        SearchMethod::Exhaustive => exhaustive::search(case, surrogate),
+        SearchMethod::Exhaustive => exhaustive::search(case, surrogate, progress),
         SearchMethod::Multistart { starts, seed } => {
-            multistart::search(case, surrogate, &request.threshold, starts, seed)
+            multistart::search(case, surrogate, &request.threshold, starts, seed, progress)
         }
     };
     let grid = case.grid();

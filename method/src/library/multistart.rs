@@ -21,6 +21,7 @@
 
 use super::{Evaluated, Threshold};
 use crate::case::{Case, SurrogateEvaluation};
+use crate::progress::Progress;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::collections::{HashMap, VecDeque};
@@ -102,6 +103,7 @@ pub(crate) fn search<C: Case>(
     threshold: &Threshold,
     starts: usize,
     seed: u64,
+    progress: &Progress,
 ) -> Evaluated {
     let cells = case.grid().len();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -113,7 +115,9 @@ pub(crate) fn search<C: Case>(
         mu_lower: 0.0,
         filled: vec![false; cells],
     };
+    progress.start(starts as u64);
     for _ in 0..starts {
+        progress.add(1);
         let start = rng.random_range(0..cells);
         let path = s.descend(start);
         let optimum = *path.last().expect("a path has its start");

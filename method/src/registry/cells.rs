@@ -12,7 +12,8 @@ use crate::case::Case;
 use crate::estimator::z_for_confidence;
 use crate::exact::{event_cells, event_probability, exact_report, ExactReport};
 use crate::external::{DriverError, ExternalVehicle, ExternalVut, TestStart};
-use crate::library::{build_library, Library, LibraryRequest, SearchMethod};
+use crate::library::{build_library_observed, Library, LibraryRequest, SearchMethod};
+use crate::progress::Progress;
 use crate::sampling::{LibraryDistribution, NddDistribution, OutsideSpread, TestDistribution};
 use serde::de::DeserializeOwned;
 use serde::Serialize;
@@ -123,10 +124,11 @@ where
         self.search(request).map(|_| ())
     }
 
-    fn build_library(
+    fn build_library_observed(
         &self,
         surrogate: &serde_json::Value,
         request: &BuildRequest,
+        progress: &Progress,
     ) -> Result<BuiltLibrary, CaseError> {
         let vehicle = self.builtin(surrogate, "a library's surrogate")?;
         let spec = serde_json::to_value(&vehicle).expect("vehicle specifications serialise");
@@ -134,7 +136,14 @@ where
             threshold: request.threshold.unwrap_or_default(),
             search: self.search(request)?,
         };
-        let library = build_library(self.case.as_ref(), &vehicle, spec, &self.preset, &request);
+        let library = build_library_observed(
+            self.case.as_ref(),
+            &vehicle,
+            spec,
+            &self.preset,
+            &request,
+            progress,
+        );
         Ok(BuiltLibrary {
             file: library.to_json().into_bytes(),
             media_type: LIBRARY_MEDIA_TYPE,

@@ -20,6 +20,7 @@ use crate::external::{
     DriverError, ExternalFollower, ExternalVehicle, ExternalVut, TestStart, NOMINAL_LENGTH,
 };
 use crate::library::{ExposureRef, LibraryFileError};
+use crate::progress::Progress;
 use crate::sampling::OutsideSpread;
 use crate::vehicle::VehicleModel;
 use std::sync::{Arc, Mutex, Weak};
@@ -183,10 +184,11 @@ impl ScenarioCase for FollowScenarioCase {
         self.solver(request).map(|_| ())
     }
 
-    fn build_library(
+    fn build_library_observed(
         &self,
         surrogate: &serde_json::Value,
         request: &BuildRequest,
+        progress: &Progress,
     ) -> Result<BuiltLibrary, CaseError> {
         let solver = self.solver(request)?;
         let vehicle = self
@@ -194,7 +196,7 @@ impl ScenarioCase for FollowScenarioCase {
             .into_builtin(NAME, "a library's surrogate")?;
         let learned = self
             .case
-            .learn(&vehicle, solver)
+            .learn_observed(&vehicle, solver, progress)
             .map_err(CaseError::Build)?;
         let file = PolicyLibraryFile {
             header: PolicyHeader {

@@ -19,6 +19,7 @@ use crate::exact::ExactReport;
 use crate::external::{DriverError, ExternalVehicle, ExternalVut};
 use crate::highway::{HighwayExit, HighwayPreset};
 use crate::library::{LibraryFileError, SearchMethod, Threshold};
+use crate::progress::Progress;
 use crate::sampling::{OutsideSpread, SamplingError};
 use cells::Registered;
 use follow::FollowScenarioCase;
@@ -172,6 +173,16 @@ pub trait ScenarioCase: Send + Sync {
         &self,
         surrogate: &serde_json::Value,
         request: &BuildRequest,
+    ) -> Result<BuiltLibrary, CaseError> {
+        self.build_library_observed(surrogate, request, &Progress::default())
+    }
+    /// [`ScenarioCase::build_library`], counting the search's work in
+    /// `progress` as it goes.
+    fn build_library_observed(
+        &self,
+        surrogate: &serde_json::Value,
+        request: &BuildRequest,
+        progress: &Progress,
     ) -> Result<BuiltLibrary, CaseError>;
     /// The tests of a campaign of `vut`: from the library `file` with
     /// exploration `epsilon` spread by `outside`, or from the NDD when

@@ -62,12 +62,12 @@ pub async fn create(
         },
     )
     .await?;
-    spawn_build(state, row.id);
+    spawn_build(state.clone(), row.id);
     let location = format!("/api/v1/libraries/{}", row.id);
     Ok((
         StatusCode::ACCEPTED,
         [(header::LOCATION, location)],
-        Json(row.view()),
+        Json(live_view(&state, &row)),
     ))
 }
 
@@ -75,7 +75,7 @@ pub async fn create(
 #[utoipa::path(get, path = "/api/v1/libraries", responses((status = 200, body = Vec<LibraryView>)))]
 pub async fn list(State(state): State<AppState>) -> Result<Json<Vec<LibraryView>>, ApiError> {
     let rows = libraries::list(&state.db.read).await?;
-    Ok(Json(rows.iter().map(|r| r.view()).collect()))
+    Ok(Json(rows.iter().map(|r| live_view(&state, r)).collect()))
 }
 
 /// One library's state.
@@ -85,7 +85,10 @@ pub async fn get_one(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
 ) -> Result<Json<LibraryView>, ApiError> {
-    Ok(Json(libraries::get(&state.db.read, id).await?.view()))
+    Ok(Json(live_view(
+        &state,
+        &libraries::get(&state.db.read, id).await?,
+    )))
 }
 
 /// The library file in its case's format (`docs/library-format.md`): JSON
@@ -109,4 +112,11 @@ pub async fn file(
         .await?
         .ok_or_else(|| ApiError::Internal(anyhow::anyhow!("ready library {id} has no file")))?;
     Ok(([(header::CONTENT_TYPE, file.media_type)], file.bytes))
+}
+
+/// A library's view with the progress of its build, while it runs.
+fn live_view(state: &AppState, row: &libraries::LibraryRow) -> LibraryView {
+    let mut view = row.view();
+    state.build_progress.fill(&mut view);
+    view
 }

@@ -58,6 +58,7 @@ impl LibraryRow {
             w: self.w,
             build_seconds: self.build_seconds,
             error: self.error.clone(),
+            progress: None,
             created_at: self.created_at.clone(),
         }
     }

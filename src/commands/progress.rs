@@ -1,0 +1,196 @@
+//! Progress in the terminal: one bar per campaign toward β, and one per
+//! library build. A campaign's bar runs over the tests predicted to reach β
+//! (`n (rₙ/β)²`, from the coordinator), so it fills as the relative
+//! half-width falls; until that prediction exists (too few events) it shows
+//! the tests so far. When stderr is not a terminal the bars are hidden and
+//! each campaign's final state is printed as one line instead.
+
+use crate::commands::remote::progress_line;
+use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
+use std::io::IsTerminal;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+use tslg_api::{CampaignView, LibraryView};
+use tslg_method::progress::Progress;
+
+fn style() -> ProgressStyle {
+    ProgressStyle::with_template(
+        "{prefix:<9} [{bar:30.cyan/blue}] {human_pos:>11}/{human_len:<11} tests  {msg}",
+    )
+    .expect("a valid template")
+    .progress_chars("=> ")
+}
+
+/// What follows the bar: r against β, events, rate and time left.
+fn message(view: &CampaignView) -> String {
+    let r = view
+        .relative_half_width
+        .map_or("∞".into(), |r| format!("{r:.3}"));
+    let mut text = format!("r {r} → β {}  {} events", view.beta, view.events);
+    if let Some(rate) = view.tests_per_second {
+        text.push_str(&format!("  {rate:.0} tests/s"));
+    }
+    if let Some(left) = view.seconds_left {
+        text.push_str(&format!("  ~{} left", duration(left)));
+    }
+    if view.status.is_final() {
+        text.push_str(&format!("  {}", view.status.as_str()));
+    }
+    text
+}
+
+fn duration(seconds: f64) -> String {
+    match seconds {
+        s if s < 60.0 => format!("{s:.0} s"),
+        s if s < 3600.0 => format!("{:.0} min", s / 60.0),
+        s => format!("{:.1} h", s / 3600.0),
+    }
+}
+
+/// Bars for a set of campaigns, drawn together.
+pub struct CampaignBars {
+    bars: Vec<(String, ProgressBar)>,
+    shown: bool,
+    _group: MultiProgress,
+}
+
+impl CampaignBars {
+    pub fn new(labels: &[&str]) -> Self {
+        let shown = std::io::stderr().is_terminal();
+        let group = MultiProgress::with_draw_target(if shown {
+            ProgressDrawTarget::stderr()
+        } else {
+            ProgressDrawTarget::hidden()
+        });
+        let bars = labels
+            .iter()
+            .map(|label| {
+                let bar = group.add(ProgressBar::new(0).with_style(style()));
+                bar.set_prefix(label.to_string());
+                (label.to_string(), bar)
+            })
+            .collect();
+        Self {
+            bars,
+            shown,
+            _group: group,
+        }
+    }
+
+    /// Shows campaign `k`'s state; a stopped campaign's bar is finished.
+    pub fn update(&self, k: usize, view: &CampaignView) {
+        let (label, bar) = &self.bars[k];
+        if bar.is_finished() {
+            return;
+        }
+        let target = view
+            .predicted_tests
+            .unwrap_or(view.tests)
+            .max(view.tests)
+            .max(1);
+        bar.set_length(target);
+        bar.set_position(view.tests);
+        bar.set_message(message(view));
+        if view.status.is_final() {
+            bar.set_length(view.tests.max(1));
+            bar.finish();
+            if !self.shown {
+                eprintln!("{}", progress_line(label, view));
+            }
+        }
+    }
+}
+
+/// A spinner, then a bar, for a library build on the coordinator.
+pub struct BuildBar {
+    bar: ProgressBar,
+}
+
+impl BuildBar {
+    pub fn new(id: i64) -> Self {
+        let bar = if std::io::stderr().is_terminal() {
+            ProgressBar::new(0)
+        } else {
+            ProgressBar::hidden()
+        };
+        bar.set_style(
+            ProgressStyle::with_template(
+                "{prefix} [{bar:30.cyan/blue}] {human_pos}/{human_len} {msg} ({elapsed})",
+            )
+            .expect("a valid template")
+            .progress_chars("=> "),
+        );
+        bar.set_prefix(format!("library {id}"));
+        bar.enable_steady_tick(Duration::from_millis(200));
+        Self { bar }
+    }
+
+    pub fn update(&self, view: &LibraryView) {
+        match view.progress {
+            Some(p) => {
+                self.bar.set_length(p.total);
+                self.bar.set_position(p.done);
+                self.bar.set_message(search_unit(&view.case));
+            }
+            None => self.bar.set_message("queued"),
+        }
+    }
+
+    pub fn finish(&self, view: &LibraryView) {
+        self.bar.finish_and_clear();
+        if !std::io::stderr().is_terminal() {
+            return;
+        }
+        eprintln!(
+            "library {} {}: {} of {} scenarios",
+            view.id,
+            view.status.as_str(),
+            view.size.unwrap_or(0),
+            view.total_scenarios
+        );
+    }
+}
+
+/// What a build's progress counts.
+fn search_unit(case: &str) -> &'static str {
+    if case == "car-following" {
+        "surrogate transitions"
+    } else {
+        "searched"
+    }
+}
+
+/// Runs `work` with a bar on stderr that follows the [`Progress`] it
+/// reports to (hidden when stderr is not a terminal).
+pub fn with_progress<T>(label: &str, work: impl FnOnce(&Progress) -> T) -> T {
+    let progress = Progress::default();
+    let bar = if std::io::stderr().is_terminal() {
+        ProgressBar::new(0)
+    } else {
+        ProgressBar::hidden()
+    };
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{prefix} [{bar:30.cyan/blue}] {human_pos}/{human_len} ({elapsed}, ~{eta} left)",
+        )
+        .expect("a valid template")
+        .progress_chars("=> "),
+    );
+    bar.set_prefix(label.to_owned());
+    let finished = AtomicBool::new(false);
+    let result = std::thread::scope(|scope| {
+        scope.spawn(|| {
+            while !finished.load(Ordering::Relaxed) {
+                let (done, total) = progress.get();
+                bar.set_length(total);
+                bar.set_position(done);
+                std::thread::sleep(Duration::from_millis(100));
+            }
+        });
+        let result = work(&progress);
+        finished.store(true, Ordering::Relaxed);
+        result
+    });
+    bar.finish_and_clear();
+    result
+}
