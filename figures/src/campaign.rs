@@ -95,8 +95,7 @@ pub fn relative_half_width_svg(
     let high = line.iter().map(|&(_, r)| r).fold(view.beta, f64::max);
     let title = format!(
         "Campaign {}: relative half-width, β = {}",
-        view.id,
-        number(view.beta)
+        view.id, view.beta
     );
     let beta = view.beta;
     let y = (low / 1.5..high * 1.5).log_scale();
@@ -114,7 +113,7 @@ pub fn relative_half_width_svg(
                     LIMIT.stroke_width(2),
                 ))
                 .map_err(fail)?
-                .label(format!("β = {}", number(beta)))
+                .label(format!("β = {beta}"))
                 .legend(|(x, y)| {
                     PathElement::new(vec![(x, y), (x + 18, y)], LIMIT.stroke_width(2))
                 });

@@ -1,0 +1,248 @@
+//! The dashboard in a real browser: headless Chromium (Debian's `chromium`
+//! and `chromium-driver`, which `.ci/run` installs) loads the pages while a
+//! campaign runs; the numbers on the page change as results arrive and
+//! agree with the API, the figures are drawn and redrawn, and screenshots
+//! are written to `target/tmp/artefacts/`.
+
+mod support;
+
+use fantoccini::{Client as Browser, ClientBuilder};
+use hyper_util::client::legacy::connect::HttpConnector;
+use serde_json::{json, Value};
+use std::net::TcpListener;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+use support::*;
+use tslg_api::{CampaignStatus, Method};
+
+const CHROMIUM: &str = "/usr/bin/chromium";
+const CHROMEDRIVER: &str = "/usr/bin/chromedriver";
+
+/// chromedriver on a free port, killed on drop.
+struct Driver {
+    child: Child,
+    url: String,
+}
+
+impl Driver {
+    fn start() -> Self {
+        for program in [CHROMIUM, CHROMEDRIVER] {
+            assert!(
+                std::path::Path::new(program).exists(),
+                "{program} is missing: the browser test needs Debian's chromium and \
+                 chromium-driver (`apt-get install chromium chromium-driver`, as .ci/run does)"
+            );
+        }
+        let port = TcpListener::bind("127.0.0.1:0")
+            .unwrap()
+            .local_addr()
+            .unwrap()
+            .port();
+        let child = Command::new(CHROMEDRIVER)
+            .arg(format!("--port={port}"))
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("start chromedriver");
+        Self {
+            child,
+            url: format!("http://127.0.0.1:{port}"),
+        }
+    }
+
+    async fn connect(&self) -> Browser {
+        let capabilities = json!({
+            "goog:chromeOptions": {
+                "binary": CHROMIUM,
+                "args": ["--headless=new", "--no-sandbox", "--disable-gpu",
+                         "--disable-dev-shm-usage", "--window-size=1560,900"]
+            }
+        });
+        let started = Instant::now();
+        loop {
+            // The driver is on loopback: plain HTTP, no TLS.
+            let mut builder = ClientBuilder::new(HttpConnector::new());
+            builder.capabilities(capabilities.as_object().unwrap().clone());
+            match builder.connect(&self.url).await {
+                Ok(browser) => return browser,
+                Err(e) if started.elapsed() < Duration::from_secs(30) => {
+                    let _ = e;
+                    tokio::time::sleep(Duration::from_millis(200)).await;
+                }
+                Err(e) => panic!("cannot start a browser session: {e}"),
+            }
+        }
+    }
+}
+
+impl Drop for Driver {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Evaluates `expression` in the page.
+async fn eval(browser: &Browser, expression: &str) -> Value {
+    browser
+        .execute(&format!("return {expression};"), vec![])
+        .await
+        .expect("script")
+}
+
+/// Waits until `expression` is truthy in the page, then returns it.
+async fn until(browser: &Browser, expression: &str, what: &str) -> Value {
+    let started = Instant::now();
+    loop {
+        let value = eval(browser, expression).await;
+        if !(value.is_null() || value == json!(false) || value == json!(0) || value == json!("")) {
+            return value;
+        }
+        assert!(started.elapsed() < Duration::from_secs(60), "never: {what}");
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+}
+
+/// The number an element shows, from its exact `data-value`.
+fn number(value: &Value) -> u64 {
+    value
+        .as_str()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| panic!("{value}"))
+}
+
+fn save(name: &str, png: &[u8]) {
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("artefacts");
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join(name);
+    std::fs::write(&path, png).unwrap();
+    eprintln!("screenshot: {}", path.display());
+}
+
+/// Points of the longest estimate-coloured line in the figure `figure`.
+fn line_points(figure: &str) -> String {
+    format!(
+        "Math.max(0, ...[...document.querySelectorAll('#{figure} svg polyline[stroke=\"#1F5DA6\"]')]\
+         .map(p => p.getAttribute('points').trim().split(/\\s+/).length))"
+    )
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_dashboard_follows_a_running_campaign_and_agrees_with_the_api() {
+    let dir = scratch();
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &["--lease-size", "3000"]);
+    let _worker = WorkerProcess::start(&server.url, 1, "w1");
+    let client = server.client();
+    let library = ready_library(&client, "idm", true).await;
+    // The NDD baseline to β = 0.005 needs about 2 × 10⁷ tests: it runs for
+    // as long as the test looks at it, and is cancelled at the end.
+    let request = campaign(Method::Ndd, library.id, "fvdm", 0.005, 1);
+    let id = client.create_campaign(&request).await.unwrap().id;
+    let driver = Driver::start();
+    let browser = driver.connect().await;
+
+    // The list: the campaign's row, its numbers caught up with the API.
+    browser
+        .goto(&format!("{}/?refresh=300", server.url))
+        .await
+        .unwrap();
+    let tests =
+        format!("document.querySelector('#campaign-{id} [data-field=tests]')?.dataset.value");
+    let before = wait_for(&client, id, Duration::from_secs(60), |v| v.tests > 0).await;
+    let shown = number(
+        &until(
+            &browser,
+            &format!("Number({tests}) >= {} && {tests}", before.tests),
+            "the list catches up",
+        )
+        .await,
+    );
+    let after = client.campaign(id).await.unwrap();
+    assert!(
+        before.tests <= shown && shown <= after.tests,
+        "{} ≤ {shown} ≤ {}",
+        before.tests,
+        after.tests
+    );
+    // … and it changes as results arrive.
+    until(
+        &browser,
+        &format!("Number({tests}) > {shown}"),
+        "the list's tests grow",
+    )
+    .await;
+    let worker_tests = "document.querySelector('#worker-w1 [data-field=tests]')?.dataset.value";
+    assert!(number(&until(&browser, worker_tests, "the worker is listed").await) > 0);
+    save("dashboard.png", &browser.screenshot().await.unwrap());
+
+    // The campaign page: both figures drawn, then redrawn with more points.
+    browser
+        .goto(&format!("{}/campaigns/{id}?refresh=300", server.url))
+        .await
+        .unwrap();
+    let estimate = line_points("estimate-figure");
+    let first = until(
+        &browser,
+        &format!("{estimate} >= 2 && {estimate}"),
+        "the estimate is drawn",
+    )
+    .await;
+    until(
+        &browser,
+        &format!("{} >= 2", line_points("half-width-figure")),
+        "the half-width is drawn",
+    )
+    .await;
+    let legend = eval(&browser, "[...document.querySelectorAll('#half-width-figure svg text')].some(t => t.textContent.trim() === 'β = 0.005')").await;
+    assert_eq!(legend, json!(true));
+    until(
+        &browser,
+        &format!("{estimate} > {first}"),
+        "the estimate figure grows",
+    )
+    .await;
+    let before = client.campaign(id).await.unwrap();
+    let page_tests = "document.getElementById('tests').dataset.value";
+    let shown = number(
+        &until(
+            &browser,
+            &format!("Number({page_tests}) >= {} && {page_tests}", before.tests),
+            "the page catches up",
+        )
+        .await,
+    );
+    let after = client.campaign(id).await.unwrap();
+    assert!(before.tests <= shown && shown <= after.tests);
+    let rate = eval(&browser, "document.getElementById('rate').dataset.value").await;
+    assert!(
+        number(&json!(rate.as_str().unwrap().split('.').next().unwrap())) > 0,
+        "tests/s {rate}"
+    );
+    save("campaign.png", &browser.screenshot().await.unwrap());
+
+    // Stopped: the page shows exactly the API's final numbers and stops polling.
+    let cancelled = client.cancel_campaign(id).await.unwrap();
+    assert_eq!(cancelled.status, CampaignStatus::Cancelled);
+    until(
+        &browser,
+        "document.getElementById('status').textContent === 'cancelled'",
+        "the page shows the stop",
+    )
+    .await;
+    let last = client.campaign(id).await.unwrap();
+    let shown = |field: &'static str| {
+        let browser = &browser;
+        async move {
+            eval(
+                browser,
+                &format!("document.getElementById('{field}').dataset.value"),
+            )
+            .await
+        }
+    };
+    assert_eq!(number(&shown("tests").await), last.tests);
+    assert_eq!(number(&shown("events").await), last.events);
+    let estimate: f64 = shown("estimate").await.as_str().unwrap().parse().unwrap();
+    assert_eq!(estimate, last.estimate.unwrap());
+    browser.close().await.unwrap();
+}
