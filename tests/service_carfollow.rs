@@ -57,6 +57,15 @@ async fn car_following_library_campaigns_agree_with_ndd_baselines_with_far_fewer
     // A zone run per state and a transition per dangerous state and action.
     assert!(library.sm_evaluations.unwrap() > 45_885 + 31 * size as u64);
     assert_eq!(library.mu_s, library.w);
+    // Its picture over initial range × range rate (115 × 19): the library's
+    // states are a part of the exposed ones.
+    let (texts, exposure, sampled) = library_picture(&server.url, library.id).await;
+    assert!(exposure > 1000 && exposure <= 115 * 19, "{exposure}");
+    assert!(
+        sampled > 0 && sampled <= exposure,
+        "{sampled} of {exposure}"
+    );
+    assert!(texts.iter().any(|t| t == "range R (m)"), "{texts:?}");
 
     // The file is the compact binary form, not JSON.
     let http = reqwest::Client::new();

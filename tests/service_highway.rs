@@ -62,6 +62,16 @@ async fn highway_exit_library_and_ndd_campaigns_cover_the_exact_failure_rate() {
     // Every cell with positive exposure (BV 1 ahead of BV 2) is simulated once.
     assert_eq!(library.sm_evaluations, Some(4320));
     assert!(library.size.unwrap() >= 1);
+    // Its picture over the two positions: the exposure is positive where
+    // BV 1 is ahead of BV 2 (16 · 15 / 2 of the 16 × 16 pairs); the library
+    // lies inside that.
+    let (texts, exposure, sampled) = library_picture(&server.url, library.id).await;
+    assert_eq!(exposure, 120);
+    assert!((1..=120).contains(&sampled), "{sampled}");
+    assert!(
+        texts.iter().any(|t| t == "p1") && texts.iter().any(|t| t == "p2"),
+        "{texts:?}"
+    );
 
     // A MOBIL driver with other politeness and patience than the surrogate:
     // library and NDD. The gap-seeker fails mostly outside the MOBIL library

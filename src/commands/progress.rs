@@ -108,19 +108,10 @@ pub struct BuildBar {
 
 impl BuildBar {
     pub fn new(id: i64) -> Self {
-        let bar = if std::io::stderr().is_terminal() {
-            ProgressBar::new(0)
-        } else {
-            ProgressBar::hidden()
-        };
-        bar.set_style(
-            ProgressStyle::with_template(
-                "{prefix} [{bar:30.cyan/blue}] {human_pos}/{human_len} {msg} ({elapsed})",
-            )
-            .expect("a valid template")
-            .progress_chars("=> "),
+        let bar = counting_bar(
+            &format!("library {id}"),
+            "{prefix} [{bar:30.cyan/blue}] {human_pos}/{human_len} {msg} ({elapsed})",
         );
-        bar.set_prefix(format!("library {id}"));
         bar.enable_steady_tick(Duration::from_millis(200));
         Self { bar }
     }
@@ -164,19 +155,10 @@ fn search_unit(case: &str) -> &'static str {
 /// reports to (hidden when stderr is not a terminal).
 pub fn with_progress<T>(label: &str, work: impl FnOnce(&Progress) -> T) -> T {
     let progress = Progress::default();
-    let bar = if std::io::stderr().is_terminal() {
-        ProgressBar::new(0)
-    } else {
-        ProgressBar::hidden()
-    };
-    bar.set_style(
-        ProgressStyle::with_template(
-            "{prefix} [{bar:30.cyan/blue}] {human_pos}/{human_len} ({elapsed}, ~{eta} left)",
-        )
-        .expect("a valid template")
-        .progress_chars("=> "),
+    let bar = counting_bar(
+        label,
+        "{prefix} [{bar:30.cyan/blue}] {human_pos}/{human_len} ({elapsed}, ~{eta} left)",
     );
-    bar.set_prefix(label.to_owned());
     let finished = AtomicBool::new(false);
     let result = std::thread::scope(|scope| {
         scope.spawn(|| {
@@ -193,4 +175,20 @@ pub fn with_progress<T>(label: &str, work: impl FnOnce(&Progress) -> T) -> T {
     });
     bar.finish_and_clear();
     result
+}
+
+/// A bar drawn with `template` on stderr, hidden when it is not a terminal.
+fn counting_bar(prefix: &str, template: &str) -> ProgressBar {
+    let bar = if std::io::stderr().is_terminal() {
+        ProgressBar::new(0)
+    } else {
+        ProgressBar::hidden()
+    };
+    bar.set_style(
+        ProgressStyle::with_template(template)
+            .expect("a valid template")
+            .progress_chars("=> "),
+    );
+    bar.set_prefix(prefix.to_owned());
+    bar
 }

@@ -346,3 +346,40 @@ pub fn exact(vut: &str) -> f64 {
         .exact_event_probability(&serde_json::json!({ "model": vut }))
         .unwrap()
 }
+
+/// A library's picture from the coordinator, parsed: its texts, and the
+/// coloured cells of the left map (exposure) and of the right map (the
+/// library's distribution), told apart by position.
+pub async fn library_picture(url: &str, id: i64) -> (Vec<String>, usize, usize) {
+    let response = reqwest::get(format!("{url}/api/v1/libraries/{id}/figures/picture.svg"))
+        .await
+        .unwrap();
+    assert_eq!(response.status(), 200);
+    assert_eq!(response.headers()["content-type"], "image/svg+xml");
+    let svg = response.text().await.unwrap();
+    let doc = roxmltree::Document::parse(&svg).expect("the picture is XML");
+    let width: f64 = doc
+        .root_element()
+        .attribute("width")
+        .unwrap()
+        .parse()
+        .unwrap();
+    let texts = doc
+        .descendants()
+        .filter_map(|n| n.has_tag_name("text").then(|| n.text()).flatten())
+        .map(|t| t.trim().to_owned())
+        .collect();
+    let (mut left, mut right) = (0, 0);
+    for cell in doc
+        .descendants()
+        .filter(|n| n.has_tag_name("rect") && n.attribute("fill") != Some("#FFFFFF"))
+    {
+        let x: f64 = cell.attribute("x").unwrap().parse().unwrap();
+        if x < width / 2.0 {
+            left += 1;
+        } else {
+            right += 1;
+        }
+    }
+    (texts, left, right)
+}

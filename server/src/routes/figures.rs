@@ -9,7 +9,6 @@ use crate::store::{campaigns, libraries};
 use axum::extract::State;
 use axum::http::header;
 use axum::response::{IntoResponse, Response};
-use tslg_api::LibraryStatus;
 use tslg_figures::{FigureError, Heatmap, HeatmapAxis};
 use tslg_method::registry::{open_case, PictureMap};
 
@@ -68,16 +67,7 @@ pub async fn library_picture(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
 ) -> Result<Response, ApiError> {
-    let row = libraries::get(&state.db.read, id).await?;
-    if row.status() != LibraryStatus::Ready {
-        return Err(ApiError::Conflict(format!(
-            "library {id} is {}, not ready: it has no picture yet",
-            row.status().as_str()
-        )));
-    }
-    let file = libraries::file(&state.db.read, id)
-        .await?
-        .ok_or_else(|| ApiError::Internal(anyhow::anyhow!("ready library {id} has no file")))?;
+    let (row, file) = libraries::ready_file(&state.db.read, id).await?;
     let surrogate: serde_json::Value = serde_json::from_str(&row.surrogate).unwrap_or_default();
     let title = format!(
         "Library {id}: {}, surrogate {}, {} of {} scenarios",

@@ -9,7 +9,7 @@ use axum::extract::State;
 use axum::http::{header, StatusCode};
 use axum::response::IntoResponse;
 use axum::Json;
-use tslg_api::{CreateLibrary, ExposureRequest, LibraryStatus, LibraryView, Problem};
+use tslg_api::{CreateLibrary, ExposureRequest, LibraryView, Problem};
 use tslg_method::registry::open_case;
 
 /// Starts a library build; poll the library until `status` is `ready`.
@@ -101,16 +101,7 @@ pub async fn file(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
 ) -> Result<impl IntoResponse, ApiError> {
-    let row = libraries::get(&state.db.read, id).await?;
-    if row.status() != LibraryStatus::Ready {
-        return Err(ApiError::Conflict(format!(
-            "library {id} is {}, not ready",
-            row.status().as_str()
-        )));
-    }
-    let file = libraries::file(&state.db.read, id)
-        .await?
-        .ok_or_else(|| ApiError::Internal(anyhow::anyhow!("ready library {id} has no file")))?;
+    let (_, file) = libraries::ready_file(&state.db.read, id).await?;
     Ok(([(header::CONTENT_TYPE, file.media_type)], file.bytes))
 }
 

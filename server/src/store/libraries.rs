@@ -136,6 +136,21 @@ pub async fn file(pool: &SqlitePool, id: i64) -> Result<Option<LibraryFile>, Api
     })
 }
 
+/// A ready library and its file; 404 if unknown, 409 if not ready (yet).
+pub async fn ready_file(pool: &SqlitePool, id: i64) -> Result<(LibraryRow, LibraryFile), ApiError> {
+    let row = get(pool, id).await?;
+    if row.status() != LibraryStatus::Ready {
+        return Err(ApiError::Conflict(format!(
+            "library {id} is {}, not ready",
+            row.status().as_str()
+        )));
+    }
+    let file = file(pool, id)
+        .await?
+        .ok_or_else(|| ApiError::Internal(anyhow::anyhow!("ready library {id} has no file")))?;
+    Ok((row, file))
+}
+
 /// A finished build: the library file and its summary.
 pub struct Built<'a> {
     pub file: &'a [u8],
