@@ -316,6 +316,30 @@ async fn the_report_writes_the_dashboard_figures_as_svg_with_the_numbers_as_csv(
     let saved: tslg_api::CampaignView =
         serde_json::from_str(&std::fs::read_to_string(out.join("campaign.json")).unwrap()).unwrap();
     assert_eq!(saved.estimate, view.estimate);
+    // `tslg campaign watch` of a stopped campaign: its final line on stderr
+    // (no terminal: no bar), its state on stdout.
+    let o = Command::new(env!("CARGO_BIN_EXE_tslg"))
+        .args([
+            "campaign",
+            "watch",
+            &view.id.to_string(),
+            "--json",
+            "--server",
+            &server.url,
+        ])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let watched: tslg_api::CampaignView = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(
+        (watched.indices, watched.estimate),
+        (view.indices, view.estimate)
+    );
+    let line = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        line.contains("converged") && line.contains(&format!("{} tests", view.tests)),
+        "{line}"
+    );
     // A campaign that does not exist: a message and a non-zero exit.
     let o = Command::new(env!("CARGO_BIN_EXE_tslg"))
         .args([

@@ -45,7 +45,7 @@ pub fn start(args: &CampaignStartArgs) -> anyhow::Result<()> {
 
 /// Polls a campaign until it stops, showing a progress bar on stderr.
 pub async fn watch(client: &Client, id: i64) -> anyhow::Result<tslg_api::CampaignView> {
-    let bars = CampaignBars::new(&[&format!("#{id}")]);
+    let bars = CampaignBars::new(&["campaign"]);
     loop {
         let view = client.campaign(id).await?;
         bars.update(0, &view);
