@@ -108,6 +108,10 @@ pub enum CampaignCommand {
         /// history.csv and campaign.json to (created if missing).
         #[arg(long)]
         out: PathBuf,
+        /// History points in the figures and the CSV (2 to 5000), spaced
+        /// logarithmically in the number of tests; the dashboard shows 300.
+        #[arg(long, default_value_t = 300)]
+        points: usize,
     },
     /// Cancel a pending or running campaign.
     Cancel {
@@ -431,9 +435,12 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Campaign(CampaignCommand::Watch { id, server, json }) => {
             commands::campaign::watch_command(&server, id, json)
         }
-        Command::Campaign(CampaignCommand::Report { id, server, out }) => {
-            commands::campaign::report(&server, id, &out)
-        }
+        Command::Campaign(CampaignCommand::Report {
+            id,
+            server,
+            out,
+            points,
+        }) => commands::campaign::report(&server, id, &out, points),
         Command::Campaign(CampaignCommand::Cancel { id, server }) => {
             commands::campaign::cancel(&server, id)
         }

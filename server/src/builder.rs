@@ -115,9 +115,19 @@ async fn run_build(state: &AppState, id: i64) -> anyhow::Result<()> {
     tracing::info!(library = id, case = %req.case, "library build started");
     let progress = state.build_progress.begin(id);
     let outcome = tokio::task::spawn_blocking(move || build(&req, &progress)).await;
+    // The progress stays until the outcome is recorded: the library is
+    // `building` until then.
+    let recorded = record_build(state, id, outcome).await;
     state.build_progress.end(id);
-    let outcome = outcome?;
-    match outcome {
+    recorded
+}
+
+async fn record_build(
+    state: &AppState,
+    id: i64,
+    outcome: Result<Result<(BuiltLibrary, f64), String>, tokio::task::JoinError>,
+) -> anyhow::Result<()> {
+    match outcome? {
         Ok((library, seconds)) => {
             libraries::mark_ready(
                 &state.db.write,

@@ -24,6 +24,8 @@ pub struct AppState {
     pub workers: Arc<WorkerRegistry>,
     /// Tests per second of the running campaigns.
     pub throughput: Arc<Throughput>,
+    /// Library pictures, drawn once each.
+    pub pictures: Arc<crate::routes::PictureCache>,
     /// Request latencies, for `/metrics`.
     pub metrics: Arc<Metrics>,
 }
@@ -39,6 +41,7 @@ impl AppState {
             workers: Arc::new(WorkerRegistry::default()),
             throughput: Arc::new(Throughput::default()),
             metrics: Arc::new(Metrics::default()),
+            pictures: Arc::default(),
         }
     }
 }

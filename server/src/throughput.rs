@@ -9,6 +9,9 @@ use tslg_api::CampaignView;
 
 /// The window the rate is measured over.
 const WINDOW: Duration = Duration::from_secs(60);
+/// A rate needs reports spread over at least this many seconds (two
+/// reports a moment apart would give an absurd one).
+const MIN_SPAN: f64 = 1.0;
 /// Reports remembered per campaign at most (older ones go first).
 const MAX_SAMPLES: usize = 4096;
 
@@ -59,7 +62,7 @@ impl Throughput {
         let (first, _) = recent.next()?;
         let (count, tests) = recent.fold((0, 0u64), |(c, n), (_, a)| (c + 1, n + a));
         let seconds = now.duration_since(*first).as_secs_f64();
-        (count > 0 && seconds > 0.0).then(|| tests as f64 / seconds)
+        (count > 0 && seconds >= MIN_SPAN).then(|| tests as f64 / seconds)
     }
 
     /// Fills the rate and the time left of a running campaign's view.
@@ -68,9 +71,11 @@ impl Throughput {
             return;
         }
         view.tests_per_second = self.per_second(view.id);
+        // The rate counts every accepted test; the prediction valid ones.
+        let valid_share = view.tests as f64 / view.indices.max(1) as f64;
         view.seconds_left = match (view.predicted_tests, view.tests_per_second) {
-            (Some(needed), Some(rate)) if rate > 0.0 => {
-                Some(needed.saturating_sub(view.tests) as f64 / rate)
+            (Some(needed), Some(rate)) if rate * valid_share > 0.0 => {
+                Some(needed.saturating_sub(view.tests) as f64 / (rate * valid_share))
             }
             _ => None,
         };
@@ -88,6 +93,13 @@ mod tests {
         let at = |s: f64| start + Duration::from_secs_f64(s);
         assert_eq!(t.per_second_at(1, at(0.0)), None);
         t.accepted_at(1, 500, at(0.0));
+        t.accepted_at(3, 500, at(0.0));
+        t.accepted_at(3, 500, at(0.001));
+        assert_eq!(
+            t.per_second_at(3, at(0.002)),
+            None,
+            "two reports a moment apart give none"
+        );
         assert_eq!(
             t.per_second_at(1, at(1.0)),
             None,

@@ -65,10 +65,14 @@ pub fn watch_command(server: &ServerArgs, id: i64, json: bool) -> anyhow::Result
 
 /// `tslg campaign report ID --out DIR`: the dashboard's figures as SVG
 /// files, and the numbers behind them as CSV and JSON.
-pub fn report(server: &ServerArgs, id: i64, out: &Path) -> anyhow::Result<()> {
+pub fn report(server: &ServerArgs, id: i64, out: &Path, points: usize) -> anyhow::Result<()> {
     let client = client(server)?;
-    let (view, history) =
-        block_on(async { Ok((client.campaign(id).await?, client.history(id).await?)) })?;
+    let (view, history) = block_on(async {
+        Ok((
+            client.campaign(id).await?,
+            client.history_points(id, points).await?,
+        ))
+    })?;
     std::fs::create_dir_all(out)
         .with_context(|| format!("cannot create the directory {}", out.display()))?;
     let files = [

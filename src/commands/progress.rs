@@ -159,6 +159,14 @@ pub fn with_progress<T>(label: &str, work: impl FnOnce(&Progress) -> T) -> T {
         label,
         "{prefix} [{bar:30.cyan/blue}] {human_pos}/{human_len} ({elapsed}, ~{eta} left)",
     );
+    /// Stops the drawing thread however `work` ends, a panic included
+    /// (the scope would otherwise wait for that thread forever).
+    struct Finish<'a>(&'a AtomicBool);
+    impl Drop for Finish<'_> {
+        fn drop(&mut self) {
+            self.0.store(true, Ordering::Relaxed);
+        }
+    }
     let finished = AtomicBool::new(false);
     let result = std::thread::scope(|scope| {
         scope.spawn(|| {
@@ -169,9 +177,8 @@ pub fn with_progress<T>(label: &str, work: impl FnOnce(&Progress) -> T) -> T {
                 std::thread::sleep(Duration::from_millis(100));
             }
         });
-        let result = work(&progress);
-        finished.store(true, Ordering::Relaxed);
-        result
+        let _finish = Finish(&finished);
+        work(&progress)
     });
     bar.finish_and_clear();
     result

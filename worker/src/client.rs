@@ -192,6 +192,15 @@ impl Client {
         .await
     }
 
+    /// At most `points` of the history, spaced logarithmically in tests.
+    pub async fn history_points(&self, id: i64, points: usize) -> Result<History, CallError> {
+        self.json(self.request(
+            reqwest::Method::GET,
+            &format!("/api/v1/campaigns/{id}/history?points={points}"),
+        ))
+        .await
+    }
+
     /// The workers the coordinator has seen.
     pub async fn workers(&self) -> Result<tslg_api::WorkerList, CallError> {
         self.json(self.request(reqwest::Method::GET, "/api/v1/workers"))

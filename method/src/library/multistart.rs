@@ -117,7 +117,6 @@ pub(crate) fn search<C: Case>(
     };
     progress.start(starts as u64);
     for _ in 0..starts {
-        progress.add(1);
         let start = rng.random_range(0..cells);
         let path = s.descend(start);
         let optimum = *path.last().expect("a path has its start");
@@ -128,6 +127,7 @@ pub(crate) fn search<C: Case>(
                 s.fill(cell);
             }
         }
+        progress.add(1);
     }
     let critical = s
         .memo

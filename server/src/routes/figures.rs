@@ -9,6 +9,8 @@ use crate::store::{campaigns, libraries};
 use axum::extract::State;
 use axum::http::header;
 use axum::response::{IntoResponse, Response};
+use std::collections::HashMap;
+use std::sync::Arc;
 use tslg_figures::{FigureError, Heatmap, HeatmapAxis};
 use tslg_method::registry::{open_case, PictureMap};
 
@@ -67,6 +69,21 @@ pub async fn library_picture(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
 ) -> Result<Response, ApiError> {
+    // A ready library never changes: its picture is drawn once, and one
+    // at a time (the highway grid has 1.6 × 10⁶ cells to project).
+    let mut pictures = state.pictures.lock().await;
+    if let Some(picture) = pictures.get(&id) {
+        return svg(Ok(picture.as_ref().clone()));
+    }
+    let picture = draw_picture(&state, id).await?;
+    pictures.insert(id, Arc::new(picture.clone()));
+    svg(Ok(picture))
+}
+
+/// Drawn library pictures by library id.
+pub type PictureCache = tokio::sync::Mutex<HashMap<i64, Arc<String>>>;
+
+async fn draw_picture(state: &AppState, id: i64) -> Result<String, ApiError> {
     let (row, file) = libraries::ready_file(&state.db.read, id).await?;
     let surrogate: serde_json::Value = serde_json::from_str(&row.surrogate).unwrap_or_default();
     let title = format!(
@@ -84,7 +101,7 @@ pub async fn library_picture(
     .map_err(|e| ApiError::Internal(e.into()))?
     .map_err(ApiError::Internal)?;
     let maps: Vec<Heatmap> = maps.into_iter().map(heatmap).collect();
-    svg(tslg_figures::heatmaps_svg(&title, &maps))
+    tslg_figures::heatmaps_svg(&title, &maps).map_err(|e| ApiError::Internal(e.into()))
 }
 
 fn heatmap(map: PictureMap) -> Heatmap {

@@ -207,7 +207,9 @@ pub async fn results(
         .filter(|i| i.index >= report.to - accepted)
         .count() as u64;
     state.workers.reported(&report.worker, accepted, invalid);
-    state.throughput.accepted(recorded.campaign_id, accepted);
+    if accepted > 0 && recorded.ack.proceed {
+        state.throughput.accepted(recorded.campaign_id, accepted);
+    }
     if recorded.stopped.is_some() {
         state.samplers.forget(recorded.campaign_id);
         state.throughput.forget(recorded.campaign_id);

@@ -14,6 +14,7 @@ mod libraries;
 pub mod openapi;
 
 pub use extract::{ApiPath, ApiQuery};
+pub use figures::PictureCache;
 
 use crate::error::{problem, ApiError};
 use crate::state::AppState;
