@@ -80,34 +80,56 @@ const PENDING_LINES: usize = 16;
 /// Kills a process group when an armed deadline passes.
 #[derive(Default)]
 struct Watchdog {
-    /// The armed deadline, and whether the process is gone.
-    state: Mutex<(Option<Instant>, bool)>,
+    state: Mutex<WatchState>,
     wake: Condvar,
+}
+
+#[derive(Default)]
+struct WatchState {
+    /// The armed deadline.
+    deadline: Option<Instant>,
+    /// Whether the watchdog killed the program since it was last armed, so
+    /// a closed pipe is reported as the timeout it is, not as an exit.
+    fired: bool,
+    /// Whether the process is gone and the watchdog can stop.
+    finished: bool,
 }
 
 impl Watchdog {
     fn arm(&self, deadline: Option<Instant>) {
         let mut state = self.state.lock().unwrap_or_else(|p| p.into_inner());
-        state.0 = deadline;
+        state.deadline = deadline;
+        state.fired = false;
         self.wake.notify_one();
     }
 
     fn finish(&self) {
-        self.state.lock().unwrap_or_else(|p| p.into_inner()).1 = true;
+        self.state
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .finished = true;
         self.wake.notify_one();
+    }
+
+    /// Whether the program was killed at the deadline (or the deadline has
+    /// passed, so it is about to be).
+    fn timed_out(&self) -> bool {
+        let state = self.state.lock().unwrap_or_else(|p| p.into_inner());
+        state.fired || state.deadline.is_some_and(|d| Instant::now() >= d)
     }
 
     fn watch(&self, group: i32) {
         let mut state = self.state.lock().unwrap_or_else(|p| p.into_inner());
         loop {
-            if state.1 {
+            if state.finished {
                 return;
             }
-            state = match state.0 {
+            state = match state.deadline {
                 None => self.wake.wait(state).unwrap_or_else(|p| p.into_inner()),
                 Some(deadline) if Instant::now() >= deadline => {
                     kill_group(group);
-                    state.0 = None;
+                    state.deadline = None;
+                    state.fired = true;
                     state
                 }
                 Some(deadline) => {
@@ -250,8 +272,7 @@ impl ProgramProcess {
     /// The fault of a program whose pipes closed: killed by the watchdog at
     /// the deadline, or exited by itself.
     fn gone(&mut self) -> Fault {
-        let armed = self.watchdog.state.lock().map(|s| s.0).unwrap_or(None);
-        if armed.is_none_or(|deadline| Instant::now() < deadline) {
+        if !self.watchdog.timed_out() {
             return self.exited();
         }
         self.kill();
@@ -459,6 +480,28 @@ print(json.dumps({"type": "hello", "protocol": 1, "name": str(os.getpid()), "cas
         std::thread::sleep(Duration::from_millis(200));
         let fault = p.call(&reset, "ready", deadline).unwrap_err();
         assert!(fault.to_string().contains("without being asked"), "{fault}");
+    }
+
+    #[test]
+    fn a_closed_pipe_after_the_watchdog_fired_is_a_timeout() {
+        // The watchdog disarms itself when it kills; the reader may see the
+        // closed pipe only after that, and must still call it a timeout.
+        let watchdog = Arc::new(Watchdog::default());
+        let watching = Arc::clone(&watchdog);
+        // A process group that cannot exist (beyond any pid_max).
+        let thread = std::thread::spawn(move || watching.watch(i32::MAX));
+        watchdog.arm(Some(Instant::now()));
+        while watchdog.state.lock().unwrap().deadline.is_some() {
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        assert!(
+            watchdog.timed_out(),
+            "fired, then disarmed: still a timeout"
+        );
+        watchdog.arm(Some(Instant::now() + Duration::from_secs(3600)));
+        assert!(!watchdog.timed_out(), "a new arming starts afresh");
+        watchdog.finish();
+        thread.join().unwrap();
     }
 
     #[test]
