@@ -233,10 +233,9 @@ pub async fn history(
         )));
     }
     let row = campaigns::get(&state.db.read, id).await?;
-    let points = campaigns::history(&state.db.read, &row).await?;
     Ok(Json(History {
         campaign_id: id,
-        points: history::log_downsample(points, max),
+        points: campaigns::history(&state.db.read, &row, max).await?,
     }))
 }
 

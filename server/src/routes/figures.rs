@@ -32,8 +32,7 @@ async fn campaign(
     id: i64,
 ) -> Result<(tslg_api::CampaignView, Vec<tslg_api::HistoryPoint>), ApiError> {
     let row = campaigns::get(&state.db.read, id).await?;
-    let points = campaigns::history(&state.db.read, &row).await?;
-    let points = crate::history::log_downsample(points, crate::history::DEFAULT_POINTS);
+    let points = campaigns::history(&state.db.read, &row, crate::history::DEFAULT_POINTS).await?;
     Ok((super::campaigns::live_view(state, &row), points))
 }
 

@@ -268,8 +268,13 @@ pub async fn cancel(pool: &SqlitePool, id: i64) -> Result<CampaignRow, ApiError>
 }
 
 /// The persisted history of a campaign's prefix estimate (thinned as
-/// [`crate::history`] says), ending at the campaign's current prefix.
-pub async fn history(pool: &SqlitePool, row: &CampaignRow) -> Result<Vec<HistoryPoint>, ApiError> {
+/// [`crate::history`] says), ending at the campaign's current prefix: at
+/// most `max` points, logarithmically spaced in tests.
+pub async fn history(
+    pool: &SqlitePool,
+    row: &CampaignRow,
+    max: usize,
+) -> Result<Vec<HistoryPoint>, ApiError> {
     let rows: Vec<(i64, i64, i64, f64, f64)> = sqlx::query_as(
         "SELECT indices, tests, events, s1, s2 FROM history WHERE campaign_id = ? ORDER BY indices",
     )
@@ -292,5 +297,5 @@ pub async fn history(pool: &SqlitePool, row: &CampaignRow) -> Result<Vec<History
     if current.indices > points.last().map_or(0, |p| p.indices) {
         points.push(point(&current, z));
     }
-    Ok(points)
+    Ok(crate::history::log_downsample(points, max))
 }
