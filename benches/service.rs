@@ -98,6 +98,7 @@ async fn round_trips(count: usize) -> anyhow::Result<Vec<f64>> {
         let report = ResultReport {
             worker: "bench".into(),
             attempt: lease.attempt,
+            key: lease.key.clone(),
             from: lease.start,
             to: lease.end,
             events: vec![],

@@ -108,6 +108,7 @@ async fn invalid_tests_use_indices_but_are_not_counted_as_tests() {
     let report = ResultReport {
         worker: "w".into(),
         attempt: 1,
+        key: lease.key.clone(),
         from: 0,
         to: 100,
         events: vec![],

@@ -341,6 +341,7 @@ async fn only_workers_offering_a_program_get_its_tests() {
     let fence = tslg_api::LeaseFence {
         worker: "probe".into(),
         attempt: lease.attempt,
+        key: lease.key.clone(),
     };
     client.release(lease.id, &fence).await.unwrap();
     assert!(client.claim(&ask(&[])).await.unwrap().is_none());

@@ -13,10 +13,12 @@ use tslg_api::{EventResult, Lease, LeaseRequest, Method, ResultAck, ResultReport
 use tslg_method::library::SearchMethod;
 use tslg_method::registry::{open_case, BuildRequest, ExposureSource, LibrarySearch};
 
-fn report(worker: &str, attempt: i64, from: u64, to: u64, events: &[EventResult]) -> ResultReport {
+/// `worker`'s report on `lease` (its attempt and key) of `from..to`.
+fn report(worker: &str, lease: &Lease, from: u64, to: u64, events: &[EventResult]) -> ResultReport {
     ResultReport {
         worker: worker.into(),
-        attempt,
+        attempt: lease.attempt,
+        key: lease.key.clone(),
         from,
         to,
         events: events
@@ -116,7 +118,7 @@ async fn results_are_idempotent_fenced_on_the_attempt_and_leases_expire_and_retu
 
     // First half, then the same report again: acknowledged once.
     let first: ResultAck = client
-        .report(lease.id, &report("w1", 1, 0, 50, &events))
+        .report(lease.id, &report("w1", &lease, 0, 50, &events))
         .await
         .unwrap();
     assert_eq!(
@@ -129,7 +131,7 @@ async fn results_are_idempotent_fenced_on_the_attempt_and_leases_expire_and_retu
         (50, 0, 50, true)
     );
     let again: ResultAck = client
-        .report(lease.id, &report("w1", 1, 0, 50, &events))
+        .report(lease.id, &report("w1", &lease, 0, 50, &events))
         .await
         .unwrap();
     assert_eq!((again.accepted, again.duplicate), (0, 50));
@@ -143,7 +145,12 @@ async fn results_are_idempotent_fenced_on_the_attempt_and_leases_expire_and_retu
     // A conflicting outcome for a recorded test: 409, nothing changes.
     let mut flipped = events.clone();
     let dropped = flipped.remove(0);
-    let (status, body) = post(&http, &results(&lease), &report("w1", 1, 0, 50, &flipped)).await;
+    let (status, body) = post(
+        &http,
+        &results(&lease),
+        &report("w1", &lease, 0, 50, &flipped),
+    )
+    .await;
     assert_eq!(status, StatusCode::CONFLICT);
     let detail = body["detail"].as_str().unwrap();
     assert!(
@@ -152,7 +159,7 @@ async fn results_are_idempotent_fenced_on_the_attempt_and_leases_expire_and_retu
     );
     assert!(detail.contains("now reported as no_event"), "{detail}");
     // A wrong weight: 422.
-    let mut skewed = report("w1", 1, 50, 100, &events);
+    let mut skewed = report("w1", &lease, 50, 100, &events);
     skewed.events[0].weight *= 1.0 + 1e-12;
     let (status, body) = post(&http, &results(&lease), &skewed).await;
     assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY);
@@ -164,7 +171,12 @@ async fn results_are_idempotent_fenced_on_the_attempt_and_leases_expire_and_retu
         "{body}"
     );
     // A gap: 422.
-    let (status, body) = post(&http, &results(&lease), &report("w1", 1, 60, 100, &events)).await;
+    let (status, body) = post(
+        &http,
+        &results(&lease),
+        &report("w1", &lease, 60, 100, &events),
+    )
+    .await;
     assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY);
     assert!(
         body["detail"]
@@ -174,7 +186,15 @@ async fn results_are_idempotent_fenced_on_the_attempt_and_leases_expire_and_retu
         "{body}"
     );
     // Another attempt's report: fenced.
-    let (status, _) = post(&http, &results(&lease), &report("w1", 2, 50, 100, &events)).await;
+    let (status, _) = post(
+        &http,
+        &results(&lease),
+        &ResultReport {
+            attempt: 2,
+            ..report("w1", &lease, 50, 100, &events)
+        },
+    )
+    .await;
     assert_eq!(status, StatusCode::CONFLICT);
     assert_eq!(client.campaign(id).await.unwrap().indices, 50);
 
@@ -185,14 +205,19 @@ async fn results_are_idempotent_fenced_on_the_attempt_and_leases_expire_and_retu
         (again.id, again.attempt, again.resume_at),
         (lease.id, 2, 50)
     );
-    let (status, body) = post(&http, &results(&lease), &report("w1", 1, 50, 100, &events)).await;
+    let (status, body) = post(
+        &http,
+        &results(&lease),
+        &report("w1", &lease, 50, 100, &events),
+    )
+    .await;
     assert_eq!(status, StatusCode::CONFLICT, "the old holder is fenced out");
     assert!(
         body["detail"].as_str().unwrap().contains("attempt 2"),
         "{body}"
     );
     let done = client
-        .report(again.id, &report("w2", 2, 50, 100, &events))
+        .report(again.id, &report("w2", &again, 50, 100, &events))
         .await
         .unwrap();
     assert_eq!((done.accepted, done.lease_done), (50, true));
@@ -221,7 +246,7 @@ async fn results_are_idempotent_fenced_on_the_attempt_and_leases_expire_and_retu
     let next = claim(&client, "w2").await.expect("a new lease");
     client.cancel_campaign(id).await.unwrap();
     let late = client
-        .report(next.id, &report("w2", 1, 100, 200, &[]))
+        .report(next.id, &report("w2", &next, 100, 200, &[]))
         .await
         .unwrap();
     assert_eq!((late.accepted, late.ignored, late.proceed), (0, 100, false));

@@ -1,12 +1,17 @@
 //! Persistence and shutdown: a coordinator killed mid-campaign and
-//! restarted on its database continues to the same answer; a worker told
-//! to stop finishes its chunk and gives its lease back.
+//! restarted on its database continues to the same answer, with the
+//! workers reconnecting by themselves; every result it acknowledged before
+//! the kill is on disk; a worker killed mid-lease costs only time (its lease
+//! expires and is handed out again) and not the answer; a worker told to
+//! stop finishes its chunk and gives its lease back.
 
 mod support;
 
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use support::*;
-use tslg_api::{CampaignStatus, Method};
+use tslg_api::{CampaignStatus, Lease, LeaseRequest, Method, ResultReport};
+use tslg_worker::client::Client;
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_coordinator_killed_mid_campaign_continues_from_its_database_to_the_same_answer() {
@@ -37,6 +42,7 @@ async fn a_coordinator_killed_mid_campaign_continues_from_its_database_to_the_sa
         "killed too late to test anything"
     );
     server.kill();
+    // The worker is left alone: it retries until the coordinator is back.
     let server = ServerProcess::start_on(&database, &address, &["--lease-size", "50000"]);
     let client = server.client();
     let resumed = client.campaign(id).await.unwrap();
@@ -50,6 +56,142 @@ async fn a_coordinator_killed_mid_campaign_continues_from_its_database_to_the_sa
     let history = client.history(id).await.unwrap();
     assert!(history.points.iter().any(|p| p.indices <= before.indices));
     assert_eq!(history.points.last().unwrap().indices, view.indices);
+    let workers = client.workers().await.unwrap().workers;
+    assert!(
+        workers.iter().any(|w| w.name == "w1" && w.tests > 0),
+        "the same worker reconnected and reported to the new coordinator: {workers:?}"
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_worker_killed_mid_lease_changes_neither_the_stop_index_nor_the_estimate() {
+    let dir = scratch();
+    let options = ["--lease-size", "40000", "--lease-ttl-seconds", "1"];
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &options);
+    let client = server.client();
+    let library = ready_library(&client, "idm", false).await;
+    let request = campaign(Method::Ndd, library.id, "idm", 0.04, 9);
+    let id = client.create_campaign(&request).await.unwrap().id;
+    let doomed = WorkerProcess::start(&server.url, 1, "doomed");
+    let view = wait_for(&client, id, Duration::from_secs(120), |v| {
+        v.indices >= 60_000
+    })
+    .await;
+    assert_eq!(view.status, CampaignStatus::Running, "killed too late");
+    // SIGKILL in the middle of its second (or later) lease: no release.
+    doomed.kill();
+    let _rescuer = WorkerProcess::start(&server.url, 1, "rescuer");
+    let view = finished(&client, id, Duration::from_secs(300)).await;
+    assert_eq!(view.status, CampaignStatus::Converged);
+    assert_same(&view, &in_process(None, &request));
+    let metrics = reqwest::get(format!("{}/metrics", server.url))
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    let reclaimed: f64 = metrics
+        .lines()
+        .find_map(|l| l.strip_prefix("tslg_leases_reclaimed_total "))
+        .expect("reclaimed counter")
+        .parse()
+        .unwrap();
+    assert!(
+        reclaimed >= 1.0,
+        "the killed worker's lease was handed out again"
+    );
+}
+
+/// Claims a lease and reports all of it with no events, as `worker`.
+async fn claim_and_report(client: &Client, worker: &str) -> Option<(Lease, ResultReport)> {
+    let ask = LeaseRequest {
+        worker: worker.into(),
+        threads: 1,
+        include_tests: false,
+        offers: Vec::new(),
+        unhealthy: Vec::new(),
+    };
+    // Errors (the coordinator is gone) end the simulated worker.
+    let lease = client.claim(&ask).await.ok()??;
+    let report = ResultReport {
+        worker: worker.into(),
+        attempt: lease.attempt,
+        key: lease.key.clone(),
+        from: lease.resume_at,
+        to: lease.end,
+        events: Vec::new(),
+        invalid: Vec::new(),
+        compute_seconds: 0.01,
+        threads: 1,
+    };
+    client.report(lease.id, &report).await.ok()?;
+    Some((lease, report))
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn every_acknowledged_result_survives_a_coordinator_kill_and_counts_once() {
+    let dir = scratch();
+    let database = dir.path().join("db.sqlite");
+    let server = ServerProcess::start(&database, &["--lease-size", "100"]);
+    let address = server.address.clone();
+    let client = server.client();
+    let library = ready_library(&client, "idm", false).await;
+    let mut request = campaign(Method::Ndd, library.id, "idm", 0.001, 4);
+    request.max_tests = 1_000_000_000;
+    let id = client.create_campaign(&request).await.unwrap().id;
+    // Eight simulated workers report as fast as they can; the coordinator
+    // is killed while they do, so some requests are cut off mid-flight.
+    let acked = Arc::new(Mutex::new(Vec::new()));
+    let tasks: Vec<_> = (0..8)
+        .map(|w| {
+            let (client, acked) = (client.clone(), Arc::clone(&acked));
+            tokio::spawn(async move {
+                while let Some((lease, report)) = claim_and_report(&client, &format!("s{w}")).await
+                {
+                    acked.lock().unwrap().push((lease, report));
+                }
+            })
+        })
+        .collect();
+    while acked.lock().unwrap().len() < 200 {
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+    server.kill();
+    for task in tasks {
+        task.await.unwrap();
+    }
+    let acked = std::mem::take(&mut *acked.lock().unwrap());
+    let server = ServerProcess::start_on(&database, &address, &["--lease-size", "100"]);
+    let client = server.client();
+    // Each acknowledged report is on disk: sent again, all of it is a
+    // duplicate, none of it new.
+    for (lease, report) in &acked {
+        let ack = client.report(lease.id, report).await.unwrap();
+        assert_eq!(
+            (ack.accepted, ack.duplicate),
+            (0, report.to - report.from),
+            "lease {} lost or changed its acknowledged results",
+            lease.id
+        );
+    }
+    // The resolved prefix covers at least the acknowledged leases that
+    // form a prefix, and no test was counted twice.
+    let mut ranges: Vec<_> = acked.iter().map(|(_, r)| (r.from, r.to)).collect();
+    ranges.sort();
+    let mut prefix = 0;
+    for &(from, to) in &ranges {
+        if from != prefix {
+            break;
+        }
+        prefix = to;
+    }
+    let view = client.campaign(id).await.unwrap();
+    assert!(view.indices >= prefix, "{} < {prefix}", view.indices);
+    assert!(
+        prefix >= 100 * 150,
+        "most acknowledged leases form the prefix"
+    );
+    assert_eq!(view.tests, view.indices, "no events, no invalid tests");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -77,11 +77,15 @@ pub struct TestCase {
 
 /// A contiguous range `start..end` of test indices of one campaign, held
 /// by one worker until it expires. `attempt` counts how often the range
-/// was handed out; heartbeats and results must name it.
+/// was handed out; heartbeats and results must name it together with
+/// `key`, a secret drawn for this attempt, so only the worker the lease was
+/// handed to can report on it (every worker shares the worker token).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct Lease {
     pub id: i64,
     pub attempt: i64,
+    /// The holder's secret for this attempt (32 hex digits).
+    pub key: String,
     pub campaign_id: i64,
     pub start: u64,
     pub end: u64,
@@ -102,6 +106,8 @@ pub struct Lease {
 pub struct LeaseFence {
     pub worker: String,
     pub attempt: i64,
+    /// The lease's `key`, as handed out with this attempt.
+    pub key: String,
 }
 
 /// The answer to a heartbeat: whether to go on.
@@ -142,6 +148,8 @@ pub struct InvalidResult {
 pub struct ResultReport {
     pub worker: String,
     pub attempt: i64,
+    /// The lease's `key`, as handed out with this attempt.
+    pub key: String,
     pub from: u64,
     pub to: u64,
     #[serde(default)]

@@ -29,6 +29,14 @@ pub struct Config {
     #[arg(long, env = "TSLG_ADMIN_TOKEN", hide_env_values = true)]
     pub admin_token: Option<String>,
 
+    /// Token needed to read: the dashboard, `/metrics` and every `GET` of
+    /// the API (the admin token also reads). Sent as `Authorization: Bearer
+    /// …` or as the password of HTTP Basic authentication, which browsers
+    /// ask for. When unset, reads are public. `/healthz` and the OpenAPI
+    /// document are always public.
+    #[arg(long, env = "TSLG_READ_TOKEN", hide_env_values = true)]
+    pub read_token: Option<String>,
+
     /// Seconds a lease lives without a heartbeat or result before it is
     /// handed out again.
     #[arg(long, env = "TSLG_LEASE_TTL", default_value_t = 30.0)]
@@ -73,6 +81,7 @@ impl Config {
         for (name, token) in [
             ("TSLG_WORKER_TOKEN", &self.worker_token),
             ("TSLG_ADMIN_TOKEN", &self.admin_token),
+            ("TSLG_READ_TOKEN", &self.read_token),
         ] {
             if let Some(t) = token {
                 anyhow::ensure!(!t.is_empty(), "{name} is set but empty");

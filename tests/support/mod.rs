@@ -25,6 +25,8 @@ pub struct ServerProcess {
     pub url: String,
     pub address: String,
     pub database: PathBuf,
+    /// Everything the coordinator wrote to stderr (its log) so far.
+    log: std::sync::Arc<std::sync::Mutex<String>>,
 }
 
 impl ServerProcess {
@@ -46,17 +48,25 @@ impl ServerProcess {
     /// Starts a prepared `tslg-server` command (its bind address must be
     /// free or port 0), waiting until it reports the address it listens on.
     pub fn spawn(mut command: Command, database: &Path) -> Self {
+        if !command.get_envs().any(|(k, _)| k == "RUST_LOG") {
+            command.env("RUST_LOG", "info");
+        }
         let mut child = command
-            .env("RUST_LOG", "info")
             .stdout(Stdio::null())
             .stderr(Stdio::piped())
             .spawn()
             .expect("start tslg-server");
         let stderr = child.stderr.take().expect("stderr");
         let (tx, rx) = mpsc::channel();
+        let log = std::sync::Arc::new(std::sync::Mutex::new(String::new()));
+        let sink = std::sync::Arc::clone(&log);
         std::thread::spawn(move || {
             let mut tx = Some(tx);
             for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+                let mut log = sink.lock().unwrap();
+                log.push_str(&line);
+                log.push('\n');
+                drop(log);
                 if let Some(at) = line.find("address=") {
                     if let Some(tx) = tx.take() {
                         let address = line[at + 8..]
@@ -77,7 +87,13 @@ impl ServerProcess {
             url: format!("http://{address}"),
             address,
             database: database.to_owned(),
+            log,
         }
+    }
+
+    /// The coordinator's log so far.
+    pub fn log(&self) -> String {
+        self.log.lock().unwrap().clone()
     }
 
     /// SIGKILL: no shutdown, no flush beyond what was committed.
@@ -124,6 +140,12 @@ impl WorkerProcess {
             .spawn()
             .expect("start tslg-worker");
         Self(child)
+    }
+
+    /// SIGKILL: the worker vanishes without releasing its lease.
+    pub fn kill(mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
     }
 
     /// SIGTERM, then waits for the worker to exit by itself.

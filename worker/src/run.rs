@@ -159,6 +159,7 @@ impl Worker {
         let fence = LeaseFence {
             worker: self.name.clone(),
             attempt: lease.attempt,
+            key: lease.key.clone(),
         };
         let prepared = match self.cache.get(&self.client, lease.campaign_id).await {
             Ok(p) => p,
@@ -219,6 +220,7 @@ impl Worker {
             let report = ResultReport {
                 worker: self.name.clone(),
                 attempt: lease.attempt,
+                key: lease.key.clone(),
                 from: at,
                 to: ran.end,
                 events: ran.events,

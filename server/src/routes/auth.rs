@@ -1,19 +1,28 @@
-//! Bearer tokens. Compared in constant time, never logged.
+//! Tokens. Three roles: admin (create and cancel), worker (leases, plans,
+//! library files) and read (the dashboard, metrics and the API's reads).
+//! Each role's token is optional; an unset token leaves its role open. The
+//! admin token also passes as worker and reader. Tokens are compared in
+//! constant time and never logged: the request log records method, path
+//! and status, not headers, and a refusal names the role, not the token.
 
 use crate::error::ApiError;
 use crate::state::AppState;
 use axum::extract::{Request, State};
-use axum::http::header::AUTHORIZATION;
+use axum::http::header::{AUTHORIZATION, WWW_AUTHENTICATE};
+use axum::http::{HeaderMap, HeaderValue};
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
+use base64::Engine;
 use subtle::ConstantTimeEq;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Role {
-    /// Workers: leases, plans, library files. The admin token also passes.
+    /// Workers: leases, plans, library files.
     Worker,
     /// Creating libraries, starting and cancelling campaigns.
     Admin,
+    /// The dashboard, `/metrics` and the API's reads.
+    Read,
 }
 
 fn matches(given: Option<&str>, expected: &str) -> bool {
@@ -22,15 +31,34 @@ fn matches(given: Option<&str>, expected: &str) -> bool {
 
 /// Whether `token` grants `role` under the configured tokens.
 pub fn allowed(state: &AppState, role: Role, token: Option<&str>) -> bool {
-    let admin = state.config.admin_token.as_deref();
-    let worker = state.config.worker_token.as_deref();
-    match role {
-        Role::Admin => admin.is_none_or(|a| matches(token, a)),
-        Role::Worker => match worker {
-            None => true,
-            Some(w) => matches(token, w) || admin.is_some_and(|a| matches(token, a)),
-        },
+    let config = &state.config;
+    let admin = config.admin_token.as_deref();
+    let own = match role {
+        Role::Admin => return admin.is_none_or(|a| matches(token, a)),
+        Role::Worker => config.worker_token.as_deref(),
+        Role::Read => config.read_token.as_deref(),
+    };
+    match own {
+        None => true,
+        Some(t) => matches(token, t) || admin.is_some_and(|a| matches(token, a)),
     }
+}
+
+/// The presented token: `Authorization: Bearer TOKEN`, or the password of
+/// `Authorization: Basic base64(user:TOKEN)` (any user name), which is
+/// what a browser sends after asking.
+fn presented(headers: &HeaderMap) -> Option<String> {
+    let value = headers.get(AUTHORIZATION)?.to_str().ok()?;
+    if let Some(token) = value.strip_prefix("Bearer ") {
+        return Some(token.to_owned());
+    }
+    let encoded = value.strip_prefix("Basic ")?;
+    let decoded = base64::engine::general_purpose::STANDARD
+        .decode(encoded.trim())
+        .ok()?;
+    let text = String::from_utf8(decoded).ok()?;
+    text.split_once(':')
+        .map(|(_, password)| password.to_owned())
 }
 
 /// Middleware: admits requests with the admin token (when one is set).
@@ -43,27 +71,64 @@ pub async fn require_worker(state: State<AppState>, request: Request, next: Next
     check(state, request, next, Role::Worker).await
 }
 
+/// Middleware: admits requests with the read or admin token (when set).
+pub async fn require_read(state: State<AppState>, request: Request, next: Next) -> Response {
+    check(state, request, next, Role::Read).await
+}
+
 async fn check(
     State(state): State<AppState>,
     request: Request,
     next: Next,
     role: Role,
 ) -> Response {
-    let token = request
-        .headers()
-        .get(AUTHORIZATION)
-        .and_then(|v| v.to_str().ok())
-        .and_then(|v| v.strip_prefix("Bearer "));
-    if allowed(&state, role, token) {
-        next.run(request).await
-    } else {
-        let which = match role {
-            Role::Admin => "the admin token",
-            Role::Worker => "the worker token",
-        };
-        ApiError::Unauthorized(format!(
-            "this endpoint needs {which} as `Authorization: Bearer <token>`"
-        ))
-        .into_response()
+    let token = presented(request.headers());
+    if allowed(&state, role, token.as_deref()) {
+        return next.run(request).await;
+    }
+    let which = match role {
+        Role::Admin => "the admin token",
+        Role::Worker => "the worker token",
+        Role::Read => "the read token",
+    };
+    let mut response = ApiError::Unauthorized(format!(
+        "this endpoint needs {which} as `Authorization: Bearer <token>`"
+    ))
+    .into_response();
+    if role == Role::Read {
+        // Lets a browser ask for the token (as the password) on the dashboard.
+        response.headers_mut().insert(
+            WWW_AUTHENTICATE,
+            HeaderValue::from_static("Basic realm=\"tslg\", charset=\"UTF-8\""),
+        );
+    }
+    response
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn headers(value: &str) -> HeaderMap {
+        let mut h = HeaderMap::new();
+        h.insert(AUTHORIZATION, HeaderValue::from_str(value).unwrap());
+        h
+    }
+
+    #[test]
+    fn bearer_and_basic_passwords_are_the_presented_token() {
+        assert_eq!(
+            presented(&headers("Bearer s3cret")).as_deref(),
+            Some("s3cret")
+        );
+        // base64("viewer:s3:cret"): the password may hold colons.
+        let basic = base64::engine::general_purpose::STANDARD.encode("viewer:s3:cret");
+        assert_eq!(
+            presented(&headers(&format!("Basic {basic}"))).as_deref(),
+            Some("s3:cret")
+        );
+        assert_eq!(presented(&headers("Basic !!!")), None);
+        assert_eq!(presented(&headers("Token s3cret")), None);
+        assert_eq!(presented(&HeaderMap::new()), None);
     }
 }

@@ -90,6 +90,7 @@ pub async fn claim(
     Ok(Json(Lease {
         id: row.id,
         attempt: row.attempt,
+        key: row.key,
         campaign_id: row.campaign_id,
         start: row.start_index as u64,
         end: row.end_index as u64,

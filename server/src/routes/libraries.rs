@@ -95,7 +95,9 @@ pub async fn get_one(
 /// (`tslg-library`) for the grid cases, the binary Q-table for car-following.
 #[utoipa::path(get, path = "/api/v1/libraries/{id}/file", params(("id" = i64, Path)), responses(
     (status = 200, description = "The library file: application/json for grid cases, \
-     application/vnd.tslg.policy-library for car-following", content_type = "application/octet-stream"),
+     application/vnd.tslg.policy-library for car-following", content(
+        (Object = "application/json"),
+        (Vec<u8> = "application/vnd.tslg.policy-library"))),
     (status = 404, body = Problem), (status = 409, body = Problem)))]
 pub async fn file(
     State(state): State<AppState>,

@@ -1,7 +1,9 @@
 //! The HTTP routes: the API under `/api/v1`, the dashboard at `/` and
-//! metrics at `/metrics`. Reads are public; the lease endpoints and the files
-//! workers download need the worker (or admin) token when one is set;
-//! creating and cancelling need the admin token when one is set.
+//! metrics at `/metrics`. Reads, the dashboard and metrics need the read (or
+//! admin) token when one is set; the lease endpoints and the files workers
+//! download need the worker (or admin) token when one is set; creating and
+//! cancelling need the admin token when one is set. `/healthz` and the
+//! OpenAPI document are always open.
 
 mod auth;
 mod campaigns;
@@ -18,7 +20,7 @@ pub use figures::PictureCache;
 
 use crate::error::{problem, ApiError};
 use crate::state::AppState;
-use axum::extract::DefaultBodyLimit;
+use axum::extract::{DefaultBodyLimit, State};
 use axum::http::StatusCode;
 use axum::middleware::from_fn_with_state;
 use axum::routing::{get, post};
@@ -38,9 +40,10 @@ pub fn router(state: AppState) -> Router {
         .route("/api/v1/campaigns/{id}/plan", get(campaigns::plan))
         .route("/api/v1/libraries/{id}/file", get(libraries::file))
         .route_layer(from_fn_with_state(state.clone(), auth::require_worker));
-    let public = Router::new()
+    let open = Router::new()
         .route("/healthz", get(health::healthz))
-        .route("/api/v1/openapi.json", get(openapi::document))
+        .route("/api/v1/openapi.json", get(openapi::document));
+    let read = Router::new()
         .route("/api/v1/libraries", get(libraries::list))
         .route("/api/v1/libraries/{id}", get(libraries::get_one))
         .route("/api/v1/campaigns", get(campaigns::list))
@@ -64,17 +67,44 @@ pub fn router(state: AppState) -> Router {
         .route("/campaigns/{id}", get(dashboard::campaign))
         .route("/libraries/{id}", get(dashboard::library))
         .route("/assets/dashboard.js", get(dashboard::script))
-        .route("/assets/dashboard.css", get(dashboard::style));
+        .route("/assets/dashboard.css", get(dashboard::style))
+        .route_layer(from_fn_with_state(state.clone(), auth::require_read));
     let limit = state.config.max_body_bytes;
     admin
         .merge(worker)
-        .merge(public)
+        .merge(read)
+        .merge(open)
         .fallback(not_found)
         .method_not_allowed_fallback(method_not_allowed)
         .layer(DefaultBodyLimit::max(limit))
+        .layer(from_fn_with_state(state.clone(), refuse_large_bodies))
         .layer(from_fn_with_state(state.clone(), crate::metrics::observe))
         .layer(tower_http::trace::TraceLayer::new_for_http())
         .with_state(state)
+}
+
+/// Refuses a request whose declared `Content-Length` exceeds the body
+/// limit before any handler runs, on every route (also those that read no
+/// body); bodies without a length are cut at the limit by the extractors
+/// (`DefaultBodyLimit`).
+async fn refuse_large_bodies(
+    State(state): State<AppState>,
+    request: axum::extract::Request,
+    next: axum::middleware::Next,
+) -> axum::response::Response {
+    let limit = state.config.max_body_bytes;
+    let declared = request
+        .headers()
+        .get(axum::http::header::CONTENT_LENGTH)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.parse::<u64>().ok());
+    match declared {
+        Some(length) if length > limit as u64 => problem(
+            StatusCode::PAYLOAD_TOO_LARGE,
+            format!("request body of {length} bytes exceeds the limit of {limit} bytes"),
+        ),
+        _ => next.run(request).await,
+    }
 }
 
 async fn not_found(uri: axum::http::Uri) -> ApiError {

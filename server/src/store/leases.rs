@@ -1,5 +1,5 @@
 //! The `leases` table: claiming work, heartbeats and releases, each fenced
-//! on (lease id, worker, attempt).
+//! on (lease id, worker, attempt) and the attempt's secret key.
 
 use crate::config::Config;
 use crate::db::{now_ms, Database};
@@ -7,6 +7,7 @@ use crate::error::ApiError;
 use crate::lease_size::{lease_size, predicted_unleased, SizingInput, MAX_INLINE_LEASE};
 use crate::store::campaigns::{self, CampaignRow, COLUMNS as CAMPAIGN_COLUMNS};
 use sqlx::SqliteConnection;
+use subtle::ConstantTimeEq;
 use tslg_api::{CampaignStatus, HeartbeatAck, LeaseFence};
 use tslg_method::registry::SEQUENTIAL_CASES;
 
@@ -21,10 +22,17 @@ pub struct LeaseRow {
     pub worker: String,
     pub expires_at: i64,
     pub state: String,
+    pub key: String,
 }
 
 pub const COLUMNS: &str =
-    "id, campaign_id, start_index, end_index, resume_at, attempt, worker, expires_at, state";
+    "id, campaign_id, start_index, end_index, resume_at, attempt, worker, expires_at, state, key";
+
+/// A fresh lease key: 128 bits from the operating system's generator, as
+/// 32 hex digits.
+fn new_key() -> String {
+    format!("{:032x}", rand::random::<u128>())
+}
 
 fn ttl_ms(config: &Config) -> i64 {
     (config.lease_ttl_seconds * 1000.0) as i64
@@ -66,7 +74,7 @@ pub async fn claim(
     let runnable = "AND (c.requires IS NULL OR c.requires IN (SELECT value FROM json_each(?)))";
     let mut tx = db.write.begin().await?;
     let sql = format!(
-        "UPDATE leases SET attempt = attempt + 1, worker = ?, expires_at = ? \
+        "UPDATE leases SET attempt = attempt + 1, worker = ?, expires_at = ?, key = ? \
          WHERE id = (SELECT l.id FROM leases l JOIN campaigns c ON c.id = l.campaign_id \
                      WHERE l.state = 'active' AND l.expires_at < ? AND c.status = 'running' \
                        AND l.end_index - l.resume_at <= ? {planned_only} {runnable} \
@@ -76,6 +84,7 @@ pub async fn claim(
     let reclaimed: Option<LeaseRow> = sqlx::query_as(&sql)
         .bind(worker)
         .bind(expires)
+        .bind(new_key())
         .bind(now)
         .bind(span_limit)
         .bind(&offered)
@@ -123,7 +132,7 @@ pub async fn claim(
     }
     let sql = format!(
         "INSERT INTO leases (campaign_id, start_index, end_index, resume_at, attempt, worker, \
-         expires_at, state) VALUES (?, ?, ?, ?, 1, ?, ?, 'active') RETURNING {COLUMNS}"
+         expires_at, state, key) VALUES (?, ?, ?, ?, 1, ?, ?, 'active', ?) RETURNING {COLUMNS}"
     );
     let lease: LeaseRow = sqlx::query_as(&sql)
         .bind(campaign.id)
@@ -132,6 +141,7 @@ pub async fn claim(
         .bind(start)
         .bind(worker)
         .bind(expires)
+        .bind(new_key())
         .fetch_one(&mut *tx)
         .await?;
     tx.commit().await?;
@@ -178,13 +188,28 @@ pub async fn get(conn: &mut SqliteConnection, id: i64) -> Result<LeaseRow, ApiEr
         .ok_or_else(|| ApiError::NotFound(format!("lease {id} does not exist")))
 }
 
-/// Refuses a caller that does not hold the lease in its current attempt.
-pub fn check_fence(lease: &LeaseRow, worker: &str, attempt: i64) -> Result<(), ApiError> {
+/// Refuses a caller that does not hold the lease in its current attempt:
+/// 409 when the attempt or worker is not the current one (the lease expired
+/// and was handed out again; a stale holder stops), 403 when they are but
+/// the key is wrong (somebody else's lease). Keys compare in constant time.
+pub fn check_fence(
+    lease: &LeaseRow,
+    worker: &str,
+    attempt: i64,
+    key: &str,
+) -> Result<(), ApiError> {
     if lease.worker != worker || lease.attempt != attempt {
         return Err(ApiError::Conflict(format!(
             "lease {} is held by worker `{}` in attempt {}; this request is from worker `{}` \
              for attempt {}: the lease expired and was handed out again",
             lease.id, lease.worker, lease.attempt, worker, attempt
+        )));
+    }
+    if !bool::from(lease.key.as_bytes().ct_eq(key.as_bytes())) {
+        return Err(ApiError::Forbidden(format!(
+            "the key does not match lease {}'s attempt {}: only the worker it was handed to \
+             may report on it",
+            lease.id, lease.attempt
         )));
     }
     Ok(())
@@ -199,7 +224,7 @@ pub async fn heartbeat(
 ) -> Result<HeartbeatAck, ApiError> {
     let mut tx = db.write.begin().await?;
     let lease = get(&mut tx, id).await?;
-    check_fence(&lease, &fence.worker, fence.attempt)?;
+    check_fence(&lease, &fence.worker, fence.attempt, &fence.key)?;
     let campaign = campaigns::get(&mut *tx, lease.campaign_id).await?;
     let status = campaign.status();
     if lease.state != "active" || status != CampaignStatus::Running {
@@ -231,7 +256,7 @@ pub async fn heartbeat(
 pub async fn release(db: &Database, id: i64, fence: &LeaseFence) -> Result<LeaseRow, ApiError> {
     let mut tx = db.write.begin().await?;
     let lease = get(&mut tx, id).await?;
-    check_fence(&lease, &fence.worker, fence.attempt)?;
+    check_fence(&lease, &fence.worker, fence.attempt, &fence.key)?;
     sqlx::query(
         "UPDATE leases SET expires_at = 0 WHERE id = ? AND worker = ? AND attempt = ? AND state = 'active'",
     )
