@@ -40,6 +40,9 @@ pub enum Command {
     /// Learn the car-following library of a surrogate and print its action
     /// distribution at one state beside the naturalistic one.
     Policy(PolicyArgs),
+    /// Load a coordinator with many simulated workers; print the lease and
+    /// result latencies and check that no test was lost or counted twice.
+    LoadTest(commands::load::LoadArgs),
 }
 
 #[derive(Debug, Clone, Copy, ValueEnum, PartialEq, Eq)]
@@ -446,5 +449,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         }
         Command::Health(server) => commands::campaign::health(&server),
         Command::Policy(args) => commands::policy::run(&args),
+        Command::LoadTest(args) => commands::load::run(&args),
     }
 }

@@ -9,7 +9,9 @@ use reqwest::StatusCode;
 use serde_json::{json, Value};
 use std::time::Duration;
 use support::*;
-use tslg_api::{EventResult, Lease, LeaseRequest, Method, ResultAck, ResultReport};
+use tslg_api::{
+    CampaignStatus, EventResult, Lease, LeaseFence, LeaseRequest, Method, ResultAck, ResultReport,
+};
 use tslg_method::library::SearchMethod;
 use tslg_method::registry::{open_case, BuildRequest, ExposureSource, LibrarySearch};
 
@@ -520,4 +522,93 @@ async fn the_openapi_document_describes_the_contract() {
     ] {
         assert!(view[field].is_object(), "CampaignView.{field} missing");
     }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_late_result_counts_until_the_lease_is_taken_over_and_nothing_counts_after_the_stop() {
+    let dir = scratch();
+    let server = ServerProcess::start(
+        &dir.path().join("db.sqlite"),
+        &["--lease-ttl-seconds", "1", "--lease-size", "100"],
+    );
+    let client = server.client();
+    let library = ready_library(&client, "idm", true).await;
+    let request = campaign(Method::Library, library.id, "idm", 0.2, 3);
+    let id = client.create_campaign(&request).await.unwrap().id;
+    let file = client.library_file(library.id).await.unwrap();
+    let tests = open_case("cut-in", None, &ExposureSource::Builtin)
+        .unwrap()
+        .campaign(
+            Some(&file),
+            &json!({"model": "idm"}),
+            0.1,
+            Default::default(),
+            3,
+        )
+        .unwrap();
+    let run = |lease: &Lease| -> Vec<EventResult> {
+        (lease.start..lease.end)
+            .filter_map(|index| {
+                let o = tests.run(index);
+                o.event.then_some(EventResult {
+                    index,
+                    weight: o.weight,
+                })
+            })
+            .collect()
+    };
+    let first = claim(&client, "w1").await.unwrap();
+    let second = claim(&client, "w1").await.unwrap();
+    assert_eq!((first.start, second.start), (0, 100));
+
+    // Both expire; nobody takes them over. The holder's late report is
+    // still the lease's only report: it counts.
+    tokio::time::sleep(Duration::from_millis(1300)).await;
+    let late = client
+        .report(first.id, &report("w1", &first, 0, 100, &run(&first)))
+        .await
+        .unwrap();
+    assert_eq!((late.accepted, late.duplicate), (100, 0));
+    // These 100 tests satisfy the rule: the campaign stops exactly where
+    // the in-process run does.
+    let stopped = client.campaign(id).await.unwrap();
+    assert_eq!(stopped.status, CampaignStatus::Converged);
+    assert_same(&stopped, &in_process(Some("idm"), &request));
+    assert!(!late.proceed);
+
+    // After the stop: a result is acknowledged and ignored, a heartbeat says
+    // stop, a repeated or even conflicting report changes nothing.
+    let after = client
+        .report(second.id, &report("w1", &second, 100, 200, &run(&second)))
+        .await
+        .unwrap();
+    assert_eq!(
+        (after.accepted, after.ignored, after.proceed),
+        (0, 100, false)
+    );
+    let fence = LeaseFence {
+        worker: "w1".into(),
+        attempt: second.attempt,
+        key: second.key.clone(),
+    };
+    let beat = client.heartbeat(second.id, &fence).await.unwrap();
+    assert_eq!(
+        (beat.proceed, beat.campaign_status),
+        (false, CampaignStatus::Converged)
+    );
+    let conflicting = client
+        .report(first.id, &report("w1", &first, 0, 100, &[]))
+        .await
+        .unwrap();
+    assert_eq!((conflicting.accepted, conflicting.ignored), (0, 100));
+    let view = client.campaign(id).await.unwrap();
+    assert_eq!(
+        (view.indices, view.events, view.estimate.map(f64::to_bits)),
+        (
+            stopped.indices,
+            stopped.events,
+            stopped.estimate.map(f64::to_bits)
+        )
+    );
+    assert!(claim(&client, "w2").await.is_none(), "no work is left");
 }

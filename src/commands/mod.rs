@@ -5,6 +5,7 @@ pub mod demo;
 pub mod evaluate;
 pub mod exact;
 pub mod library;
+pub mod load;
 pub mod policy;
 pub mod progress;
 pub mod remote;

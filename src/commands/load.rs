@@ -1,0 +1,316 @@
+//! `tslg load-test`: many simulated workers against one coordinator.
+//!
+//! It starts a never-converging NDD campaign (cut-in, IDM, β = 10⁻⁹) and
+//! runs `--workers` concurrent simulated workers, each making `--requests`
+//! rounds of: take a lease, run its tests for real (about a microsecond
+//! each), report them all. It times every lease and result request, then
+//! cancels the campaign and checks the books: the tests the coordinator
+//! acknowledged as new must be exactly its resolved prefix, and the events
+//! reported exactly its events, so no test was lost or counted twice. It
+//! fails (exit 1) on any refused or failed request or a mismatch. The
+//! coordinator's own lease size applies; start it with `--lease-size` to
+//! fix the work per request.
+
+use crate::commands::remote::client;
+use crate::ServerArgs;
+use clap::Args;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+use tslg_api::{CreateCampaign, LeaseRequest, Method, ResultReport};
+use tslg_worker::client::Client;
+use tslg_worker::prepared::{Cache, PreparedCampaign};
+
+#[derive(Debug, Args)]
+pub struct LoadArgs {
+    #[command(flatten)]
+    pub server: ServerArgs,
+    /// The worker token, when the coordinator has one.
+    #[arg(long, env = "TSLG_WORKER_TOKEN", hide_env_values = true)]
+    pub worker_token: Option<String>,
+    /// Concurrent simulated workers.
+    #[arg(long, default_value_t = 64)]
+    pub workers: usize,
+    /// Lease-and-report rounds per worker.
+    #[arg(long, default_value_t = 50)]
+    pub requests: usize,
+    /// Give up (exit 1) after this many seconds.
+    #[arg(long, default_value_t = 300.0)]
+    pub time_limit: f64,
+    /// Print the result as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// What one simulated worker saw.
+#[derive(Default)]
+struct WorkerLog {
+    lease_ms: Vec<f64>,
+    result_ms: Vec<f64>,
+    accepted: u64,
+    events: u64,
+    errors: Vec<String>,
+}
+
+/// The measured latencies and the books of one run.
+#[derive(Debug, serde::Serialize)]
+pub struct LoadReport {
+    pub campaign_id: i64,
+    pub workers: usize,
+    pub requests: usize,
+    pub seconds: f64,
+    pub lease_ms: Percentiles,
+    pub result_ms: Percentiles,
+    pub errors: Vec<String>,
+    pub accepted_tests: u64,
+    pub campaign_tests: u64,
+    pub reported_events: u64,
+    pub campaign_events: u64,
+}
+
+/// Nearest-rank percentiles of a sample, in milliseconds.
+#[derive(Debug, serde::Serialize)]
+pub struct Percentiles {
+    pub count: usize,
+    pub p50: f64,
+    pub p90: f64,
+    pub p99: f64,
+    pub max: f64,
+}
+
+impl Percentiles {
+    fn of(mut sample: Vec<f64>) -> Self {
+        sample.sort_by(f64::total_cmp);
+        let rank = |p: f64| {
+            if sample.is_empty() {
+                return f64::NAN;
+            }
+            let k = ((p * sample.len() as f64).ceil() as usize).clamp(1, sample.len());
+            sample[k - 1]
+        };
+        Self {
+            count: sample.len(),
+            p50: rank(0.5),
+            p90: rank(0.9),
+            p99: rank(0.99),
+            max: rank(1.0),
+        }
+    }
+}
+
+impl LoadReport {
+    /// Whether the books balance and nothing failed.
+    pub fn clean(&self) -> bool {
+        self.errors.is_empty()
+            && self.accepted_tests == self.campaign_tests
+            && self.reported_events == self.campaign_events
+    }
+}
+
+pub fn run(args: &LoadArgs) -> anyhow::Result<()> {
+    anyhow::ensure!(args.workers >= 1, "--workers must be at least 1");
+    anyhow::ensure!(args.requests >= 1, "--requests must be at least 1");
+    anyhow::ensure!(
+        args.time_limit.is_finite() && args.time_limit > 0.0,
+        "--time-limit must be > 0"
+    );
+    let admin = client(&args.server)?;
+    let worker = client(&ServerArgs {
+        server: args.server.server.clone(),
+        token: args.worker_token.clone(),
+    })?;
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()?;
+    let limit = Duration::from_secs_f64(args.time_limit);
+    let report = runtime.block_on(async {
+        tokio::time::timeout(limit, load(&admin, &worker, args.workers, args.requests))
+            .await
+            .map_err(|_| anyhow::anyhow!("the load test did not finish within {limit:?}"))?
+    })?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print_table(&report);
+    }
+    anyhow::ensure!(
+        report.clean(),
+        "the load test found errors or unbalanced books ({} errors)",
+        report.errors.len()
+    );
+    Ok(())
+}
+
+fn print_table(r: &LoadReport) {
+    println!(
+        "{} workers × {} rounds in {:.1} s ({:.0} requests/s)",
+        r.workers,
+        r.requests,
+        r.seconds,
+        (r.lease_ms.count + r.result_ms.count) as f64 / r.seconds
+    );
+    println!("| request | count | p50 ms | p90 ms | p99 ms | max ms |");
+    println!("|---|---|---|---|---|---|");
+    for (name, p) in [("lease", &r.lease_ms), ("result", &r.result_ms)] {
+        println!(
+            "| {name} | {} | {:.2} | {:.2} | {:.2} | {:.2} |",
+            p.count, p.p50, p.p90, p.p99, p.max
+        );
+    }
+    println!(
+        "tests acknowledged {} / resolved by the coordinator {}; events reported {} / counted {}; errors {}",
+        r.accepted_tests,
+        r.campaign_tests,
+        r.reported_events,
+        r.campaign_events,
+        r.errors.len()
+    );
+    for e in r.errors.iter().take(10) {
+        println!("  error: {e}");
+    }
+}
+
+async fn load(
+    admin: &Client,
+    worker: &Client,
+    workers: usize,
+    requests: usize,
+) -> anyhow::Result<LoadReport> {
+    let campaign = admin
+        .create_campaign(&CreateCampaign {
+            case: "cut-in".into(),
+            method: Method::Ndd,
+            library_id: None,
+            vut: serde_json::json!({"model": "idm"}),
+            epsilon: 0.1,
+            beta: 1e-9,
+            confidence: 0.9,
+            max_tests: 1 << 50,
+            seed: 1,
+            n_min: None,
+            min_events: None,
+            outside: None,
+        })
+        .await?;
+    let prepared = Cache::default().get(worker, campaign.id).await?;
+    let started = Instant::now();
+    let tasks: Vec<_> = (0..workers)
+        .map(|w| {
+            let (client, prepared) = (worker.clone(), Arc::clone(&prepared));
+            tokio::spawn(simulated_worker(
+                client,
+                prepared,
+                format!("load-{w}"),
+                requests,
+            ))
+        })
+        .collect();
+    let mut logs = Vec::with_capacity(workers);
+    for task in tasks {
+        logs.push(task.await?);
+    }
+    let seconds = started.elapsed().as_secs_f64();
+    let view = admin.cancel_campaign(campaign.id).await?;
+    let all = |f: fn(&WorkerLog) -> &Vec<f64>| logs.iter().flat_map(f).copied().collect();
+    Ok(LoadReport {
+        campaign_id: campaign.id,
+        workers,
+        requests,
+        seconds,
+        lease_ms: Percentiles::of(all(|l| &l.lease_ms)),
+        result_ms: Percentiles::of(all(|l| &l.result_ms)),
+        errors: logs.iter().flat_map(|l| l.errors.clone()).collect(),
+        accepted_tests: logs.iter().map(|l| l.accepted).sum(),
+        campaign_tests: view.indices,
+        reported_events: logs.iter().map(|l| l.events).sum(),
+        campaign_events: view.events,
+    })
+}
+
+/// One simulated worker: `rounds` leases, each run and reported whole.
+async fn simulated_worker(
+    client: Client,
+    prepared: Arc<PreparedCampaign>,
+    name: String,
+    rounds: usize,
+) -> WorkerLog {
+    let mut log = WorkerLog::default();
+    let ask = LeaseRequest {
+        worker: name.clone(),
+        threads: 1,
+        include_tests: false,
+        offers: Vec::new(),
+        unhealthy: Vec::new(),
+    };
+    for _ in 0..rounds {
+        let asked = Instant::now();
+        let lease = match client.claim(&ask).await {
+            Ok(Some(lease)) => lease,
+            Ok(None) => {
+                log.errors.push(format!("{name}: no work offered"));
+                continue;
+            }
+            Err(e) => {
+                log.errors.push(format!("{name}: lease: {e}"));
+                continue;
+            }
+        };
+        log.lease_ms.push(asked.elapsed().as_secs_f64() * 1e3);
+        let ran = Instant::now();
+        let (tests, from, to) = (Arc::clone(&prepared), lease.resume_at, lease.end);
+        let events = tokio::task::spawn_blocking(move || {
+            (from..to)
+                .filter_map(|index| {
+                    let outcome = tests.tests.run(index);
+                    outcome.event.then_some(tslg_api::EventResult {
+                        index,
+                        weight: outcome.weight,
+                    })
+                })
+                .collect::<Vec<_>>()
+        })
+        .await;
+        let Ok(events) = events else {
+            log.errors
+                .push(format!("{name}: running lease {}'s tests failed", lease.id));
+            continue;
+        };
+        let report = ResultReport {
+            worker: name.clone(),
+            attempt: lease.attempt,
+            key: lease.key.clone(),
+            from,
+            to,
+            compute_seconds: ran.elapsed().as_secs_f64(),
+            threads: 1,
+            invalid: Vec::new(),
+            events,
+        };
+        let sent = Instant::now();
+        match client.report(lease.id, &report).await {
+            Ok(ack) => {
+                log.result_ms.push(sent.elapsed().as_secs_f64() * 1e3);
+                log.accepted += ack.accepted;
+                log.events += report.events.len() as u64;
+            }
+            Err(e) => log.errors.push(format!("{name}: result: {e}")),
+        }
+    }
+    log
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Percentiles;
+
+    #[test]
+    fn nearest_rank_percentiles() {
+        let p = Percentiles::of((1..=100).rev().map(f64::from).collect());
+        assert_eq!(
+            (p.count, p.p50, p.p90, p.p99, p.max),
+            (100, 50.0, 90.0, 99.0, 100.0)
+        );
+        let one = Percentiles::of(vec![7.0]);
+        assert_eq!((one.p50, one.p99), (7.0, 7.0));
+    }
+}

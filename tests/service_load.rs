@@ -1,0 +1,53 @@
+//! Load: 64 concurrent simulated workers (`tslg load-test`) against one
+//! coordinator, for a fixed number of requests within a time limit. No
+//! request fails, the SQLite file is never "locked", and the books balance:
+//! the resolved prefix is exactly the tests acknowledged, and its estimate
+//! is bit for bit the in-process estimate of that many tests.
+
+mod support;
+
+use serde_json::Value;
+use std::process::Command;
+use support::*;
+use tslg_api::{CampaignStatus, Method};
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sixty_four_concurrent_workers_lose_and_double_nothing() {
+    let dir = scratch();
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &["--lease-size", "100"]);
+    let (workers, rounds) = (64, 10);
+    let output = Command::new(env!("CARGO_BIN_EXE_tslg"))
+        .args(["load-test", "--server", &server.url, "--json"])
+        .args(["--workers", &workers.to_string()])
+        .args(["--requests", &rounds.to_string()])
+        .args(["--time-limit", "120"])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(
+        output.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let report: Value = serde_json::from_str(&stdout).unwrap();
+    let requests = (workers * rounds) as u64;
+    assert_eq!(report["lease_ms"]["count"], requests);
+    assert_eq!(report["result_ms"]["count"], requests);
+    assert_eq!(report["errors"].as_array().unwrap().len(), 0);
+    assert_eq!(report["accepted_tests"], requests * 100);
+    assert_eq!(report["campaign_tests"], requests * 100);
+    assert_eq!(report["reported_events"], report["campaign_events"]);
+    assert!(report["lease_ms"]["p99"].as_f64().unwrap() > 0.0);
+
+    let client = server.client();
+    let id = report["campaign_id"].as_i64().unwrap();
+    let view = client.campaign(id).await.unwrap();
+    assert_eq!(view.status, CampaignStatus::Cancelled);
+    let mut request = campaign(Method::Ndd, 0, "idm", 1e-9, 1);
+    request.library_id = None;
+    request.max_tests = requests * 100;
+    assert_same(&view, &in_process(None, &request));
+    let log = server.log();
+    assert!(!log.contains("database is locked"), "{log}");
+    assert!(!log.contains("panicked"), "{log}");
+}
