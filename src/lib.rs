@@ -37,6 +37,9 @@ pub enum Command {
     Campaign(CampaignCommand),
     /// Check that a coordinator answers and its database works (exit 0 if so).
     Health(ServerArgs),
+    /// Copy a coordinator's SQLite database to a new file, consistently,
+    /// while the coordinator runs (SQLite's `VACUUM INTO`).
+    Backup(BackupArgs),
     /// Learn the car-following library of a surrogate and print its action
     /// distribution at one state beside the naturalistic one.
     Policy(PolicyArgs),
@@ -64,6 +67,20 @@ pub struct PolicyArgs {
     /// How the Q-values are computed.
     #[arg(long, value_enum, default_value = "dp")]
     pub solver: SolverArg,
+}
+
+#[derive(Debug, Args)]
+pub struct BackupArgs {
+    /// The database to copy, as the coordinator's `--database-url`.
+    #[arg(
+        long,
+        env = "TSLG_DATABASE_URL",
+        default_value = "sqlite://tslg.sqlite"
+    )]
+    pub database_url: String,
+    /// The backup file to write; it must not exist.
+    #[arg(long)]
+    pub out: std::path::PathBuf,
 }
 
 /// How to reach a coordinator.
@@ -450,5 +467,14 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Health(server) => commands::campaign::health(&server),
         Command::Policy(args) => commands::policy::run(&args),
         Command::LoadTest(args) => commands::load::run(&args),
+        Command::Backup(args) => commands::remote::block_on(async {
+            let bytes = tslg_server::db::backup(&args.database_url, &args.out).await?;
+            println!(
+                "backed up {} to {} ({bytes} bytes)",
+                args.database_url,
+                args.out.display()
+            );
+            Ok(())
+        }),
     }
 }

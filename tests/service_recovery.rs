@@ -229,3 +229,48 @@ async fn a_worker_stopped_by_sigterm_gives_its_lease_back() {
     );
     assert!(lease.resume_at > 0);
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_backup_taken_while_running_restores_to_the_same_answer() {
+    let dir = scratch();
+    let database = dir.path().join("db.sqlite");
+    let options = ["--lease-size", "50000", "--lease-ttl-seconds", "2"];
+    let server = ServerProcess::start(&database, &options);
+    let worker = WorkerProcess::start(&server.url, 1, "w1");
+    let client = server.client();
+    let library = ready_library(&client, "idm", false).await;
+    let request = campaign(Method::Ndd, library.id, "idm", 0.04, 9);
+    let id = client.create_campaign(&request).await.unwrap().id;
+    let before = wait_for(&client, id, Duration::from_secs(120), |v| {
+        v.indices >= 100_000
+    })
+    .await;
+    assert_eq!(before.status, CampaignStatus::Running, "backed up too late");
+    let backup = dir.path().join("backup.sqlite");
+    let tslg = |out: &std::path::Path| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_tslg"))
+            .args(["backup", "--database-url"])
+            .arg(format!("sqlite://{}", database.display()))
+            .arg("--out")
+            .arg(out)
+            .output()
+            .unwrap()
+    };
+    let done = tslg(&backup);
+    assert!(done.status.success(), "{done:?}");
+    let again = tslg(&backup);
+    assert!(!again.status.success());
+    assert!(String::from_utf8_lossy(&again.stderr).contains("never overwrites"));
+    drop(worker);
+    server.kill();
+
+    // A new coordinator on the backup continues the campaign from it.
+    let server = ServerProcess::start(&backup, &options);
+    let client = server.client();
+    let restored = client.campaign(id).await.unwrap();
+    assert!(restored.indices >= before.indices, "{restored:?}");
+    let _worker = WorkerProcess::start(&server.url, 1, "w2");
+    let view = finished(&client, id, Duration::from_secs(300)).await;
+    assert_eq!(view.status, CampaignStatus::Converged);
+    assert_same(&view, &in_process(None, &request));
+}

@@ -19,6 +19,13 @@ pub struct Config {
     )]
     pub database_url: String,
 
+    /// `full`: every acknowledged result is on stable storage (fsync at
+    /// each commit) and survives a power failure; `normal`: it survives a
+    /// crash of the coordinator but not of the machine, for more results
+    /// per second on slow disks.
+    #[arg(long, env = "TSLG_DURABILITY", value_enum, default_value = "full")]
+    pub durability: crate::db::Durability,
+
     /// Token workers present as `Authorization: Bearer …` on the lease
     /// endpoints. When unset, workers need no token.
     #[arg(long, env = "TSLG_WORKER_TOKEN", hide_env_values = true)]

@@ -31,7 +31,7 @@ pub async fn serve(
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> anyhow::Result<()> {
     config.validate()?;
-    let db = db::Database::open(&config.database_url).await?;
+    let db = db::Database::open(&config.database_url, config.durability).await?;
     let state = state::AppState::new(db, config);
     builder::resume_builds(&state).await?;
     let address = listener.local_addr()?;
