@@ -89,7 +89,8 @@ pub struct ServerArgs {
     /// The coordinator's base URL.
     #[arg(long, env = "TSLG_SERVER", default_value = "http://127.0.0.1:8080")]
     pub server: String,
-    /// The admin token (needed to start or cancel when the coordinator has one).
+    /// The admin token (needed to start or cancel when the coordinator has
+    /// one); for reading only, the read token will do.
     #[arg(long, env = "TSLG_ADMIN_TOKEN", hide_env_values = true)]
     pub token: Option<String>,
 }
