@@ -7,6 +7,8 @@ mod support;
 
 use reqwest::{Method as Http, StatusCode};
 use serde_json::{json, Value};
+use sqlx::sqlite::SqliteConnectOptions;
+use sqlx::ConnectOptions;
 use std::process::{Command, Stdio};
 use std::time::Duration;
 use support::*;
@@ -82,11 +84,14 @@ async fn tokens_open_only_their_part_of_the_api_and_never_reach_the_logs() {
         (Http::POST, "/api/v1/campaigns".to_owned()),
         (Http::POST, format!("/api/v1/campaigns/{id}/cancel")),
     ] {
+        // Not even the admin token as a Basic password: a browser would
+        // resend it with a form posted from another site.
         for auth in [
             Auth::None,
             Auth::Bearer(WORKER),
             Auth::Bearer(READ),
             Auth::Basic(READ),
+            Auth::Basic(ADMIN),
         ] {
             let what = format!("{method} {path}");
             refused(send(&http, &url(&path), method.clone(), auth).await, &what).await;
@@ -128,7 +133,12 @@ async fn tokens_open_only_their_part_of_the_api_and_never_reach_the_logs() {
             );
             refused(response, path).await;
         }
-        for auth in [Auth::Bearer(READ), Auth::Basic(READ), Auth::Bearer(ADMIN)] {
+        for auth in [
+            Auth::Bearer(READ),
+            Auth::Basic(READ),
+            Auth::Bearer(ADMIN),
+            Auth::Basic(ADMIN),
+        ] {
             let response = send(&http, &url(path), Http::GET, auth).await;
             assert_eq!(response.status(), StatusCode::OK, "{path}");
         }
@@ -144,7 +154,12 @@ async fn tokens_open_only_their_part_of_the_api_and_never_reach_the_logs() {
         (Http::GET, format!("/api/v1/campaigns/{id}/plan")),
         (Http::GET, format!("/api/v1/libraries/{}/file", library.id)),
     ] {
-        for auth in [Auth::None, Auth::Bearer(READ), Auth::Basic(READ)] {
+        for auth in [
+            Auth::None,
+            Auth::Bearer(READ),
+            Auth::Basic(READ),
+            Auth::Basic(WORKER),
+        ] {
             let what = format!("{method} {path}");
             refused(send(&http, &url(&path), method.clone(), auth).await, &what).await;
         }
@@ -241,9 +256,25 @@ async fn tokens_open_only_their_part_of_the_api_and_never_reach_the_logs() {
         worker_log.contains("DEBUG"),
         "the worker logged at debug level"
     );
+    // Every lease key ever handed out, the worker's included.
+    let mut db = SqliteConnectOptions::new()
+        .filename(dir.path().join("db.sqlite"))
+        .read_only(true)
+        .connect()
+        .await
+        .unwrap();
+    let keys: Vec<String> = sqlx::query_scalar("SELECT key FROM leases")
+        .fetch_all(&mut db)
+        .await
+        .unwrap();
+    assert!(keys.len() >= 2, "{keys:?}");
+    let secrets: Vec<&str> = [ADMIN, WORKER, READ, &lease.key]
+        .into_iter()
+        .chain(keys.iter().map(String::as_str))
+        .collect();
     for (name, log) in [("coordinator", &server_log), ("worker", &worker_log)] {
-        for token in [ADMIN, WORKER, READ, &lease.key, &again.key] {
-            assert!(!log.contains(token), "the {name}'s log holds `{token}`");
+        for secret in &secrets {
+            assert!(!log.contains(secret), "the {name}'s log holds `{secret}`");
         }
     }
 }
@@ -279,5 +310,21 @@ async fn a_refusal_names_the_token_it_needs() {
             problem["detail"].as_str().unwrap().contains(needs),
             "{path}: {problem}"
         );
+    }
+}
+
+#[test]
+fn a_worker_or_read_token_without_an_admin_token_is_refused_at_start() {
+    for variable in ["TSLG_WORKER_TOKEN", "TSLG_READ_TOKEN"] {
+        let output = Command::new(env!("CARGO_BIN_EXE_tslg-server"))
+            .args(["--bind", "127.0.0.1:0", "--database-url", "sqlite::memory:"])
+            .env(variable, "some-token")
+            .env_remove("TSLG_ADMIN_TOKEN")
+            .output()
+            .unwrap();
+        assert!(!output.status.success(), "{variable}");
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(stderr.contains("set TSLG_ADMIN_TOKEN too"), "{stderr}");
+        assert!(!stderr.contains("some-token"), "{stderr}");
     }
 }

@@ -150,3 +150,34 @@ fn wait_with_limit(mut child: std::process::Child, limit: Duration) -> std::proc
     }
     child.wait_with_output().unwrap()
 }
+
+#[test]
+fn a_worker_refuses_a_coordinator_of_another_release() {
+    use std::io::{Read, Write};
+    // A stand-in coordinator that answers every request as another release.
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let url = format!("http://{}", listener.local_addr().unwrap());
+    std::thread::spawn(move || {
+        for stream in listener.incoming() {
+            let Ok(mut stream) = stream else { break };
+            let mut request = [0u8; 4096];
+            let _ = stream.read(&mut request);
+            let body = r#"{"status":"ok","version":"0.0.1-elsewhere"}"#;
+            let _ = write!(
+                stream,
+                "HTTP/1.1 200 OK\r\ncontent-type: application/json\r\ncontent-length: {}\r\n\
+                 connection: close\r\n\r\n{body}",
+                body.len()
+            );
+        }
+    });
+    let worker = worker_from_env(&url, WORKER, "w-old", Stdio::piped());
+    let out = wait_with_limit(worker, Duration::from_secs(30));
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("the coordinator runs tslg 0.0.1-elsewhere")
+            && stderr.contains("upgrade workers and coordinator together"),
+        "{stderr}"
+    );
+}

@@ -94,6 +94,14 @@ impl Config {
                 anyhow::ensure!(!t.is_empty(), "{name} is set but empty");
             }
         }
+        // Protecting leases or reads while anyone may create and cancel
+        // campaigns is a mistake, not a configuration.
+        anyhow::ensure!(
+            self.admin_token.is_some()
+                || (self.worker_token.is_none() && self.read_token.is_none()),
+            "TSLG_WORKER_TOKEN or TSLG_READ_TOKEN is set without TSLG_ADMIN_TOKEN: anyone \
+             could create and cancel campaigns; set TSLG_ADMIN_TOKEN too"
+        );
         Ok(())
     }
 }

@@ -93,7 +93,30 @@ pub async fn run(
     let mut trouble = Backoff::new(0.2, config.max_backoff_seconds.max(5.0));
     let mut rng = rand::rngs::StdRng::from_os_rng();
     let mut idle_since = Instant::now();
+    // The coordinator's release is checked before the first lease and after
+    // every outage (it may come back upgraded): both speak one version of
+    // the lease protocol.
+    let mut version_checked = false;
     while !worker.stopping() {
+        if !version_checked {
+            match worker.client.health().await {
+                Ok(health) => {
+                    anyhow::ensure!(
+                        health.version == env!("CARGO_PKG_VERSION"),
+                        "the coordinator runs tslg {}, this worker tslg {}: upgrade workers \
+                         and coordinator together (docs/operations.md)",
+                        health.version,
+                        env!("CARGO_PKG_VERSION")
+                    );
+                    version_checked = true;
+                }
+                Err(e) => {
+                    tracing::warn!(error = %e, "cannot reach the coordinator");
+                    worker.pause(trouble.next_wait(&mut rng)).await;
+                    continue;
+                }
+            }
+        }
         if worker.programs.any_rested() {
             let programs = Arc::clone(&worker.programs);
             tokio::task::spawn_blocking(move || programs.probe_rested()).await?;
@@ -133,6 +156,7 @@ pub async fn run(
             }
             Err(e) => {
                 tracing::warn!(error = %e, "cannot get work");
+                version_checked = false;
                 worker.pause(trouble.next_wait(&mut rng)).await;
             }
         }

@@ -44,13 +44,19 @@ pub fn allowed(state: &AppState, role: Role, token: Option<&str>) -> bool {
     }
 }
 
-/// The presented token: `Authorization: Bearer TOKEN`, or the password of
-/// `Authorization: Basic base64(user:TOKEN)` (any user name), which is
-/// what a browser sends after asking.
-fn presented(headers: &HeaderMap) -> Option<String> {
+/// The presented token: `Authorization: Bearer TOKEN`, or for reads the
+/// password of `Authorization: Basic base64(user:TOKEN)` (any user name),
+/// which is what a browser sends after asking. Basic is refused for the
+/// admin and worker roles: a browser attaches cached Basic credentials to
+/// any request to the origin, a form posted from another site included,
+/// and `POST …/cancel` needs no body.
+fn presented(headers: &HeaderMap, role: Role) -> Option<String> {
     let value = headers.get(AUTHORIZATION)?.to_str().ok()?;
     if let Some(token) = value.strip_prefix("Bearer ") {
         return Some(token.to_owned());
+    }
+    if role != Role::Read {
+        return None;
     }
     let encoded = value.strip_prefix("Basic ")?;
     let decoded = base64::engine::general_purpose::STANDARD
@@ -82,7 +88,7 @@ async fn check(
     next: Next,
     role: Role,
 ) -> Response {
-    let token = presented(request.headers());
+    let token = presented(request.headers(), role);
     if allowed(&state, role, token.as_deref()) {
         return next.run(request).await;
     }
