@@ -122,19 +122,30 @@ mod tests {
     }
 
     #[test]
-    fn bearer_and_basic_passwords_are_the_presented_token() {
+    fn bearer_tokens_and_for_reads_basic_passwords_are_the_presented_token() {
+        let read = Role::Read;
         assert_eq!(
-            presented(&headers("Bearer s3cret")).as_deref(),
+            presented(&headers("Bearer s3cret"), read).as_deref(),
             Some("s3cret")
         );
         // base64("viewer:s3:cret"): the password may hold colons.
-        let basic = base64::engine::general_purpose::STANDARD.encode("viewer:s3:cret");
+        let basic = format!(
+            "Basic {}",
+            base64::engine::general_purpose::STANDARD.encode("viewer:s3:cret")
+        );
         assert_eq!(
-            presented(&headers(&format!("Basic {basic}"))).as_deref(),
+            presented(&headers(&basic), read).as_deref(),
             Some("s3:cret")
         );
-        assert_eq!(presented(&headers("Basic !!!")), None);
-        assert_eq!(presented(&headers("Token s3cret")), None);
-        assert_eq!(presented(&HeaderMap::new()), None);
+        for role in [Role::Admin, Role::Worker] {
+            assert_eq!(presented(&headers(&basic), role), None, "{role:?}");
+            assert_eq!(
+                presented(&headers("Bearer s3cret"), role).as_deref(),
+                Some("s3cret")
+            );
+        }
+        assert_eq!(presented(&headers("Basic !!!"), read), None);
+        assert_eq!(presented(&headers("Token s3cret"), read), None);
+        assert_eq!(presented(&HeaderMap::new(), read), None);
     }
 }
