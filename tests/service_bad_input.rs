@@ -87,14 +87,11 @@ async fn every_endpoint_answers_bad_input_with_a_problem_and_keeps_serving() {
         .unwrap()
         .id;
     let http = reqwest::Client::new();
-    let doc: Value = http
-        .get(format!("{}/api/v1/openapi.json", server.url))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let get = |path: &str| {
+        let request = http.get(format!("{}{path}", server.url));
+        async move { request.send().await.unwrap().json::<Value>().await.unwrap() }
+    };
+    let doc = get("/api/v1/openapi.json").await;
     let paths = doc["paths"].as_object().unwrap();
     assert!(paths.len() >= 17, "{} paths", paths.len());
     let huge = format!("{{\"pad\": \"{}\"}}", "x".repeat(limit));
@@ -304,14 +301,7 @@ async fn every_endpoint_answers_bad_input_with_a_problem_and_keeps_serving() {
     assert_eq!(health.status(), StatusCode::OK);
     let view = client.campaign(id).await.unwrap();
     assert_eq!((view.indices, view.status.is_final()), (0, false));
-    let list: Value = http
-        .get(format!("{}/api/v1/campaigns", server.url))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let list = get("/api/v1/campaigns").await;
     assert_eq!(list["campaigns"].as_array().unwrap().len(), 1, "{list}");
     assert!(!server.log().contains("panicked"));
 }

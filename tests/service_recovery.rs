@@ -235,17 +235,13 @@ async fn a_backup_taken_while_running_restores_to_the_same_answer() {
     let dir = scratch();
     let database = dir.path().join("db.sqlite");
     let options = ["--lease-size", "50000", "--lease-ttl-seconds", "2"];
-    let server = ServerProcess::start(&database, &options);
-    let worker = WorkerProcess::start(&server.url, 1, "w1");
-    let client = server.client();
-    let library = ready_library(&client, "idm", false).await;
-    let request = campaign(Method::Ndd, library.id, "idm", 0.04, 9);
-    let id = client.create_campaign(&request).await.unwrap().id;
-    let before = wait_for(&client, id, Duration::from_secs(120), |v| {
-        v.indices >= 100_000
-    })
-    .await;
-    assert_eq!(before.status, CampaignStatus::Running, "backed up too late");
+    let MidCampaign {
+        server,
+        worker,
+        request,
+        id,
+        view: before,
+    } = MidCampaign::start(&database, &options).await;
     let backup = dir.path().join("backup.sqlite");
     let tslg = |out: &std::path::Path| {
         std::process::Command::new(env!("CARGO_BIN_EXE_tslg"))

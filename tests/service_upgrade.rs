@@ -12,7 +12,7 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 use support::*;
-use tslg_api::{CampaignStatus, Method, ResultReport};
+use tslg_api::{CampaignStatus, ResultReport};
 use tslg_worker::client::CallError;
 
 /// The newest migration: the lease key of this release.
@@ -35,16 +35,14 @@ async fn a_database_of_the_previous_release_is_migrated_and_one_of_a_newer_is_re
     let dir = scratch();
     let database = dir.path().join("db.sqlite");
     let options = ["--lease-size", "50000", "--lease-ttl-seconds", "2"];
-    let server = ServerProcess::start(&database, &options);
-    let worker = WorkerProcess::start(&server.url, 1, "w1");
+    let MidCampaign {
+        server,
+        worker,
+        request,
+        id,
+        ..
+    } = MidCampaign::start(&database, &options).await;
     let client = server.client();
-    let library = ready_library(&client, "idm", false).await;
-    let request = campaign(Method::Ndd, library.id, "idm", 0.04, 9);
-    let id = client.create_campaign(&request).await.unwrap().id;
-    wait_for(&client, id, Duration::from_secs(120), |v| {
-        v.indices >= 100_000
-    })
-    .await;
     let held = claim(&client, "old").await.expect("a lease");
     drop(worker);
     server.kill();

@@ -405,3 +405,42 @@ pub async fn library_picture(url: &str, id: i64) -> (Vec<String>, usize, usize) 
     }
     (texts, left, right)
 }
+
+/// A coordinator on `database` started with `options`, one worker `w1`,
+/// and the NDD campaign of the IDM (β 0.04, seed 9) run past 100,000
+/// tests and still running: the set-up of the recovery, backup and
+/// upgrade tests.
+pub struct MidCampaign {
+    pub server: ServerProcess,
+    pub worker: WorkerProcess,
+    pub request: CreateCampaign,
+    pub id: i64,
+    pub view: CampaignView,
+}
+
+impl MidCampaign {
+    pub async fn start(database: &Path, options: &[&str]) -> Self {
+        let server = ServerProcess::start(database, options);
+        let worker = WorkerProcess::start(&server.url, 1, "w1");
+        let client = server.client();
+        let library = ready_library(&client, "idm", false).await;
+        let request = campaign(Method::Ndd, library.id, "idm", 0.04, 9);
+        let id = client.create_campaign(&request).await.unwrap().id;
+        let view = wait_for(&client, id, Duration::from_secs(120), |v| {
+            v.indices >= 100_000
+        })
+        .await;
+        assert_eq!(
+            view.status,
+            tslg_api::CampaignStatus::Running,
+            "the campaign stopped before the disturbance"
+        );
+        Self {
+            server,
+            worker,
+            request,
+            id,
+            view,
+        }
+    }
+}
