@@ -12,7 +12,7 @@ use sqlx::ConnectOptions;
 use std::process::{Command, Stdio};
 use std::time::Duration;
 use support::*;
-use tslg_api::{CampaignStatus, LeaseFence, LeaseRequest, Method, ResultReport};
+use tslg_api::{CampaignStatus, LeaseFence, LeaseKey, LeaseRequest, Method, ResultReport};
 use tslg_worker::client::{CallError, Client};
 
 const ADMIN: &str = "adm-3e9f1c7a5b2d";
@@ -176,7 +176,12 @@ async fn tokens_open_only_their_part_of_the_api_and_never_reach_the_logs() {
         unhealthy: Vec::new(),
     };
     let lease = workers.claim(&ask("honest")).await.unwrap().unwrap();
-    assert_eq!(lease.key.len(), 32);
+    assert_eq!(lease.key.as_str().len(), 32);
+    assert_eq!(
+        format!("{:?}", lease.key),
+        "LeaseKey(…)",
+        "Debug hides the key"
+    );
     let report = ResultReport {
         worker: "honest".into(),
         attempt: lease.attempt,
@@ -188,7 +193,7 @@ async fn tokens_open_only_their_part_of_the_api_and_never_reach_the_logs() {
         compute_seconds: 0.1,
         threads: 1,
     };
-    let forged_key = "0".repeat(32);
+    let forged_key = LeaseKey("0".repeat(32));
     let forged = ResultReport {
         key: forged_key.clone(),
         ..report.clone()
@@ -268,7 +273,7 @@ async fn tokens_open_only_their_part_of_the_api_and_never_reach_the_logs() {
         .await
         .unwrap();
     assert!(keys.len() >= 2, "{keys:?}");
-    let secrets: Vec<&str> = [ADMIN, WORKER, READ, &lease.key]
+    let secrets: Vec<&str> = [ADMIN, WORKER, READ, lease.key.as_str()]
         .into_iter()
         .chain(keys.iter().map(String::as_str))
         .collect();

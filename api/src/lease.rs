@@ -2,7 +2,27 @@
 
 use crate::campaign::CampaignStatus;
 use serde::{Deserialize, Serialize};
+use std::fmt;
 use utoipa::ToSchema;
+
+/// A lease attempt's secret key (32 hex digits). Its `Debug` hides the
+/// value, so a lease, fence or report that ends up in a log or a panic
+/// message does not carry it.
+#[derive(Clone, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
+#[serde(transparent)]
+pub struct LeaseKey(pub String);
+
+impl LeaseKey {
+    pub fn as_str(&self) -> &str {
+        &self.0
+    }
+}
+
+impl fmt::Debug for LeaseKey {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("LeaseKey(…)")
+    }
+}
 
 /// `POST /api/v1/leases`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
@@ -85,7 +105,7 @@ pub struct Lease {
     pub id: i64,
     pub attempt: i64,
     /// The holder's secret for this attempt (32 hex digits).
-    pub key: String,
+    pub key: LeaseKey,
     pub campaign_id: i64,
     pub start: u64,
     pub end: u64,
@@ -107,7 +127,7 @@ pub struct LeaseFence {
     pub worker: String,
     pub attempt: i64,
     /// The lease's `key`, as handed out with this attempt.
-    pub key: String,
+    pub key: LeaseKey,
 }
 
 /// The answer to a heartbeat: whether to go on.
@@ -149,7 +169,7 @@ pub struct ResultReport {
     pub worker: String,
     pub attempt: i64,
     /// The lease's `key`, as handed out with this attempt.
-    pub key: String,
+    pub key: LeaseKey,
     pub from: u64,
     pub to: u64,
     #[serde(default)]

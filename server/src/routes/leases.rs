@@ -9,8 +9,8 @@ use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
 use axum::Json;
 use tslg_api::{
-    HeartbeatAck, Lease, LeaseFence, LeaseRequest, Problem, ResultAck, ResultReport, TestCase,
-    WorkerList,
+    HeartbeatAck, Lease, LeaseFence, LeaseKey, LeaseRequest, Problem, ResultAck, ResultReport,
+    TestCase, WorkerList,
 };
 use tslg_method::external::{check_program_name, ExternalMode};
 
@@ -90,7 +90,7 @@ pub async fn claim(
     Ok(Json(Lease {
         id: row.id,
         attempt: row.attempt,
-        key: row.key,
+        key: LeaseKey(row.key),
         campaign_id: row.campaign_id,
         start: row.start_index as u64,
         end: row.end_index as u64,

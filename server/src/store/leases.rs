@@ -224,7 +224,7 @@ pub async fn heartbeat(
 ) -> Result<HeartbeatAck, ApiError> {
     let mut tx = db.write.begin().await?;
     let lease = get(&mut tx, id).await?;
-    check_fence(&lease, &fence.worker, fence.attempt, &fence.key)?;
+    check_fence(&lease, &fence.worker, fence.attempt, fence.key.as_str())?;
     let campaign = campaigns::get(&mut *tx, lease.campaign_id).await?;
     let status = campaign.status();
     if lease.state != "active" || status != CampaignStatus::Running {
@@ -256,7 +256,7 @@ pub async fn heartbeat(
 pub async fn release(db: &Database, id: i64, fence: &LeaseFence) -> Result<LeaseRow, ApiError> {
     let mut tx = db.write.begin().await?;
     let lease = get(&mut tx, id).await?;
-    check_fence(&lease, &fence.worker, fence.attempt, &fence.key)?;
+    check_fence(&lease, &fence.worker, fence.attempt, fence.key.as_str())?;
     sqlx::query(
         "UPDATE leases SET expires_at = 0 WHERE id = ? AND worker = ? AND attempt = ? AND state = 'active'",
     )

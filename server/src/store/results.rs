@@ -101,7 +101,7 @@ pub async fn record(
 ) -> Result<Recorded, ApiError> {
     let mut tx = db.write.begin().await?;
     let lease = leases::get(&mut tx, lease_id).await?;
-    check_fence(&lease, &report.worker, report.attempt, &report.key)?;
+    check_fence(&lease, &report.worker, report.attempt, report.key.as_str())?;
     let campaign = campaigns::get(&mut *tx, lease.campaign_id).await?;
     let span = checked.to - checked.from;
     let (start, end, resume_at) = (
