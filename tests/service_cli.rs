@@ -62,6 +62,13 @@ fn library_create_and_campaign_start_status_cancel_drive_a_coordinator() {
         text.contains("converged") && text.contains(&format!("stop index {}", view.indices)),
         "{text}"
     );
+    let health = format!(
+        "sampling health: {:.1} effective events of {}, largest weight {:.1}% of the estimate",
+        view.effective_events.unwrap(),
+        view.events,
+        view.largest_weight_share.unwrap() * 100.0
+    );
+    assert!(text.contains(&health), "{text}");
     // A long NDD baseline, cancelled; cancelling again is refused.
     let o = tslg(&[
         "campaign", "start", "--server", url, "--method", "ndd", "--vut", "idm", "--beta", "0.001",

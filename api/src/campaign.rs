@@ -187,6 +187,17 @@ pub struct CampaignView {
     /// `n (rₙ/β)²`, since the half-width shrinks as `1/√n`; absent before
     /// `min_events` events (and at least 2).
     pub predicted_tests: Option<u64>,
+    /// Importance-sampling health: Kish's effective number of events
+    /// `S₁²/S₂`, with `S₁ = Σ wᵢyᵢ`, `S₂ = Σ (wᵢyᵢ)²`. Equal to `events`
+    /// when all event weights are equal; near 1 when one weight dominates,
+    /// and then the interval cannot be trusted. Absent before the first
+    /// event.
+    #[serde(default)]
+    pub effective_events: Option<f64>,
+    /// The largest single weighted outcome's share of the estimate,
+    /// `max wᵢyᵢ / S₁`; absent before the first event.
+    #[serde(default)]
+    pub largest_weight_share: Option<f64>,
     /// Tests accepted per second over the last minute, while running.
     pub tests_per_second: Option<f64>,
     /// `(predicted_tests − tests) / tests_per_second`, while running.

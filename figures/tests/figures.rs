@@ -36,6 +36,8 @@ fn view() -> CampaignView {
         ci_low: Some(7e-5),
         ci_high: Some(1.3e-4),
         predicted_tests: Some(9000),
+        effective_events: None,
+        largest_weight_share: None,
         tests_per_second: Some(1000.0),
         seconds_left: Some(5.0),
         created_at: String::new(),

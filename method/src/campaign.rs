@@ -28,6 +28,11 @@ pub struct CampaignResult {
     pub relative_half_width: f64,
     pub ci_low: f64,
     pub ci_high: f64,
+    /// Kish's effective number of events `S₁²/S₂`
+    /// ([`crate::estimator::ImportanceEstimator::effective_events`]).
+    pub effective_events: f64,
+    /// The largest weighted term's share of the estimate.
+    pub largest_weight_share: Option<f64>,
 }
 
 impl CampaignResult {
@@ -46,6 +51,8 @@ impl CampaignResult {
             relative_half_width: e.relative_half_width(z),
             ci_low,
             ci_high,
+            effective_events: e.effective_events(),
+            largest_weight_share: e.largest_share(),
         }
     }
 

@@ -26,12 +26,26 @@ pub struct ImportanceEstimator {
     s1: f64,
     /// `S₂ = Σ (wᵢ yᵢ)²`.
     s2: f64,
+    /// `max wᵢ yᵢ`: the largest single term, for the health figures.
+    #[serde(default)]
+    largest: f64,
 }
 
 impl ImportanceEstimator {
     /// The estimator with the given sums (as persisted by a coordinator).
     pub fn from_sums(n: u64, events: u64, s1: f64, s2: f64) -> Self {
-        Self { n, events, s1, s2 }
+        Self {
+            n,
+            events,
+            s1,
+            s2,
+            largest: 0.0,
+        }
+    }
+
+    /// The same estimator with its largest term `max wᵢ yᵢ` (as persisted).
+    pub fn with_largest(self, largest: f64) -> Self {
+        Self { largest, ..self }
     }
 
     /// Adds one test with weight `weight` and outcome `event`.
@@ -41,6 +55,7 @@ impl ImportanceEstimator {
             self.events += 1;
             self.s1 += weight;
             self.s2 += weight * weight;
+            self.largest = self.largest.max(weight);
         }
     }
 
@@ -96,6 +111,30 @@ impl ImportanceEstimator {
         } else {
             f64::INFINITY
         }
+    }
+
+    /// The largest single term `max wᵢ yᵢ` (0 before the first event).
+    pub fn largest_term(&self) -> f64 {
+        self.largest
+    }
+
+    /// Importance-sampling health: Kish's effective number of events
+    /// `S₁²/S₂` (0 before the first event). It equals `events` when every
+    /// event carries the same weight and falls toward 1 as one weight
+    /// dominates: the estimate then rests on that one test, and its
+    /// variance estimate with it, so the interval cannot be trusted.
+    pub fn effective_events(&self) -> f64 {
+        if self.s2 > 0.0 {
+            self.s1 * self.s1 / self.s2
+        } else {
+            0.0
+        }
+    }
+
+    /// The largest term's share of the estimate, `max wᵢ yᵢ / S₁`; `None`
+    /// before the first event with a positive weight.
+    pub fn largest_share(&self) -> Option<f64> {
+        (self.s1 > 0.0).then(|| self.largest / self.s1)
     }
 
     /// The interval `μ̂ₙ ± z sₙ/√n`.
@@ -205,6 +244,33 @@ pub enum Decision {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn health_figures_are_kish_and_the_largest_share() {
+        let mut e = ImportanceEstimator::default();
+        assert_eq!((e.effective_events(), e.largest_share()), (0.0, None));
+        // Four equal weights among ten tests: four effective events.
+        for i in 0..10 {
+            e.push(0.5, i % 3 == 0 && i < 10);
+        }
+        assert_eq!(e.events(), 4);
+        assert!((e.effective_events() - 4.0).abs() < 1e-12);
+        assert_eq!(e.largest_share(), Some(0.25));
+        // One weight of 10 beside two of 1: (12)²/102 = 1.41 effective
+        // events, the largest 10/12 of the estimate.
+        let mut skewed = ImportanceEstimator::default();
+        for w in [1.0, 10.0, 1.0] {
+            skewed.push(w, true);
+        }
+        skewed.push(99.0, false);
+        assert!((skewed.effective_events() - 144.0 / 102.0).abs() < 1e-12);
+        assert_eq!(skewed.largest_share(), Some(10.0 / 12.0));
+        assert_eq!(skewed.largest_term(), 10.0);
+        // As persisted: the sums and the largest term give the same figures.
+        let (s1, s2) = skewed.sums();
+        let restored = ImportanceEstimator::from_sums(4, 3, s1, s2).with_largest(10.0);
+        assert_eq!(restored, skewed);
+    }
 
     #[test]
     fn power_sums_match_the_two_pass_formulas() {

@@ -56,9 +56,17 @@ pub fn progress_line(label: &str, view: &CampaignView) -> String {
 
 /// The campaign's state, several lines.
 pub fn describe(view: &CampaignView) -> String {
+    let health = match (view.effective_events, view.largest_weight_share) {
+        (Some(ess), Some(share)) => format!(
+            "\n  sampling health: {ess:.1} effective events of {}, largest weight {:.1}% of the estimate",
+            view.events,
+            share * 100.0
+        ),
+        _ => String::new(),
+    };
     format!(
         "campaign {} ({} {}, vehicle {}): {}{}\n  tests {} (events {}, invalid {}), stop index {}\n  \
-         estimate {}  interval [{}, {}]  relative half-width {} (β {}, confidence {})",
+         estimate {}  interval [{}, {}]  relative half-width {} (β {}, confidence {}){health}",
         view.id,
         view.case,
         view.method.as_str(),

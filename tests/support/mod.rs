@@ -359,6 +359,16 @@ pub fn assert_same(view: &CampaignView, reference: &CampaignResult) {
         Some(reference.ci_high.to_bits()),
         "ci_high"
     );
+    assert_eq!(
+        view.effective_events.map(f64::to_bits),
+        (reference.events > 0).then(|| reference.effective_events.to_bits()),
+        "effective events"
+    );
+    assert_eq!(
+        view.largest_weight_share.map(f64::to_bits),
+        reference.largest_weight_share.map(f64::to_bits),
+        "largest weight share"
+    );
 }
 
 /// The exact P(A) of a built-in vehicle on the built-in exposure.

@@ -38,6 +38,8 @@ pub struct CampaignRow {
     pub invalid: i64,
     pub s1: f64,
     pub s2: f64,
+    /// The largest weighted term of the prefix, `max wᵢ yᵢ`.
+    pub largest: f64,
     pub cost_per_test: Option<f64>,
     pub worker_seconds: f64,
     pub created_at: String,
@@ -47,7 +49,7 @@ pub struct CampaignRow {
 pub const COLUMNS: &str = "id, case_name, preset, method, library_id, exposure_name, \
     exposure_fingerprint, exposure_table, vut, requires, epsilon, outside, beta, confidence, n_min, \
     min_events, max_tests, seed, status, status_detail, next_index, indices, tests, events, invalid, s1, s2, \
-    cost_per_test, worker_seconds, created_at, updated_at";
+    largest, cost_per_test, worker_seconds, created_at, updated_at";
 
 impl CampaignRow {
     pub fn status(&self) -> CampaignStatus {
@@ -92,7 +94,8 @@ impl CampaignRow {
                 self.events as u64,
                 self.s1,
                 self.s2,
-            ),
+            )
+            .with_largest(self.largest),
             indices: self.indices as u64,
             invalid: self.invalid as u64,
         }
@@ -120,7 +123,9 @@ impl CampaignRow {
 
     pub fn view(&self) -> CampaignView {
         let rule = self.rule();
-        let point = point(&self.fold(), rule.z());
+        let fold = self.fold();
+        let point = point(&fold, rule.z());
+        let has_events = self.events > 0;
         let started = self.indices > 0;
         CampaignView {
             id: self.id,
@@ -150,6 +155,8 @@ impl CampaignRow {
             ci_low: (self.tests > 1).then_some(point.ci_low),
             ci_high: (self.tests > 1).then_some(point.ci_high),
             predicted_tests: self.predicted_tests(&rule, &point),
+            effective_events: has_events.then(|| fold.estimator.effective_events()),
+            largest_weight_share: fold.estimator.largest_share(),
             tests_per_second: None,
             seconds_left: None,
             created_at: self.created_at.clone(),

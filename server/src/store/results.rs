@@ -427,7 +427,7 @@ async fn fold_prefix(
     let (s1, s2) = fold.estimator.sums();
     sqlx::query(
         "UPDATE campaigns SET indices = ?, tests = ?, events = ?, invalid = ?, s1 = ?, s2 = ?, \
-         status = ?, status_detail = COALESCE(?, status_detail), \
+         largest = ?, status = ?, status_detail = COALESCE(?, status_detail), \
          updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now') WHERE id = ?",
     )
     .bind(fold.indices as i64)
@@ -436,6 +436,7 @@ async fn fold_prefix(
     .bind(fold.invalid as i64)
     .bind(s1)
     .bind(s2)
+    .bind(fold.estimator.largest_term())
     .bind(status.as_str())
     .bind(detail)
     .bind(campaign.id)
