@@ -27,6 +27,7 @@ fn request(tests: u64) -> CreateCampaign {
         seed: 1,
         n_min: None,
         min_events: None,
+        guard_outside: false,
         outside: None,
     }
 }

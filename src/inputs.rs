@@ -72,6 +72,7 @@ pub fn stopping_rule(args: &RuleArgs) -> anyhow::Result<StoppingRule> {
         n_min: args.n_min,
         min_events: args.min_events,
         max_tests: args.max_tests,
+        guard_outside: args.guard_outside,
     };
     rule.validate().context("invalid stopping rule")?;
     Ok(rule)

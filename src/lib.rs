@@ -46,6 +46,9 @@ pub enum Command {
     /// Load a coordinator with many simulated workers; print the lease and
     /// result latencies and check that no test was lost or counted twice.
     LoadTest(commands::load::LoadArgs),
+    /// Run replicate campaigns in this process against the exact answer:
+    /// coverage of the plain and the guarded interval, tests to stop, bias.
+    Validate(commands::validate::ValidateArgs),
 }
 
 #[derive(Debug, Clone, Copy, ValueEnum, PartialEq, Eq)]
@@ -364,6 +367,12 @@ pub struct RuleArgs {
     /// Give up after this many tests (status `exhausted`).
     #[arg(long, default_value_t = 10_000_000)]
     pub max_tests: u64,
+    /// Also require the failure mass outside the library to be bounded:
+    /// its upper confidence bound may exceed the outside part of the
+    /// estimate by at most β × the estimate (library campaigns of grid
+    /// cases; pair it with `--outside ndd`).
+    #[arg(long)]
+    pub guard_outside: bool,
 }
 
 #[derive(Debug, Args)]
@@ -468,6 +477,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Health(server) => commands::campaign::health(&server),
         Command::Policy(args) => commands::policy::run(&args),
         Command::LoadTest(args) => commands::load::run(&args),
+        Command::Validate(args) => commands::validate::run(&args),
         Command::Backup(args) => commands::remote::block_on(async {
             let bytes = tslg_server::db::backup(&args.database_url, &args.out).await?;
             println!(

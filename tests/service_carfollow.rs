@@ -28,6 +28,7 @@ fn request(method: Method, library_id: i64, vut: &str, seed: u64) -> CreateCampa
         seed,
         n_min: None,
         min_events: None,
+        guard_outside: false,
     }
 }
 

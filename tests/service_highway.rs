@@ -37,6 +37,7 @@ fn request(
         seed,
         n_min: None,
         min_events: None,
+        guard_outside: false,
     }
 }
 

@@ -233,12 +233,13 @@ async fn results_are_idempotent_fenced_on_the_attempt_and_leases_expire_and_retu
         n_min: 30,
         min_events: 10,
         max_tests: 10_000_000,
+        guard_outside: false,
     };
     let sparse: Vec<_> = events
         .iter()
         .map(|e| (e.index, tslg_method::prefix::SparseOutcome::Event(e.weight)))
         .collect();
-    fold.advance(&rule, rule.z(), 100, &sparse).unwrap();
+    fold.advance(&rule, rule.z(), 100, &sparse, None).unwrap();
     assert_eq!(
         view.estimate.unwrap().to_bits(),
         fold.estimator.estimate().to_bits()

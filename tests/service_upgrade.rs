@@ -15,13 +15,20 @@ use support::*;
 use tslg_api::{CampaignStatus, ResultReport};
 use tslg_worker::client::CallError;
 
-/// Undoes this release's migrations (the lease key, the largest term),
-/// leaving the previous release's schema with its data.
-const UNDO: [&str; 4] = [
+/// Undoes this release's migrations (the lease key, the largest term, the
+/// outside bound), leaving the previous release's schema with its data.
+const UNDO: [&str; 11] = [
     "ALTER TABLE leases DROP COLUMN key",
     "ALTER TABLE campaigns DROP COLUMN largest",
+    "ALTER TABLE campaigns DROP COLUMN guard_outside",
+    "ALTER TABLE campaigns DROP COLUMN outside_tests",
+    "ALTER TABLE campaigns DROP COLUMN outside_events",
+    "ALTER TABLE campaigns DROP COLUMN outside_s1",
+    "ALTER TABLE campaigns DROP COLUMN outside_mismatches",
+    "ALTER TABLE campaigns DROP COLUMN outside_upper",
     "DELETE FROM _sqlx_migrations WHERE version = 20261122000007",
     "DELETE FROM _sqlx_migrations WHERE version = 20261122000008",
+    "DELETE FROM _sqlx_migrations WHERE version = 20261122000009",
 ];
 
 async fn sql(database: &Path, statements: &[&str]) {

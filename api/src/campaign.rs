@@ -85,6 +85,13 @@ pub struct CreateCampaign {
     /// Fewest events before the rule may stop (default 10).
     #[serde(default)]
     pub min_events: Option<u64>,
+    /// Also stop only when the failure mass the library's exploring tests
+    /// could still be missing, `outside_upper`, exceeds what they already
+    /// contributed to the estimate by at most β times the estimate
+    /// (docs/statistics.md). Library campaigns of grid cases only. It costs
+    /// about `2.3/(ε β P(A))` tests with `outside: ndd` at 90 %.
+    #[serde(default)]
+    pub guard_outside: bool,
 }
 
 fn default_epsilon() -> f64 {
@@ -198,6 +205,37 @@ pub struct CampaignView {
     /// `max wᵢyᵢ / S₁`; absent before the first event.
     #[serde(default)]
     pub largest_weight_share: Option<f64>,
+    /// Whether the campaign stops only under the outside guard.
+    #[serde(default)]
+    pub guard_outside: bool,
+    /// Valid tests drawn outside the library (the ε share), and their
+    /// events: the vehicle failing where its surrogate found nothing
+    /// critical. Zero for the NDD and car-following.
+    #[serde(default)]
+    pub outside_tests: u64,
+    #[serde(default)]
+    pub outside_events: u64,
+    /// Those events in scenarios where the library's surrogate has no
+    /// event: the vehicle fails where the surrogate does not (a mismatch).
+    #[serde(default)]
+    pub mismatched_events: u64,
+    /// The share of the estimate the events outside the library carry.
+    #[serde(default)]
+    pub outside_share: Option<f64>,
+    /// Upper confidence bound (at `confidence`) on the failure mass outside
+    /// the library, from its exploring tests: the worst-case exposure of the
+    /// scenarios their Clopper–Pearson bound allows to fail. Absent for the
+    /// NDD, for car-following and before the first results.
+    #[serde(default)]
+    pub outside_upper: Option<f64>,
+    /// `ci_high` with the outside part of the estimate replaced by
+    /// `outside_upper`: the upper end of the guarded interval.
+    #[serde(default)]
+    pub guarded_ci_high: Option<f64>,
+    /// What the numbers cannot show on their own, in words (surrogate
+    /// mismatch, an interval the outside bound does not support).
+    #[serde(default)]
+    pub warnings: Vec<String>,
     /// Tests accepted per second over the last minute, while running.
     pub tests_per_second: Option<f64>,
     /// `(predicted_tests − tests) / tests_per_second`, while running.

@@ -111,9 +111,9 @@ fn main() {
     let distribution = TestDistribution::library(q);
     let rule = StoppingRule::new(0.2, 10_000_000);
     let secs = median_seconds(|| {
-        black_box(run_campaign(&case, &idm, &distribution, &rule, 3));
+        black_box(run_campaign(&case, &idm, None, &distribution, &rule, 3));
     });
-    let tests = run_campaign(&case, &idm, &distribution, &rule, 3).tests;
+    let tests = run_campaign(&case, &idm, None, &distribution, &rule, 3).tests;
     println!(
         "| library campaign, IDM tested with the FVDM library, β 0.2: {tests} tests | {:.2} ms |",
         secs * 1e3

@@ -6,7 +6,9 @@
 //! equal, to the bit, what the coordinator computes from the same seed.
 
 use crate::estimator::{Decision, StoppingRule};
-use crate::prefix::{PrefixFold, SparseOutcome};
+use crate::outside::OutsideMass;
+use crate::prefix::{Exploration, PrefixFold, SparseOutcome};
+use crate::registry::CampaignTests;
 use crate::sampling::TestDistribution;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -33,13 +35,48 @@ pub struct CampaignResult {
     pub effective_events: f64,
     /// The largest weighted term's share of the estimate.
     pub largest_weight_share: Option<f64>,
+    /// Valid tests drawn outside the library (ε-exploration), and their events.
+    pub outside_tests: u64,
+    pub outside_events: u64,
+    /// Those events where the library's surrogate has no event.
+    pub mismatched_events: u64,
+    /// The events outside the library's share of the estimate `S₁,out/S₁`:
+    /// the vehicle fails where the surrogate found nothing critical.
+    pub outside_share: Option<f64>,
+    /// `U`: the upper confidence bound on the failure mass outside the
+    /// library ([`crate::outside`]); `None` where the campaign has no
+    /// library outside to bound (the NDD, car-following).
+    pub outside_upper: Option<f64>,
+    /// The interval's upper end with the outside part of the estimate
+    /// replaced by its bound: `max(ci_high, ci_high − S₁,out/n + U)`.
+    pub guarded_ci_high: Option<f64>,
 }
 
 impl CampaignResult {
-    /// The summary of `fold` under a rule with quantile `z`.
-    pub fn from_fold(status: Decision, fold: &PrefixFold, z: f64) -> Self {
+    /// The summary of `fold` under `rule`, with the outside bound when the
+    /// campaign explores outside a library of fill `mass`.
+    pub fn from_fold(
+        status: Decision,
+        fold: &PrefixFold,
+        rule: &StoppingRule,
+        mass: Option<&OutsideMass>,
+    ) -> Self {
+        let upper = mass.map(|m| m.upper(fold.outside.tests, fold.outside.events, rule.confidence));
+        Self::with_outside_upper(status, fold, rule.z(), upper)
+    }
+
+    /// The summary of `fold` with quantile `z` and the outside bound
+    /// `outside_upper` already computed (as a coordinator persists it).
+    pub fn with_outside_upper(
+        status: Decision,
+        fold: &PrefixFold,
+        z: f64,
+        outside_upper: Option<f64>,
+    ) -> Self {
         let e = &fold.estimator;
         let (ci_low, ci_high) = e.interval(z);
+        let (s1, _) = e.sums();
+        let n = e.tests().max(1) as f64;
         Self {
             status,
             tests: e.tests(),
@@ -53,6 +90,12 @@ impl CampaignResult {
             ci_high,
             effective_events: e.effective_events(),
             largest_weight_share: e.largest_share(),
+            outside_tests: fold.outside.tests,
+            outside_events: fold.outside.events,
+            mismatched_events: fold.outside.mismatches,
+            outside_share: (outside_upper.is_some() && s1 > 0.0).then(|| fold.outside.s1 / s1),
+            outside_upper,
+            guarded_ci_high: outside_upper.map(|u| ci_high.max(ci_high - fold.outside.s1 / n + u)),
         }
     }
 
@@ -60,26 +103,86 @@ impl CampaignResult {
     pub fn covers(&self, value: f64) -> bool {
         self.ci_low <= value && value <= self.ci_high
     }
+
+    /// What a careful reader should know that the interval does not say:
+    /// the vehicle failing outside the library (a surrogate mismatch), and an
+    /// interval of the precision asked for (`rₙ ≤ β`) that the outside bound
+    /// does not support (more
+    /// failure mass than β times the estimate could hide outside the
+    /// library). `beta` is the campaign's target.
+    pub fn warnings(&self, beta: f64) -> Vec<String> {
+        let mut warnings = Vec::new();
+        if self.mismatched_events > 0 {
+            warnings.push(format!(
+                "surrogate mismatch: the vehicle failed in {} tests whose scenario the \
+                 library's surrogate passes ({} events outside the library in all, {:.0}% of \
+                 the estimate): the library does not cover where this vehicle fails, so the \
+                 estimate rests on the few exploring tests. Check the guarded interval, or \
+                 build the library with a surrogate closer to this vehicle",
+                self.mismatched_events,
+                self.outside_events,
+                100.0 * self.outside_share.unwrap_or(0.0)
+            ));
+        }
+        if let (Some(upper), Some(high)) = (self.outside_upper, self.guarded_ci_high) {
+            let unseen = high - self.ci_high;
+            if self.relative_half_width <= beta && unseen > beta * self.estimate {
+                warnings.push(format!(
+                    "the interval does not bound what the library leaves out: up to {upper:.3e} \
+                     of failure mass may lie outside it ({} exploring tests, {} events), more \
+                     than β × the estimate; the guarded upper end is {high:.3e}. Rerun with \
+                     guard_outside (and outside: ndd) to test until it is bounded",
+                    self.outside_tests, self.outside_events
+                ));
+            }
+        }
+        warnings
+    }
+
+    /// Whether the guarded interval `[ci_low, guarded_ci_high]` contains
+    /// `value` (the plain one where there is no outside bound).
+    pub fn guarded_covers(&self, value: f64) -> bool {
+        self.ci_low <= value && value <= self.guarded_ci_high.unwrap_or(self.ci_high)
+    }
 }
 
 /// First batch size; batches double up to [`MAX_BATCH`].
 const FIRST_BATCH: u64 = 64;
 const MAX_BATCH: u64 = 65_536;
 
+/// How an in-process campaign learns which tests explored: `explores(i)`
+/// and the fill of the outside scenarios.
+#[derive(Clone, Copy)]
+pub struct Explorer<'a> {
+    pub explores: &'a (dyn Fn(u64) -> bool + Sync),
+    pub mass: &'a OutsideMass,
+    /// See [`Exploration::surrogate_misses`].
+    pub surrogate_misses: &'a (dyn Fn(u64) -> bool + Sync),
+}
+
 /// Runs one campaign on a case given as its event test `is_event(cell)`
-/// with tests from `distribution`. The rule must be valid
-/// ([`StoppingRule::validate`]).
+/// with tests from `distribution`; `surrogate_event(cell)` is the library's
+/// surrogate's (for the mismatch count; `None` counts none). The rule must
+/// be valid ([`StoppingRule::validate`]).
 pub fn run_campaign_with(
     is_event: &(dyn Fn(usize) -> bool + Sync),
+    surrogate_event: Option<&(dyn Fn(usize) -> bool + Sync)>,
     distribution: &TestDistribution,
     rule: &StoppingRule,
     seed: u64,
 ) -> CampaignResult {
-    run_indexed_campaign(
+    let explores = |i| distribution.explores(seed, i);
+    let misses = |i| surrogate_event.is_some_and(|f| !f(distribution.draw(seed, i).cell));
+    run_outcome_campaign(
         &|i| {
             let draw = distribution.draw(seed, i);
-            is_event(draw.cell).then_some(draw.weight)
+            is_event(draw.cell).then_some(SparseOutcome::Event(draw.weight))
         },
+        distribution.outside_mass().map(|mass| Explorer {
+            explores: &explores,
+            mass,
+            surrogate_misses: &misses,
+        }),
         rule,
     )
 }
@@ -92,18 +195,21 @@ pub fn run_indexed_campaign(
     event_weight: &(dyn Fn(u64) -> Option<f64> + Sync),
     rule: &StoppingRule,
 ) -> CampaignResult {
-    run_outcome_campaign(&|i| event_weight(i).map(SparseOutcome::Event), rule)
+    run_outcome_campaign(&|i| event_weight(i).map(SparseOutcome::Event), None, rule)
 }
 
 /// Runs one campaign whose test `i` has the outcome `outcome(i)`: an event
 /// with its weight, invalid (it takes an index but enters neither sum), or
-/// `None` for no event. A service campaign whose workers report the same
-/// outcomes stops at the same index with the same estimate.
+/// `None` for no event; `explorer` says which tests drew outside the
+/// library, if the campaign has one. A service campaign whose workers
+/// report the same outcomes stops at the same index with the same estimate.
 pub fn run_outcome_campaign(
     outcome: &(dyn Fn(u64) -> Option<SparseOutcome> + Sync),
+    explorer: Option<Explorer<'_>>,
     rule: &StoppingRule,
 ) -> CampaignResult {
     let z = rule.z();
+    let mass = explorer.map(|e| e.mass);
     let mut fold = PrefixFold::default();
     let mut batch = FIRST_BATCH;
     loop {
@@ -114,26 +220,75 @@ pub fn run_outcome_campaign(
             .filter_map(|i| outcome(i).map(|o| (i, o)))
             .collect();
         events.sort_by_key(|&(i, _)| i);
+        let explored: Vec<u64> = match explorer {
+            Some(e) => (from..to)
+                .into_par_iter()
+                .filter(|&i| (e.explores)(i))
+                .collect(),
+            None => Vec::new(),
+        };
+        let exploration = explorer.map(|e| Exploration {
+            explored: &explored,
+            mass: e.mass,
+            surrogate_misses: e.surrogate_misses,
+        });
         let stop = fold
-            .advance(rule, z, to, &events)
+            .advance(rule, z, to, &events, exploration)
             .expect("weights of a valid distribution are finite and ≥ 0");
         if let Some(status) = stop {
-            return CampaignResult::from_fold(status, &fold, z);
+            return CampaignResult::from_fold(status, &fold, rule, mass);
         }
         batch = (batch * 2).min(MAX_BATCH);
     }
 }
 
-/// [`run_campaign_with`] for a typed case and vehicle.
+/// Runs the tests of a service campaign (`tests`, as the coordinator and
+/// the workers build them) in this process on its built-in vehicle, the
+/// tests `invalid` picks having no valid outcome: the in-process twin of a
+/// service campaign, with its exploring tests and mismatches counted as
+/// the coordinator counts them.
+pub fn run_campaign_tests(
+    tests: &dyn CampaignTests,
+    rule: &StoppingRule,
+    invalid: &(dyn Fn(u64) -> bool + Sync),
+) -> CampaignResult {
+    let explores = |i| tests.explores(i);
+    let misses = |i| tests.surrogate_misses(i);
+    run_outcome_campaign(
+        &|i| {
+            if invalid(i) {
+                return Some(SparseOutcome::Invalid);
+            }
+            let outcome = tests.run(i);
+            outcome
+                .event
+                .then_some(SparseOutcome::Event(outcome.weight))
+        },
+        tests.outside_mass().map(|mass| Explorer {
+            explores: &explores,
+            mass,
+            surrogate_misses: &misses,
+        }),
+        rule,
+    )
+}
+
+/// [`run_campaign_with`] for a typed case and vehicle, and the surrogate
+/// of the library `distribution` samples from, when known.
 pub fn run_campaign<C: crate::case::Case>(
     case: &C,
     vehicle: &C::Vehicle,
+    surrogate: Option<&C::Vehicle>,
     distribution: &TestDistribution,
     rule: &StoppingRule,
     seed: u64,
 ) -> CampaignResult {
+    let surrogate_event = surrogate.map(|s| move |cell| case.is_event(s, cell));
     run_campaign_with(
         &|cell| case.is_event(vehicle, cell),
+        surrogate_event
+            .as_ref()
+            .map(|f| f as &(dyn Fn(usize) -> bool + Sync)),
         distribution,
         rule,
         seed,

@@ -173,6 +173,11 @@ pub struct StoppingRule {
     pub n_min: u64,
     pub min_events: u64,
     pub max_tests: u64,
+    /// Also require the outside guard ([`crate::outside::OutsideTally::guarded`]):
+    /// the failure mass the library's exploring tests could still be missing
+    /// is at most β times the estimate. Library campaigns of grid cases only.
+    #[serde(default)]
+    pub guard_outside: bool,
 }
 
 /// Defaults chosen from coverage measurements; see `docs/statistics.md`.
@@ -188,6 +193,7 @@ impl StoppingRule {
             n_min: DEFAULT_N_MIN,
             min_events: DEFAULT_MIN_EVENTS,
             max_tests,
+            guard_outside: false,
         }
     }
 
@@ -309,6 +315,7 @@ mod tests {
             n_min: 4,
             min_events: 2,
             max_tests: 6,
+            guard_outside: false,
         };
         let z = rule.z();
         let mut e = ImportanceEstimator::default();

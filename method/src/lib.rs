@@ -17,6 +17,7 @@ pub mod library;
 pub mod mass;
 pub mod ndd_table;
 pub mod objective;
+pub mod outside;
 pub mod prefix;
 pub mod progress;
 pub mod registry;

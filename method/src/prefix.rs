@@ -15,6 +15,7 @@
 //! test indices) but are neither events nor non-events: `n` skips them.
 
 use crate::estimator::{Decision, ImportanceEstimator, StoppingRule};
+use crate::outside::{OutsideMass, OutsideTally};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
@@ -27,6 +28,10 @@ pub enum FoldError {
     Unordered(u64),
     #[error("event weight {weight} at test {index} is not a finite number ≥ 0")]
     BadWeight { index: u64, weight: f64 },
+    #[error(
+        "exploring test {index} is not in strictly increasing order inside the span {from}..{to}"
+    )]
+    Explored { index: u64, from: u64, to: u64 },
 }
 
 /// One resolved test in sparse form.
@@ -37,6 +42,19 @@ pub enum SparseOutcome {
     Invalid,
 }
 
+/// What a library campaign's fold needs about its exploring tests
+/// ([`crate::outside`]): which tests of the span drew outside the library,
+/// and the fill that bounds the failure mass there.
+#[derive(Clone, Copy)]
+pub struct Exploration<'a> {
+    /// The indices of the span being folded whose tests explored, increasing.
+    pub explored: &'a [u64],
+    pub mass: &'a OutsideMass,
+    /// Whether the library's surrogate has no event in the scenario of
+    /// test `i` (asked only of exploring tests with the event).
+    pub surrogate_misses: &'a (dyn Fn(u64) -> bool + Sync),
+}
+
 /// The state of a campaign's estimate over the resolved prefix `0..indices`.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct PrefixFold {
@@ -45,21 +63,27 @@ pub struct PrefixFold {
     pub indices: u64,
     /// Invalid tests among them.
     pub invalid: u64,
+    /// The valid tests among them that explored, and their events.
+    #[serde(default)]
+    pub outside: OutsideTally,
 }
 
 impl PrefixFold {
     /// Folds the tests `self.indices..to`, of which `outcomes` (sorted by
     /// index) are the events and invalid tests; all others had no event.
-    /// Returns the decision if the rule stopped the campaign, in which case
-    /// `self.indices` is the exact stop index and later tests are not folded.
+    /// `exploration` lists the span's exploring tests (library campaigns of
+    /// grid cases; `None` otherwise). Returns the decision if the rule
+    /// stopped the campaign, in which case `self.indices` is the exact stop
+    /// index and later tests are not folded.
     pub fn advance(
         &mut self,
         rule: &StoppingRule,
         z: f64,
         to: u64,
         outcomes: &[(u64, SparseOutcome)],
+        exploration: Option<Exploration<'_>>,
     ) -> Result<Option<Decision>, FoldError> {
-        self.advance_observed(rule, z, to, outcomes, &mut |_| {})
+        self.advance_observed(rule, z, to, outcomes, exploration, &mut |_| {})
     }
 
     /// [`PrefixFold::advance`], showing `observe` the fold on both sides of
@@ -72,6 +96,7 @@ impl PrefixFold {
         z: f64,
         to: u64,
         outcomes: &[(u64, SparseOutcome)],
+        exploration: Option<Exploration<'_>>,
         observe: &mut dyn FnMut(&PrefixFold),
     ) -> Result<Option<Decision>, FoldError> {
         let from = self.indices;
@@ -90,61 +115,189 @@ impl PrefixFold {
             }
             previous = Some(index);
         }
+        let explored = exploration.map_or(&[][..], |e| e.explored);
+        let mut previous = None;
+        for &index in explored {
+            if index < from || index >= to || previous.is_some_and(|p| index <= p) {
+                return Err(FoldError::Explored { index, from, to });
+            }
+            previous = Some(index);
+        }
         if self.indices >= rule.max_tests {
             return Ok(Some(Decision::Exhausted));
         }
+        let mut pass = Pass {
+            rule,
+            z,
+            mass: exploration.map(|e| e.mass),
+            surrogate_misses: exploration.map(|e| e.surrogate_misses),
+            explored,
+        };
         for &(index, outcome) in outcomes {
-            if let Some(stop) = self.fold_zeros(rule, z, index - self.indices) {
+            if let Some(stop) = self.fold_zeros(&mut pass, index - self.indices) {
                 return Ok(Some(stop));
             }
             observe(self);
-            if let Some(stop) = self.fold_one(rule, z, outcome) {
+            if let Some(stop) = self.fold_one(&mut pass, index, outcome) {
                 return Ok(Some(stop));
             }
             observe(self);
         }
-        Ok(self.fold_zeros(rule, z, to.saturating_sub(self.indices)))
+        Ok(self.fold_zeros(&mut pass, to.saturating_sub(self.indices)))
+    }
+
+    /// Whether the rule stops here: `rₙ ≤ β` and the rest of
+    /// [`StoppingRule::converged`], and, when the rule guards the outside,
+    /// the guard of [`OutsideTally::guarded`].
+    pub fn stops(&self, rule: &StoppingRule, z: f64, mass: Option<&OutsideMass>) -> bool {
+        rule.converged(&self.estimator, z) && self.guard_holds(rule, mass)
+    }
+
+    fn guard_holds(&self, rule: &StoppingRule, mass: Option<&OutsideMass>) -> bool {
+        let (Some(mass), true) = (mass, rule.guard_outside) else {
+            return true;
+        };
+        let (s1, _) = self.estimator.sums();
+        self.outside
+            .guarded(mass, rule.confidence, rule.beta, s1, self.estimator.tests())
+    }
+
+    /// This fold after `k` more tests without the event, `explored` being
+    /// the exploring tests from `self.indices` on.
+    fn after_zeros(&self, k: u64, explored: &[u64]) -> PrefixFold {
+        let mut next = *self;
+        next.estimator.push_zeros(k);
+        next.indices += k;
+        next.outside.tests += explored.partition_point(|&e| e < next.indices) as u64;
+        next
     }
 
     /// Folds `k` tests without the event.
-    fn fold_zeros(&mut self, rule: &StoppingRule, z: f64, k: u64) -> Option<Decision> {
+    ///
+    /// Without the guard the rule can first hold at the run's first index
+    /// with `n ≥ n_min` (see the module's note). With it, `rₙ ≤ β` holds on
+    /// an interval `[first, last]` of the run (found by bisection, `rₙ`
+    /// growing), and the guard `U(m) ≤ (β S₁ + S₁,out)/n` can first hold at
+    /// `first` or just after an exploring test: between those `U` is fixed
+    /// and the right side falls.
+    fn fold_zeros(&mut self, pass: &mut Pass<'_>, k: u64) -> Option<Decision> {
         if k == 0 {
             return None;
         }
+        let rule = pass.rule;
         let run = k.min(rule.max_tests - self.indices);
         let n0 = self.estimator.tests();
+        let start = self.indices;
         let first = (n0 + 1).max(rule.n_min);
+        let mut stop = None;
         if first <= n0 + run {
-            let mut probe = self.estimator;
-            probe.push_zeros(first - n0);
-            if rule.converged(&probe, z) {
-                self.estimator = probe;
-                self.indices += first - n0;
-                return Some(Decision::Converged);
+            let at_first = self.after_zeros(first - n0, pass.explored);
+            if rule.converged(&at_first.estimator, pass.z) {
+                if at_first.guard_holds(rule, pass.mass) {
+                    stop = Some(at_first);
+                } else {
+                    let (mut lo, mut hi) = (first, n0 + run);
+                    while lo < hi {
+                        let mid = lo + (hi - lo).div_ceil(2);
+                        let probe = self.after_zeros(mid - n0, pass.explored);
+                        if rule.converged(&probe.estimator, pass.z) {
+                            lo = mid;
+                        } else {
+                            hi = mid - 1;
+                        }
+                    }
+                    let (a, b) = (start + (first - n0), start + (lo - n0));
+                    stop = pass
+                        .explored
+                        .iter()
+                        .filter(|&&e| a <= e && e < b)
+                        .map(|&e| self.after_zeros(e - start + 1, pass.explored))
+                        .find(|probe| probe.guard_holds(rule, pass.mass));
+                }
             }
         }
-        self.estimator.push_zeros(run);
-        self.indices += run;
+        if let Some(state) = stop {
+            *self = state;
+            pass.consume_below(self.indices);
+            return Some(Decision::Converged);
+        }
+        *self = self.after_zeros(run, pass.explored);
+        pass.consume_below(self.indices);
         (self.indices >= rule.max_tests).then_some(Decision::Exhausted)
     }
 
     fn fold_one(
         &mut self,
-        rule: &StoppingRule,
-        z: f64,
+        pass: &mut Pass<'_>,
+        index: u64,
         outcome: SparseOutcome,
     ) -> Option<Decision> {
+        let explored = pass.explored.first() == Some(&index);
+        pass.consume_below(index + 1);
         self.indices += 1;
         match outcome {
             SparseOutcome::Event(weight) => {
                 self.estimator.push(weight, true);
-                if rule.converged(&self.estimator, z) {
+                if explored {
+                    self.outside.tests += 1;
+                    self.outside.events += 1;
+                    self.outside.s1 += weight;
+                    if pass.surrogate_misses.is_some_and(|misses| misses(index)) {
+                        self.outside.mismatches += 1;
+                    }
+                }
+                if self.stops(pass.rule, pass.z, pass.mass) {
                     return Some(Decision::Converged);
                 }
             }
             SparseOutcome::Invalid => self.invalid += 1,
         }
-        (self.indices >= rule.max_tests).then_some(Decision::Exhausted)
+        (self.indices >= pass.rule.max_tests).then_some(Decision::Exhausted)
+    }
+}
+
+/// The tally a fold of `0..to` keeps of its exploring tests, from the
+/// span's `explored` tests and its stored `outcomes` (both sorted): the
+/// valid exploring tests, their events and those events' weights summed in
+/// index order, as [`PrefixFold::advance`] sums them.
+pub fn outside_tally(
+    explored: &[u64],
+    outcomes: &[(u64, SparseOutcome)],
+    surrogate_misses: &dyn Fn(u64) -> bool,
+) -> OutsideTally {
+    let mut tally = OutsideTally::default();
+    let mut k = 0;
+    for &index in explored {
+        while k < outcomes.len() && outcomes[k].0 < index {
+            k += 1;
+        }
+        match outcomes.get(k) {
+            Some(&(i, SparseOutcome::Invalid)) if i == index => {}
+            Some(&(i, SparseOutcome::Event(w))) if i == index => {
+                tally.tests += 1;
+                tally.events += 1;
+                tally.s1 += w;
+                tally.mismatches += u64::from(surrogate_misses(index));
+            }
+            _ => tally.tests += 1,
+        }
+    }
+    tally
+}
+
+/// One `advance`: the rule and what remains of the span's exploring tests.
+struct Pass<'a> {
+    rule: &'a StoppingRule,
+    z: f64,
+    mass: Option<&'a OutsideMass>,
+    surrogate_misses: Option<&'a (dyn Fn(u64) -> bool + Sync)>,
+    explored: &'a [u64],
+}
+
+impl Pass<'_> {
+    fn consume_below(&mut self, bound: u64) {
+        let k = self.explored.partition_point(|&e| e < bound);
+        self.explored = &self.explored[k..];
     }
 }
 
@@ -205,6 +358,7 @@ mod tests {
                 n_min: rng.random_range(1..200),
                 min_events: rng.random_range(0..5),
                 max_tests: rng.random_range(200..len as u64),
+                guard_outside: false,
             };
             let z = rule.z();
             let reference = step_by_step(&rule, z, &tests);
@@ -213,7 +367,7 @@ mod tests {
             while at < len {
                 let to = (at + rng.random_range(1..400)).min(len);
                 let stop = fold
-                    .advance(&rule, z, to as u64, &sparse(&tests, at, to))
+                    .advance(&rule, z, to as u64, &sparse(&tests, at, to), None)
                     .unwrap();
                 if stop.is_some() {
                     break;
@@ -221,6 +375,168 @@ mod tests {
                 at = to;
             }
             assert_eq!(fold, reference, "seed {seed}");
+        }
+    }
+
+    /// The guarded reference: one test at a time, each either exploring or
+    /// not, the rule and the guard checked after each.
+    fn step_by_step_guarded(
+        rule: &StoppingRule,
+        z: f64,
+        tests: &[(Option<Option<f64>>, bool)],
+        mass: &OutsideMass,
+    ) -> PrefixFold {
+        let mut fold = PrefixFold::default();
+        for (index, &(t, explores)) in tests.iter().enumerate() {
+            fold.indices += 1;
+            match t {
+                Some(Some(w)) => {
+                    fold.estimator.push(w, true);
+                    if explores {
+                        fold.outside.tests += 1;
+                        fold.outside.events += 1;
+                        fold.outside.s1 += w;
+                        fold.outside.mismatches += u64::from(index % 3 == 0);
+                    }
+                }
+                Some(None) => {
+                    fold.estimator.push(0.0, false);
+                    fold.outside.tests += u64::from(explores);
+                }
+                None => fold.invalid += 1,
+            }
+            let (s1, _) = fold.estimator.sums();
+            let n = fold.estimator.tests();
+            let guarded = !rule.guard_outside
+                || fold
+                    .outside
+                    .guarded(mass, rule.confidence, rule.beta, s1, n);
+            if (rule.converged(&fold.estimator, z) && guarded) || fold.indices >= rule.max_tests {
+                break;
+            }
+        }
+        fold
+    }
+
+    #[test]
+    fn guarded_folds_in_any_chunking_equal_the_step_by_step_rule_to_the_bit() {
+        let mut guard_mattered = 0;
+        for seed in 0..300u64 {
+            let mut rng = ChaCha8Rng::seed_from_u64(1000 + seed);
+            let len = 4000;
+            let p_event = rng.random_range(0.005..0.05);
+            let epsilon = rng.random_range(0.05..0.5);
+            let tests: Vec<(Option<Option<f64>>, bool)> = (0..len)
+                .map(|_| {
+                    let explores = rng.random::<f64>() < epsilon;
+                    let u: f64 = rng.random();
+                    let t = if u < 0.01 {
+                        None
+                    } else if u < 0.01 + p_event {
+                        Some(Some(rng.random_range(0.01..3.0)))
+                    } else {
+                        Some(None)
+                    };
+                    (t, explores)
+                })
+                .collect();
+            let mass = if seed % 2 == 0 {
+                OutsideMass::Proportional {
+                    total: rng.random_range(0.01..2.0),
+                }
+            } else {
+                OutsideMass::uniform((0..50).map(|_| rng.random_range(0.0..0.05)).collect())
+            };
+            let rule = StoppingRule {
+                beta: rng.random_range(0.2..0.9),
+                confidence: 0.9,
+                n_min: rng.random_range(1..200),
+                min_events: rng.random_range(0..5),
+                max_tests: rng.random_range(200..len as u64),
+                guard_outside: true,
+            };
+            let z = rule.z();
+            let reference = step_by_step_guarded(&rule, z, &tests, &mass);
+            let plain = step_by_step_guarded(
+                &StoppingRule {
+                    guard_outside: false,
+                    ..rule
+                },
+                z,
+                &tests,
+                &mass,
+            );
+            guard_mattered += usize::from(plain.indices != reference.indices);
+            let explored: Vec<u64> = (0..len as u64).filter(|&i| tests[i as usize].1).collect();
+            let plain_tests: Vec<Option<Option<f64>>> = tests.iter().map(|t| t.0).collect();
+            let mut fold = PrefixFold::default();
+            let mut at = 0usize;
+            while at < len {
+                let to = (at + rng.random_range(1..400)).min(len);
+                let span: Vec<u64> = explored
+                    .iter()
+                    .copied()
+                    .filter(|&e| (at as u64..to as u64).contains(&e))
+                    .collect();
+                let exploration = Exploration {
+                    explored: &span,
+                    mass: &mass,
+                    surrogate_misses: &|i| i % 3 == 0,
+                };
+                let stop = fold
+                    .advance(
+                        &rule,
+                        z,
+                        to as u64,
+                        &sparse(&plain_tests, at, to),
+                        Some(exploration),
+                    )
+                    .unwrap();
+                if stop.is_some() {
+                    break;
+                }
+                at = to;
+            }
+            assert_eq!(fold, reference, "seed {seed}");
+            // Counting again from the stored outcomes gives the same tally.
+            let upto = fold.indices;
+            let stored = sparse(&plain_tests, 0, upto as usize);
+            let span: Vec<u64> = explored.iter().copied().filter(|&e| e < upto).collect();
+            assert_eq!(
+                outside_tally(&span, &stored, &|i| i % 3 == 0),
+                fold.outside,
+                "seed {seed}"
+            );
+        }
+        // The guard delayed the stop in a good share of the configurations.
+        assert!(
+            guard_mattered > 50,
+            "the guard changed {guard_mattered} stops"
+        );
+    }
+
+    #[test]
+    fn exploring_tests_out_of_order_or_span_are_refused() {
+        let rule = StoppingRule::new(0.2, 100);
+        let mass = OutsideMass::Proportional { total: 1.0 };
+        let mut fold = PrefixFold::default();
+        for explored in [&[3u64, 3][..], &[5, 2], &[12]] {
+            let err = fold.advance(
+                &rule,
+                rule.z(),
+                10,
+                &[],
+                Some(Exploration {
+                    explored,
+                    mass: &mass,
+                    surrogate_misses: &|_| false,
+                }),
+            );
+            assert!(
+                matches!(err, Err(FoldError::Explored { .. })),
+                "{explored:?}"
+            );
+            assert_eq!(fold, PrefixFold::default());
         }
     }
 
@@ -240,13 +556,16 @@ mod tests {
             n_min: 10,
             min_events: 5,
             max_tests: 5000,
+            guard_outside: false,
         };
         let z = rule.z();
         let outcomes = sparse(&tests, 0, 2000);
         let mut seen = Vec::new();
         let mut fold = PrefixFold::default();
         let stop = fold
-            .advance_observed(&rule, z, 2000, &outcomes, &mut |state| seen.push(*state))
+            .advance_observed(&rule, z, 2000, &outcomes, None, &mut |state| {
+                seen.push(*state)
+            })
             .unwrap();
         assert_eq!(stop, None);
         // Two states per outcome: just before it and just after it.
@@ -259,7 +578,7 @@ mod tests {
             let mut prefix = PrefixFold::default();
             let to = state.indices as usize;
             prefix
-                .advance(&rule, z, to as u64, &sparse(&tests, 0, to))
+                .advance(&rule, z, to as u64, &sparse(&tests, 0, to), None)
                 .unwrap();
             assert_eq!(*state, prefix);
         }
@@ -275,11 +594,12 @@ mod tests {
             n_min: 12,
             min_events: 1,
             max_tests: 100,
+            guard_outside: false,
         };
         let z = rule.z();
         let events: Vec<_> = (0..10).map(|i| (i, SparseOutcome::Event(1.0))).collect();
         let mut fold = PrefixFold::default();
-        let stop = fold.advance(&rule, z, 50, &events).unwrap();
+        let stop = fold.advance(&rule, z, 50, &events, None).unwrap();
         assert_eq!(stop, Some(Decision::Converged));
         assert_eq!(fold.indices, 12);
         assert_eq!(fold.estimator.tests(), 12);
@@ -293,17 +613,18 @@ mod tests {
             n_min: 1,
             min_events: 1,
             max_tests: 5,
+            guard_outside: false,
         };
         let z = rule.z();
         let mut fold = PrefixFold::default();
         let invalid: Vec<_> = (0..3).map(|i| (i, SparseOutcome::Invalid)).collect();
-        assert_eq!(fold.advance(&rule, z, 3, &invalid).unwrap(), None);
+        assert_eq!(fold.advance(&rule, z, 3, &invalid, None).unwrap(), None);
         assert_eq!(
             (fold.indices, fold.invalid, fold.estimator.tests()),
             (3, 3, 0)
         );
         let before = fold;
-        let err = fold.advance(&rule, z, 4, &[(7, SparseOutcome::Invalid)]);
+        let err = fold.advance(&rule, z, 4, &[(7, SparseOutcome::Invalid)], None);
         assert_eq!(
             err,
             Err(FoldError::OutOfSpan {
@@ -312,11 +633,11 @@ mod tests {
                 to: 4
             })
         );
-        let err = fold.advance(&rule, z, 5, &[(3, SparseOutcome::Event(f64::NAN))]);
+        let err = fold.advance(&rule, z, 5, &[(3, SparseOutcome::Event(f64::NAN))], None);
         assert!(matches!(err, Err(FoldError::BadWeight { index: 3, .. })));
         assert_eq!(fold, before);
         assert_eq!(
-            fold.advance(&rule, z, 100, &[]).unwrap(),
+            fold.advance(&rule, z, 100, &[], None).unwrap(),
             Some(Decision::Exhausted)
         );
         assert_eq!((fold.indices, fold.estimator.tests()), (5, 2));

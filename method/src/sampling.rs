@@ -7,6 +7,7 @@
 
 use crate::library::Library;
 use crate::mass::GridMass;
+use crate::outside::OutsideMass;
 use crate::tolerance::PROBABILITY_FLOOR;
 use rand::distr::Distribution;
 use rand::{Rng, SeedableRng};
@@ -84,6 +85,9 @@ pub struct LibraryDistribution {
     outside_cells: usize,
     /// For the NDD spread: alias over the outside cells with positive exposure.
     outside_ndd: Option<(Vec<usize>, WeightedAliasIndex<f64>, f64)>,
+    /// The worst-case fill of the outside cells, built when first asked for
+    /// (only the coordinator and in-process runs need it).
+    outside_mass: std::sync::OnceLock<OutsideMass>,
 }
 
 impl LibraryDistribution {
@@ -148,7 +152,37 @@ impl LibraryDistribution {
             outside,
             outside_cells,
             outside_ndd,
+            outside_mass: Default::default(),
         })
+    }
+
+    /// The worst-case fill `F` of the scenarios outside the library
+    /// ([`crate::outside`]): proportional to `P(X \ Φ)` under the NDD
+    /// spread, the most exposed cells first under the uniform one.
+    pub fn outside_mass(&self) -> &OutsideMass {
+        self.outside_mass.get_or_init(|| {
+            let outside = (0..self.in_library.len()).filter(|&c| self.in_library[c].is_none());
+            match (&self.outside, &self.outside_ndd) {
+                (OutsideSpread::Uniform, _) if self.outside_cells > 0 => {
+                    OutsideMass::uniform(outside.map(|c| self.exposure.p(c)).collect())
+                }
+                (OutsideSpread::Uniform, _) => OutsideMass::Proportional { total: 0.0 },
+                (OutsideSpread::Ndd, _) => OutsideMass::Proportional {
+                    total: outside.map(|c| self.exposure.p(c)).sum(),
+                },
+            }
+        })
+    }
+
+    /// Whether test `index` of a campaign with seed `seed` explores: draws
+    /// its scenario outside the library (the first number of its stream
+    /// falls below ε, as in [`Self::sample`]).
+    pub fn explores(&self, seed: u64, index: u64) -> bool {
+        self.explore(&mut test_rng(seed, index))
+    }
+
+    fn explore<R: Rng + ?Sized>(&self, rng: &mut R) -> bool {
+        self.epsilon > 0.0 && rng.random::<f64>() < self.epsilon
     }
 
     /// The ε actually in force (0 when nothing lies outside the library).
@@ -177,8 +211,7 @@ impl LibraryDistribution {
 
     /// Draws one scenario.
     pub fn sample<R: Rng + ?Sized>(&self, rng: &mut R) -> usize {
-        let explore = self.epsilon > 0.0 && rng.random::<f64>() < self.epsilon;
-        if !explore {
+        if !self.explore(rng) {
             return self.cells[self.inside.sample(rng)];
         }
         match (&self.outside, &self.outside_ndd) {
@@ -253,6 +286,23 @@ impl TestDistribution {
         match self {
             TestDistribution::Library(d) => d.draw(seed, index),
             TestDistribution::Ndd(d) => d.draw(seed, index),
+        }
+    }
+
+    /// Whether test `index` draws outside the library (never for the NDD).
+    pub fn explores(&self, seed: u64, index: u64) -> bool {
+        match self {
+            TestDistribution::Library(d) => d.explores(seed, index),
+            TestDistribution::Ndd(_) => false,
+        }
+    }
+
+    /// The fill of the scenarios outside the library; `None` for the NDD,
+    /// which samples every scenario by its exposure.
+    pub fn outside_mass(&self) -> Option<&OutsideMass> {
+        match self {
+            TestDistribution::Library(d) => Some(d.outside_mass()),
+            TestDistribution::Ndd(_) => None,
         }
     }
 }

@@ -104,7 +104,14 @@ fn coverage(case: &CutIn, surrogate: &str, vut: &str, runs: u64) -> Coverage {
     let mut covered = 0;
     let mut tests = Vec::new();
     for seed in 0..runs {
-        let r = run_campaign(case, &vehicle(vut), &distribution, &rule, seed);
+        let r = run_campaign(
+            case,
+            &vehicle(vut),
+            Some(&vehicle(surrogate)),
+            &distribution,
+            &rule,
+            seed,
+        );
         assert_eq!(
             r.status,
             Decision::Converged,
@@ -163,6 +170,7 @@ fn library_and_ndd_campaigns_agree() {
     let by_library = run_campaign(
         &case,
         &idm,
+        Some(&vehicle("fvdm")),
         &TestDistribution::library(
             LibraryDistribution::new(&lib, case.exposure(), 0.1, OutsideSpread::Uniform).unwrap(),
         ),
@@ -172,6 +180,7 @@ fn library_and_ndd_campaigns_agree() {
     let by_ndd = run_campaign(
         &case,
         &idm,
+        None,
         &TestDistribution::Ndd(NddDistribution::new(case.exposure())),
         &rule,
         7,

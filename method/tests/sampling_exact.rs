@@ -178,19 +178,19 @@ fn campaigns_do_not_depend_on_the_number_of_threads() {
     let dist = TestDistribution::library(q);
     let rule = StoppingRule::new(0.2, 100_000);
     let vut = vehicle("acc-aeb");
-    let many = run_campaign(&case, &vut, &dist, &rule, 42);
+    let many = run_campaign(&case, &vut, None, &dist, &rule, 42);
     let one = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
         .build()
         .unwrap()
-        .install(|| run_campaign(&case, &vut, &dist, &rule, 42));
+        .install(|| run_campaign(&case, &vut, None, &dist, &rule, 42));
     assert_eq!(many, one);
     let ndd = TestDistribution::Ndd(NddDistribution::new(case.exposure()));
     let rule = StoppingRule {
         max_tests: 5_000,
         ..rule
     };
-    let exhausted = run_campaign(&case, &vut, &ndd, &rule, 1);
+    let exhausted = run_campaign(&case, &vut, None, &ndd, &rule, 1);
     assert_eq!(exhausted.tests, 5_000);
     assert!((z_for_confidence(0.9) - rule.z()).abs() < 1e-15);
 }

@@ -31,6 +31,7 @@ pub fn start(args: &CampaignStartArgs) -> anyhow::Result<()> {
         seed: args.seed,
         n_min: Some(args.rule.n_min),
         min_events: Some(args.rule.min_events),
+        guard_outside: args.rule.guard_outside,
     };
     block_on(async {
         let view = client.create_campaign(&request).await?;

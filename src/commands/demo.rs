@@ -116,6 +116,7 @@ async fn drive(
         seed: args.seed,
         n_min: None,
         min_events: None,
+        guard_outside: false,
     };
     let by_library = client.create_campaign(&request(Method::Library)).await?;
     let by_ndd = client.create_campaign(&request(Method::Ndd)).await?;

@@ -8,6 +8,7 @@ use tslg_method::campaign::{run_campaign, CampaignResult};
 use tslg_method::case::Case;
 use tslg_method::exact::{event_cells, event_probability};
 use tslg_method::sampling::{LibraryDistribution, NddDistribution, TestDistribution};
+use tslg_method::vehicle::VehicleModel;
 
 #[derive(Serialize)]
 struct Report {
@@ -17,6 +18,7 @@ struct Report {
     result: CampaignResult,
     exact: f64,
     covers_exact: bool,
+    warnings: Vec<String>,
 }
 
 pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
@@ -24,8 +26,11 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
     let vut = parse_vehicle(&args.vut, "vehicle under test")?;
     let rule = stopping_rule(&args.rule)?;
     check_epsilon(args.exploration.epsilon)?;
-    let distribution = match args.method {
-        MethodArg::Ndd => TestDistribution::Ndd(NddDistribution::new(case.exposure())),
+    let (distribution, surrogate) = match args.method {
+        MethodArg::Ndd => (
+            TestDistribution::Ndd(NddDistribution::new(case.exposure())),
+            None,
+        ),
         MethodArg::Library => {
             let path = args
                 .library
@@ -37,7 +42,9 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
                 .exploration
                 .outside
                 .map_or(Default::default(), OutsideArg::spread);
-            TestDistribution::library(
+            let surrogate: VehicleModel = serde_json::from_value(library.surrogate.clone())
+                .context("the library's surrogate is not a built-in cut-in model")?;
+            let distribution = TestDistribution::library(
                 LibraryDistribution::new(
                     &library,
                     case.exposure(),
@@ -45,10 +52,18 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
                     outside,
                 )
                 .context("cannot sample from this library")?,
-            )
+            );
+            (distribution, Some(surrogate))
         }
     };
-    let result = run_campaign(&case, &vut, &distribution, &rule, args.seed);
+    let result = run_campaign(
+        &case,
+        &vut,
+        surrogate.as_ref(),
+        &distribution,
+        &rule,
+        args.seed,
+    );
     // Cut-in vehicles are deterministic on a 3,420-cell grid: the exact answer is cheap.
     let exact = event_probability(&case, &event_cells(&case, &vut));
     let report = Report {
@@ -60,6 +75,7 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
         result,
         exact,
         covers_exact: result.covers(exact),
+        warnings: result.warnings(rule.beta),
     };
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
@@ -90,5 +106,23 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
             "OUTSIDE the interval"
         }
     );
+    if let (Some(upper), Some(high)) = (result.outside_upper, result.guarded_ci_high) {
+        println!(
+            "outside library    {} exploring tests, {} events; failure mass there ≤ {upper:.4e}",
+            result.outside_tests, result.outside_events
+        );
+        println!(
+            "guarded interval   [{:.4e}, {high:.4e}] (exact {})",
+            result.ci_low,
+            if result.guarded_covers(exact) {
+                "inside"
+            } else {
+                "OUTSIDE"
+            }
+        );
+    }
+    for warning in result.warnings(rule.beta) {
+        println!("warning: {warning}");
+    }
     Ok(())
 }

@@ -189,6 +189,7 @@ async fn load(
             seed: 1,
             n_min: None,
             min_events: None,
+            guard_outside: false,
             outside: None,
         })
         .await?;

@@ -9,3 +9,4 @@ pub mod load;
 pub mod policy;
 pub mod progress;
 pub mod remote;
+pub mod validate;

@@ -64,9 +64,27 @@ pub fn describe(view: &CampaignView) -> String {
         ),
         _ => String::new(),
     };
+    let outside = match view.outside_upper {
+        Some(upper) => format!(
+            "\n  outside the library: {} exploring tests, {} events; failure mass there ≤ {upper:.3e} \
+             ({:.0}% bound), guarded interval [{}, {}]{}",
+            view.outside_tests,
+            view.outside_events,
+            view.confidence * 100.0,
+            sci(view.ci_low),
+            sci(view.guarded_ci_high),
+            if view.guard_outside { ", guard on" } else { "" }
+        ),
+        None => String::new(),
+    };
+    let warnings: String = view
+        .warnings
+        .iter()
+        .map(|w| format!("\n  warning: {w}"))
+        .collect();
     format!(
         "campaign {} ({} {}, vehicle {}): {}{}\n  tests {} (events {}, invalid {}), stop index {}\n  \
-         estimate {}  interval [{}, {}]  relative half-width {} (β {}, confidence {}){health}",
+         estimate {}  interval [{}, {}]  relative half-width {} (β {}, confidence {}){health}{outside}{warnings}",
         view.id,
         view.case,
         view.method.as_str(),

@@ -12,10 +12,9 @@ use tslg_api::{
     CampaignView, CreateCampaign, CreateLibrary, Lease, LeaseRequest, LibraryStatus, LibraryView,
     Method,
 };
-use tslg_method::campaign::{run_outcome_campaign, CampaignResult};
+use tslg_method::campaign::{run_campaign_tests, CampaignResult};
 use tslg_method::estimator::StoppingRule;
 use tslg_method::library::SearchMethod;
-use tslg_method::prefix::SparseOutcome;
 use tslg_method::registry::{open_case, BuildRequest, ExposureSource, LibrarySearch};
 use tslg_worker::client::Client;
 
@@ -230,6 +229,7 @@ pub fn campaign(
         n_min: None,
         min_events: None,
         outside: Default::default(),
+        guard_outside: false,
     }
 }
 
@@ -322,19 +322,9 @@ pub fn in_process_with_invalid(
         n_min: request.n_min.unwrap_or(30),
         min_events: request.min_events.unwrap_or(10),
         max_tests: request.max_tests,
+        guard_outside: request.guard_outside,
     };
-    run_outcome_campaign(
-        &|index| {
-            if invalid(index) {
-                return Some(SparseOutcome::Invalid);
-            }
-            let outcome = tests.run(index);
-            outcome
-                .event
-                .then_some(SparseOutcome::Event(outcome.weight))
-        },
-        &rule,
-    )
+    run_campaign_tests(tests.as_ref(), &rule, invalid)
 }
 
 /// Asserts that a service campaign ended exactly where the in-process run did.
@@ -369,6 +359,30 @@ pub fn assert_same(view: &CampaignView, reference: &CampaignResult) {
         reference.largest_weight_share.map(f64::to_bits),
         "largest weight share"
     );
+    assert_eq!(
+        (
+            view.outside_tests,
+            view.outside_events,
+            view.mismatched_events
+        ),
+        (
+            reference.outside_tests,
+            reference.outside_events,
+            reference.mismatched_events
+        ),
+        "exploring tests and their events"
+    );
+    for (name, served, own) in [
+        ("outside share", view.outside_share, reference.outside_share),
+        ("outside upper", view.outside_upper, reference.outside_upper),
+        (
+            "guarded ci_high",
+            view.guarded_ci_high,
+            reference.guarded_ci_high,
+        ),
+    ] {
+        assert_eq!(served.map(f64::to_bits), own.map(f64::to_bits), "{name}");
+    }
 }
 
 /// The exact P(A) of a built-in vehicle on the built-in exposure.

@@ -163,19 +163,27 @@ where
         seed: u64,
     ) -> Result<Arc<dyn CampaignTests>, CaseError> {
         let vehicle = self.campaign_vehicle(vut)?;
-        let distribution = match file {
-            Some(file) => TestDistribution::library(LibraryDistribution::new(
-                &self.library(file)?,
-                self.case.exposure(),
-                epsilon,
-                outside,
-            )?),
-            None => TestDistribution::Ndd(NddDistribution::new(self.case.exposure())),
+        let (distribution, surrogate) = match file {
+            Some(file) => {
+                let library = self.library(file)?;
+                let distribution = TestDistribution::library(LibraryDistribution::new(
+                    &library,
+                    self.case.exposure(),
+                    epsilon,
+                    outside,
+                )?);
+                (distribution, self.vehicle(&library.surrogate).ok())
+            }
+            None => (
+                TestDistribution::Ndd(NddDistribution::new(self.case.exposure())),
+                None,
+            ),
         };
         Ok(Arc::new(CellCampaign {
             world: self.case.external_world(),
             case: Arc::clone(&self.case),
             vehicle,
+            surrogate,
             distribution,
             seed,
         }))
@@ -232,6 +240,8 @@ where
 struct CellCampaign<C: Case> {
     case: Arc<C>,
     vehicle: CampaignVehicle<C::Vehicle>,
+    /// The library's surrogate, for the mismatch count.
+    surrogate: Option<C::Vehicle>,
     distribution: TestDistribution,
     seed: u64,
     /// The world block of each `reset` sent to a program.
@@ -287,6 +297,22 @@ where
             cell: draw.cell,
             scenario: self.case.grid().values(draw.cell),
             weight: draw.weight,
+        })
+    }
+
+    fn explores(&self, index: u64) -> bool {
+        self.distribution.explores(self.seed, index)
+    }
+
+    fn outside_mass(&self) -> Option<&crate::outside::OutsideMass> {
+        self.distribution.outside_mass()
+    }
+
+    fn surrogate_misses(&self, index: u64) -> bool {
+        self.surrogate.as_ref().is_some_and(|surrogate| {
+            !self
+                .case
+                .is_event(surrogate, self.distribution.draw(self.seed, index).cell)
         })
     }
 }

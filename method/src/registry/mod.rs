@@ -146,6 +146,22 @@ pub trait CampaignTests: Send + Sync {
     /// The scenario and weight of test `index` when they are fixed before the
     /// test runs; `None` for sequential scenarios sampled while they run.
     fn planned(&self, index: u64) -> Option<PlannedTest>;
+    /// Whether test `index` draws its scenario outside the library.
+    fn explores(&self, _index: u64) -> bool {
+        false
+    }
+    /// The fill that bounds the failure mass outside the library
+    /// ([`crate::outside`]); `None` for the NDD and for cases whose
+    /// exploration is per decision (car-following).
+    fn outside_mass(&self) -> Option<&crate::outside::OutsideMass> {
+        None
+    }
+    /// Whether the library's surrogate has no event in the scenario of test
+    /// `index`: asked of exploring tests where the vehicle had one, it
+    /// counts the vehicle failing where the surrogate does not.
+    fn surrogate_misses(&self, _index: u64) -> bool {
+        false
+    }
 }
 
 /// A case opened for a service: everything the coordinator and the worker

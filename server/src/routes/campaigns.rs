@@ -16,7 +16,7 @@ use tslg_api::{
 };
 use tslg_method::estimator::{StoppingRule, DEFAULT_MIN_EVENTS, DEFAULT_N_MIN};
 use tslg_method::external::ExternalVut;
-use tslg_method::registry::{open_case, ExposureSource};
+use tslg_method::registry::{open_case, ExposureSource, SEQUENTIAL_CASES};
 use tslg_method::sampling::OutsideSpread;
 
 /// Largest accepted test budget.
@@ -40,6 +40,7 @@ pub async fn create(
         n_min: req.n_min.unwrap_or(DEFAULT_N_MIN),
         min_events: req.min_events.unwrap_or(DEFAULT_MIN_EVENTS),
         max_tests: req.max_tests,
+        guard_outside: req.guard_outside,
     };
     rule.validate().map_err(|e| bad(e.to_string()))?;
     if rule.n_min == 0 {
@@ -49,6 +50,20 @@ pub async fn create(
         return Err(bad(format!(
             "max_tests = {} exceeds the limit 2^50",
             req.max_tests
+        )));
+    }
+    if req.guard_outside && req.method == Method::Ndd {
+        return Err(bad(
+            "guard_outside bounds the failure mass outside a library; an ndd campaign samples \
+             every scenario by its exposure and has no outside to guard"
+                .into(),
+        ));
+    }
+    if req.guard_outside && SEQUENTIAL_CASES.contains(&req.case.as_str()) {
+        return Err(bad(format!(
+            "guard_outside applies to the grid cases (cut-in, highway-exit): a {} campaign \
+             explores per decision, and no bound on its outside mass is defined",
+            req.case
         )));
     }
     let library = match (req.method, req.library_id) {

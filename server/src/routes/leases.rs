@@ -199,7 +199,15 @@ pub async fn results(
     if !report.events.is_empty() {
         verify_weights(&state, id, &report).await?;
     }
-    let recorded = results::record(&state.db, &state.config, id, &report, &checked).await?;
+    let recorded = results::record(
+        &state.db,
+        &state.config,
+        &state.samplers,
+        id,
+        &report,
+        &checked,
+    )
+    .await?;
     let accepted = recorded.ack.accepted;
     // The accepted tests are the range's tail (the rest were duplicates).
     let invalid = report

@@ -4,7 +4,9 @@ use crate::error::ApiError;
 use crate::lease_size::predicted_unleased;
 use sqlx::SqlitePool;
 use tslg_api::{CampaignStatus, CampaignView, ExposureRequest, HistoryPoint, Method, Outside};
-use tslg_method::estimator::{ImportanceEstimator, StoppingRule};
+use tslg_method::campaign::CampaignResult;
+use tslg_method::estimator::{Decision, ImportanceEstimator, StoppingRule};
+use tslg_method::outside::OutsideTally;
 use tslg_method::prefix::PrefixFold;
 use tslg_method::registry::ExposureSource;
 
@@ -40,6 +42,15 @@ pub struct CampaignRow {
     pub s2: f64,
     /// The largest weighted term of the prefix, `max wᵢ yᵢ`.
     pub largest: f64,
+    pub guard_outside: bool,
+    /// The prefix's exploring tests, their events and those events' `S₁`.
+    pub outside_tests: i64,
+    pub outside_events: i64,
+    pub outside_s1: f64,
+    pub outside_mismatches: i64,
+    /// `U` for the prefix; NULL until the exploring tests are counted, and
+    /// for campaigns without a library outside (NDD, car-following).
+    pub outside_upper: Option<f64>,
     pub cost_per_test: Option<f64>,
     pub worker_seconds: f64,
     pub created_at: String,
@@ -49,7 +60,9 @@ pub struct CampaignRow {
 pub const COLUMNS: &str = "id, case_name, preset, method, library_id, exposure_name, \
     exposure_fingerprint, exposure_table, vut, requires, epsilon, outside, beta, confidence, n_min, \
     min_events, max_tests, seed, status, status_detail, next_index, indices, tests, events, invalid, s1, s2, \
-    largest, cost_per_test, worker_seconds, created_at, updated_at";
+    largest, guard_outside, outside_tests, outside_events, outside_s1, outside_upper, \
+    outside_mismatches, \
+    cost_per_test, worker_seconds, created_at, updated_at";
 
 impl CampaignRow {
     pub fn status(&self) -> CampaignStatus {
@@ -83,6 +96,7 @@ impl CampaignRow {
             n_min: self.n_min as u64,
             min_events: self.min_events as u64,
             max_tests: self.max_tests as u64,
+            guard_outside: self.guard_outside,
         }
     }
 
@@ -98,6 +112,12 @@ impl CampaignRow {
             .with_largest(self.largest),
             indices: self.indices as u64,
             invalid: self.invalid as u64,
+            outside: OutsideTally {
+                tests: self.outside_tests as u64,
+                events: self.outside_events as u64,
+                s1: self.outside_s1,
+                mismatches: self.outside_mismatches as u64,
+            },
         }
     }
 
@@ -127,6 +147,12 @@ impl CampaignRow {
         let point = point(&fold, rule.z());
         let has_events = self.events > 0;
         let started = self.indices > 0;
+        let summary = CampaignResult::with_outside_upper(
+            Decision::Continue,
+            &fold,
+            rule.z(),
+            self.outside_upper,
+        );
         CampaignView {
             id: self.id,
             case: self.case_name.clone(),
@@ -157,6 +183,18 @@ impl CampaignRow {
             predicted_tests: self.predicted_tests(&rule, &point),
             effective_events: has_events.then(|| fold.estimator.effective_events()),
             largest_weight_share: fold.estimator.largest_share(),
+            guard_outside: self.guard_outside,
+            outside_tests: summary.outside_tests,
+            outside_events: summary.outside_events,
+            mismatched_events: summary.mismatched_events,
+            outside_share: summary.outside_share,
+            outside_upper: summary.outside_upper,
+            guarded_ci_high: summary.guarded_ci_high.filter(|_| self.tests > 1),
+            warnings: if self.tests > 1 {
+                summary.warnings(self.beta)
+            } else {
+                Vec::new()
+            },
             tests_per_second: None,
             seconds_left: None,
             created_at: self.created_at.clone(),
@@ -204,8 +242,8 @@ pub async fn insert(pool: &SqlitePool, new: &NewCampaign) -> Result<CampaignRow,
     let sql = format!(
         "INSERT INTO campaigns (case_name, preset, method, library_id, exposure_name, \
          exposure_fingerprint, exposure_table, vut, requires, epsilon, outside, beta, confidence, \
-         n_min, min_events, max_tests, seed, status) \
-         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) \
+         n_min, min_events, max_tests, seed, status, guard_outside) \
+         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) \
          RETURNING {COLUMNS}"
     );
     Ok(sqlx::query_as(&sql)
@@ -227,6 +265,7 @@ pub async fn insert(pool: &SqlitePool, new: &NewCampaign) -> Result<CampaignRow,
         .bind(new.rule.max_tests as i64)
         .bind(new.seed as i64)
         .bind(new.status.as_str())
+        .bind(new.rule.guard_outside)
         .fetch_one(pool)
         .await?)
 }
@@ -296,6 +335,7 @@ pub async fn history(
                 estimator: ImportanceEstimator::from_sums(tests as u64, events as u64, s1, s2),
                 indices: indices as u64,
                 invalid: (indices - tests) as u64,
+                outside: OutsideTally::default(),
             };
             point(&fold, z)
         })

@@ -13,12 +13,15 @@ use crate::db::{now_ms, Database};
 use crate::error::ApiError;
 use crate::history;
 use crate::lease_size::update_cost;
+use crate::sampler_cache::SamplerCache;
 use crate::store::campaigns::{self, CampaignRow};
 use crate::store::leases::{self, check_fence};
 use sqlx::{QueryBuilder, Sqlite, SqliteConnection};
-use tslg_api::{CampaignStatus, ResultAck, ResultReport};
+use std::sync::Arc;
+use tslg_api::{CampaignStatus, Method, ResultAck, ResultReport};
 use tslg_method::estimator::Decision;
-use tslg_method::prefix::SparseOutcome;
+use tslg_method::prefix::{outside_tally, Exploration, SparseOutcome};
+use tslg_method::registry::CampaignTests;
 
 /// Longest accepted reason of an invalid test.
 const MAX_REASON: usize = 2000;
@@ -91,10 +94,12 @@ pub fn check_report(report: &ResultReport) -> Result<CheckedReport, ApiError> {
     })
 }
 
-/// Records a checked report on lease `lease_id` and folds the prefix.
+/// Records a checked report on lease `lease_id` and folds the prefix;
+/// `samplers` gives a library campaign's tests, to tell which explored.
 pub async fn record(
     db: &Database,
     config: &Config,
+    samplers: &SamplerCache,
     lease_id: i64,
     report: &ResultReport,
     checked: &CheckedReport,
@@ -103,6 +108,11 @@ pub async fn record(
     let lease = leases::get(&mut tx, lease_id).await?;
     check_fence(&lease, &report.worker, report.attempt, report.key.as_str())?;
     let campaign = campaigns::get(&mut *tx, lease.campaign_id).await?;
+    let tests = if campaign.method() == Method::Library && !campaign.status().is_final() {
+        Some(samplers.get(db, &campaign).await?)
+    } else {
+        None
+    };
     let span = checked.to - checked.from;
     let (start, end, resume_at) = (
         lease.start_index as u64,
@@ -173,7 +183,7 @@ pub async fn record(
         .execute(&mut *tx)
         .await?;
     }
-    let stopped = fold_prefix(&mut tx, &campaign).await?;
+    let stopped = fold_prefix(&mut tx, &campaign, tests).await?;
     tx.commit().await?;
     let status = stopped.unwrap_or(CampaignStatus::Running);
     let resume_at = resume_at.max(checked.to);
@@ -221,6 +231,22 @@ fn stopped_ack(span: u64, resume_at: u64, end: u64, status: CampaignStatus) -> R
         proceed: false,
         campaign_status: status,
     }
+}
+
+/// The tests of `from..to` that draw outside the library, replayed off the
+/// async runtime (one random number each); empty without a library.
+async fn explored_tests(
+    tests: Option<&Arc<dyn CampaignTests>>,
+    from: u64,
+    to: u64,
+) -> Result<Vec<u64>, ApiError> {
+    let Some(tests) = tests.filter(|t| t.outside_mass().is_some()) else {
+        return Ok(Vec::new());
+    };
+    let tests = Arc::clone(tests);
+    tokio::task::spawn_blocking(move || (from..to).filter(|&i| tests.explores(i)).collect())
+        .await
+        .map_err(|e| ApiError::Internal(e.into()))
 }
 
 /// Stored outcomes of `campaign` in `from..to`, sorted by index.
@@ -374,6 +400,7 @@ async fn insert_outcomes(
 async fn fold_prefix(
     conn: &mut SqliteConnection,
     campaign: &CampaignRow,
+    tests: Option<Arc<dyn CampaignTests>>,
 ) -> Result<Option<CampaignStatus>, ApiError> {
     let (open,): (Option<i64>,) = sqlx::query_as(
         "SELECT MIN(resume_at) FROM leases WHERE campaign_id = ? AND state = 'active'",
@@ -387,6 +414,25 @@ async fn fold_prefix(
         return Ok(None);
     }
     let outcomes = stored_outcomes(conn, campaign.id, fold.indices, frontier).await?;
+    let mass = tests.as_ref().and_then(|t| t.outside_mass());
+    let from = fold.indices;
+    if mass.is_some() && campaign.outside_upper.is_none() && from > 0 {
+        // Started before the outside bound existed: count its exploring
+        // tests from the start, as the fold would have.
+        let earlier = stored_outcomes(conn, campaign.id, 0, from).await?;
+        let explored = explored_tests(tests.as_ref(), 0, from).await?;
+        let tests = tests
+            .as_ref()
+            .expect("a mass comes from the campaign's tests");
+        fold.outside = outside_tally(&explored, &earlier, &|i| tests.surrogate_misses(i));
+    }
+    let explored = explored_tests(tests.as_ref(), from, frontier).await?;
+    let misses = |i| tests.as_ref().is_some_and(|t| t.surrogate_misses(i));
+    let exploration = mass.map(|mass| Exploration {
+        explored: &explored,
+        mass,
+        surrogate_misses: &misses,
+    });
     let rule = campaign.rule();
     let (last_stored,): (Option<i64>,) =
         sqlx::query_as("SELECT MAX(indices) FROM history WHERE campaign_id = ?")
@@ -397,12 +443,19 @@ async fn fold_prefix(
     let mut last_stored = last_stored.map(|i| i as u64);
     let mut course = Vec::new();
     let decision = fold
-        .advance_observed(&rule, rule.z(), frontier, &outcomes, &mut |state| {
-            if history::worth_storing(last_stored, state.indices) {
-                last_stored = Some(state.indices);
-                course.push(*state);
-            }
-        })
+        .advance_observed(
+            &rule,
+            rule.z(),
+            frontier,
+            &outcomes,
+            exploration,
+            &mut |state| {
+                if history::worth_storing(last_stored, state.indices) {
+                    last_stored = Some(state.indices);
+                    course.push(*state);
+                }
+            },
+        )
         .map_err(|e| {
             anyhow::anyhow!("stored outcomes of campaign {} rejected: {e}", campaign.id)
         })?;
@@ -411,9 +464,14 @@ async fn fold_prefix(
         Some(Decision::Converged) => (
             CampaignStatus::Converged,
             Some(format!(
-                "relative half-width ≤ β = {} after test index {}",
+                "relative half-width ≤ β = {} after test index {}{}",
                 rule.beta,
-                fold.indices - 1
+                fold.indices - 1,
+                if rule.guard_outside {
+                    ", with the failure mass outside the library bounded"
+                } else {
+                    ""
+                }
             )),
         ),
         Some(Decision::Exhausted) | Some(Decision::Continue) => (
@@ -425,9 +483,12 @@ async fn fold_prefix(
         ),
     };
     let (s1, s2) = fold.estimator.sums();
+    let upper = mass.map(|m| m.upper(fold.outside.tests, fold.outside.events, campaign.confidence));
     sqlx::query(
         "UPDATE campaigns SET indices = ?, tests = ?, events = ?, invalid = ?, s1 = ?, s2 = ?, \
-         largest = ?, status = ?, status_detail = COALESCE(?, status_detail), \
+         largest = ?, outside_tests = ?, outside_events = ?, outside_s1 = ?, outside_upper = ?, \
+         outside_mismatches = ?, \
+         status = ?, status_detail = COALESCE(?, status_detail), \
          updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now') WHERE id = ?",
     )
     .bind(fold.indices as i64)
@@ -437,6 +498,11 @@ async fn fold_prefix(
     .bind(s1)
     .bind(s2)
     .bind(fold.estimator.largest_term())
+    .bind(fold.outside.tests as i64)
+    .bind(fold.outside.events as i64)
+    .bind(fold.outside.s1)
+    .bind(upper)
+    .bind(fold.outside.mismatches as i64)
     .bind(status.as_str())
     .bind(detail)
     .bind(campaign.id)

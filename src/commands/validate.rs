@@ -1,0 +1,336 @@
+//! `tslg validate`: replicate campaigns in this process, per case, pairing of
+//! surrogate and vehicle, and stopping rule, against the exact `P(A)` by
+//! enumeration. It reports how often the plain interval and the guarded
+//! interval `[ci_low, guarded_ci_high]` contain `P(A)` (nominal: the
+//! confidence), the distribution of tests to stop and the bias of the
+//! estimate at the stop, and flags coverage well below nominal: below
+//! `c − 2.33 √(c(1 − c)/R)`, where a correct interval falls one time in a
+//! hundred.
+
+use rayon::prelude::*;
+use std::fmt::Write as _;
+use std::path::PathBuf;
+use std::sync::Arc;
+use tslg_method::campaign::{run_campaign_tests, CampaignResult};
+use tslg_method::estimator::{Decision, StoppingRule};
+use tslg_method::library::SearchMethod;
+use tslg_method::registry::{open_case, BuildRequest, ExposureSource, LibrarySearch, ScenarioCase};
+use tslg_method::sampling::OutsideSpread;
+
+#[derive(Debug, clap::Args)]
+pub struct ValidateArgs {
+    /// The cases to validate (those with an exact answer).
+    #[arg(long, value_delimiter = ',', default_values = ["cut-in", "highway-exit"])]
+    pub cases: Vec<String>,
+    /// Replicate campaigns (seeds 0..R) per configuration.
+    #[arg(long, default_value_t = 200)]
+    pub replicates: u64,
+    /// Target relative half-width β.
+    #[arg(long, default_value_t = 0.2)]
+    pub beta: f64,
+    /// Confidence of the interval.
+    #[arg(long, default_value_t = 0.9)]
+    pub confidence: f64,
+    /// The values of n_min to compare (comma-separated).
+    #[arg(long, value_delimiter = ',', default_values_t = [tslg_method::estimator::DEFAULT_N_MIN])]
+    pub n_min: Vec<u64>,
+    /// The values of min_events to compare (comma-separated).
+    #[arg(long, value_delimiter = ',', default_values_t = [tslg_method::estimator::DEFAULT_MIN_EVENTS])]
+    pub min_events: Vec<u64>,
+    /// Also run each pairing with the outside guard (ε 0.5, outside spread ndd).
+    #[arg(long)]
+    pub guard: bool,
+    /// A quick run: 50 replicates and highway-exit's coarse preset.
+    #[arg(long)]
+    pub quick: bool,
+    /// Budget of each campaign.
+    #[arg(long, default_value_t = 2_000_000)]
+    pub max_tests: u64,
+    /// Write validation.md and validation.csv to this directory.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+/// One configuration: a case, a library's surrogate, a vehicle and a rule.
+struct Setup {
+    case: Arc<dyn ScenarioCase>,
+    case_name: String,
+    surrogate: &'static str,
+    vut: &'static str,
+    library: Vec<u8>,
+    epsilon: f64,
+    outside: OutsideSpread,
+    rule: StoppingRule,
+    truth: f64,
+}
+
+/// What the replicates of one setup did.
+pub struct Row {
+    case: String,
+    surrogate: &'static str,
+    vut: &'static str,
+    epsilon: f64,
+    outside: OutsideSpread,
+    rule: StoppingRule,
+    truth: f64,
+    runs: Vec<CampaignResult>,
+}
+
+impl Row {
+    fn coverage(&self, covers: impl Fn(&CampaignResult) -> bool) -> f64 {
+        self.runs.iter().filter(|r| covers(r)).count() as f64 / self.runs.len() as f64
+    }
+
+    /// The coverage a correct interval stays above but one time in a hundred.
+    fn floor(&self) -> f64 {
+        let c = self.rule.confidence;
+        c - 2.33 * (c * (1.0 - c) / self.runs.len() as f64).sqrt()
+    }
+
+    /// `(mean μ̂ / P(A) − 1, its standard error)`.
+    fn bias(&self) -> (f64, f64) {
+        let n = self.runs.len() as f64;
+        let mean = self.runs.iter().map(|r| r.estimate).sum::<f64>() / n;
+        let var = self
+            .runs
+            .iter()
+            .map(|r| (r.estimate - mean).powi(2))
+            .sum::<f64>()
+            / (n - 1.0).max(1.0);
+        (mean / self.truth - 1.0, (var / n).sqrt() / self.truth)
+    }
+
+    fn tests_quantile(&self, q: f64) -> u64 {
+        let mut tests: Vec<u64> = self.runs.iter().map(|r| r.tests).collect();
+        tests.sort_unstable();
+        tests[((tests.len() - 1) as f64 * q).round() as usize]
+    }
+
+    fn flag(&self) -> &'static str {
+        match (
+            self.coverage(|r| r.covers(self.truth)) < self.floor(),
+            self.coverage(|r| r.guarded_covers(self.truth)) < self.floor(),
+        ) {
+            (true, true) => "LOW both",
+            (true, false) => "LOW plain",
+            (false, true) => "LOW guarded",
+            (false, false) => "",
+        }
+    }
+}
+
+pub fn run(args: &ValidateArgs) -> anyhow::Result<()> {
+    anyhow::ensure!(args.replicates >= 2, "--replicates must be at least 2");
+    let replicates = if args.quick {
+        args.replicates.min(50)
+    } else {
+        args.replicates
+    };
+    let mut rows = Vec::new();
+    for case_name in &args.cases {
+        for setup in setups(case_name, args)? {
+            let row = replicate(&setup, replicates)?;
+            eprintln!("{}", markdown_line(&row));
+            rows.push(row);
+        }
+    }
+    let table = markdown(&rows);
+    println!("{table}");
+    if let Some(dir) = &args.out {
+        std::fs::create_dir_all(dir)?;
+        std::fs::write(dir.join("validation.md"), &table)?;
+        std::fs::write(dir.join("validation.csv"), csv(&rows))?;
+        eprintln!("written to {}", dir.display());
+    }
+    Ok(())
+}
+
+/// The pairings of a case: each surrogate with itself and with the other
+/// vehicle, under every (n_min, min_events) asked for, plain and guarded.
+fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
+    let (preset, pairs): (Option<&str>, &[(&'static str, &'static str)]) = match case_name {
+        "cut-in" => (
+            None,
+            &[
+                ("idm", "idm"),
+                ("fvdm", "fvdm"),
+                ("fvdm", "idm"),
+                ("idm", "fvdm"),
+            ],
+        ),
+        "highway-exit" => (
+            args.quick.then_some("coarse"),
+            &[("mobil", "mobil"), ("mobil", "gap-seeker")],
+        ),
+        other => anyhow::bail!(
+            "tslg validate needs an exact answer; `{other}` has none (cases: cut-in, highway-exit)"
+        ),
+    };
+    let case = open_case(case_name, preset, &ExposureSource::Builtin)?;
+    let mut setups = Vec::new();
+    for &(surrogate, vut) in pairs {
+        let library = case
+            .build_library(
+                &serde_json::json!({ "model": surrogate }),
+                &BuildRequest {
+                    threshold: None,
+                    search: Some(LibrarySearch::Cells(SearchMethod::Exhaustive)),
+                },
+            )?
+            .file;
+        let truth = case.exact_event_probability(&serde_json::json!({ "model": vut }))?;
+        let mut variants = vec![(0.1, case.default_outside(), false)];
+        if args.guard {
+            variants.push((0.5, OutsideSpread::Ndd, true));
+        }
+        for &(epsilon, outside, guard_outside) in &variants {
+            for &n_min in &args.n_min {
+                for &min_events in &args.min_events {
+                    let rule = StoppingRule {
+                        beta: args.beta,
+                        confidence: args.confidence,
+                        n_min,
+                        min_events,
+                        max_tests: args.max_tests,
+                        guard_outside,
+                    };
+                    rule.validate()?;
+                    setups.push(Setup {
+                        case: Arc::clone(&case),
+                        case_name: case_name.to_owned(),
+                        surrogate,
+                        vut,
+                        library: library.clone(),
+                        epsilon,
+                        outside,
+                        rule,
+                        truth,
+                    });
+                }
+            }
+        }
+    }
+    Ok(setups)
+}
+
+/// Runs the campaigns of seeds `0..replicates`.
+fn replicate(setup: &Setup, replicates: u64) -> anyhow::Result<Row> {
+    let vut = serde_json::json!({ "model": setup.vut });
+    let runs = (0..replicates)
+        .into_par_iter()
+        .map(|seed| {
+            let tests = setup.case.campaign(
+                Some(&setup.library),
+                &vut,
+                setup.epsilon,
+                setup.outside,
+                seed,
+            )?;
+            Ok(run_campaign_tests(tests.as_ref(), &setup.rule, &|_| false))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    Ok(Row {
+        case: setup.case_name.clone(),
+        surrogate: setup.surrogate,
+        vut: setup.vut,
+        epsilon: setup.epsilon,
+        outside: setup.outside,
+        rule: setup.rule,
+        truth: setup.truth,
+        runs,
+    })
+}
+
+const HEADER: [&str; 17] = [
+    "case",
+    "surrogate",
+    "vehicle",
+    "ε",
+    "outside",
+    "guard",
+    "n_min",
+    "min_events",
+    "R",
+    "exact P(A)",
+    "tests median",
+    "tests p90",
+    "tests max",
+    "coverage plain",
+    "coverage guarded",
+    "bias (± s.e.)",
+    "flag",
+];
+
+fn cells(row: &Row) -> Vec<String> {
+    let (bias, se) = row.bias();
+    let exhausted = row
+        .runs
+        .iter()
+        .filter(|r| r.status == Decision::Exhausted)
+        .count();
+    let flag = match exhausted {
+        0 => row.flag().to_owned(),
+        k => format!("{} {k} exhausted", row.flag()).trim().to_owned(),
+    };
+    vec![
+        row.case.clone(),
+        row.surrogate.into(),
+        row.vut.into(),
+        format!("{}", row.epsilon),
+        format!("{:?}", row.outside).to_lowercase(),
+        if row.rule.guard_outside { "yes" } else { "no" }.into(),
+        row.rule.n_min.to_string(),
+        row.rule.min_events.to_string(),
+        row.runs.len().to_string(),
+        format!("{:.4e}", row.truth),
+        row.tests_quantile(0.5).to_string(),
+        row.tests_quantile(0.9).to_string(),
+        row.tests_quantile(1.0).to_string(),
+        format!("{:.3}", row.coverage(|r| r.covers(row.truth))),
+        format!("{:.3}", row.coverage(|r| r.guarded_covers(row.truth))),
+        format!("{:+.3} ± {:.3}", bias, se),
+        flag,
+    ]
+}
+
+fn markdown_line(row: &Row) -> String {
+    format!("| {} |", cells(row).join(" | "))
+}
+
+/// The table in Markdown, with the nominal level and the flag's threshold.
+pub fn markdown(rows: &[Row]) -> String {
+    let mut out = String::new();
+    let _ = writeln!(out, "| {} |", HEADER.join(" | "));
+    let _ = writeln!(out, "|{}", "---|".repeat(HEADER.len()));
+    for row in rows {
+        let _ = writeln!(out, "{}", markdown_line(row));
+    }
+    if let Some(first) = rows.first() {
+        let _ = writeln!(
+            out,
+            "\nNominal coverage {:.2}; LOW marks coverage below {:.3} (c − 2.33 √(c(1 − c)/R)). \
+             Bias is mean estimate / exact − 1 at the stop.",
+            first.rule.confidence,
+            first.floor()
+        );
+    }
+    out
+}
+
+fn csv(rows: &[Row]) -> String {
+    let mut out = HEADER.join(",") + "\n";
+    for row in rows {
+        let line: Vec<String> = cells(row)
+            .into_iter()
+            .map(|c| {
+                if c.contains(',') {
+                    format!("\"{c}\"")
+                } else {
+                    c
+                }
+            })
+            .collect();
+        out += &(line.join(",") + "\n");
+    }
+    out
+}

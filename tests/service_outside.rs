@@ -1,0 +1,134 @@
+//! The outside bound through the service: a library campaign of a vehicle
+//! that fails where its surrogate does not (the IDM library testing the
+//! FVDM on cut-in) stops early with an interval far from the truth, and the
+//! coordinator says so; with the guard it keeps testing until the failure
+//! mass outside the library is bounded, and every figure equals the
+//! in-process run's to the bit, also for a campaign whose exploring tests
+//! are counted again after an upgrade.
+
+mod support;
+
+use sqlx::sqlite::SqliteConnectOptions;
+use sqlx::{ConnectOptions, Connection};
+use std::time::Duration;
+use support::*;
+use tslg_api::{CampaignStatus, CreateCampaign, Method, Outside};
+
+fn guarded(library_id: i64, beta: f64) -> CreateCampaign {
+    CreateCampaign {
+        epsilon: 0.5,
+        outside: Some(Outside::Ndd),
+        guard_outside: true,
+        ..campaign(Method::Library, library_id, "fvdm", beta, 3)
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_mismatched_surrogate_is_flagged_and_the_guard_keeps_testing_until_the_outside_is_bounded(
+) {
+    let dir = scratch();
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &[]);
+    let _workers = two_workers(&server.url);
+    let client = server.client();
+    let library = ready_library(&client, "idm", true).await;
+    let exact = exact("fvdm");
+
+    // The plain rule: converged at n_min, the interval far below P(A),
+    // but the outside bound and the guarded interval say what is unknown.
+    let plain = campaign(Method::Library, library.id, "fvdm", 0.2, 3);
+    let id = client.create_campaign(&plain).await.unwrap().id;
+    let view = finished(&client, id, Duration::from_secs(120)).await;
+    assert_eq!(view.status, CampaignStatus::Converged);
+    assert!(view.ci_high.unwrap() < exact, "{view:?}");
+    assert!(view.guarded_ci_high.unwrap() >= exact, "{view:?}");
+    assert!(view.outside_upper.unwrap() > 0.2 * view.estimate.unwrap());
+    assert!(
+        view.warnings
+            .iter()
+            .any(|w| w.contains("does not bound what the library leaves out")),
+        "{:?}",
+        view.warnings
+    );
+    assert_same(&view, &in_process(Some("idm"), &plain));
+
+    // Guarded: many more tests, the vehicle's failures outside the library
+    // found and flagged as a mismatch, the interval around P(A).
+    let request = guarded(library.id, 0.2);
+    let id = client.create_campaign(&request).await.unwrap().id;
+    let view = finished(&client, id, Duration::from_secs(120)).await;
+    assert_eq!(view.status, CampaignStatus::Converged);
+    assert!(view.guard_outside);
+    assert!(view.tests > 1000, "{view:?}");
+    assert!(view.mismatched_events > 0 && view.mismatched_events <= view.outside_events);
+    assert!(view.outside_share.unwrap() > 0.5, "{view:?}");
+    assert!(view
+        .warnings
+        .iter()
+        .any(|w| w.contains("surrogate mismatch")));
+    let (estimate, upper) = (view.estimate.unwrap(), view.outside_upper.unwrap());
+    let seen = view.outside_share.unwrap() * estimate;
+    assert!(upper - seen <= 0.2 * estimate * (1.0 + 1e-12), "{view:?}");
+    assert!(view.ci_low.unwrap() <= exact && exact <= view.guarded_ci_high.unwrap());
+    assert!(view
+        .status_detail
+        .as_deref()
+        .unwrap()
+        .contains("outside the library bounded"));
+    assert_same(&view, &in_process(Some("idm"), &request));
+
+    // The guard needs a library outside to bound.
+    let ndd = CreateCampaign {
+        method: Method::Ndd,
+        ..guarded(library.id, 0.2)
+    };
+    let refused = client.create_campaign(&ndd).await.unwrap_err().to_string();
+    assert!(
+        refused.contains("422") && refused.contains("no outside to guard"),
+        "{refused}"
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_campaign_started_before_the_outside_bound_is_counted_again_from_its_first_test() {
+    let dir = scratch();
+    let database = dir.path().join("db.sqlite");
+    let options = ["--lease-size", "5000"];
+    let server = ServerProcess::start(&database, &options);
+    let worker = WorkerProcess::start(&server.url, 1, "w1");
+    let client = server.client();
+    let library = ready_library(&client, "idm", true).await;
+    let request = guarded(library.id, 0.05);
+    let id = client.create_campaign(&request).await.unwrap().id;
+    let before = wait_for(&client, id, Duration::from_secs(120), |v| {
+        v.indices >= 40_000
+    })
+    .await;
+    assert_eq!(before.status, CampaignStatus::Running);
+    assert!(before.outside_tests > 0);
+    drop(worker);
+    server.kill();
+
+    // What the migration leaves for a campaign of the previous release.
+    let mut conn = SqliteConnectOptions::new()
+        .filename(&database)
+        .connect()
+        .await
+        .unwrap();
+    sqlx::query(
+        "UPDATE campaigns SET outside_tests = 0, outside_events = 0, outside_s1 = 0, \
+         outside_mismatches = 0, outside_upper = NULL",
+    )
+    .execute(&mut conn)
+    .await
+    .unwrap();
+    conn.close().await.unwrap();
+
+    let server = ServerProcess::start(&database, &options);
+    let client = server.client();
+    let blank = client.campaign(id).await.unwrap();
+    assert_eq!((blank.outside_tests, blank.outside_upper), (0, None));
+    let _worker = WorkerProcess::start(&server.url, 1, "w2");
+    let view = finished(&client, id, Duration::from_secs(300)).await;
+    assert_eq!(view.status, CampaignStatus::Converged);
+    assert_same(&view, &in_process(Some("idm"), &request));
+}
