@@ -424,3 +424,82 @@ fn policy_prints_the_car_following_librarys_action_distribution_at_the_papers_st
         assert!(stderr(&o).contains(expected), "{}", stderr(&o));
     }
 }
+
+/// The value of `column` in the Markdown row of `surrogate` → `vehicle`
+/// (unguarded unless `guard`).
+fn validation_cell(
+    table: &str,
+    surrogate: &str,
+    vehicle: &str,
+    guard: bool,
+    column: &str,
+) -> String {
+    let header: Vec<&str> = table
+        .lines()
+        .next()
+        .unwrap()
+        .split('|')
+        .map(str::trim)
+        .collect();
+    let at = header.iter().position(|h| *h == column).unwrap();
+    let guard = if guard { "yes" } else { "no" };
+    table
+        .lines()
+        .map(|l| l.split('|').map(str::trim).collect::<Vec<_>>())
+        .find(|c| c.len() > at && c[2] == surrogate && c[3] == vehicle && c[6] == guard)
+        .unwrap_or_else(|| panic!("no row {surrogate} → {vehicle} in\n{table}"))[at]
+        .to_owned()
+}
+
+#[test]
+fn validate_flags_the_mismatched_pair_and_the_guard_restores_coverage() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = tslg(&[
+        "validate",
+        "--cases",
+        "cut-in",
+        "--replicates",
+        "40",
+        "--guard",
+        "--out",
+        dir.path().to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let table = stdout(&out);
+    let cell = |s, v, g, c| validation_cell(&table, s, v, g, c);
+    let number = |s, v, g, c| cell(s, v, g, c).parse::<f64>().unwrap();
+    // The IDM library testing the FVDM: the plain interval misses far more
+    // often than 1 in 10, and is flagged; the guarded interval covers.
+    assert!(
+        number("idm", "fvdm", false, "coverage plain") < 0.5,
+        "{table}"
+    );
+    assert!(
+        cell("idm", "fvdm", false, "flag").contains("LOW plain"),
+        "{table}"
+    );
+    assert!(
+        number("idm", "fvdm", false, "coverage guarded") >= 0.9,
+        "{table}"
+    );
+    // A matched pair stops at n_min; with the guard it needs thousands.
+    assert_eq!(number("fvdm", "fvdm", false, "tests median"), 30.0);
+    assert!(
+        number("fvdm", "fvdm", true, "tests median") > 1000.0,
+        "{table}"
+    );
+    assert!(
+        number("idm", "fvdm", true, "coverage guarded") >= 0.9,
+        "{table}"
+    );
+    let csv = std::fs::read_to_string(dir.path().join("validation.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 1 + 8, "{csv}");
+    assert!(csv.starts_with("case,surrogate,vehicle,"), "{csv}");
+    let unknown = tslg(&["validate", "--cases", "car-following"]);
+    assert!(!unknown.status.success());
+    assert!(
+        stderr(&unknown).contains("needs an exact answer"),
+        "{}",
+        stderr(&unknown)
+    );
+}
