@@ -324,6 +324,31 @@ mod tests {
         fold
     }
 
+    /// One test: invalid with probability 0.01, an event of weight in
+    /// [0.01, 3) with probability `p_event`, else no event.
+    fn random_outcome(rng: &mut ChaCha8Rng, p_event: f64) -> Option<Option<f64>> {
+        let u: f64 = rng.random();
+        if u < 0.01 {
+            None
+        } else if u < 0.01 + p_event {
+            Some(Some(rng.random_range(0.01..3.0)))
+        } else {
+            Some(None)
+        }
+    }
+
+    /// A valid rule with random β, n_min, min_events and max_tests < `len`.
+    fn random_rule(rng: &mut ChaCha8Rng, len: u64, guard_outside: bool) -> StoppingRule {
+        StoppingRule {
+            beta: rng.random_range(0.2..0.9),
+            confidence: 0.9,
+            n_min: rng.random_range(1..200),
+            min_events: rng.random_range(0..5),
+            max_tests: rng.random_range(200..len),
+            guard_outside,
+        }
+    }
+
     fn sparse(tests: &[Option<Option<f64>>], from: usize, to: usize) -> Vec<(u64, SparseOutcome)> {
         (from..to)
             .filter_map(|i| match tests[i] {
@@ -341,25 +366,9 @@ mod tests {
             let len = 3000;
             let p_event = rng.random_range(0.002..0.05);
             let tests: Vec<Option<Option<f64>>> = (0..len)
-                .map(|_| {
-                    let u: f64 = rng.random();
-                    if u < 0.01 {
-                        None
-                    } else if u < 0.01 + p_event {
-                        Some(Some(rng.random_range(0.01..3.0)))
-                    } else {
-                        Some(None)
-                    }
-                })
+                .map(|_| random_outcome(&mut rng, p_event))
                 .collect();
-            let rule = StoppingRule {
-                beta: rng.random_range(0.2..0.9),
-                confidence: 0.9,
-                n_min: rng.random_range(1..200),
-                min_events: rng.random_range(0..5),
-                max_tests: rng.random_range(200..len as u64),
-                guard_outside: false,
-            };
+            let rule = random_rule(&mut rng, len as u64, false);
             let z = rule.z();
             let reference = step_by_step(&rule, z, &tests);
             let mut fold = PrefixFold::default();
@@ -429,15 +438,7 @@ mod tests {
             let tests: Vec<(Option<Option<f64>>, bool)> = (0..len)
                 .map(|_| {
                     let explores = rng.random::<f64>() < epsilon;
-                    let u: f64 = rng.random();
-                    let t = if u < 0.01 {
-                        None
-                    } else if u < 0.01 + p_event {
-                        Some(Some(rng.random_range(0.01..3.0)))
-                    } else {
-                        Some(None)
-                    };
-                    (t, explores)
+                    (random_outcome(&mut rng, p_event), explores)
                 })
                 .collect();
             let mass = if seed % 2 == 0 {
@@ -447,14 +448,7 @@ mod tests {
             } else {
                 OutsideMass::uniform((0..50).map(|_| rng.random_range(0.0..0.05)).collect())
             };
-            let rule = StoppingRule {
-                beta: rng.random_range(0.2..0.9),
-                confidence: 0.9,
-                n_min: rng.random_range(1..200),
-                min_events: rng.random_range(0..5),
-                max_tests: rng.random_range(200..len as u64),
-                guard_outside: true,
-            };
+            let rule = random_rule(&mut rng, len as u64, true);
             let z = rule.z();
             let reference = step_by_step_guarded(&rule, z, &tests, &mass);
             let plain = step_by_step_guarded(
