@@ -7,7 +7,10 @@
 
 use std::time::{Duration, Instant};
 use tslg::service::LocalService;
-use tslg_api::{CreateCampaign, LeaseRequest, Method, ResultReport};
+use tslg_api::{
+    CreateCampaign, CreateLibrary, ExposureRequest, LeaseRequest, LibraryStatus, Method,
+    ResultReport, SearchRequest,
+};
 use tslg_method::campaign::run_indexed_campaign;
 use tslg_method::estimator::StoppingRule;
 use tslg_method::registry::{open_case, ExposureSource};
@@ -56,10 +59,10 @@ fn in_process(tests: u64) -> f64 {
     started.elapsed().as_secs_f64()
 }
 
-async fn through_service(tests: u64, threads: usize) -> anyhow::Result<f64> {
+async fn through_service(tests: u64, workers: usize, threads: usize) -> anyhow::Result<f64> {
     let dir = tempfile::tempdir()?;
     let url = format!("sqlite://{}", dir.path().join("bench.sqlite").display());
-    let service = LocalService::start(&url, 1, threads).await?;
+    let service = LocalService::start(&url, workers, threads).await?;
     let client = Client::new(&service.url, None)?;
     let started = Instant::now();
     let id = client.create_campaign(&request(tests)).await?.id;
@@ -76,14 +79,37 @@ async fn through_service(tests: u64, threads: usize) -> anyhow::Result<f64> {
     Ok(seconds)
 }
 
-/// Claim-and-report round trips of tiny leases with no worker running.
-async fn round_trips(count: usize) -> anyhow::Result<Vec<f64>> {
+/// Claim-and-report round trips with no worker running, of an NDD campaign
+/// or (`library`) of a library campaign of the IDM's cut-in library, whose
+/// reports the coordinator also replays for exploring tests. Returns the
+/// sorted times (ms) and the mean lease size.
+async fn round_trips(count: usize, library: bool) -> anyhow::Result<(Vec<f64>, f64)> {
     let dir = tempfile::tempdir()?;
     let url = format!("sqlite://{}", dir.path().join("rtt.sqlite").display());
     let service = LocalService::start(&url, 0, 1).await?;
     let client = Client::new(&service.url, None)?;
-    client.create_campaign(&request(u64::MAX >> 20)).await?;
+    let mut campaign = request(u64::MAX >> 20);
+    if library {
+        let mut view = client
+            .create_library(&CreateLibrary {
+                case: "cut-in".into(),
+                preset: None,
+                surrogate: serde_json::json!({"model": "idm"}),
+                exposure: ExposureRequest::Builtin,
+                search: Some(SearchRequest::Exhaustive),
+                threshold: None,
+            })
+            .await?;
+        while view.status == LibraryStatus::Building {
+            tokio::time::sleep(Duration::from_millis(20)).await;
+            view = client.library(view.id).await?;
+        }
+        campaign.method = Method::Library;
+        campaign.library_id = Some(view.id);
+    }
+    client.create_campaign(&campaign).await?;
     let mut times = Vec::with_capacity(count);
+    let mut leased = 0u64;
     for _ in 0..count {
         let started = Instant::now();
         let lease = client
@@ -96,6 +122,7 @@ async fn round_trips(count: usize) -> anyhow::Result<Vec<f64>> {
             })
             .await?
             .expect("work");
+        leased += lease.end - lease.start;
         let report = ResultReport {
             worker: "bench".into(),
             attempt: lease.attempt,
@@ -112,7 +139,7 @@ async fn round_trips(count: usize) -> anyhow::Result<Vec<f64>> {
     }
     service.stop().await?;
     times.sort_by(f64::total_cmp);
-    Ok(times)
+    Ok((times, leased as f64 / count as f64))
 }
 
 fn main() -> anyhow::Result<()> {
@@ -129,7 +156,7 @@ fn main() -> anyhow::Result<()> {
     let mut service = Vec::new();
     for _ in 0..3 {
         local.push(in_process(tests));
-        service.push(runtime.block_on(through_service(tests, cores))?);
+        service.push(runtime.block_on(through_service(tests, 1, cores))?);
     }
     let best = |v: &[f64]| v.iter().copied().fold(f64::INFINITY, f64::min);
     let (l, s) = (best(&local), best(&service));
@@ -145,15 +172,38 @@ fn main() -> anyhow::Result<()> {
         tests as f64 / s
     );
     println!("\nthroughput ratio service / in-process: {:.3}\n", l / s);
-    let rtt = runtime.block_on(round_trips(1000))?;
-    let q = |p: f64| rtt[((rtt.len() - 1) as f64 * p) as usize];
-    println!("| lease round trip (claim + report, 1000 trips) | p50 ms | p90 ms | p99 ms |");
+    // How throughput grows with the number of workers (one thread each) on
+    // this machine's cores: a quarter of the tests, best of 3.
+    let scaled = tests / 4;
+    println!("| workers × threads ({scaled} tests) | seconds | tests/s | per worker thread |");
     println!("|---|---:|---:|---:|");
-    println!(
-        "| loopback, SQLite WAL | {:.2} | {:.2} | {:.2} |",
-        q(0.5),
-        q(0.9),
-        q(0.99)
-    );
+    for workers in [1, 2, 4, 8] {
+        let mut times = Vec::new();
+        for _ in 0..3 {
+            times.push(runtime.block_on(through_service(scaled, workers, 1))?);
+        }
+        let t = best(&times);
+        println!(
+            "| {workers} × 1 | {t:.2} | {:.3e} | {:.3e} |",
+            scaled as f64 / t,
+            scaled as f64 / t / workers as f64
+        );
+    }
+    println!();
+    println!("| lease round trip (claim + report, 1000 trips) | mean lease (tests) | p50 ms | p90 ms | p99 ms |");
+    println!("|---|---:|---:|---:|---:|");
+    for (label, library) in [
+        ("NDD campaign", false),
+        ("library campaign (exploring tests replayed)", true),
+    ] {
+        let (rtt, lease) = runtime.block_on(round_trips(1000, library))?;
+        let q = |p: f64| rtt[((rtt.len() - 1) as f64 * p) as usize];
+        println!(
+            "| {label}, loopback, SQLite WAL | {lease:.0} | {:.2} | {:.2} | {:.2} |",
+            q(0.5),
+            q(0.9),
+            q(0.99)
+        );
+    }
     Ok(())
 }

@@ -65,11 +65,18 @@ pub fn read_library(path: &Path) -> anyhow::Result<Library> {
     Library::from_json(&text).with_context(|| format!("library file {} rejected", path.display()))
 }
 
-pub fn stopping_rule(args: &RuleArgs) -> anyhow::Result<StoppingRule> {
+/// The rule of `args`; `exploring_share` sets the default `n_min`
+/// ([`tslg_method::estimator::default_n_min`]).
+pub fn stopping_rule(
+    args: &RuleArgs,
+    exploring_share: Option<f64>,
+) -> anyhow::Result<StoppingRule> {
     let rule = StoppingRule {
         beta: args.beta,
         confidence: args.confidence,
-        n_min: args.n_min,
+        n_min: args.n_min.unwrap_or_else(|| {
+            tslg_method::estimator::default_n_min(exploring_share, args.max_tests)
+        }),
         min_events: args.min_events,
         max_tests: args.max_tests,
         guard_outside: args.guard_outside,

@@ -49,6 +49,10 @@ pub enum Command {
     /// Run replicate campaigns in this process against the exact answer:
     /// coverage of the plain and the guarded interval, tests to stop, bias.
     Validate(commands::validate::ValidateArgs),
+    /// Run the paper's three cases through a local coordinator and workers;
+    /// print and write (Markdown, CSV) the tests each method needed beside
+    /// the paper's numbers, the estimates and the exact answers.
+    Reproduce(commands::reproduce::ReproduceArgs),
 }
 
 #[derive(Debug, Clone, Copy, ValueEnum, PartialEq, Eq)]
@@ -358,9 +362,11 @@ pub struct RuleArgs {
     /// Two-sided confidence level of the interval.
     #[arg(long, default_value_t = 0.9)]
     pub confidence: f64,
-    /// Never stop before this many tests.
-    #[arg(long, default_value_t = tslg_method::estimator::DEFAULT_N_MIN)]
-    pub n_min: u64,
+    /// Never stop before this many tests. Default: 30, and for a library
+    /// campaign of a grid case max(30, ⌈10/ε⌉), so that about ten exploring
+    /// tests are expected first (docs/statistics.md).
+    #[arg(long)]
+    pub n_min: Option<u64>,
     /// Never stop before this many events.
     #[arg(long, default_value_t = tslg_method::estimator::DEFAULT_MIN_EVENTS)]
     pub min_events: u64,
@@ -478,6 +484,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Policy(args) => commands::policy::run(&args),
         Command::LoadTest(args) => commands::load::run(&args),
         Command::Validate(args) => commands::validate::run(&args),
+        Command::Reproduce(args) => commands::reproduce::run(&args),
         Command::Backup(args) => commands::remote::block_on(async {
             let bytes = tslg_server::db::backup(&args.database_url, &args.out).await?;
             println!(

@@ -35,7 +35,10 @@ async fn a_mismatched_surrogate_is_flagged_and_the_guard_keeps_testing_until_the
 
     // The plain rule: converged at n_min, the interval far below P(A),
     // but the outside bound and the guarded interval say what is unknown.
-    let plain = campaign(Method::Library, library.id, "fvdm", 0.2, 3);
+    let plain = CreateCampaign {
+        n_min: Some(30),
+        ..campaign(Method::Library, library.id, "fvdm", 0.2, 3)
+    };
     let id = client.create_campaign(&plain).await.unwrap().id;
     let view = finished(&client, id, Duration::from_secs(120)).await;
     assert_eq!(view.status, CampaignStatus::Converged);
@@ -75,6 +78,29 @@ async fn a_mismatched_surrogate_is_flagged_and_the_guard_keeps_testing_until_the
         .unwrap()
         .contains("outside the library bounded"));
     assert_same(&view, &in_process(Some("idm"), &request));
+
+    // A surrogate that fails wherever the vehicle does (the FVDM's library
+    // testing the IDM): the guarded campaign meets the vehicle's failures
+    // outside the library, and none is a mismatch, so no such warning.
+    let covering = ready_library(&client, "fvdm", true).await;
+    let request = CreateCampaign {
+        vut: serde_json::json!({"model": "idm"}),
+        ..guarded(covering.id, 0.2)
+    };
+    let id = client.create_campaign(&request).await.unwrap().id;
+    let view = finished(&client, id, Duration::from_secs(120)).await;
+    assert_eq!(view.status, CampaignStatus::Converged);
+    assert!(view.outside_events > 0, "{view:?}");
+    assert_eq!(view.mismatched_events, 0, "{view:?}");
+    assert!(
+        !view
+            .warnings
+            .iter()
+            .any(|w| w.contains("surrogate mismatch")),
+        "{:?}",
+        view.warnings
+    );
+    assert_same(&view, &in_process(Some("fvdm"), &request));
 
     // The guard needs a library outside to bound.
     let ndd = CreateCampaign {

@@ -79,7 +79,9 @@ pub struct CreateCampaign {
     /// Seed of the campaign's counter-based random streams.
     #[serde(default)]
     pub seed: u64,
-    /// Fewest valid tests before the rule may stop (default 30).
+    /// Fewest valid tests before the rule may stop. Default: 30; for a
+    /// library campaign of a grid case max(30, ⌈10/ε⌉) (capped at
+    /// max_tests), so that about ten exploring tests are expected first.
     #[serde(default)]
     pub n_min: Option<u64>,
     /// Fewest events before the rule may stop (default 10).

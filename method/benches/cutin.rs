@@ -108,6 +108,17 @@ fn main() {
         "| library draws/s per core (scenario + weight) | {:.3e} |",
         draws as f64 / secs
     );
+    // The coordinator's replay on the result path: which reported tests
+    // explored (one ChaCha8 number per test, for the outside bound).
+    let secs = median_seconds(|| {
+        for i in 0..draws {
+            black_box(q.explores(black_box(9), i));
+        }
+    });
+    println!(
+        "| exploring-test replay per core (coordinator, per reported test) | {:.3e} tests/s |",
+        draws as f64 / secs
+    );
     let distribution = TestDistribution::library(q);
     let rule = StoppingRule::new(0.2, 10_000_000);
     let secs = median_seconds(|| {

@@ -79,6 +79,21 @@ fn main() {
         exhaustive.size(),
         exhaustive.search.sm_evaluations
     );
+    // How library generation grows with the grid: the same search on the
+    // coarse grid (steps 20 m, 4 m/s) and on the paper's.
+    let coarse = HighwayExit::builtin(HighwayPreset::Coarse);
+    let (coarse_secs, coarse_library) =
+        median_seconds(|| library(&coarse, &mobil, SearchMethod::Exhaustive));
+    for (scenarios, seconds, built) in [
+        (coarse.grid().len(), coarse_secs, &coarse_library),
+        (case.grid().len(), secs, &exhaustive),
+    ] {
+        println!(
+            "| grid scaling, exhaustive mobil library: {scenarios} scenarios, {} surrogate runs | {seconds:.3} s, {:.2} µs per surrogate run |",
+            built.search.sm_evaluations,
+            seconds * 1e6 / built.search.sm_evaluations as f64
+        );
+    }
     for seed in [0, 1, 2] {
         let t = Instant::now();
         let multistart = library(

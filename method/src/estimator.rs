@@ -180,10 +180,38 @@ pub struct StoppingRule {
     pub guard_outside: bool,
 }
 
-/// Defaults chosen from coverage measurements; see `docs/statistics.md`.
+/// Defaults chosen from coverage measurements (`tslg validate`); see
+/// `docs/statistics.md`. `DEFAULT_N_MIN` is the floor of every campaign;
+/// library campaigns of grid cases wait longer ([`default_n_min`]).
 pub const DEFAULT_N_MIN: u64 = 30;
 pub const DEFAULT_MIN_EVENTS: u64 = 10;
 pub const DEFAULT_CONFIDENCE: f64 = 0.90;
+/// The exploring tests a grid library campaign expects before it may stop.
+pub const DEFAULT_EXPLORING_TESTS: f64 = 10.0;
+
+/// The default `n_min` of a campaign whose every test explores outside the
+/// library with probability `exploring_share` (ε of a grid case's library
+/// campaign; `None` for NDD campaigns and for car-following, which explores
+/// in each of its 30 decisions): `max(30, min(⌈10/ε⌉, max_tests))`.
+///
+/// Why: when the library covers the vehicle, its inside tests are nearly all
+/// events of about the same weight `W/(1 − ε)`, and the variance of `μ̂` is
+/// mostly the binomial split between inside and exploring tests. The Wald
+/// interval of that split needs about ten exploring tests expected (the
+/// `np ≥ 10` rule for a binomial): with 30 tests at ε = 0.1 all land inside
+/// 4% of the time and the interval is a point. Measured coverage of the 90%
+/// interval on cut-in (R = 200): 0.775 (IDM) at n_min 30 and ε 0.1, 0.865 at
+/// 100; 0.74 at n_min 30 and ε 0.05, 0.91 at 200. Car-following's coverage
+/// does not change between n_min 30 and 1,000.
+pub fn default_n_min(exploring_share: Option<f64>, max_tests: u64) -> u64 {
+    match exploring_share {
+        Some(epsilon) if epsilon > 0.0 => {
+            let wanted = (DEFAULT_EXPLORING_TESTS / epsilon).ceil();
+            (wanted.min(max_tests as f64) as u64).max(DEFAULT_N_MIN)
+        }
+        _ => DEFAULT_N_MIN,
+    }
+}
 
 impl StoppingRule {
     pub fn new(beta: f64, max_tests: u64) -> Self {

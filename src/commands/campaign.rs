@@ -29,7 +29,7 @@ pub fn start(args: &CampaignStartArgs) -> anyhow::Result<()> {
         confidence: args.rule.confidence,
         max_tests: args.rule.max_tests,
         seed: args.seed,
-        n_min: Some(args.rule.n_min),
+        n_min: args.rule.n_min,
         min_events: Some(args.rule.min_events),
         guard_outside: args.rule.guard_outside,
     };

@@ -4,19 +4,15 @@
 //! side by side with progress, and prints both beside the exact answer (or,
 //! for car-following, where no enumeration exists, beside each other).
 
-use crate::commands::campaign::wait_for_library;
+use crate::commands::local::{build_library, exact_report, ExactQuestion, Local};
 use crate::commands::progress::CampaignBars;
 use crate::commands::remote::{exposure_request, vehicle_json};
-use crate::service::LocalService;
 use crate::DemoArgs;
 use std::time::{Duration, Instant};
 use tslg_api::{
-    CampaignView, CreateCampaign, CreateLibrary, ExposureRequest, LibraryStatus, Method, Outside,
-    SearchRequest,
+    CampaignView, CreateCampaign, CreateLibrary, ExposureRequest, Method, SearchRequest,
 };
 use tslg_method::exact::ExactReport;
-use tslg_method::registry::{open_case, CaseError, ExposureSource};
-use tslg_method::sampling::OutsideSpread;
 use tslg_worker::client::Client;
 
 pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
@@ -28,37 +24,18 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
 }
 
 async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
-    anyhow::ensure!(args.workers >= 1, "--workers must be at least 1");
     let exposure = exposure_request(&args.case)?;
     let vut = vehicle_json(demo_vut(args))?;
-    let (database, scratch) = match &args.database {
-        Some(path) => (path.clone(), None),
-        None => {
-            let dir = std::env::temp_dir().join(format!("tslg-demo-{}", std::process::id()));
-            std::fs::create_dir_all(&dir)?;
-            (dir.join("tslg.sqlite"), Some(dir))
-        }
-    };
-    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let threads = (cores / args.workers).max(1);
-    let service = LocalService::start(
-        &format!("sqlite://{}", database.display()),
-        args.workers,
-        threads,
-    )
-    .await?;
+    let local = Local::start(args.database.as_deref(), args.workers, "demo").await?;
     println!(
         "coordinator {} on {}, {} workers × {} threads",
-        service.url,
-        database.display(),
+        local.service.url,
+        local.database.display(),
         args.workers,
-        threads
+        local.threads
     );
-    let outcome = drive(args, &service.url, exposure, vut).await;
-    service.stop().await?;
-    if let Some(dir) = scratch {
-        let _ = std::fs::remove_dir_all(dir);
-    }
+    let outcome = drive(args, &local.service.url, exposure, vut).await;
+    local.stop().await?;
     outcome
 }
 
@@ -70,22 +47,18 @@ async fn drive(
 ) -> anyhow::Result<()> {
     let client = Client::new(url, None)?;
     let started = Instant::now();
-    let mut library = client
-        .create_library(&CreateLibrary {
+    let library = build_library(
+        &client,
+        &CreateLibrary {
             case: args.case.case.clone(),
             preset: args.case.preset.clone(),
             surrogate: vehicle_json(args.case.vehicle_or_default(&args.surrogate))?,
             exposure: exposure.clone(),
             search: demo_search(&args.case.case),
             threshold: None,
-        })
-        .await?;
-    library = wait_for_library(&client, library).await?;
-    anyhow::ensure!(
-        library.status == LibraryStatus::Ready,
-        "the library failed to build: {}",
-        library.error.unwrap_or_default()
-    );
+        },
+    )
+    .await?;
     // A car-following library is a policy over initial states.
     let unit = if library.case == "car-following" {
         "states"
@@ -121,34 +94,18 @@ async fn drive(
     let by_library = client.create_campaign(&request(Method::Library)).await?;
     let by_ndd = client.create_campaign(&request(Method::Ndd)).await?;
     let (by_library, by_ndd) = watch_both(&client, by_library.id, by_ndd.id).await?;
-    let case_name = args.case.case.clone();
-    let preset = args.case.preset.clone();
-    let source = match exposure {
-        ExposureRequest::Builtin => ExposureSource::Builtin,
-        ExposureRequest::Table { name, text } => ExposureSource::Table { name, text },
-    };
-    let vut_spec = vut.clone();
-    let library_file = client.library_file(library.id).await?;
-    let (epsilon, beta) = (args.exploration.epsilon, args.beta);
-    let outside = match by_library.outside {
-        Outside::Uniform => OutsideSpread::Uniform,
-        Outside::Ndd => OutsideSpread::Ndd,
-    };
-    let exact = tokio::task::spawn_blocking(move || {
-        match open_case(&case_name, preset.as_deref(), &source)?.exact_report(
-            &vut_spec,
-            &library_file,
-            epsilon,
-            outside,
-            beta,
-            0.9,
-        ) {
-            Ok(report) => Ok(Some(report)),
-            Err(CaseError::NoExactAnswer(_)) => Ok(None),
-            Err(e) => Err(e),
-        }
+    let exact = exact_report(ExactQuestion {
+        case: args.case.case.clone(),
+        preset: args.case.preset.clone(),
+        exposure,
+        vut,
+        library_file: client.library_file(library.id).await?,
+        epsilon: args.exploration.epsilon,
+        outside: by_library.outside,
+        beta: args.beta,
+        confidence: 0.9,
     })
-    .await??;
+    .await?;
     print_table(args, &by_library, &by_ndd, exact.as_ref());
     Ok(())
 }
@@ -238,6 +195,7 @@ fn print_table(
             v.status.as_str()
         );
     }
+    print_outside(by_library, exact);
     let measured = by_ndd.tests as f64 / by_library.tests.max(1) as f64;
     let Some(report) = report else {
         let ((a, b), (c, d)) = (interval(by_library), interval(by_ndd));
@@ -286,4 +244,28 @@ fn print_table(
         report.ndd_tests,
         report.library_tests
     );
+}
+
+/// The library campaign's outside bound, guarded interval and warnings
+/// (grid cases; docs/statistics.md).
+fn print_outside(by_library: &CampaignView, exact: Option<f64>) {
+    if let (Some(upper), Some(lo), Some(high)) = (
+        by_library.outside_upper,
+        by_library.ci_low,
+        by_library.guarded_ci_high,
+    ) {
+        let covers = match exact {
+            Some(p) if lo <= p && p <= high => ", covers the exact value",
+            Some(_) => ", misses the exact value",
+            None => "",
+        };
+        println!(
+            "\nlibrary: failure mass outside the library ≤ {upper:.3e} ({} exploring tests, {} \
+             events); guarded interval [{lo:.3e}, {high:.3e}]{covers}",
+            by_library.outside_tests, by_library.outside_events
+        );
+    }
+    for warning in &by_library.warnings {
+        println!("warning: {warning}");
+    }
 }

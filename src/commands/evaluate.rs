@@ -7,6 +7,7 @@ use serde::Serialize;
 use tslg_method::campaign::{run_campaign, CampaignResult};
 use tslg_method::case::Case;
 use tslg_method::exact::{event_cells, event_probability};
+use tslg_method::registry::exploring_share;
 use tslg_method::sampling::{LibraryDistribution, NddDistribution, TestDistribution};
 use tslg_method::vehicle::VehicleModel;
 
@@ -24,7 +25,14 @@ struct Report {
 pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
     let case = load_case(&args.case)?;
     let vut = parse_vehicle(&args.vut, "vehicle under test")?;
-    let rule = stopping_rule(&args.rule)?;
+    let rule = stopping_rule(
+        &args.rule,
+        exploring_share(
+            &args.case.case,
+            args.method == MethodArg::Library,
+            args.exploration.epsilon,
+        ),
+    )?;
     check_epsilon(args.exploration.epsilon)?;
     let (distribution, surrogate) = match args.method {
         MethodArg::Ndd => (

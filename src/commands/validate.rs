@@ -12,9 +12,11 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::sync::Arc;
 use tslg_method::campaign::{run_campaign_tests, CampaignResult};
-use tslg_method::estimator::{Decision, StoppingRule};
+use tslg_method::estimator::{default_n_min, Decision, StoppingRule};
 use tslg_method::library::SearchMethod;
-use tslg_method::registry::{open_case, BuildRequest, ExposureSource, LibrarySearch, ScenarioCase};
+use tslg_method::registry::{
+    exploring_share, open_case, BuildRequest, ExposureSource, LibrarySearch, ScenarioCase,
+};
 use tslg_method::sampling::OutsideSpread;
 
 #[derive(Debug, clap::Args)]
@@ -22,25 +24,30 @@ pub struct ValidateArgs {
     /// The cases to validate (those with an exact answer).
     #[arg(long, value_delimiter = ',', default_values = ["cut-in", "highway-exit"])]
     pub cases: Vec<String>,
-    /// Replicate campaigns (seeds 0..R) per configuration.
-    #[arg(long, default_value_t = 200)]
-    pub replicates: u64,
+    /// Replicate campaigns (seeds 0..R) per configuration (default 200, 50
+    /// with --quick).
+    #[arg(long)]
+    pub replicates: Option<u64>,
     /// Target relative half-width β.
     #[arg(long, default_value_t = 0.2)]
     pub beta: f64,
     /// Confidence of the interval.
     #[arg(long, default_value_t = 0.9)]
     pub confidence: f64,
-    /// The values of n_min to compare (comma-separated).
-    #[arg(long, value_delimiter = ',', default_values_t = [tslg_method::estimator::DEFAULT_N_MIN])]
+    /// The values of n_min to compare (comma-separated); default: a
+    /// campaign's default, max(30, ⌈10/ε⌉) for these library campaigns.
+    #[arg(long, value_delimiter = ',')]
     pub n_min: Vec<u64>,
     /// The values of min_events to compare (comma-separated).
     #[arg(long, value_delimiter = ',', default_values_t = [tslg_method::estimator::DEFAULT_MIN_EVENTS])]
     pub min_events: Vec<u64>,
+    /// ε of the plain library campaigns (spread as the case does by default).
+    #[arg(long, default_value_t = 0.1)]
+    pub epsilon: f64,
     /// Also run each pairing with the outside guard (ε 0.5, outside spread ndd).
     #[arg(long)]
     pub guard: bool,
-    /// A quick run: 50 replicates and highway-exit's coarse preset.
+    /// A quick run: 50 replicates (unless given) and highway-exit's coarse preset.
     #[arg(long)]
     pub quick: bool,
     /// Budget of each campaign.
@@ -120,12 +127,8 @@ impl Row {
 }
 
 pub fn run(args: &ValidateArgs) -> anyhow::Result<()> {
-    anyhow::ensure!(args.replicates >= 2, "--replicates must be at least 2");
-    let replicates = if args.quick {
-        args.replicates.min(50)
-    } else {
-        args.replicates
-    };
+    let replicates = args.replicates.unwrap_or(if args.quick { 50 } else { 200 });
+    anyhow::ensure!(replicates >= 2, "--replicates must be at least 2");
     let mut rows = Vec::new();
     for case_name in &args.cases {
         for setup in setups(case_name, args)? {
@@ -179,12 +182,19 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
             )?
             .file;
         let truth = case.exact_event_probability(&serde_json::json!({ "model": vut }))?;
-        let mut variants = vec![(0.1, case.default_outside(), false)];
+        let mut variants = vec![(args.epsilon, case.default_outside(), false)];
         if args.guard {
             variants.push((0.5, OutsideSpread::Ndd, true));
         }
         for &(epsilon, outside, guard_outside) in &variants {
-            for &n_min in &args.n_min {
+            let n_mins = match args.n_min.as_slice() {
+                [] => vec![default_n_min(
+                    exploring_share(case_name, true, epsilon),
+                    args.max_tests,
+                )],
+                given => given.to_vec(),
+            };
+            for &n_min in &n_mins {
                 for &min_events in &args.min_events {
                     let rule = StoppingRule {
                         beta: args.beta,

@@ -13,9 +13,11 @@ use tslg_api::{
     Method,
 };
 use tslg_method::campaign::{run_campaign_tests, CampaignResult};
-use tslg_method::estimator::StoppingRule;
+use tslg_method::estimator::{default_n_min, StoppingRule};
 use tslg_method::library::SearchMethod;
-use tslg_method::registry::{open_case, BuildRequest, ExposureSource, LibrarySearch};
+use tslg_method::registry::{
+    exploring_share, open_case, BuildRequest, ExposureSource, LibrarySearch,
+};
 use tslg_worker::client::Client;
 
 /// A `tslg-server` process; killed when dropped.
@@ -319,7 +321,16 @@ pub fn in_process_with_invalid(
     let rule = StoppingRule {
         beta: request.beta,
         confidence: request.confidence,
-        n_min: request.n_min.unwrap_or(30),
+        n_min: request.n_min.unwrap_or_else(|| {
+            default_n_min(
+                exploring_share(
+                    &request.case,
+                    request.method == Method::Library,
+                    request.epsilon,
+                ),
+                request.max_tests,
+            )
+        }),
         min_events: request.min_events.unwrap_or(10),
         max_tests: request.max_tests,
         guard_outside: request.guard_outside,

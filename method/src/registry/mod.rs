@@ -34,6 +34,14 @@ pub const CASES: [&str; 3] = ["cut-in", "highway-exit", "car-following"];
 /// list their scenarios in advance ([`CampaignTests::planned`] is `None`).
 pub const SEQUENTIAL_CASES: [&str; 1] = ["car-following"];
 
+/// The probability that one test of a campaign explores outside the
+/// library: ε for a library campaign of a grid case, `None` for the NDD and
+/// for the sequential cases (which explore in every decision). It sets the
+/// default `n_min` ([`crate::estimator::default_n_min`]).
+pub fn exploring_share(case: &str, library: bool, epsilon: f64) -> Option<f64> {
+    (library && !SEQUENTIAL_CASES.contains(&case)).then_some(epsilon)
+}
+
 /// Where a case's exposure `P(x)` comes from.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]

@@ -14,9 +14,9 @@ use tslg_api::{
     CampaignList, CampaignPlan, CampaignStatus, CampaignView, CreateCampaign, History,
     LibraryStatus, Method, Outside, Problem,
 };
-use tslg_method::estimator::{StoppingRule, DEFAULT_MIN_EVENTS, DEFAULT_N_MIN};
+use tslg_method::estimator::{default_n_min, StoppingRule, DEFAULT_MIN_EVENTS};
 use tslg_method::external::ExternalVut;
-use tslg_method::registry::{open_case, ExposureSource, SEQUENTIAL_CASES};
+use tslg_method::registry::{exploring_share, open_case, ExposureSource, SEQUENTIAL_CASES};
 use tslg_method::sampling::OutsideSpread;
 
 /// Largest accepted test budget.
@@ -37,7 +37,12 @@ pub async fn create(
     let rule = StoppingRule {
         beta: req.beta,
         confidence: req.confidence,
-        n_min: req.n_min.unwrap_or(DEFAULT_N_MIN),
+        n_min: req.n_min.unwrap_or_else(|| {
+            default_n_min(
+                exploring_share(&req.case, req.method == Method::Library, req.epsilon),
+                req.max_tests,
+            )
+        }),
         min_events: req.min_events.unwrap_or(DEFAULT_MIN_EVENTS),
         max_tests: req.max_tests,
         guard_outside: req.guard_outside,

@@ -1,0 +1,404 @@
+//! `tslg reproduce`: the paper's three cases through the service, in one
+//! command. A coordinator on a scratch SQLite file and local workers build
+//! each case's library through the API with the paper's settings where they
+//! are known (ε 0.05 and β 0.3 for cut-in, ε 0.1 and β 0.2 for the others,
+//! 90% confidence, the authors' exposure table when given), run R seeded
+//! library campaigns per vehicle, and then the NDD baseline when its
+//! expected number of tests fits the budget; otherwise the NDD count is the
+//! analytic `z² (1 − μ)/(β² μ)` with μ the exact `P(A)` or, for
+//! car-following, the library campaigns' median estimate. The table
+//! ([`table`]) puts the paper's numbers beside ours.
+
+mod table;
+
+use crate::commands::local::{build_library, exact_report, ExactQuestion, Local};
+use crate::commands::progress::CampaignBars;
+use crate::commands::remote::exposure_request;
+use crate::CaseArgs;
+use std::path::PathBuf;
+use std::time::Duration;
+use tslg_api::{
+    CampaignView, CreateCampaign, CreateLibrary, ExposureRequest, Method, Outside, SearchRequest,
+};
+use tslg_method::estimator::z_for_confidence;
+use tslg_method::exact::{expected_ndd_tests, ExactReport};
+use tslg_worker::client::Client;
+
+#[derive(Debug, clap::Args)]
+pub struct ReproduceArgs {
+    /// The cases to run.
+    #[arg(long, value_delimiter = ',', default_values = ["cut-in", "highway-exit", "car-following"])]
+    pub cases: Vec<String>,
+    /// The cut-in exposure table (the paper's: the authors' table,
+    /// `../shared/data/cutin_ndd_spmd.csv`); default: the built-in model
+    /// fitted to it.
+    #[arg(long, env = "TSLG_NDD_TABLE")]
+    pub ndd_table: Option<PathBuf>,
+    /// Library campaigns per vehicle (seeds seed, seed + 1, …); default 5, 3
+    /// with --quick.
+    #[arg(long)]
+    pub replicates: Option<u64>,
+    /// The first seed.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Run an NDD baseline when its expected tests are at most this (default
+    /// 10⁸: every case, car-following's in about ten minutes; 2 × 10⁶ with
+    /// --quick); beyond it report the analytic count.
+    #[arg(long)]
+    pub ndd_budget: Option<u64>,
+    /// A couple of minutes: 3 replicates and no NDD baseline beyond 2 × 10⁶
+    /// expected tests (car-following's is then analytic).
+    #[arg(long)]
+    pub quick: bool,
+    /// Local workers.
+    #[arg(long, default_value_t = 2)]
+    pub workers: usize,
+    /// Where to write reproduction.md and reproduction.csv (created if missing).
+    #[arg(long, default_value = "reproduction")]
+    pub out: PathBuf,
+}
+
+/// The paper's own figures for a case (Part II, Section IV).
+#[derive(Debug, Clone, Copy)]
+pub struct Paper {
+    pub library_size: Option<u64>,
+    pub library_tests: f64,
+    pub ndd_tests: f64,
+}
+
+/// One case as the paper ran it, and the vehicles we test with its library.
+struct CaseSetting {
+    case: &'static str,
+    preset: &'static str,
+    surrogate: &'static str,
+    search: SearchRequest,
+    epsilon: f64,
+    beta: f64,
+    /// `(label, specification)`: the surrogate's own model first where the
+    /// vehicles differ in how well the library covers them.
+    vehicles: Vec<(&'static str, serde_json::Value)>,
+    paper: Paper,
+}
+
+fn settings(case: &str) -> anyhow::Result<CaseSetting> {
+    use serde_json::json;
+    Ok(match case {
+        "cut-in" => CaseSetting {
+            case: "cut-in",
+            preset: "paper-code",
+            surrogate: "idm",
+            // The paper's search, 50 starting points (recall 1 on this grid).
+            search: SearchRequest::Multistart {
+                starts: 50,
+                seed: 0,
+            },
+            epsilon: 0.05,
+            beta: 0.3,
+            vehicles: vec![
+                ("idm", json!({"model": "idm"})),
+                ("acc-aeb", json!({"model": "acc-aeb"})),
+            ],
+            paper: Paper {
+                library_size: Some(184),
+                library_tests: 51.0,
+                ndd_tests: 9.63e4,
+            },
+        },
+        "highway-exit" => CaseSetting {
+            case: "highway-exit",
+            preset: "paper",
+            surrogate: "mobil",
+            // Enumeration: MOBIL's failures are scattered islands that a
+            // 100-start multistart finds 3% of (docs/models.md), and all
+            // 1.64 × 10⁶ scenarios take seconds.
+            search: SearchRequest::Exhaustive,
+            epsilon: 0.1,
+            beta: 0.2,
+            vehicles: vec![
+                (
+                    "mobil p 0.3",
+                    json!({"model": "mobil", "politeness": 0.3, "wait_cost": 0.5}),
+                ),
+                ("gap-seeker", json!({"model": "gap-seeker"})),
+            ],
+            paper: Paper {
+                library_size: Some(1895),
+                library_tests: 2.6e3,
+                ndd_tests: 6.6e5,
+            },
+        },
+        "car-following" => CaseSetting {
+            case: "car-following",
+            preset: "paper",
+            surrogate: "idm",
+            search: SearchRequest::DynamicProgramming,
+            epsilon: 0.1,
+            beta: 0.2,
+            vehicles: vec![("acc-aeb", json!({"model": "acc-aeb"}))],
+            paper: Paper {
+                library_size: None,
+                library_tests: 50.0,
+                ndd_tests: 1.875e7,
+            },
+        },
+        other => {
+            anyhow::bail!("unknown case `{other}` (cases: cut-in, highway-exit, car-following)")
+        }
+    })
+}
+
+/// Where an NDD test count comes from.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum NddSource {
+    /// A campaign ran to β.
+    Run,
+    /// `z² (1 − μ)/(β² μ)` with the exact `P(A)`.
+    AnalyticExact,
+    /// The same with the library campaigns' median estimate.
+    AnalyticEstimate,
+}
+
+/// One vehicle tested with one case's library: the row of the table.
+pub struct Row {
+    pub case: &'static str,
+    pub preset: &'static str,
+    pub exposure: String,
+    pub surrogate: &'static str,
+    pub library_size: u64,
+    pub total_scenarios: u64,
+    pub vehicle: &'static str,
+    pub epsilon: f64,
+    pub beta: f64,
+    pub library_runs: Vec<CampaignView>,
+    /// The guarded campaign (grid cases).
+    pub guarded_run: Option<CampaignView>,
+    pub ndd_run: Option<CampaignView>,
+    pub ndd_tests: f64,
+    pub ndd_source: NddSource,
+    pub exact: Option<ExactReport>,
+    pub paper: Paper,
+}
+
+pub fn run(args: &ReproduceArgs) -> anyhow::Result<()> {
+    let replicates = args.replicates.unwrap_or(if args.quick { 3 } else { 5 });
+    anyhow::ensure!(replicates >= 1, "--replicates must be at least 1");
+    let budget = args
+        .ndd_budget
+        .unwrap_or(if args.quick { 2_000_000 } else { 100_000_000 });
+    let cases = args
+        .cases
+        .iter()
+        .map(|c| settings(c))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let exposure = exposure_request(&CaseArgs {
+        case: "cut-in".into(),
+        ndd_table: args.ndd_table.clone(),
+        preset: None,
+    })?;
+    let rows = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()?
+        .block_on(async {
+            let local = Local::start(None, args.workers, "reproduce").await?;
+            eprintln!(
+                "coordinator {}, {} workers × {} threads",
+                local.service.url, args.workers, local.threads
+            );
+            let client = local.client()?;
+            let mut rows = Vec::new();
+            let mut outcome = Ok(());
+            for case in &cases {
+                let exposure = match case.case {
+                    "cut-in" => exposure.clone(),
+                    _ => ExposureRequest::Builtin,
+                };
+                match run_case(&client, case, exposure, replicates, args.seed, budget).await {
+                    Ok(mut case_rows) => rows.append(&mut case_rows),
+                    Err(e) => {
+                        outcome = Err(e);
+                        break;
+                    }
+                }
+            }
+            local.stop().await?;
+            outcome.map(|()| rows)
+        })?;
+    let markdown = table::markdown(&rows, replicates, budget);
+    println!("{markdown}");
+    std::fs::create_dir_all(&args.out)?;
+    std::fs::write(args.out.join("reproduction.md"), &markdown)?;
+    std::fs::write(args.out.join("reproduction.csv"), table::csv(&rows))?;
+    eprintln!(
+        "written to {}",
+        args.out.join("reproduction.{md,csv}").display()
+    );
+    Ok(())
+}
+
+/// Builds the case's library, runs the library campaigns of every vehicle,
+/// then the NDD baselines that fit the budget.
+async fn run_case(
+    client: &Client,
+    setting: &CaseSetting,
+    exposure: ExposureRequest,
+    replicates: u64,
+    seed: u64,
+    budget: u64,
+) -> anyhow::Result<Vec<Row>> {
+    let library = build_library(
+        client,
+        &CreateLibrary {
+            case: setting.case.into(),
+            preset: Some(setting.preset.into()),
+            surrogate: serde_json::json!({"model": setting.surrogate}),
+            exposure: exposure.clone(),
+            search: Some(setting.search),
+            threshold: None,
+        },
+    )
+    .await?;
+    eprintln!(
+        "{}: library {} of {} ({} of {}, {:.1} s)",
+        setting.case,
+        library.id,
+        setting.surrogate,
+        library.size.unwrap_or(0),
+        library.total_scenarios,
+        library.build_seconds.unwrap_or(f64::NAN)
+    );
+    let file = client.library_file(library.id).await?;
+    let mut rows = Vec::new();
+    for (label, vut) in &setting.vehicles {
+        let request = |method, seed| CreateCampaign {
+            case: setting.case.into(),
+            method,
+            library_id: Some(library.id),
+            vut: vut.clone(),
+            epsilon: setting.epsilon,
+            outside: None,
+            beta: setting.beta,
+            confidence: 0.9,
+            max_tests: 10_000_000,
+            seed,
+            n_min: None,
+            min_events: None,
+            guard_outside: false,
+        };
+        let mut ids = Vec::new();
+        for k in 0..replicates {
+            ids.push(
+                client
+                    .create_campaign(&request(Method::Library, seed + k))
+                    .await?
+                    .id,
+            );
+        }
+        // Grid cases: one campaign that does not assume the library covers
+        // the vehicle's failures (the outside guard, with ε 0.5 spread by
+        // the exposure so exploring tests weigh at most P(X∖Φ)/ε).
+        let guarded = setting.case != "car-following";
+        if guarded {
+            let mut request = request(Method::Library, seed);
+            request.epsilon = 0.5;
+            request.outside = Some(Outside::Ndd);
+            request.guard_outside = true;
+            ids.push(client.create_campaign(&request).await?.id);
+        }
+        let mut library_runs = watch(client, &ids, &format!("{} {label}", setting.case)).await?;
+        let guarded_run = guarded.then(|| library_runs.pop()).flatten();
+        let exact = exact_report(ExactQuestion {
+            case: setting.case.into(),
+            preset: Some(setting.preset.into()),
+            exposure: exposure.clone(),
+            vut: vut.clone(),
+            library_file: file.clone(),
+            epsilon: setting.epsilon,
+            outside: library_runs[0].outside,
+            beta: setting.beta,
+            confidence: 0.9,
+        })
+        .await?;
+        let (expected, source) = expected_ndd(&library_runs, exact.as_ref(), setting.beta);
+        let ndd_run = if expected.is_finite() && expected <= budget as f64 {
+            // Room for an unlucky run: five times the expected count.
+            let mut ndd = request(Method::Ndd, seed);
+            ndd.max_tests = ((5.0 * expected) as u64).max(100_000);
+            let id = client.create_campaign(&ndd).await?.id;
+            Some(watch(client, &[id], &format!("{} {label} ndd", setting.case)).await?[0].clone())
+        } else {
+            None
+        };
+        let (ndd_tests, ndd_source) = match &ndd_run {
+            Some(v) => (v.tests as f64, NddSource::Run),
+            None => (expected, source),
+        };
+        rows.push(Row {
+            case: setting.case,
+            preset: setting.preset,
+            exposure: library.exposure.clone(),
+            surrogate: setting.surrogate,
+            library_size: library.size.unwrap_or(0),
+            total_scenarios: library.total_scenarios,
+            vehicle: label,
+            epsilon: setting.epsilon,
+            beta: setting.beta,
+            library_runs,
+            guarded_run,
+            ndd_run,
+            ndd_tests,
+            ndd_source,
+            exact,
+            paper: setting.paper,
+        });
+    }
+    Ok(rows)
+}
+
+/// The NDD baseline's expected tests at β, 90%: from the exact `P(A)` where
+/// it exists, else from the median of the library campaigns' estimates.
+fn expected_ndd(
+    library_runs: &[CampaignView],
+    exact: Option<&ExactReport>,
+    beta: f64,
+) -> (f64, NddSource) {
+    if let Some(report) = exact {
+        return (report.ndd_tests, NddSource::AnalyticExact);
+    }
+    let mut estimates: Vec<f64> = library_runs.iter().filter_map(|v| v.estimate).collect();
+    estimates.sort_by(f64::total_cmp);
+    // The median; the lower middle one of an even count, as for the tests.
+    match estimates.get(estimates.len().saturating_sub(1) / 2) {
+        Some(&mu) if mu > 0.0 => (
+            expected_ndd_tests(mu, beta, z_for_confidence(0.9)),
+            NddSource::AnalyticEstimate,
+        ),
+        _ => (f64::INFINITY, NddSource::AnalyticEstimate),
+    }
+}
+
+/// Polls the campaigns `ids` with a bar each until all have stopped.
+async fn watch(client: &Client, ids: &[i64], label: &str) -> anyhow::Result<Vec<CampaignView>> {
+    let labels: Vec<String> = (0..ids.len())
+        .map(|k| {
+            if ids.len() == 1 {
+                label.to_owned()
+            } else {
+                format!("{label} ({})", k + 1)
+            }
+        })
+        .collect();
+    let bars = CampaignBars::new(&labels.iter().map(String::as_str).collect::<Vec<_>>());
+    loop {
+        let mut views = Vec::new();
+        for (k, &id) in ids.iter().enumerate() {
+            let view = client.campaign(id).await?;
+            bars.update(k, &view);
+            views.push(view);
+        }
+        if views.iter().all(|v| v.status.is_final()) {
+            return Ok(views);
+        }
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
+}
