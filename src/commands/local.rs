@@ -7,9 +7,10 @@ use crate::service::LocalService;
 use std::path::{Path, PathBuf};
 use tslg_api::{CreateLibrary, ExposureRequest, LibraryStatus, LibraryView, Outside};
 use tslg_method::exact::ExactReport;
-use tslg_method::registry::{open_case, CaseError, ExposureSource};
+use tslg_method::registry::{open_case, CaseError};
 use tslg_method::sampling::OutsideSpread;
 use tslg_worker::client::Client;
+use tslg_worker::prepared::exposure_source;
 
 /// A local coordinator and its workers; the scratch database is removed on
 /// [`Local::stop`].
@@ -101,14 +102,12 @@ pub struct ExactQuestion {
 /// (car-following: its scenarios are sequences).
 pub async fn exact_report(question: ExactQuestion) -> anyhow::Result<Option<ExactReport>> {
     tokio::task::spawn_blocking(move || {
-        let source = match question.exposure {
-            ExposureRequest::Builtin => ExposureSource::Builtin,
-            ExposureRequest::Table { name, text } => ExposureSource::Table { name, text },
-        };
-        let outside = match question.outside {
-            Outside::Uniform => OutsideSpread::Uniform,
-            Outside::Ndd => OutsideSpread::Ndd,
-        };
+        let source = exposure_source(&question.exposure);
+        let outside: OutsideSpread = question
+            .outside
+            .as_str()
+            .parse()
+            .map_err(anyhow::Error::msg)?;
         match open_case(&question.case, question.preset.as_deref(), &source)?.exact_report(
             &question.vut,
             &question.library_file,

@@ -8,6 +8,17 @@ use std::sync::Arc;
 use tslg_api::{CampaignPlan, ExposureRequest, Method};
 use tslg_method::registry::{open_case, CampaignTests, ExposureSource};
 
+/// The method's exposure source for an exposure given over the API.
+pub fn exposure_source(exposure: &ExposureRequest) -> ExposureSource {
+    match exposure {
+        ExposureRequest::Builtin => ExposureSource::Builtin,
+        ExposureRequest::Table { name, text } => ExposureSource::Table {
+            name: name.clone(),
+            text: text.clone(),
+        },
+    }
+}
+
 /// What the worker needs to run any test of one campaign.
 pub struct PreparedCampaign {
     pub tests: Arc<dyn CampaignTests>,
@@ -17,14 +28,11 @@ impl PreparedCampaign {
     /// Builds the sampler and vehicle from a plan (CPU work: call off the
     /// async runtime).
     pub fn new(plan: &CampaignPlan, library: Option<&[u8]>) -> anyhow::Result<Self> {
-        let exposure = match &plan.exposure {
-            ExposureRequest::Builtin => ExposureSource::Builtin,
-            ExposureRequest::Table { name, text } => ExposureSource::Table {
-                name: name.clone(),
-                text: text.clone(),
-            },
-        };
-        let case = open_case(&plan.case, Some(&plan.preset), &exposure)?;
+        let case = open_case(
+            &plan.case,
+            Some(&plan.preset),
+            &exposure_source(&plan.exposure),
+        )?;
         let fingerprint = case.exposure_fingerprint();
         anyhow::ensure!(
             fingerprint == plan.exposure_fingerprint,

@@ -367,14 +367,19 @@ fn expected_ndd(
     }
     let mut estimates: Vec<f64> = library_runs.iter().filter_map(|v| v.estimate).collect();
     estimates.sort_by(f64::total_cmp);
-    // The median; the lower middle one of an even count, as for the tests.
-    match estimates.get(estimates.len().saturating_sub(1) / 2) {
+    match lower_median(&estimates) {
         Some(&mu) if mu > 0.0 => (
             expected_ndd_tests(mu, beta, z_for_confidence(0.9)),
             NddSource::AnalyticEstimate,
         ),
         _ => (f64::INFINITY, NddSource::AnalyticEstimate),
     }
+}
+
+/// The median of sorted values, the lower middle one of an even count (a
+/// value that occurred); `None` when empty.
+pub fn lower_median<T>(sorted: &[T]) -> Option<&T> {
+    sorted.get(sorted.len().saturating_sub(1) / 2)
 }
 
 /// Polls the campaigns `ids` with a bar each until all have stopped.

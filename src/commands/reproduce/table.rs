@@ -1,7 +1,7 @@
 //! The reproduction's tables: Markdown (tests, estimates, every campaign)
 //! and CSV (one line per campaign, the row's figures repeated on each).
 
-use super::{NddSource, Row};
+use super::{lower_median, NddSource, Row};
 use std::fmt::Write as _;
 use tslg_api::CampaignView;
 
@@ -13,11 +13,9 @@ impl Row {
         tests
     }
 
-    /// The median test count of the library campaigns (the lower middle
-    /// one for an even count).
+    /// The median test count of the library campaigns ([`lower_median`]).
     pub fn median_library_tests(&self) -> u64 {
-        let tests = self.library_tests();
-        tests[(tests.len() - 1) / 2]
+        *lower_median(&self.library_tests()).expect("at least one library campaign")
     }
 
     /// The plain library campaigns, then the guarded one.
