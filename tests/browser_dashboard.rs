@@ -14,7 +14,7 @@ use std::os::unix::process::CommandExt;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 use support::*;
-use tslg_api::{CampaignStatus, Method};
+use tslg_api::{CampaignStatus, CreateCampaign, Method};
 
 const CHROMIUM: &str = "/usr/bin/chromium";
 const CHROMEDRIVER: &str = "/usr/bin/chromedriver";
@@ -256,5 +256,55 @@ async fn the_dashboard_follows_a_running_campaign_and_agrees_with_the_api() {
     assert_eq!(number(&shown("events").await), last.events);
     let estimate: f64 = shown("estimate").await.as_str().unwrap().parse().unwrap();
     assert_eq!(estimate, last.estimate.unwrap());
+    assert_eq!(
+        shown("outside-upper").await,
+        json!(""),
+        "an NDD campaign has no outside"
+    );
+
+    // A library campaign of a vehicle its surrogate does not cover: the
+    // page shows the outside bound, the guarded interval and the warning.
+    let plain = CreateCampaign {
+        n_min: Some(30),
+        ..campaign(Method::Library, library.id, "fvdm", 0.2, 3)
+    };
+    let id = client.create_campaign(&plain).await.unwrap().id;
+    let view = finished(&client, id, Duration::from_secs(120)).await;
+    browser
+        .goto(&format!("{}/campaigns/{id}?refresh=300", server.url))
+        .await
+        .unwrap();
+    until(
+        &browser,
+        "document.getElementById('status').textContent === 'converged'",
+        "the library campaign's page",
+    )
+    .await;
+    let upper: f64 = shown("outside-upper")
+        .await
+        .as_str()
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert_eq!(upper, view.outside_upper.unwrap());
+    let guarded: f64 = shown("guarded-interval")
+        .await
+        .as_str()
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert_eq!(guarded, view.guarded_ci_high.unwrap());
+    let warnings = eval(
+        &browser,
+        "[...document.querySelectorAll('#warnings li')].map(li => li.textContent)",
+    )
+    .await;
+    assert_eq!(
+        warnings,
+        json!(view.warnings),
+        "every warning, as the API words it"
+    );
+    assert!(!view.warnings.is_empty());
+    save("campaign-library.png", &browser.screenshot().await.unwrap());
     browser.close().await.unwrap();
 }

@@ -156,6 +156,13 @@ async function campaignPage() {
   set('rate', fmt.rate(c.tests_per_second), c.tests_per_second);
   set('left', fmt.seconds(c.seconds_left), c.seconds_left);
   set('detail', c.status_detail ?? `${c.case}, ${c.method}, vehicle ${fmt.vehicle(c.vut)}, seed ${c.seed}`);
+  // The outside bound and the guarded interval exist for library campaigns
+  // of grid cases (docs/statistics.md).
+  set('outside-upper', fmt.sci(c.outside_upper), c.outside_upper);
+  set('guarded-interval', c.guarded_ci_high == null ? '–'
+    : `[${fmt.sci(c.ci_low)}, ${fmt.sci(c.guarded_ci_high)}]`, c.guarded_ci_high);
+  document.getElementById('warnings').replaceChildren(
+    ...(c.warnings ?? []).map((w) => el('li', {}, w)));
   const share = progress(c);
   document.getElementById('progress').style.width = `${(share * 100).toFixed(1)}%`;
   const [estimate, halfWidth] = await Promise.all([
