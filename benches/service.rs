@@ -11,10 +11,10 @@ use tslg_api::{
     CreateCampaign, CreateLibrary, ExposureRequest, LeaseRequest, LibraryStatus, Method,
     ResultReport, SearchRequest,
 };
+use tslg_client::Client;
 use tslg_method::campaign::run_indexed_campaign;
 use tslg_method::estimator::StoppingRule;
 use tslg_method::registry::{open_case, ExposureSource};
-use tslg_worker::client::Client;
 
 fn request(tests: u64) -> CreateCampaign {
     CreateCampaign {
@@ -119,6 +119,7 @@ async fn round_trips(count: usize, library: bool) -> anyhow::Result<(Vec<f64>, f
                 include_tests: false,
                 offers: Vec::new(),
                 unhealthy: Vec::new(),
+                max_tests: None,
             })
             .await?
             .expect("work");
@@ -130,6 +131,7 @@ async fn round_trips(count: usize, library: bool) -> anyhow::Result<(Vec<f64>, f
             from: lease.start,
             to: lease.end,
             events: vec![],
+            packed_events: None,
             invalid: vec![],
             compute_seconds: 0.0,
             threads: 1,

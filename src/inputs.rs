@@ -85,10 +85,7 @@ pub fn stopping_rule(
     Ok(rule)
 }
 
-/// ε must lie in [0, 1).
+/// ε must be 0 or in the method's range.
 pub fn check_epsilon(epsilon: f64) -> anyhow::Result<()> {
-    if !(0.0..1.0).contains(&epsilon) {
-        bail!("--epsilon {epsilon} must be in [0, 1)");
-    }
-    Ok(())
+    tslg_method::sampling::check_epsilon(epsilon).map_err(|e| anyhow::anyhow!("--epsilon: {e}"))
 }

@@ -44,6 +44,10 @@ pub struct LeaseRequest {
     /// Programs this worker stopped running after repeated failures.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub unhealthy: Vec<UnhealthyProgram>,
+    /// The most tests this worker takes in one lease (a slow rig, a load
+    /// test); the coordinator's own sizing applies below it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_tests: Option<u64>,
 }
 
 /// An external program a worker has stopped offering: it failed
@@ -81,6 +85,9 @@ pub struct WorkerView {
     /// How many of those were invalid.
     #[serde(default)]
     pub invalid: u64,
+    /// Why it last gave a lease back unfinished, when it said.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub last_release_reason: Option<String>,
 }
 
 /// One test of a lease.
@@ -120,7 +127,7 @@ pub struct Lease {
     pub tests: Option<Vec<TestCase>>,
 }
 
-/// `POST /api/v1/leases/{id}/heartbeat` and `/release`.
+/// `POST /api/v1/leases/{id}/heartbeat`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct LeaseFence {
@@ -128,6 +135,45 @@ pub struct LeaseFence {
     pub attempt: i64,
     /// The lease's `key`, as handed out with this attempt.
     pub key: LeaseKey,
+}
+
+/// `POST /api/v1/leases/{id}/release`: the fence, and why the worker
+/// gives the rest of the lease back (logged by the coordinator and shown
+/// with the worker in `GET /api/v1/workers`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct LeaseRelease {
+    pub worker: String,
+    pub attempt: i64,
+    /// The lease's `key`, as handed out with this attempt.
+    pub key: LeaseKey,
+    /// Why (at most 2000 bytes): shutdown, an unhealthy program, a report
+    /// the coordinator refused.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
+}
+
+impl LeaseFence {
+    /// A release of the fenced lease, saying `reason`.
+    pub fn release(&self, reason: Option<String>) -> LeaseRelease {
+        LeaseRelease {
+            worker: self.worker.clone(),
+            attempt: self.attempt,
+            key: self.key.clone(),
+            reason,
+        }
+    }
+}
+
+impl LeaseRelease {
+    /// The fence part.
+    pub fn fence(&self) -> LeaseFence {
+        LeaseFence {
+            worker: self.worker.clone(),
+            attempt: self.attempt,
+            key: self.key.clone(),
+        }
+    }
 }
 
 /// The answer to a heartbeat: whether to go on.
@@ -158,11 +204,31 @@ pub struct InvalidResult {
     pub reason: String,
 }
 
+/// Most tests one report may cover (`to − from`): a longer range is
+/// reported in parts.
+pub const MAX_REPORT_TESTS: u64 = 1 << 22;
+/// Most events one report may carry (in `events` or `packed_events`): a
+/// worker splits a range with more into several reports, so a report stays
+/// a few megabytes whatever share of the tests has the event.
+pub const MAX_REPORT_EVENTS: usize = 65_536;
+/// Most invalid tests one report may carry (each with a reason of up to
+/// [`MAX_INVALID_REASON`] bytes).
+pub const MAX_REPORT_INVALID: usize = 512;
+/// Longest accepted reason of an invalid test, in bytes.
+pub const MAX_INVALID_REASON: usize = 2_000;
+/// The largest report these limits allow, in bytes of JSON (events as
+/// objects of two numbers, invalid tests with their reasons, and the
+/// rest): a coordinator's body limit below it refuses valid reports.
+pub const MAX_REPORT_BYTES: usize =
+    MAX_REPORT_EVENTS * 64 + MAX_REPORT_INVALID * (MAX_INVALID_REASON * 6 + 48) + 4096;
+
 /// `POST /api/v1/leases/{id}/results`: the outcomes of the tests
 /// `from..to` of the lease. Listed tests are events or invalid; every
 /// other index in the range had no event. Reports continue where the last
 /// one ended (`from` ≤ the lease's `resume_at`); a repeated report is
-/// acknowledged once.
+/// acknowledged once. Events come either as `events` or, compactly, as
+/// `packed_events` (see [`crate::packed`]), not both; at most
+/// [`MAX_REPORT_EVENTS`] of them and [`MAX_REPORT_INVALID`] invalid tests.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ResultReport {
@@ -174,10 +240,15 @@ pub struct ResultReport {
     pub to: u64,
     #[serde(default)]
     pub events: Vec<EventResult>,
+    /// The events packed ([`crate::packed`], indices from `from`), in
+    /// standard base64; instead of `events`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub packed_events: Option<String>,
     #[serde(default)]
     pub invalid: Vec<InvalidResult>,
-    /// Wall-clock seconds the worker spent on these tests, and on how many
-    /// threads; used to size later leases.
+    /// Wall-clock seconds the worker spent on these tests (at most the
+    /// time since the lease was handed to it), and on how many threads (at
+    /// most those it asked the lease for); used to size later leases.
     #[serde(default)]
     pub compute_seconds: f64,
     #[serde(default = "one")]
@@ -186,6 +257,37 @@ pub struct ResultReport {
 
 fn one() -> u32 {
     1
+}
+
+impl ResultReport {
+    /// The report's events however they were sent: the list, or the
+    /// packed form decoded.
+    pub fn event_list(&self) -> Result<Vec<(u64, f64)>, String> {
+        match (&self.packed_events, self.events.is_empty()) {
+            (None, _) => Ok(self.events.iter().map(|e| (e.index, e.weight)).collect()),
+            (Some(_), false) => {
+                Err("a report carries `events` or `packed_events`, not both".into())
+            }
+            (Some(text), true) => {
+                use base64::Engine;
+                let bytes = base64::engine::general_purpose::STANDARD
+                    .decode(text)
+                    .map_err(|e| format!("packed_events is not base64: {e}"))?;
+                crate::packed::unpack(self.from, &bytes).map_err(|e| e.to_string())
+            }
+        }
+    }
+
+    /// Sets `packed_events` to `events` (`(index, weight)`, strictly
+    /// increasing from `from`) and empties `events`.
+    pub fn pack_events(&mut self, events: &[(u64, f64)]) {
+        use base64::Engine;
+        self.events.clear();
+        self.packed_events = Some(
+            base64::engine::general_purpose::STANDARD
+                .encode(crate::packed::pack(self.from, events)),
+        );
+    }
 }
 
 /// The answer to a result report.

@@ -9,6 +9,7 @@
 mod campaign;
 mod lease;
 mod library;
+pub mod packed;
 
 pub use campaign::*;
 pub use lease::*;

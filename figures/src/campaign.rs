@@ -3,6 +3,7 @@
 //! number of valid tests `n` on a log axis, as in the paper's result figures.
 //! Points with `n = 0` have no place on a log axis and are left out.
 
+use crate::axis::{linear_top, log_range};
 use crate::style::{count, number, BAND, ESTIMATE, FONT, LIMIT, SIZE};
 use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
 use plotters::prelude::*;
@@ -24,16 +25,10 @@ fn plotted(points: &[HistoryPoint]) -> impl DoubleEndedIterator<Item = &HistoryP
     points.iter().filter(|p| p.tests > 0)
 }
 
-/// `[first, last]` tests, widened around a single point.
+/// `[first, last]` tests (at least a factor 2 apart, widened around a
+/// single point), drawable whatever the points say.
 fn test_range(points: &[HistoryPoint]) -> (f64, f64) {
-    let mut tests = plotted(points).map(|p| p.tests as f64);
-    let first = tests.next().unwrap_or(1.0);
-    let last = tests.next_back().unwrap_or(first);
-    if last > first {
-        (first, last)
-    } else {
-        ((first / 2.0).max(1.0), first * 2.0)
-    }
+    log_range(plotted(points).map(|p| p.tests as f64), 1.0, 1.0)
 }
 
 /// The estimate with its interval band against tests. The y axis runs from
@@ -41,12 +36,13 @@ fn test_range(points: &[HistoryPoint]) -> (f64, f64) {
 /// end; the band is clipped to it (early intervals are wide).
 pub fn estimate_svg(view: &CampaignView, points: &[HistoryPoint]) -> Result<String, FigureError> {
     let (x0, x1) = test_range(points);
-    let top = plotted(points)
-        .map(|p| p.estimate)
-        .chain(plotted(points).last().map(|p| p.ci_high))
-        .fold(0.0f64, f64::max);
-    let y1 = if top > 0.0 { top * 1.15 } else { 1e-6 };
-    let clip = |y: f64| y.clamp(0.0, y1);
+    let y1 = linear_top(
+        plotted(points)
+            .map(|p| p.estimate)
+            .chain(plotted(points).last().map(|p| p.ci_high)),
+        1.15,
+    );
+    let clip = |y: f64| if y.is_nan() { 0.0 } else { y.clamp(0.0, y1) };
     let mut band: Vec<(f64, f64)> = plotted(points)
         .map(|p| (p.tests as f64, clip(p.ci_high)))
         .collect();
@@ -89,16 +85,19 @@ pub fn relative_half_width_svg(
     let (x0, x1) = test_range(points);
     let line: Vec<(f64, f64)> = plotted(points)
         .filter_map(|p| p.relative_half_width.map(|r| (p.tests as f64, r)))
-        .filter(|&(_, r)| r > 0.0)
+        .filter(|&(_, r)| r.is_finite() && r > 0.0)
         .collect();
-    let low = line.iter().map(|&(_, r)| r).fold(view.beta, f64::min);
-    let high = line.iter().map(|&(_, r)| r).fold(view.beta, f64::max);
+    let (low, high) = log_range(
+        line.iter().map(|&(_, r)| r).chain([view.beta]),
+        1.5,
+        view.beta,
+    );
     let title = format!(
         "Campaign {}: relative half-width, β = {}",
         view.id, view.beta
     );
     let beta = view.beta;
-    let y = (low / 1.5..high * 1.5).log_scale();
+    let y = (low..high).log_scale();
     draw(
         &title,
         (x0..x1).log_scale(),

@@ -7,6 +7,7 @@
 //!   (the paper's result figures, Figs. 7, 11 and 15), and the numbers as CSV.
 //! - [`heatmap`]: values over a two-dimensional grid (a library's picture).
 
+pub mod axis;
 pub mod campaign;
 pub mod heatmap;
 mod style;

@@ -219,3 +219,62 @@ fn a_heatmap_draws_one_cell_per_positive_value_and_rejects_a_wrong_shape() {
         .to_string()
         .contains("5 values for a 4 × 3 grid"));
 }
+
+/// Draws both campaign figures on another thread; `None` when they take
+/// longer than `limit` (a hang: the figure code once walked a log axis from
+/// 0 forever for a campaign stored with β = 10⁻³¹⁰).
+fn drawn_within(
+    view: CampaignView,
+    points: Vec<HistoryPoint>,
+    limit: std::time::Duration,
+) -> Option<(String, String)> {
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let estimate = estimate_svg(&view, &points).unwrap();
+        let width = relative_half_width_svg(&view, &points).unwrap();
+        let _ = tx.send((estimate, width));
+    });
+    rx.recv_timeout(limit).ok()
+}
+
+#[test]
+fn degenerate_numbers_never_hang_a_figure() {
+    let point = |tests: u64, r: f64, estimate: f64| HistoryPoint {
+        tests,
+        indices: tests,
+        events: 3,
+        estimate,
+        half_width: r * estimate,
+        relative_half_width: Some(r),
+        ci_low: estimate * (1.0 - r),
+        ci_high: estimate * (1.0 + r),
+    };
+    let cases: Vec<(f64, Vec<HistoryPoint>)> = vec![
+        // β subnormal, ordinary history: the axis once reached 0.
+        (1e-310, history()),
+        (1e-310, vec![point(100, 0.5, 1e-3)]),
+        // Stored numbers of every kind of wrong.
+        (
+            0.2,
+            vec![
+                point(10, f64::NAN, f64::NAN),
+                point(20, f64::INFINITY, f64::INFINITY),
+            ],
+        ),
+        (
+            0.2,
+            vec![point(10, 1e-320, 1e-320), point(u64::MAX, 1e300, f64::MAX)],
+        ),
+        (f64::MIN_POSITIVE, vec![point(1, 0.0, 0.0)]),
+        (0.2, vec![]),
+    ];
+    for (beta, points) in cases {
+        let mut v = view();
+        v.beta = beta;
+        let drawn = drawn_within(v, points.clone(), std::time::Duration::from_secs(20));
+        let (estimate, width) =
+            drawn.unwrap_or_else(|| panic!("hung on β = {beta:e} with {} points", points.len()));
+        Document::parse(&estimate).expect("the estimate figure is XML");
+        Document::parse(&width).expect("the half-width figure is XML");
+    }
+}

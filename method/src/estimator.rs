@@ -13,6 +13,7 @@
 //! cancellation in `S₂ − S₁²/n` is harmless here: near the stopping point
 //! `S₂/(S₂ − S₁²/n) ≈ 1 + (z/β)²/n`, a loss of under two bits.
 
+use crate::number::Num;
 use serde::{Deserialize, Serialize};
 use statrs::distribution::{ContinuousCDF, Normal};
 use thiserror::Error;
@@ -152,15 +153,36 @@ pub fn z_for_confidence(confidence: f64) -> f64 {
         .inverse_cdf(1.0 - (1.0 - confidence) / 2.0)
 }
 
+/// The smallest β a campaign takes. Below it no campaign of this method
+/// finishes: even at a relative variance of 1 per test, `(z/β)²` is
+/// 2.7 × 10⁸ tests at 90 % confidence, and an NDD baseline needs about
+/// `1/μ` times more. It also keeps every figure's axis in normal numbers
+/// (a subnormal β once hung the coordinator's figure code).
+pub const MIN_BETA: f64 = 1e-4;
+/// The largest β: the half-width must stay below the estimate.
+pub const MAX_BETA: f64 = 0.99;
+/// Confidence levels a campaign takes: `z` from 0.67 to 4.9.
+pub const MIN_CONFIDENCE: f64 = 0.5;
+pub const MAX_CONFIDENCE: f64 = 0.999_999;
+/// The largest test budget (about 10¹⁵: years of simulation at 10⁷ tests
+/// a second, and exact in an `f64` and a SQLite integer).
+pub const MAX_TESTS_LIMIT: u64 = 1 << 50;
+/// The most events a campaign may require before it stops.
+pub const MAX_MIN_EVENTS: u64 = 1_000_000;
+
 /// Why a stopping rule is invalid.
 #[derive(Debug, Error, PartialEq)]
 pub enum RuleError {
-    #[error("beta = {0} must be in (0, 1)")]
+    #[error("beta = {} must be in [{MIN_BETA}, {MAX_BETA}]", Num(*.0))]
     Beta(f64),
-    #[error("confidence = {0} must be in (0, 1)")]
+    #[error("confidence = {} must be in [{MIN_CONFIDENCE}, {MAX_CONFIDENCE}]", Num(*.0))]
     Confidence(f64),
-    #[error("max_tests must be ≥ 1 and ≥ n_min ({n_min}), got {max_tests}")]
-    MaxTests { max_tests: u64, n_min: u64 },
+    #[error("max_tests = {0} must be in 1..=2^50 ({MAX_TESTS_LIMIT})")]
+    MaxTests(u64),
+    #[error("n_min = {n_min} must be in 1..=max_tests ({max_tests})")]
+    NMin { n_min: u64, max_tests: u64 },
+    #[error("min_events = {0} must be in 1..={MAX_MIN_EVENTS}")]
+    MinEvents(u64),
 }
 
 /// When a campaign stops: at the smallest `n ≥ n_min` with at least
@@ -225,18 +247,25 @@ impl StoppingRule {
         }
     }
 
+    /// Checks every field against the ranges the method makes sense in.
     pub fn validate(&self) -> Result<(), RuleError> {
-        if !(self.beta > 0.0 && self.beta < 1.0) {
+        if !(MIN_BETA..=MAX_BETA).contains(&self.beta) {
             return Err(RuleError::Beta(self.beta));
         }
-        if !(self.confidence > 0.0 && self.confidence < 1.0) {
+        if !(MIN_CONFIDENCE..=MAX_CONFIDENCE).contains(&self.confidence) {
             return Err(RuleError::Confidence(self.confidence));
         }
-        if self.max_tests == 0 || self.max_tests < self.n_min {
-            return Err(RuleError::MaxTests {
-                max_tests: self.max_tests,
+        if !(1..=MAX_TESTS_LIMIT).contains(&self.max_tests) {
+            return Err(RuleError::MaxTests(self.max_tests));
+        }
+        if !(1..=self.max_tests).contains(&self.n_min) {
+            return Err(RuleError::NMin {
                 n_min: self.n_min,
+                max_tests: self.max_tests,
             });
+        }
+        if !(1..=MAX_MIN_EVENTS).contains(&self.min_events) {
+            return Err(RuleError::MinEvents(self.min_events));
         }
         Ok(())
     }

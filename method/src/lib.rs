@@ -16,6 +16,7 @@ pub mod highway;
 pub mod library;
 pub mod mass;
 pub mod ndd_table;
+pub mod number;
 pub mod objective;
 pub mod outside;
 pub mod prefix;

@@ -47,9 +47,25 @@ impl std::str::FromStr for OutsideSpread {
     }
 }
 
+/// The smallest positive ε: a smaller share explores so rarely (one test
+/// in a million) that no campaign sees it, and tiny values only make the
+/// outside weights `P(x)/(ε/N)` overflow.
+pub const MIN_EPSILON: f64 = 1e-6;
+/// The largest ε: at least 0.1 % of the tests come from the library.
+pub const MAX_EPSILON: f64 = 0.999;
+
+/// Checks ε: 0 (no exploration) or in `[MIN_EPSILON, MAX_EPSILON]`.
+pub fn check_epsilon(epsilon: f64) -> Result<(), SamplingError> {
+    if epsilon == 0.0 || (MIN_EPSILON..=MAX_EPSILON).contains(&epsilon) {
+        Ok(())
+    } else {
+        Err(SamplingError::Epsilon(epsilon))
+    }
+}
+
 #[derive(Debug, Error, PartialEq)]
 pub enum SamplingError {
-    #[error("ε = {0} must be in [0, 1)")]
+    #[error("ε = {} must be 0 or in [{MIN_EPSILON}, {MAX_EPSILON}]", crate::number::Num(*.0))]
     Epsilon(f64),
     #[error("the library is empty: there is nothing to sample with weight 1 − ε")]
     EmptyLibrary,
@@ -97,9 +113,7 @@ impl LibraryDistribution {
         epsilon: f64,
         outside: OutsideSpread,
     ) -> Result<Self, SamplingError> {
-        if !(0.0..1.0).contains(&epsilon) {
-            return Err(SamplingError::Epsilon(epsilon));
-        }
+        check_epsilon(epsilon)?;
         let n = exposure.grid().len();
         if library.total_scenarios() != n {
             return Err(SamplingError::GridMismatch {

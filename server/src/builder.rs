@@ -10,7 +10,7 @@ use tslg_api::{BuildProgress, CreateLibrary, LibraryView, SearchRequest, Thresho
 use tslg_method::carfollow::PolicySolver;
 use tslg_method::library::{SearchMethod, Threshold};
 use tslg_method::progress::Progress;
-use tslg_method::registry::{open_case, BuildRequest, BuiltLibrary, ExposureSource, LibrarySearch};
+use tslg_method::registry::{open_case, BuildRequest, BuiltLibrary, LibrarySearch};
 
 /// The method's threshold and search from the request, validated; what the
 /// request leaves out is the case's default.
@@ -47,21 +47,14 @@ pub fn build_request(req: &CreateLibrary) -> Result<BuildRequest, String> {
     Ok(BuildRequest { threshold, search })
 }
 
-/// The exposure source of a request.
-pub fn exposure_source(req: &CreateLibrary) -> ExposureSource {
-    match &req.exposure {
-        tslg_api::ExposureRequest::Builtin => ExposureSource::Builtin,
-        tslg_api::ExposureRequest::Table { name, text } => ExposureSource::Table {
-            name: name.clone(),
-            text: text.clone(),
-        },
-    }
-}
-
 fn build(req: &CreateLibrary, progress: &Progress) -> Result<(BuiltLibrary, f64), String> {
     let started = Instant::now();
-    let case = open_case(&req.case, req.preset.as_deref(), &exposure_source(req))
-        .map_err(|e| e.to_string())?;
+    let case = open_case(
+        &req.case,
+        req.preset.as_deref(),
+        &tslg_client::wire::exposure_source(&req.exposure),
+    )
+    .map_err(|e| e.to_string())?;
     let request = build_request(req)?;
     let library = case
         .build_library_observed(&req.surrogate, &request, progress)

@@ -77,15 +77,42 @@ pub fn problem(status: StatusCode, detail: impl Into<String>) -> Response {
     response
 }
 
+/// The cause of a 500, carried to [`log_internal_errors`] in the
+/// response's extensions (a response is not the place to log it).
+#[derive(Clone)]
+pub struct InternalCause(pub std::sync::Arc<anyhow::Error>);
+
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
         let status = self.status();
-        let detail = match self {
-            ApiError::Internal(_) => "internal error; the cause is in the coordinator's log".into(),
-            other => other.to_string(),
-        };
-        problem(status, detail)
+        match self {
+            ApiError::Internal(cause) => {
+                let mut response = problem(
+                    status,
+                    "internal error; the cause is in the coordinator's log",
+                );
+                response
+                    .extensions_mut()
+                    .insert(InternalCause(std::sync::Arc::new(cause)));
+                response
+            }
+            other => problem(status, other.to_string()),
+        }
     }
+}
+
+/// Logs the cause of every 500 with the request that met it: the client
+/// gets an opaque problem, the operator the whole chain of causes.
+pub async fn log_internal_errors(
+    request: axum::extract::Request,
+    next: axum::middleware::Next,
+) -> Response {
+    let (method, path) = (request.method().clone(), request.uri().path().to_owned());
+    let response = next.run(request).await;
+    if let Some(InternalCause(cause)) = response.extensions().get::<InternalCause>() {
+        tracing::error!(%method, path, error = format!("{cause:#}"), "internal error");
+    }
+    response
 }
 
 /// A JSON body whose rejection is a problem response.

@@ -4,17 +4,20 @@
 //! estimator until the stopping rule holds. See `docs/architecture.md`.
 
 pub mod builder;
+pub mod campaign_start;
 pub mod config;
 pub mod db;
 pub mod error;
 pub mod history;
 pub mod lease_size;
 pub mod metrics;
+pub mod problem_io;
 pub mod routes;
 pub mod sampler_cache;
 pub mod state;
 pub mod store;
 pub mod throughput;
+pub mod validate;
 pub mod workers;
 
 pub use config::Config;
@@ -31,12 +34,20 @@ pub async fn serve(
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> anyhow::Result<()> {
     config.validate()?;
+    if config.max_body_bytes < tslg_api::MAX_REPORT_BYTES {
+        tracing::warn!(
+            max_body_bytes = config.max_body_bytes,
+            largest_report = tslg_api::MAX_REPORT_BYTES,
+            "the body limit is below the largest report a worker may send: reports with many \
+             events or invalid tests will be refused (413) and their leases released"
+        );
+    }
     let db = db::Database::open(&config.database_url, config.durability).await?;
     let state = state::AppState::new(db, config);
     builder::resume_builds(&state).await?;
     let address = listener.local_addr()?;
     tracing::info!(%address, "coordinator listening");
-    axum::serve(listener, routes::router(state))
+    axum::serve(problem_io::ProblemListener(listener), routes::router(state))
         .with_graceful_shutdown(shutdown)
         .await
         .context("server error")

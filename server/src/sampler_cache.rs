@@ -67,7 +67,7 @@ fn build(row: &CampaignRow, file: Option<&[u8]>) -> anyhow::Result<Arc<dyn Campa
         file,
         &vut,
         row.epsilon,
-        row.outside().as_str().parse().map_err(anyhow::Error::msg)?,
+        tslg_client::wire::outside_spread(row.outside()),
         row.seed(),
     )?)
 }

@@ -21,6 +21,8 @@ struct Entry {
     /// Tests of its reports accepted, and how many were invalid.
     tests: u64,
     invalid: u64,
+    /// Why it last gave a lease back, when it said.
+    last_release: Option<String>,
 }
 
 #[derive(Default)]
@@ -70,6 +72,7 @@ impl WorkerRegistry {
                 last_seen: Instant::now(),
                 tests: 0,
                 invalid: 0,
+                last_release: None,
             });
         entry.threads = request.threads;
         entry.offers = request.offers.clone();
@@ -85,6 +88,15 @@ impl WorkerRegistry {
         if let Some(entry) = workers.get_mut(worker) {
             entry.tests += tests;
             entry.invalid += invalid;
+            entry.last_seen = Instant::now();
+        }
+    }
+
+    /// Keeps why a worker gave a lease back.
+    pub fn released(&self, worker: &str, reason: &str) {
+        let mut workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(entry) = workers.get_mut(worker) {
+            entry.last_release = Some(reason.to_owned());
             entry.last_seen = Instant::now();
         }
     }
@@ -113,6 +125,7 @@ impl WorkerRegistry {
                 unhealthy: e.unhealthy.clone(),
                 tests: e.tests,
                 invalid: e.invalid,
+                last_release_reason: e.last_release.clone(),
             })
             .collect();
         list.sort_by(|a, b| a.last_seen_seconds.total_cmp(&b.last_seen_seconds));

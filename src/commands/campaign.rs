@@ -11,7 +11,7 @@ use tslg_api::{
     CreateCampaign, CreateLibrary, LibraryStatus, LibraryView, Method, SearchRequest,
     ThresholdRequest,
 };
-use tslg_worker::client::Client;
+use tslg_client::Client;
 
 pub fn start(args: &CampaignStartArgs) -> anyhow::Result<()> {
     let client = client(&args.server)?;

@@ -12,8 +12,8 @@ use std::time::{Duration, Instant};
 use tslg_api::{
     CampaignView, CreateCampaign, CreateLibrary, ExposureRequest, Method, SearchRequest,
 };
+use tslg_client::Client;
 use tslg_method::exact::ExactReport;
-use tslg_worker::client::Client;
 
 pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     tokio::runtime::Builder::new_multi_thread()

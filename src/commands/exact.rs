@@ -6,7 +6,7 @@ use crate::{CaseArgs, ExactArgs};
 use anyhow::Context;
 use tslg_method::case::Case;
 use tslg_method::cutin::CutIn;
-use tslg_method::estimator::z_for_confidence;
+use tslg_method::estimator::{z_for_confidence, StoppingRule};
 use tslg_method::exact::exact_report;
 use tslg_method::library::{build_library, LibraryRequest, SearchMethod, Threshold};
 use tslg_method::sampling::{LibraryDistribution, OutsideSpread};
@@ -14,11 +14,14 @@ use tslg_method::vehicle::{VehicleModel, BUILTIN_MODELS};
 
 pub fn run(args: &ExactArgs) -> anyhow::Result<()> {
     check_epsilon(args.epsilon)?;
-    for (name, value) in [("beta", args.beta), ("confidence", args.confidence)] {
-        if !(value > 0.0 && value < 1.0) {
-            anyhow::bail!("--{name} {value} must be in (0, 1)");
-        }
+    // The ranges a campaign takes (the rule's other fields do not matter here).
+    StoppingRule {
+        beta: args.beta,
+        confidence: args.confidence,
+        ..StoppingRule::new(args.beta, tslg_method::estimator::MAX_TESTS_LIMIT)
     }
+    .validate()
+    .map_err(|e| anyhow::anyhow!("--{e}"))?;
     let surrogate = parse_vehicle(&args.surrogate, "surrogate")?;
     let builtin = load_case(&CaseArgs {
         ndd_table: None,

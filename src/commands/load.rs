@@ -1,15 +1,17 @@
 //! `tslg load-test`: many simulated workers against one coordinator.
 //!
-//! It starts a never-converging NDD campaign (cut-in, IDM, β = 10⁻⁹) and
-//! runs `--workers` concurrent simulated workers, each making `--requests`
-//! rounds of: take a lease, run its tests for real (about a microsecond
-//! each), report them all. It times every lease and result request, then
-//! cancels the campaign and checks the books: the tests the coordinator
-//! acknowledged as new must be exactly its resolved prefix, and the events
-//! reported exactly its events, so no test was lost or counted twice. It
-//! fails (exit 1) on any refused or failed request or a mismatch. The
-//! coordinator's own lease size applies; start it with `--lease-size` to
-//! fix the work per request.
+//! It starts an NDD campaign that cannot converge within the test (cut-in,
+//! IDM, the smallest β a campaign takes) and runs `--workers` concurrent
+//! simulated workers, each making `--requests` rounds of: take a lease of
+//! at most `--lease-tests` tests (a worker's own cap, so a coordinator with
+//! adaptive lease sizes hands out what one round can run at once), run its
+//! tests for real (about a microsecond each), report them all. It times
+//! every lease and result request, then cancels the campaign, whatever
+//! happened (also on a failure, a timeout or Ctrl-C: a campaign left running
+//! would keep real workers busy), and checks the books: the tests the
+//! coordinator acknowledged as new must be exactly its resolved prefix, and
+//! the events reported exactly its events, so no test was lost or counted
+//! twice. It fails (exit 1) on any refused or failed request or a mismatch.
 
 use crate::commands::remote::client;
 use crate::ServerArgs;
@@ -17,7 +19,8 @@ use clap::Args;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tslg_api::{CreateCampaign, LeaseRequest, Method, ResultReport};
-use tslg_worker::client::Client;
+use tslg_client::Client;
+use tslg_method::estimator::MIN_BETA;
 use tslg_worker::prepared::{Cache, PreparedCampaign};
 
 #[derive(Debug, Args)]
@@ -33,6 +36,10 @@ pub struct LoadArgs {
     /// Lease-and-report rounds per worker.
     #[arg(long, default_value_t = 50)]
     pub requests: usize,
+    /// The most tests a simulated worker takes per lease (the coordinator
+    /// may give fewer: `--lease-size`, the campaign's budget).
+    #[arg(long, default_value_t = 100)]
+    pub lease_tests: u64,
     /// Give up (exit 1) after this many seconds.
     #[arg(long, default_value_t = 300.0)]
     pub time_limit: f64,
@@ -110,6 +117,10 @@ pub fn run(args: &LoadArgs) -> anyhow::Result<()> {
     anyhow::ensure!(args.workers >= 1, "--workers must be at least 1");
     anyhow::ensure!(args.requests >= 1, "--requests must be at least 1");
     anyhow::ensure!(
+        (1..=MAX_LEASE_TESTS).contains(&args.lease_tests),
+        "--lease-tests must be in 1..={MAX_LEASE_TESTS}"
+    );
+    anyhow::ensure!(
         args.time_limit.is_finite() && args.time_limit > 0.0,
         "--time-limit must be > 0"
     );
@@ -123,10 +134,34 @@ pub fn run(args: &LoadArgs) -> anyhow::Result<()> {
         .enable_all()
         .build()?;
     let limit = Duration::from_secs_f64(args.time_limit);
+    let shape = Shape {
+        workers: args.workers,
+        requests: args.requests,
+        lease_tests: args.lease_tests,
+    };
     let report = runtime.block_on(async {
-        tokio::time::timeout(limit, load(&admin, &worker, args.workers, args.requests))
-            .await
-            .map_err(|_| anyhow::anyhow!("the load test did not finish within {limit:?}"))?
+        let campaign = admin.create_campaign(&load_campaign()).await?;
+        let outcome = tokio::select! {
+            run = tokio::time::timeout(limit, load(&worker, campaign.id, shape)) => match run {
+                Ok(run) => run,
+                Err(_) => Err(anyhow::anyhow!("the load test did not finish within {limit:?}")),
+            },
+            _ = tokio::signal::ctrl_c() => Err(anyhow::anyhow!("interrupted")),
+        };
+        // Cancelled whatever happened: a campaign that cannot converge would
+        // keep every real worker busy.
+        let cancelled = admin.cancel_campaign(campaign.id).await;
+        let mut report =
+            outcome.map_err(|e| anyhow::anyhow!("{e}; campaign {} was cancelled", campaign.id))?;
+        let view = cancelled.map_err(|e| {
+            anyhow::anyhow!(
+                "cannot cancel the load test's campaign {}: {e}",
+                campaign.id
+            )
+        })?;
+        report.campaign_tests = view.indices;
+        report.campaign_events = view.events;
+        anyhow::Ok(report)
     })?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
@@ -170,61 +205,70 @@ fn print_table(r: &LoadReport) {
     }
 }
 
-async fn load(
-    admin: &Client,
-    worker: &Client,
+/// The most tests per lease the command asks for.
+const MAX_LEASE_TESTS: u64 = 1 << 20;
+
+/// How many simulated workers make how many rounds of leases how large.
+#[derive(Debug, Clone, Copy)]
+struct Shape {
     workers: usize,
     requests: usize,
-) -> anyhow::Result<LoadReport> {
-    let campaign = admin
-        .create_campaign(&CreateCampaign {
-            case: "cut-in".into(),
-            method: Method::Ndd,
-            library_id: None,
-            vut: serde_json::json!({"model": "idm"}),
-            epsilon: 0.1,
-            beta: 1e-9,
-            confidence: 0.9,
-            max_tests: 1 << 50,
-            seed: 1,
-            n_min: None,
-            min_events: None,
-            guard_outside: false,
-            outside: None,
-        })
-        .await?;
-    let prepared = Cache::default().get(worker, campaign.id).await?;
+    lease_tests: u64,
+}
+
+/// The campaign the load runs on: cut-in NDD of the IDM at the smallest β
+/// a campaign takes, which needs billions of tests (about 2.7 × 10⁹ at
+/// P(A) ≈ 10⁻³), so it cannot stop during a load test.
+pub fn load_campaign() -> CreateCampaign {
+    CreateCampaign {
+        case: "cut-in".into(),
+        method: Method::Ndd,
+        library_id: None,
+        vut: serde_json::json!({"model": "idm"}),
+        epsilon: 0.1,
+        beta: MIN_BETA,
+        confidence: 0.9,
+        max_tests: 1 << 50,
+        seed: 1,
+        n_min: None,
+        min_events: None,
+        guard_outside: false,
+        outside: None,
+    }
+}
+
+async fn load(worker: &Client, campaign_id: i64, shape: Shape) -> anyhow::Result<LoadReport> {
+    let prepared = Cache::default().get(worker, campaign_id).await?;
     let started = Instant::now();
-    let tasks: Vec<_> = (0..workers)
+    let tasks: Vec<_> = (0..shape.workers)
         .map(|w| {
             let (client, prepared) = (worker.clone(), Arc::clone(&prepared));
             tokio::spawn(simulated_worker(
                 client,
                 prepared,
                 format!("load-{w}"),
-                requests,
+                shape,
             ))
         })
         .collect();
-    let mut logs = Vec::with_capacity(workers);
+    let mut logs = Vec::with_capacity(shape.workers);
     for task in tasks {
         logs.push(task.await?);
     }
     let seconds = started.elapsed().as_secs_f64();
-    let view = admin.cancel_campaign(campaign.id).await?;
     let all = |f: fn(&WorkerLog) -> &Vec<f64>| logs.iter().flat_map(f).copied().collect();
     Ok(LoadReport {
-        campaign_id: campaign.id,
-        workers,
-        requests,
+        campaign_id,
+        workers: shape.workers,
+        requests: shape.requests,
         seconds,
         lease_ms: Percentiles::of(all(|l| &l.lease_ms)),
         result_ms: Percentiles::of(all(|l| &l.result_ms)),
         errors: logs.iter().flat_map(|l| l.errors.clone()).collect(),
         accepted_tests: logs.iter().map(|l| l.accepted).sum(),
-        campaign_tests: view.indices,
+        campaign_tests: 0,
         reported_events: logs.iter().map(|l| l.events).sum(),
-        campaign_events: view.events,
+        campaign_events: 0,
     })
 }
 
@@ -233,7 +277,7 @@ async fn simulated_worker(
     client: Client,
     prepared: Arc<PreparedCampaign>,
     name: String,
-    rounds: usize,
+    shape: Shape,
 ) -> WorkerLog {
     let mut log = WorkerLog::default();
     let ask = LeaseRequest {
@@ -242,8 +286,9 @@ async fn simulated_worker(
         include_tests: false,
         offers: Vec::new(),
         unhealthy: Vec::new(),
+        max_tests: Some(shape.lease_tests),
     };
-    for _ in 0..rounds {
+    for _ in 0..shape.requests {
         let asked = Instant::now();
         let lease = match client.claim(&ask).await {
             Ok(Some(lease)) => lease,
@@ -263,10 +308,7 @@ async fn simulated_worker(
             (from..to)
                 .filter_map(|index| {
                     let outcome = tests.tests.run(index);
-                    outcome.event.then_some(tslg_api::EventResult {
-                        index,
-                        weight: outcome.weight,
-                    })
+                    outcome.event.then_some((index, outcome.weight))
                 })
                 .collect::<Vec<_>>()
         })
@@ -276,7 +318,7 @@ async fn simulated_worker(
                 .push(format!("{name}: running lease {}'s tests failed", lease.id));
             continue;
         };
-        let report = ResultReport {
+        let mut report = ResultReport {
             worker: name.clone(),
             attempt: lease.attempt,
             key: lease.key.clone(),
@@ -285,14 +327,17 @@ async fn simulated_worker(
             compute_seconds: ran.elapsed().as_secs_f64(),
             threads: 1,
             invalid: Vec::new(),
-            events,
+            events: Vec::new(),
+            packed_events: None,
         };
+        let found = events.len() as u64;
+        report.pack_events(&events);
         let sent = Instant::now();
         match client.report(lease.id, &report).await {
             Ok(ack) => {
                 log.result_ms.push(sent.elapsed().as_secs_f64() * 1e3);
                 log.accepted += ack.accepted;
-                log.events += report.events.len() as u64;
+                log.events += found;
             }
             Err(e) => log.errors.push(format!("{name}: result: {e}")),
         }

@@ -6,11 +6,11 @@ use crate::commands::campaign::wait_for_library;
 use crate::service::LocalService;
 use std::path::{Path, PathBuf};
 use tslg_api::{CreateLibrary, ExposureRequest, LibraryStatus, LibraryView, Outside};
+use tslg_client::wire::exposure_source;
+use tslg_client::Client;
 use tslg_method::exact::ExactReport;
 use tslg_method::registry::{open_case, CaseError};
 use tslg_method::sampling::OutsideSpread;
-use tslg_worker::client::Client;
-use tslg_worker::prepared::exposure_source;
 
 /// A local coordinator and its workers; the scratch database is removed on
 /// [`Local::stop`].

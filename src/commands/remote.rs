@@ -5,7 +5,7 @@ use crate::{CaseArgs, ServerArgs};
 use anyhow::Context;
 use tslg_api::CampaignView;
 use tslg_api::ExposureRequest;
-use tslg_worker::client::Client;
+use tslg_client::Client;
 
 pub fn client(args: &ServerArgs) -> anyhow::Result<Client> {
     anyhow::ensure!(

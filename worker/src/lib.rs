@@ -3,10 +3,10 @@
 //! vehicle under test on a rayon pool and reports the outcomes.
 
 pub mod backoff;
-pub mod client;
 pub mod config;
 pub mod external;
 pub mod prepared;
+pub mod report_parts;
 pub mod run;
 
 pub use config::WorkerConfig;

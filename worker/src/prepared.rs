@@ -2,22 +2,11 @@
 //! per library (JSON for grid cases, the binary Q-table for car-following)
 //! and the campaign's tests built from them, cached per campaign.
 
-use crate::client::{CallError, Client};
 use std::collections::HashMap;
 use std::sync::Arc;
-use tslg_api::{CampaignPlan, ExposureRequest, Method};
-use tslg_method::registry::{open_case, CampaignTests, ExposureSource};
-
-/// The method's exposure source for an exposure given over the API.
-pub fn exposure_source(exposure: &ExposureRequest) -> ExposureSource {
-    match exposure {
-        ExposureRequest::Builtin => ExposureSource::Builtin,
-        ExposureRequest::Table { name, text } => ExposureSource::Table {
-            name: name.clone(),
-            text: text.clone(),
-        },
-    }
-}
+use tslg_api::{CampaignPlan, Method};
+use tslg_client::{wire, CallError, Client};
+use tslg_method::registry::{open_case, CampaignTests};
 
 /// What the worker needs to run any test of one campaign.
 pub struct PreparedCampaign {
@@ -31,7 +20,7 @@ impl PreparedCampaign {
         let case = open_case(
             &plan.case,
             Some(&plan.preset),
-            &exposure_source(&plan.exposure),
+            &wire::exposure_source(&plan.exposure),
         )?;
         let fingerprint = case.exposure_fingerprint();
         anyhow::ensure!(
@@ -40,7 +29,7 @@ impl PreparedCampaign {
             plan.campaign_id,
             plan.exposure_fingerprint
         );
-        let outside = plan.outside.as_str().parse().map_err(anyhow::Error::msg)?;
+        let outside = wire::outside_spread(plan.outside);
         let tests = case.campaign(library, &plan.vut, plan.epsilon, outside, plan.seed)?;
         Ok(Self { tests })
     }

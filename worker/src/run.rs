@@ -5,10 +5,10 @@
 //! the rest of the lease is given back.
 
 use crate::backoff::Backoff;
-use crate::client::{CallError, Client};
 use crate::config::WorkerConfig;
 use crate::external::{Program, ProgramRun, ProgramSettings, Programs};
 use crate::prepared::{Cache, PrepareError, PreparedCampaign};
+use crate::report_parts::{report_parts, truncated, PartLimits, Reporter};
 use rand::SeedableRng;
 use rayon::prelude::*;
 use std::future::Future;
@@ -17,7 +17,11 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tokio::sync::watch;
-use tslg_api::{EventResult, InvalidResult, Lease, LeaseFence, LeaseRequest, ResultReport};
+use tslg_api::{
+    EventResult, InvalidResult, Lease, LeaseFence, LeaseRelease, LeaseRequest, ResultReport,
+    MAX_INVALID_REASON,
+};
+use tslg_client::{CallError, Client};
 use tslg_method::registry::TestOutcome;
 
 /// Times a test whose simulation panics is tried before it is reported
@@ -127,6 +131,7 @@ pub async fn run(
             include_tests: false,
             offers: worker.programs.offers(),
             unhealthy: worker.programs.unhealthy(),
+            max_tests: None,
         };
         match worker.client.claim(&request).await {
             Ok(Some(lease)) => {
@@ -188,13 +193,15 @@ impl Worker {
         let prepared = match self.cache.get(&self.client, lease.campaign_id).await {
             Ok(p) => p,
             Err(e) => {
-                let _ = self.client.release(lease.id, &fence).await;
-                return Err(match e {
-                    PrepareError::Call(c) => c.into(),
+                let error = match e {
+                    PrepareError::Call(c) => anyhow::Error::from(c),
                     PrepareError::Unusable(reason) => {
                         anyhow::anyhow!("campaign {}: {reason}", lease.campaign_id)
                     }
-                });
+                };
+                self.give_back(&lease, &fence, &format!("cannot prepare: {error}"))
+                    .await;
+                return Err(error);
             }
         };
         let program = match prepared.tests.external() {
@@ -202,13 +209,13 @@ impl Worker {
             Some(vut) => match self.programs.get(&vut.external) {
                 Some(program) => Some(Arc::clone(program)),
                 None => {
-                    let _ = self.client.release(lease.id, &fence).await;
-                    anyhow::bail!(
+                    let reason = format!(
                         "campaign {} tests the external program `{}`, which this worker does \
                          not run",
-                        lease.campaign_id,
-                        vut.external
+                        lease.campaign_id, vut.external
                     );
+                    self.give_back(&lease, &fence, &reason).await;
+                    anyhow::bail!(reason);
                 }
             },
         };
@@ -231,6 +238,7 @@ impl Worker {
                 program.clone(),
             );
             let campaign = lease.campaign_id;
+            let chunk_start = at;
             let ran = tokio::task::spawn_blocking(move || {
                 pool.install(|| run_range(&p, program.as_deref(), campaign, at, to))
             })
@@ -241,49 +249,84 @@ impl Worker {
                 break;
             }
             let found = ran.events.len() as u64;
-            let report = ResultReport {
-                worker: self.name.clone(),
+            let who = Reporter {
+                worker: &self.name,
                 attempt: lease.attempt,
-                key: lease.key.clone(),
-                from: at,
-                to: ran.end,
-                events: ran.events,
-                invalid: ran.invalid,
-                compute_seconds: seconds,
+                key: &lease.key,
                 threads: self.threads as u32,
             };
-            match self.report(lease.id, &report).await {
-                Ok(ack) => {
-                    self.summary.tests += ack.accepted;
-                    self.summary.events += found;
-                    at = report.to;
-                    if !ack.proceed || at < to {
-                        break;
+            let parts = report_parts(
+                &who,
+                at,
+                ran.end,
+                seconds,
+                &ran.events,
+                &ran.invalid,
+                PartLimits::default(),
+            );
+            let mut proceed_after = true;
+            for part in &parts {
+                match self.report(lease.id, part).await {
+                    Ok(ack) => {
+                        self.summary.tests += ack.accepted;
+                        at = part.to;
+                        if !ack.proceed {
+                            proceed_after = false;
+                            break;
+                        }
+                    }
+                    Err(e) => {
+                        heartbeat.abort();
+                        if let CallError::Refused { status, detail } = &e {
+                            // A refusal will not change by waiting: give the rest
+                            // back at once, saying why, instead of letting it expire.
+                            let reason = format!("report refused ({status}): {detail}");
+                            self.give_back(&lease, &fence, &reason).await;
+                        }
+                        return Err(e.into());
                     }
                 }
-                Err(e) => {
-                    heartbeat.abort();
-                    return Err(e.into());
-                }
             }
-            let rate = (report.to - report.from) as f64 / seconds.max(1e-6);
+            self.summary.events += found;
+            if !proceed_after || at < to {
+                break;
+            }
+            let rate = (ran.end - chunk_start) as f64 / seconds.max(1e-6);
             chunk = ((rate * CHUNK_SECONDS) as u64).clamp(16, 1 << 22);
         }
         heartbeat.abort();
         let unhealthy = program.as_ref().and_then(|p| p.unhealthy());
         if at < lease.end && (self.stopping() || unhealthy.is_some()) {
-            self.client.release(lease.id, &fence).await?;
-            match unhealthy {
-                Some(u) => tracing::warn!(
-                    lease = lease.id,
-                    at,
-                    program = %u.name,
-                    "lease given back: the external program is unhealthy"
+            let reason = match &unhealthy {
+                Some(u) => format!(
+                    "the external program `{}` is unhealthy: {}",
+                    u.name, u.reason
                 ),
-                None => tracing::info!(lease = lease.id, at, "lease given back on shutdown"),
-            }
+                None => "the worker is shutting down".to_owned(),
+            };
+            self.give_back(&lease, &fence, &reason).await;
         }
         Ok(())
+    }
+
+    /// Releases the rest of `lease` for another worker at once, telling the
+    /// coordinator `reason` (it logs it and shows it with the worker).
+    async fn give_back(&self, lease: &Lease, fence: &LeaseFence, reason: &str) {
+        let release = LeaseRelease {
+            worker: fence.worker.clone(),
+            attempt: fence.attempt,
+            key: fence.key.clone(),
+            reason: Some(truncated(&sanitised(reason), MAX_INVALID_REASON)),
+        };
+        match self.client.release(lease.id, &release).await {
+            Ok(()) => tracing::warn!(lease = lease.id, reason, "lease given back"),
+            Err(e) => tracing::warn!(
+                lease = lease.id,
+                reason,
+                error = %e,
+                "could not give the lease back; it expires by itself"
+            ),
+        }
     }
 
     /// Reports, retrying while the coordinator is unreachable: the same
@@ -390,6 +433,14 @@ pub fn run_range(
         }
     }
     ran
+}
+
+/// `text` with control characters (but new lines) replaced by spaces, as
+/// the coordinator takes reasons.
+fn sanitised(text: &str) -> String {
+    text.chars()
+        .map(|c| if c.is_control() && c != '\n' { ' ' } else { c })
+        .collect()
 }
 
 /// The message a panic carried.

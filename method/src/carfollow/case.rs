@@ -85,11 +85,12 @@ pub const TD_TOLERANCE: f64 = 1e-10;
 impl PolicySolver {
     pub fn validate(&self) -> Result<(), String> {
         match *self {
-            PolicySolver::TemporalDifference { alpha, .. }
-                if !(alpha.is_finite() && alpha > 0.0 && alpha <= 1.0) =>
-            {
+            // Below 10⁻³ the TD iteration would need thousands of sweeps
+            // per digit of its tolerance.
+            PolicySolver::TemporalDifference { alpha, .. } if !(1e-3..=1.0).contains(&alpha) => {
                 Err(format!(
-                    "TD learning rate alpha = {alpha} must be in (0, 1]"
+                    "TD learning rate alpha = {} must be in [0.001, 1]",
+                    crate::number::Num(alpha)
                 ))
             }
             _ => Ok(()),

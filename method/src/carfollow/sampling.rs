@@ -96,9 +96,7 @@ impl FollowSampler {
         epsilon: f64,
         outside: OutsideSpread,
     ) -> Result<Self, SamplingError> {
-        if !(0.0..1.0).contains(&epsilon) {
-            return Err(SamplingError::Epsilon(epsilon));
-        }
+        crate::sampling::check_epsilon(epsilon)?;
         if epsilon == 0.0 {
             return Err(SamplingError::NoExploration);
         }

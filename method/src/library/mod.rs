@@ -32,19 +32,21 @@ impl Default for Threshold {
 /// A threshold parameter outside its range.
 #[derive(Debug, Error, PartialEq)]
 pub enum ThresholdError {
-    #[error("threshold multiplier m = {0} must be a finite number > 0")]
+    #[error("threshold multiplier m = {} must be in [1e-6, 1e6]", crate::number::Num(*.0))]
     BadMultiplier(f64),
-    #[error("absolute threshold γ = {0} must be a finite number ≥ 0")]
+    #[error("absolute threshold γ = {} must be in [0, 1] (a criticality P(S|x) P(x) is at most 1)", crate::number::Num(*.0))]
     BadAbsolute(f64),
 }
 
 impl Threshold {
+    /// Checks the parameter: `m` in `[10⁻⁶, 10⁶]` (γ from a millionth to a
+    /// million times the mean criticality), `γ` in `[0, 1]`.
     pub fn validate(&self) -> Result<(), ThresholdError> {
         match *self {
-            Threshold::Relative { m } if !(m.is_finite() && m > 0.0) => {
+            Threshold::Relative { m } if !(1e-6..=1e6).contains(&m) => {
                 Err(ThresholdError::BadMultiplier(m))
             }
-            Threshold::Absolute { gamma } if !(gamma.is_finite() && gamma >= 0.0) => {
+            Threshold::Absolute { gamma } if !(0.0..=1.0).contains(&gamma) => {
                 Err(ThresholdError::BadAbsolute(gamma))
             }
             _ => Ok(()),

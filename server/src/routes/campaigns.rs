@@ -1,26 +1,18 @@
 //! `/api/v1/campaigns`: starting, watching and cancelling campaigns.
 
+use crate::campaign_start;
 use crate::error::{ApiError, ApiJson};
 use crate::history;
 use crate::routes::{ApiPath, ApiQuery};
 use crate::state::AppState;
-use crate::store::campaigns::{self, NewCampaign};
-use crate::store::libraries;
+use crate::store::campaigns;
 use axum::extract::State;
 use axum::http::{header, StatusCode};
 use axum::response::IntoResponse;
 use axum::Json;
 use tslg_api::{
-    CampaignList, CampaignPlan, CampaignStatus, CampaignView, CreateCampaign, History,
-    LibraryStatus, Method, Outside, Problem,
+    CampaignList, CampaignPlan, CampaignView, CreateCampaign, History, Method, Problem,
 };
-use tslg_method::estimator::{default_n_min, StoppingRule, DEFAULT_MIN_EVENTS};
-use tslg_method::external::ExternalVut;
-use tslg_method::registry::{exploring_share, open_case, ExposureSource, SEQUENTIAL_CASES};
-use tslg_method::sampling::OutsideSpread;
-
-/// Largest accepted test budget.
-const MAX_TESTS_LIMIT: u64 = 1 << 50;
 
 /// Starts a campaign. It runs as soon as its library is ready.
 #[utoipa::path(post, path = "/api/v1/campaigns", request_body = CreateCampaign, responses(
@@ -30,164 +22,7 @@ pub async fn create(
     State(state): State<AppState>,
     ApiJson(req): ApiJson<CreateCampaign>,
 ) -> Result<impl IntoResponse, ApiError> {
-    let bad = |m: String| ApiError::Unprocessable(m);
-    if !(0.0..1.0).contains(&req.epsilon) {
-        return Err(bad(format!("epsilon = {} must be in [0, 1)", req.epsilon)));
-    }
-    let rule = StoppingRule {
-        beta: req.beta,
-        confidence: req.confidence,
-        n_min: req.n_min.unwrap_or_else(|| {
-            default_n_min(
-                exploring_share(&req.case, req.method == Method::Library, req.epsilon),
-                req.max_tests,
-            )
-        }),
-        min_events: req.min_events.unwrap_or(DEFAULT_MIN_EVENTS),
-        max_tests: req.max_tests,
-        guard_outside: req.guard_outside,
-    };
-    rule.validate().map_err(|e| bad(e.to_string()))?;
-    if rule.n_min == 0 {
-        return Err(bad("n_min must be at least 1".into()));
-    }
-    if req.max_tests > MAX_TESTS_LIMIT {
-        return Err(bad(format!(
-            "max_tests = {} exceeds the limit 2^50",
-            req.max_tests
-        )));
-    }
-    if req.guard_outside && req.method == Method::Ndd {
-        return Err(bad(
-            "guard_outside bounds the failure mass outside a library; an ndd campaign samples \
-             every scenario by its exposure and has no outside to guard"
-                .into(),
-        ));
-    }
-    if req.guard_outside && SEQUENTIAL_CASES.contains(&req.case.as_str()) {
-        return Err(bad(format!(
-            "guard_outside applies to the grid cases (cut-in, highway-exit): a {} campaign \
-             explores per decision, and no bound on its outside mass is defined",
-            req.case
-        )));
-    }
-    let library = match (req.method, req.library_id) {
-        (Method::Library, None) => {
-            return Err(bad("method `library` needs a library_id".into()));
-        }
-        (_, Some(id)) => Some(
-            libraries::get(&state.db.read, id)
-                .await
-                .map_err(|_| bad(format!("library_id {id} does not name a library")))?,
-        ),
-        (Method::Ndd, None) => None,
-    };
-    if let Some(lib) = &library {
-        if lib.case_name != req.case {
-            return Err(bad(format!(
-                "library {} was built for case `{}`, not `{}`",
-                lib.id, lib.case_name, req.case
-            )));
-        }
-        if lib.status() == LibraryStatus::Failed && req.method == Method::Library {
-            return Err(bad(format!(
-                "library {} failed to build: {}",
-                lib.id,
-                lib.error.as_deref().unwrap_or("unknown reason")
-            )));
-        }
-    }
-    let exposure = match &library {
-        Some(lib) => match &lib.exposure_table {
-            Some(text) => ExposureSource::Table {
-                name: lib.exposure_name.clone(),
-                text: text.clone(),
-            },
-            None => ExposureSource::Builtin,
-        },
-        None => ExposureSource::Builtin,
-    };
-    let preset = library.as_ref().map(|l| l.preset.clone());
-    // A ready library's file, to prepare the campaign's tests now: what a
-    // worker could not prepare must be refused here, not leased forever.
-    let file = match &library {
-        Some(lib) if req.method == Method::Library && lib.status() == LibraryStatus::Ready => Some(
-            libraries::file(&state.db.read, lib.id)
-                .await?
-                .ok_or_else(|| {
-                    ApiError::Internal(anyhow::anyhow!("ready library {} has no file", lib.id))
-                })?
-                .bytes,
-        ),
-        _ => None,
-    };
-    let prepare = req.method == Method::Ndd || file.is_some();
-    let (case_name, vut, epsilon, requested, seed) = (
-        req.case.clone(),
-        req.vut.clone(),
-        req.epsilon,
-        req.outside,
-        req.seed,
-    );
-    let source = exposure.clone();
-    let (case, vut, outside, tests) = tokio::task::spawn_blocking(move || {
-        let case = open_case(&case_name, preset.as_deref(), &source)?;
-        let vut = case.normalise_vehicle(&vut)?;
-        let outside = match requested {
-            Some(Outside::Uniform) => OutsideSpread::Uniform,
-            Some(Outside::Ndd) => OutsideSpread::Ndd,
-            None => case.default_outside(),
-        };
-        let tests = if prepare {
-            Some(case.campaign(file.as_deref(), &vut, epsilon, outside, seed)?)
-        } else {
-            None
-        };
-        Ok::<_, tslg_method::registry::CaseError>((case, vut, outside, tests))
-    })
-    .await
-    .map_err(|e| ApiError::Internal(e.into()))?
-    .map_err(|e| bad(e.to_string()))?;
-    let outside = match outside {
-        OutsideSpread::Uniform => Outside::Uniform,
-        OutsideSpread::Ndd => Outside::Ndd,
-    };
-    // Only workers offering an external program get its tests.
-    let requires = ExternalVut::from_spec(&vut)
-        .and_then(Result::ok)
-        .map(|e| e.requirement(case.name()));
-    let status = match &library {
-        Some(lib) if req.method == Method::Library && lib.status() == LibraryStatus::Building => {
-            CampaignStatus::Pending
-        }
-        _ => CampaignStatus::Running,
-    };
-    let row = campaigns::insert(
-        &state.db.write,
-        &NewCampaign {
-            case_name: case.name().to_owned(),
-            preset: case.preset(),
-            method: req.method,
-            library_id: req.library_id,
-            exposure_name: case.exposure_name().to_owned(),
-            exposure_fingerprint: case.exposure_fingerprint(),
-            exposure_table: match exposure {
-                ExposureSource::Table { text, .. } => Some(text),
-                ExposureSource::Builtin => None,
-            },
-            vut: vut.to_string(),
-            requires,
-            epsilon: req.epsilon,
-            outside,
-            rule,
-            seed: req.seed,
-            status,
-        },
-    )
-    .await?;
-    if let Some(tests) = tests {
-        state.samplers.insert(row.id, tests);
-    }
+    let row = campaign_start::start(&state, req).await?;
     let location = format!("/api/v1/campaigns/{}", row.id);
     Ok((
         StatusCode::CREATED,

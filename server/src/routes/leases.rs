@@ -8,11 +8,13 @@ use axum::extract::State;
 use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
 use axum::Json;
+use std::sync::Arc;
 use tslg_api::{
-    HeartbeatAck, Lease, LeaseFence, LeaseKey, LeaseRequest, Problem, ResultAck, ResultReport,
-    TestCase, WorkerList,
+    HeartbeatAck, Lease, LeaseFence, LeaseKey, LeaseRelease, LeaseRequest, Method, Problem,
+    ResultAck, ResultReport, TestCase, WorkerList, MAX_INVALID_REASON,
 };
 use tslg_method::external::{check_program_name, ExternalMode};
+use tslg_method::registry::CampaignTests;
 
 /// Most programs' offers and unhealthy reports one request may carry.
 const MAX_OFFERS: usize = 256;
@@ -37,24 +39,28 @@ pub async fn claim(
     ApiJson(req): ApiJson<LeaseRequest>,
 ) -> Result<Response, ApiError> {
     check_worker(&req.worker)?;
-    if !(1..=4096).contains(&req.threads) {
+    if !(1..=leases::MAX_THREADS).contains(&req.threads) {
         return Err(ApiError::Unprocessable(format!(
-            "threads = {} must be in 1..=4096",
-            req.threads
+            "threads = {} must be in 1..={}",
+            req.threads,
+            leases::MAX_THREADS
         )));
+    }
+    if req.max_tests == Some(0) {
+        return Err(ApiError::Unprocessable(
+            "max_tests = 0: a lease holds at least one test".into(),
+        ));
     }
     check_programs(&req)?;
     state.workers.seen(&req);
-    let Some(row) = leases::claim(
-        &state.db,
-        &state.config,
-        &req.worker,
-        req.threads,
-        req.include_tests,
-        &req.offers,
-    )
-    .await?
-    else {
+    let ask = leases::Claim {
+        worker: &req.worker,
+        threads: req.threads,
+        inline: req.include_tests,
+        offers: &req.offers,
+        max_tests: req.max_tests,
+    };
+    let Some(row) = leases::claim(&state.db, &state.config, &ask).await? else {
         return Ok(StatusCode::NO_CONTENT.into_response());
     };
     let tests = if req.include_tests {
@@ -169,17 +175,32 @@ pub async fn heartbeat(
     ))
 }
 
-/// Gives an unfinished lease back, to be handed out again at once.
+/// Gives an unfinished lease back, to be handed out again at once, saying
+/// why.
 #[utoipa::path(post, path = "/api/v1/leases/{id}/release", params(("id" = i64, Path)),
-    request_body = LeaseFence, responses(
-    (status = 204, description = "Released"), (status = 404, body = Problem), (status = 409, body = Problem)))]
+    request_body = LeaseRelease, responses(
+    (status = 204, description = "Released"), (status = 404, body = Problem), (status = 409, body = Problem),
+    (status = 422, body = Problem)))]
 pub async fn release(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
-    ApiJson(fence): ApiJson<LeaseFence>,
+    ApiJson(release): ApiJson<LeaseRelease>,
 ) -> Result<StatusCode, ApiError> {
-    let lease = leases::release(&state.db, id, &fence).await?;
-    tracing::info!(lease = id, resume_at = lease.resume_at, "lease released");
+    let reason = release.reason.as_deref().unwrap_or("no reason given");
+    if reason.len() > MAX_INVALID_REASON || reason.chars().any(|c| c.is_control() && c != '\n') {
+        return Err(ApiError::Unprocessable(format!(
+            "the reason must be at most {MAX_INVALID_REASON} bytes without control characters"
+        )));
+    }
+    let lease = leases::release(&state.db, id, &release.fence()).await?;
+    state.workers.released(&release.worker, reason);
+    tracing::info!(
+        lease = id,
+        worker = %release.worker,
+        resume_at = lease.resume_at,
+        reason,
+        "lease released"
+    );
     Ok(StatusCode::NO_CONTENT)
 }
 
@@ -196,13 +217,23 @@ pub async fn results(
 ) -> Result<Json<ResultAck>, ApiError> {
     check_worker(&report.worker)?;
     let checked = results::check_report(&report)?;
-    if !report.events.is_empty() {
-        verify_weights(&state, id, &report).await?;
+    let lease = leases::get(&mut *state.db.read.acquire().await?, id).await?;
+    let campaign = campaigns::get(&state.db.read, lease.campaign_id).await?;
+    let tests = if campaign.status().is_final() {
+        None
+    } else {
+        Some(state.samplers.get(&state.db, &campaign).await?)
+    };
+    if let Some(tests) = &tests {
+        if !checked.events.is_empty() {
+            verify_weights(tests, &checked).await?;
+        }
     }
+    let library_tests = tests.filter(|_| campaign.method() == Method::Library);
     let recorded = results::record(
         &state.db,
         &state.config,
-        &state.samplers,
+        library_tests,
         id,
         &report,
         &checked,
@@ -231,21 +262,15 @@ pub async fn results(
 /// the worker samples differently (another version, another library) and its
 /// results must not enter the estimate.
 async fn verify_weights(
-    state: &AppState,
-    lease_id: i64,
-    report: &ResultReport,
+    tests: &Arc<dyn CampaignTests>,
+    report: &results::CheckedReport,
 ) -> Result<(), ApiError> {
-    let lease = leases::get(&mut *state.db.read.acquire().await?, lease_id).await?;
-    let campaign = campaigns::get(&state.db.read, lease.campaign_id).await?;
-    if campaign.status().is_final() {
-        return Ok(());
-    }
-    let tests = state.samplers.get(&state.db, &campaign).await?;
+    let tests = Arc::clone(tests);
     let events = report.events.clone();
     let checked = tokio::task::spawn_blocking(move || {
         events
             .iter()
-            .try_for_each(|e| tests.check_event(e.index, e.weight))
+            .try_for_each(|&(index, weight)| tests.check_event(index, weight))
     })
     .await
     .map_err(|e| ApiError::Internal(e.into()))?;

@@ -1,6 +1,6 @@
 //! `/api/v1/libraries`: build requests, state and files.
 
-use crate::builder::{build_request, exposure_source, spawn_build};
+use crate::builder::{build_request, spawn_build};
 use crate::error::{ApiError, ApiJson};
 use crate::routes::ApiPath;
 use crate::state::AppState;
@@ -33,7 +33,7 @@ pub async fn create(
         let case = open_case(
             &checked.case,
             checked.preset.as_deref(),
-            &exposure_source(&checked),
+            &tslg_client::wire::exposure_source(&checked.exposure),
         )?;
         case.check_request(&request)?;
         let surrogate = case.normalise_vehicle(&checked.surrogate)?;

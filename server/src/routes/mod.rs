@@ -78,6 +78,8 @@ pub fn router(state: AppState) -> Router {
         .method_not_allowed_fallback(method_not_allowed)
         .layer(DefaultBodyLimit::max(limit))
         .layer(from_fn_with_state(state.clone(), refuse_large_bodies))
+        .layer(axum::middleware::from_fn(refuse_long_uris))
+        .layer(axum::middleware::from_fn(crate::error::log_internal_errors))
         .layer(from_fn_with_state(state.clone(), crate::metrics::observe))
         .layer(tower_http::trace::TraceLayer::new_for_http())
         .with_state(state)
@@ -107,8 +109,35 @@ async fn refuse_large_bodies(
     }
 }
 
+/// The longest request target (path and query) the API takes: its
+/// longest URL, a history query, is under a hundred bytes.
+pub const MAX_URI_BYTES: usize = 8192;
+
+/// Refuses a request target over [`MAX_URI_BYTES`] with 414 before routing.
+/// (Targets over 65,534 bytes hyper refuses itself; [`crate::problem_io`]
+/// gives that answer its problem body.)
+async fn refuse_long_uris(
+    request: axum::extract::Request,
+    next: axum::middleware::Next,
+) -> axum::response::Response {
+    let length = request
+        .uri()
+        .path_and_query()
+        .map_or(0, |p| p.as_str().len());
+    if length > MAX_URI_BYTES {
+        return problem(
+            StatusCode::URI_TOO_LONG,
+            format!("the request target has {length} bytes; at most {MAX_URI_BYTES}"),
+        );
+    }
+    next.run(request).await
+}
+
 async fn not_found(uri: axum::http::Uri) -> ApiError {
-    ApiError::NotFound(format!("no route for {}", uri.path()))
+    let path = uri.path();
+    let shown: String = path.chars().take(200).collect();
+    let more = if shown.len() < path.len() { "…" } else { "" };
+    ApiError::NotFound(format!("no route for {shown}{more}"))
 }
 
 async fn method_not_allowed(

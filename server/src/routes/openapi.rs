@@ -50,7 +50,7 @@ pub async fn document(State(state): State<AppState>) -> Json<Value> {
 }
 
 /// Who may call an operation: the router's groups (`routes/mod.rs`);
-/// `None` for the open ones. `tests/service_access.rs` checks the router
+/// `None` for the open ones. `tests/it/service_access.rs` checks the router
 /// and `scripts/fuzz-api` checks this against it (schemathesis's
 /// `ignored_auth`).
 fn role_of(path: &str, method: &str) -> Option<Role> {

@@ -122,14 +122,11 @@ impl CampaignRow {
     }
 
     pub fn exposure_source(&self) -> ExposureSource {
-        super::exposure_source(&self.exposure_name, self.exposure_table.as_ref())
+        tslg_client::wire::stored_exposure(&self.exposure_name, self.exposure_table.as_ref())
     }
 
     pub fn exposure_request(&self) -> ExposureRequest {
-        match self.exposure_source() {
-            ExposureSource::Builtin => ExposureRequest::Builtin,
-            ExposureSource::Table { name, text } => ExposureRequest::Table { name, text },
-        }
+        tslg_client::wire::exposure_request(self.exposure_source())
     }
 
     /// `n (rₙ/β)²` valid tests, at least `n_min`, once the prefix has

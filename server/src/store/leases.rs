@@ -23,10 +23,20 @@ pub struct LeaseRow {
     pub expires_at: i64,
     pub state: String,
     pub key: String,
+    /// Unix ms when the current attempt was handed out.
+    pub claimed_at: i64,
+    /// The threads the current attempt was asked for.
+    pub threads: i64,
 }
 
-pub const COLUMNS: &str =
-    "id, campaign_id, start_index, end_index, resume_at, attempt, worker, expires_at, state, key";
+pub const COLUMNS: &str = "id, campaign_id, start_index, end_index, resume_at, attempt, worker, \
+    expires_at, state, key, claimed_at, threads";
+
+/// Most threads a worker may declare.
+pub const MAX_THREADS: u32 = 4096;
+/// The longest a lease's work is expected to take for fair sharing, in
+/// milliseconds (a day): a campaign's turn never moves further ahead.
+const MAX_EXPECTED_MS: i64 = 86_400_000;
 
 /// A fresh lease key: 128 bits from the operating system's generator, as
 /// 32 hex digits.
@@ -36,6 +46,19 @@ fn new_key() -> String {
 
 fn ttl_ms(config: &Config) -> i64 {
     (config.lease_ttl_seconds * 1000.0) as i64
+}
+
+/// Who asks for work and what it takes.
+#[derive(Debug, Clone, Copy)]
+pub struct Claim<'a> {
+    pub worker: &'a str,
+    pub threads: u32,
+    /// The lease lists its tests (grid cases only; capped in size).
+    pub inline: bool,
+    /// The external programs the worker runs, `NAME:case:mode`.
+    pub offers: &'a [String],
+    /// The most tests the worker takes in one lease.
+    pub max_tests: Option<u64>,
 }
 
 /// Hands out work: first a lease that expired (its holder is presumed
@@ -50,18 +73,22 @@ fn ttl_ms(config: &Config) -> i64 {
 pub async fn claim(
     db: &Database,
     config: &Config,
-    worker: &str,
-    threads: u32,
-    inline: bool,
-    offers: &[String],
+    ask: &Claim<'_>,
 ) -> Result<Option<LeaseRow>, ApiError> {
+    let Claim {
+        worker,
+        threads,
+        inline,
+        offers,
+        max_tests,
+    } = *ask;
     let now = now_ms();
     let expires = now + ttl_ms(config);
-    let span_limit = if inline {
-        MAX_INLINE_LEASE as i64
-    } else {
-        i64::MAX
-    };
+    let mut span_limit = if inline { MAX_INLINE_LEASE } else { u64::MAX };
+    if let Some(most) = max_tests {
+        span_limit = span_limit.min(most);
+    }
+    let span_limit = span_limit.min(i64::MAX as u64) as i64;
     // A client that needs each test's scenario in the lease can only take
     // campaigns whose scenarios are fixed before the test runs.
     let planned_only = if inline {
@@ -74,7 +101,8 @@ pub async fn claim(
     let runnable = "AND (c.requires IS NULL OR c.requires IN (SELECT value FROM json_each(?)))";
     let mut tx = db.write.begin().await?;
     let sql = format!(
-        "UPDATE leases SET attempt = attempt + 1, worker = ?, expires_at = ?, key = ? \
+        "UPDATE leases SET attempt = attempt + 1, worker = ?, expires_at = ?, key = ?, \
+             claimed_at = ?, threads = ? \
          WHERE id = (SELECT l.id FROM leases l JOIN campaigns c ON c.id = l.campaign_id \
                      WHERE l.state = 'active' AND l.expires_at < ? AND c.status = 'running' \
                        AND l.end_index - l.resume_at <= ? {planned_only} {runnable} \
@@ -85,6 +113,8 @@ pub async fn claim(
         .bind(worker)
         .bind(expires)
         .bind(new_key())
+        .bind(now)
+        .bind(threads)
         .bind(now)
         .bind(span_limit)
         .bind(&offered)
@@ -111,10 +141,7 @@ pub async fn claim(
     else {
         return Ok(None);
     };
-    let mut size = new_lease_size(config, &campaign, threads);
-    if inline {
-        size = size.min(MAX_INLINE_LEASE);
-    }
+    let size = new_lease_size(config, &campaign, threads).min(span_limit as u64);
     let start = campaign.next_index;
     let end = start + size as i64;
     let moved = sqlx::query(
@@ -122,7 +149,7 @@ pub async fn claim(
          WHERE id = ? AND next_index = ? AND status = 'running'",
     )
     .bind(end)
-    .bind(now + expected_ms(&campaign, size, threads))
+    .bind(now.saturating_add(expected_ms(&campaign, size, threads)))
     .bind(campaign.id)
     .bind(start)
     .execute(&mut *tx)
@@ -132,7 +159,8 @@ pub async fn claim(
     }
     let sql = format!(
         "INSERT INTO leases (campaign_id, start_index, end_index, resume_at, attempt, worker, \
-         expires_at, state, key) VALUES (?, ?, ?, ?, 1, ?, ?, 'active', ?) RETURNING {COLUMNS}"
+         expires_at, state, key, claimed_at, threads) \
+         VALUES (?, ?, ?, ?, 1, ?, ?, 'active', ?, ?, ?) RETURNING {COLUMNS}"
     );
     let lease: LeaseRow = sqlx::query_as(&sql)
         .bind(campaign.id)
@@ -142,6 +170,8 @@ pub async fn claim(
         .bind(worker)
         .bind(expires)
         .bind(new_key())
+        .bind(now)
+        .bind(threads)
         .fetch_one(&mut *tx)
         .await?;
     tx.commit().await?;
@@ -149,10 +179,16 @@ pub async fn claim(
 }
 
 /// Milliseconds of work a lease of `size` tests is expected to take on
-/// `threads` threads; 0 while the campaign's cost is unknown.
+/// `threads` threads, `size · cost / threads`, at most a day; 0 while the
+/// campaign's cost is unknown (or not a finite positive number, which the
+/// report checks rule out, but the turn must never wrap whatever is stored).
 fn expected_ms(campaign: &CampaignRow, size: u64, threads: u32) -> i64 {
-    let cost = campaign.cost_per_test.unwrap_or(0.0);
-    (size as f64 * cost / f64::from(threads.max(1)) * 1000.0).round() as i64
+    let cost = campaign
+        .cost_per_test
+        .filter(|c| c.is_finite() && *c > 0.0)
+        .unwrap_or(0.0);
+    let ms = size as f64 * cost / f64::from(threads.max(1)) * 1000.0;
+    ms.round().clamp(0.0, MAX_EXPECTED_MS as f64) as i64
 }
 
 fn new_lease_size(config: &Config, campaign: &CampaignRow, threads: u32) -> u64 {

@@ -31,7 +31,7 @@ const COLUMNS: &str = "id, case_name, preset, status, request, surrogate, exposu
 
 impl LibraryRow {
     pub fn exposure_source(&self) -> tslg_method::registry::ExposureSource {
-        super::exposure_source(&self.exposure_name, self.exposure_table.as_ref())
+        tslg_client::wire::stored_exposure(&self.exposure_name, self.exposure_table.as_ref())
     }
 
     pub fn status(&self) -> LibraryStatus {

@@ -20,9 +20,9 @@ use std::time::Duration;
 use tslg_api::{
     CampaignView, CreateCampaign, CreateLibrary, ExposureRequest, Method, Outside, SearchRequest,
 };
+use tslg_client::Client;
 use tslg_method::estimator::z_for_confidence;
 use tslg_method::exact::{expected_ndd_tests, ExactReport};
-use tslg_worker::client::Client;
 
 #[derive(Debug, clap::Args)]
 pub struct ReproduceArgs {

@@ -6,12 +6,10 @@
 //! in-process run's to the bit, also for a campaign whose exploring tests
 //! are counted again after an upgrade.
 
-mod support;
-
+use crate::support::*;
 use sqlx::sqlite::SqliteConnectOptions;
 use sqlx::{ConnectOptions, Connection};
 use std::time::Duration;
-use support::*;
 use tslg_api::{CampaignStatus, CreateCampaign, Method, Outside};
 
 fn guarded(library_id: i64, beta: f64) -> CreateCampaign {

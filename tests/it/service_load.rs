@@ -4,11 +4,9 @@
 //! the resolved prefix is exactly the tests acknowledged, and its estimate
 //! is bit for bit the in-process estimate of that many tests.
 
-mod support;
-
+use crate::support::*;
 use serde_json::Value;
 use std::process::Command;
-use support::*;
 use tslg_api::{CampaignStatus, Method};
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

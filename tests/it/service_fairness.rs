@@ -1,10 +1,8 @@
 //! Fair sharing: campaigns running at once get comparable worker time,
 //! and a campaign started while a long one runs is not starved by it.
 
-mod support;
-
+use crate::support::*;
 use std::time::Duration;
-use support::*;
 use tslg_api::{CampaignStatus, Method};
 
 const LIMIT: Duration = Duration::from_secs(60);

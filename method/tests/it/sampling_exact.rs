@@ -1,8 +1,6 @@
 //! Sampling and estimation checked against exact answers on the grid.
 
-mod common;
-
-use common::{library, vehicle};
+use crate::common::{library, vehicle};
 use std::collections::HashMap;
 use tslg_method::campaign::run_campaign;
 use tslg_method::case::Case;

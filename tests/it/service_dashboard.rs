@@ -2,14 +2,12 @@
 //! Prometheus client's parser), the downsampled history, the SVG figures of
 //! the dashboard and of `tslg campaign report`, library pictures and pages.
 
-mod support;
-
+use crate::support::*;
 use roxmltree::Document;
 use serde_json::Value;
 use std::io::Write;
 use std::process::{Command, Stdio};
 use std::time::Duration;
-use support::*;
 use tslg_api::{CampaignStatus, Method};
 
 async fn get(url: &str) -> reqwest::Response {

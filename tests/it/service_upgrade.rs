@@ -4,19 +4,65 @@
 //! database from a newer release (a migration this binary does not know)
 //! is refused at start, not silently used.
 
-mod support;
-
+use crate::support::*;
 use sqlx::sqlite::SqliteConnectOptions;
 use sqlx::{ConnectOptions, Connection};
 use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
-use support::*;
 use tslg_api::{CampaignStatus, ResultReport};
-use tslg_worker::client::CallError;
+use tslg_client::CallError;
 
-/// Undoes this release's migrations (the lease key, the largest term, the
-/// outside bound), leaving the previous release's schema with its data.
+/// Undoes the packed report rows (migration 10): unpacks every report's
+/// events into the per-event `events` table of earlier releases, then drops
+/// the `reports` table and the leases' attempt columns. What remains is
+/// the schema, and the data, an earlier coordinator wrote.
+async fn undo_report_rows(database: &Path) {
+    let mut conn = SqliteConnectOptions::new()
+        .filename(database)
+        .connect()
+        .await
+        .unwrap();
+    sqlx::query(
+        "CREATE TABLE events (campaign_id INTEGER NOT NULL REFERENCES campaigns (id), \
+         test_index INTEGER NOT NULL, weight REAL NOT NULL, \
+         PRIMARY KEY (campaign_id, test_index)) WITHOUT ROWID",
+    )
+    .execute(&mut conn)
+    .await
+    .unwrap();
+    let rows: Vec<(i64, i64, Vec<u8>)> =
+        sqlx::query_as("SELECT campaign_id, from_index, packed FROM reports")
+            .fetch_all(&mut conn)
+            .await
+            .unwrap();
+    let mut moved = 0;
+    for (campaign, from, packed) in rows {
+        for (index, weight) in tslg_api::packed::unpack(from as u64, &packed).unwrap() {
+            sqlx::query("INSERT INTO events (campaign_id, test_index, weight) VALUES (?, ?, ?)")
+                .bind(campaign)
+                .bind(index as i64)
+                .bind(weight)
+                .execute(&mut conn)
+                .await
+                .unwrap();
+            moved += 1;
+        }
+    }
+    assert!(moved > 50, "the campaign has events to move: {moved}");
+    for statement in [
+        "DROP TABLE reports",
+        "ALTER TABLE leases DROP COLUMN claimed_at",
+        "ALTER TABLE leases DROP COLUMN threads",
+        "DELETE FROM _sqlx_migrations WHERE version = 20261124000010",
+    ] {
+        sqlx::query(statement).execute(&mut conn).await.unwrap();
+    }
+    conn.close().await.unwrap();
+}
+
+/// Undoes the migrations of the release before (the lease key, the largest
+/// term, the outside bound), leaving the schema of two releases back.
 const UNDO: [&str; 11] = [
     "ALTER TABLE leases DROP COLUMN key",
     "ALTER TABLE campaigns DROP COLUMN largest",
@@ -60,7 +106,8 @@ async fn a_database_of_the_previous_release_is_migrated_and_one_of_a_newer_is_re
     drop(worker);
     server.kill();
 
-    // Back to the previous release's schema, data and held leases kept.
+    // Back to two releases' schemas before, data and held leases kept.
+    undo_report_rows(&database).await;
     sql(&database, &UNDO).await;
 
     let server = ServerProcess::start(&database, &options);
@@ -78,6 +125,7 @@ async fn a_database_of_the_previous_release_is_migrated_and_one_of_a_newer_is_re
         from: held.resume_at,
         to: held.resume_at + 10,
         events: Vec::new(),
+        packed_events: None,
         invalid: Vec::new(),
         compute_seconds: 0.0,
         threads: 1,

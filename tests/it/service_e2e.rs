@@ -2,10 +2,8 @@
 //! convergence over HTTP, and the answers equal the in-process runner's to
 //! the last bit, whatever the number of workers or the lease size.
 
-mod support;
-
+use crate::support::*;
 use std::time::Duration;
-use support::*;
 use tslg_api::{CampaignStatus, Method};
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -118,7 +116,7 @@ async fn an_ndd_baseline_of_over_a_million_tests_stores_far_fewer_rows_than_test
             .await
             .unwrap();
     let mut rows = 0i64;
-    for table in ["events", "invalid_tests", "leases", "history"] {
+    for table in ["reports", "invalid_tests", "leases", "history"] {
         let (n,): (i64,) = sqlx::query_as(&format!("SELECT COUNT(*) FROM {table}"))
             .fetch_one(&mut db)
             .await

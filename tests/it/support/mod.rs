@@ -12,13 +12,13 @@ use tslg_api::{
     CampaignView, CreateCampaign, CreateLibrary, Lease, LeaseRequest, LibraryStatus, LibraryView,
     Method,
 };
+use tslg_client::Client;
 use tslg_method::campaign::{run_campaign_tests, CampaignResult};
 use tslg_method::estimator::{default_n_min, StoppingRule};
 use tslg_method::library::SearchMethod;
 use tslg_method::registry::{
     exploring_share, open_case, BuildRequest, ExposureSource, LibrarySearch,
 };
-use tslg_worker::client::Client;
 
 /// A `tslg-server` process; killed when dropped.
 pub struct ServerProcess {
@@ -270,6 +270,7 @@ pub async fn claim(client: &Client, worker: &str) -> Option<Lease> {
             include_tests: false,
             offers: Vec::new(),
             unhealthy: Vec::new(),
+            max_tests: None,
         })
         .await
         .expect("lease request")

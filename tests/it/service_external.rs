@@ -7,13 +7,11 @@
 //! one that keeps failing is reported unhealthy instead of burning the
 //! campaign; and only workers offering a program get its tests.
 
-mod support;
-
+use crate::support::*;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
-use support::*;
 use tslg_api::{CampaignStatus, CreateCampaign, CreateLibrary, LeaseRequest, Method};
-use tslg_worker::client::Client;
+use tslg_client::Client;
 
 fn repo(path: &str) -> String {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -326,6 +324,7 @@ async fn only_workers_offering_a_program_get_its_tests() {
         include_tests: false,
         offers: offers.iter().map(|s| s.to_string()).collect(),
         unhealthy: Vec::new(),
+        max_tests: None,
     };
     for offers in [
         &[][..],
@@ -348,7 +347,10 @@ async fn only_workers_offering_a_program_get_its_tests() {
         attempt: lease.attempt,
         key: lease.key.clone(),
     };
-    client.release(lease.id, &fence).await.unwrap();
+    client
+        .release(lease.id, &fence.release(None))
+        .await
+        .unwrap();
     assert!(client.claim(&ask(&[])).await.unwrap().is_none());
     let again = client
         .claim(&ask(&["track:cut-in:episode"]))

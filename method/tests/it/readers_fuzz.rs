@@ -6,8 +6,6 @@
 //! accepted input must satisfy what the readers promise (a probability
 //! mass that sums to 1; Q-rows that are sub-probabilities).
 
-mod common;
-
 use proptest::prelude::*;
 use std::sync::LazyLock;
 use tslg_method::carfollow::file::PolicyLibraryFile;
@@ -19,7 +17,7 @@ use tslg_method::registry::{open_case, BuildRequest, ExposureSource, LibrarySear
 const SMALL_TABLE: &str = ",-1,0,1\n1,0.1,0.1,0\n3,0.2,0.1,0.1\n5,0.2,0.1,0.1\n";
 
 /// The authors' cut-in table, when `../shared/data` holds it.
-static AUTHORS_TABLE: LazyLock<Option<String>> = LazyLock::new(common::shared_table);
+static AUTHORS_TABLE: LazyLock<Option<String>> = LazyLock::new(crate::common::shared_table);
 
 /// The cut-in library of the IDM by exhaustive search, as its JSON file.
 static CUT_IN_FILE: LazyLock<Vec<u8>> = LazyLock::new(|| {

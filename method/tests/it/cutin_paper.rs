@@ -2,9 +2,7 @@
 //! the grid. Tests that need the authors' table skip (and say why) when
 //! `../shared/data` is absent; the built-in exposure always runs.
 
-mod common;
-
-use common::{library, median, shared_table, vehicle};
+use crate::common::{library, median, shared_table, vehicle};
 use tslg_method::campaign::run_campaign;
 use tslg_method::case::Case;
 use tslg_method::cutin::{CutIn, CutInExposureModel, CutInPreset};

@@ -4,11 +4,9 @@
 //! a 4xx `application/problem+json` with a detail, and the coordinator keeps
 //! serving. (scripts/fuzz-api fuzzes the same document with schemathesis.)
 
-mod support;
-
+use crate::support::*;
 use reqwest::{Method as Http, StatusCode};
 use serde_json::{json, Value};
-use support::*;
 use tslg_api::Method;
 
 /// Sends `body` (raw text, as JSON) and returns status and problem.

@@ -4,8 +4,7 @@
 //! agree with the API, the figures are drawn and redrawn, and screenshots
 //! are written to `target/tmp/artefacts/`.
 
-mod support;
-
+use crate::support::*;
 use fantoccini::{Client as Browser, ClientBuilder};
 use hyper_util::client::legacy::connect::HttpConnector;
 use serde_json::{json, Value};
@@ -13,7 +12,6 @@ use std::net::TcpListener;
 use std::os::unix::process::CommandExt;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
-use support::*;
 use tslg_api::{CampaignStatus, CreateCampaign, Method};
 
 const CHROMIUM: &str = "/usr/bin/chromium";

@@ -6,10 +6,8 @@
 //! preset keeps the NDD baselines to a few hundred thousand tests; the
 //! paper preset's runs are in docs/models.md.
 
-mod support;
-
+use crate::support::*;
 use std::time::Duration;
-use support::*;
 use tslg_api::{
     CampaignStatus, CreateCampaign, CreateLibrary, LeaseRequest, Method, Outside, SearchRequest,
 };
@@ -125,6 +123,7 @@ async fn car_following_library_campaigns_agree_with_ndd_baselines_with_far_fewer
                 include_tests: true,
                 offers: Vec::new(),
                 unhealthy: Vec::new(),
+                max_tests: None,
             })
             .await
             .unwrap();

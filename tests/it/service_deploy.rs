@@ -3,14 +3,12 @@
 //! compose file sets, tokens are enforced, and the health check command
 //! works. (No container engine runs in CI; this is what the containers run.)
 
-mod support;
-
+use crate::support::*;
 use std::collections::BTreeSet;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-use support::*;
 use tslg_api::{CampaignStatus, Method};
-use tslg_worker::client::{CallError, Client};
+use tslg_client::{CallError, Client};
 
 const ADMIN: &str = "admin-secret-4f1c";
 const WORKER: &str = "worker-secret-9a2e";

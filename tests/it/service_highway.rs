@@ -3,10 +3,8 @@
 //! coarse grid, library and NDD campaigns whose intervals contain the exact
 //! `P(A)` of the vehicle by enumeration.
 
-mod support;
-
+use crate::support::*;
 use std::time::Duration;
-use support::*;
 use tslg_api::{CampaignStatus, CreateCampaign, CreateLibrary, Method, Outside};
 use tslg_method::registry::{open_case, ExposureSource};
 

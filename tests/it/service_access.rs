@@ -3,17 +3,15 @@
 //! lease key), although all workers share one token; and no token ever
 //! reaches the coordinator's or the worker's log, even at debug level.
 
-mod support;
-
+use crate::support::*;
 use reqwest::{Method as Http, StatusCode};
 use serde_json::{json, Value};
 use sqlx::sqlite::SqliteConnectOptions;
 use sqlx::ConnectOptions;
 use std::process::{Command, Stdio};
 use std::time::Duration;
-use support::*;
 use tslg_api::{CampaignStatus, LeaseFence, LeaseKey, LeaseRequest, Method, ResultReport};
-use tslg_worker::client::{CallError, Client};
+use tslg_client::{CallError, Client};
 
 const ADMIN: &str = "adm-3e9f1c7a5b2d";
 const WORKER: &str = "wrk-8c2a6e4f0b9d";
@@ -174,6 +172,7 @@ async fn tokens_open_only_their_part_of_the_api_and_never_reach_the_logs() {
         include_tests: false,
         offers: Vec::new(),
         unhealthy: Vec::new(),
+        max_tests: None,
     };
     let lease = workers.claim(&ask("honest")).await.unwrap().unwrap();
     assert_eq!(lease.key.as_str().len(), 32);
@@ -189,6 +188,7 @@ async fn tokens_open_only_their_part_of_the_api_and_never_reach_the_logs() {
         from: lease.start,
         to: lease.start + 50,
         events: Vec::new(),
+        packed_events: None,
         invalid: Vec::new(),
         compute_seconds: 0.1,
         threads: 1,
@@ -207,7 +207,7 @@ async fn tokens_open_only_their_part_of_the_api_and_never_reach_the_logs() {
     assert!(forbidden(&stolen), "{stolen:?}");
     let beat = workers.heartbeat(lease.id, &fence).await;
     assert!(forbidden(&beat), "{beat:?}");
-    let released = workers.release(lease.id, &fence).await;
+    let released = workers.release(lease.id, &fence.release(None)).await;
     assert!(forbidden(&released), "{released:?}");
     assert_eq!(
         admin.campaign(id).await.unwrap().indices,
@@ -225,7 +225,8 @@ async fn tokens_open_only_their_part_of_the_api_and_never_reach_the_logs() {
                 worker: "honest".into(),
                 attempt: lease.attempt,
                 key: lease.key.clone(),
-            },
+            }
+            .release(Some("done with it".into())),
         )
         .await
         .unwrap();

@@ -5,13 +5,11 @@
 //! expires and is handed out again) and not the answer; a worker told to
 //! stop finishes its chunk and gives its lease back.
 
-mod support;
-
+use crate::support::*;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
-use support::*;
 use tslg_api::{CampaignStatus, Lease, LeaseRequest, Method, ResultReport};
-use tslg_worker::client::Client;
+use tslg_client::Client;
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_coordinator_killed_mid_campaign_continues_from_its_database_to_the_same_answer() {
@@ -110,6 +108,7 @@ async fn claim_and_report(client: &Client, worker: &str) -> Option<(Lease, Resul
         include_tests: false,
         offers: Vec::new(),
         unhealthy: Vec::new(),
+        max_tests: None,
     };
     // Errors (the coordinator is gone) end the simulated worker.
     let lease = client.claim(&ask).await.ok()??;
@@ -120,6 +119,7 @@ async fn claim_and_report(client: &Client, worker: &str) -> Option<(Lease, Resul
         from: lease.resume_at,
         to: lease.end,
         events: Vec::new(),
+        packed_events: None,
         invalid: Vec::new(),
         compute_seconds: 0.01,
         threads: 1,

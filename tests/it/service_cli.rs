@@ -1,10 +1,8 @@
 //! The `tslg` client commands against a real coordinator and worker, and
 //! invalid outcomes through the service.
 
-mod support;
-
+use crate::support::*;
 use std::process::Command;
-use support::*;
 use tslg_api::{CampaignView, InvalidResult, LibraryView, Method, ResultReport};
 
 fn tslg(args: &[&str]) -> std::process::Output {
@@ -93,7 +91,7 @@ fn library_create_and_campaign_start_status_cancel_drive_a_coordinator() {
         "2",
     ]);
     assert!(!o.status.success());
-    assert!(String::from_utf8_lossy(&o.stderr).contains("beta = 2 must be in (0, 1)"));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("beta = 2 must be in [0.0001, 0.99]"));
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -119,6 +117,7 @@ async fn invalid_tests_use_indices_but_are_not_counted_as_tests() {
         from: 0,
         to: 100,
         events: vec![],
+        packed_events: None,
         invalid: vec![reason(5), reason(6)],
         compute_seconds: 0.0,
         threads: 1,

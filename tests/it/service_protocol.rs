@@ -3,12 +3,10 @@
 //! re-issue, weight checks, inline test lists; and precise problem
 //! responses for bad requests, with the server still serving after them.
 
-mod support;
-
+use crate::support::*;
 use reqwest::StatusCode;
 use serde_json::{json, Value};
 use std::time::Duration;
-use support::*;
 use tslg_api::{
     CampaignStatus, EventResult, Lease, LeaseFence, LeaseRequest, Method, ResultAck, ResultReport,
 };
@@ -28,9 +26,10 @@ fn report(worker: &str, lease: &Lease, from: u64, to: u64, events: &[EventResult
             .copied()
             .filter(|e| (from..to).contains(&e.index))
             .collect(),
+        packed_events: None,
         invalid: vec![],
-        compute_seconds: 0.5,
-        threads: 2,
+        compute_seconds: 1.0,
+        threads: 1,
     }
 }
 
@@ -66,6 +65,7 @@ async fn results_are_idempotent_fenced_on_the_attempt_and_leases_expire_and_retu
             include_tests: true,
             offers: Vec::new(),
             unhealthy: Vec::new(),
+            max_tests: None,
         })
         .await
         .unwrap()
@@ -141,7 +141,7 @@ async fn results_are_idempotent_fenced_on_the_attempt_and_leases_expire_and_retu
     assert_eq!(view.indices, 50, "the prefix is exactly the reported range");
     assert_eq!(
         view.worker_seconds, 1.0,
-        "0.5 s on 2 threads, charged once though reported twice"
+        "1 s on 1 thread, charged once though reported twice"
     );
 
     // A conflicting outcome for a recorded test: 409, nothing changes.
@@ -282,22 +282,22 @@ async fn bad_requests_get_precise_problems_and_the_server_keeps_serving() {
         (
             with("beta", json!(1.5)),
             StatusCode::UNPROCESSABLE_ENTITY,
-            "beta = 1.5 must be in (0, 1)",
+            "beta = 1.5 must be in [0.0001, 0.99]",
         ),
         (
             with("epsilon", json!(1.0)),
             StatusCode::UNPROCESSABLE_ENTITY,
-            "epsilon = 1 must be in [0, 1)",
+            "ε = 1 must be 0 or in [0.000001, 0.999]",
         ),
         (
             with("confidence", json!(0.0)),
             StatusCode::UNPROCESSABLE_ENTITY,
-            "confidence = 0 must be in (0, 1)",
+            "confidence = 0 must be in [0.5, 0.999999]",
         ),
         (
             with("max_tests", json!(0)),
             StatusCode::UNPROCESSABLE_ENTITY,
-            "max_tests must be ≥ 1",
+            "max_tests = 0 must be in 1..=2^50",
         ),
         (
             with("max_tests", json!(-5)),
@@ -399,7 +399,7 @@ async fn bad_requests_get_precise_problems_and_the_server_keeps_serving() {
         ),
         (
             json!({"case": "car-following", "surrogate": {"model": "idm"}, "search": {"method": "temporal-difference", "alpha": 0}}),
-            "alpha = 0 must be in (0, 1]",
+            "alpha = 0 must be in [0.001, 1]",
         ),
         (
             json!({"case": "car-following", "preset": "dense", "surrogate": {"model": "idm"}}),

@@ -8,7 +8,7 @@ use serde::Serialize;
 use std::time::Duration;
 use tslg_api::{
     CampaignPlan, CampaignView, CreateCampaign, CreateLibrary, HeartbeatAck, History, Lease,
-    LeaseFence, LeaseRequest, LibraryView, Problem, ResultAck, ResultReport,
+    LeaseFence, LeaseRelease, LeaseRequest, LibraryView, Problem, ResultAck, ResultReport,
 };
 
 /// A failed call: worth retrying, or refused for good.
@@ -119,13 +119,13 @@ impl Client {
             .await
     }
 
-    pub async fn release(&self, lease: i64, fence: &LeaseFence) -> Result<(), CallError> {
+    pub async fn release(&self, lease: i64, release: &LeaseRelease) -> Result<(), CallError> {
         self.send(
             self.request(
                 reqwest::Method::POST,
                 &format!("/api/v1/leases/{lease}/release"),
             )
-            .json(fence),
+            .json(release),
         )
         .await
         .map(|_| ())

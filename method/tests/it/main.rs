@@ -1,0 +1,12 @@
+//! The method checked against the paper, exact answers and its own
+//! readers, one test binary.
+
+#[allow(dead_code)]
+mod common;
+
+mod carfollow_library;
+mod cutin_paper;
+mod external_protocol;
+mod highway_geometry;
+mod readers_fuzz;
+mod sampling_exact;

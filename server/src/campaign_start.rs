@@ -1,0 +1,191 @@
+//! Starting a campaign: the request checked against the method's ranges
+//! and the coordinator's libraries, its tests prepared as a worker will
+//! (what a worker could not prepare is refused here, not leased forever),
+//! and the campaign stored `running`, or `pending` while its library builds.
+
+use crate::error::ApiError;
+use crate::state::AppState;
+use crate::store::campaigns::{self, CampaignRow, NewCampaign};
+use crate::store::libraries::{self, LibraryRow};
+use crate::validate::check_name;
+use std::sync::Arc;
+use tslg_api::{CampaignStatus, CreateCampaign, LibraryStatus, Method};
+use tslg_client::wire;
+use tslg_method::estimator::{default_n_min, StoppingRule, DEFAULT_MIN_EVENTS};
+use tslg_method::external::ExternalVut;
+use tslg_method::registry::{
+    exploring_share, open_case, CampaignTests, CaseError, ExposureSource, ScenarioCase,
+    SEQUENTIAL_CASES,
+};
+use tslg_method::sampling::{check_epsilon, OutsideSpread};
+
+fn bad(message: impl Into<String>) -> ApiError {
+    ApiError::Unprocessable(message.into())
+}
+
+/// The stopping rule a request asks for, with the defaults filled in, and
+/// every number checked against the method's ranges; pure.
+pub fn rule_of(req: &CreateCampaign) -> Result<StoppingRule, ApiError> {
+    check_name("case", &req.case, 64)?;
+    check_epsilon(req.epsilon).map_err(|e| bad(e.to_string()))?;
+    let rule = StoppingRule {
+        beta: req.beta,
+        confidence: req.confidence,
+        n_min: req.n_min.unwrap_or_else(|| {
+            default_n_min(
+                exploring_share(&req.case, req.method == Method::Library, req.epsilon),
+                req.max_tests,
+            )
+        }),
+        min_events: req.min_events.unwrap_or(DEFAULT_MIN_EVENTS),
+        max_tests: req.max_tests,
+        guard_outside: req.guard_outside,
+    };
+    rule.validate().map_err(|e| bad(e.to_string()))?;
+    if req.guard_outside && req.method == Method::Ndd {
+        return Err(bad(
+            "guard_outside bounds the failure mass outside a library; an ndd campaign samples \
+             every scenario by its exposure and has no outside to guard",
+        ));
+    }
+    if req.guard_outside && SEQUENTIAL_CASES.contains(&req.case.as_str()) {
+        return Err(bad(format!(
+            "guard_outside applies to the grid cases (cut-in, highway-exit): a {} campaign \
+             explores per decision, and no bound on its outside mass is defined",
+            req.case
+        )));
+    }
+    Ok(rule)
+}
+
+/// The library a request names, checked against it.
+async fn library_of(
+    state: &AppState,
+    req: &CreateCampaign,
+) -> Result<Option<LibraryRow>, ApiError> {
+    let library = match (req.method, req.library_id) {
+        (Method::Library, None) => return Err(bad("method `library` needs a library_id")),
+        (_, Some(id)) => Some(
+            libraries::get(&state.db.read, id)
+                .await
+                .map_err(|_| bad(format!("library_id {id} does not name a library")))?,
+        ),
+        (Method::Ndd, None) => None,
+    };
+    if let Some(lib) = &library {
+        if lib.case_name != req.case {
+            return Err(bad(format!(
+                "library {} was built for case `{}`, not `{}`",
+                lib.id, lib.case_name, req.case
+            )));
+        }
+        if lib.status() == LibraryStatus::Failed && req.method == Method::Library {
+            return Err(bad(format!(
+                "library {} failed to build: {}",
+                lib.id,
+                lib.error.as_deref().unwrap_or("unknown reason")
+            )));
+        }
+    }
+    Ok(library)
+}
+
+/// The case opened for the campaign, its vehicle in full, the spread of ε,
+/// and its tests when they can be prepared now (an NDD campaign, or a
+/// ready library).
+struct Opened {
+    case: Arc<dyn ScenarioCase>,
+    vut: serde_json::Value,
+    outside: OutsideSpread,
+    tests: Option<Arc<dyn CampaignTests>>,
+}
+
+fn open(
+    req: &CreateCampaign,
+    preset: Option<&str>,
+    exposure: &ExposureSource,
+    file: Option<&[u8]>,
+) -> Result<Opened, CaseError> {
+    let case = open_case(&req.case, preset, exposure)?;
+    let vut = case.normalise_vehicle(&req.vut)?;
+    let outside = match req.outside {
+        Some(o) => wire::outside_spread(o),
+        None => case.default_outside(),
+    };
+    let tests = if req.method == Method::Ndd || file.is_some() {
+        Some(case.campaign(file, &vut, req.epsilon, outside, req.seed)?)
+    } else {
+        None
+    };
+    Ok(Opened {
+        case,
+        vut,
+        outside,
+        tests,
+    })
+}
+
+/// Starts the campaign `req` asks for.
+pub async fn start(state: &AppState, req: CreateCampaign) -> Result<CampaignRow, ApiError> {
+    let rule = rule_of(&req)?;
+    let library = library_of(state, &req).await?;
+    let exposure = library.as_ref().map_or(ExposureSource::Builtin, |lib| {
+        wire::stored_exposure(&lib.exposure_name, lib.exposure_table.as_ref())
+    });
+    let preset = library.as_ref().map(|l| l.preset.clone());
+    let file = match &library {
+        Some(lib) if req.method == Method::Library && lib.status() == LibraryStatus::Ready => Some(
+            libraries::file(&state.db.read, lib.id)
+                .await?
+                .ok_or_else(|| {
+                    ApiError::Internal(anyhow::anyhow!("ready library {} has no file", lib.id))
+                })?
+                .bytes,
+        ),
+        _ => None,
+    };
+    let (request, source) = (req.clone(), exposure.clone());
+    let opened = tokio::task::spawn_blocking(move || {
+        open(&request, preset.as_deref(), &source, file.as_deref())
+    })
+    .await
+    .map_err(|e| ApiError::Internal(e.into()))?
+    .map_err(|e| bad(e.to_string()))?;
+    // Only workers offering an external program get its tests.
+    let requires = ExternalVut::from_spec(&opened.vut)
+        .and_then(Result::ok)
+        .map(|e| e.requirement(opened.case.name()));
+    let status = match &library {
+        Some(lib) if req.method == Method::Library && lib.status() == LibraryStatus::Building => {
+            CampaignStatus::Pending
+        }
+        _ => CampaignStatus::Running,
+    };
+    let row = campaigns::insert(
+        &state.db.write,
+        &NewCampaign {
+            case_name: opened.case.name().to_owned(),
+            preset: opened.case.preset(),
+            method: req.method,
+            library_id: req.library_id,
+            exposure_name: opened.case.exposure_name().to_owned(),
+            exposure_fingerprint: opened.case.exposure_fingerprint(),
+            exposure_table: match exposure {
+                ExposureSource::Table { text, .. } => Some(text),
+                ExposureSource::Builtin => None,
+            },
+            vut: opened.vut.to_string(),
+            requires,
+            epsilon: req.epsilon,
+            outside: wire::outside(opened.outside),
+            rule,
+            seed: req.seed,
+            status,
+        },
+    )
+    .await?;
+    if let Some(tests) = opened.tests {
+        state.samplers.insert(row.id, tests);
+    }
+    Ok(row)
+}

@@ -1,0 +1,256 @@
+//! Folding a campaign's newly resolved prefix: a pure step over the
+//! outcomes ([`fold_step`]) and the code that reads its inputs and writes
+//! its result ([`fold_prefix`]), inside the report's transaction.
+//!
+//! The frontier is the smallest `resume_at` of the campaign's active
+//! leases, or its `next_index` when none is active: every index below it
+//! has a recorded outcome (listed, or no event). The fold walks the
+//! outcomes in index order and checks the stopping rule at every index
+//! (SPEC §7), so the stop index does not depend on who reported what when.
+
+use crate::error::ApiError;
+use crate::history;
+use crate::store::campaigns::CampaignRow;
+use crate::store::reports;
+use sqlx::{QueryBuilder, Sqlite, SqliteConnection};
+use std::sync::Arc;
+use tslg_api::CampaignStatus;
+use tslg_method::estimator::{Decision, StoppingRule};
+use tslg_method::outside::OutsideMass;
+use tslg_method::prefix::{outside_tally, Exploration, FoldError, PrefixFold, SparseOutcome};
+use tslg_method::registry::CampaignTests;
+
+/// History rows per multi-row `INSERT`.
+const INSERT_BATCH: usize = 1000;
+
+/// What one fold gave.
+pub struct Folded {
+    /// The state after the fold.
+    pub fold: PrefixFold,
+    /// History points inside the fold worth storing, then the last one
+    /// when it is worth storing or the campaign stopped.
+    pub course: Vec<PrefixFold>,
+    /// `Some` when the rule stopped the campaign.
+    pub decision: Option<Decision>,
+}
+
+/// Folds `outcomes` (sorted, inside `fold.indices..frontier`) onto `fold`
+/// under `rule`: pure, so the same inputs give the same stop anywhere.
+/// `last_stored` is the campaign's last stored history point.
+pub fn fold_step(
+    mut fold: PrefixFold,
+    rule: &StoppingRule,
+    frontier: u64,
+    outcomes: &[(u64, SparseOutcome)],
+    exploration: Option<Exploration<'_>>,
+    last_stored: Option<u64>,
+) -> Result<Folded, FoldError> {
+    let mut last_stored = last_stored;
+    let mut course = Vec::new();
+    let decision = fold.advance_observed(
+        rule,
+        rule.z(),
+        frontier,
+        outcomes,
+        exploration,
+        &mut |state| {
+            if history::worth_storing(last_stored, state.indices) {
+                last_stored = Some(state.indices);
+                course.push(*state);
+            }
+        },
+    )?;
+    if decision.is_some() || history::worth_storing(last_stored, fold.indices) {
+        course.push(fold);
+    }
+    Ok(Folded {
+        fold,
+        course,
+        decision,
+    })
+}
+
+/// The first index without a recorded outcome: the smallest `resume_at`
+/// of the campaign's active leases, or its `next_index`.
+async fn frontier(conn: &mut SqliteConnection, campaign: &CampaignRow) -> Result<u64, ApiError> {
+    let (open,): (Option<i64>,) = sqlx::query_as(
+        "SELECT MIN(resume_at) FROM leases WHERE campaign_id = ? AND state = 'active'",
+    )
+    .bind(campaign.id)
+    .fetch_one(&mut *conn)
+    .await?;
+    Ok(open.map_or(campaign.next_index, |r| r.min(campaign.next_index)) as u64)
+}
+
+/// The tests of `from..to` that draw outside the library, replayed off the
+/// async runtime (one random number each).
+async fn explored_tests(
+    tests: &Arc<dyn CampaignTests>,
+    from: u64,
+    to: u64,
+) -> Result<Vec<u64>, ApiError> {
+    let tests = Arc::clone(tests);
+    tokio::task::spawn_blocking(move || (from..to).filter(|&i| tests.explores(i)).collect())
+        .await
+        .map_err(|e| ApiError::Internal(e.into()))
+}
+
+/// Folds the newly resolved prefix of `campaign` and persists the
+/// estimate, its history points and, when the rule stops the campaign, its
+/// final status. `tests` are a library campaign's tests, which say which
+/// tests explored outside the library; `None` for the NDD.
+pub async fn fold_prefix(
+    conn: &mut SqliteConnection,
+    campaign: &CampaignRow,
+    tests: Option<Arc<dyn CampaignTests>>,
+) -> Result<Option<CampaignStatus>, ApiError> {
+    let frontier = frontier(conn, campaign).await?;
+    let mut fold = campaign.fold();
+    if frontier <= fold.indices {
+        return Ok(None);
+    }
+    let from = fold.indices;
+    let outcomes = reports::outcomes(conn, campaign.id, from, frontier).await?;
+    let tests = tests.filter(|t| t.outside_mass().is_some());
+    let mut explored = Vec::new();
+    if let Some(tests) = &tests {
+        if campaign.outside_upper.is_none() && from > 0 {
+            // Started before the outside bound existed: count its exploring
+            // tests from the start, as the fold would have.
+            let earlier = reports::outcomes(conn, campaign.id, 0, from).await?;
+            let before = explored_tests(tests, 0, from).await?;
+            fold.outside = outside_tally(&before, &earlier, &|i| tests.surrogate_misses(i));
+        }
+        explored = explored_tests(tests, from, frontier).await?;
+    }
+    let mass: Option<&OutsideMass> = tests.as_ref().and_then(|t| t.outside_mass());
+    let misses = |i| tests.as_ref().is_some_and(|t| t.surrogate_misses(i));
+    let exploration = mass.map(|mass| Exploration {
+        explored: &explored,
+        mass,
+        surrogate_misses: &misses,
+    });
+    let (last_stored,): (Option<i64>,) =
+        sqlx::query_as("SELECT MAX(indices) FROM history WHERE campaign_id = ?")
+            .bind(campaign.id)
+            .fetch_one(&mut *conn)
+            .await?;
+    let rule = campaign.rule();
+    let folded = fold_step(
+        fold,
+        &rule,
+        frontier,
+        &outcomes,
+        exploration,
+        last_stored.map(|i| i as u64),
+    )
+    .map_err(|e| anyhow::anyhow!("stored outcomes of campaign {} rejected: {e}", campaign.id))?;
+    let upper = mass.map(|m| {
+        m.upper(
+            folded.fold.outside.tests,
+            folded.fold.outside.events,
+            campaign.confidence,
+        )
+    });
+    write(conn, campaign, &rule, &folded, upper).await
+}
+
+/// The status a decision gives, with the sentence that explains it.
+fn outcome(
+    decision: Option<Decision>,
+    rule: &StoppingRule,
+    fold: &PrefixFold,
+) -> (CampaignStatus, Option<String>) {
+    match decision {
+        None => (CampaignStatus::Running, None),
+        Some(Decision::Converged) => (
+            CampaignStatus::Converged,
+            Some(format!(
+                "relative half-width ≤ β = {} after test index {}{}",
+                rule.beta,
+                fold.indices - 1,
+                if rule.guard_outside {
+                    ", with the failure mass outside the library bounded"
+                } else {
+                    ""
+                }
+            )),
+        ),
+        Some(Decision::Exhausted) | Some(Decision::Continue) => (
+            CampaignStatus::Exhausted,
+            Some(format!(
+                "max_tests = {} used up before the relative half-width reached β = {}",
+                rule.max_tests, rule.beta
+            )),
+        ),
+    }
+}
+
+/// Writes a fold's state, history and, on a stop, the final status (its
+/// active leases cancelled).
+async fn write(
+    conn: &mut SqliteConnection,
+    campaign: &CampaignRow,
+    rule: &StoppingRule,
+    folded: &Folded,
+    upper: Option<f64>,
+) -> Result<Option<CampaignStatus>, ApiError> {
+    let fold = &folded.fold;
+    let (status, detail) = outcome(folded.decision, rule, fold);
+    let (s1, s2) = fold.estimator.sums();
+    sqlx::query(
+        "UPDATE campaigns SET indices = ?, tests = ?, events = ?, invalid = ?, s1 = ?, s2 = ?, \
+         largest = ?, outside_tests = ?, outside_events = ?, outside_s1 = ?, outside_upper = ?, \
+         outside_mismatches = ?, \
+         status = ?, status_detail = COALESCE(?, status_detail), \
+         updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now') WHERE id = ?",
+    )
+    .bind(fold.indices as i64)
+    .bind(fold.estimator.tests() as i64)
+    .bind(fold.estimator.events() as i64)
+    .bind(fold.invalid as i64)
+    .bind(s1)
+    .bind(s2)
+    .bind(fold.estimator.largest_term())
+    .bind(fold.outside.tests as i64)
+    .bind(fold.outside.events as i64)
+    .bind(fold.outside.s1)
+    .bind(upper)
+    .bind(fold.outside.mismatches as i64)
+    .bind(status.as_str())
+    .bind(detail)
+    .bind(campaign.id)
+    .execute(&mut *conn)
+    .await?;
+    for batch in folded.course.chunks(INSERT_BATCH) {
+        QueryBuilder::<Sqlite>::new(
+            "INSERT OR REPLACE INTO history (campaign_id, indices, tests, events, s1, s2) ",
+        )
+        .push_values(batch, |mut row, state| {
+            let (s1, s2) = state.estimator.sums();
+            row.push_bind(campaign.id)
+                .push_bind(state.indices as i64)
+                .push_bind(state.estimator.tests() as i64)
+                .push_bind(state.estimator.events() as i64)
+                .push_bind(s1)
+                .push_bind(s2);
+        })
+        .build()
+        .execute(&mut *conn)
+        .await?;
+    }
+    if folded.decision.is_none() {
+        return Ok(None);
+    }
+    sqlx::query("UPDATE leases SET state = 'cancelled' WHERE campaign_id = ? AND state = 'active'")
+        .bind(campaign.id)
+        .execute(&mut *conn)
+        .await?;
+    tracing::info!(
+        campaign = campaign.id,
+        status = status.as_str(),
+        stop_index = fold.indices,
+        "campaign stopped"
+    );
+    Ok(Some(status))
+}

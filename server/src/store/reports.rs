@@ -1,0 +1,183 @@
+//! The `reports` and `invalid_tests` tables: what workers reported.
+//!
+//! One row per accepted report: its range, its lease and worker, and its
+//! events packed ([`tslg_api::packed`]); invalid tests one row each with
+//! the reason. Tests of a reported range that are not listed had no event.
+//! Storage grows with reports and events, never with tests: a report row
+//! costs about 40 bytes plus 2 to 10 bytes per event (a dictionary of
+//! weights makes a grid case's events 2 to 3 bytes each), so a campaign
+//! with 4 million events keeps about 12 MB of them, read back in tens of
+//! milliseconds.
+
+use crate::error::ApiError;
+use sqlx::{QueryBuilder, Sqlite, SqliteConnection};
+use tslg_api::{packed, MAX_REPORT_TESTS};
+use tslg_method::prefix::SparseOutcome;
+
+/// Rows per multi-row `INSERT` of invalid tests: 3 bound values each, far
+/// below SQLite's limit of 32 766 variables.
+const INSERT_BATCH: usize = 1000;
+
+/// A report to store: the range, who sent it, its events (index order)
+/// and invalid tests with their reasons (index order).
+pub struct NewReport<'a> {
+    pub campaign_id: i64,
+    pub lease_id: i64,
+    pub worker: &'a str,
+    pub from: u64,
+    pub to: u64,
+    pub events: &'a [(u64, f64)],
+    pub invalid: &'a [(u64, &'a str)],
+}
+
+pub async fn insert(conn: &mut SqliteConnection, report: &NewReport<'_>) -> Result<(), ApiError> {
+    sqlx::query(
+        "INSERT INTO reports (campaign_id, from_index, to_index, lease_id, worker, events, packed) \
+         VALUES (?, ?, ?, ?, ?, ?, ?)",
+    )
+    .bind(report.campaign_id)
+    .bind(report.from as i64)
+    .bind(report.to as i64)
+    .bind(report.lease_id)
+    .bind(report.worker)
+    .bind(report.events.len() as i64)
+    .bind(packed::pack(report.from, report.events))
+    .execute(&mut *conn)
+    .await?;
+    for batch in report.invalid.chunks(INSERT_BATCH) {
+        QueryBuilder::<Sqlite>::new("INSERT INTO invalid_tests (campaign_id, test_index, reason) ")
+            .push_values(batch, |mut row, &(index, reason)| {
+                row.push_bind(report.campaign_id)
+                    .push_bind(index as i64)
+                    .push_bind(reason);
+            })
+            .build()
+            .execute(&mut *conn)
+            .await?;
+    }
+    Ok(())
+}
+
+/// Stored events of `campaign` with index in `from..to`, in index order.
+pub async fn events(
+    conn: &mut SqliteConnection,
+    campaign: i64,
+    from: u64,
+    to: u64,
+) -> Result<Vec<(u64, f64)>, ApiError> {
+    // A report covers at most MAX_REPORT_TESTS tests, so only rows starting
+    // that far before `from` can reach into the range: the key bounds the scan.
+    let rows: Vec<(i64, Vec<u8>)> = sqlx::query_as(
+        "SELECT from_index, packed FROM reports \
+         WHERE campaign_id = ? AND from_index > ? AND from_index < ? AND to_index > ? \
+           AND events > 0 ORDER BY from_index",
+    )
+    .bind(campaign)
+    .bind(from as i64 - MAX_REPORT_TESTS as i64)
+    .bind(to as i64)
+    .bind(from as i64)
+    .fetch_all(&mut *conn)
+    .await?;
+    let mut events = Vec::new();
+    for (start, bytes) in rows {
+        let unpacked = packed::unpack(start as u64, &bytes).map_err(|e| {
+            anyhow::anyhow!("stored report at {start} of campaign {campaign} is damaged: {e}")
+        })?;
+        events.extend(
+            unpacked
+                .into_iter()
+                .filter(|&(i, _)| (from..to).contains(&i)),
+        );
+    }
+    // Rows moved from the old per-event table may overlap newer reports'
+    // ranges (never their events): sort once.
+    events.sort_by_key(|&(i, _)| i);
+    Ok(events)
+}
+
+/// Stored events and invalid tests of `campaign` in `from..to`, sorted by
+/// index.
+pub async fn outcomes(
+    conn: &mut SqliteConnection,
+    campaign: i64,
+    from: u64,
+    to: u64,
+) -> Result<Vec<(u64, SparseOutcome)>, ApiError> {
+    let events = events(conn, campaign, from, to).await?;
+    let invalid: Vec<(i64,)> = sqlx::query_as(
+        "SELECT test_index FROM invalid_tests WHERE campaign_id = ? AND test_index >= ? AND test_index < ?",
+    )
+    .bind(campaign)
+    .bind(from as i64)
+    .bind(to as i64)
+    .fetch_all(&mut *conn)
+    .await?;
+    let mut outcomes: Vec<(u64, SparseOutcome)> = events
+        .into_iter()
+        .map(|(i, w)| (i, SparseOutcome::Event(w)))
+        .chain(
+            invalid
+                .into_iter()
+                .map(|(i,)| (i as u64, SparseOutcome::Invalid)),
+        )
+        .collect();
+    outcomes.sort_by_key(|&(i, _)| i);
+    Ok(outcomes)
+}
+
+/// Events moved from the old per-event table go into report rows of at
+/// most this many events.
+const LEGACY_CHUNK: usize = 65_536;
+
+/// Packs the rows of the old `legacy_events` table (databases from before
+/// the `reports` table) into report rows without a worker, and drops it.
+/// Runs once, at start-up, in one transaction; returns the events moved.
+pub async fn move_legacy_events(conn: &mut SqliteConnection) -> Result<u64, anyhow::Error> {
+    let (exists,): (i64,) = sqlx::query_as(
+        "SELECT COUNT(*) FROM sqlite_master WHERE type = 'table' AND name = 'legacy_events'",
+    )
+    .fetch_one(&mut *conn)
+    .await?;
+    if exists == 0 {
+        return Ok(0);
+    }
+    let rows: Vec<(i64, i64, f64)> = sqlx::query_as(
+        "SELECT campaign_id, test_index, weight FROM legacy_events ORDER BY campaign_id, test_index",
+    )
+    .fetch_all(&mut *conn)
+    .await?;
+    let moved = rows.len() as u64;
+    let mut at = 0;
+    while at < rows.len() {
+        let campaign = rows[at].0;
+        // One campaign's events, at most LEGACY_CHUNK of them, spanning
+        // fewer than MAX_REPORT_TESTS indices like every report.
+        let first = rows[at].1;
+        let end = rows[at..]
+            .iter()
+            .position(|r| r.0 != campaign || r.1 - first >= MAX_REPORT_TESTS as i64)
+            .map_or(rows.len(), |k| at + k)
+            .min(at + LEGACY_CHUNK);
+        let events: Vec<(u64, f64)> = rows[at..end]
+            .iter()
+            .map(|&(_, i, w)| (i as u64, w))
+            .collect();
+        let (from, to) = (events[0].0, events[events.len() - 1].0 + 1);
+        sqlx::query(
+            "INSERT INTO reports (campaign_id, from_index, to_index, lease_id, worker, events, packed) \
+             VALUES (?, ?, ?, NULL, '', ?, ?)",
+        )
+        .bind(campaign)
+        .bind(from as i64)
+        .bind(to as i64)
+        .bind(events.len() as i64)
+        .bind(packed::pack(from, &events))
+        .execute(&mut *conn)
+        .await?;
+        at = end;
+    }
+    sqlx::query("DROP TABLE legacy_events")
+        .execute(&mut *conn)
+        .await?;
+    Ok(moved)
+}

@@ -1,0 +1,25 @@
+//! The integration tests, one binary so CI links once: command-line runs,
+//! end-to-end service tests with the real `tslg-server` and `tslg-worker`
+//! processes, and the dashboard in headless Chromium.
+
+mod support;
+
+mod browser_dashboard;
+mod cli;
+mod reproduce;
+mod service_access;
+mod service_adversarial;
+mod service_bad_input;
+mod service_carfollow;
+mod service_cli;
+mod service_dashboard;
+mod service_deploy;
+mod service_e2e;
+mod service_external;
+mod service_fairness;
+mod service_highway;
+mod service_load;
+mod service_outside;
+mod service_protocol;
+mod service_recovery;
+mod service_upgrade;
