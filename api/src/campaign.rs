@@ -242,8 +242,31 @@ pub struct CampaignView {
     pub tests_per_second: Option<f64>,
     /// `(predicted_tests − tests) / tests_per_second`, while running.
     pub seconds_left: Option<f64>,
+    /// The replication audits of an external program's tests; absent for
+    /// built-in vehicles (which the coordinator runs again itself).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub audits: Option<AuditCounts>,
     pub created_at: String,
     pub updated_at: String,
+}
+
+/// How a campaign's audited tests stand: each is run again by a different
+/// worker, and a third decides when two disagree (docs/operations.md).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
+pub struct AuditCounts {
+    /// Waiting for a second or a third run; the prefix stops at the first.
+    pub open: u64,
+    /// Two workers agreed.
+    pub agreed: u64,
+    /// Two disagreed and a third decided: the worker in the minority was
+    /// flagged and its results taken back.
+    pub settled: u64,
+    /// Three runs, three outcomes; the first stands.
+    pub undecided: u64,
+    /// Taken back with the worker that ran them first.
+    pub void: u64,
+    /// Chosen, but no other live worker offered the program to run them.
+    pub waived: u64,
 }
 
 /// `GET /api/v1/campaigns`: every campaign, newest first.

@@ -88,6 +88,10 @@ pub struct WorkerView {
     /// Why it last gave a lease back unfinished, when it said.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub last_release_reason: Option<String>,
+    /// Why it is flagged: it reported what the coordinator's replay or two
+    /// other workers contradict. A flagged worker gets no work.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub flagged: Option<String>,
 }
 
 /// One test of a lease.

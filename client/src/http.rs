@@ -179,6 +179,12 @@ impl Client {
         self.post("/api/v1/campaigns", request).await
     }
 
+    /// Every campaign, newest first.
+    pub async fn campaigns(&self) -> Result<tslg_api::CampaignList, CallError> {
+        self.json(self.request(reqwest::Method::GET, "/api/v1/campaigns"))
+            .await
+    }
+
     pub async fn campaign(&self, id: i64) -> Result<CampaignView, CallError> {
         self.json(self.request(reqwest::Method::GET, &format!("/api/v1/campaigns/{id}")))
             .await

@@ -48,6 +48,7 @@ fn view() -> CampaignView {
         warnings: Vec::new(),
         tests_per_second: Some(1000.0),
         seconds_left: Some(5.0),
+        audits: None,
         created_at: String::new(),
         updated_at: String::new(),
     }

@@ -33,6 +33,7 @@ pub enum GridError {
 
 /// One dimension of a grid: a named, strictly increasing list of values.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Axis {
     name: String,
     values: Vec<f64>,
@@ -125,6 +126,7 @@ pub struct Grid {
 }
 
 #[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 struct GridRepr {
     axes: Vec<Axis>,
 }

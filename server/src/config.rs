@@ -61,6 +61,25 @@ pub struct Config {
     /// Largest request body accepted, in bytes (uploaded tables included).
     #[arg(long, env = "TSLG_MAX_BODY", default_value_t = 16 * 1024 * 1024)]
     pub max_body_bytes: usize,
+
+    /// Built-in vehicles: the share of reported tests without an event that
+    /// the coordinator runs again to check them (drawn by a secret key);
+    /// every reported event is run again. A mismatch refuses the report and
+    /// flags the worker (docs/operations.md, "Results are checked").
+    #[arg(long, env = "TSLG_REPLAY_SHARE", default_value_t = 0.1)]
+    pub replay_share: f64,
+
+    /// External programs: the share of reported tests run again by a
+    /// different worker (drawn by a secret key) before the campaign's
+    /// prefix passes them.
+    #[arg(long, env = "TSLG_AUDIT_SHARE", default_value_t = 0.01)]
+    pub audit_share: f64,
+
+    /// External programs: an event is also run again by a different worker
+    /// when it would carry at least this share of the estimate,
+    /// `w ≥ share · (S₁ + w)`. 1 turns this off.
+    #[arg(long, env = "TSLG_AUDIT_WEIGHT_SHARE", default_value_t = 0.05)]
+    pub audit_weight_share: f64,
 }
 
 impl Config {
@@ -85,6 +104,16 @@ impl Config {
             self.lease_size != Some(0),
             "--lease-size must be at least 1"
         );
+        for (name, share) in [
+            ("--replay-share", self.replay_share),
+            ("--audit-share", self.audit_share),
+            ("--audit-weight-share", self.audit_weight_share),
+        ] {
+            anyhow::ensure!(
+                (0.0..=1.0).contains(&share),
+                "{name} {share} must be in [0, 1]"
+            );
+        }
         for (name, token) in [
             ("TSLG_WORKER_TOKEN", &self.worker_token),
             ("TSLG_ADMIN_TOKEN", &self.admin_token),

@@ -3,6 +3,7 @@
 //! workers as leases, and folds their results into each campaign's prefix
 //! estimator until the stopping rule holds. See `docs/architecture.md`.
 
+pub mod audit;
 pub mod builder;
 pub mod campaign_start;
 pub mod config;
@@ -12,6 +13,8 @@ pub mod history;
 pub mod lease_size;
 pub mod metrics;
 pub mod problem_io;
+pub mod report_check;
+pub mod reporting;
 pub mod routes;
 pub mod sampler_cache;
 pub mod state;

@@ -28,6 +28,8 @@ pub struct AppState {
     pub pictures: Arc<crate::routes::PictureCache>,
     /// Request latencies, for `/metrics`.
     pub metrics: Arc<Metrics>,
+    /// Which tests are checked again, by a key of this process.
+    pub sampler: Arc<crate::audit::Sampler>,
 }
 
 impl AppState {
@@ -42,6 +44,7 @@ impl AppState {
             throughput: Arc::new(Throughput::default()),
             metrics: Arc::new(Metrics::default()),
             pictures: Arc::default(),
+            sampler: Arc::default(),
         }
     }
 }

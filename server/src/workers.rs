@@ -101,6 +101,18 @@ impl WorkerRegistry {
         }
     }
 
+    /// The live workers offering `requirement` (`NAME:case:mode`).
+    pub fn live_offering(&self, requirement: &str) -> Vec<String> {
+        let workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
+        workers
+            .iter()
+            .filter(|(_, e)| {
+                e.last_seen.elapsed() < LIVE && e.offers.iter().any(|o| o == requirement)
+            })
+            .map(|(name, _)| name.clone())
+            .collect()
+    }
+
     /// Workers heard from within the last minute, and all workers known.
     pub fn counts(&self) -> (usize, usize) {
         let workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
@@ -111,9 +123,16 @@ impl WorkerRegistry {
         (live, workers.len())
     }
 
-    /// Every worker, most recently seen first.
-    pub fn list(&self) -> Vec<WorkerView> {
+    /// Every worker, most recently seen first, with why it is flagged if
+    /// it is in `flagged` (`(name, reason)`).
+    pub fn list(&self, flagged: &[(String, String)]) -> Vec<WorkerView> {
         let workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
+        let flag = |name: &str| {
+            flagged
+                .iter()
+                .find(|(n, _)| n == name)
+                .map(|(_, reason)| reason.clone())
+        };
         let mut list: Vec<WorkerView> = workers
             .iter()
             .map(|(name, e)| WorkerView {
@@ -126,6 +145,7 @@ impl WorkerRegistry {
                 tests: e.tests,
                 invalid: e.invalid,
                 last_release_reason: e.last_release.clone(),
+                flagged: flag(name),
             })
             .collect();
         list.sort_by(|a, b| a.last_seen_seconds.total_cmp(&b.last_seen_seconds));

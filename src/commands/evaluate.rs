@@ -23,7 +23,28 @@ struct Report {
 }
 
 pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
-    let case = load_case(&args.case)?;
+    check_epsilon(args.exploration.epsilon)?;
+    let library = match (args.method, &args.library) {
+        (MethodArg::Library, None) => anyhow::bail!("--library is required with --method library"),
+        (MethodArg::Library, Some(path)) => Some(read_library(path)?),
+        (MethodArg::Ndd, _) => None,
+    };
+    // The tests run on the simulation the library was built on: its preset,
+    // unless --preset says the same.
+    let mut case_args = args.case.clone();
+    if let Some(library) = &library {
+        match &case_args.preset {
+            None => case_args.preset = Some(library.preset.clone()),
+            Some(preset) if *preset != library.preset => anyhow::bail!(
+                "--preset {preset}: the library was built on preset {}, and its criticality \
+                 means nothing on another simulation; leave --preset out or build the library \
+                 with --preset {preset}",
+                library.preset
+            ),
+            Some(_) => {}
+        }
+    }
+    let case = load_case(&case_args)?;
     let vut = parse_vehicle(&args.vut, "vehicle under test")?;
     let rule = stopping_rule(
         &args.rule,
@@ -33,18 +54,13 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
             args.exploration.epsilon,
         ),
     )?;
-    check_epsilon(args.exploration.epsilon)?;
     let (distribution, surrogate) = match args.method {
         MethodArg::Ndd => (
             TestDistribution::Ndd(NddDistribution::new(case.exposure())),
             None,
         ),
         MethodArg::Library => {
-            let path = args
-                .library
-                .as_ref()
-                .context("--library is required with --method library")?;
-            let library = read_library(path)?;
+            let library = library.as_ref().expect("read above for --method library");
             library.check_matches(&case)?;
             let outside = args
                 .exploration
@@ -54,7 +70,7 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
                 .context("the library's surrogate is not a built-in cut-in model")?;
             let distribution = TestDistribution::library(
                 LibraryDistribution::new(
-                    &library,
+                    library,
                     case.exposure(),
                     args.exploration.epsilon,
                     outside,

@@ -114,6 +114,95 @@ fn evaluate_prints_an_estimate_near_the_exact_answer() {
 }
 
 #[test]
+fn evaluate_runs_on_the_preset_the_library_was_built_on() {
+    let dir = tempfile::tempdir().unwrap();
+    let lib = dir.path().join("table.json");
+    let lib = lib.to_str().unwrap();
+    let o = tslg(&[
+        "library",
+        "build",
+        "--surrogate",
+        "idm",
+        "--search",
+        "exhaustive",
+        "--preset",
+        "paper-table",
+        "-o",
+        lib,
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let run = |extra: &[&str]| {
+        let mut args = vec![
+            "evaluate",
+            "--library",
+            lib,
+            "--vut",
+            "idm",
+            "--seed",
+            "2",
+            "--json",
+        ];
+        args.extend_from_slice(extra);
+        tslg(&args)
+    };
+    // Without --preset: the library's own, the same as saying it.
+    let implied = run(&[]);
+    assert!(implied.status.success(), "{}", stderr(&implied));
+    let said = run(&["--preset", "paper-table"]);
+    assert!(said.status.success(), "{}", stderr(&said));
+    let tests = |o: &Output| {
+        serde_json::from_slice::<serde_json::Value>(&o.stdout).unwrap()["tests"]
+            .as_u64()
+            .unwrap()
+    };
+    assert_eq!(tests(&implied), tests(&said));
+    // The matched surrogate on its own simulation stops at n_min.
+    assert!(tests(&implied) <= 200, "{} tests", tests(&implied));
+    let other = run(&["--preset", "paper-code"]);
+    assert!(!other.status.success());
+    assert!(
+        stderr(&other).contains("the library was built on preset paper-table"),
+        "{}",
+        stderr(&other)
+    );
+}
+
+#[test]
+fn a_library_file_with_an_unknown_field_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let lib = dir.path().join("idm.json");
+    let o = tslg(&[
+        "library",
+        "build",
+        "--surrogate",
+        "idm",
+        "-o",
+        lib.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = std::fs::read_to_string(&lib).unwrap();
+    for (from, to, field) in [
+        ("\"gamma\":", "\"gamma_typo\": 1, \"gamma\":", "gamma_typo"),
+        (
+            "\"fingerprint\":",
+            "\"extra\": 0, \"fingerprint\":",
+            "extra",
+        ),
+        ("\"cell\":", "\"weight\": 2, \"cell\":", "weight"),
+    ] {
+        let changed = dir.path().join(format!("{field}.json"));
+        std::fs::write(&changed, text.replacen(from, to, 1)).unwrap();
+        let o = tslg(&["library", "show", changed.to_str().unwrap()]);
+        assert!(!o.status.success(), "{field} accepted");
+        assert!(
+            stderr(&o).contains(&format!("unknown field `{field}`")),
+            "{field}: {}",
+            stderr(&o)
+        );
+    }
+}
+
+#[test]
 fn exact_reports_every_vehicle_for_both_exposures() {
     let mut args = vec!["exact"];
     let table = shared_table();

@@ -22,4 +22,5 @@ mod service_load;
 mod service_outside;
 mod service_protocol;
 mod service_recovery;
+mod service_trust;
 mod service_upgrade;

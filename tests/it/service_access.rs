@@ -187,7 +187,7 @@ async fn tokens_open_only_their_part_of_the_api_and_never_reach_the_logs() {
         key: lease.key.clone(),
         from: lease.start,
         to: lease.start + 50,
-        events: Vec::new(),
+        events: real_events(&workers, id, lease.start, lease.start + 50).await,
         packed_events: None,
         invalid: Vec::new(),
         compute_seconds: 0.1,

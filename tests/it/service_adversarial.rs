@@ -141,6 +141,15 @@ async fn every_number_is_held_to_the_methods_range_and_stored_nonsense_cannot_ha
             json!({"case": "cut-in", "surrogate": {"model": "switching-acc", "ts": 1e-320}}),
             "`ts` = 1e-320 must be 0 or between",
         ),
+        (
+            json!({"case": "cut-in", "preset": "p\u{1b}[31m", "surrogate": {"model": "idm"}}),
+            "preset must be 1 to 64 bytes without control characters",
+        ),
+        (
+            json!({"case": "cut-in", "surrogate": {"model": "idm"},
+                   "exposure": {"kind": "table", "name": "n".repeat(300), "text": "1"}}),
+            "exposure.name must be 1 to 256 bytes",
+        ),
     ] {
         let (status, detail) = post(&libraries, &body).await;
         assert_eq!(
@@ -387,7 +396,7 @@ async fn a_refused_worker_gives_its_lease_back_at_once_and_says_why() {
         attempt >= 2,
         "the refused lease was handed out {attempt} times"
     );
-    assert!(server.log().contains("lease released"), "{}", server.log());
+    assert!(server.log_line(|l| l.contains("lease released")).is_some());
     client.cancel_campaign(id).await.unwrap();
 }
 
@@ -452,4 +461,59 @@ async fn oversized_reports_are_refused_and_a_high_event_campaign_runs_through() 
         "a high-event campaign: {view:?}"
     );
     assert_same(&view, &in_process(Some("idm"), &request));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_cause_of_an_internal_error_is_logged_and_never_sent() {
+    let dir = scratch();
+    let path = dir.path().join("db.sqlite");
+    let server = ServerProcess::start(&path, &["--lease-size", "100"]);
+    let client = server.client();
+    let library = ready_library(&client, "idm", true).await;
+    let id = client
+        .create_campaign(&campaign(Method::Library, library.id, "idm", 0.01, 3))
+        .await
+        .unwrap()
+        .id;
+    // Two leases; the second is reported first, so its events wait beyond
+    // the frontier, and then its stored row is damaged on disk.
+    let first = claim(&client, "w").await.unwrap();
+    let second = claim(&client, "w").await.unwrap();
+    let mut report = effort(&second, "w", 0.0, 1);
+    report.to = second.end;
+    report.events = real_events(&client, id, second.start, second.end).await;
+    assert!(!report.events.is_empty());
+    client.report(second.id, &report).await.unwrap();
+    let mut db = database(&path).await;
+    sqlx::query("UPDATE reports SET packed = x'07' WHERE campaign_id = ? AND from_index = ?")
+        .bind(id)
+        .bind(second.start as i64)
+        .execute(&mut db)
+        .await
+        .unwrap();
+    // Reporting the first lease folds through the damaged row: a 500 whose
+    // body says only where the cause is, and whose cause is in the log.
+    let mut report = effort(&first, "w", 0.0, 1);
+    report.to = first.end;
+    report.events = real_events(&client, id, first.start, first.end).await;
+    let response = reqwest::Client::new()
+        .post(format!("{}/api/v1/leases/{}/results", server.url, first.id))
+        .json(&report)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(response.status(), StatusCode::INTERNAL_SERVER_ERROR);
+    let problem: Value = response.json().await.unwrap();
+    assert_eq!(
+        problem["detail"],
+        "internal error; the cause is in the coordinator's log"
+    );
+    let line = server
+        .log_line(|l| l.contains("internal error") && l.contains("/results"))
+        .unwrap_or_else(|| panic!("no cause logged: {}", server.log()));
+    assert!(line.contains("method=POST"), "{line}");
+    assert!(
+        line.contains("is damaged: packed events: unknown tag 7"),
+        "{line}"
+    );
 }

@@ -100,12 +100,25 @@ async fn invalid_tests_use_indices_but_are_not_counted_as_tests() {
     let server = ServerProcess::start(&dir.path().join("db.sqlite"), &["--lease-size", "100"]);
     let client = server.client();
     let library = ready_library(&client, "idm", true).await;
-    let id = client
-        .create_campaign(&campaign(Method::Ndd, library.id, "idm", 0.2, 1))
+    // An external program's campaign: only its workers can say a test was
+    // invalid (the coordinator runs a built-in vehicle's tests again).
+    let request = tslg_api::CreateCampaign {
+        vut: serde_json::json!({"external": "sim"}),
+        ..campaign(Method::Ndd, library.id, "idm", 0.2, 1)
+    };
+    let id = client.create_campaign(&request).await.unwrap().id;
+    let lease = client
+        .claim(&tslg_api::LeaseRequest {
+            worker: "w".into(),
+            threads: 1,
+            include_tests: false,
+            offers: vec!["sim:cut-in:step".into()],
+            unhealthy: Vec::new(),
+            max_tests: None,
+        })
         .await
         .unwrap()
-        .id;
-    let lease = claim(&client, "w").await.unwrap();
+        .unwrap();
     let reason = |index| InvalidResult {
         index,
         reason: "simulator crashed".into(),
@@ -128,6 +141,8 @@ async fn invalid_tests_use_indices_but_are_not_counted_as_tests() {
         (view.indices, view.tests, view.invalid, view.events),
         (100, 98, 2, 0)
     );
+    // Alone, the worker's audits could not be run by another.
+    assert_eq!(view.audits.unwrap().open, 0);
     // Reporting the same tests as valid now conflicts.
     let flipped = ResultReport {
         invalid: vec![reason(5)],

@@ -41,11 +41,61 @@ async fn sixty_four_concurrent_workers_lose_and_double_nothing() {
     let id = report["campaign_id"].as_i64().unwrap();
     let view = client.campaign(id).await.unwrap();
     assert_eq!(view.status, CampaignStatus::Cancelled);
-    let mut request = campaign(Method::Ndd, 0, "idm", 1e-9, 1);
+    let mut request = campaign(Method::Ndd, 0, "idm", tslg_method::estimator::MIN_BETA, 1);
     request.library_id = None;
     request.max_tests = requests * 100;
     assert_same(&view, &in_process(None, &request));
     let log = server.log();
     assert!(!log.contains("database is locked"), "{log}");
     assert!(!log.contains("panicked"), "{log}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_load_test_works_against_a_default_coordinator_and_always_cleans_up() {
+    let dir = scratch();
+    // Adaptive lease sizes, as an operator runs the coordinator.
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &[]);
+    let run = |extra: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_tslg"))
+            .args(["load-test", "--server", &server.url, "--json"])
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let output = run(&["--workers", "16", "--requests", "10"]);
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(
+        output.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let report: Value = serde_json::from_str(&stdout).unwrap();
+    assert_eq!(report["errors"].as_array().unwrap().len(), 0);
+    assert_eq!(
+        report["accepted_tests"],
+        16 * 10 * 100,
+        "leases of the default 100 tests"
+    );
+    assert_eq!(report["accepted_tests"], report["campaign_tests"]);
+    // Cut off by its time limit, it still cancels its campaign.
+    let output = run(&[
+        "--workers",
+        "64",
+        "--requests",
+        "100000",
+        "--time-limit",
+        "1",
+    ]);
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        stderr.contains("did not finish within") && stderr.contains("was cancelled"),
+        "{stderr}"
+    );
+    let client = server.client();
+    let campaigns = client.campaigns().await.unwrap().campaigns;
+    assert_eq!(campaigns.len(), 2);
+    for view in campaigns {
+        assert_eq!(view.status, CampaignStatus::Cancelled, "{view:?}");
+    }
 }

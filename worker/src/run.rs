@@ -159,6 +159,14 @@ pub async fn run(
             }) => {
                 anyhow::bail!("the coordinator refused this worker's token: {detail}");
             }
+            Err(CallError::Refused {
+                status: 403,
+                detail,
+            }) => {
+                // Flagged: its results contradicted others'. Asking again
+                // changes nothing until an operator clears the flag.
+                anyhow::bail!("the coordinator refuses this worker: {detail}");
+            }
             Err(e) => {
                 tracing::warn!(error = %e, "cannot get work");
                 version_checked = false;

@@ -51,12 +51,15 @@ pub enum LibraryFileError {
     WrongExposure { library: String, campaign: String },
 }
 
-#[derive(Serialize, Deserialize)]
-struct LibraryFile {
-    format: String,
+/// The file as written: the format tag and version, then the library's
+/// fields. (Read back through [`Library::from_json`], which takes the tag
+/// and version off and refuses unknown fields; serde's `flatten` cannot.)
+#[derive(Serialize)]
+struct LibraryFile<'a> {
+    format: &'static str,
     version: u32,
     #[serde(flatten)]
-    library: Library,
+    library: &'a Library,
 }
 
 #[derive(Deserialize)]
@@ -69,9 +72,9 @@ impl Library {
     /// The library as pretty JSON.
     pub fn to_json(&self) -> String {
         serde_json::to_string_pretty(&LibraryFile {
-            format: FORMAT.to_owned(),
+            format: FORMAT,
             version: VERSION,
-            library: self.clone(),
+            library: self,
         })
         .expect("a library serialises")
     }
@@ -88,10 +91,16 @@ impl Library {
         if header.version != Some(VERSION) {
             return Err(LibraryFileError::Version(header.version.unwrap_or(0)));
         }
-        let file: LibraryFile =
+        // Every other field must be the library's: a misspelt or foreign
+        // field is refused, not silently dropped.
+        let mut fields: serde_json::Map<String, serde_json::Value> =
             serde_json::from_str(text).map_err(|e| LibraryFileError::Json(e.to_string()))?;
-        file.library.validate()?;
-        Ok(file.library)
+        fields.remove("format");
+        fields.remove("version");
+        let library: Library = serde_json::from_value(serde_json::Value::Object(fields))
+            .map_err(|e| LibraryFileError::Json(e.to_string()))?;
+        library.validate()?;
+        Ok(library)
     }
 
     fn validate(&self) -> Result<(), LibraryFileError> {

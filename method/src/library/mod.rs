@@ -75,6 +75,7 @@ pub enum SearchMethod {
 
 /// What a search did.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct SearchReport {
     pub method: SearchMethod,
     /// Distinct cells on which the surrogate was simulated.
@@ -86,6 +87,7 @@ pub struct SearchReport {
 
 /// One library scenario.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct LibraryCell {
     pub cell: usize,
     /// `V(x) = P(S|x) P(x)`.
@@ -94,6 +96,7 @@ pub struct LibraryCell {
 
 /// The exposure a library was built on.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct ExposureRef {
     pub name: String,
     pub fingerprint: String,
@@ -101,6 +104,7 @@ pub struct ExposureRef {
 
 /// A scenario library. See `docs/library-format.md` for the file format.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Library {
     pub case: String,
     /// The case's simulation preset (e.g. `paper-code`).

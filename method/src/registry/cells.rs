@@ -17,7 +17,8 @@ use crate::progress::Progress;
 use crate::sampling::{LibraryDistribution, NddDistribution, OutsideSpread, TestDistribution};
 use serde::de::DeserializeOwned;
 use serde::Serialize;
-use std::sync::Arc;
+use std::sync::atomic::{AtomicU8, Ordering};
+use std::sync::{Arc, OnceLock};
 
 /// The media type of the JSON library file.
 const LIBRARY_MEDIA_TYPE: &str = "application/json";
@@ -186,6 +187,7 @@ where
             surrogate,
             distribution,
             seed,
+            outcomes: OnceLock::new(),
         }))
     }
 
@@ -246,7 +248,16 @@ struct CellCampaign<C: Case> {
     seed: u64,
     /// The world block of each `reset` sent to a program.
     world: serde_json::Value,
+    /// The built-in vehicle's outcome per cell, for [`CampaignTests::replay`]:
+    /// 0 not run yet, 1 no event, 2 event. Allocated on the first replay
+    /// (the coordinator's copy), so workers never pay for it.
+    outcomes: OnceLock<Vec<AtomicU8>>,
 }
+
+/// [`CellCampaign::outcomes`]' codes.
+const NOT_RUN: u8 = 0;
+const NO_EVENT: u8 = 1;
+const EVENT: u8 = 2;
 
 impl<C> CampaignTests for CellCampaign<C>
 where
@@ -289,6 +300,30 @@ where
                  gives {expected:e}"
             ))
         }
+    }
+
+    fn replay(&self, index: u64) -> Option<TestOutcome> {
+        let CampaignVehicle::Builtin(vehicle) = &self.vehicle else {
+            return None;
+        };
+        let draw = self.distribution.draw(self.seed, index);
+        let outcomes = self.outcomes.get_or_init(|| {
+            (0..self.case.grid().len())
+                .map(|_| AtomicU8::new(NOT_RUN))
+                .collect()
+        });
+        let known = outcomes[draw.cell].load(Ordering::Relaxed);
+        let event = if known == NOT_RUN {
+            let event = self.case.is_event(vehicle, draw.cell);
+            outcomes[draw.cell].store(if event { EVENT } else { NO_EVENT }, Ordering::Relaxed);
+            event
+        } else {
+            known == EVENT
+        };
+        Some(TestOutcome {
+            event,
+            weight: draw.weight,
+        })
     }
 
     fn planned(&self, index: u64) -> Option<PlannedTest> {

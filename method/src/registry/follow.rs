@@ -390,4 +390,8 @@ impl CampaignTests for FollowCampaign {
     fn planned(&self, _: u64) -> Option<PlannedTest> {
         None
     }
+
+    fn replay(&self, index: u64) -> Option<TestOutcome> {
+        self.vut.external().is_none().then(|| self.run(index))
+    }
 }

@@ -154,6 +154,12 @@ pub trait CampaignTests: Send + Sync {
     /// The scenario and weight of test `index` when they are fixed before the
     /// test runs; `None` for sequential scenarios sampled while they run.
     fn planned(&self, index: u64) -> Option<PlannedTest>;
+    /// The coordinator's own outcome of test `index`, to check what a
+    /// worker reported: the test run again on the campaign's built-in
+    /// model (a grid case runs each cell once and remembers it, since a
+    /// built-in vehicle's outcome depends on the cell alone). `None` when
+    /// the vehicle is an external program, which only workers can run.
+    fn replay(&self, index: u64) -> Option<TestOutcome>;
     /// Whether test `index` draws its scenario outside the library.
     fn explores(&self, _index: u64) -> bool {
         false

@@ -230,3 +230,63 @@ fn the_car_following_case_learns_a_policy_file_and_replays_reported_accidents() 
         .unwrap_err();
     assert!(err.to_string().contains("no enumeration"), "{err}");
 }
+
+#[test]
+fn the_coordinators_replay_gives_every_tests_outcome_and_nothing_for_programs() {
+    let library = |case: &dyn ScenarioCase, surrogate: &str| {
+        case.build_library(
+            &json!({ "model": surrogate }),
+            &BuildRequest {
+                threshold: None,
+                search: Some(LibrarySearch::Cells(SearchMethod::Exhaustive)),
+            },
+        )
+        .unwrap()
+        .file
+    };
+    let cut_in = open_case("cut-in", None, &ExposureSource::Builtin).unwrap();
+    let file = library(cut_in.as_ref(), "idm");
+    for (vut, file) in [("fvdm", Some(&file[..])), ("idm", None)] {
+        let tests = cut_in
+            .campaign(
+                file,
+                &json!({ "model": vut }),
+                0.1,
+                OutsideSpread::Uniform,
+                9,
+            )
+            .unwrap();
+        // Twice: the first replay of a cell runs it, later ones remember it.
+        for _ in 0..2 {
+            for index in 0..3000 {
+                let (run, replay) = (tests.run(index), tests.replay(index).unwrap());
+                assert_eq!(
+                    (run.event, run.weight.to_bits()),
+                    (replay.event, replay.weight.to_bits()),
+                    "{vut} test {index}"
+                );
+            }
+        }
+    }
+    let program = cut_in
+        .campaign(
+            Some(&file),
+            &json!({"external": "mine"}),
+            0.1,
+            OutsideSpread::Uniform,
+            9,
+        )
+        .unwrap();
+    assert_eq!(program.replay(0), None);
+    let follow = open_case("car-following", Some("risky"), &ExposureSource::Builtin).unwrap();
+    let tests = follow
+        .campaign(None, &json!({"model": "idm"}), 0.1, OutsideSpread::Ndd, 2)
+        .unwrap();
+    for index in 0..200 {
+        let (run, replay) = (tests.run(index), tests.replay(index).unwrap());
+        assert_eq!(
+            (run.event, run.weight.to_bits()),
+            (replay.event, replay.weight.to_bits())
+        );
+    }
+}

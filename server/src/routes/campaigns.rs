@@ -5,7 +5,7 @@ use crate::error::{ApiError, ApiJson};
 use crate::history;
 use crate::routes::{ApiPath, ApiQuery};
 use crate::state::AppState;
-use crate::store::campaigns;
+use crate::store::{audits, campaigns};
 use axum::extract::State;
 use axum::http::{header, StatusCode};
 use axum::response::IntoResponse;
@@ -35,9 +35,11 @@ pub async fn create(
 #[utoipa::path(get, path = "/api/v1/campaigns", responses((status = 200, body = CampaignList)))]
 pub async fn list(State(state): State<AppState>) -> Result<Json<CampaignList>, ApiError> {
     let rows = campaigns::list(&state.db.read).await?;
-    Ok(Json(CampaignList {
-        campaigns: rows.iter().map(|r| live_view(&state, r)).collect(),
-    }))
+    let mut views = Vec::with_capacity(rows.len());
+    for row in &rows {
+        views.push(live_view(&state, row).await?);
+    }
+    Ok(Json(CampaignList { campaigns: views }))
 }
 
 /// One campaign's state and estimate over its resolved prefix.
@@ -47,17 +49,26 @@ pub async fn get_one(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
 ) -> Result<Json<CampaignView>, ApiError> {
-    Ok(Json(live_view(
-        &state,
-        &campaigns::get(&state.db.read, id).await?,
-    )))
+    Ok(Json(
+        live_view(&state, &campaigns::get(&state.db.read, id).await?).await?,
+    ))
 }
 
-/// A campaign's view with its current rate and the time left.
-pub fn live_view(state: &AppState, row: &campaigns::CampaignRow) -> CampaignView {
+/// A campaign's view with its current rate, the time left and, for an
+/// external program, its audits.
+pub async fn live_view(
+    state: &AppState,
+    row: &campaigns::CampaignRow,
+) -> Result<CampaignView, ApiError> {
     let mut view = row.view();
     state.throughput.fill(&mut view);
-    view
+    if row.requires.is_some() {
+        let states = audits::counts(&state.db.read, row.id).await?;
+        let (counts, warnings) = campaigns::audit_counts(row, &states);
+        view.audits = Some(counts);
+        view.warnings.extend(warnings);
+    }
+    Ok(view)
 }
 
 /// `?points=N` of the history read.

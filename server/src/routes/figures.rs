@@ -33,7 +33,7 @@ async fn campaign(
 ) -> Result<(tslg_api::CampaignView, Vec<tslg_api::HistoryPoint>), ApiError> {
     let row = campaigns::get(&state.db.read, id).await?;
     let points = campaigns::history(&state.db.read, &row, crate::history::DEFAULT_POINTS).await?;
-    Ok((super::campaigns::live_view(state, &row), points))
+    Ok((super::campaigns::live_view(state, &row).await?, points))
 }
 
 /// The estimate with its interval band against tests (log axis).

@@ -1,20 +1,20 @@
 //! `/api/v1/leases`: workers take ranges of tests and report outcomes.
 
 use crate::error::{ApiError, ApiJson};
+use crate::report_check::check_report;
+use crate::reporting;
 use crate::routes::ApiPath;
 use crate::state::AppState;
-use crate::store::{campaigns, leases, results};
+use crate::store::{audits, campaigns, leases};
 use axum::extract::State;
 use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
 use axum::Json;
-use std::sync::Arc;
 use tslg_api::{
-    HeartbeatAck, Lease, LeaseFence, LeaseKey, LeaseRelease, LeaseRequest, Method, Problem,
-    ResultAck, ResultReport, TestCase, WorkerList, MAX_INVALID_REASON,
+    HeartbeatAck, Lease, LeaseFence, LeaseKey, LeaseRelease, LeaseRequest, Problem, ResultAck,
+    ResultReport, TestCase, WorkerList, MAX_INVALID_REASON,
 };
 use tslg_method::external::{check_program_name, ExternalMode};
-use tslg_method::registry::CampaignTests;
 
 /// Most programs' offers and unhealthy reports one request may carry.
 const MAX_OFFERS: usize = 256;
@@ -53,6 +53,7 @@ pub async fn claim(
     }
     check_programs(&req)?;
     state.workers.seen(&req);
+    reporting::refuse_flagged(&state, &req.worker).await?;
     let ask = leases::Claim {
         worker: &req.worker,
         threads: req.threads,
@@ -155,10 +156,30 @@ fn check_programs(req: &LeaseRequest) -> Result<(), ApiError> {
 /// their threads, the external programs they offer and those they report
 /// unhealthy.
 #[utoipa::path(get, path = "/api/v1/workers", responses((status = 200, body = WorkerList)))]
-pub async fn workers(State(state): State<AppState>) -> Json<WorkerList> {
-    Json(WorkerList {
-        workers: state.workers.list(),
-    })
+pub async fn workers(State(state): State<AppState>) -> Result<Json<WorkerList>, ApiError> {
+    let flagged = audits::flagged(&state.db.read).await?;
+    Ok(Json(WorkerList {
+        workers: state.workers.list(&flagged),
+    }))
+}
+
+/// Clears a worker's flag: it gets work again (its taken-back results stay
+/// taken back).
+#[utoipa::path(delete, path = "/api/v1/workers/{name}/flag", params(("name" = String, Path)),
+    responses((status = 204, description = "Cleared"), (status = 401, body = Problem),
+    (status = 404, body = Problem)))]
+pub async fn unflag(
+    State(state): State<AppState>,
+    ApiPath(name): ApiPath<String>,
+) -> Result<StatusCode, ApiError> {
+    check_worker(&name)?;
+    if !audits::unflag(&state.db.write, &name).await? {
+        return Err(ApiError::NotFound(format!(
+            "worker `{name}` is not flagged"
+        )));
+    }
+    tracing::warn!(worker = %name, "flag cleared by an operator");
+    Ok(StatusCode::NO_CONTENT)
 }
 
 /// Keeps a lease alive; `continue: false` means drop it.
@@ -170,6 +191,7 @@ pub async fn heartbeat(
     ApiPath(id): ApiPath<i64>,
     ApiJson(fence): ApiJson<LeaseFence>,
 ) -> Result<Json<HeartbeatAck>, ApiError> {
+    reporting::refuse_flagged(&state, &fence.worker).await?;
     Ok(Json(
         leases::heartbeat(&state.db, &state.config, id, &fence).await?,
     ))
@@ -216,67 +238,8 @@ pub async fn results(
     ApiJson(report): ApiJson<ResultReport>,
 ) -> Result<Json<ResultAck>, ApiError> {
     check_worker(&report.worker)?;
-    let checked = results::check_report(&report)?;
-    let lease = leases::get(&mut *state.db.read.acquire().await?, id).await?;
-    let campaign = campaigns::get(&state.db.read, lease.campaign_id).await?;
-    let tests = if campaign.status().is_final() {
-        None
-    } else {
-        Some(state.samplers.get(&state.db, &campaign).await?)
-    };
-    if let Some(tests) = &tests {
-        if !checked.events.is_empty() {
-            verify_weights(tests, &checked).await?;
-        }
-    }
-    let library_tests = tests.filter(|_| campaign.method() == Method::Library);
-    let recorded = results::record(
-        &state.db,
-        &state.config,
-        library_tests,
-        id,
-        &report,
-        &checked,
-    )
-    .await?;
-    let accepted = recorded.ack.accepted;
-    // The accepted tests are the range's tail (the rest were duplicates).
-    let invalid = report
-        .invalid
-        .iter()
-        .filter(|i| i.index >= report.to - accepted)
-        .count() as u64;
-    state.workers.reported(&report.worker, accepted, invalid);
-    if accepted > 0 && recorded.ack.proceed {
-        state.throughput.accepted(recorded.campaign_id, accepted);
-    }
-    if recorded.stopped.is_some() {
-        state.samplers.forget(recorded.campaign_id);
-        state.throughput.forget(recorded.campaign_id);
-    }
-    Ok(Json(recorded.ack))
-}
-
-/// Checks each reported event against the coordinator's own copy of that
-/// test (its draw, or for sequential scenarios a replay): a mismatch means
-/// the worker samples differently (another version, another library) and its
-/// results must not enter the estimate.
-async fn verify_weights(
-    tests: &Arc<dyn CampaignTests>,
-    report: &results::CheckedReport,
-) -> Result<(), ApiError> {
-    let tests = Arc::clone(tests);
-    let events = report.events.clone();
-    let checked = tokio::task::spawn_blocking(move || {
-        events
-            .iter()
-            .try_for_each(|&(index, weight)| tests.check_event(index, weight))
-    })
-    .await
-    .map_err(|e| ApiError::Internal(e.into()))?;
-    checked.map_err(|reason| {
-        ApiError::Unprocessable(format!(
-            "{reason}: the worker draws different scenarios (another version of tslg?)"
-        ))
-    })
+    let checked = check_report(&report)?;
+    Ok(Json(
+        reporting::receive(&state, id, &report, &checked).await?,
+    ))
 }

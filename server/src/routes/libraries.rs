@@ -5,6 +5,7 @@ use crate::error::{ApiError, ApiJson};
 use crate::routes::ApiPath;
 use crate::state::AppState;
 use crate::store::libraries::{self, NewLibrary};
+use crate::validate::check_name;
 use axum::extract::State;
 use axum::http::{header, StatusCode};
 use axum::response::IntoResponse;
@@ -21,7 +22,12 @@ pub async fn create(
     ApiJson(req): ApiJson<CreateLibrary>,
 ) -> Result<impl IntoResponse, ApiError> {
     let request = build_request(&req).map_err(ApiError::Unprocessable)?;
+    check_name("case", &req.case, 64)?;
+    if let Some(preset) = &req.preset {
+        check_name("preset", preset, 64)?;
+    }
     if let ExposureRequest::Table { name, .. } = &req.exposure {
+        check_name("exposure.name", name, 256)?;
         if name.trim().is_empty() {
             return Err(ApiError::Unprocessable(
                 "exposure.name must not be empty".into(),

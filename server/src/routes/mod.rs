@@ -23,7 +23,7 @@ use crate::state::AppState;
 use axum::extract::{DefaultBodyLimit, State};
 use axum::http::StatusCode;
 use axum::middleware::from_fn_with_state;
-use axum::routing::{get, post};
+use axum::routing::{delete, get, post};
 use axum::Router;
 
 pub fn router(state: AppState) -> Router {
@@ -31,6 +31,7 @@ pub fn router(state: AppState) -> Router {
         .route("/api/v1/libraries", post(libraries::create))
         .route("/api/v1/campaigns", post(campaigns::create))
         .route("/api/v1/campaigns/{id}/cancel", post(campaigns::cancel))
+        .route("/api/v1/workers/{name}/flag", delete(leases::unflag))
         .route_layer(from_fn_with_state(state.clone(), auth::require_admin));
     let worker = Router::new()
         .route("/api/v1/leases", post(leases::claim))

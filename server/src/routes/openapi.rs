@@ -33,6 +33,7 @@ use utoipa::OpenApi;
         super::leases::release,
         super::leases::results,
         super::leases::workers,
+        super::leases::unflag,
         super::figures::estimate,
         super::figures::relative_half_width,
         super::figures::library_picture,
@@ -56,9 +57,8 @@ pub async fn document(State(state): State<AppState>) -> Json<Value> {
 fn role_of(path: &str, method: &str) -> Option<Role> {
     match (method, path) {
         (_, "/healthz" | "/api/v1/openapi.json") => None,
-        ("post", "/api/v1/libraries" | "/api/v1/campaigns" | "/api/v1/campaigns/{id}/cancel") => {
-            Some(Role::Admin)
-        }
+        ("post", "/api/v1/libraries" | "/api/v1/campaigns" | "/api/v1/campaigns/{id}/cancel")
+        | ("delete", "/api/v1/workers/{name}/flag") => Some(Role::Admin),
         (_, p) if p.starts_with("/api/v1/leases") => Some(Role::Worker),
         ("get", "/api/v1/campaigns/{id}/plan" | "/api/v1/libraries/{id}/file") => {
             Some(Role::Worker)

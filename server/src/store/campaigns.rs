@@ -3,7 +3,9 @@
 use crate::error::ApiError;
 use crate::lease_size::predicted_unleased;
 use sqlx::SqlitePool;
-use tslg_api::{CampaignStatus, CampaignView, ExposureRequest, HistoryPoint, Method, Outside};
+use tslg_api::{
+    AuditCounts, CampaignStatus, CampaignView, ExposureRequest, HistoryPoint, Method, Outside,
+};
 use tslg_method::campaign::CampaignResult;
 use tslg_method::estimator::{Decision, ImportanceEstimator, StoppingRule};
 use tslg_method::outside::OutsideTally;
@@ -53,6 +55,10 @@ pub struct CampaignRow {
     pub outside_upper: Option<f64>,
     pub cost_per_test: Option<f64>,
     pub worker_seconds: f64,
+    /// Tests chosen for an audit that no other worker could run.
+    pub audits_waived: i64,
+    /// The weights of every event recorded, folded or not.
+    pub reported_s1: f64,
     pub created_at: String,
     pub updated_at: String,
 }
@@ -62,7 +68,7 @@ pub const COLUMNS: &str = "id, case_name, preset, method, library_id, exposure_n
     min_events, max_tests, seed, status, status_detail, next_index, indices, tests, events, invalid, s1, s2, \
     largest, guard_outside, outside_tests, outside_events, outside_s1, outside_upper, \
     outside_mismatches, \
-    cost_per_test, worker_seconds, created_at, updated_at";
+    cost_per_test, worker_seconds, audits_waived, reported_s1, created_at, updated_at";
 
 impl CampaignRow {
     pub fn status(&self) -> CampaignStatus {
@@ -194,10 +200,59 @@ impl CampaignRow {
             },
             tests_per_second: None,
             seconds_left: None,
+            audits: None,
             created_at: self.created_at.clone(),
             updated_at: self.updated_at.clone(),
         }
     }
+}
+
+/// A campaign's audit counts from `(state, count)` rows, with what they
+/// mean for its user in words.
+pub fn audit_counts(row: &CampaignRow, states: &[(String, i64)]) -> (AuditCounts, Vec<String>) {
+    let count = |name: &str| {
+        states
+            .iter()
+            .filter(|(s, _)| s == name)
+            .map(|(_, n)| *n as u64)
+            .sum::<u64>()
+    };
+    let counts = AuditCounts {
+        open: count("replica") + count("tiebreak"),
+        agreed: count("agreed"),
+        settled: count("settled"),
+        undecided: count("undecided"),
+        void: count("void"),
+        waived: row.audits_waived as u64,
+    };
+    let program = row
+        .requires
+        .as_deref()
+        .and_then(|r| r.split(':').next())
+        .unwrap_or("the program");
+    let mut warnings = Vec::new();
+    if counts.waived > 0 {
+        warnings.push(format!(
+            "{} tests chosen for an audit were not run again: no other worker offering \
+             `{program}` was live; run two or more workers offering it to have them checked",
+            counts.waived
+        ));
+    }
+    if counts.open > 0 && !row.status().is_final() {
+        warnings.push(format!(
+            "{} tests wait to be run again by another worker offering `{program}`; the estimate \
+             stops at the first of them until they are",
+            counts.open
+        ));
+    }
+    if counts.undecided > 0 {
+        warnings.push(format!(
+            "{} audited tests got three different outcomes from three workers: is `{program}` \
+             deterministic for a given test?",
+            counts.undecided
+        ));
+    }
+    (counts, warnings)
 }
 
 /// The estimate, interval and relative half-width of a prefix.

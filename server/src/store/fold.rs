@@ -10,6 +10,7 @@
 
 use crate::error::ApiError;
 use crate::history;
+use crate::store::audits;
 use crate::store::campaigns::CampaignRow;
 use crate::store::reports;
 use sqlx::{QueryBuilder, Sqlite, SqliteConnection};
@@ -70,16 +71,21 @@ pub fn fold_step(
     })
 }
 
-/// The first index without a recorded outcome: the smallest `resume_at`
-/// of the campaign's active leases, or its `next_index`.
+/// The first index the prefix may not pass: the smallest `resume_at` of
+/// the campaign's active leases (below it every outcome is recorded), its
+/// `next_index`, and its first open audit (a test two workers have not yet
+/// agreed on, [`crate::audit`]).
 async fn frontier(conn: &mut SqliteConnection, campaign: &CampaignRow) -> Result<u64, ApiError> {
     let (open,): (Option<i64>,) = sqlx::query_as(
-        "SELECT MIN(resume_at) FROM leases WHERE campaign_id = ? AND state = 'active'",
+        "SELECT MIN(resume_at) FROM leases WHERE campaign_id = ? AND state = 'active' \
+         AND audit_id IS NULL",
     )
     .bind(campaign.id)
     .fetch_one(&mut *conn)
     .await?;
-    Ok(open.map_or(campaign.next_index, |r| r.min(campaign.next_index)) as u64)
+    let recorded = open.map_or(campaign.next_index, |r| r.min(campaign.next_index)) as u64;
+    let audited = audits::open_front(&mut *conn, campaign.id).await?;
+    Ok(audited.map_or(recorded, |a| a.min(recorded)))
 }
 
 /// The tests of `from..to` that draw outside the library, replayed off the
@@ -246,6 +252,16 @@ async fn write(
         .bind(campaign.id)
         .execute(&mut *conn)
         .await?;
+    // Audits past the stop check tests that no longer count.
+    sqlx::query(&format!(
+        "UPDATE audits SET state = 'past' WHERE campaign_id = ? AND test_index >= ? \
+         AND state IN {}",
+        audits::OPEN
+    ))
+    .bind(campaign.id)
+    .bind(fold.indices as i64)
+    .execute(&mut *conn)
+    .await?;
     tracing::info!(
         campaign = campaign.id,
         status = status.as_str(),

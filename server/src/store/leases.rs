@@ -5,6 +5,7 @@ use crate::config::Config;
 use crate::db::{now_ms, Database};
 use crate::error::ApiError;
 use crate::lease_size::{lease_size, predicted_unleased, SizingInput, MAX_INLINE_LEASE};
+use crate::store::audits;
 use crate::store::campaigns::{self, CampaignRow, COLUMNS as CAMPAIGN_COLUMNS};
 use sqlx::SqliteConnection;
 use subtle::ConstantTimeEq;
@@ -27,10 +28,15 @@ pub struct LeaseRow {
     pub claimed_at: i64,
     /// The threads the current attempt was asked for.
     pub threads: i64,
+    /// The audit whose run this one-test lease is.
+    pub audit_id: Option<i64>,
 }
 
 pub const COLUMNS: &str = "id, campaign_id, start_index, end_index, resume_at, attempt, worker, \
-    expires_at, state, key, claimed_at, threads";
+    expires_at, state, key, claimed_at, threads, audit_id";
+
+/// Open audits past which a campaign gets no new range.
+const MAX_OPEN_AUDITS: i64 = 256;
 
 /// Most threads a worker may declare.
 pub const MAX_THREADS: u32 = 4096;
@@ -105,6 +111,7 @@ pub async fn claim(
              claimed_at = ?, threads = ? \
          WHERE id = (SELECT l.id FROM leases l JOIN campaigns c ON c.id = l.campaign_id \
                      WHERE l.state = 'active' AND l.expires_at < ? AND c.status = 'running' \
+                       AND l.audit_id IS NULL \
                        AND l.end_index - l.resume_at <= ? {planned_only} {runnable} \
                      ORDER BY l.campaign_id, l.resume_at LIMIT 1) \
          RETURNING {COLUMNS}"
@@ -130,9 +137,20 @@ pub async fn claim(
         );
         return Ok(Some(lease));
     }
+    if let Some(lease) = claim_audit(&mut tx, ask, &offered, now, expires).await? {
+        tx.commit().await?;
+        return Ok(Some(lease));
+    }
+    // A campaign with many tests waiting for their audits gets no new
+    // range until workers have run them: audits come first, and the work
+    // behind them cannot count before they are done.
     let sql = format!(
         "SELECT {CAMPAIGN_COLUMNS} FROM campaigns c WHERE status = 'running' \
-         AND next_index < max_tests {planned_only} {runnable} ORDER BY next_turn_at, id LIMIT 1"
+         AND next_index < max_tests {planned_only} {runnable} \
+         AND (SELECT COUNT(*) FROM audits a WHERE a.campaign_id = c.id \
+              AND a.state IN {open}) < {MAX_OPEN_AUDITS} \
+         ORDER BY next_turn_at, id LIMIT 1",
+        open = audits::OPEN
     );
     let Some(campaign): Option<CampaignRow> = sqlx::query_as(&sql)
         .bind(&offered)
@@ -176,6 +194,83 @@ pub async fn claim(
         .await?;
     tx.commit().await?;
     Ok(Some(lease))
+}
+
+/// A one-test lease for an open audit `ask`'s worker may run (see
+/// [`crate::audit`]): a new lease, or the audit's expired one taken over.
+async fn claim_audit(
+    conn: &mut SqliteConnection,
+    ask: &Claim<'_>,
+    offered: &str,
+    now: i64,
+    expires: i64,
+) -> Result<Option<LeaseRow>, ApiError> {
+    if ask.inline || ask.offers.is_empty() {
+        return Ok(None);
+    }
+    let Some(audit) = audits::runnable(&mut *conn, ask.worker, offered, now).await? else {
+        return Ok(None);
+    };
+    if let Some(old) = audit.lease_id {
+        sqlx::query("UPDATE leases SET state = 'cancelled' WHERE id = ? AND state = 'active'")
+            .bind(old)
+            .execute(&mut *conn)
+            .await?;
+    }
+    let sql = format!(
+        "INSERT INTO leases (campaign_id, start_index, end_index, resume_at, attempt, worker, \
+         expires_at, state, key, claimed_at, threads, audit_id) \
+         VALUES (?, ?, ?, ?, 1, ?, ?, 'active', ?, ?, ?, ?) RETURNING {COLUMNS}"
+    );
+    let lease: LeaseRow = sqlx::query_as(&sql)
+        .bind(audit.campaign_id)
+        .bind(audit.test_index)
+        .bind(audit.test_index + 1)
+        .bind(audit.test_index)
+        .bind(ask.worker)
+        .bind(expires)
+        .bind(new_key())
+        .bind(now)
+        .bind(ask.threads)
+        .bind(audit.id)
+        .fetch_one(&mut *conn)
+        .await?;
+    sqlx::query("UPDATE audits SET lease_id = ? WHERE id = ?")
+        .bind(lease.id)
+        .bind(audit.id)
+        .execute(&mut *conn)
+        .await?;
+    tracing::info!(
+        audit = audit.id,
+        campaign = audit.campaign_id,
+        test = audit.test_index,
+        worker = ask.worker,
+        "audit run leased"
+    );
+    Ok(Some(lease))
+}
+
+/// A lease of `from..to` for any worker, expired at once so the next
+/// claim takes it: the range of results taken back from a flagged worker.
+pub async fn insert_redo(
+    conn: &mut SqliteConnection,
+    campaign: i64,
+    from: u64,
+    to: u64,
+) -> Result<(), ApiError> {
+    sqlx::query(
+        "INSERT INTO leases (campaign_id, start_index, end_index, resume_at, attempt, worker, \
+         expires_at, state, key, claimed_at, threads) \
+         VALUES (?, ?, ?, ?, 0, '', 0, 'active', ?, 0, 1)",
+    )
+    .bind(campaign)
+    .bind(from as i64)
+    .bind(to as i64)
+    .bind(from as i64)
+    .bind(new_key())
+    .execute(&mut *conn)
+    .await?;
+    Ok(())
 }
 
 /// Milliseconds of work a lease of `size` tests is expected to take on

@@ -12,161 +12,26 @@ use crate::config::Config;
 use crate::db::{now_ms, Database};
 use crate::error::ApiError;
 use crate::lease_size::update_cost;
+use crate::report_check::{check_effort, CheckedReport};
+use crate::store::audits::{self, NewAudit};
 use crate::store::campaigns::{self, CampaignRow};
 use crate::store::fold::fold_prefix;
-use crate::store::leases::{self, check_fence, LeaseRow, MAX_THREADS};
+use crate::store::leases::{self, check_fence, LeaseRow};
 use crate::store::reports::{self, NewReport};
 use sqlx::SqliteConnection;
 use std::sync::Arc;
-use tslg_api::{
-    CampaignStatus, ResultAck, ResultReport, MAX_INVALID_REASON, MAX_REPORT_EVENTS,
-    MAX_REPORT_INVALID, MAX_REPORT_TESTS,
-};
-use tslg_method::number::Num;
+use tslg_api::{CampaignStatus, ResultAck, ResultReport};
 use tslg_method::prefix::SparseOutcome;
 use tslg_method::registry::CampaignTests;
 
-/// Longest a report may say it took, in seconds (a day): with the
-/// attempt's age it keeps the cost per test, and so the fairness turn it
-/// sets, finite.
-const MAX_COMPUTE_SECONDS: f64 = 86_400.0;
-/// Slack for the attempt-age check: the worker's clock starts after the
-/// coordinator's, but rounding of milliseconds and clocks of different
-/// resolution are allowed this much.
-const CLOCK_SLACK_SECONDS: f64 = 1.0;
-
-/// A report checked for shape: sorted, disjoint, inside its range, within
-/// the size limits.
-pub struct CheckedReport {
-    pub from: u64,
-    pub to: u64,
-    /// Events, sorted by index.
-    pub events: Vec<(u64, f64)>,
-    /// Events and invalid tests, sorted by index.
-    pub outcomes: Vec<(u64, SparseOutcome)>,
-    /// Invalid tests with their reasons, sorted by index.
-    pub reasons: Vec<(u64, String)>,
-}
-
-pub fn check_report(report: &ResultReport) -> Result<CheckedReport, ApiError> {
-    let bad = |m: String| Err(ApiError::Unprocessable(m));
-    if report.from >= report.to {
-        return bad(format!(
-            "empty range: from {} must be < to {}",
-            report.from, report.to
-        ));
-    }
-    if report.to > i64::MAX as u64 {
-        return bad(format!("to {} is out of range", report.to));
-    }
-    if report.to - report.from > MAX_REPORT_TESTS {
-        return bad(format!(
-            "the range {}..{} covers {} tests; a report covers at most {MAX_REPORT_TESTS}: \
-             report it in parts",
-            report.from,
-            report.to,
-            report.to - report.from
-        ));
-    }
-    if !(report.compute_seconds.is_finite()
-        && (0.0..=MAX_COMPUTE_SECONDS).contains(&report.compute_seconds))
-    {
-        return bad(format!(
-            "compute_seconds = {} must be in [0, {MAX_COMPUTE_SECONDS}]",
-            Num(report.compute_seconds)
-        ));
-    }
-    if !(1..=MAX_THREADS).contains(&report.threads) {
-        return bad(format!(
-            "threads = {} must be in 1..={MAX_THREADS}",
-            report.threads
-        ));
-    }
-    let mut events = report.event_list().map_err(ApiError::Unprocessable)?;
-    if events.len() > MAX_REPORT_EVENTS {
-        return bad(format!(
-            "the report lists {} events; at most {MAX_REPORT_EVENTS} per report: report the \
-             range in parts",
-            events.len()
-        ));
-    }
-    if report.invalid.len() > MAX_REPORT_INVALID {
-        return bad(format!(
-            "the report lists {} invalid tests; at most {MAX_REPORT_INVALID} per report: \
-             report the range in parts",
-            report.invalid.len()
-        ));
-    }
-    if let Some(&(index, weight)) = events.iter().find(|(_, w)| !(w.is_finite() && *w >= 0.0)) {
-        return bad(format!(
-            "event at test {index} has weight {}; weights are finite and ≥ 0",
-            Num(weight)
-        ));
-    }
-    events.sort_by_key(|&(i, _)| i);
-    let mut outcomes = Vec::with_capacity(events.len() + report.invalid.len());
-    outcomes.extend(events.iter().map(|&(i, w)| (i, SparseOutcome::Event(w))));
-    let mut reasons = Vec::with_capacity(report.invalid.len());
-    for i in &report.invalid {
-        if i.reason.len() > MAX_INVALID_REASON {
-            return bad(format!(
-                "the reason for invalid test {} exceeds {MAX_INVALID_REASON} bytes",
-                i.index
-            ));
-        }
-        outcomes.push((i.index, SparseOutcome::Invalid));
-        reasons.push((i.index, i.reason.clone()));
-    }
-    outcomes.sort_by_key(|&(i, _)| i);
-    for pair in outcomes.windows(2) {
-        if pair[0].0 == pair[1].0 {
-            return bad(format!(
-                "test {} is reported more than once in this report",
-                pair[0].0
-            ));
-        }
-    }
-    if let Some(&(i, _)) = outcomes
-        .iter()
-        .find(|&&(i, _)| i < report.from || i >= report.to)
-    {
-        return bad(format!(
-            "test {i} lies outside the reported range {}..{}",
-            report.from, report.to
-        ));
-    }
-    reasons.sort_by_key(|(i, _)| *i);
-    Ok(CheckedReport {
-        from: report.from,
-        to: report.to,
-        events,
-        outcomes,
-        reasons,
-    })
-}
-
-/// Refuses a report that says it took longer than its lease's attempt has
-/// existed, or ran on more threads than the attempt was sized for: such
-/// figures would set the cost per test, and so the campaign's fair-sharing
-/// turn, to anything.
-fn check_effort(lease: &LeaseRow, report: &ResultReport, now_ms: i64) -> Result<(), ApiError> {
-    let age = (now_ms - lease.claimed_at).max(0) as f64 / 1000.0 + CLOCK_SLACK_SECONDS;
-    if report.compute_seconds > age {
-        return Err(ApiError::Unprocessable(format!(
-            "compute_seconds = {} exceeds the {age:.3} s since lease {} was handed to worker \
-             `{}`",
-            Num(report.compute_seconds),
-            lease.id,
-            lease.worker
-        )));
-    }
-    if i64::from(report.threads) > lease.threads {
-        return Err(ApiError::Unprocessable(format!(
-            "threads = {} exceeds the {} threads lease {} was asked for",
-            report.threads, lease.threads, lease.id
-        )));
-    }
-    Ok(())
+/// The audits an external program's report asks for ([`crate::audit`]):
+/// `audits` from the report's start (those in the part recorded now are
+/// stored), or, when no other worker could run them, only counted as
+/// `waived`.
+#[derive(Debug, Default)]
+pub struct AuditPlan {
+    pub audits: Vec<NewAudit>,
+    pub waived: bool,
 }
 
 /// Records a checked report on lease `lease_id` and folds the prefix;
@@ -179,11 +44,10 @@ pub async fn record(
     lease_id: i64,
     report: &ResultReport,
     checked: &CheckedReport,
+    plan: &AuditPlan,
 ) -> Result<Recorded, ApiError> {
     let mut tx = db.write.begin().await?;
-    let lease = leases::get(&mut tx, lease_id).await?;
-    check_fence(&lease, &report.worker, report.attempt, report.key.as_str())?;
-    let campaign = campaigns::get(&mut *tx, lease.campaign_id).await?;
+    let (lease, campaign) = held_lease(&mut tx, lease_id, report).await?;
     let span = checked.to - checked.from;
     let (start, end, resume_at) = (
         lease.start_index as u64,
@@ -223,6 +87,7 @@ pub async fn record(
             &mut tx, &campaign, &lease, report, checked, new_from, expires_at,
         )
         .await?;
+        store_audits(&mut tx, campaign.id, &report.worker, plan, new_from).await?;
     }
     let stopped = fold_prefix(&mut tx, &campaign, tests).await?;
     tx.commit().await?;
@@ -241,6 +106,19 @@ pub async fn record(
         stopped,
         campaign_id: campaign.id,
     })
+}
+
+/// The lease a report is on, checked to be held by its sender in this
+/// attempt, and its campaign, read in the report's transaction.
+pub(crate) async fn held_lease(
+    conn: &mut SqliteConnection,
+    lease_id: i64,
+    report: &ResultReport,
+) -> Result<(LeaseRow, CampaignRow), ApiError> {
+    let lease = leases::get(&mut *conn, lease_id).await?;
+    check_fence(&lease, &report.worker, report.attempt, report.key.as_str())?;
+    let campaign = campaigns::get(&mut *conn, lease.campaign_id).await?;
+    Ok((lease, campaign))
 }
 
 /// Stores the part `new_from..to` of a report that was not reported
@@ -305,15 +183,47 @@ async fn store_new_part(
         report.threads,
     );
     let worker_seconds = spent_thread_seconds(report, accepted, span);
+    let weights: f64 = checked.events[first_new..].iter().map(|e| e.1).sum();
     sqlx::query(
-        "UPDATE campaigns SET cost_per_test = ?, worker_seconds = worker_seconds + ? WHERE id = ?",
+        "UPDATE campaigns SET cost_per_test = ?, worker_seconds = worker_seconds + ?, \
+         reported_s1 = reported_s1 + ? WHERE id = ?",
     )
     .bind(cost)
     .bind(worker_seconds)
+    .bind(weights)
     .bind(campaign.id)
     .execute(&mut *conn)
     .await?;
     Ok(())
+}
+
+/// Stores the planned audits of the part from `new_from`, or counts them
+/// waived.
+async fn store_audits(
+    conn: &mut SqliteConnection,
+    campaign: i64,
+    worker: &str,
+    plan: &AuditPlan,
+    new_from: u64,
+) -> Result<(), ApiError> {
+    let new: Vec<NewAudit> = plan
+        .audits
+        .iter()
+        .filter(|a| a.test_index >= new_from)
+        .cloned()
+        .collect();
+    if new.is_empty() {
+        return Ok(());
+    }
+    if plan.waived {
+        sqlx::query("UPDATE campaigns SET audits_waived = audits_waived + ? WHERE id = ?")
+            .bind(new.len() as i64)
+            .bind(campaign)
+            .execute(&mut *conn)
+            .await?;
+        return Ok(());
+    }
+    audits::insert(conn, campaign, worker, &new).await
 }
 
 /// What recording a report did.
@@ -335,7 +245,12 @@ fn spent_thread_seconds(report: &ResultReport, accepted: u64, span: u64) -> f64 
     seconds * f64::from(report.threads.max(1)) * accepted as f64 / span as f64
 }
 
-fn stopped_ack(span: u64, resume_at: u64, end: u64, status: CampaignStatus) -> ResultAck {
+pub(crate) fn stopped_ack(
+    span: u64,
+    resume_at: u64,
+    end: u64,
+    status: CampaignStatus,
+) -> ResultAck {
     ResultAck {
         accepted: 0,
         duplicate: 0,

@@ -97,6 +97,21 @@ impl ServerProcess {
         self.log.lock().unwrap().clone()
     }
 
+    /// The first line of the log that `wanted` picks, waiting for it up to
+    /// ten seconds (the log arrives through a pipe, after the response).
+    pub fn log_line(&self, wanted: impl Fn(&str) -> bool) -> Option<String> {
+        let started = Instant::now();
+        loop {
+            if let Some(line) = self.log().lines().find(|l| wanted(l)) {
+                return Some(line.to_owned());
+            }
+            if started.elapsed() > Duration::from_secs(10) {
+                return None;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
     /// SIGKILL: no shutdown, no flush beyond what was committed.
     pub fn kill(mut self) {
         let _ = self.child.kill();
@@ -274,6 +289,30 @@ pub async fn claim(client: &Client, worker: &str) -> Option<Lease> {
         })
         .await
         .expect("lease request")
+}
+
+/// The events of tests `from..to` of campaign `id` as an honest worker
+/// finds them: the campaign prepared from its plan, as a worker does, and
+/// each test run in this process.
+pub async fn real_events(
+    client: &Client,
+    id: i64,
+    from: u64,
+    to: u64,
+) -> Vec<tslg_api::EventResult> {
+    let prepared = tslg_worker::prepared::Cache::default()
+        .get(client, id)
+        .await
+        .expect("the campaign's plan");
+    (from..to)
+        .filter_map(|index| {
+            let outcome = prepared.tests.run(index);
+            outcome.event.then_some(tslg_api::EventResult {
+                index,
+                weight: outcome.weight,
+            })
+        })
+        .collect()
 }
 
 /// The same campaign run in this process (built-in exposure, exhaustive

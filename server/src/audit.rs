@@ -1,0 +1,568 @@
+//! Checking what workers report, the way volunteer computing does it.
+//!
+//! A worker is trusted with nothing the coordinator cannot check:
+//!
+//! - **Built-in vehicles** are run again by the coordinator
+//!   ([`verify_builtin`]): every reported event and invalid test, and a share
+//!   (`--replay-share`, default 0.1) of the tests reported without an
+//!   event, drawn with a key only this coordinator process knows, so a
+//!   worker cannot tell which of its tests are checked. A grid case runs each
+//!   cell once and remembers it, so a check costs a draw and a look-up.
+//! - **External programs** run only on workers, so a share of their tests
+//!   (`--audit-share`, default 0.01, by the same secret key) and every event
+//!   that would carry at least `--audit-weight-share` (0.05) of the estimate
+//!   are run again by a different worker: BOINC's validation by
+//!   replication. The campaign's prefix does not pass an audited test until
+//!   two workers agree on it; when they disagree both results are held and
+//!   a third worker decides.
+//!
+//! A worker whose report the replay contradicts, or that ends in the
+//! minority of an audit, is flagged ([`flag_worker`]): every request of its
+//! is refused, every result it reported to a campaign that has not been
+//! cancelled is taken back and leased to others, and a campaign that had
+//! stopped on such results runs again. So the answer is the one honest
+//! workers give, whatever the flagged worker did.
+
+use crate::db::{now_ms, Database};
+use crate::error::ApiError;
+use crate::report_check::{check_effort, CheckedReport};
+use crate::store::audits::{self, AuditRow, NewAudit};
+use crate::store::campaigns;
+use crate::store::fold::fold_prefix;
+use crate::store::results::{held_lease, stopped_ack, Recorded};
+use sqlx::SqliteConnection;
+use std::hash::{BuildHasher, RandomState};
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::sync::Arc;
+use tslg_api::{CampaignStatus, ResultAck, ResultReport};
+use tslg_method::prefix::SparseOutcome;
+use tslg_method::registry::CampaignTests;
+
+/// Which tests are checked: a keyed hash of (purpose, campaign, test),
+/// with a key drawn from the operating system when the coordinator starts
+/// and never sent anywhere.
+pub struct Sampler {
+    key: RandomState,
+}
+
+impl Default for Sampler {
+    fn default() -> Self {
+        Self {
+            key: RandomState::new(),
+        }
+    }
+}
+
+/// What a selection is for, so the replay and the audit samples differ.
+#[derive(Clone, Copy)]
+pub enum Purpose {
+    Replay = 1,
+    Audit = 2,
+}
+
+impl Sampler {
+    /// Whether test `index` of `campaign` is in the sample of `share`.
+    pub fn chosen(&self, purpose: Purpose, campaign: i64, index: u64, share: f64) -> bool {
+        if share <= 0.0 {
+            return false;
+        }
+        let h = self.key.hash_one((purpose as u8, campaign, index));
+        ((h >> 11) as f64) * (1.0 / (1u64 << 53) as f64) < share
+    }
+}
+
+/// A reported outcome the coordinator's own run contradicts.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Mismatch {
+    pub index: u64,
+    pub reported: String,
+    pub replayed: String,
+}
+
+fn describe(outcome: &str) -> String {
+    match outcome.strip_prefix("event:") {
+        Some(bits) => {
+            let w = u64::from_str_radix(bits, 16)
+                .map(f64::from_bits)
+                .unwrap_or(f64::NAN);
+            format!("an event of weight {w:e}")
+        }
+        None if outcome == "none" => "no event".into(),
+        None => outcome.into(),
+    }
+}
+
+impl std::fmt::Display for Mismatch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "test {} was reported as {}, but the coordinator's run gives {}",
+            self.index,
+            describe(&self.reported),
+            describe(&self.replayed)
+        )
+    }
+}
+
+/// The coordinator's outcome of test `index`: its replay, or invalid when
+/// the simulation panics (as the worker's did, if it reported invalid).
+fn replayed(tests: &dyn CampaignTests, index: u64) -> Option<String> {
+    match catch_unwind(AssertUnwindSafe(|| tests.replay(index))) {
+        Ok(Some(outcome)) => Some(audits::encode(
+            outcome
+                .event
+                .then_some(SparseOutcome::Event(outcome.weight)),
+        )),
+        Ok(None) => None,
+        Err(_) => Some(audits::encode(Some(SparseOutcome::Invalid))),
+    }
+}
+
+/// Runs again, on the coordinator, every event and invalid test of a
+/// report on a built-in vehicle and the tests `chosen` among the others;
+/// the first contradiction, if any. CPU work: call off the async runtime.
+pub fn verify_builtin(
+    tests: &dyn CampaignTests,
+    report: &CheckedReport,
+    chosen: &dyn Fn(u64) -> bool,
+) -> Option<Mismatch> {
+    let listed = report.outcomes.iter().map(|&(i, o)| (i, Some(o)));
+    let quiet = (report.from..report.to)
+        .filter(|&i| chosen(i))
+        .filter(|&i| report.outcomes.binary_search_by_key(&i, |o| o.0).is_err())
+        .map(|i| (i, None));
+    for (index, outcome) in listed.chain(quiet) {
+        let reported = audits::encode(outcome);
+        let own = replayed(tests, index)?;
+        if own != reported {
+            return Some(Mismatch {
+                index,
+                reported,
+                replayed: own,
+            });
+        }
+    }
+    None
+}
+
+/// The audits of the part of an external program's report from `new_from`:
+/// the tests `chosen` (the secret sample), and every event that would carry
+/// at least `weight_share` of the estimate, `w ≥ share · (S₁ + w)` with
+/// `S₁` the weights of the campaign's events recorded so far (folded or
+/// not: the folded sum stalls while the prefix waits for audits, and would
+/// make every later event look heavy).
+pub fn choose_audits(
+    report: &CheckedReport,
+    new_from: u64,
+    s1: f64,
+    weight_share: f64,
+    chosen: &dyn Fn(u64) -> bool,
+) -> Vec<NewAudit> {
+    let outcome_at = |i: u64| {
+        report
+            .outcomes
+            .binary_search_by_key(&i, |o| o.0)
+            .ok()
+            .map(|k| report.outcomes[k].1)
+    };
+    let heavy = |i: u64| match outcome_at(i) {
+        Some(SparseOutcome::Event(w)) => weight_share < 1.0 && w >= weight_share * (s1 + w),
+        _ => false,
+    };
+    let mut audits = Vec::new();
+    let events = report
+        .outcomes
+        .iter()
+        .map(|o| o.0)
+        .filter(|&i| i >= new_from);
+    let sampled = (new_from.max(report.from)..report.to).filter(|&i| chosen(i));
+    let mut indices: Vec<u64> = events.filter(|&i| heavy(i)).chain(sampled).collect();
+    indices.sort_unstable();
+    indices.dedup();
+    for index in indices {
+        audits.push(NewAudit {
+            test_index: index,
+            reason: if heavy(index) { "weight" } else { "sample" },
+            first_outcome: audits::encode(outcome_at(index)),
+        });
+    }
+    audits
+}
+
+/// What an audit run decided.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Verdict {
+    /// Two runs agree, or a run is still needed.
+    Pending,
+    Agreed,
+    /// `liar` is in the minority of three.
+    Liar {
+        liar: String,
+        detail: String,
+    },
+    /// Three runs, three outcomes: nobody is flagged.
+    Undecided,
+}
+
+/// Records the run of `worker` with `outcome` on `audit` (whose current
+/// lease it held) and decides what two or three runs say.
+pub async fn record_run(
+    conn: &mut SqliteConnection,
+    audit: &AuditRow,
+    worker: &str,
+    outcome: &str,
+) -> Result<Verdict, ApiError> {
+    let (state, column, verdict) = match audit.state.as_str() {
+        "replica" if outcome == audit.first_outcome => ("agreed", "replica", Verdict::Agreed),
+        "replica" => ("tiebreak", "replica", Verdict::Pending),
+        "tiebreak" => {
+            let replica = audit.replica_outcome.as_deref().unwrap_or("");
+            let replica_worker = audit.replica_worker.clone().unwrap_or_default();
+            let detail = |liar: &str, said: &str, others: &str| {
+                format!(
+                    "worker `{liar}` reported {} for test {} of campaign {}, where two other \
+                     workers found {}",
+                    describe(said),
+                    audit.test_index,
+                    audit.campaign_id,
+                    describe(others)
+                )
+            };
+            if outcome == audit.first_outcome {
+                let detail = detail(&replica_worker, replica, outcome);
+                (
+                    "settled",
+                    "third",
+                    Verdict::Liar {
+                        liar: replica_worker,
+                        detail,
+                    },
+                )
+            } else if outcome == replica {
+                let detail = detail(&audit.first_worker, &audit.first_outcome, outcome);
+                let liar = audit.first_worker.clone();
+                ("settled", "third", Verdict::Liar { liar, detail })
+            } else {
+                ("undecided", "third", Verdict::Undecided)
+            }
+        }
+        _ => return Ok(Verdict::Pending),
+    };
+    sqlx::query(&format!(
+        "UPDATE audits SET state = ?, {column}_worker = ?, {column}_outcome = ?, lease_id = NULL \
+         WHERE id = ?"
+    ))
+    .bind(state)
+    .bind(worker)
+    .bind(outcome)
+    .bind(audit.id)
+    .execute(&mut *conn)
+    .await?;
+    match &verdict {
+        Verdict::Undecided => tracing::warn!(
+            campaign = audit.campaign_id,
+            test = audit.test_index,
+            "three workers gave three outcomes; the first run stands"
+        ),
+        Verdict::Pending if state == "tiebreak" => tracing::warn!(
+            campaign = audit.campaign_id,
+            test = audit.test_index,
+            first = %audit.first_worker,
+            replica = worker,
+            "two workers disagree; a third decides"
+        ),
+        _ => {}
+    }
+    Ok(verdict)
+}
+
+/// Flags `worker` (caught at test `index` of `campaign`, for `reason`) and
+/// takes back its results: see the module's documentation. Returns the
+/// campaigns whose results changed.
+pub async fn flag_worker(
+    conn: &mut SqliteConnection,
+    worker: &str,
+    reason: &str,
+    campaign: i64,
+    index: u64,
+) -> Result<Vec<i64>, ApiError> {
+    sqlx::query(
+        "INSERT OR IGNORE INTO flagged_workers (name, reason, campaign_id, test_index) \
+         VALUES (?, ?, ?, ?)",
+    )
+    .bind(worker)
+    .bind(reason)
+    .bind(campaign)
+    .bind(index as i64)
+    .execute(&mut *conn)
+    .await?;
+    let touched: Vec<(i64,)> =
+        sqlx::query_as("SELECT DISTINCT campaign_id FROM reports WHERE worker = ?")
+            .bind(worker)
+            .fetch_all(&mut *conn)
+            .await?;
+    let mut changed = Vec::new();
+    for (id,) in touched {
+        if take_back(conn, id, worker).await? {
+            changed.push(id);
+        }
+    }
+    sqlx::query("UPDATE leases SET expires_at = 0 WHERE worker = ? AND state = 'active'")
+        .bind(worker)
+        .execute(&mut *conn)
+        .await?;
+    sqlx::query(
+        "UPDATE audits SET state = 'void', lease_id = NULL \
+         WHERE first_worker = ? AND state IN ('replica', 'tiebreak', 'agreed')",
+    )
+    .bind(worker)
+    .execute(&mut *conn)
+    .await?;
+    sqlx::query(
+        "UPDATE audits SET state = 'replica', replica_worker = NULL, replica_outcome = NULL, \
+         lease_id = NULL WHERE replica_worker = ? AND state = 'tiebreak'",
+    )
+    .bind(worker)
+    .execute(&mut *conn)
+    .await?;
+    tracing::warn!(
+        worker,
+        campaign,
+        test = index,
+        reason,
+        ?changed,
+        "worker flagged; its results are taken back"
+    );
+    Ok(changed)
+}
+
+/// Takes back `worker`'s results in `campaign`: its report rows go, their
+/// ranges become leases for others, and the estimate is folded again from
+/// the start (a campaign that stopped on those results runs again). A
+/// cancelled campaign, or one that stopped before them, is left alone.
+async fn take_back(conn: &mut SqliteConnection, id: i64, worker: &str) -> Result<bool, ApiError> {
+    let campaign = campaigns::get(&mut *conn, id).await?;
+    let ranges: Vec<(i64, i64)> = sqlx::query_as(
+        "SELECT from_index, to_index FROM reports WHERE campaign_id = ? AND worker = ? \
+         ORDER BY from_index",
+    )
+    .bind(id)
+    .bind(worker)
+    .fetch_all(&mut *conn)
+    .await?;
+    let Some(first) = ranges.first().map(|r| r.0) else {
+        return Ok(false);
+    };
+    let status = campaign.status();
+    let stopped = status.is_final();
+    if matches!(status.as_str(), "cancelled" | "failed") || (stopped && campaign.indices <= first) {
+        return Ok(false);
+    }
+    for &(from, to) in &ranges {
+        sqlx::query("DELETE FROM reports WHERE campaign_id = ? AND from_index = ?")
+            .bind(id)
+            .bind(from)
+            .execute(&mut *conn)
+            .await?;
+        sqlx::query(
+            "DELETE FROM invalid_tests WHERE campaign_id = ? AND test_index >= ? AND test_index < ?",
+        )
+        .bind(id)
+        .bind(from)
+        .bind(to)
+        .execute(&mut *conn)
+        .await?;
+        crate::store::leases::insert_redo(&mut *conn, id, from as u64, to as u64).await?;
+    }
+    if campaign.indices > first {
+        let detail = format!(
+            "results of worker `{worker}` from test {first} on were taken back (it was caught \
+             reporting what others could not reproduce) and are being run again"
+        );
+        sqlx::query(
+            "UPDATE campaigns SET indices = 0, tests = 0, events = 0, invalid = 0, s1 = 0, \
+             s2 = 0, largest = 0, outside_tests = 0, outside_events = 0, outside_s1 = 0, \
+             outside_mismatches = 0, outside_upper = NULL, status = 'running', status_detail = ? \
+             WHERE id = ?",
+        )
+        .bind(detail)
+        .bind(id)
+        .execute(&mut *conn)
+        .await?;
+        sqlx::query("DELETE FROM history WHERE campaign_id = ? AND indices > ?")
+            .bind(id)
+            .bind(first)
+            .execute(&mut *conn)
+            .await?;
+        if stopped {
+            // The leases the stop cancelled hold ranges not yet reported.
+            sqlx::query(
+                "UPDATE leases SET state = 'active', expires_at = 0 WHERE campaign_id = ? \
+                 AND state = 'cancelled' AND resume_at < end_index AND audit_id IS NULL",
+            )
+            .bind(id)
+            .execute(&mut *conn)
+            .await?;
+            tracing::warn!(campaign = id, worker, "a stopped campaign runs again");
+        }
+    }
+    Ok(true)
+}
+
+/// Records a run of an audit (a one-test lease with `audit_id`) and decides
+/// the audit; a worker in the minority of three is flagged and its results
+/// taken back. Then folds the prefix, which the audit may have held.
+pub async fn record_audit_run(
+    db: &Database,
+    tests: Option<Arc<dyn CampaignTests>>,
+    lease_id: i64,
+    report: &ResultReport,
+    checked: &CheckedReport,
+) -> Result<Recorded, ApiError> {
+    let mut tx = db.write.begin().await?;
+    let (lease, campaign) = held_lease(&mut tx, lease_id, report).await?;
+    let (start, end) = (lease.start_index as u64, lease.end_index as u64);
+    let audit = audits::get(&mut tx, lease.audit_id.unwrap_or_default()).await?;
+    if campaign.status().is_final() || lease.state != "active" || audit.lease_id != Some(lease.id) {
+        return Ok(Recorded {
+            ack: stopped_ack(1, lease.resume_at as u64, end, campaign.status()),
+            stopped: None,
+            campaign_id: campaign.id,
+        });
+    }
+    check_effort(&lease, report, now_ms())?;
+    if (checked.from, checked.to) != (start, end) {
+        return Err(ApiError::Unprocessable(format!(
+            "lease {lease_id} is the audit run of test {start}: report {start}..{end}"
+        )));
+    }
+    let outcome = audits::encode(checked.outcomes.first().map(|o| o.1));
+    let verdict = record_run(&mut tx, &audit, &report.worker, &outcome).await?;
+    sqlx::query("UPDATE leases SET resume_at = end_index, state = 'done' WHERE id = ?")
+        .bind(lease.id)
+        .execute(&mut *tx)
+        .await?;
+    if let Verdict::Liar { liar, detail } = &verdict {
+        flag_worker(&mut tx, liar, detail, campaign.id, start).await?;
+    }
+    // The flag may have reset the campaign: fold from what is stored now.
+    let campaign = campaigns::get(&mut *tx, campaign.id).await?;
+    let stopped = fold_prefix(&mut tx, &campaign, tests).await?;
+    tx.commit().await?;
+    Ok(Recorded {
+        ack: ResultAck {
+            accepted: 1,
+            duplicate: 0,
+            ignored: 0,
+            resume_at: end,
+            lease_done: true,
+            proceed: stopped.is_none(),
+            campaign_status: stopped.unwrap_or(CampaignStatus::Running),
+        },
+        stopped,
+        campaign_id: campaign.id,
+    })
+}
+
+/// Flags `worker` for `mismatch` (the coordinator's own run of a test it
+/// reported gives another outcome) and takes back its results, in one
+/// transaction.
+pub async fn flag_for_mismatch(
+    db: &Database,
+    worker: &str,
+    campaign: i64,
+    mismatch: &Mismatch,
+) -> Result<(), ApiError> {
+    let mut tx = db.write.begin().await?;
+    let reason = format!("campaign {campaign}: {mismatch}");
+    flag_worker(&mut tx, worker, &reason, campaign, mismatch.index).await?;
+    tx.commit().await?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_secret_sample_has_its_share_and_differs_by_purpose_and_key() {
+        let sampler = Sampler::default();
+        let n = 200_000;
+        let share = 0.1;
+        let chosen = (0..n)
+            .filter(|&i| sampler.chosen(Purpose::Replay, 3, i, share))
+            .count() as f64;
+        // Binomial(200 000, 0.1): sd ≈ 134; 5 sd either side.
+        assert!((chosen - n as f64 * share).abs() < 700.0, "{chosen}");
+        let both = (0..n)
+            .filter(|&i| {
+                sampler.chosen(Purpose::Replay, 3, i, share)
+                    && sampler.chosen(Purpose::Audit, 3, i, share)
+            })
+            .count() as f64;
+        assert!((both - n as f64 * share * share).abs() < 300.0, "{both}");
+        let other = Sampler::default();
+        let same = (0..1000)
+            .filter(|&i| {
+                sampler.chosen(Purpose::Audit, 1, i, 0.5) == other.chosen(Purpose::Audit, 1, i, 0.5)
+            })
+            .count();
+        assert!(
+            (400..600).contains(&same),
+            "two keys agree on {same} of 1000"
+        );
+        assert!(!sampler.chosen(Purpose::Audit, 1, 1, 0.0));
+        assert!(sampler.chosen(Purpose::Audit, 1, 1, 1.0));
+    }
+
+    fn report(from: u64, to: u64, outcomes: Vec<(u64, SparseOutcome)>) -> CheckedReport {
+        CheckedReport {
+            from,
+            to,
+            events: outcomes
+                .iter()
+                .filter_map(|&(i, o)| match o {
+                    SparseOutcome::Event(w) => Some((i, w)),
+                    SparseOutcome::Invalid => None,
+                })
+                .collect(),
+            outcomes,
+            reasons: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn heavy_events_and_the_sample_are_audited_in_the_new_part_only() {
+        let r = report(
+            100,
+            110,
+            vec![
+                (101, SparseOutcome::Event(0.5)),
+                (103, SparseOutcome::Event(0.001)),
+                (105, SparseOutcome::Invalid),
+                (108, SparseOutcome::Event(2.0)),
+            ],
+        );
+        // S₁ = 10: 0.5 carries 0.5/10.5 ≈ 4.8 % < 5 %, 2.0 carries 16.7 %.
+        let audits = choose_audits(&r, 100, 10.0, 0.05, &|i| i == 104);
+        let got: Vec<(u64, &str, &str)> = audits
+            .iter()
+            .map(|a| (a.test_index, a.reason, a.first_outcome.as_str()))
+            .collect();
+        assert_eq!(
+            got,
+            [
+                (104, "sample", "none"),
+                (108, "weight", "event:4000000000000000")
+            ]
+        );
+        // Only from where the new part starts; an empty estimate makes
+        // every event heavy.
+        let audits = choose_audits(&r, 106, 0.0, 0.05, &|_| false);
+        assert_eq!(
+            audits.iter().map(|a| a.test_index).collect::<Vec<_>>(),
+            [108]
+        );
+        assert!(choose_audits(&r, 100, 0.0, 1.0, &|_| false).is_empty());
+    }
+}

@@ -1,0 +1,187 @@
+//! Receiving a worker's report: who may report, what is checked before it
+//! is stored ([`crate::audit`]: the coordinator's replay of built-in
+//! vehicles, the weights and the audits of external programs), recording
+//! it, and the bookkeeping that follows. The route only parses.
+
+use crate::audit::{self, Purpose};
+use crate::error::ApiError;
+use crate::report_check::CheckedReport;
+use crate::state::AppState;
+use crate::store::results::{self, AuditPlan, Recorded};
+use crate::store::{audits, campaigns, leases};
+use std::sync::Arc;
+use tslg_api::{Method, ResultAck, ResultReport};
+use tslg_method::registry::CampaignTests;
+
+/// Refuses a worker that is flagged.
+pub async fn refuse_flagged(state: &AppState, worker: &str) -> Result<(), ApiError> {
+    match audits::flag_of(&state.db.read, worker).await? {
+        None => Ok(()),
+        Some(reason) => Err(ApiError::Forbidden(format!(
+            "worker `{worker}` is flagged and gets no work: {reason}; an operator clears the \
+             flag with DELETE /api/v1/workers/{worker}/flag"
+        ))),
+    }
+}
+
+/// Checks, records and accounts a report on lease `lease_id`.
+pub async fn receive(
+    state: &AppState,
+    lease_id: i64,
+    report: &ResultReport,
+    checked: &CheckedReport,
+) -> Result<ResultAck, ApiError> {
+    refuse_flagged(state, &report.worker).await?;
+    let lease = leases::get(&mut *state.db.read.acquire().await?, lease_id).await?;
+    // Only the lease's holder may report on it, and only what it reports is
+    // checked: a report in another worker's name must not get that worker
+    // flagged. (The transaction that records the report checks the fence
+    // again.)
+    leases::check_fence(&lease, &report.worker, report.attempt, report.key.as_str())?;
+    let campaign = campaigns::get(&state.db.read, lease.campaign_id).await?;
+    let tests = if campaign.status().is_final() {
+        None
+    } else {
+        Some(state.samplers.get(&state.db, &campaign).await?)
+    };
+    let library_tests = || {
+        tests
+            .clone()
+            .filter(|_| campaign.method() == Method::Library)
+    };
+    let recorded = if lease.audit_id.is_some() {
+        audit::record_audit_run(&state.db, library_tests(), lease_id, report, checked).await?
+    } else {
+        let mut plan = AuditPlan::default();
+        if let Some(tests) = &tests {
+            if tests.external().is_none() {
+                verify_builtin(state, tests, campaign.id, &report.worker, checked).await?;
+            } else {
+                check_weights(tests, checked).await?;
+                plan = audit_plan(state, &campaign, &report.worker, checked).await?;
+            }
+        }
+        let config = &state.config;
+        results::record(
+            &state.db,
+            config,
+            library_tests(),
+            lease_id,
+            report,
+            checked,
+            &plan,
+        )
+        .await?
+    };
+    account(state, report, &recorded);
+    Ok(recorded.ack)
+}
+
+/// The workers' counts, the rates and the caches after a report.
+fn account(state: &AppState, report: &ResultReport, recorded: &Recorded) {
+    let accepted = recorded.ack.accepted;
+    // The accepted tests are the range's tail (the rest were duplicates).
+    let invalid = report
+        .invalid
+        .iter()
+        .filter(|i| i.index >= report.to - accepted)
+        .count() as u64;
+    state.workers.reported(&report.worker, accepted, invalid);
+    if accepted > 0 && recorded.ack.proceed {
+        state.throughput.accepted(recorded.campaign_id, accepted);
+    }
+    if recorded.stopped.is_some() {
+        state.samplers.forget(recorded.campaign_id);
+        state.throughput.forget(recorded.campaign_id);
+    }
+}
+
+/// Runs a built-in vehicle's reported events and a secret sample of the
+/// rest again on the coordinator; a contradiction refuses the report and
+/// flags the worker.
+async fn verify_builtin(
+    state: &AppState,
+    tests: &Arc<dyn CampaignTests>,
+    campaign: i64,
+    worker: &str,
+    checked: &CheckedReport,
+) -> Result<(), ApiError> {
+    let (tests, report) = (Arc::clone(tests), checked.clone());
+    let (sampler, share) = (Arc::clone(&state.sampler), state.config.replay_share);
+    let mismatch = tokio::task::spawn_blocking(move || {
+        let chosen = |i| sampler.chosen(Purpose::Replay, campaign, i, share);
+        audit::verify_builtin(tests.as_ref(), &report, &chosen)
+    })
+    .await
+    .map_err(|e| ApiError::Internal(e.into()))?;
+    let Some(mismatch) = mismatch else {
+        return Ok(());
+    };
+    audit::flag_for_mismatch(&state.db, worker, campaign, &mismatch).await?;
+    Err(ApiError::Unprocessable(format!(
+        "{mismatch}: the report is refused and worker `{worker}` is flagged; its results are \
+         taken back"
+    )))
+}
+
+/// An external program's events: the weight must be the campaign's draw
+/// (grid cases) or finite and positive (car-following): another weight
+/// means a worker that samples differently, and its results must not enter
+/// the estimate.
+async fn check_weights(
+    tests: &Arc<dyn CampaignTests>,
+    report: &CheckedReport,
+) -> Result<(), ApiError> {
+    if report.events.is_empty() {
+        return Ok(());
+    }
+    let tests = Arc::clone(tests);
+    let events = report.events.clone();
+    let checked = tokio::task::spawn_blocking(move || {
+        events
+            .iter()
+            .try_for_each(|&(index, weight)| tests.check_event(index, weight))
+    })
+    .await
+    .map_err(|e| ApiError::Internal(e.into()))?;
+    checked.map_err(|reason| {
+        ApiError::Unprocessable(format!(
+            "{reason}: the worker draws different scenarios (another version of tslg?)"
+        ))
+    })
+}
+
+/// The audits of an external program's report, waived when no other live
+/// worker that is not flagged offers the program.
+async fn audit_plan(
+    state: &AppState,
+    campaign: &campaigns::CampaignRow,
+    worker: &str,
+    checked: &CheckedReport,
+) -> Result<AuditPlan, ApiError> {
+    let config = &state.config;
+    let sampler = &state.sampler;
+    let chosen = |i| sampler.chosen(Purpose::Audit, campaign.id, i, config.audit_share);
+    let planned = audit::choose_audits(
+        checked,
+        checked.from,
+        campaign.reported_s1,
+        config.audit_weight_share,
+        &chosen,
+    );
+    if planned.is_empty() {
+        return Ok(AuditPlan::default());
+    }
+    let requirement = campaign.requires.as_deref().unwrap_or_default();
+    let mut others = false;
+    for name in state.workers.live_offering(requirement) {
+        if name != worker && audits::flag_of(&state.db.read, &name).await?.is_none() {
+            others = true;
+            break;
+        }
+    }
+    Ok(AuditPlan {
+        audits: planned,
+        waived: !others,
+    })
+}

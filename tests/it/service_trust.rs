@@ -1,0 +1,280 @@
+//! A worker cannot forge results (issue 20): the coordinator runs a
+//! built-in vehicle's reported events and a secret sample of the rest again
+//! and refuses a contradiction; an external program's tests are audited by
+//! other workers, a disagreement is settled by a third, and the worker in
+//! the minority is flagged, refused, and has every result it reported taken
+//! back. Either way the campaign ends exactly where honest workers alone
+//! take it.
+
+use crate::support::*;
+use std::path::Path;
+use std::time::{Duration, Instant};
+use tslg_api::{CampaignStatus, EventResult, Lease, LeaseRequest, Method, ResultReport};
+use tslg_client::{CallError, Client};
+use tslg_method::registry::{open_case, CampaignTests, ExposureSource};
+
+fn ask(worker: &str, offers: &[&str]) -> LeaseRequest {
+    LeaseRequest {
+        worker: worker.into(),
+        threads: 1,
+        include_tests: false,
+        offers: offers.iter().map(|o| o.to_string()).collect(),
+        unhealthy: Vec::new(),
+        max_tests: None,
+    }
+}
+
+/// A report of `lease` whole, with `events`.
+fn whole(lease: &Lease, worker: &str, events: Vec<EventResult>) -> ResultReport {
+    ResultReport {
+        worker: worker.into(),
+        attempt: lease.attempt,
+        key: lease.key.clone(),
+        from: lease.resume_at,
+        to: lease.end,
+        events,
+        packed_events: None,
+        invalid: Vec::new(),
+        compute_seconds: 0.0,
+        threads: 1,
+    }
+}
+
+/// The events of `lease` as the campaign's tests really give them.
+fn honest_events(tests: &dyn CampaignTests, lease: &Lease) -> Vec<EventResult> {
+    (lease.resume_at..lease.end)
+        .filter_map(|index| {
+            let outcome = tests.run(index);
+            outcome.event.then_some(EventResult {
+                index,
+                weight: outcome.weight,
+            })
+        })
+        .collect()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_forged_report_on_a_builtin_vehicle_is_refused_and_its_worker_undone() {
+    let dir = scratch();
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &["--lease-size", "300"]);
+    let client = server.client();
+    let library = ready_library(&client, "idm", true).await;
+    let file = client.library_file(library.id).await.unwrap();
+    let request = campaign(Method::Library, library.id, "fvdm", 0.1, 21);
+    let id = client.create_campaign(&request).await.unwrap().id;
+    let tests = open_case("cut-in", None, &ExposureSource::Builtin)
+        .unwrap()
+        .campaign(
+            Some(&file),
+            &request.vut,
+            0.1,
+            Default::default(),
+            request.seed,
+        )
+        .unwrap();
+
+    // An honest report first: accepted.
+    let first = client.claim(&ask("forger", &[])).await.unwrap().unwrap();
+    let events = honest_events(tests.as_ref(), &first);
+    assert!(
+        events.len() > 50,
+        "a library campaign of the FVDM has many events"
+    );
+    let ack = client
+        .report(first.id, &whole(&first, "forger", events))
+        .await
+        .unwrap();
+    assert_eq!(ack.accepted, 300);
+    // Then the adversary's report: the real events hidden, one made up.
+    let second = client.claim(&ask("forger", &[])).await.unwrap().unwrap();
+    let real = honest_events(tests.as_ref(), &second);
+    let fake = (second.start..second.end)
+        .find(|i| real.iter().all(|e| e.index != *i))
+        .unwrap();
+    let forged = vec![EventResult {
+        index: fake,
+        weight: tests.planned(fake).unwrap().weight,
+    }];
+    match client
+        .report(second.id, &whole(&second, "forger", forged))
+        .await
+    {
+        Err(CallError::Refused {
+            status: 422,
+            detail,
+        }) => {
+            assert!(
+                detail.contains(&format!("test {fake} was reported as an event")),
+                "{detail}"
+            );
+            assert!(detail.contains("worker `forger` is flagged"), "{detail}");
+        }
+        other => panic!("a forged report was not refused: {other:?}"),
+    }
+    // Flagged: no more work, and its honest first report is taken back too.
+    match client.claim(&ask("forger", &[])).await {
+        Err(CallError::Refused {
+            status: 403,
+            detail,
+        }) => {
+            assert!(detail.contains("is flagged"), "{detail}")
+        }
+        other => panic!("a flagged worker got {other:?}"),
+    }
+    let listed = client.workers().await.unwrap().workers;
+    let forger = listed.iter().find(|w| w.name == "forger").unwrap();
+    assert!(
+        forger
+            .flagged
+            .as_deref()
+            .unwrap_or("")
+            .contains(&format!("test {fake}")),
+        "{forger:?}"
+    );
+    assert_eq!(client.campaign(id).await.unwrap().indices, 0);
+    // A weight off in its last bits (a worker of another version, another
+    // library): refused, and that worker flagged too.
+    let third = client.claim(&ask("skewed", &[])).await.unwrap().unwrap();
+    let mut events = honest_events(tests.as_ref(), &third);
+    events[0].weight *= 1.0 + 1e-12;
+    match client
+        .report(third.id, &whole(&third, "skewed", events))
+        .await
+    {
+        Err(CallError::Refused {
+            status: 422,
+            detail,
+        }) => {
+            assert!(
+                detail.contains("but the coordinator's run gives an event of weight"),
+                "{detail}"
+            )
+        }
+        other => panic!("a skewed weight was not refused: {other:?}"),
+    }
+    let _workers = two_workers(&server.url);
+    let view = finished(&client, id, Duration::from_secs(120)).await;
+    assert_eq!(view.status, CampaignStatus::Converged);
+    assert_same(&view, &in_process(Some("idm"), &request));
+
+    // An operator clears the flag.
+    let http = reqwest::Client::new();
+    let clear = |name: &str| {
+        http.delete(format!("{}/api/v1/workers/{name}/flag", server.url))
+            .send()
+    };
+    assert_eq!(clear("forger").await.unwrap().status(), 204);
+    assert_eq!(clear("forger").await.unwrap().status(), 404);
+    assert!(client.claim(&ask("forger", &[])).await.is_ok());
+}
+
+/// Claims leases of the program `offer` as `name` and reports every test
+/// without an event (hiding them all) until the coordinator refuses it;
+/// the refusal it got.
+async fn liar(client: Client, name: &str, offer: &str, limit: Duration) -> String {
+    let started = Instant::now();
+    while started.elapsed() < limit {
+        match client.claim(&ask(name, &[offer])).await {
+            Ok(Some(lease)) => {
+                if let Err(CallError::Refused {
+                    status: 403,
+                    detail,
+                }) = client
+                    .report(lease.id, &whole(&lease, name, Vec::new()))
+                    .await
+                {
+                    return detail;
+                }
+            }
+            Ok(None) => tokio::time::sleep(Duration::from_millis(20)).await,
+            Err(CallError::Refused {
+                status: 403,
+                detail,
+            }) => return detail,
+            Err(e) => panic!("{e}"),
+        }
+    }
+    panic!("the liar was never caught")
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_lying_worker_is_caught_by_replication_and_the_answer_is_the_honest_one() {
+    let dir = scratch();
+    let server = ServerProcess::start(
+        &dir.path().join("db.sqlite"),
+        &["--lease-size", "200", "--audit-share", "0.05"],
+    );
+    let client = server.client();
+    let library = ready_library(&client, "idm", true).await;
+    let builtin = campaign(Method::Library, library.id, "idm", 0.2, 8);
+    let request = tslg_api::CreateCampaign {
+        vut: serde_json::json!({"external": "py-idm"}),
+        ..builtin.clone()
+    };
+    let id = client.create_campaign(&request).await.unwrap().id;
+    // The liar takes the first lease before anyone else is there.
+    let offer = "py-idm:cut-in:step";
+    let lease = client.claim(&ask("liar", &[offer])).await.unwrap().unwrap();
+    assert_eq!(lease.start, 0);
+    // Two honest workers running the Python IDM come.
+    let exec = format!(
+        "py-idm=python3 {}",
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("examples/python/idm_vut.py")
+            .display()
+    );
+    let _honest = [
+        WorkerProcess::start_with(&server.url, 1, "honest-1", &["--vut-exec", &exec]),
+        WorkerProcess::start_with(&server.url, 1, "honest-2", &["--vut-exec", &exec]),
+    ];
+    let started = Instant::now();
+    while client
+        .workers()
+        .await
+        .unwrap()
+        .workers
+        .iter()
+        .filter(|w| w.name.starts_with("honest"))
+        .count()
+        < 2
+    {
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "the honest workers never came"
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    // The liar reports its lease with every event hidden: accepted, and
+    // held until others have run a secret twentieth of it again.
+    let ack = client
+        .report(lease.id, &whole(&lease, "liar", Vec::new()))
+        .await
+        .unwrap();
+    assert_eq!(ack.accepted, 200);
+    let held = client.campaign(id).await.unwrap();
+    assert!(
+        held.indices < 200,
+        "the prefix waits for the audits: {held:?}"
+    );
+    // The liar goes on lying until it is refused.
+    let refusal = liar(server.client(), "liar", offer, Duration::from_secs(120)).await;
+    assert!(refusal.contains("worker `liar` is flagged"), "{refusal}");
+    assert!(
+        refusal.contains("where two other workers found an event"),
+        "{refusal}"
+    );
+    let view = finished(&client, id, Duration::from_secs(240)).await;
+    assert_eq!(view.status, CampaignStatus::Converged, "{view:?}");
+    // Exactly the campaign of the built-in IDM: nothing of the liar's stayed.
+    assert_same(&view, &in_process(Some("idm"), &builtin));
+    let audits = view.audits.unwrap();
+    assert!(audits.settled >= 1 && audits.agreed >= 1, "{audits:?}");
+    assert_eq!(audits.open, 0, "{audits:?}");
+    let workers = client.workers().await.unwrap().workers;
+    let flagged: Vec<&str> = workers
+        .iter()
+        .filter(|w| w.flagged.is_some())
+        .map(|w| w.name.as_str())
+        .collect();
+    assert_eq!(flagged, ["liar"]);
+}
