@@ -13,7 +13,7 @@ use tslg_api::{
 };
 use tslg_client::Client;
 use tslg_method::campaign::run_indexed_campaign;
-use tslg_method::estimator::StoppingRule;
+use tslg_method::estimator::{default_n_min, StoppingRule, MIN_BETA};
 use tslg_method::registry::{open_case, ExposureSource};
 
 fn request(tests: u64) -> CreateCampaign {
@@ -24,7 +24,7 @@ fn request(tests: u64) -> CreateCampaign {
         vut: serde_json::json!({"model": "idm"}),
         epsilon: 0.1,
         // Never reached: the campaign runs to its budget.
-        beta: 1e-6,
+        beta: MIN_BETA,
         confidence: 0.9,
         max_tests: tests,
         seed: 1,
@@ -46,7 +46,7 @@ fn in_process(tests: u64) -> f64 {
             1,
         )
         .unwrap();
-    let rule = StoppingRule::new(1e-6, tests);
+    let rule = StoppingRule::new(MIN_BETA, tests);
     let started = Instant::now();
     let result = run_indexed_campaign(
         &|i| {
@@ -159,6 +159,158 @@ async fn round_trips(count: usize, library: bool) -> anyhow::Result<(Vec<f64>, f
     Ok((times, leased as f64 / count as f64))
 }
 
+/// The high-event campaign of issue 20: the FVDM tested with the IDM's
+/// exhaustive cut-in library, about 91 % of whose tests are events, to
+/// relative half-width `beta`. In process: seconds to the stop and the stop
+/// index. Through the service (one worker on every core, the embedded
+/// coordinator): seconds from the campaign's creation to its stop, the stop
+/// index, and what the events cost on disk.
+fn high_event_in_process(beta: f64) -> (f64, u64) {
+    let case = open_case("cut-in", None, &ExposureSource::Builtin).unwrap();
+    let library = case
+        .build_library(
+            &serde_json::json!({"model": "idm"}),
+            &tslg_method::registry::BuildRequest {
+                threshold: None,
+                search: Some(tslg_method::registry::LibrarySearch::Cells(
+                    tslg_method::library::SearchMethod::Exhaustive,
+                )),
+            },
+        )
+        .unwrap();
+    let campaign = case
+        .campaign(
+            Some(&library.file),
+            &serde_json::json!({"model": "fvdm"}),
+            0.1,
+            Default::default(),
+            1,
+        )
+        .unwrap();
+    let rule = StoppingRule {
+        n_min: default_n_min(Some(0.1), 1 << 40),
+        ..StoppingRule::new(beta, 1 << 40)
+    };
+    let started = Instant::now();
+    let result = tslg_method::campaign::run_campaign_tests(campaign.as_ref(), &rule, &|_| false);
+    (started.elapsed().as_secs_f64(), result.indices)
+}
+
+struct ServiceRun {
+    seconds: f64,
+    indices: u64,
+    events: u64,
+    report_rows: i64,
+    packed_bytes: i64,
+    file_bytes: u64,
+}
+
+async fn high_event_service(beta: f64, threads: usize) -> anyhow::Result<ServiceRun> {
+    let dir = tempfile::tempdir()?;
+    let path = dir.path().join("high.sqlite");
+    let url = format!("sqlite://{}", path.display());
+    let service = LocalService::start(&url, 1, threads).await?;
+    let client = Client::new(&service.url, None)?;
+    let mut view = client
+        .create_library(&CreateLibrary {
+            case: "cut-in".into(),
+            preset: None,
+            surrogate: serde_json::json!({"model": "idm"}),
+            exposure: ExposureRequest::Builtin,
+            search: Some(SearchRequest::Exhaustive),
+            threshold: None,
+        })
+        .await?;
+    while view.status == LibraryStatus::Building {
+        tokio::time::sleep(Duration::from_millis(20)).await;
+        view = client.library(view.id).await?;
+    }
+    let request = CreateCampaign {
+        method: Method::Library,
+        library_id: Some(view.id),
+        vut: serde_json::json!({"model": "fvdm"}),
+        beta,
+        max_tests: 1 << 40,
+        ..request(0)
+    };
+    let started = Instant::now();
+    let id = client.create_campaign(&request).await?.id;
+    let view = loop {
+        let view = client.campaign(id).await?;
+        if view.status.is_final() {
+            break view;
+        }
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    };
+    let seconds = started.elapsed().as_secs_f64();
+    service.stop().await?;
+    use sqlx::Connection;
+    let mut db = sqlx::SqliteConnection::connect(&url).await?;
+    let (report_rows, packed_bytes): (i64, i64) =
+        sqlx::query_as("SELECT COUNT(*), COALESCE(SUM(LENGTH(packed)), 0) FROM reports")
+            .fetch_one(&mut db)
+            .await?;
+    sqlx::query("VACUUM").execute(&mut db).await?;
+    db.close().await?;
+    Ok(ServiceRun {
+        seconds,
+        indices: view.indices,
+        events: view.events,
+        report_rows,
+        packed_bytes,
+        file_bytes: std::fs::metadata(&path)?.len(),
+    })
+}
+
+fn high_event_table(runtime: &tokio::runtime::Runtime, cores: usize) -> anyhow::Result<()> {
+    let beta: f64 = std::env::var("TSLG_BENCH_HIGH_BETA")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(0.01);
+    let mut local = Vec::new();
+    let mut served = Vec::new();
+    for _ in 0..3 {
+        local.push(high_event_in_process(beta));
+        served.push(runtime.block_on(high_event_service(beta, cores))?);
+    }
+    let (l, stop) = local
+        .iter()
+        .copied()
+        .fold((f64::INFINITY, 0), |a, b| if b.0 < a.0 { b } else { a });
+    let s = served
+        .iter()
+        .min_by(|a, b| a.seconds.total_cmp(&b.seconds))
+        .expect("three runs");
+    assert_eq!(s.indices, stop, "the service stops where the process does");
+    println!(
+        "High-event campaign: FVDM with the IDM library, β = {beta}, {cores} cores (best of 3)\n"
+    );
+    println!("| runner | seconds | stop index | events | tests/s |");
+    println!("|---|---:|---:|---:|---:|");
+    println!(
+        "| in-process (rayon, {cores} threads) | {l:.2} | {stop} | | {:.3e} |",
+        stop as f64 / l
+    );
+    println!(
+        "| service (1 worker × {cores} threads, embedded coordinator) | {:.2} | {} | {} | {:.3e} |",
+        s.seconds,
+        s.indices,
+        s.events,
+        s.indices as f64 / s.seconds
+    );
+    println!("\nservice / in-process time: {:.2}", s.seconds / l);
+    println!(
+        "storage: {} report rows, {} bytes of packed events ({:.2} bytes per event), \
+         database file {} bytes after VACUUM ({:.2} bytes per event)\n",
+        s.report_rows,
+        s.packed_bytes,
+        s.packed_bytes as f64 / s.events as f64,
+        s.file_bytes,
+        s.file_bytes as f64 / s.events as f64
+    );
+    Ok(())
+}
+
 fn main() -> anyhow::Result<()> {
     let tests: u64 = std::env::var("TSLG_BENCH_TESTS")
         .ok()
@@ -169,6 +321,7 @@ fn main() -> anyhow::Result<()> {
         .worker_threads(2)
         .enable_all()
         .build()?;
+    high_event_table(&runtime, cores)?;
     let mut local = Vec::new();
     let mut service = Vec::new();
     for _ in 0..3 {

@@ -208,6 +208,8 @@ pub struct InvalidResult {
     pub reason: String,
 }
 
+/// Most threads a worker may declare in a lease request (and a report).
+pub const MAX_THREADS: u32 = 4096;
 /// Most tests one report may cover (`to − from`): a longer range is
 /// reported in parts.
 pub const MAX_REPORT_TESTS: u64 = 1 << 22;

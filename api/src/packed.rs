@@ -27,6 +27,8 @@ use std::fmt;
 
 const RAW: u8 = 0;
 const DICTIONARY: u8 = 1;
+/// The most distinct weights a dictionary holds.
+const MAX_DICTIONARY: usize = 4096;
 
 /// Why a packed list could not be read.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -125,7 +127,12 @@ pub fn pack(from: u64, events: &[(u64, f64)]) -> Vec<u8> {
     }
     // The dictionary, in order of first appearance.
     let mut distinct: Vec<u64> = Vec::new();
-    let mut position = std::collections::HashMap::new();
+    // Fx hashing, far cheaper than SipHash per event. Weights come from
+    // workers, so a hostile one could send keys that collide; the
+    // dictionary is given up past MAX_DICTIONARY distinct weights, which
+    // bounds the cost of collisions (and a dictionary that large saves
+    // little anyway).
+    let mut position = rustc_hash::FxHashMap::default();
     let mut codes = Vec::with_capacity(events.len());
     for &(_, weight) in events {
         let bits = weight.to_bits();
@@ -133,9 +140,16 @@ pub fn pack(from: u64, events: &[(u64, f64)]) -> Vec<u8> {
             distinct.push(bits);
             distinct.len() - 1
         });
+        if distinct.len() > MAX_DICTIONARY {
+            break;
+        }
         put_varint(&mut codes, code as u64);
     }
-    let dictionary_size = 10 + distinct.len() * 8 + codes.len();
+    let dictionary_size = if distinct.len() > MAX_DICTIONARY {
+        usize::MAX
+    } else {
+        10 + distinct.len() * 8 + codes.len()
+    };
     let raw_size = events.len() * 8;
     let mut out = Vec::with_capacity(1 + head.len() + raw_size.min(dictionary_size));
     if dictionary_size < raw_size {

@@ -25,11 +25,12 @@
 
 use crate::db::{now_ms, Database};
 use crate::error::ApiError;
-use crate::report_check::{check_effort, CheckedReport};
-use crate::store::audits::{self, AuditRow, NewAudit};
+use crate::report_check::CheckedReport;
+use crate::store::audits::{self, AuditRow, AuditState, NewAudit};
 use crate::store::campaigns;
 use crate::store::fold::fold_prefix;
-use crate::store::results::{held_lease, stopped_ack, Recorded};
+use crate::store::leases::LeaseState;
+use crate::store::results::{check_effort, held_lease, stopped_ack, Recorded};
 use sqlx::SqliteConnection;
 use std::hash::{BuildHasher, RandomState};
 use std::panic::{catch_unwind, AssertUnwindSafe};
@@ -104,17 +105,31 @@ impl std::fmt::Display for Mismatch {
     }
 }
 
-/// The coordinator's outcome of test `index`: its replay, or invalid when
-/// the simulation panics (as the worker's did, if it reported invalid).
-fn replayed(tests: &dyn CampaignTests, index: u64) -> Option<String> {
+/// The coordinator's outcome of test `index`: its replay (invalid when the
+/// simulation panics, as the worker's did if it reported invalid); `None`
+/// when it cannot run the test.
+fn replayed(tests: &dyn CampaignTests, index: u64) -> Option<Option<SparseOutcome>> {
     match catch_unwind(AssertUnwindSafe(|| tests.replay(index))) {
-        Ok(Some(outcome)) => Some(audits::encode(
+        Ok(Some(outcome)) => Some(
             outcome
                 .event
                 .then_some(SparseOutcome::Event(outcome.weight)),
-        )),
+        ),
         Ok(None) => None,
-        Err(_) => Some(audits::encode(Some(SparseOutcome::Invalid))),
+        Err(_) => Some(Some(SparseOutcome::Invalid)),
+    }
+}
+
+/// Two outcomes are the same when their kinds are and, for events, their
+/// weights to the bit.
+fn same(a: Option<SparseOutcome>, b: Option<SparseOutcome>) -> bool {
+    match (a, b) {
+        (None, None) => true,
+        (Some(SparseOutcome::Invalid), Some(SparseOutcome::Invalid)) => true,
+        (Some(SparseOutcome::Event(x)), Some(SparseOutcome::Event(y))) => {
+            x.to_bits() == y.to_bits()
+        }
+        _ => false,
     }
 }
 
@@ -132,13 +147,12 @@ pub fn verify_builtin(
         .filter(|&i| report.outcomes.binary_search_by_key(&i, |o| o.0).is_err())
         .map(|i| (i, None));
     for (index, outcome) in listed.chain(quiet) {
-        let reported = audits::encode(outcome);
         let own = replayed(tests, index)?;
-        if own != reported {
+        if !same(own, outcome) {
             return Some(Mismatch {
                 index,
-                reported,
-                replayed: own,
+                reported: audits::encode(outcome),
+                replayed: audits::encode(own),
             });
         }
     }
@@ -212,10 +226,12 @@ pub async fn record_run(
     worker: &str,
     outcome: &str,
 ) -> Result<Verdict, ApiError> {
-    let (state, column, verdict) = match audit.state.as_str() {
-        "replica" if outcome == audit.first_outcome => ("agreed", "replica", Verdict::Agreed),
-        "replica" => ("tiebreak", "replica", Verdict::Pending),
-        "tiebreak" => {
+    let (state, column, verdict) = match audit.state {
+        AuditState::Replica if outcome == audit.first_outcome => {
+            (AuditState::Agreed, "replica", Verdict::Agreed)
+        }
+        AuditState::Replica => (AuditState::Tiebreak, "replica", Verdict::Pending),
+        AuditState::Tiebreak => {
             let replica = audit.replica_outcome.as_deref().unwrap_or("");
             let replica_worker = audit.replica_worker.clone().unwrap_or_default();
             let detail = |liar: &str, said: &str, others: &str| {
@@ -230,20 +246,17 @@ pub async fn record_run(
             };
             if outcome == audit.first_outcome {
                 let detail = detail(&replica_worker, replica, outcome);
-                (
-                    "settled",
-                    "third",
-                    Verdict::Liar {
-                        liar: replica_worker,
-                        detail,
-                    },
-                )
+                let verdict = Verdict::Liar {
+                    liar: replica_worker,
+                    detail,
+                };
+                (AuditState::Settled, "third", verdict)
             } else if outcome == replica {
                 let detail = detail(&audit.first_worker, &audit.first_outcome, outcome);
                 let liar = audit.first_worker.clone();
-                ("settled", "third", Verdict::Liar { liar, detail })
+                (AuditState::Settled, "third", Verdict::Liar { liar, detail })
             } else {
-                ("undecided", "third", Verdict::Undecided)
+                (AuditState::Undecided, "third", Verdict::Undecided)
             }
         }
         _ => return Ok(Verdict::Pending),
@@ -264,7 +277,7 @@ pub async fn record_run(
             test = audit.test_index,
             "three workers gave three outcomes; the first run stands"
         ),
-        Verdict::Pending if state == "tiebreak" => tracing::warn!(
+        Verdict::Pending if state == AuditState::Tiebreak => tracing::warn!(
             campaign = audit.campaign_id,
             test = audit.test_index,
             first = %audit.first_worker,
@@ -353,7 +366,7 @@ async fn take_back(conn: &mut SqliteConnection, id: i64, worker: &str) -> Result
     let Some(first) = ranges.first().map(|r| r.0) else {
         return Ok(false);
     };
-    let status = campaign.status();
+    let status = campaign.status;
     let stopped = status.is_final();
     if matches!(status.as_str(), "cancelled" | "failed") || (stopped && campaign.indices <= first) {
         return Ok(false);
@@ -423,9 +436,12 @@ pub async fn record_audit_run(
     let (lease, campaign) = held_lease(&mut tx, lease_id, report).await?;
     let (start, end) = (lease.start_index as u64, lease.end_index as u64);
     let audit = audits::get(&mut tx, lease.audit_id.unwrap_or_default()).await?;
-    if campaign.status().is_final() || lease.state != "active" || audit.lease_id != Some(lease.id) {
+    if campaign.status.is_final()
+        || lease.state != LeaseState::Active
+        || audit.lease_id != Some(lease.id)
+    {
         return Ok(Recorded {
-            ack: stopped_ack(1, lease.resume_at as u64, end, campaign.status()),
+            ack: stopped_ack(1, lease.resume_at as u64, end, campaign.status),
             stopped: None,
             campaign_id: campaign.id,
         });

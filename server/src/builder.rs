@@ -3,10 +3,8 @@
 
 use crate::state::AppState;
 use crate::store::libraries::{self, Built};
-use std::collections::HashMap;
-use std::sync::{Arc, Mutex};
 use std::time::Instant;
-use tslg_api::{BuildProgress, CreateLibrary, LibraryView, SearchRequest, ThresholdRequest};
+use tslg_api::{CreateLibrary, SearchRequest, ThresholdRequest};
 use tslg_method::carfollow::PolicySolver;
 use tslg_method::library::{SearchMethod, Threshold};
 use tslg_method::progress::Progress;
@@ -60,36 +58,6 @@ fn build(req: &CreateLibrary, progress: &Progress) -> Result<(BuiltLibrary, f64)
         .build_library_observed(&req.surrogate, &request, progress)
         .map_err(|e| e.to_string())?;
     Ok((library, started.elapsed().as_secs_f64()))
-}
-
-/// The progress of the builds under way, by library id.
-#[derive(Default)]
-pub struct BuildTracker {
-    running: Mutex<HashMap<i64, Arc<Progress>>>,
-}
-
-impl BuildTracker {
-    fn begin(&self, id: i64) -> Arc<Progress> {
-        let progress = Arc::new(Progress::default());
-        self.lock().insert(id, Arc::clone(&progress));
-        progress
-    }
-
-    fn end(&self, id: i64) {
-        self.lock().remove(&id);
-    }
-
-    /// Fills the progress of a library being built.
-    pub fn fill(&self, view: &mut LibraryView) {
-        if let Some(progress) = self.lock().get(&view.id) {
-            let (done, total) = progress.get();
-            view.progress = Some(BuildProgress { done, total });
-        }
-    }
-
-    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<i64, Arc<Progress>>> {
-        self.running.lock().unwrap_or_else(|p| p.into_inner())
-    }
 }
 
 /// Builds library `id` in the background and records the result.

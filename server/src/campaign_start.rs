@@ -79,7 +79,7 @@ async fn library_of(
                 lib.id, lib.case_name, req.case
             )));
         }
-        if lib.status() == LibraryStatus::Failed && req.method == Method::Library {
+        if lib.status == LibraryStatus::Failed && req.method == Method::Library {
             return Err(bad(format!(
                 "library {} failed to build: {}",
                 lib.id,
@@ -134,7 +134,7 @@ pub async fn start(state: &AppState, req: CreateCampaign) -> Result<CampaignRow,
     });
     let preset = library.as_ref().map(|l| l.preset.clone());
     let file = match &library {
-        Some(lib) if req.method == Method::Library && lib.status() == LibraryStatus::Ready => Some(
+        Some(lib) if req.method == Method::Library && lib.status == LibraryStatus::Ready => Some(
             libraries::file(&state.db.read, lib.id)
                 .await?
                 .ok_or_else(|| {
@@ -156,7 +156,7 @@ pub async fn start(state: &AppState, req: CreateCampaign) -> Result<CampaignRow,
         .and_then(Result::ok)
         .map(|e| e.requirement(opened.case.name()));
     let status = match &library {
-        Some(lib) if req.method == Method::Library && lib.status() == LibraryStatus::Building => {
+        Some(lib) if req.method == Method::Library && lib.status == LibraryStatus::Building => {
             CampaignStatus::Pending
         }
         _ => CampaignStatus::Running,

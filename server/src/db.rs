@@ -55,14 +55,6 @@ impl Database {
             .run(&write)
             .await
             .context("cannot apply the database migrations")?;
-        let mut conn = write.begin().await?;
-        let moved = crate::store::reports::move_legacy_events(&mut conn)
-            .await
-            .context("cannot move the old event rows into report rows")?;
-        conn.commit().await?;
-        if moved > 0 {
-            tracing::info!(events = moved, "old event rows packed into report rows");
-        }
         let read = SqlitePoolOptions::new()
             .max_connections(4)
             .connect_with(options.read_only(true))

@@ -4,12 +4,14 @@
 //! estimator until the stopping rule holds. See `docs/architecture.md`.
 
 pub mod audit;
+pub mod build_progress;
 pub mod builder;
 pub mod campaign_start;
 pub mod config;
 pub mod db;
 pub mod error;
 pub mod history;
+pub mod latency;
 pub mod lease_size;
 pub mod metrics;
 pub mod problem_io;
@@ -46,6 +48,7 @@ pub async fn serve(
         );
     }
     let db = db::Database::open(&config.database_url, config.durability).await?;
+    store::reports::move_legacy_events(&db).await?;
     let state = state::AppState::new(db, config);
     builder::resume_builds(&state).await?;
     let address = listener.local_addr()?;

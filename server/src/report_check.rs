@@ -4,9 +4,9 @@
 //! outcomes sorted, disjoint and inside the range.
 
 use crate::error::ApiError;
-use crate::store::leases::{LeaseRow, MAX_THREADS};
 use tslg_api::{
     ResultReport, MAX_INVALID_REASON, MAX_REPORT_EVENTS, MAX_REPORT_INVALID, MAX_REPORT_TESTS,
+    MAX_THREADS,
 };
 use tslg_method::number::Num;
 use tslg_method::prefix::SparseOutcome;
@@ -15,10 +15,6 @@ use tslg_method::prefix::SparseOutcome;
 /// attempt's age it keeps the cost per test, and so the fairness turn it
 /// sets, finite.
 pub const MAX_COMPUTE_SECONDS: f64 = 86_400.0;
-/// Slack for the attempt-age check: the worker's clock starts after the
-/// coordinator's, but rounding of milliseconds and clocks of different
-/// resolution are allowed this much.
-pub const CLOCK_SLACK_SECONDS: f64 = 1.0;
 
 /// A report checked for shape: sorted, disjoint, inside its range, within
 /// the size limits.
@@ -129,28 +125,4 @@ pub fn check_report(report: &ResultReport) -> Result<CheckedReport, ApiError> {
         outcomes,
         reasons,
     })
-}
-
-/// Refuses a report that says it took longer than its lease's attempt has
-/// existed, or ran on more threads than the attempt was sized for: such
-/// figures would set the cost per test, and so the campaign's fair-sharing
-/// turn, to anything.
-pub fn check_effort(lease: &LeaseRow, report: &ResultReport, now_ms: i64) -> Result<(), ApiError> {
-    let age = (now_ms - lease.claimed_at).max(0) as f64 / 1000.0 + CLOCK_SLACK_SECONDS;
-    if report.compute_seconds > age {
-        return Err(ApiError::Unprocessable(format!(
-            "compute_seconds = {} exceeds the {age:.3} s since lease {} was handed to worker \
-             `{}`",
-            Num(report.compute_seconds),
-            lease.id,
-            lease.worker
-        )));
-    }
-    if i64::from(report.threads) > lease.threads {
-        return Err(ApiError::Unprocessable(format!(
-            "threads = {} exceeds the {} threads lease {} was asked for",
-            report.threads, lease.threads, lease.id
-        )));
-    }
-    Ok(())
 }

@@ -39,16 +39,12 @@ pub async fn receive(
     // again.)
     leases::check_fence(&lease, &report.worker, report.attempt, report.key.as_str())?;
     let campaign = campaigns::get(&state.db.read, lease.campaign_id).await?;
-    let tests = if campaign.status().is_final() {
+    let tests = if campaign.status.is_final() {
         None
     } else {
         Some(state.samplers.get(&state.db, &campaign).await?)
     };
-    let library_tests = || {
-        tests
-            .clone()
-            .filter(|_| campaign.method() == Method::Library)
-    };
+    let library_tests = || tests.clone().filter(|_| campaign.method == Method::Library);
     let recorded = if lease.audit_id.is_some() {
         audit::record_audit_run(&state.db, library_tests(), lease_id, report, checked).await?
     } else {

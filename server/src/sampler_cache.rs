@@ -9,6 +9,7 @@ use crate::store::libraries;
 use anyhow::Context;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
+use tslg_api::Method;
 use tslg_method::registry::{open_case, CampaignTests};
 
 #[derive(Default)]
@@ -26,7 +27,7 @@ impl SamplerCache {
             return Ok(Arc::clone(sampler));
         }
         let file = match row.library_id {
-            Some(id) if row.method == "library" => Some(
+            Some(id) if row.method == Method::Library => Some(
                 libraries::file(&db.read, id)
                     .await?
                     .with_context(|| format!("library {id} of campaign {} has no file", row.id))?
@@ -67,7 +68,7 @@ fn build(row: &CampaignRow, file: Option<&[u8]>) -> anyhow::Result<Arc<dyn Campa
         file,
         &vut,
         row.epsilon,
-        tslg_client::wire::outside_spread(row.outside()),
+        tslg_client::wire::outside_spread(row.outside),
         row.seed(),
     )?)
 }

@@ -1,14 +1,17 @@
 //! Shared state of the request handlers.
 
-use crate::builder::BuildTracker;
+use crate::build_progress::BuildTracker;
 use crate::config::Config;
 use crate::db::Database;
-use crate::metrics::Metrics;
+use crate::latency::Metrics;
 use crate::sampler_cache::SamplerCache;
 use crate::throughput::Throughput;
 use crate::workers::WorkerRegistry;
 use std::sync::Arc;
 use tokio::sync::Semaphore;
+
+/// Library pictures (SVG), drawn once per library.
+pub type PictureCache = tokio::sync::Mutex<std::collections::HashMap<i64, Arc<String>>>;
 
 #[derive(Clone)]
 pub struct AppState {
@@ -25,7 +28,7 @@ pub struct AppState {
     /// Tests per second of the running campaigns.
     pub throughput: Arc<Throughput>,
     /// Library pictures, drawn once each.
-    pub pictures: Arc<crate::routes::PictureCache>,
+    pub pictures: Arc<PictureCache>,
     /// Request latencies, for `/metrics`.
     pub metrics: Arc<Metrics>,
     /// Which tests are checked again, by a key of this process.

@@ -5,6 +5,7 @@
 pub mod backoff;
 pub mod config;
 pub mod external;
+pub mod panics;
 pub mod prepared;
 pub mod report_parts;
 pub mod run;

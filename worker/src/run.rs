@@ -237,24 +237,34 @@ impl Worker {
         ));
         let mut at = lease.resume_at;
         let mut chunk = FIRST_CHUNK_PER_THREAD * self.threads as u64;
-        while at < lease.end && proceed.load(Ordering::Relaxed) && !self.stopping() {
-            let to = (at + chunk).min(lease.end);
-            let started = Instant::now();
-            let (pool, p, program) = (
-                Arc::clone(&self.pool),
-                Arc::clone(&prepared),
-                program.clone(),
-            );
+        let pool = Arc::clone(&self.pool);
+        let start = |from: u64, chunk: u64| {
+            let to = (from + chunk).min(lease.end);
+            let (pool, p, program) = (Arc::clone(&pool), Arc::clone(&prepared), program.clone());
             let campaign = lease.campaign_id;
-            let chunk_start = at;
-            let ran = tokio::task::spawn_blocking(move || {
-                pool.install(|| run_range(&p, program.as_deref(), campaign, at, to))
-            })
-            .await?;
+            let handle = tokio::task::spawn_blocking(move || {
+                pool.install(|| run_range(&p, program.as_deref(), campaign, from, to))
+            });
+            (from, to, Instant::now(), handle)
+        };
+        // The next chunk runs while the last one is reported: the worker's
+        // threads do not wait for the coordinator's acknowledgement.
+        let mut running = (at < lease.end && !self.stopping()).then(|| start(at, chunk));
+        while let Some((from, to, started, handle)) = running.take() {
+            let ran = handle.await?;
             let seconds = started.elapsed().as_secs_f64();
-            if ran.end == at {
+            if ran.end == from {
                 // The program turned unhealthy before this chunk ran.
                 break;
+            }
+            if ran.end == to
+                && to < lease.end
+                && proceed.load(Ordering::Relaxed)
+                && !self.stopping()
+            {
+                let rate = (ran.end - from) as f64 / seconds.max(1e-6);
+                chunk = ((rate * CHUNK_SECONDS) as u64).clamp(16, 1 << 22);
+                running = Some(start(to, chunk));
             }
             let found = ran.events.len() as u64;
             let who = Reporter {
@@ -265,7 +275,7 @@ impl Worker {
             };
             let parts = report_parts(
                 &who,
-                at,
+                from,
                 ran.end,
                 seconds,
                 &ran.events,
@@ -297,10 +307,9 @@ impl Worker {
             }
             self.summary.events += found;
             if !proceed_after || at < to {
+                // A chunk started meanwhile is left to finish unreported.
                 break;
             }
-            let rate = (ran.end - chunk_start) as f64 / seconds.max(1e-6);
-            chunk = ((rate * CHUNK_SECONDS) as u64).clamp(16, 1 << 22);
         }
         heartbeat.abort();
         let unhealthy = program.as_ref().and_then(|p| p.unhealthy());
@@ -451,22 +460,13 @@ fn sanitised(text: &str) -> String {
         .collect()
 }
 
-/// The message a panic carried.
-pub(crate) fn panic_message(panic: &(dyn std::any::Any + Send)) -> String {
-    panic
-        .downcast_ref::<&str>()
-        .map(|s| s.to_string())
-        .or_else(|| panic.downcast_ref::<String>().cloned())
-        .unwrap_or_else(|| "unknown panic".into())
-}
-
 fn run_builtin(p: &PreparedCampaign, index: u64) -> Result<TestOutcome, String> {
     let mut last = String::new();
     for _ in 0..INVALID_TRIES {
         match catch_unwind(AssertUnwindSafe(|| p.tests.run_with(index, None))) {
             Ok(Ok(outcome)) => return Ok(outcome),
             Ok(Err(e)) => return Err(e.0),
-            Err(panic) => last = panic_message(panic.as_ref()),
+            Err(panic) => last = crate::panics::panic_message(panic.as_ref()),
         }
     }
     Err(format!(

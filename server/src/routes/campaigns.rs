@@ -119,14 +119,14 @@ pub async fn plan(
         preset: row.preset.clone(),
         exposure: row.exposure_request(),
         exposure_fingerprint: row.exposure_fingerprint.clone(),
-        method: row.method(),
-        library_id: if row.method() == Method::Library {
+        method: row.method,
+        library_id: if row.method == Method::Library {
             row.library_id
         } else {
             None
         },
         epsilon: row.epsilon,
-        outside: row.outside(),
+        outside: row.outside,
         seed: row.seed(),
         vut: serde_json::from_str(&row.vut).map_err(|e| ApiError::Internal(e.into()))?,
     }))

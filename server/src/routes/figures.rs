@@ -9,7 +9,6 @@ use crate::store::{campaigns, libraries};
 use axum::extract::State;
 use axum::http::header;
 use axum::response::{IntoResponse, Response};
-use std::collections::HashMap;
 use std::sync::Arc;
 use tslg_figures::{FigureError, Heatmap, HeatmapAxis};
 use tslg_method::registry::{open_case, PictureMap};
@@ -78,9 +77,6 @@ pub async fn library_picture(
     pictures.insert(id, Arc::new(picture.clone()));
     svg(Ok(picture))
 }
-
-/// Drawn library pictures by library id.
-pub type PictureCache = tokio::sync::Mutex<HashMap<i64, Arc<String>>>;
 
 async fn draw_picture(state: &AppState, id: i64) -> Result<String, ApiError> {
     let (row, file) = libraries::ready_file(&state.db.read, id).await?;

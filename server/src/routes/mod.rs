@@ -16,7 +16,6 @@ mod libraries;
 pub mod openapi;
 
 pub use extract::{ApiPath, ApiQuery};
-pub use figures::PictureCache;
 
 use crate::error::{problem, ApiError};
 use crate::state::AppState;
@@ -25,6 +24,7 @@ use axum::http::StatusCode;
 use axum::middleware::from_fn_with_state;
 use axum::routing::{delete, get, post};
 use axum::Router;
+use std::sync::Arc;
 
 pub fn router(state: AppState) -> Router {
     let admin = Router::new()
@@ -81,7 +81,10 @@ pub fn router(state: AppState) -> Router {
         .layer(from_fn_with_state(state.clone(), refuse_large_bodies))
         .layer(axum::middleware::from_fn(refuse_long_uris))
         .layer(axum::middleware::from_fn(crate::error::log_internal_errors))
-        .layer(from_fn_with_state(state.clone(), crate::metrics::observe))
+        .layer(from_fn_with_state(
+            Arc::clone(&state.metrics),
+            crate::latency::observe,
+        ))
         .layer(tower_http::trace::TraceLayer::new_for_http())
         .with_state(state)
 }

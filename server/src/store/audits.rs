@@ -24,13 +24,32 @@ pub struct NewAudit {
     pub first_outcome: String,
 }
 
+/// Where an audit stands (see [`crate::audit`] and the `audits` table).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, sqlx::Type)]
+#[sqlx(rename_all = "lowercase")]
+pub enum AuditState {
+    /// Waits for a second run.
+    Replica,
+    /// Two runs disagree; a third decides.
+    Tiebreak,
+    Agreed,
+    /// The third run decided and the minority was flagged.
+    Settled,
+    /// The first run was taken back with its worker.
+    Void,
+    /// Three runs, three outcomes.
+    Undecided,
+    /// Still open when its campaign stopped before its test.
+    Past,
+}
+
 #[derive(Debug, Clone, sqlx::FromRow)]
 pub struct AuditRow {
     pub id: i64,
     pub campaign_id: i64,
     pub test_index: i64,
     pub reason: String,
-    pub state: String,
+    pub state: AuditState,
     pub first_worker: String,
     pub first_outcome: String,
     pub replica_worker: Option<String>,
@@ -128,7 +147,7 @@ pub async fn runnable(
 }
 
 /// Counts of a campaign's audits by state, for its view.
-pub async fn counts(pool: &SqlitePool, campaign: i64) -> Result<Vec<(String, i64)>, ApiError> {
+pub async fn counts(pool: &SqlitePool, campaign: i64) -> Result<Vec<(AuditState, i64)>, ApiError> {
     Ok(
         sqlx::query_as("SELECT state, COUNT(*) FROM audits WHERE campaign_id = ? GROUP BY state")
             .bind(campaign)

@@ -2,6 +2,7 @@
 
 use crate::error::ApiError;
 use crate::lease_size::predicted_unleased;
+use crate::store::audits::AuditState;
 use sqlx::SqlitePool;
 use tslg_api::{
     AuditCounts, CampaignStatus, CampaignView, ExposureRequest, HistoryPoint, Method, Outside,
@@ -17,7 +18,7 @@ pub struct CampaignRow {
     pub id: i64,
     pub case_name: String,
     pub preset: String,
-    pub method: String,
+    pub method: Method,
     pub library_id: Option<i64>,
     pub exposure_name: String,
     pub exposure_fingerprint: String,
@@ -26,14 +27,14 @@ pub struct CampaignRow {
     /// `NAME:case:mode` of an external vehicle under test.
     pub requires: Option<String>,
     pub epsilon: f64,
-    pub outside: String,
+    pub outside: Outside,
     pub beta: f64,
     pub confidence: f64,
     pub n_min: i64,
     pub min_events: i64,
     pub max_tests: i64,
     pub seed: i64,
-    pub status: String,
+    pub status: CampaignStatus,
     pub status_detail: Option<String>,
     pub next_index: i64,
     pub indices: i64,
@@ -71,26 +72,6 @@ pub const COLUMNS: &str = "id, case_name, preset, method, library_id, exposure_n
     cost_per_test, worker_seconds, audits_waived, reported_s1, created_at, updated_at";
 
 impl CampaignRow {
-    pub fn status(&self) -> CampaignStatus {
-        CampaignStatus::parse(&self.status).unwrap_or(CampaignStatus::Failed)
-    }
-
-    pub fn outside(&self) -> Outside {
-        if self.outside == "ndd" {
-            Outside::Ndd
-        } else {
-            Outside::Uniform
-        }
-    }
-
-    pub fn method(&self) -> Method {
-        if self.method == "library" {
-            Method::Library
-        } else {
-            Method::Ndd
-        }
-    }
-
     pub fn seed(&self) -> u64 {
         self.seed as u64
     }
@@ -159,18 +140,18 @@ impl CampaignRow {
         CampaignView {
             id: self.id,
             case: self.case_name.clone(),
-            method: self.method(),
+            method: self.method,
             library_id: self.library_id,
             vut: serde_json::from_str(&self.vut).unwrap_or_default(),
             epsilon: self.epsilon,
-            outside: self.outside(),
+            outside: self.outside,
             beta: self.beta,
             confidence: self.confidence,
             n_min: rule.n_min,
             min_events: rule.min_events,
             max_tests: rule.max_tests,
             seed: self.seed(),
-            status: self.status(),
+            status: self.status,
             status_detail: self.status_detail.clone(),
             tests: self.tests as u64,
             events: self.events as u64,
@@ -209,20 +190,20 @@ impl CampaignRow {
 
 /// A campaign's audit counts from `(state, count)` rows, with what they
 /// mean for its user in words.
-pub fn audit_counts(row: &CampaignRow, states: &[(String, i64)]) -> (AuditCounts, Vec<String>) {
-    let count = |name: &str| {
+pub fn audit_counts(row: &CampaignRow, states: &[(AuditState, i64)]) -> (AuditCounts, Vec<String>) {
+    let count = |state: AuditState| {
         states
             .iter()
-            .filter(|(s, _)| s == name)
+            .filter(|(s, _)| *s == state)
             .map(|(_, n)| *n as u64)
             .sum::<u64>()
     };
     let counts = AuditCounts {
-        open: count("replica") + count("tiebreak"),
-        agreed: count("agreed"),
-        settled: count("settled"),
-        undecided: count("undecided"),
-        void: count("void"),
+        open: count(AuditState::Replica) + count(AuditState::Tiebreak),
+        agreed: count(AuditState::Agreed),
+        settled: count(AuditState::Settled),
+        undecided: count(AuditState::Undecided),
+        void: count(AuditState::Void),
         waived: row.audits_waived as u64,
     };
     let program = row
@@ -238,7 +219,7 @@ pub fn audit_counts(row: &CampaignRow, states: &[(String, i64)]) -> (AuditCounts
             counts.waived
         ));
     }
-    if counts.open > 0 && !row.status().is_final() {
+    if counts.open > 0 && !row.status.is_final() {
         warnings.push(format!(
             "{} tests wait to be run again by another worker offering `{program}`; the estimate \
              stops at the first of them until they are",
@@ -343,10 +324,10 @@ pub async fn list(pool: &SqlitePool) -> Result<Vec<CampaignRow>, ApiError> {
 pub async fn cancel(pool: &SqlitePool, id: i64) -> Result<CampaignRow, ApiError> {
     let mut tx = pool.begin().await?;
     let row = get(&mut *tx, id).await?;
-    if row.status().is_final() {
+    if row.status.is_final() {
         return Err(ApiError::Conflict(format!(
             "campaign {id} has already stopped ({})",
-            row.status
+            row.status.as_str()
         )));
     }
     sqlx::query(

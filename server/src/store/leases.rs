@@ -12,6 +12,16 @@ use subtle::ConstantTimeEq;
 use tslg_api::{CampaignStatus, HeartbeatAck, LeaseFence};
 use tslg_method::registry::SEQUENTIAL_CASES;
 
+/// Where a lease stands: being worked on (or expired, waiting for another
+/// worker), fully reported, or cancelled with its campaign.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, sqlx::Type)]
+#[sqlx(rename_all = "lowercase")]
+pub enum LeaseState {
+    Active,
+    Done,
+    Cancelled,
+}
+
 #[derive(Debug, Clone, sqlx::FromRow)]
 pub struct LeaseRow {
     pub id: i64,
@@ -22,7 +32,7 @@ pub struct LeaseRow {
     pub attempt: i64,
     pub worker: String,
     pub expires_at: i64,
-    pub state: String,
+    pub state: LeaseState,
     pub key: String,
     /// Unix ms when the current attempt was handed out.
     pub claimed_at: i64,
@@ -38,8 +48,7 @@ pub const COLUMNS: &str = "id, campaign_id, start_index, end_index, resume_at, a
 /// Open audits past which a campaign gets no new range.
 const MAX_OPEN_AUDITS: i64 = 256;
 
-/// Most threads a worker may declare.
-pub const MAX_THREADS: u32 = 4096;
+pub use tslg_api::MAX_THREADS;
 /// The longest a lease's work is expected to take for fair sharing, in
 /// milliseconds (a day): a campaign's turn never moves further ahead.
 const MAX_EXPECTED_MS: i64 = 86_400_000;
@@ -357,8 +366,8 @@ pub async fn heartbeat(
     let lease = get(&mut tx, id).await?;
     check_fence(&lease, &fence.worker, fence.attempt, fence.key.as_str())?;
     let campaign = campaigns::get(&mut *tx, lease.campaign_id).await?;
-    let status = campaign.status();
-    if lease.state != "active" || status != CampaignStatus::Running {
+    let status = campaign.status;
+    if lease.state != LeaseState::Active || status != CampaignStatus::Running {
         return Ok(HeartbeatAck {
             proceed: false,
             campaign_status: status,

@@ -9,7 +9,7 @@ pub struct LibraryRow {
     pub id: i64,
     pub case_name: String,
     pub preset: String,
-    pub status: String,
+    pub status: LibraryStatus,
     pub request: String,
     pub surrogate: String,
     pub exposure_name: String,
@@ -34,20 +34,12 @@ impl LibraryRow {
         tslg_client::wire::stored_exposure(&self.exposure_name, self.exposure_table.as_ref())
     }
 
-    pub fn status(&self) -> LibraryStatus {
-        match self.status.as_str() {
-            "ready" => LibraryStatus::Ready,
-            "failed" => LibraryStatus::Failed,
-            _ => LibraryStatus::Building,
-        }
-    }
-
     pub fn view(&self) -> LibraryView {
         LibraryView {
             id: self.id,
             case: self.case_name.clone(),
             preset: self.preset.clone(),
-            status: self.status(),
+            status: self.status,
             exposure: self.exposure_name.clone(),
             exposure_fingerprint: self.exposure_fingerprint.clone(),
             surrogate: serde_json::from_str(&self.surrogate).unwrap_or_default(),
@@ -139,10 +131,10 @@ pub async fn file(pool: &SqlitePool, id: i64) -> Result<Option<LibraryFile>, Api
 /// A ready library and its file; 404 if unknown, 409 if not ready (yet).
 pub async fn ready_file(pool: &SqlitePool, id: i64) -> Result<(LibraryRow, LibraryFile), ApiError> {
     let row = get(pool, id).await?;
-    if row.status() != LibraryStatus::Ready {
+    if row.status != LibraryStatus::Ready {
         return Err(ApiError::Conflict(format!(
             "library {id} is {}, not ready",
-            row.status().as_str()
+            row.status.as_str()
         )));
     }
     let file = file(pool, id)

@@ -131,8 +131,21 @@ const LEGACY_CHUNK: usize = 65_536;
 
 /// Packs the rows of the old `legacy_events` table (databases from before
 /// the `reports` table) into report rows without a worker, and drops it.
-/// Runs once, at start-up, in one transaction; returns the events moved.
-pub async fn move_legacy_events(conn: &mut SqliteConnection) -> Result<u64, anyhow::Error> {
+/// Runs at start-up, after the migrations, in one transaction.
+pub async fn move_legacy_events(db: &crate::db::Database) -> anyhow::Result<()> {
+    use anyhow::Context;
+    let mut tx = db.write.begin().await?;
+    let moved = move_legacy_rows(&mut tx)
+        .await
+        .context("cannot move the old event rows into report rows")?;
+    tx.commit().await?;
+    if moved > 0 {
+        tracing::info!(events = moved, "old event rows packed into report rows");
+    }
+    Ok(())
+}
+
+async fn move_legacy_rows(conn: &mut SqliteConnection) -> Result<u64, anyhow::Error> {
     let (exists,): (i64,) = sqlx::query_as(
         "SELECT COUNT(*) FROM sqlite_master WHERE type = 'table' AND name = 'legacy_events'",
     )

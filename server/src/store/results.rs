@@ -12,17 +12,51 @@ use crate::config::Config;
 use crate::db::{now_ms, Database};
 use crate::error::ApiError;
 use crate::lease_size::update_cost;
-use crate::report_check::{check_effort, CheckedReport};
+use crate::report_check::CheckedReport;
 use crate::store::audits::{self, NewAudit};
 use crate::store::campaigns::{self, CampaignRow};
 use crate::store::fold::fold_prefix;
-use crate::store::leases::{self, check_fence, LeaseRow};
+use crate::store::leases::{self, check_fence, LeaseRow, LeaseState};
 use crate::store::reports::{self, NewReport};
 use sqlx::SqliteConnection;
 use std::sync::Arc;
 use tslg_api::{CampaignStatus, ResultAck, ResultReport};
+use tslg_method::number::Num;
 use tslg_method::prefix::SparseOutcome;
 use tslg_method::registry::CampaignTests;
+
+/// Slack for the attempt-age check: the worker's clock starts after the
+/// coordinator's, but rounding of milliseconds and clocks of different
+/// resolution are allowed this much.
+const CLOCK_SLACK_SECONDS: f64 = 1.0;
+
+/// Refuses a report that says it took longer than its lease's attempt has
+/// existed, or ran on more threads than the attempt was sized for: such
+/// figures would set the cost per test, and so the campaign's fair-sharing
+/// turn, to anything.
+pub(crate) fn check_effort(
+    lease: &LeaseRow,
+    report: &ResultReport,
+    now_ms: i64,
+) -> Result<(), ApiError> {
+    let age = (now_ms - lease.claimed_at).max(0) as f64 / 1000.0 + CLOCK_SLACK_SECONDS;
+    if report.compute_seconds > age {
+        return Err(ApiError::Unprocessable(format!(
+            "compute_seconds = {} exceeds the {age:.3} s since lease {} was handed to worker \
+             `{}`",
+            Num(report.compute_seconds),
+            lease.id,
+            lease.worker
+        )));
+    }
+    if i64::from(report.threads) > lease.threads {
+        return Err(ApiError::Unprocessable(format!(
+            "threads = {} exceeds the {} threads lease {} was asked for",
+            report.threads, lease.threads, lease.id
+        )));
+    }
+    Ok(())
+}
 
 /// The audits an external program's report asks for ([`crate::audit`]):
 /// `audits` from the report's start (those in the part recorded now are
@@ -54,9 +88,9 @@ pub async fn record(
         lease.end_index as u64,
         lease.resume_at as u64,
     );
-    if campaign.status().is_final() || lease.state == "cancelled" {
+    if campaign.status.is_final() || lease.state == LeaseState::Cancelled {
         return Ok(Recorded {
-            ack: stopped_ack(span, resume_at, end, campaign.status()),
+            ack: stopped_ack(span, resume_at, end, campaign.status),
             stopped: None,
             campaign_id: campaign.id,
         });
@@ -161,7 +195,11 @@ async fn store_new_part(
     )
     .bind(checked.to as i64)
     .bind(expires_at)
-    .bind(if done { "done" } else { "active" })
+    .bind(if done {
+        LeaseState::Done
+    } else {
+        LeaseState::Active
+    })
     .bind(lease.id)
     .bind(&report.worker)
     .bind(report.attempt)

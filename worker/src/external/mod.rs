@@ -273,7 +273,7 @@ impl Program {
                         lock(&self.idle).push(process);
                     }
                 }
-                Err(panic) => last = crate::run::panic_message(panic.as_ref()),
+                Err(panic) => last = crate::panics::panic_message(panic.as_ref()),
             }
         }
         let reason = clip_reason(format!(
