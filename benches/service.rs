@@ -3,7 +3,9 @@
 //! worker on the same cores, and the lease round-trip time. Prints a
 //! Markdown table for docs/benchmarks.md.
 //!
-//! `cargo bench --bench service` (set TSLG_BENCH_TESTS to change the size).
+//! `cargo bench --bench service` (set TSLG_BENCH_TESTS to change the size
+//! of the NDD runs, TSLG_BENCH_HIGH_BETA the high-event campaign's β, and
+//! TSLG_BENCH_HIGH_ONLY to run only the high-event table).
 
 use std::time::{Duration, Instant};
 use tslg::service::LocalService;
@@ -79,6 +81,25 @@ async fn through_service(tests: u64, workers: usize, threads: usize) -> anyhow::
     Ok(seconds)
 }
 
+/// The IDM's exhaustive cut-in library built through the service: its id.
+async fn idm_library(client: &Client) -> anyhow::Result<i64> {
+    let mut view = client
+        .create_library(&CreateLibrary {
+            case: "cut-in".into(),
+            preset: None,
+            surrogate: serde_json::json!({"model": "idm"}),
+            exposure: ExposureRequest::Builtin,
+            search: Some(SearchRequest::Exhaustive),
+            threshold: None,
+        })
+        .await?;
+    while view.status == LibraryStatus::Building {
+        tokio::time::sleep(Duration::from_millis(20)).await;
+        view = client.library(view.id).await?;
+    }
+    Ok(view.id)
+}
+
 /// Claim-and-report round trips with no worker running, of an NDD campaign
 /// or (`library`) of a library campaign of the IDM's cut-in library, whose
 /// reports the coordinator checks against its own runs (every event, a
@@ -91,22 +112,8 @@ async fn round_trips(count: usize, library: bool) -> anyhow::Result<(Vec<f64>, f
     let client = Client::new(&service.url, None)?;
     let mut campaign = request(u64::MAX >> 20);
     if library {
-        let mut view = client
-            .create_library(&CreateLibrary {
-                case: "cut-in".into(),
-                preset: None,
-                surrogate: serde_json::json!({"model": "idm"}),
-                exposure: ExposureRequest::Builtin,
-                search: Some(SearchRequest::Exhaustive),
-                threshold: None,
-            })
-            .await?;
-        while view.status == LibraryStatus::Building {
-            tokio::time::sleep(Duration::from_millis(20)).await;
-            view = client.library(view.id).await?;
-        }
         campaign.method = Method::Library;
-        campaign.library_id = Some(view.id);
+        campaign.library_id = Some(idm_library(&client).await?);
     }
     let id = client.create_campaign(&campaign).await?.id;
     // The coordinator checks reports against its own runs: report the real
@@ -211,23 +218,9 @@ async fn high_event_service(beta: f64, threads: usize) -> anyhow::Result<Service
     let url = format!("sqlite://{}", path.display());
     let service = LocalService::start(&url, 1, threads).await?;
     let client = Client::new(&service.url, None)?;
-    let mut view = client
-        .create_library(&CreateLibrary {
-            case: "cut-in".into(),
-            preset: None,
-            surrogate: serde_json::json!({"model": "idm"}),
-            exposure: ExposureRequest::Builtin,
-            search: Some(SearchRequest::Exhaustive),
-            threshold: None,
-        })
-        .await?;
-    while view.status == LibraryStatus::Building {
-        tokio::time::sleep(Duration::from_millis(20)).await;
-        view = client.library(view.id).await?;
-    }
     let request = CreateCampaign {
         method: Method::Library,
-        library_id: Some(view.id),
+        library_id: Some(idm_library(&client).await?),
         vut: serde_json::json!({"model": "fvdm"}),
         beta,
         max_tests: 1 << 40,
@@ -322,6 +315,9 @@ fn main() -> anyhow::Result<()> {
         .enable_all()
         .build()?;
     high_event_table(&runtime, cores)?;
+    if std::env::var_os("TSLG_BENCH_HIGH_ONLY").is_some() {
+        return Ok(());
+    }
     let mut local = Vec::new();
     let mut service = Vec::new();
     for _ in 0..3 {

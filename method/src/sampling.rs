@@ -303,6 +303,17 @@ impl TestDistribution {
         }
     }
 
+    /// Whether a draw explored: its cell lies outside the library (the
+    /// library's share draws only library cells, the exploring share only
+    /// cells outside it), so this equals [`Self::explores`] of its test
+    /// without drawing again. Never for the NDD.
+    pub fn explored(&self, draw: &Draw) -> bool {
+        match self {
+            TestDistribution::Library(d) => !d.contains(draw.cell),
+            TestDistribution::Ndd(_) => false,
+        }
+    }
+
     /// Whether test `index` draws outside the library (never for the NDD).
     pub fn explores(&self, seed: u64, index: u64) -> bool {
         match self {

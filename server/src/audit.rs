@@ -31,44 +31,58 @@ use crate::store::campaigns;
 use crate::store::fold::fold_prefix;
 use crate::store::leases::LeaseState;
 use crate::store::results::{check_effort, held_lease, stopped_ack, Recorded};
+use rand::rngs::StdRng;
+use rand::{Rng, SeedableRng};
 use sqlx::SqliteConnection;
-use std::hash::{BuildHasher, RandomState};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::Arc;
+use std::sync::Mutex;
 use tslg_api::{CampaignStatus, ResultAck, ResultReport};
 use tslg_method::prefix::SparseOutcome;
 use tslg_method::registry::CampaignTests;
 
-/// Which tests are checked: a keyed hash of (purpose, campaign, test),
-/// with a key drawn from the operating system when the coordinator starts
-/// and never sent anywhere.
+/// Which tests are checked: drawn when a report arrives, from a generator
+/// seeded by the operating system when the coordinator starts, so a worker
+/// cannot know which of its tests will be run again.
 pub struct Sampler {
-    key: RandomState,
+    rng: Mutex<StdRng>,
 }
 
 impl Default for Sampler {
     fn default() -> Self {
         Self {
-            key: RandomState::new(),
+            rng: Mutex::new(StdRng::from_os_rng()),
         }
     }
 }
 
-/// What a selection is for, so the replay and the audit samples differ.
-#[derive(Clone, Copy)]
-pub enum Purpose {
-    Replay = 1,
-    Audit = 2,
-}
-
 impl Sampler {
-    /// Whether test `index` of `campaign` is in the sample of `share`.
-    pub fn chosen(&self, purpose: Purpose, campaign: i64, index: u64, share: f64) -> bool {
-        if share <= 0.0 {
-            return false;
+    /// The indices of `from..to` each chosen with probability `share`,
+    /// independently, in increasing order. The gaps between chosen indices
+    /// are geometric, `⌊ln(1 − U)/ln(1 − share)⌋`, so the cost is in the
+    /// chosen tests, not in the range.
+    pub fn pick(&self, share: f64, from: u64, to: u64) -> Vec<u64> {
+        if share.is_nan() || share <= 0.0 || from >= to {
+            return Vec::new();
         }
-        let h = self.key.hash_one((purpose as u8, campaign, index));
-        ((h >> 11) as f64) * (1.0 / (1u64 << 53) as f64) < share
+        if share >= 1.0 {
+            return (from..to).collect();
+        }
+        let mut rng = self.rng.lock().unwrap_or_else(|p| p.into_inner());
+        let log_miss = (1.0 - share).ln();
+        let mut picked = Vec::new();
+        let mut at = from;
+        while at < to {
+            let u: f64 = rng.random();
+            let gap = ((1.0 - u).ln() / log_miss).floor();
+            if gap.is_nan() || gap >= (to - at) as f64 {
+                break;
+            }
+            at += gap as u64;
+            picked.push(at);
+            at += 1;
+        }
+        picked
     }
 }
 
@@ -133,34 +147,114 @@ fn same(a: Option<SparseOutcome>, b: Option<SparseOutcome>) -> bool {
     }
 }
 
-/// Runs again, on the coordinator, every event and invalid test of a
-/// report on a built-in vehicle and the tests `chosen` among the others;
-/// the first contradiction, if any. CPU work: call off the async runtime.
+/// What the coordinator's own runs of a report gave.
+#[derive(Debug, Default)]
+pub struct Verified {
+    /// The first contradiction, if any.
+    pub mismatch: Option<Mismatch>,
+    /// The tests of the report's range that explore outside the library,
+    /// when every test was run (a library campaign of a grid case): the
+    /// fold then need not draw them again.
+    pub explored: Option<Explored>,
+}
+
+/// The exploring tests of `from..to`, sorted.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Explored {
+    pub from: u64,
+    pub to: u64,
+    pub tests: Vec<u64>,
+}
+
+/// Runs again, on the coordinator, the tests `new_from..to` of a report on
+/// a built-in vehicle (the part it adds): on a library campaign whose
+/// exploring tests the fold counts, every test (the fold needs each test's
+/// draw anyway, and a grid case remembers each cell's outcome, so checking
+/// all costs no more); else every event and invalid test and the tests
+/// `chosen` (sorted) among the others. CPU work: call off the async runtime.
 pub fn verify_builtin(
     tests: &dyn CampaignTests,
     report: &CheckedReport,
-    chosen: &dyn Fn(u64) -> bool,
-) -> Option<Mismatch> {
-    let listed = report.outcomes.iter().map(|&(i, o)| (i, Some(o)));
-    let quiet = (report.from..report.to)
-        .filter(|&i| chosen(i))
-        .filter(|&i| report.outcomes.binary_search_by_key(&i, |o| o.0).is_err())
+    new_from: u64,
+    chosen: &[u64],
+) -> Verified {
+    let reported = |i: u64| {
+        report
+            .outcomes
+            .binary_search_by_key(&i, |o| o.0)
+            .ok()
+            .map(|k| report.outcomes[k].1)
+    };
+    let contradiction = |index: u64, outcome: Option<SparseOutcome>, own: Option<SparseOutcome>| {
+        (!same(own, outcome)).then(|| Mismatch {
+            index,
+            reported: audits::encode(outcome),
+            replayed: audits::encode(own),
+        })
+    };
+    if tests.outside_mass().is_some() {
+        let mut explored = Vec::new();
+        for index in new_from..report.to {
+            let own = match catch_unwind(AssertUnwindSafe(|| tests.replay_explored(index))) {
+                Ok(Some((outcome, explores))) => {
+                    if explores {
+                        explored.push(index);
+                    }
+                    outcome
+                        .event
+                        .then_some(SparseOutcome::Event(outcome.weight))
+                }
+                Ok(None) => return Verified::default(),
+                Err(_) => {
+                    if tests.explores(index) {
+                        explored.push(index);
+                    }
+                    Some(SparseOutcome::Invalid)
+                }
+            };
+            if let Some(mismatch) = contradiction(index, reported(index), own) {
+                return Verified {
+                    mismatch: Some(mismatch),
+                    explored: None,
+                };
+            }
+        }
+        let explored = Explored {
+            from: new_from,
+            to: report.to,
+            tests: explored,
+        };
+        return Verified {
+            mismatch: None,
+            explored: Some(explored),
+        };
+    }
+    let listed = report
+        .outcomes
+        .iter()
+        .filter(|o| o.0 >= new_from)
+        .map(|&(i, o)| (i, Some(o)));
+    let quiet = chosen
+        .iter()
+        .copied()
+        .filter(|&i| reported(i).is_none())
         .map(|i| (i, None));
     for (index, outcome) in listed.chain(quiet) {
-        let own = replayed(tests, index)?;
-        if !same(own, outcome) {
-            return Some(Mismatch {
-                index,
-                reported: audits::encode(outcome),
-                replayed: audits::encode(own),
-            });
+        let Some(own) = replayed(tests, index) else {
+            return Verified::default();
+        };
+        if let Some(mismatch) = contradiction(index, outcome, own) {
+            return Verified {
+                mismatch: Some(mismatch),
+                explored: None,
+            };
         }
     }
-    None
+    Verified::default()
 }
 
 /// The audits of the part of an external program's report from `new_from`:
-/// the tests `chosen` (the secret sample), and every event that would carry
+/// the tests `chosen` (the secret sample, sorted), and every event that would carry
 /// at least `weight_share` of the estimate, `w ≥ share · (S₁ + w)` with
 /// `S₁` the weights of the campaign's events recorded so far (folded or
 /// not: the folded sum stalls while the prefix waits for audits, and would
@@ -170,7 +264,7 @@ pub fn choose_audits(
     new_from: u64,
     s1: f64,
     weight_share: f64,
-    chosen: &dyn Fn(u64) -> bool,
+    chosen: &[u64],
 ) -> Vec<NewAudit> {
     let outcome_at = |i: u64| {
         report
@@ -189,7 +283,7 @@ pub fn choose_audits(
         .iter()
         .map(|o| o.0)
         .filter(|&i| i >= new_from);
-    let sampled = (new_from.max(report.from)..report.to).filter(|&i| chosen(i));
+    let sampled = chosen.iter().copied().filter(|&i| i >= new_from);
     let mut indices: Vec<u64> = events.filter(|&i| heavy(i)).chain(sampled).collect();
     indices.sort_unstable();
     indices.dedup();
@@ -463,7 +557,7 @@ pub async fn record_audit_run(
     }
     // The flag may have reset the campaign: fold from what is stored now.
     let campaign = campaigns::get(&mut *tx, campaign.id).await?;
-    let stopped = fold_prefix(&mut tx, &campaign, tests).await?;
+    let stopped = fold_prefix(&mut tx, &campaign, tests, None).await?;
     tx.commit().await?;
     Ok(Recorded {
         ack: ResultAck {
@@ -501,34 +595,35 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_secret_sample_has_its_share_and_differs_by_purpose_and_key() {
+    fn the_secret_sample_has_its_share_independently_and_differs_between_coordinators() {
         let sampler = Sampler::default();
-        let n = 200_000;
-        let share = 0.1;
-        let chosen = (0..n)
-            .filter(|&i| sampler.chosen(Purpose::Replay, 3, i, share))
-            .count() as f64;
+        let (n, share) = (200_000u64, 0.1);
+        let picked = sampler.pick(share, 1000, 1000 + n);
         // Binomial(200 000, 0.1): sd ≈ 134; 5 sd either side.
-        assert!((chosen - n as f64 * share).abs() < 700.0, "{chosen}");
-        let both = (0..n)
-            .filter(|&i| {
-                sampler.chosen(Purpose::Replay, 3, i, share)
-                    && sampler.chosen(Purpose::Audit, 3, i, share)
-            })
-            .count() as f64;
-        assert!((both - n as f64 * share * share).abs() < 300.0, "{both}");
-        let other = Sampler::default();
-        let same = (0..1000)
-            .filter(|&i| {
-                sampler.chosen(Purpose::Audit, 1, i, 0.5) == other.chosen(Purpose::Audit, 1, i, 0.5)
-            })
-            .count();
         assert!(
-            (400..600).contains(&same),
-            "two keys agree on {same} of 1000"
+            (picked.len() as f64 - n as f64 * share).abs() < 700.0,
+            "{}",
+            picked.len()
         );
-        assert!(!sampler.chosen(Purpose::Audit, 1, 1, 0.0));
-        assert!(sampler.chosen(Purpose::Audit, 1, 1, 1.0));
+        assert!(picked.windows(2).all(|w| w[0] < w[1]));
+        assert!(picked.first() >= Some(&1000) && picked.last() < Some(&(1000 + n)));
+        // Independent: pairs of neighbours both chosen about share² of the time.
+        let set: std::collections::HashSet<u64> = picked.iter().copied().collect();
+        let pairs = (1000..1000 + n - 1)
+            .filter(|i| set.contains(i) && set.contains(&(i + 1)))
+            .count() as f64;
+        assert!((pairs - n as f64 * share * share).abs() < 300.0, "{pairs}");
+        // Each range in many small reports: the same share.
+        let small: usize = (0..20_000u64)
+            .map(|k| sampler.pick(share, k * 10, k * 10 + 10).len())
+            .sum();
+        assert!((small as f64 - 20_000.0).abs() < 700.0, "{small}");
+        let other = Sampler::default().pick(0.5, 0, 1000);
+        let mine = sampler.pick(0.5, 0, 1000);
+        assert_ne!(other, mine, "two coordinators draw alike");
+        assert!(sampler.pick(0.0, 0, 100).is_empty());
+        assert_eq!(sampler.pick(1.0, 5, 8), [5, 6, 7]);
+        assert!(sampler.pick(0.5, 8, 8).is_empty());
     }
 
     fn report(from: u64, to: u64, outcomes: Vec<(u64, SparseOutcome)>) -> CheckedReport {
@@ -560,7 +655,7 @@ mod tests {
             ],
         );
         // S₁ = 10: 0.5 carries 0.5/10.5 ≈ 4.8 % < 5 %, 2.0 carries 16.7 %.
-        let audits = choose_audits(&r, 100, 10.0, 0.05, &|i| i == 104);
+        let audits = choose_audits(&r, 100, 10.0, 0.05, &[104]);
         let got: Vec<(u64, &str, &str)> = audits
             .iter()
             .map(|a| (a.test_index, a.reason, a.first_outcome.as_str()))
@@ -574,11 +669,11 @@ mod tests {
         );
         // Only from where the new part starts; an empty estimate makes
         // every event heavy.
-        let audits = choose_audits(&r, 106, 0.0, 0.05, &|_| false);
+        let audits = choose_audits(&r, 106, 0.0, 0.05, &[]);
         assert_eq!(
             audits.iter().map(|a| a.test_index).collect::<Vec<_>>(),
             [108]
         );
-        assert!(choose_audits(&r, 100, 0.0, 1.0, &|_| false).is_empty());
+        assert!(choose_audits(&r, 100, 0.0, 1.0, &[]).is_empty());
     }
 }

@@ -3,25 +3,21 @@
 //! vehicles, the weights and the audits of external programs), recording
 //! it, and the bookkeeping that follows. The route only parses.
 
-use crate::audit::{self, Purpose};
+use crate::audit;
 use crate::error::ApiError;
 use crate::report_check::CheckedReport;
 use crate::state::AppState;
-use crate::store::results::{self, AuditPlan, Recorded};
+use crate::store::results::{self, AuditPlan, Findings, Recorded};
 use crate::store::{audits, campaigns, leases};
 use std::sync::Arc;
 use tslg_api::{Method, ResultAck, ResultReport};
 use tslg_method::registry::CampaignTests;
 
-/// Refuses a worker that is flagged.
+/// Refuses a worker that is flagged (checked again in the transaction
+/// that records: this early check only saves the work of a refusal).
 pub async fn refuse_flagged(state: &AppState, worker: &str) -> Result<(), ApiError> {
-    match audits::flag_of(&state.db.read, worker).await? {
-        None => Ok(()),
-        Some(reason) => Err(ApiError::Forbidden(format!(
-            "worker `{worker}` is flagged and gets no work: {reason}; an operator clears the \
-             flag with DELETE /api/v1/workers/{worker}/flag"
-        ))),
-    }
+    let mut conn = state.db.read.acquire().await?;
+    audits::refuse_flagged(&mut conn, worker).await
 }
 
 /// Checks, records and accounts a report on lease `lease_id`.
@@ -29,7 +25,7 @@ pub async fn receive(
     state: &AppState,
     lease_id: i64,
     report: &ResultReport,
-    checked: &CheckedReport,
+    checked: &Arc<CheckedReport>,
 ) -> Result<ResultAck, ApiError> {
     refuse_flagged(state, &report.worker).await?;
     let lease = leases::get(&mut *state.db.read.acquire().await?, lease_id).await?;
@@ -49,25 +45,26 @@ pub async fn receive(
         audit::record_audit_run(&state.db, library_tests(), lease_id, report, checked).await?
     } else {
         let mut plan = AuditPlan::default();
+        let mut explored = None;
         if let Some(tests) = &tests {
             if tests.external().is_none() {
-                verify_builtin(state, tests, campaign.id, &report.worker, checked).await?;
+                // Only what the report adds is checked: a part reported
+                // before is compared with what is stored (a conflict, 409).
+                let new = checked.from.max(lease.resume_at as u64);
+                explored =
+                    verify_builtin(state, tests, campaign.id, &report.worker, checked, new).await?;
             } else {
                 check_weights(tests, checked).await?;
                 plan = audit_plan(state, &campaign, &report.worker, checked).await?;
             }
         }
         let config = &state.config;
-        results::record(
-            &state.db,
-            config,
-            library_tests(),
-            lease_id,
-            report,
-            checked,
-            &plan,
-        )
-        .await?
+        let found = Findings {
+            tests: library_tests(),
+            audits: &plan,
+            explored: explored.as_ref(),
+        };
+        results::record(&state.db, config, lease_id, report, checked, found).await?
     };
     account(state, report, &recorded);
     Ok(recorded.ack)
@@ -92,26 +89,31 @@ fn account(state: &AppState, report: &ResultReport, recorded: &Recorded) {
     }
 }
 
-/// Runs a built-in vehicle's reported events and a secret sample of the
-/// rest again on the coordinator; a contradiction refuses the report and
-/// flags the worker.
+/// Runs a built-in vehicle's reported tests again on the coordinator (see
+/// [`audit::verify_builtin`]); a contradiction refuses the report and flags
+/// the worker. The exploring tests it found, when it ran every test.
 async fn verify_builtin(
     state: &AppState,
     tests: &Arc<dyn CampaignTests>,
     campaign: i64,
     worker: &str,
-    checked: &CheckedReport,
-) -> Result<(), ApiError> {
-    let (tests, report) = (Arc::clone(tests), checked.clone());
-    let (sampler, share) = (Arc::clone(&state.sampler), state.config.replay_share);
-    let mismatch = tokio::task::spawn_blocking(move || {
-        let chosen = |i| sampler.chosen(Purpose::Replay, campaign, i, share);
-        audit::verify_builtin(tests.as_ref(), &report, &chosen)
+    checked: &Arc<CheckedReport>,
+    new_from: u64,
+) -> Result<Option<audit::Explored>, ApiError> {
+    if new_from >= checked.to {
+        return Ok(None);
+    }
+    let (tests, report) = (Arc::clone(tests), Arc::clone(checked));
+    let chosen = state
+        .sampler
+        .pick(state.config.replay_share, new_from, checked.to);
+    let verified = tokio::task::spawn_blocking(move || {
+        audit::verify_builtin(tests.as_ref(), &report, new_from, &chosen)
     })
     .await
     .map_err(|e| ApiError::Internal(e.into()))?;
-    let Some(mismatch) = mismatch else {
-        return Ok(());
+    let Some(mismatch) = verified.mismatch else {
+        return Ok(verified.explored);
     };
     audit::flag_for_mismatch(&state.db, worker, campaign, &mismatch).await?;
     Err(ApiError::Unprocessable(format!(
@@ -156,8 +158,9 @@ async fn audit_plan(
     checked: &CheckedReport,
 ) -> Result<AuditPlan, ApiError> {
     let config = &state.config;
-    let sampler = &state.sampler;
-    let chosen = |i| sampler.chosen(Purpose::Audit, campaign.id, i, config.audit_share);
+    let chosen = state
+        .sampler
+        .pick(config.audit_share, checked.from, checked.to);
     let planned = audit::choose_audits(
         checked,
         checked.from,

@@ -303,10 +303,15 @@ where
     }
 
     fn replay(&self, index: u64) -> Option<TestOutcome> {
+        self.replay_explored(index).map(|(outcome, _)| outcome)
+    }
+
+    fn replay_explored(&self, index: u64) -> Option<(TestOutcome, bool)> {
         let CampaignVehicle::Builtin(vehicle) = &self.vehicle else {
             return None;
         };
         let draw = self.distribution.draw(self.seed, index);
+        let explored = self.distribution.explored(&draw);
         let outcomes = self.outcomes.get_or_init(|| {
             (0..self.case.grid().len())
                 .map(|_| AtomicU8::new(NOT_RUN))
@@ -320,10 +325,11 @@ where
         } else {
             known == EVENT
         };
-        Some(TestOutcome {
+        let outcome = TestOutcome {
             event,
             weight: draw.weight,
-        })
+        };
+        Some((outcome, explored))
     }
 
     fn planned(&self, index: u64) -> Option<PlannedTest> {

@@ -160,6 +160,13 @@ pub trait CampaignTests: Send + Sync {
     /// built-in vehicle's outcome depends on the cell alone). `None` when
     /// the vehicle is an external program, which only workers can run.
     fn replay(&self, index: u64) -> Option<TestOutcome>;
+    /// [`Self::replay`] with [`Self::explores`] of the same test, from one
+    /// draw where the case can (a grid case's exploring tests are those
+    /// whose cell lies outside the library).
+    fn replay_explored(&self, index: u64) -> Option<(TestOutcome, bool)> {
+        self.replay(index)
+            .map(|outcome| (outcome, self.explores(index)))
+    }
     /// Whether test `index` draws its scenario outside the library.
     fn explores(&self, _index: u64) -> bool {
         false

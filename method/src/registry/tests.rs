@@ -265,6 +265,8 @@ fn the_coordinators_replay_gives_every_tests_outcome_and_nothing_for_programs() 
                     (replay.event, replay.weight.to_bits()),
                     "{vut} test {index}"
                 );
+                let (_, explored) = tests.replay_explored(index).unwrap();
+                assert_eq!(explored, tests.explores(index), "{vut} test {index}");
             }
         }
     }

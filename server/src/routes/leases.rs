@@ -53,7 +53,6 @@ pub async fn claim(
     }
     check_programs(&req)?;
     state.workers.seen(&req);
-    reporting::refuse_flagged(&state, &req.worker).await?;
     let ask = leases::Claim {
         worker: &req.worker,
         threads: req.threads,
@@ -191,7 +190,6 @@ pub async fn heartbeat(
     ApiPath(id): ApiPath<i64>,
     ApiJson(fence): ApiJson<LeaseFence>,
 ) -> Result<Json<HeartbeatAck>, ApiError> {
-    reporting::refuse_flagged(&state, &fence.worker).await?;
     Ok(Json(
         leases::heartbeat(&state.db, &state.config, id, &fence).await?,
     ))
@@ -238,7 +236,7 @@ pub async fn results(
     ApiJson(report): ApiJson<ResultReport>,
 ) -> Result<Json<ResultAck>, ApiError> {
     check_worker(&report.worker)?;
-    let checked = check_report(&report)?;
+    let checked = std::sync::Arc::new(check_report(&report)?);
     Ok(Json(
         reporting::receive(&state, id, &report, &checked).await?,
     ))

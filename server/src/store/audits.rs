@@ -169,6 +169,18 @@ where
     Ok(row.map(|(reason,)| reason))
 }
 
+/// Refuses a flagged worker (403), inside the transaction that would give
+/// it work or take its results, so a flag set meanwhile cannot be missed.
+pub async fn refuse_flagged(conn: &mut SqliteConnection, worker: &str) -> Result<(), ApiError> {
+    match flag_of(&mut *conn, worker).await? {
+        None => Ok(()),
+        Some(reason) => Err(ApiError::Forbidden(format!(
+            "worker `{worker}` is flagged and gets no work: {reason}; an operator clears the \
+             flag with DELETE /api/v1/workers/{worker}/flag"
+        ))),
+    }
+}
+
 /// Every flagged worker with why.
 pub async fn flagged(pool: &SqlitePool) -> Result<Vec<(String, String)>, ApiError> {
     Ok(

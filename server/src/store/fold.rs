@@ -8,6 +8,7 @@
 //! outcomes in index order and checks the stopping rule at every index
 //! (SPEC §7), so the stop index does not depend on who reported what when.
 
+use crate::audit::Explored;
 use crate::error::ApiError;
 use crate::history;
 use crate::store::audits;
@@ -104,11 +105,13 @@ async fn explored_tests(
 /// Folds the newly resolved prefix of `campaign` and persists the
 /// estimate, its history points and, when the rule stops the campaign, its
 /// final status. `tests` are a library campaign's tests, which say which
-/// tests explored outside the library; `None` for the NDD.
+/// tests explored outside the library; `None` for the NDD. `known` are the
+/// exploring tests of a range the coordinator just ran itself.
 pub async fn fold_prefix(
     conn: &mut SqliteConnection,
     campaign: &CampaignRow,
     tests: Option<Arc<dyn CampaignTests>>,
+    known: Option<&Explored>,
 ) -> Result<Option<CampaignStatus>, ApiError> {
     let frontier = frontier(conn, campaign).await?;
     let mut fold = campaign.fold();
@@ -127,7 +130,17 @@ pub async fn fold_prefix(
             let before = explored_tests(tests, 0, from).await?;
             fold.outside = outside_tally(&before, &earlier, &|i| tests.surrogate_misses(i));
         }
-        explored = explored_tests(tests, from, frontier).await?;
+        explored = match known {
+            // The report just checked covered the whole fold: its draws say
+            // which tests explored.
+            Some(k) if k.from <= from && frontier <= k.to => k
+                .tests
+                .iter()
+                .copied()
+                .filter(|i| (from..frontier).contains(i))
+                .collect(),
+            _ => explored_tests(tests, from, frontier).await?,
+        };
     }
     let mass: Option<&OutsideMass> = tests.as_ref().and_then(|t| t.outside_mass());
     let misses = |i| tests.as_ref().is_some_and(|t| t.surrogate_misses(i));

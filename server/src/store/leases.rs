@@ -115,6 +115,8 @@ pub async fn claim(
     let offered = serde_json::to_string(offers).expect("strings serialise");
     let runnable = "AND (c.requires IS NULL OR c.requires IN (SELECT value FROM json_each(?)))";
     let mut tx = db.write.begin().await?;
+    // In the transaction: a flag set since the route's check still counts.
+    audits::refuse_flagged(&mut tx, worker).await?;
     let sql = format!(
         "UPDATE leases SET attempt = attempt + 1, worker = ?, expires_at = ?, key = ?, \
              claimed_at = ?, threads = ? \
@@ -363,6 +365,7 @@ pub async fn heartbeat(
     fence: &LeaseFence,
 ) -> Result<HeartbeatAck, ApiError> {
     let mut tx = db.write.begin().await?;
+    audits::refuse_flagged(&mut tx, &fence.worker).await?;
     let lease = get(&mut tx, id).await?;
     check_fence(&lease, &fence.worker, fence.attempt, fence.key.as_str())?;
     let campaign = campaigns::get(&mut *tx, lease.campaign_id).await?;

@@ -8,6 +8,7 @@
 //! prefix estimator folds whatever became resolved in index order, all in
 //! one transaction, so an acknowledged result is always on disk.
 
+use crate::audit::Explored;
 use crate::config::Config;
 use crate::db::{now_ms, Database};
 use crate::error::ApiError;
@@ -68,18 +69,31 @@ pub struct AuditPlan {
     pub waived: bool,
 }
 
-/// Records a checked report on lease `lease_id` and folds the prefix;
-/// `tests` are the campaign's tests when it is a library campaign (they say
-/// which tests explored outside the library).
+/// What the coordinator found out about a report before recording it.
+pub struct Findings<'a> {
+    /// The campaign's tests when it is a library campaign (they say which
+    /// tests explored outside the library).
+    pub tests: Option<Arc<dyn CampaignTests>>,
+    /// The audits the report asks for.
+    pub audits: &'a AuditPlan,
+    /// The report's exploring tests, when the coordinator ran them all.
+    pub explored: Option<&'a Explored>,
+}
+
+/// Records a checked report on lease `lease_id` and folds the prefix.
 pub async fn record(
     db: &Database,
     config: &Config,
-    tests: Option<Arc<dyn CampaignTests>>,
     lease_id: i64,
     report: &ResultReport,
     checked: &CheckedReport,
-    plan: &AuditPlan,
+    found: Findings<'_>,
 ) -> Result<Recorded, ApiError> {
+    let Findings {
+        tests,
+        audits: plan,
+        explored: known,
+    } = found;
     let mut tx = db.write.begin().await?;
     let (lease, campaign) = held_lease(&mut tx, lease_id, report).await?;
     let span = checked.to - checked.from;
@@ -123,7 +137,7 @@ pub async fn record(
         .await?;
         store_audits(&mut tx, campaign.id, &report.worker, plan, new_from).await?;
     }
-    let stopped = fold_prefix(&mut tx, &campaign, tests).await?;
+    let stopped = fold_prefix(&mut tx, &campaign, tests, known).await?;
     tx.commit().await?;
     let status = stopped.unwrap_or(CampaignStatus::Running);
     let resume_at = resume_at.max(checked.to);
@@ -143,12 +157,14 @@ pub async fn record(
 }
 
 /// The lease a report is on, checked to be held by its sender in this
-/// attempt, and its campaign, read in the report's transaction.
+/// attempt (a sender that is not flagged), and its campaign, read in the
+/// report's transaction.
 pub(crate) async fn held_lease(
     conn: &mut SqliteConnection,
     lease_id: i64,
     report: &ResultReport,
 ) -> Result<(LeaseRow, CampaignRow), ApiError> {
+    audits::refuse_flagged(&mut *conn, &report.worker).await?;
     let lease = leases::get(&mut *conn, lease_id).await?;
     check_fence(&lease, &report.worker, report.attempt, report.key.as_str())?;
     let campaign = campaigns::get(&mut *conn, lease.campaign_id).await?;
