@@ -14,6 +14,8 @@ mod health;
 mod leases;
 mod libraries;
 pub mod openapi;
+#[cfg(test)]
+mod tests;
 
 pub use extract::{ApiPath, ApiQuery};
 

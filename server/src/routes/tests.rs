@@ -1,0 +1,245 @@
+//! The router driven in process (`tower::ServiceExt::oneshot`) on a scratch
+//! database: the store logic behind the routes, where no real process or
+//! socket is needed (the end-to-end tests in `tests/it/` start those).
+
+use crate::config::Config;
+use crate::db::Database;
+use crate::state::AppState;
+use axum::body::Body;
+use axum::http::{Request, StatusCode};
+use axum::Router;
+use serde_json::{json, Value};
+use tower::ServiceExt;
+
+struct App {
+    router: Router,
+    state: AppState,
+    _dir: tempfile::TempDir,
+}
+
+async fn app(configure: impl FnOnce(&mut Config)) -> App {
+    let dir = tempfile::tempdir().unwrap();
+    let url = format!("sqlite://{}", dir.path().join("db.sqlite").display());
+    let mut config = Config::embedded(&url);
+    configure(&mut config);
+    let db = Database::open(&url, config.durability).await.unwrap();
+    let state = AppState::new(db, config);
+    App {
+        router: super::router(state.clone()),
+        state,
+        _dir: dir,
+    }
+}
+
+impl App {
+    async fn call(&self, method: &str, uri: &str, body: Option<Value>) -> (StatusCode, Value) {
+        let request = Request::builder().method(method).uri(uri);
+        let request = match body {
+            Some(body) => request
+                .header("content-type", "application/json")
+                .body(Body::from(body.to_string())),
+            None => request.body(Body::empty()),
+        }
+        .unwrap();
+        let response = self.router.clone().oneshot(request).await.unwrap();
+        let status = response.status();
+        let bytes = axum::body::to_bytes(response.into_body(), usize::MAX)
+            .await
+            .unwrap();
+        (
+            status,
+            serde_json::from_slice(&bytes).unwrap_or(Value::Null),
+        )
+    }
+
+    /// An NDD campaign of the external program `x` on cut-in, which only
+    /// workers offering `x:cut-in:step` run.
+    async fn external_campaign(&self) -> i64 {
+        let (status, view) = self
+            .call(
+                "POST",
+                "/api/v1/campaigns",
+                Some(
+                    json!({"case": "cut-in", "method": "ndd", "vut": {"external": "x"},
+                            "beta": 0.01, "max_tests": 1_000_000}),
+                ),
+            )
+            .await;
+        assert_eq!(status, StatusCode::CREATED, "{view}");
+        view["id"].as_i64().unwrap()
+    }
+
+    async fn claim(&self, worker: &str, max_tests: u64) -> (StatusCode, Value) {
+        let ask = json!({"worker": worker, "threads": 1, "offers": ["x:cut-in:step"],
+                         "max_tests": max_tests});
+        self.call("POST", "/api/v1/leases", Some(ask)).await
+    }
+}
+
+/// A report of `lease` whole, with no events.
+fn quiet_report(worker: &str, lease: &Value) -> Value {
+    json!({"worker": worker, "attempt": lease["attempt"], "key": lease["key"],
+           "from": lease["resume_at"], "to": lease["end"], "compute_seconds": 0.0,
+           "threads": 1})
+}
+
+#[tokio::test]
+async fn reports_beyond_the_limits_or_damaged_are_refused_precisely() {
+    let app = app(|_| {}).await;
+    app.external_campaign().await;
+    let (_, lease) = app.claim("w", 100_000).await;
+    let id = lease["id"].as_i64().unwrap();
+    let results = format!("/api/v1/leases/{id}/results");
+    let mut report = quiet_report("w", &lease);
+    let events: Vec<Value> = (0..=tslg_api::MAX_REPORT_EVENTS as u64)
+        .map(|i| json!({"index": i, "weight": 1.0}))
+        .collect();
+    report["events"] = json!(events);
+    let (status, problem) = app.call("POST", &results, Some(report)).await;
+    assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY);
+    assert!(problem["detail"]
+        .as_str()
+        .unwrap()
+        .contains("at most 65536 per report"));
+
+    let mut both = quiet_report("w", &lease);
+    both["events"] = json!([{"index": 1, "weight": 1.0}]);
+    both["packed_events"] = json!("AAA=");
+    let (status, problem) = app.call("POST", &results, Some(both)).await;
+    assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY);
+    assert!(
+        problem["detail"].as_str().unwrap().contains("not both"),
+        "{problem}"
+    );
+
+    let mut damaged = quiet_report("w", &lease);
+    damaged["packed_events"] = json!("AQU=");
+    let (status, problem) = app.call("POST", &results, Some(damaged)).await;
+    assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY);
+    assert!(
+        problem["detail"]
+            .as_str()
+            .unwrap()
+            .contains("packed events"),
+        "{problem}"
+    );
+
+    let mut early = quiet_report("w", &lease);
+    early["compute_seconds"] = json!(30.0);
+    let (status, problem) = app.call("POST", &results, Some(early)).await;
+    assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY);
+    assert!(
+        problem["detail"].as_str().unwrap().contains("since lease"),
+        "{problem}"
+    );
+
+    // Packed like a worker sends it: accepted, and stored packed.
+    let mut packed: tslg_api::ResultReport =
+        serde_json::from_value(quiet_report("w", &lease)).unwrap();
+    packed.pack_events(&[(packed.from + 3, 1.0), (packed.from + 9, 1.0)]);
+    let (status, ack) = app
+        .call(
+            "POST",
+            &results,
+            Some(serde_json::to_value(&packed).unwrap()),
+        )
+        .await;
+    assert_eq!(status, StatusCode::OK, "{ack}");
+    let (rows, events): (i64, i64) = sqlx::query_as("SELECT COUNT(*), SUM(events) FROM reports")
+        .fetch_one(&app.state.db.read)
+        .await
+        .unwrap();
+    assert_eq!((rows, events), (1, 2));
+}
+
+#[tokio::test]
+async fn a_flagged_worker_gets_nothing_until_an_operator_clears_it() {
+    let app = app(|_| {}).await;
+    app.external_campaign().await;
+    sqlx::query("INSERT INTO flagged_workers (name, reason) VALUES ('bad', 'lied about test 7')")
+        .execute(&app.state.db.write)
+        .await
+        .unwrap();
+    let (status, problem) = app.claim("bad", 10).await;
+    assert_eq!(status, StatusCode::FORBIDDEN);
+    assert!(problem["detail"]
+        .as_str()
+        .unwrap()
+        .contains("lied about test 7"));
+    let (status, workers) = app.call("GET", "/api/v1/workers", None).await;
+    assert_eq!(status, StatusCode::OK);
+    assert_eq!(workers["workers"][0]["flagged"], "lied about test 7");
+    let (status, _) = app.call("DELETE", "/api/v1/workers/bad/flag", None).await;
+    assert_eq!(status, StatusCode::NO_CONTENT);
+    let (status, problem) = app.call("DELETE", "/api/v1/workers/bad/flag", None).await;
+    assert_eq!(status, StatusCode::NOT_FOUND, "{problem}");
+    let (status, lease) = app.claim("bad", 10).await;
+    assert_eq!(status, StatusCode::OK, "{lease}");
+}
+
+#[tokio::test]
+async fn an_audit_is_run_by_another_worker_and_holds_the_prefix_until_it_agrees() {
+    let app = app(|c| c.audit_share = 1.0).await;
+    let id = app.external_campaign().await;
+    // Both workers are seen before the first report, so its audits are
+    // not waived; with a share of 1 every test is audited.
+    let (_, first) = app.claim("a", 5).await;
+    let (_, second) = app.claim("b", 5).await;
+    let (status, ack) = app
+        .call(
+            "POST",
+            &format!("/api/v1/leases/{}/results", first["id"]),
+            Some(quiet_report("a", &first)),
+        )
+        .await;
+    assert_eq!(status, StatusCode::OK, "{ack}");
+    let (_, view) = app
+        .call("GET", &format!("/api/v1/campaigns/{id}"), None)
+        .await;
+    assert_eq!(view["indices"], 0, "held at the first audit");
+    assert_eq!(view["audits"]["open"], 5);
+    // "a" is not given its own tests to audit; "b" is, one test at a time,
+    // before any new range.
+    let (_, own) = app.claim("a", 5).await;
+    assert_eq!(
+        own["end"].as_u64().unwrap() - own["start"].as_u64().unwrap(),
+        5
+    );
+    assert!(own["start"].as_u64().unwrap() >= 10);
+    for _ in 0..5 {
+        let (status, audit) = app.claim("b", 5).await;
+        assert_eq!(status, StatusCode::OK);
+        let start = audit["start"].as_u64().unwrap();
+        assert_eq!(
+            (audit["end"].as_u64().unwrap(), start < 5),
+            (start + 1, true)
+        );
+        let (status, ack) = app
+            .call(
+                "POST",
+                &format!("/api/v1/leases/{}/results", audit["id"]),
+                Some(quiet_report("b", &audit)),
+            )
+            .await;
+        assert_eq!(status, StatusCode::OK, "{ack}");
+    }
+    let (_, view) = app
+        .call("GET", &format!("/api/v1/campaigns/{id}"), None)
+        .await;
+    assert_eq!(view["audits"]["agreed"], 5, "{view}");
+    assert_eq!(view["audits"]["open"], 0);
+    assert_eq!(
+        view["indices"], 5,
+        "the first range resolved; the second is b's"
+    );
+    let _ = second;
+}
+
+#[tokio::test]
+async fn an_overlong_target_is_a_414_problem() {
+    let app = app(|_| {}).await;
+    let uri = format!("/api/v1/campaigns/{}", "1".repeat(super::MAX_URI_BYTES));
+    let (status, problem) = app.call("GET", &uri, None).await;
+    assert_eq!(status, StatusCode::URI_TOO_LONG);
+    assert!(problem["detail"].as_str().unwrap().contains("at most 8192"));
+}
