@@ -21,19 +21,22 @@ const MAX_OFFERS: usize = 256;
 const MAX_UNHEALTHY: usize = 16;
 const MAX_UNHEALTHY_REASON: usize = 4000;
 
+/// A worker's name: 1 to 128 bytes, no control characters; the problem
+/// otherwise (a body's name answers 422, a path's 400).
+fn worker_name_problem(worker: &str) -> Option<String> {
+    (worker.is_empty() || worker.len() > 128 || worker.chars().any(char::is_control))
+        .then(|| "worker must be 1 to 128 printable characters".to_string())
+}
+
 fn check_worker(worker: &str) -> Result<(), ApiError> {
-    if worker.is_empty() || worker.len() > 128 || worker.chars().any(char::is_control) {
-        return Err(ApiError::Unprocessable(
-            "worker must be 1 to 128 printable characters".into(),
-        ));
-    }
-    Ok(())
+    worker_name_problem(worker).map_or(Ok(()), |m| Err(ApiError::Unprocessable(m)))
 }
 
 /// Takes a range of tests of a running campaign; 204 when there is none.
 #[utoipa::path(post, path = "/api/v1/leases", request_body = LeaseRequest, responses(
     (status = 200, body = Lease), (status = 204, description = "No work right now"),
-    (status = 401, body = Problem), (status = 422, body = Problem)))]
+    (status = 401, body = Problem), (status = 403, body = Problem),
+    (status = 422, body = Problem)))]
 pub async fn claim(
     State(state): State<AppState>,
     ApiJson(req): ApiJson<LeaseRequest>,
@@ -165,13 +168,15 @@ pub async fn workers(State(state): State<AppState>) -> Result<Json<WorkerList>, 
 /// Clears a worker's flag: it gets work again (its taken-back results stay
 /// taken back).
 #[utoipa::path(delete, path = "/api/v1/workers/{name}/flag", params(("name" = String, Path)),
-    responses((status = 204, description = "Cleared"), (status = 401, body = Problem),
-    (status = 404, body = Problem)))]
+    responses((status = 204, description = "Cleared"), (status = 400, body = Problem),
+    (status = 401, body = Problem), (status = 404, body = Problem)))]
 pub async fn unflag(
     State(state): State<AppState>,
     ApiPath(name): ApiPath<String>,
 ) -> Result<StatusCode, ApiError> {
-    check_worker(&name)?;
+    if let Some(message) = worker_name_problem(&name) {
+        return Err(ApiError::BadRequest(message));
+    }
     if !audits::unflag(&state.db.write, &name).await? {
         return Err(ApiError::NotFound(format!(
             "worker `{name}` is not flagged"

@@ -71,7 +71,8 @@ fn role_of(path: &str, method: &str) -> Option<Role> {
 /// are `application/problem+json` (utoipa writes `application/json`), every
 /// error status an operation can answer is listed (400 for a malformed
 /// body, path or query; 401 when its token is configured; 403 and 409 on
-/// leases; 404 for an unknown id; 413 over the body limit; 422 for an
+/// leases; 404 for an unknown id; 413 over the body limit; 414 for a
+/// target over `MAX_URI_BYTES`; 422 for an
 /// invalid body), and operations whose token is configured require the
 /// bearer scheme.
 fn contract(mut doc: Value, config: &Config) -> Value {
@@ -91,7 +92,10 @@ fn contract(mut doc: Value, config: &Config) -> Value {
                 .is_some_and(|ps| ps.iter().any(|p| p["in"] == "query"));
             let role = role_of(path, method);
             let guarded = role.is_some_and(configured);
-            let mut codes = vec![("413", "The body exceeds the configured limit")];
+            let mut codes = vec![
+                ("413", "The body exceeds the configured limit"),
+                ("414", "The request target exceeds 8,192 bytes"),
+            ];
             if guarded {
                 codes.push(("401", "The token this operation needs is missing or wrong"));
             }

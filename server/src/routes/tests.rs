@@ -173,6 +173,9 @@ async fn a_flagged_worker_gets_nothing_until_an_operator_clears_it() {
     assert_eq!(status, StatusCode::NO_CONTENT);
     let (status, problem) = app.call("DELETE", "/api/v1/workers/bad/flag", None).await;
     assert_eq!(status, StatusCode::NOT_FOUND, "{problem}");
+    // A name no worker can have is a malformed path, as the contract says.
+    let (status, problem) = app.call("DELETE", "/api/v1/workers/a%01b/flag", None).await;
+    assert_eq!(status, StatusCode::BAD_REQUEST, "{problem}");
     let (status, lease) = app.claim("bad", 10).await;
     assert_eq!(status, StatusCode::OK, "{lease}");
 }

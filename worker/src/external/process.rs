@@ -145,6 +145,7 @@ impl Watchdog {
 }
 
 /// SIGKILL to every process of the group.
+#[allow(unsafe_code)]
 fn kill_group(group: i32) {
     // SAFETY: kill(2) with a negative pid signals a process group; it takes
     // no pointers and cannot violate memory safety.
