@@ -3,7 +3,7 @@
 //! A worker is trusted with nothing the coordinator cannot check:
 //!
 //! - **Built-in vehicles** are run again by the coordinator
-//!   ([`verify_builtin`]): every reported event and invalid test, and a share
+//!   ([`crate::replay_check`]): every reported event and invalid test, and a share
 //!   (`--replay-share`, default 0.1) of the tests reported without an
 //!   event, drawn with a key only this coordinator process knows, so a
 //!   worker cannot tell which of its tests are checked. A grid case runs each
@@ -34,7 +34,6 @@ use crate::store::results::{check_effort, held_lease, stopped_ack, Recorded};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use sqlx::SqliteConnection;
-use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::Arc;
 use std::sync::Mutex;
 use tslg_api::{CampaignStatus, ResultAck, ResultReport};
@@ -117,140 +116,6 @@ impl std::fmt::Display for Mismatch {
             describe(&self.replayed)
         )
     }
-}
-
-/// The coordinator's outcome of test `index`: its replay (invalid when the
-/// simulation panics, as the worker's did if it reported invalid); `None`
-/// when it cannot run the test.
-fn replayed(tests: &dyn CampaignTests, index: u64) -> Option<Option<SparseOutcome>> {
-    match catch_unwind(AssertUnwindSafe(|| tests.replay(index))) {
-        Ok(Some(outcome)) => Some(
-            outcome
-                .event
-                .then_some(SparseOutcome::Event(outcome.weight)),
-        ),
-        Ok(None) => None,
-        Err(_) => Some(Some(SparseOutcome::Invalid)),
-    }
-}
-
-/// Two outcomes are the same when their kinds are and, for events, their
-/// weights to the bit.
-fn same(a: Option<SparseOutcome>, b: Option<SparseOutcome>) -> bool {
-    match (a, b) {
-        (None, None) => true,
-        (Some(SparseOutcome::Invalid), Some(SparseOutcome::Invalid)) => true,
-        (Some(SparseOutcome::Event(x)), Some(SparseOutcome::Event(y))) => {
-            x.to_bits() == y.to_bits()
-        }
-        _ => false,
-    }
-}
-
-/// What the coordinator's own runs of a report gave.
-#[derive(Debug, Default)]
-pub struct Verified {
-    /// The first contradiction, if any.
-    pub mismatch: Option<Mismatch>,
-    /// The tests of the report's range that explore outside the library,
-    /// when every test was run (a library campaign of a grid case): the
-    /// fold then need not draw them again.
-    pub explored: Option<Explored>,
-}
-
-/// The exploring tests of `from..to`, sorted.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Explored {
-    pub from: u64,
-    pub to: u64,
-    pub tests: Vec<u64>,
-}
-
-/// Runs again, on the coordinator, the tests `new_from..to` of a report on
-/// a built-in vehicle (the part it adds): on a library campaign whose
-/// exploring tests the fold counts, every test (the fold needs each test's
-/// draw anyway, and a grid case remembers each cell's outcome, so checking
-/// all costs no more); else every event and invalid test and the tests
-/// `chosen` (sorted) among the others. CPU work: call off the async runtime.
-pub fn verify_builtin(
-    tests: &dyn CampaignTests,
-    report: &CheckedReport,
-    new_from: u64,
-    chosen: &[u64],
-) -> Verified {
-    let reported = |i: u64| {
-        report
-            .outcomes
-            .binary_search_by_key(&i, |o| o.0)
-            .ok()
-            .map(|k| report.outcomes[k].1)
-    };
-    let contradiction = |index: u64, outcome: Option<SparseOutcome>, own: Option<SparseOutcome>| {
-        (!same(own, outcome)).then(|| Mismatch {
-            index,
-            reported: audits::encode(outcome),
-            replayed: audits::encode(own),
-        })
-    };
-    if tests.outside_mass().is_some() {
-        let mut explored = Vec::new();
-        for index in new_from..report.to {
-            let own = match catch_unwind(AssertUnwindSafe(|| tests.replay_explored(index))) {
-                Ok(Some((outcome, explores))) => {
-                    if explores {
-                        explored.push(index);
-                    }
-                    outcome
-                        .event
-                        .then_some(SparseOutcome::Event(outcome.weight))
-                }
-                Ok(None) => return Verified::default(),
-                Err(_) => {
-                    if tests.explores(index) {
-                        explored.push(index);
-                    }
-                    Some(SparseOutcome::Invalid)
-                }
-            };
-            if let Some(mismatch) = contradiction(index, reported(index), own) {
-                return Verified {
-                    mismatch: Some(mismatch),
-                    explored: None,
-                };
-            }
-        }
-        let explored = Explored {
-            from: new_from,
-            to: report.to,
-            tests: explored,
-        };
-        return Verified {
-            mismatch: None,
-            explored: Some(explored),
-        };
-    }
-    let listed = report
-        .outcomes
-        .iter()
-        .filter(|o| o.0 >= new_from)
-        .map(|&(i, o)| (i, Some(o)));
-    let quiet = chosen
-        .iter()
-        .copied()
-        .filter(|&i| reported(i).is_none())
-        .map(|i| (i, None));
-    for (index, outcome) in listed.chain(quiet) {
-        let Some(own) = replayed(tests, index) else {
-            return Verified::default();
-        };
-        if let Some(mismatch) = contradiction(index, outcome, own) {
-            return Verified {
-                mismatch: Some(mismatch),
-                explored: None,
-            };
-        }
-    }
-    Verified::default()
 }
 
 /// The audits of the part of an external program's report from `new_from`:

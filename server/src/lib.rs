@@ -15,6 +15,7 @@ pub mod latency;
 pub mod lease_size;
 pub mod metrics;
 pub mod problem_io;
+pub mod replay_check;
 pub mod report_check;
 pub mod reporting;
 pub mod routes;

@@ -5,6 +5,7 @@
 
 use crate::audit;
 use crate::error::ApiError;
+use crate::replay_check;
 use crate::report_check::CheckedReport;
 use crate::state::AppState;
 use crate::store::results::{self, AuditPlan, Findings, Recorded};
@@ -92,7 +93,7 @@ fn account(state: &AppState, report: &ResultReport, recorded: &Recorded) {
 }
 
 /// Runs a built-in vehicle's reported tests again on the coordinator (see
-/// [`audit::verify_builtin`]); a contradiction refuses the report and flags
+/// [`replay_check::verify_builtin`]); a contradiction refuses the report and flags
 /// the worker. The exploring tests it found, when it ran every test.
 async fn verify_builtin(
     state: &AppState,
@@ -101,7 +102,7 @@ async fn verify_builtin(
     worker: &str,
     checked: &Arc<CheckedReport>,
     new_from: u64,
-) -> Result<Option<audit::Explored>, ApiError> {
+) -> Result<Option<replay_check::Explored>, ApiError> {
     if new_from >= checked.to {
         return Ok(None);
     }
@@ -120,10 +121,10 @@ async fn verify_builtin(
     let cheap = tests.planned(new_from).is_some();
     let verified = if cheap && work <= INLINE_REPLAYS {
         // A few microseconds: not worth a trip to the blocking pool.
-        audit::verify_builtin(tests.as_ref(), &report, new_from, &chosen)
+        replay_check::verify_builtin(tests.as_ref(), &report, new_from, &chosen)
     } else {
         tokio::task::spawn_blocking(move || {
-            audit::verify_builtin(tests.as_ref(), &report, new_from, &chosen)
+            replay_check::verify_builtin(tests.as_ref(), &report, new_from, &chosen)
         })
         .await
         .map_err(|e| ApiError::Internal(e.into()))?

@@ -9,6 +9,7 @@ pub mod panics;
 pub mod prepared;
 pub mod report_parts;
 pub mod run;
+pub mod sending;
 
 pub use config::WorkerConfig;
 pub use run::{run, WorkerSummary};

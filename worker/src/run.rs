@@ -2,13 +2,15 @@
 //! chunks, report each chunk (which also keeps the lease alive), heartbeat
 //! while a chunk runs, and back off with jitter when there is no work or no
 //! coordinator. On shutdown the running chunk is finished and reported and
-//! the rest of the lease is given back.
+//! the rest of the lease is given back. A lease's last chunk is reported
+//! while the next lease runs (see [`crate::sending`]).
 
 use crate::backoff::Backoff;
 use crate::config::WorkerConfig;
 use crate::external::{Program, ProgramRun, ProgramSettings, Programs};
 use crate::prepared::{Cache, PrepareError, PreparedCampaign};
-use crate::report_parts::{report_parts, truncated, PartLimits, Reporter};
+use crate::report_parts::{report_parts, PartLimits, Reporter};
+use crate::sending::{fence_of, LeaseLink, Tail};
 use rand::SeedableRng;
 use rayon::prelude::*;
 use std::future::Future;
@@ -17,10 +19,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tokio::sync::watch;
-use tslg_api::{
-    EventResult, InvalidResult, Lease, LeaseFence, LeaseRelease, LeaseRequest, ResultReport,
-    MAX_INVALID_REASON,
-};
+use tslg_api::{EventResult, InvalidResult, Lease, LeaseFence, LeaseRequest};
 use tslg_client::{CallError, Client};
 use tslg_method::registry::TestOutcome;
 
@@ -49,6 +48,8 @@ struct Worker {
     programs: Arc<Programs>,
     stop: watch::Receiver<bool>,
     summary: WorkerSummary,
+    /// The last lease's final reports, still being sent.
+    tail: Option<Tail>,
 }
 
 /// Runs a worker until `shutdown` completes (or, with
@@ -91,6 +92,7 @@ pub async fn run(
         programs,
         stop,
         summary: WorkerSummary::default(),
+        tail: None,
     };
     tracing::info!(worker = %worker.name, threads, server = %config.server, "worker started");
     let mut idle = Backoff::new(0.05, config.max_backoff_seconds);
@@ -174,6 +176,9 @@ pub async fn run(
             }
         }
     }
+    if let Some(tail) = worker.tail.take() {
+        worker.summary.tests += tail.settle().await;
+    }
     tracing::info!(worker = %worker.name, ?worker.summary, "worker stopped");
     Ok(worker.summary)
 }
@@ -193,10 +198,11 @@ impl Worker {
     }
 
     async fn work(&mut self, lease: Lease) -> anyhow::Result<()> {
-        let fence = LeaseFence {
-            worker: self.name.clone(),
-            attempt: lease.attempt,
-            key: lease.key.clone(),
+        let link = LeaseLink {
+            client: self.client.clone(),
+            lease: lease.id,
+            fence: fence_of(&lease, &self.name),
+            stop: self.stop.clone(),
         };
         let prepared = match self.cache.get(&self.client, lease.campaign_id).await {
             Ok(p) => p,
@@ -207,8 +213,7 @@ impl Worker {
                         anyhow::anyhow!("campaign {}: {reason}", lease.campaign_id)
                     }
                 };
-                self.give_back(&lease, &fence, &format!("cannot prepare: {error}"))
-                    .await;
+                link.give_back(&format!("cannot prepare: {error}")).await;
                 return Err(error);
             }
         };
@@ -222,7 +227,7 @@ impl Worker {
                          not run",
                         lease.campaign_id, vut.external
                     );
-                    self.give_back(&lease, &fence, &reason).await;
+                    link.give_back(&reason).await;
                     anyhow::bail!(reason);
                 }
             },
@@ -231,7 +236,7 @@ impl Worker {
         let heartbeat = tokio::spawn(heartbeat(
             self.client.clone(),
             lease.id,
-            fence.clone(),
+            link.fence.clone(),
             Duration::from_secs_f64(lease.heartbeat_seconds.max(0.1)),
             Arc::clone(&proceed),
         ));
@@ -282,31 +287,27 @@ impl Worker {
                 &ran.invalid,
                 PartLimits::default(),
             );
-            let mut proceed_after = true;
-            for part in &parts {
-                match self.report(lease.id, part).await {
-                    Ok(ack) => {
-                        self.summary.tests += ack.accepted;
-                        at = part.to;
-                        if !ack.proceed {
-                            proceed_after = false;
-                            break;
-                        }
-                    }
-                    Err(e) => {
-                        heartbeat.abort();
-                        if let CallError::Refused { status, detail } = &e {
-                            // A refusal will not change by waiting: give the rest
-                            // back at once, saying why, instead of letting it expire.
-                            let reason = format!("report refused ({status}): {detail}");
-                            self.give_back(&lease, &fence, &reason).await;
-                        }
-                        return Err(e.into());
-                    }
-                }
-            }
             self.summary.events += found;
-            if !proceed_after || at < to {
+            if running.is_none() && ran.end == lease.end && !self.stopping() {
+                // The lease's last chunk: its reports go while the threads
+                // start the next lease (one tail at a time).
+                if let Some(tail) = self.tail.take() {
+                    self.summary.tests += tail.settle().await;
+                }
+                self.tail = Some(link.send_as_tail(parts, from));
+                at = lease.end;
+                break;
+            }
+            let sent = match link.send(&parts, from).await {
+                Ok(sent) => sent,
+                Err(e) => {
+                    heartbeat.abort();
+                    return Err(e.into());
+                }
+            };
+            self.summary.tests += sent.accepted;
+            at = sent.reported_to;
+            if !sent.proceed || at < to {
                 // A chunk started meanwhile is left to finish unreported.
                 break;
             }
@@ -321,55 +322,9 @@ impl Worker {
                 ),
                 None => "the worker is shutting down".to_owned(),
             };
-            self.give_back(&lease, &fence, &reason).await;
+            link.give_back(&reason).await;
         }
         Ok(())
-    }
-
-    /// Releases the rest of `lease` for another worker at once, telling the
-    /// coordinator `reason` (it logs it and shows it with the worker).
-    async fn give_back(&self, lease: &Lease, fence: &LeaseFence, reason: &str) {
-        let release = LeaseRelease {
-            worker: fence.worker.clone(),
-            attempt: fence.attempt,
-            key: fence.key.clone(),
-            reason: Some(truncated(&sanitised(reason), MAX_INVALID_REASON)),
-        };
-        match self.client.release(lease.id, &release).await {
-            Ok(()) => tracing::warn!(lease = lease.id, reason, "lease given back"),
-            Err(e) => tracing::warn!(
-                lease = lease.id,
-                reason,
-                error = %e,
-                "could not give the lease back; it expires by itself"
-            ),
-        }
-    }
-
-    /// Reports, retrying while the coordinator is unreachable: the same
-    /// report twice is acknowledged once, so a retry cannot double-count.
-    async fn report(
-        &mut self,
-        lease: i64,
-        report: &ResultReport,
-    ) -> Result<tslg_api::ResultAck, CallError> {
-        let mut backoff = Backoff::new(0.2, 5.0);
-        let mut rng = rand::rngs::StdRng::from_os_rng();
-        let mut tries = 0;
-        loop {
-            match self.client.report(lease, report).await {
-                Err(CallError::Transient(e)) => {
-                    tries += 1;
-                    if self.stopping() && tries > 5 {
-                        return Err(CallError::Transient(e));
-                    }
-                    tracing::warn!(lease, error = %e, "result not delivered; retrying");
-                    let wait = backoff.next_wait(&mut rng);
-                    tokio::time::sleep(wait).await;
-                }
-                other => return other,
-            }
-        }
     }
 }
 
@@ -450,14 +405,6 @@ pub fn run_range(
         }
     }
     ran
-}
-
-/// `text` with control characters (but new lines) replaced by spaces, as
-/// the coordinator takes reasons.
-fn sanitised(text: &str) -> String {
-    text.chars()
-        .map(|c| if c.is_control() && c != '\n' { ' ' } else { c })
-        .collect()
 }
 
 fn run_builtin(p: &PreparedCampaign, index: u64) -> Result<TestOutcome, String> {

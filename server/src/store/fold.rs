@@ -8,9 +8,9 @@
 //! outcomes in index order and checks the stopping rule at every index
 //! (SPEC §7), so the stop index does not depend on who reported what when.
 
-use crate::audit::Explored;
 use crate::error::ApiError;
 use crate::history;
+use crate::replay_check::Explored;
 use crate::store::audits;
 use crate::store::campaigns::CampaignRow;
 use crate::store::reports;

@@ -8,11 +8,11 @@
 //! prefix estimator folds whatever became resolved in index order, all in
 //! one transaction, so an acknowledged result is always on disk.
 
-use crate::audit::Explored;
 use crate::config::Config;
 use crate::db::{now_ms, Database};
 use crate::error::ApiError;
 use crate::lease_size::update_cost;
+use crate::replay_check::Explored;
 use crate::report_check::CheckedReport;
 use crate::store::audits::{self, NewAudit};
 use crate::store::campaigns::{self, CampaignRow};
