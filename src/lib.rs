@@ -486,7 +486,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Validate(args) => commands::validate::run(&args),
         Command::Reproduce(args) => commands::reproduce::run(&args),
         Command::Backup(args) => commands::remote::block_on(async {
-            let bytes = tslg_server::db::backup(&args.database_url, &args.out).await?;
+            let bytes = tslg_server::backup(&args.database_url, &args.out).await?;
             println!(
                 "backed up {} to {} ({bytes} bytes)",
                 args.database_url,

@@ -17,6 +17,7 @@ pub enum Method {
 }
 
 impl Method {
+    /// The method's name on the wire (`library`, `ndd`).
     pub fn as_str(self) -> &'static str {
         match self {
             Method::Library => "library",
@@ -41,6 +42,7 @@ pub enum Outside {
 }
 
 impl Outside {
+    /// The spread's name on the wire (`uniform`, `ndd`).
     pub fn as_str(self) -> &'static str {
         match self {
             Outside::Uniform => "uniform",
@@ -55,6 +57,7 @@ impl Outside {
 pub struct CreateCampaign {
     /// `cut-in`, `highway-exit` or `car-following`.
     pub case: String,
+    /// How tests are drawn: from the library (importance sampling) or the NDD.
     pub method: Method,
     /// The library to sample from (`method: library`). For `ndd` it is
     /// optional and names the exposure to sample (the built-in one otherwise).
@@ -115,17 +118,20 @@ fn default_confidence() -> f64 {
 pub enum CampaignStatus {
     /// Waiting for its library to finish building.
     Pending,
+    /// Handing out tests and folding results until the stopping rule holds.
     Running,
     /// Stopped by the rule: relative half-width ≤ β.
     Converged,
     /// Stopped at `max_tests` without the precision asked for.
     Exhausted,
+    /// Stopped by a user; the estimate is that of the resolved prefix.
     Cancelled,
     /// Could not run (e.g. its library failed to build).
     Failed,
 }
 
 impl CampaignStatus {
+    /// The status's name on the wire and in the database.
     pub fn as_str(self) -> &'static str {
         match self {
             CampaignStatus::Pending => "pending",
@@ -137,6 +143,7 @@ impl CampaignStatus {
         }
     }
 
+    /// The status named `s`, if it is one.
     pub fn parse(s: &str) -> Option<Self> {
         Some(match s {
             "pending" => CampaignStatus::Pending,
@@ -159,26 +166,42 @@ impl CampaignStatus {
 /// the tests `0..indices`, folded in index order.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct CampaignView {
+    /// The campaign's id.
     pub id: i64,
+    /// The case: `cut-in`, `highway-exit` or `car-following`.
     pub case: String,
+    /// How tests are drawn.
     pub method: Method,
+    /// The library sampled from (or whose exposure an NDD campaign samples).
     pub library_id: Option<i64>,
+    /// The vehicle under test as given at creation (`{"model": …}` or `{"external": …}`).
     #[schema(value_type = Object)]
     pub vut: serde_json::Value,
+    /// Exploration share ε: the probability mass of tests drawn outside the library.
     pub epsilon: f64,
+    /// How the ε share is spread outside the library.
     pub outside: Outside,
+    /// Target relative half-width β: the campaign stops once `rₙ ≤ β`.
     pub beta: f64,
+    /// Confidence level c of the interval (z is its two-sided normal quantile).
     pub confidence: f64,
+    /// Fewest valid tests before the stopping rule may hold.
     pub n_min: u64,
+    /// Fewest events before the stopping rule may hold.
     pub min_events: u64,
+    /// Test indices after which the campaign stops as `exhausted`.
     pub max_tests: u64,
+    /// Seed of the test streams: test `i` draws from the stream `(seed, i)`.
     pub seed: u64,
+    /// Where the campaign stands.
     pub status: CampaignStatus,
     /// Why the campaign failed or how it ended, in words.
     pub status_detail: Option<String>,
     /// Valid tests in the resolved prefix (`n`).
     pub tests: u64,
+    /// Tests in the resolved prefix with the event (accident or task failure).
     pub events: u64,
+    /// Tests in the resolved prefix that could not be run; they do not count in `n`.
     pub invalid: u64,
     /// Test indices resolved in order (valid and invalid); once stopped,
     /// the exact stop index.
@@ -190,10 +213,13 @@ pub struct CampaignView {
     pub worker_seconds: f64,
     /// `μ̂ₙ`; absent before the first test.
     pub estimate: Option<f64>,
+    /// Half-width `z σ̂/√n` of the normal interval; absent before the first test.
     pub half_width: Option<f64>,
     /// Absent while the estimate is 0.
     pub relative_half_width: Option<f64>,
+    /// Lower end of the interval `μ̂ₙ − half_width` (at least 0).
     pub ci_low: Option<f64>,
+    /// Upper end of the interval `μ̂ₙ + half_width`.
     pub ci_high: Option<f64>,
     /// Valid tests predicted to reach β from the current prefix:
     /// `n (rₙ/β)²`, since the half-width shrinks as `1/√n`; absent before
@@ -218,6 +244,7 @@ pub struct CampaignView {
     /// critical. Zero for the NDD and car-following.
     #[serde(default)]
     pub outside_tests: u64,
+    /// Of those exploring tests, the ones with the event.
     #[serde(default)]
     pub outside_events: u64,
     /// Those events in scenarios where the library's surrogate has no
@@ -249,7 +276,9 @@ pub struct CampaignView {
     /// built-in vehicles (which the coordinator runs again itself).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub audits: Option<AuditCounts>,
+    /// When the campaign was created (UTC, RFC 3339 with milliseconds).
     pub created_at: String,
+    /// When the campaign's row last changed (UTC, RFC 3339 with milliseconds).
     pub updated_at: String,
 }
 
@@ -275,26 +304,37 @@ pub struct AuditCounts {
 /// `GET /api/v1/campaigns`: every campaign, newest first.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct CampaignList {
+    /// The campaigns, newest first.
     pub campaigns: Vec<CampaignView>,
 }
 
 /// One point of a campaign's history.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct HistoryPoint {
+    /// Valid tests in the prefix at this point (`n`).
     pub tests: u64,
+    /// Test indices resolved at this point (valid and invalid).
     pub indices: u64,
+    /// Events among those tests.
     pub events: u64,
+    /// The estimate `μ̂ₙ` at this point.
     pub estimate: f64,
+    /// The half-width `z σ̂/√n` at this point.
     pub half_width: f64,
+    /// `half_width / estimate`; absent while the estimate is 0.
     pub relative_half_width: Option<f64>,
+    /// Lower end of the interval at this point.
     pub ci_low: f64,
+    /// Upper end of the interval at this point.
     pub ci_high: f64,
 }
 
 /// `GET /api/v1/campaigns/{id}/history`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct History {
+    /// The campaign the history belongs to.
     pub campaign_id: i64,
+    /// The points, in increasing `tests`.
     pub points: Vec<HistoryPoint>,
 }
 
@@ -303,20 +343,29 @@ pub struct History {
 /// scenario from the stream `(seed, i)`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct CampaignPlan {
+    /// The campaign the plan belongs to.
     pub campaign_id: i64,
+    /// The case whose scenarios the tests draw.
     pub case: String,
+    /// The case's simulation preset (e.g. `paper-code`).
     pub preset: String,
+    /// The exposure the weights use: the built-in model or a named table.
     pub exposure: ExposureRequest,
     /// The exposure's fingerprint, to check the worker's copy.
     pub exposure_fingerprint: String,
+    /// How tests are drawn.
     pub method: Method,
     /// For `method: library`, the library file is at
     /// `/api/v1/libraries/{library_id}/file`.
     pub library_id: Option<i64>,
+    /// Exploration share ε outside the library.
     pub epsilon: f64,
+    /// How the ε share is spread outside the library.
     #[serde(default)]
     pub outside: Outside,
+    /// Seed of the test streams.
     pub seed: u64,
+    /// The vehicle under test, as given at creation.
     #[schema(value_type = Object)]
     pub vut: serde_json::Value,
 }

@@ -13,6 +13,7 @@ use utoipa::ToSchema;
 pub struct LeaseKey(pub String);
 
 impl LeaseKey {
+    /// The key's text.
     pub fn as_str(&self) -> &str {
         &self.0
     }
@@ -55,27 +56,33 @@ pub struct LeaseRequest {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct UnhealthyProgram {
+    /// The program's name, as the worker offers it.
     pub name: String,
     /// The last failure.
     pub reason: String,
+    /// Tests it failed in a row.
     pub failures: u32,
 }
 
 /// `GET /api/v1/workers`: the workers seen since the coordinator started.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct WorkerList {
+    /// The workers, by name.
     pub workers: Vec<WorkerView>,
 }
 
 /// A worker as its lease requests describe it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct WorkerView {
+    /// The worker's self-declared name.
     pub name: String,
+    /// Simulation threads it declared in its last lease request.
     pub threads: u32,
     /// Seconds since its last lease request.
     pub last_seen_seconds: f64,
     /// Whether it asked for work within the last minute.
     pub live: bool,
+    /// The external programs it offers (`--vut-exec NAME=…`).
     pub offers: Vec<String>,
     /// Empty when every program it runs is healthy.
     pub unhealthy: Vec<UnhealthyProgram>,
@@ -97,6 +104,7 @@ pub struct WorkerView {
 /// One test of a lease.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct TestCase {
+    /// The test's index in its campaign.
     pub index: u64,
     /// The scenario's grid cell.
     pub cell: u64,
@@ -113,12 +121,17 @@ pub struct TestCase {
 /// handed to can report on it (every worker shares the worker token).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct Lease {
+    /// The lease's id.
     pub id: i64,
+    /// How often the range has been handed out; the fence of this hand-out.
     pub attempt: i64,
     /// The holder's secret for this attempt (32 hex digits).
     pub key: LeaseKey,
+    /// The campaign whose tests the lease covers.
     pub campaign_id: i64,
+    /// First test index of the range.
     pub start: u64,
+    /// One past the last test index of the range.
     pub end: u64,
     /// The first index not yet reported; results continue from here.
     pub resume_at: u64,
@@ -135,7 +148,9 @@ pub struct Lease {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct LeaseFence {
+    /// The worker the lease was handed to.
     pub worker: String,
+    /// The attempt the worker holds.
     pub attempt: i64,
     /// The lease's `key`, as handed out with this attempt.
     pub key: LeaseKey,
@@ -147,7 +162,9 @@ pub struct LeaseFence {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct LeaseRelease {
+    /// The worker the lease was handed to.
     pub worker: String,
+    /// The attempt the worker holds.
     pub attempt: i64,
     /// The lease's `key`, as handed out with this attempt.
     pub key: LeaseKey,
@@ -186,7 +203,9 @@ pub struct HeartbeatAck {
     /// False when the campaign stopped or was cancelled: drop the lease.
     #[serde(rename = "continue")]
     pub proceed: bool,
+    /// The campaign's status now.
     pub campaign_status: CampaignStatus,
+    /// Seconds the lease now has before it expires.
     pub ttl_seconds: f64,
 }
 
@@ -194,6 +213,7 @@ pub struct HeartbeatAck {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct EventResult {
+    /// The test's index in its campaign.
     pub index: u64,
     /// The test's importance weight as the worker computed it; the
     /// coordinator checks it against its own.
@@ -204,7 +224,9 @@ pub struct EventResult {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct InvalidResult {
+    /// The test's index in its campaign.
     pub index: u64,
+    /// Why it could not be run (at most 2000 bytes).
     pub reason: String,
 }
 
@@ -238,18 +260,24 @@ pub const MAX_REPORT_BYTES: usize =
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ResultReport {
+    /// The worker the lease was handed to.
     pub worker: String,
+    /// The attempt the worker holds.
     pub attempt: i64,
     /// The lease's `key`, as handed out with this attempt.
     pub key: LeaseKey,
+    /// First test index reported (at most the lease's `resume_at`).
     pub from: u64,
+    /// One past the last test index reported (at most the lease's `end`).
     pub to: u64,
+    /// The events, in increasing index (or `packed_events` instead).
     #[serde(default)]
     pub events: Vec<EventResult>,
     /// The events packed ([`crate::packed`], indices from `from`), in
     /// standard base64; instead of `events`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub packed_events: Option<String>,
+    /// The tests that could not be run, in increasing index.
     #[serde(default)]
     pub invalid: Vec<InvalidResult>,
     /// Wall-clock seconds the worker spent on these tests (at most the
@@ -257,6 +285,7 @@ pub struct ResultReport {
     /// most those it asked the lease for); used to size later leases.
     #[serde(default)]
     pub compute_seconds: f64,
+    /// Threads the tests ran on (1 when absent).
     #[serde(default = "one")]
     pub threads: u32,
 }
@@ -312,5 +341,6 @@ pub struct ResultAck {
     /// False when the campaign stopped: drop the rest of the lease.
     #[serde(rename = "continue")]
     pub proceed: bool,
+    /// The campaign's status now.
     pub campaign_status: CampaignStatus,
 }

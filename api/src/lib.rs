@@ -37,5 +37,6 @@ pub struct Problem {
 pub struct Health {
     /// `ok` when the database answers.
     pub status: String,
+    /// The coordinator's version (its crate version).
     pub version: String,
 }

@@ -29,8 +29,10 @@ pub enum SearchRequest {
     /// Grid cases: local searches from `starts` random cells, then a flood
     /// fill (the default, with 50 starts).
     Multistart {
+        /// Random starting cells of the local searches.
         #[serde(default = "default_starts")]
         starts: usize,
+        /// Seed of the starting cells.
         #[serde(default)]
         seed: u64,
     },
@@ -39,8 +41,10 @@ pub enum SearchRequest {
     /// Car-following: Q-values by the paper's TD(0) with learning rate
     /// `alpha` in (0, 1]; the same fixed point as dynamic programming.
     TemporalDifference {
+        /// Learning rate α ∈ (0, 1].
         #[serde(default = "default_alpha")]
         alpha: f64,
+        /// Seed of the sampled episodes.
         #[serde(default)]
         seed: u64,
     },
@@ -59,9 +63,15 @@ fn default_alpha() -> f64 {
 #[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum ThresholdRequest {
     /// `γ = m μ_S / N(X)`.
-    Relative { m: f64 },
+    Relative {
+        /// The multiple m of the mean criticality per scenario.
+        m: f64,
+    },
     /// A fixed γ.
-    Absolute { gamma: f64 },
+    Absolute {
+        /// γ itself, in units of the criticality `V(x) = P(A|x) P(x)`.
+        gamma: f64,
+    },
 }
 
 /// `POST /api/v1/libraries`.
@@ -76,6 +86,7 @@ pub struct CreateLibrary {
     /// The surrogate model, e.g. `{"model": "idm"}`.
     #[schema(value_type = Object)]
     pub surrogate: serde_json::Value,
+    /// The exposure `P(x)` the library is built for (the built-in model when absent).
     #[serde(default)]
     pub exposure: ExposureRequest,
     /// The case's default when absent: multistart (50 starts) for grid
@@ -92,12 +103,16 @@ pub struct CreateLibrary {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum LibraryStatus {
+    /// The search is running.
     Building,
+    /// Built: campaigns may sample from it.
     Ready,
+    /// The build failed; `error` says why.
     Failed,
 }
 
 impl LibraryStatus {
+    /// The status's name on the wire and in the database.
     pub fn as_str(self) -> &'static str {
         match self {
             LibraryStatus::Building => "building",
@@ -110,21 +125,28 @@ impl LibraryStatus {
 /// How far a library build has come.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct BuildProgress {
+    /// Units of the search done (cells, or starts and flood-fill steps).
     pub done: u64,
+    /// Units of the search planned.
     pub total: u64,
 }
 
 /// `GET /api/v1/libraries/{id}`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct LibraryView {
+    /// The library's id.
     pub id: i64,
+    /// The case the library is for.
     pub case: String,
+    /// The case's simulation preset the surrogate ran with.
     pub preset: String,
+    /// Where the build stands.
     pub status: LibraryStatus,
     /// The exposure's name (`builtin` or the table's name).
     pub exposure: String,
     /// The exposure's fingerprint; campaigns must use the same exposure.
     pub exposure_fingerprint: String,
+    /// The surrogate model as given at creation.
     #[schema(value_type = Object)]
     pub surrogate: serde_json::Value,
     /// `N(Φ)`, once ready.
@@ -135,6 +157,7 @@ pub struct LibraryView {
     pub sm_evaluations: Option<u64>,
     /// `μ_S` and `W`, once ready.
     pub mu_s: Option<f64>,
+    /// `W = Σ_{x∈Φ} V(x)`, the criticality in the library, once ready.
     pub w: Option<f64>,
     /// Seconds the build took, once done.
     pub build_seconds: Option<f64>,

@@ -19,9 +19,15 @@ pub enum CallError {
     Transient(String),
     /// The coordinator refused the request (4xx) with this problem.
     #[error("refused ({status}): {detail}")]
-    Refused { status: u16, detail: String },
+    Refused {
+        /// The HTTP status.
+        status: u16,
+        /// The problem's `detail`.
+        detail: String,
+    },
 }
 
+/// A coordinator's HTTP client, with its base URL and bearer token.
 #[derive(Clone)]
 pub struct Client {
     http: reqwest::Client,
@@ -30,6 +36,7 @@ pub struct Client {
 }
 
 impl Client {
+    /// A client of the coordinator at `base`, sending `token` as a bearer token if given.
     pub fn new(base: &str, token: Option<String>) -> anyhow::Result<Self> {
         let http = reqwest::Client::builder()
             .connect_timeout(Duration::from_secs(5))
@@ -110,6 +117,7 @@ impl Client {
             .map_err(|e| CallError::Transient(format!("unreadable lease: {e}")))
     }
 
+    /// `POST /api/v1/leases/{lease}/heartbeat`: extends the lease.
     pub async fn heartbeat(
         &self,
         lease: i64,
@@ -119,6 +127,7 @@ impl Client {
             .await
     }
 
+    /// `POST /api/v1/leases/{lease}/release`: gives the rest of the lease back.
     pub async fn release(&self, lease: i64, release: &LeaseRelease) -> Result<(), CallError> {
         self.send(
             self.request(
@@ -131,11 +140,13 @@ impl Client {
         .map(|_| ())
     }
 
+    /// `POST /api/v1/leases/{lease}/results`: reports a range of outcomes.
     pub async fn report(&self, lease: i64, report: &ResultReport) -> Result<ResultAck, CallError> {
         self.post(&format!("/api/v1/leases/{lease}/results"), report)
             .await
     }
 
+    /// `GET /api/v1/campaigns/{campaign}/plan`: what any test of it needs.
     pub async fn plan(&self, campaign: i64) -> Result<CampaignPlan, CallError> {
         self.json(self.request(
             reqwest::Method::GET,
@@ -158,20 +169,24 @@ impl Client {
         Ok(bytes.to_vec())
     }
 
+    /// `GET /healthz`.
     pub async fn health(&self) -> Result<tslg_api::Health, CallError> {
         self.json(self.request(reqwest::Method::GET, "/healthz"))
             .await
     }
 
+    /// `POST /api/v1/libraries`: starts a library build.
     pub async fn create_library(&self, request: &CreateLibrary) -> Result<LibraryView, CallError> {
         self.post("/api/v1/libraries", request).await
     }
 
+    /// `GET /api/v1/libraries/{id}`.
     pub async fn library(&self, id: i64) -> Result<LibraryView, CallError> {
         self.json(self.request(reqwest::Method::GET, &format!("/api/v1/libraries/{id}")))
             .await
     }
 
+    /// `POST /api/v1/campaigns`: starts a campaign.
     pub async fn create_campaign(
         &self,
         request: &CreateCampaign,
@@ -185,11 +200,13 @@ impl Client {
             .await
     }
 
+    /// `GET /api/v1/campaigns/{id}`.
     pub async fn campaign(&self, id: i64) -> Result<CampaignView, CallError> {
         self.json(self.request(reqwest::Method::GET, &format!("/api/v1/campaigns/{id}")))
             .await
     }
 
+    /// `GET /api/v1/campaigns/{id}/history`: every point.
     pub async fn history(&self, id: i64) -> Result<History, CallError> {
         self.json(self.request(
             reqwest::Method::GET,
@@ -213,6 +230,7 @@ impl Client {
             .await
     }
 
+    /// `POST /api/v1/campaigns/{id}/cancel`.
     pub async fn cancel_campaign(&self, id: i64) -> Result<CampaignView, CallError> {
         self.post(
             &format!("/api/v1/campaigns/{id}/cancel"),

@@ -9,16 +9,22 @@ use plotters::prelude::*;
 /// One axis of a map: its name and the cell centres, ascending.
 #[derive(Debug, Clone)]
 pub struct HeatmapAxis {
+    /// The axis title, with its unit.
     pub label: String,
+    /// The cell centres, ascending.
     pub centres: Vec<f64>,
 }
 
 /// `values[i * y.centres.len() + j]` is the value at `(x[i], y[j])`.
 #[derive(Debug, Clone)]
 pub struct Heatmap {
+    /// The figure's title.
     pub title: String,
+    /// The horizontal axis.
     pub x: HeatmapAxis,
+    /// The vertical axis.
     pub y: HeatmapAxis,
+    /// The values, `x.centres.len() × y.centres.len()` of them.
     pub values: Vec<f64>,
 }
 

@@ -16,19 +16,26 @@ use serde::{Deserialize, Serialize};
 /// The state of a campaign's estimate.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct CampaignResult {
+    /// Whether the campaign goes on, converged or ran out of tests.
     pub status: Decision,
     /// Valid tests in the resolved prefix (`n`).
     pub tests: u64,
+    /// Tests in the resolved prefix with the event.
     pub events: u64,
     /// Invalid tests in the resolved prefix.
     pub invalid: u64,
     /// Test indices in the resolved prefix (`tests + invalid`); the stop
     /// index once the campaign has stopped.
     pub indices: u64,
+    /// `μ̂ₙ = S₁/n`, `S₁ = Σ wᵢyᵢ`.
     pub estimate: f64,
+    /// `z σ̂/√n`, the normal interval's half-width.
     pub half_width: f64,
+    /// `rₙ = half_width / μ̂ₙ` (infinite while `μ̂ₙ = 0`).
     pub relative_half_width: f64,
+    /// `max(0, μ̂ₙ − half_width)`.
     pub ci_low: f64,
+    /// `μ̂ₙ + half_width`.
     pub ci_high: f64,
     /// Kish's effective number of events `S₁²/S₂`
     /// ([`crate::estimator::ImportanceEstimator::effective_events`]).
@@ -37,6 +44,7 @@ pub struct CampaignResult {
     pub largest_weight_share: Option<f64>,
     /// Valid tests drawn outside the library (ε-exploration), and their events.
     pub outside_tests: u64,
+    /// Events among the exploring tests.
     pub outside_events: u64,
     /// Those events where the library's surrogate has no event.
     pub mismatched_events: u64,
@@ -154,7 +162,9 @@ const MAX_BATCH: u64 = 65_536;
 /// and the fill of the outside scenarios.
 #[derive(Clone, Copy)]
 pub struct Explorer<'a> {
+    /// Whether test `i` drew its scenario outside the library.
     pub explores: &'a (dyn Fn(u64) -> bool + Sync),
+    /// The worst-case fill of the outside scenarios.
     pub mass: &'a OutsideMass,
     /// See [`Exploration::surrogate_misses`].
     pub surrogate_misses: &'a (dyn Fn(u64) -> bool + Sync),
@@ -298,14 +308,18 @@ pub fn run_campaign<C: crate::case::Case>(
 /// What campaigns with seeds `0..campaigns` of one configuration did.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SeededCoverage {
+    /// Campaigns run.
     pub campaigns: u64,
     /// Campaigns whose interval contains the reference value.
     pub covered: u64,
+    /// Mean valid tests at the stop.
     pub mean_tests: f64,
+    /// Mean estimate at the stop.
     pub mean_estimate: f64,
 }
 
 impl SeededCoverage {
+    /// The share of campaigns whose interval covered: `covered / campaigns`.
     pub fn coverage(&self) -> f64 {
         self.covered as f64 / self.campaigns as f64
     }

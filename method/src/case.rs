@@ -15,6 +15,7 @@ pub struct SurrogateEvaluation {
     pub objective: f64,
 }
 
+/// A grid case as the exact computations see it: an exposure on a grid and a vehicle's outcome per cell.
 pub trait Case: Sync {
     /// The vehicle models this case can simulate.
     type Vehicle: Sync;
@@ -28,6 +29,7 @@ pub trait Case: Sync {
     /// A short name for the exposure (`builtin`, or the table's file name).
     fn exposure_name(&self) -> &str;
 
+    /// The scenario grid `X` (the exposure's).
     fn grid(&self) -> &Grid {
         self.exposure().grid()
     }

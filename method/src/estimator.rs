@@ -65,10 +65,12 @@ impl ImportanceEstimator {
         self.n += k;
     }
 
+    /// `n`: tests folded (with and without the event).
     pub fn tests(&self) -> u64 {
         self.n
     }
 
+    /// Tests with the event.
     pub fn events(&self) -> u64 {
         self.events
     }
@@ -163,6 +165,7 @@ pub const MIN_BETA: f64 = 1e-4;
 pub const MAX_BETA: f64 = 0.99;
 /// Confidence levels a campaign takes: `z` from 0.67 to 4.9.
 pub const MIN_CONFIDENCE: f64 = 0.5;
+/// The largest confidence a campaign takes.
 pub const MAX_CONFIDENCE: f64 = 0.999_999;
 /// The largest test budget (about 10¹⁵: years of simulation at 10⁷ tests
 /// a second, and exact in an `f64` and a SQLite integer).
@@ -173,14 +176,24 @@ pub const MAX_MIN_EVENTS: u64 = 1_000_000;
 /// Why a stopping rule is invalid.
 #[derive(Debug, Error, PartialEq)]
 pub enum RuleError {
+    /// β outside [`MIN_BETA`, `MAX_BETA`].
     #[error("beta = {} must be in [{MIN_BETA}, {MAX_BETA}]", Num(*.0))]
     Beta(f64),
+    /// Confidence outside [`MIN_CONFIDENCE`, `MAX_CONFIDENCE`].
     #[error("confidence = {} must be in [{MIN_CONFIDENCE}, {MAX_CONFIDENCE}]", Num(*.0))]
     Confidence(f64),
+    /// `max_tests` outside `1..=2^50`.
     #[error("max_tests = {0} must be in 1..=2^50 ({MAX_TESTS_LIMIT})")]
     MaxTests(u64),
+    /// `n_min` outside `1..=max_tests`.
     #[error("n_min = {n_min} must be in 1..=max_tests ({max_tests})")]
-    NMin { n_min: u64, max_tests: u64 },
+    NMin {
+        /// The n_min asked for.
+        n_min: u64,
+        /// The campaign's max_tests.
+        max_tests: u64,
+    },
+    /// `min_events` outside `1..=MAX_MIN_EVENTS`.
     #[error("min_events = {0} must be in 1..={MAX_MIN_EVENTS}")]
     MinEvents(u64),
 }
@@ -190,10 +203,15 @@ pub enum RuleError {
 /// (exhausted).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct StoppingRule {
+    /// Target relative half-width β.
     pub beta: f64,
+    /// Confidence level c of the two-sided interval.
     pub confidence: f64,
+    /// Fewest valid tests before the rule may hold.
     pub n_min: u64,
+    /// Fewest events before the rule may hold.
     pub min_events: u64,
+    /// Valid tests at which the campaign stops, converged or not.
     pub max_tests: u64,
     /// Also require the outside guard ([`crate::outside::OutsideTally::guarded`]):
     /// the failure mass the library's exploring tests could still be missing
@@ -206,7 +224,9 @@ pub struct StoppingRule {
 /// `docs/statistics.md`. `DEFAULT_N_MIN` is the floor of every campaign;
 /// library campaigns of grid cases wait longer ([`default_n_min`]).
 pub const DEFAULT_N_MIN: u64 = 30;
+/// Default `min_events`.
 pub const DEFAULT_MIN_EVENTS: u64 = 10;
+/// Default confidence level.
 pub const DEFAULT_CONFIDENCE: f64 = 0.90;
 /// The exploring tests a grid library campaign expects before it may stop.
 pub const DEFAULT_EXPLORING_TESTS: f64 = 10.0;
@@ -236,6 +256,7 @@ pub fn default_n_min(exploring_share: Option<f64>, max_tests: u64) -> u64 {
 }
 
 impl StoppingRule {
+    /// The rule for `beta` and `max_tests` with the default confidence, `n_min` and `min_events`, without the guard.
     pub fn new(beta: f64, max_tests: u64) -> Self {
         Self {
             beta,
@@ -270,6 +291,7 @@ impl StoppingRule {
         Ok(())
     }
 
+    /// The two-sided normal quantile `z = Φ⁻¹((1 + c)/2)` of the confidence.
     pub fn z(&self) -> f64 {
         z_for_confidence(self.confidence)
     }
@@ -296,11 +318,15 @@ impl StoppingRule {
     }
 }
 
+/// What the stopping rule says after a prefix.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Decision {
+    /// Not yet precise enough; more tests.
     Continue,
+    /// `rₙ ≤ β` with the rule's minimums met.
     Converged,
+    /// `max_tests` reached without convergence.
     Exhausted,
 }
 

@@ -53,9 +53,13 @@ pub fn expected_ndd_tests(mu: f64, beta: f64, z: f64) -> f64 {
 /// All exact figures for one vehicle and one library.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ExactReport {
+    /// The exact `P(A) = Σ_x P(x) A(x)` on the grid.
     pub probability: f64,
+    /// The per-test variance of the library estimator, `Σ_x P(x)² A(x)/q(x) − P(A)²`.
     pub library_variance: f64,
+    /// Tests the library needs for relative half-width β: `z² σ²/(β² P(A)²)`.
     pub library_tests: f64,
+    /// Tests the NDD needs: `z² (1 − P(A))/(β² P(A))`.
     pub ndd_tests: f64,
 }
 
@@ -66,6 +70,7 @@ impl ExactReport {
     }
 }
 
+/// Exact probability, variance and test counts for `vehicle` tested with the library distribution `q`, by enumeration of the grid.
 pub fn exact_report<C: Case>(
     case: &C,
     vehicle: &C::Vehicle,

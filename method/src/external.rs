@@ -38,6 +38,7 @@ pub enum ExternalMode {
 }
 
 impl ExternalMode {
+    /// The mode's name in the protocol (`step`, `episode`).
     pub fn as_str(self) -> &'static str {
         match self {
             ExternalMode::Step => "step",
@@ -52,7 +53,9 @@ impl ExternalMode {
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ExternalVut {
+    /// The program's name, as workers offer it (`--vut-exec NAME=…`).
     pub external: String,
+    /// How the program is driven (`step` by default).
     #[serde(default)]
     pub mode: ExternalMode,
 }
@@ -102,7 +105,9 @@ pub fn check_program_name(name: &str) -> Result<(), String> {
 /// remembers of earlier tests.
 #[derive(Debug, Clone, Serialize)]
 pub struct TestStart<'a> {
+    /// The case of the test.
     pub case: &'a str,
+    /// Step or episode mode.
     pub mode: ExternalMode,
     /// The test's index in its campaign.
     pub index: u64,
@@ -115,8 +120,11 @@ pub struct TestStart<'a> {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Ego {
+    /// Front bumper position (m).
     pub position: f64,
+    /// Speed (m/s).
     pub speed: f64,
+    /// Lane number (0 is the rightmost).
     pub lane: u32,
 }
 
@@ -124,9 +132,13 @@ pub struct Ego {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Other {
+    /// The vehicle's id, stable over the test.
     pub id: u32,
+    /// Front bumper position (m).
     pub position: f64,
+    /// Speed (m/s).
     pub speed: f64,
+    /// Lane number (0 is the rightmost).
     pub lane: u32,
     /// The bumper gap as the simulation measures it (its rear bumper to the
     /// ego's front bumper), present only for the vehicle directly ahead in
@@ -141,8 +153,11 @@ pub struct Other {
 pub struct Observation {
     /// Control step `k` since the test started; `time = k · dt`.
     pub step: u32,
+    /// Seconds since the test started.
     pub time: f64,
+    /// The vehicle under test.
     pub ego: Ego,
+    /// The other vehicles.
     pub vehicles: Vec<Other>,
 }
 
@@ -200,6 +215,7 @@ pub fn checked_control(control: Control) -> Result<Control, DriverError> {
 /// car-following): the leader is vehicle 1, [`NOMINAL_LENGTH`] long,
 /// `gap` ahead.
 pub struct ExternalFollower<'a> {
+    /// The program, reset for this test.
     pub vut: &'a mut dyn ExternalVehicle,
 }
 

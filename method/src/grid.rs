@@ -10,23 +10,38 @@ use thiserror::Error;
 /// Why an axis or grid could not be built.
 #[derive(Debug, Error, PartialEq)]
 pub enum GridError {
+    /// An axis with no values.
     #[error("axis `{axis}` has no values")]
-    EmptyAxis { axis: String },
+    EmptyAxis {
+        /// The axis's name.
+        axis: String,
+    },
+    /// A NaN or infinite axis value.
     #[error("axis `{axis}` value {index} is not finite ({value})")]
     NonFinite {
+        /// The axis's name.
         axis: String,
+        /// Position of the value on the axis.
         index: usize,
+        /// The value.
         value: f64,
     },
+    /// Axis values out of order or repeated.
     #[error("axis `{axis}` values must increase strictly, but value {index} ({value}) does not exceed the one before it ({previous})")]
     NotIncreasing {
+        /// The axis's name.
         axis: String,
+        /// Position of the value on the axis.
         index: usize,
+        /// The value.
         value: f64,
+        /// The value before it.
         previous: f64,
     },
+    /// A grid without axes.
     #[error("a grid needs at least one axis")]
     NoAxes,
+    /// More cells than a `usize` counts.
     #[error("the grid has {0} cells, more than the supported {max}", max = usize::MAX)]
     TooLarge(u128),
 }
@@ -78,22 +93,27 @@ impl Axis {
         Self::new(name, values)
     }
 
+    /// The axis's name, with its unit.
     pub fn name(&self) -> &str {
         &self.name
     }
 
+    /// The values (cell centres), strictly increasing.
     pub fn values(&self) -> &[f64] {
         &self.values
     }
 
+    /// Number of values.
     pub fn len(&self) -> usize {
         self.values.len()
     }
 
+    /// Whether the axis has no values (never, once built).
     pub fn is_empty(&self) -> bool {
         self.values.is_empty()
     }
 
+    /// The value at `index`.
     pub fn value(&self, index: usize) -> f64 {
         self.values[index]
     }
@@ -151,6 +171,7 @@ impl From<Grid> for GridRepr {
 }
 
 impl Grid {
+    /// The product grid of `axes` (row-major: the last axis varies fastest).
     pub fn new(axes: Vec<Axis>) -> Result<Self, GridError> {
         if axes.is_empty() {
             return Err(GridError::NoAxes);
@@ -168,10 +189,12 @@ impl Grid {
         })
     }
 
+    /// The axes, in order.
     pub fn axes(&self) -> &[Axis] {
         &self.axes
     }
 
+    /// Number of axes (the scenario's dimension).
     pub fn dimensions(&self) -> usize {
         self.axes.len()
     }
@@ -181,6 +204,7 @@ impl Grid {
         self.cells
     }
 
+    /// Whether the grid has no cells (never, once built).
     pub fn is_empty(&self) -> bool {
         self.cells == 0
     }

@@ -7,22 +7,42 @@ use thiserror::Error;
 /// Why a set of cell masses is not a probability mass function.
 #[derive(Debug, Error, PartialEq)]
 pub enum MassError {
+    /// Not one mass per grid cell.
     #[error("expected {expected} cell masses for the grid, got {actual}")]
-    WrongLength { expected: usize, actual: usize },
+    WrongLength {
+        /// Cells of the grid.
+        expected: usize,
+        /// Masses given.
+        actual: usize,
+    },
+    /// A NaN or infinite mass.
     #[error("cell {cell} (values {values:?}) has mass {value}, which is not a finite number")]
     NotFinite {
+        /// The cell's index.
         cell: usize,
+        /// The cell's scenario values.
         values: Vec<f64>,
+        /// The mass.
         value: f64,
     },
+    /// A negative mass.
     #[error("cell {cell} (values {values:?}) has negative mass {value}")]
     Negative {
+        /// The cell's index.
         cell: usize,
+        /// The cell's scenario values.
         values: Vec<f64>,
+        /// The mass.
         value: f64,
     },
+    /// The masses do not sum to 1 within the tolerance.
     #[error("the masses sum to {sum}, which differs from 1 by more than {tolerance}")]
-    SumOff { sum: f64, tolerance: f64 },
+    SumOff {
+        /// The total mass.
+        sum: f64,
+        /// The accepted distance from 1.
+        tolerance: f64,
+    },
 }
 
 /// A probability mass function on a grid, normalised to sum to exactly 1
@@ -101,6 +121,7 @@ impl GridMass {
         }
     }
 
+    /// The grid the masses live on.
     pub fn grid(&self) -> &Grid {
         &self.grid
     }
@@ -110,6 +131,7 @@ impl GridMass {
         self.mass[cell]
     }
 
+    /// `P(x)` for every cell, in cell order.
     pub fn masses(&self) -> &[f64] {
         &self.mass
     }

@@ -13,45 +13,75 @@ use thiserror::Error;
 /// Why a table was rejected.
 #[derive(Debug, Error, PartialEq)]
 pub enum TableError {
+    /// No text at all.
     #[error("the table is empty")]
     Empty,
+    /// A header but no data rows.
     #[error("the table has a header line but no data rows")]
     NoRows,
+    /// The header lacks the corner cell or the column labels.
     #[error("line 1 (the header) must hold an empty corner cell and at least one column label, but it has {fields} field(s)")]
-    HeaderTooShort { fields: usize },
+    HeaderTooShort {
+        /// Fields of the header line.
+        fields: usize,
+    },
+    /// A row with another number of fields than the header.
     #[error("line {line} has {actual} fields but the header has {expected}: every row needs a label and one value per column")]
     WrongShape {
+        /// Line number (from 1).
         line: usize,
+        /// Fields of the header.
         expected: usize,
+        /// Fields of this line.
         actual: usize,
     },
+    /// A field that is not a number.
     #[error("line {line}, field {field}: `{text}` is not a number")]
     NotNumeric {
+        /// Line number (from 1).
         line: usize,
+        /// Field number (from 1).
         field: usize,
+        /// The field's text.
         text: String,
     },
+    /// A probability that is NaN or infinite.
     #[error("line {line}, field {field}: the value is {value}; probabilities must be finite")]
     NotFinite {
+        /// Line number (from 1).
         line: usize,
+        /// Field number (from 1).
         field: usize,
+        /// The value.
         value: f64,
     },
+    /// A negative probability.
     #[error("line {line}, field {field}: the probability {value} is negative")]
     Negative {
+        /// Line number (from 1).
         line: usize,
+        /// Field number (from 1).
         field: usize,
+        /// The value.
         value: f64,
     },
+    /// Row or column labels that do not form an evenly spaced grid.
     #[error("labels: {0}")]
     Labels(GridError),
+    /// The mass does not sum to 1 within the tolerance.
     #[error("the probabilities sum to {sum}, which differs from 1 by more than {tolerance}")]
-    SumOff { sum: f64, tolerance: f64 },
+    SumOff {
+        /// The table's total mass.
+        sum: f64,
+        /// The accepted distance from 1.
+        tolerance: f64,
+    },
 }
 
 /// A validated exposure table.
 #[derive(Debug, Clone, PartialEq)]
 pub struct NddTable {
+    /// The probability mass `P(x)` on the grid the labels describe.
     pub mass: GridMass,
 }
 

@@ -5,13 +5,16 @@
 /// For a box the minimising `y` is `x` clamped to the box, axis by axis.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct BoxDistance<const M: usize> {
+    /// Lower corner of Ω, per axis.
     pub lower: [f64; M],
+    /// Upper corner of Ω, per axis.
     pub upper: [f64; M],
     /// The normalisation factors U_F.
     pub scale: [f64; M],
 }
 
 impl<const M: usize> BoxDistance<M> {
+    /// `d(x, Ω)`.
     pub fn distance(&self, x: &[f64; M]) -> f64 {
         let sum: f64 = (0..M)
             .map(|i| {

@@ -36,11 +36,19 @@ use statrs::distribution::{Beta, ContinuousCDF};
 #[derive(Debug, Clone, PartialEq)]
 pub enum OutsideMass {
     /// `F(p) = p · total`: every exploring draw has `r = P(X \ Φ)`.
-    Proportional { total: f64 },
+    Proportional {
+        /// `P(X \ Φ)`, the exposure outside the library.
+        total: f64,
+    },
     /// `q_out` uniform over `cells` outside cells: `F(p)` is the exposure of
     /// the `p · cells` most exposed of them. `cumulative[j]` is the exposure
     /// of the `j` most exposed (only the cells with `P > 0` are kept).
-    Uniform { cells: usize, cumulative: Vec<f64> },
+    Uniform {
+        /// Cells outside the library (with and without exposure).
+        cells: usize,
+        /// `cumulative[j]`: the exposure of the `j` most exposed outside cells.
+        cumulative: Vec<f64>,
+    },
 }
 
 impl OutsideMass {
@@ -111,8 +119,11 @@ pub fn clopper_pearson_upper(k: u64, m: u64, confidence: f64) -> f64 {
 /// library, their events and those events' weighted sum `S₁,out`.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct OutsideTally {
+    /// Valid tests drawn outside the library.
     pub tests: u64,
+    /// Those with the event.
     pub events: u64,
+    /// `S₁,out = Σ wᵢyᵢ` over them.
     pub s1: f64,
     /// Those events in scenarios where the library's surrogate has no
     /// event: the vehicle fails where the surrogate does not.

@@ -22,16 +22,39 @@ use thiserror::Error;
 /// Input that breaks the fold's contract; the state is left unchanged.
 #[derive(Debug, Error, PartialEq)]
 pub enum FoldError {
+    /// An outcome outside the span being folded.
     #[error("outcome at test {index} lies outside the span {from}..{to} being folded")]
-    OutOfSpan { index: u64, from: u64, to: u64 },
+    OutOfSpan {
+        /// The outcome's test.
+        index: u64,
+        /// First index of the span.
+        from: u64,
+        /// One past the span's last index.
+        to: u64,
+    },
+    /// Outcomes not in strictly increasing test order.
     #[error("outcomes are not in strictly increasing test order at test {0}")]
     Unordered(u64),
+    /// An event weight that is NaN, infinite or negative.
     #[error("event weight {weight} at test {index} is not a finite number ≥ 0")]
-    BadWeight { index: u64, weight: f64 },
+    BadWeight {
+        /// The test.
+        index: u64,
+        /// Its weight.
+        weight: f64,
+    },
+    /// Exploring tests outside the span or out of order.
     #[error(
         "exploring test {index} is not in strictly increasing order inside the span {from}..{to}"
     )]
-    Explored { index: u64, from: u64, to: u64 },
+    Explored {
+        /// The exploring test.
+        index: u64,
+        /// First index of the span.
+        from: u64,
+        /// One past the span's last index.
+        to: u64,
+    },
 }
 
 /// One resolved test in sparse form.
@@ -39,6 +62,7 @@ pub enum FoldError {
 pub enum SparseOutcome {
     /// The event, with the test's importance weight.
     Event(f64),
+    /// The test could not be run; it does not count in `n`.
     Invalid,
 }
 
@@ -49,6 +73,7 @@ pub enum SparseOutcome {
 pub struct Exploration<'a> {
     /// The indices of the span being folded whose tests explored, increasing.
     pub explored: &'a [u64],
+    /// The worst-case fill of the outside scenarios.
     pub mass: &'a OutsideMass,
     /// Whether the library's surrogate has no event in the scenario of
     /// test `i` (asked only of exploring tests with the event).
@@ -58,6 +83,7 @@ pub struct Exploration<'a> {
 /// The state of a campaign's estimate over the resolved prefix `0..indices`.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct PrefixFold {
+    /// The running sums of the valid tests folded.
     pub estimator: ImportanceEstimator,
     /// Test indices folded so far (valid and invalid).
     pub indices: u64,

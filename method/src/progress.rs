@@ -4,6 +4,7 @@
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
+/// Work items done and planned, readable while they change.
 #[derive(Debug, Default)]
 pub struct Progress {
     done: AtomicU64,

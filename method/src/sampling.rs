@@ -63,10 +63,13 @@ pub fn check_epsilon(epsilon: f64) -> Result<(), SamplingError> {
     }
 }
 
+/// Why a test distribution cannot be built.
 #[derive(Debug, Error, PartialEq)]
 pub enum SamplingError {
+    /// ε outside {0} ∪ [`MIN_EPSILON`, `MAX_EPSILON`].
     #[error("ε = {} must be 0 or in [{MIN_EPSILON}, {MAX_EPSILON}]", crate::number::Num(*.0))]
     Epsilon(f64),
+    /// A library without cells.
     #[error("the library is empty: there is nothing to sample with weight 1 − ε")]
     EmptyLibrary,
     #[error(
@@ -74,15 +77,24 @@ pub enum SamplingError {
          and some accidents (even the surrogate's own, from states between grid points) lie \
          there: the estimate would be biased low; use ε > 0"
     )]
+    /// ε = 0 on car-following, which would bias the estimate low.
     NoExploration,
+    /// The library's grid and the exposure's differ.
     #[error("the library's grid has {library} cells but the exposure has {exposure}")]
-    GridMismatch { library: usize, exposure: usize },
+    GridMismatch {
+        /// Cells of the library's grid.
+        library: usize,
+        /// Cells of the exposure's grid.
+        exposure: usize,
+    },
 }
 
 /// One drawn test: the scenario and its importance weight `P(x)/q(x)`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Draw {
+    /// The scenario's grid cell.
     pub cell: usize,
+    /// Importance weight `P(x)/q(x)`.
     pub weight: f64,
 }
 
@@ -107,6 +119,7 @@ pub struct LibraryDistribution {
 }
 
 impl LibraryDistribution {
+    /// The ε-greedy distribution of `library` on `exposure`, with ε spread outside as `outside` says.
     pub fn new(
         library: &Library,
         exposure: &GridMass,
@@ -270,12 +283,14 @@ pub struct NddDistribution {
 }
 
 impl NddDistribution {
+    /// Tests drawn from the exposure itself.
     pub fn new(exposure: &GridMass) -> Self {
         let alias = WeightedAliasIndex::new(exposure.masses().to_vec())
             .expect("a mass function has positive total weight");
         Self { alias }
     }
 
+    /// Test `index` of the campaign seeded `seed`: a cell drawn from `P`, weight 1.
     pub fn draw(&self, seed: u64, index: u64) -> Draw {
         Draw {
             cell: self.alias.sample(&mut test_rng(seed, index)),
@@ -287,15 +302,19 @@ impl NddDistribution {
 /// Either test distribution.
 #[derive(Debug, Clone)]
 pub enum TestDistribution {
+    /// From a library, ε-greedy.
     Library(Box<LibraryDistribution>),
+    /// From the naturalistic exposure (the baseline).
     Ndd(NddDistribution),
 }
 
 impl TestDistribution {
+    /// The distribution of `distribution`, boxed.
     pub fn library(distribution: LibraryDistribution) -> Self {
         Self::Library(Box::new(distribution))
     }
 
+    /// Test `index` of the campaign seeded `seed`: its cell and weight, from the stream `(seed, index)`.
     pub fn draw(&self, seed: u64, index: u64) -> Draw {
         match self {
             TestDistribution::Library(d) => d.draw(seed, index),

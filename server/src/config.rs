@@ -4,8 +4,14 @@
 use clap::Parser;
 use std::net::SocketAddr;
 
+/// The coordinator's settings: every flag also readable from the environment.
 #[derive(Debug, Clone, Parser)]
-#[command(name = "tslg-server", version, about = "The tslg campaign coordinator")]
+#[command(
+    name = "tslg-server",
+    version,
+    about = "The tslg campaign coordinator",
+    long_about = None
+)]
 pub struct Config {
     /// Address to listen on.
     #[arg(long, env = "TSLG_BIND", default_value = "127.0.0.1:8080")]

@@ -3,30 +3,34 @@
 //! workers as leases, and folds their results into each campaign's prefix
 //! estimator until the stopping rule holds. See `docs/architecture.md`.
 
-pub mod audit;
-pub mod build_progress;
-pub mod builder;
-pub mod campaign_start;
-pub mod config;
-pub mod db;
-pub mod error;
-pub mod history;
-pub mod latency;
-pub mod lease_size;
-pub mod metrics;
-pub mod problem_io;
-pub mod replay_check;
-pub mod report_check;
-pub mod reporting;
-pub mod routes;
-pub mod sampler_cache;
-pub mod state;
-pub mod store;
-pub mod throughput;
-pub mod validate;
-pub mod workers;
+mod audit;
+mod build_progress;
+mod builder;
+mod campaign_start;
+mod config;
+mod db;
+mod error;
+mod history;
+mod latency;
+mod lease_size;
+mod metrics;
+mod problem_io;
+mod replay_check;
+mod report_check;
+mod reporting;
+mod routes;
+mod sampler_cache;
+mod state;
+mod store;
+mod throughput;
+mod validate;
+mod workers;
 
+// The crate's surface is the coordinator itself: `serve` with its `Config`,
+// and the online backup the `tslg db backup` command runs. Everything else is
+// internal to the coordinator (and documented where it helps a reader).
 pub use config::Config;
+pub use db::backup;
 
 use anyhow::Context;
 use std::future::Future;

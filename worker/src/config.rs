@@ -7,8 +7,10 @@ use clap::Parser;
 #[command(
     name = "tslg-worker",
     version,
-    about = "A tslg worker: runs the tests a coordinator hands out"
+    about = "A tslg worker: runs the tests a coordinator hands out",
+    long_about = None
 )]
+/// The worker's settings: every flag also readable from the environment.
 pub struct WorkerConfig {
     /// The coordinator's base URL.
     #[arg(long, env = "TSLG_SERVER", default_value = "http://127.0.0.1:8080")]
@@ -78,12 +80,14 @@ impl WorkerConfig {
         }
     }
 
+    /// Simulation threads: `--threads`, else the machine's parallelism (at least 1).
     pub fn threads(&self) -> usize {
         self.threads
             .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
             .max(1)
     }
 
+    /// The worker's name: `--name`, else `HOSTNAME-PID`.
     pub fn name(&self) -> String {
         self.name.clone().unwrap_or_else(|| {
             let host = std::env::var("HOSTNAME")
@@ -96,6 +100,7 @@ impl WorkerConfig {
         })
     }
 
+    /// Checks the settings before the worker starts.
     pub fn validate(&self) -> anyhow::Result<()> {
         anyhow::ensure!(
             self.server.starts_with("http://") || self.server.starts_with("https://"),

@@ -2,14 +2,14 @@
 //! scenario from the campaign's plan and the test index, simulates the
 //! vehicle under test on a rayon pool and reports the outcomes.
 
-pub mod backoff;
-pub mod config;
+mod backoff;
+mod config;
 pub mod external;
-pub mod panics;
+mod panics;
 pub mod prepared;
-pub mod report_parts;
-pub mod run;
-pub mod sending;
+mod report_parts;
+mod run;
+mod sending;
 
 pub use config::WorkerConfig;
 pub use run::{run, WorkerSummary};

@@ -10,6 +10,7 @@ use tslg_method::registry::{open_case, CampaignTests};
 
 /// What the worker needs to run any test of one campaign.
 pub struct PreparedCampaign {
+    /// The campaign's tests: scenario, weight and simulation of any index.
     pub tests: Arc<dyn CampaignTests>,
 }
 
@@ -47,13 +48,16 @@ pub struct Cache {
 /// Why a campaign could not be prepared.
 #[derive(Debug, thiserror::Error)]
 pub enum PrepareError {
+    /// The coordinator could not be reached or refused.
     #[error(transparent)]
     Call(#[from] CallError),
+    /// The plan needs what this worker lacks (e.g. an unknown case or program).
     #[error("campaign cannot run on this worker: {0}")]
     Unusable(String),
 }
 
 impl Cache {
+    /// The prepared campaign, fetching its plan (and library) on first use.
     pub async fn get(
         &mut self,
         client: &Client,

@@ -34,8 +34,11 @@ const FIRST_CHUNK_PER_THREAD: u64 = 64;
 /// What a worker did.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct WorkerSummary {
+    /// Leases the worker took.
     pub leases: u64,
+    /// Tests it reported.
     pub tests: u64,
+    /// Events among them.
     pub events: u64,
 }
 

@@ -29,6 +29,7 @@ pub enum FollowPreset {
 }
 
 impl FollowPreset {
+    /// The preset's name on the wire (`paper`, `risky`).
     pub fn name(self) -> &'static str {
         match self {
             FollowPreset::Paper => "paper",
@@ -36,6 +37,7 @@ impl FollowPreset {
         }
     }
 
+    /// The preset's built-in exposure model.
     pub fn exposure(self) -> FollowExposureModel {
         match self {
             FollowPreset::Paper => FollowExposureModel::default(),
@@ -70,7 +72,12 @@ pub enum PolicySolver {
     DynamicProgramming,
     /// The paper's TD(0) with learning rate `alpha`, until every `|δ|` of a
     /// sweep is below 10⁻¹⁰.
-    TemporalDifference { alpha: f64, seed: u64 },
+    TemporalDifference {
+        /// Learning rate α ∈ [10⁻³, 1].
+        alpha: f64,
+        /// Seed of the sampled episodes.
+        seed: u64,
+    },
 }
 
 /// The smallest TD learning rate accepted: TD needs about 3 × 10⁶/α
@@ -80,9 +87,11 @@ pub const MIN_ALPHA: f64 = 1e-3;
 /// Tolerances of the two solvers: tight enough that DP and TD agree to
 /// about 10⁻¹⁰ (far below any weight's precision) in under a second each.
 pub const DP_TOLERANCE: f64 = 1e-13;
+/// Tolerance of TD(0): every `|δ|` of a sweep below it.
 pub const TD_TOLERANCE: f64 = 1e-10;
 
 impl PolicySolver {
+    /// Checks the solver's parameters (α in [10⁻³, 1]).
     pub fn validate(&self) -> Result<(), String> {
         match *self {
             // Below 10⁻³ the TD iteration would need thousands of sweeps
@@ -121,6 +130,7 @@ impl PolicySolver {
 /// A learned library with what its build cost.
 #[derive(Debug, Clone)]
 pub struct LearnedPolicy {
+    /// The Q-values and `P(S|s)` learned.
     pub library: PolicyLibrary,
     /// `μ_S = Σ_s P(s) P(S|s)`: the surrogate's accident rate on the grid chain.
     pub mu_s: f64,
@@ -136,15 +146,20 @@ pub struct LearnedPolicy {
 /// The car-following case with one preset.
 #[derive(Debug, Clone)]
 pub struct CarFollowing {
+    /// The preset in force.
     pub preset: FollowPreset,
+    /// Time step, decisions, action set and bounds.
     pub world: FollowWorld,
+    /// The grid of initial states `(v, R, Ṙ)`.
     pub grid: StateGrid,
+    /// The exposure model `P(s)`, `P(u|v)`.
     pub exposure: FollowExposureModel,
     /// `P(s)` on the grid.
     pub initial: Vec<f64>,
 }
 
 impl CarFollowing {
+    /// The case with `preset`'s world, grid and exposure, `P(s)` evaluated on the grid.
     pub fn new(preset: FollowPreset) -> Self {
         let world = FollowWorld::paper();
         let grid = StateGrid::paper();

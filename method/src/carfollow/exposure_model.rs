@@ -32,12 +32,19 @@ use crate::density::normal;
 /// Parameters of the synthetic car-following exposure.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FollowExposureModel {
+    /// Mean BV speed (m/s).
     pub speed_mean: f64,
+    /// Standard deviation of the BV speed (m/s).
     pub speed_sd: f64,
+    /// Standard deviation of the range rate `Ṙ` (m/s).
     pub range_rate_sd: f64,
+    /// Median time headway `R / v_VUT` (s).
     pub headway_median: f64,
+    /// Log-standard deviation of the time headway.
     pub headway_log_sd: f64,
+    /// Laplace scale λ_brake of the BV's braking actions (m/s²).
     pub brake_scale: f64,
+    /// Laplace scale of the BV's accelerating actions at low speed (m/s²), shrunk near the top speed.
     pub accel_scale: f64,
     /// States closing faster than this time to collision have exposure 0 (s).
     pub min_ttc: f64,

@@ -23,6 +23,7 @@ use crate::library::ExposureRef;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
+/// The first eight bytes of every policy library file.
 pub const MAGIC: &[u8; 8] = b"TSLGPOL\0";
 /// The current format version.
 pub const VERSION: u32 = 1;
@@ -33,43 +34,60 @@ pub const MEDIA_TYPE: &str = "application/vnd.tslg.policy-library";
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct PolicyHeader {
+    /// The format version ([`VERSION`]).
     pub version: u32,
+    /// The case (`car-following`).
     pub case: String,
+    /// The case's preset.
     pub preset: String,
     /// The surrogate model, as its full specification.
     pub surrogate: serde_json::Value,
+    /// The exposure the library was learned on.
     pub exposure: ExposureRef,
+    /// The solver that learned the Q-values.
     pub solver: PolicySolver,
     /// DP sweeps or TD updates until the tolerance held.
     pub iterations: u64,
     /// Grid states and actions per state.
     pub states: usize,
+    /// Actions per state (31 on the paper's grid).
     pub actions: usize,
     /// `μ_S = Σ_s P(s) P(S|s)`.
     pub mu_s: f64,
     /// States with `P(S|s) > 0` and their exposure `Σ P(s)`.
     pub library_states: usize,
+    /// `P(Φ) = Σ_{s∈Φ} P(s)`.
     pub library_exposure: f64,
+    /// One-decision surrogate simulations the build used.
     pub sm_evaluations: usize,
 }
 
 /// A policy library with its header, as stored and served.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PolicyLibraryFile {
+    /// Everything but the Q-values.
     pub header: PolicyHeader,
+    /// The Q-values and `P(S|s)`.
     pub library: PolicyLibrary,
 }
 
+/// Why a policy library file was refused.
 #[derive(Debug, Error, PartialEq)]
 pub enum PolicyFileError {
+    /// Not a policy library file: wrong magic, header or length.
     #[error("not a car-following library file: {0}")]
     Malformed(String),
+    /// A format version this build cannot read.
     #[error("car-following library format version {0} is not supported (this build reads version {VERSION})")]
     Version(u32),
+    /// A row of Q-values that is not a valid sub-probability.
     #[error("row {row} (state {state}): {reason}")]
     BadRow {
+        /// The row's position in the file.
         row: usize,
+        /// Its grid state.
         state: usize,
+        /// What is wrong with it.
         reason: String,
     },
 }
@@ -111,6 +129,7 @@ impl<'a> Reader<'a> {
 const ROW_SUM_SLACK: f64 = 1e-9;
 
 impl PolicyLibraryFile {
+    /// The file's bytes: magic, header length, JSON header, then the Q-values as little-endian `f64`.
     pub fn to_bytes(&self) -> Vec<u8> {
         let header = serde_json::to_vec(&self.header).expect("headers serialise");
         let actions = self.library.actions;

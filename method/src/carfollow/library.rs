@@ -33,16 +33,22 @@ use rayon::prelude::*;
 /// Where a state lies.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Zone {
+    /// Range ≤ the accident range: the accident has happened.
     Collision,
+    /// No accident even if the BV brakes at −4 m/s² for the rest of the test.
     Safe,
+    /// Neither: an accident is possible and depends on the BV's actions.
     Dangerous,
 }
 
 /// Where one BV decision leads.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Next {
+    /// The decision leads to an accident.
     Accident,
+    /// No accident can follow: the state leaves the grid or is not dangerous.
     Free,
+    /// The grid state the decision leads to.
     State(usize),
 }
 
@@ -50,16 +56,20 @@ pub enum Next {
 /// library is computed from.
 #[derive(Debug, Clone)]
 pub struct Transitions {
+    /// The grid of states.
     pub grid: StateGrid,
+    /// The zone of each grid state.
     pub zones: Vec<Zone>,
     /// `next[s · actions + k]`.
     pub next: Vec<Next>,
     /// `P(u|s)` as `action_probability[s · actions + k]`.
     pub action_probability: Vec<f64>,
+    /// Actions per state.
     pub actions: usize,
 }
 
 impl Transitions {
+    /// The surrogate's transitions from every grid state under every action.
     pub fn compute(
         world: &FollowWorld,
         grid: StateGrid,
@@ -119,6 +129,7 @@ impl Transitions {
         }
     }
 
+    /// The share of grid states in the dangerous zone.
     pub fn dangerous_share(&self) -> f64 {
         let n = self.zones.iter().filter(|&&z| z == Zone::Dangerous).count();
         n as f64 / self.zones.len() as f64
@@ -160,8 +171,11 @@ pub fn zone(world: &FollowWorld, state: FollowState, surrogate: &VehicleModel) -
 /// A learned library: `Q(s, u)` and `P(S|s) = Σ_u Q(s, u)`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PolicyLibrary {
+    /// Actions per state.
     pub actions: usize,
+    /// `Q(s, u)` as `q[s · actions + u]`: the chance of an accident after action `u` in state `s`, times `P(u|s)`.
     pub q: Vec<f64>,
+    /// `P(S|s) = Σ_u Q(s, u)` per state.
     pub challenge: Vec<f64>,
     /// Sweeps (DP) or single updates (TD) until the tolerance held.
     pub iterations: u64,
@@ -199,6 +213,7 @@ impl PolicyLibrary {
 /// The solvers stop here whether or not the tolerance held; a library that
 /// reached a cap is not at the fixed point.
 pub const DP_MAX_SWEEPS: u64 = 10_000;
+/// The most TD(0) updates before the solver stops.
 pub const TD_MAX_UPDATES: u64 = 20_000_000_000;
 
 /// Backward dynamic programming: Gauss–Seidel value iteration

@@ -31,6 +31,7 @@ use std::sync::Arc;
 /// One car-following test.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FollowTest {
+    /// Whether the test ended in an accident.
     pub accident: bool,
     /// `ln w`: 0 for the NDD.
     pub log_weight: f64,
@@ -39,6 +40,7 @@ pub struct FollowTest {
 }
 
 impl FollowTest {
+    /// The test's importance weight `w = exp(log_weight)`.
     pub fn weight(&self) -> f64 {
         self.log_weight.exp()
     }

@@ -9,14 +9,18 @@ use super::world::FollowState;
 /// The state grid's axes.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StateGrid {
+    /// BV speed axis: `(lowest value, number of values)` (m/s).
     pub speed: (f64, usize),
+    /// Range axis: `(lowest value, number of values)` (m).
     pub range: (f64, usize),
+    /// Range-rate axis: `(lowest value, number of values)` (m/s).
     pub range_rate: (f64, usize),
     /// Step of every axis (1 m/s, 1 m).
     pub step: f64,
 }
 
 impl StateGrid {
+    /// The paper's grid: v 20…40, R 1…115, Ṙ −10…8, step 1 (45,885 states).
     pub fn paper() -> Self {
         Self {
             speed: (20.0, 21),
@@ -26,10 +30,12 @@ impl StateGrid {
         }
     }
 
+    /// Number of grid states.
     pub fn len(&self) -> usize {
         self.speed.1 * self.range.1 * self.range_rate.1
     }
 
+    /// Whether the grid has no states.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }

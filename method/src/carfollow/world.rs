@@ -18,12 +18,15 @@ pub struct FollowWorld {
     /// The BV's lowest acceleration and the action step (m/s²): actions are
     /// `u_min + k · u_step`, `k = 0 … actions − 1`.
     pub u_min: f64,
+    /// Step between the BV's actions (m/s²).
     pub u_step: f64,
+    /// Number of BV actions.
     pub actions: usize,
     /// The BV's speed stays in this interval: the grid's speeds (m/s).
     pub bv_speed: (f64, f64),
     /// The VUT's acceleration and speed bounds.
     pub vut_accel: (f64, f64),
+    /// The VUT's speed bounds (m/s).
     pub vut_speed: (f64, f64),
     /// Accident: range `≤ accident_range` (m).
     pub accident_range: f64,
@@ -57,12 +60,16 @@ impl FollowWorld {
 /// The continuous state of a run: `(v_BV, R, Ṙ)` with `Ṙ = v_BV − v_VUT`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FollowState {
+    /// The BV's speed v (m/s).
     pub bv_speed: f64,
+    /// The range R (m).
     pub range: f64,
+    /// The range rate `Ṙ = v_BV − v_VUT` (m/s).
     pub range_rate: f64,
 }
 
 impl FollowState {
+    /// The VUT's speed `v_BV − Ṙ` (m/s).
     pub fn vut_speed(&self) -> f64 {
         self.bv_speed - self.range_rate
     }
@@ -72,7 +79,9 @@ impl FollowState {
 /// driven, for the observations of an external program.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Odometer {
+    /// Fine steps taken since the test started.
     pub step: usize,
+    /// The VUT's distance driven (m).
     pub position: f64,
 }
 

@@ -26,15 +26,25 @@ use crate::mass::GridMass;
 /// Fitted parameters (see the module documentation for the formula).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CutInExposureModel {
+    /// Weibull shape k of the range's rise.
     pub k: f64,
+    /// Weibull scale λ of the range's rise (m).
     pub lambda: f64,
+    /// Decay length θ of the range (m).
     pub theta: f64,
+    /// Intercept m₀ of the range-rate mode (m/s).
     pub m0: f64,
+    /// Slope m₁ of the range-rate mode (1/s).
     pub m1: f64,
+    /// `(a₀, a₁)`: left scale of the narrow component, `a = a₀ + a₁R` (m/s).
     pub a: (f64, f64),
+    /// `(b₀, b₁)`: right scale of the narrow component (m/s).
     pub b: (f64, f64),
+    /// `(c₀, c₁)`: left scale of the wide component (m/s).
     pub c: (f64, f64),
+    /// `(d₀, d₁)`: right scale of the wide component (m/s).
     pub d: (f64, f64),
+    /// `(w₀, w₁)`: logit of the narrow component's weight, `w₀ + w₁R`.
     pub w: (f64, f64),
 }
 

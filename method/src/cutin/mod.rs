@@ -20,8 +20,10 @@ use thiserror::Error;
 /// Why a cut-in case could not be set up.
 #[derive(Debug, Error, PartialEq)]
 pub enum CutInError {
+    /// The exposure is not two-dimensional.
     #[error("the cut-in case needs a two-dimensional (range, range rate) exposure, got {0} dimension(s)")]
     Dimensions(usize),
+    /// The exposure table was refused.
     #[error(transparent)]
     Table(#[from] TableError),
 }
@@ -99,10 +101,12 @@ impl CutIn {
         Ok((case, table))
     }
 
+    /// The simulation preset in force.
     pub fn preset(&self) -> CutInPreset {
         self.preset
     }
 
+    /// The preset's simulation settings.
     pub fn settings(&self) -> &CutInSettings {
         &self.settings
     }

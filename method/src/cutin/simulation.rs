@@ -23,6 +23,7 @@ pub struct CutInSettings {
     pub speed: (f64, f64),
     /// An accident is a range `≤ accident_gap` (`inclusive`) or `< accident_gap`.
     pub accident_gap: f64,
+    /// Whether a range equal to `accident_gap` is an accident.
     pub inclusive: bool,
 }
 
@@ -38,6 +39,7 @@ pub enum CutInPreset {
 }
 
 impl CutInPreset {
+    /// The preset's settings.
     pub fn settings(self) -> CutInSettings {
         match self {
             // dt 1 s for 10 s; a ∈ [−3, 3]; v ∈ [0, 40]; accident at R ≤ 0.
@@ -63,6 +65,7 @@ impl CutInPreset {
         }
     }
 
+    /// The preset's name on the wire (`paper-code`, `paper-table`).
     pub fn name(self) -> &'static str {
         match self {
             CutInPreset::PaperCode => "paper-code",

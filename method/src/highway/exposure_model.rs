@@ -31,11 +31,13 @@ use crate::mass::GridMass;
 pub struct ExitExposureModel {
     /// Leader speed mean and standard deviation (m/s).
     pub speed_mean: f64,
+    /// Leader speed standard deviation (m/s).
     pub speed_sd: f64,
     /// Standard deviation of the follower's speed about the leader's (m/s).
     pub relative_speed_sd: f64,
     /// Median (s) and log-standard deviation of the time headway.
     pub headway_median: f64,
+    /// Log-standard deviation of the time headway.
     pub headway_log_sd: f64,
 }
 

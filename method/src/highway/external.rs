@@ -9,6 +9,7 @@ use crate::external::{checked_control, DriverError, Ego, ExternalVehicle, Observ
 
 /// The lane numbers of the protocol.
 pub const RIGHT_LANE: u32 = 0;
+/// The protocol's number of the left (through) lane.
 pub const LEFT_LANE: u32 = 1;
 
 /// The constants a program is told at each reset.
@@ -69,6 +70,7 @@ pub fn observation(view: &DriverView) -> Observation {
 
 /// A program driving the VUT in step mode.
 pub struct ExternalExitDriver<'a> {
+    /// The program, reset for this test.
     pub vut: &'a mut dyn ExternalVehicle,
 }
 

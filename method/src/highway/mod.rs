@@ -35,6 +35,7 @@ pub enum HighwayPreset {
 }
 
 impl HighwayPreset {
+    /// The preset's name on the wire (`paper`, `coarse`).
     pub fn name(self) -> &'static str {
         match self {
             HighwayPreset::Paper => "paper",
@@ -113,10 +114,12 @@ impl HighwayExit {
         }
     }
 
+    /// The preset the case was opened with.
     pub fn preset(&self) -> HighwayPreset {
         self.preset
     }
 
+    /// The road, its exit and the simulation constants.
     pub fn world(&self) -> &ExitWorld {
         &self.world
     }
@@ -127,6 +130,7 @@ impl HighwayExit {
         [0, 1, 2, 3].map(|axis| g.value(cell, axis))
     }
 
+    /// Simulates built-in `vehicle` on the scenario of grid cell `cell`.
     pub fn run(&self, vehicle: &ExitVehicle, cell: usize) -> ExitRun {
         simulation::run(&self.world, vehicle, self.scenario(cell))
     }

@@ -18,12 +18,16 @@ use super::world::{ExitWorld, Traffic};
 /// How a run ended. Failures are the event `A`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum ExitOutcome {
+    /// The VUT reached the exit in the right lane.
     Exited,
+    /// The VUT passed the exit, or ran out of time, without taking it.
     FailedToExit,
+    /// The VUT overlapped a background vehicle.
     Collision,
 }
 
 impl ExitOutcome {
+    /// Whether the run is the event `A` (any outcome but `Exited`).
     pub fn is_failure(self) -> bool {
         self != ExitOutcome::Exited
     }
@@ -32,6 +36,7 @@ impl ExitOutcome {
 /// The record of a run.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ExitRun {
+    /// How the run ended.
     pub outcome: ExitOutcome,
     /// When the run ended (s).
     pub time: f64,

@@ -65,17 +65,21 @@ impl ExitWorld {
 /// A background vehicle's state.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Bv {
+    /// Position along the road (m).
     pub position: f64,
+    /// Speed (m/s), constant over the run.
     pub speed: f64,
 }
 
 /// The two BVs of a scenario `x = (p₁, v₁, p₂, v₂)`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Traffic {
+    /// The two BVs, as the scenario lists them.
     pub bvs: [Bv; 2],
 }
 
 impl Traffic {
+    /// The traffic of scenario `x = (p₁, v₁, p₂, v₂)`.
     pub fn new(x: [f64; 4]) -> Self {
         Self {
             bvs: [
@@ -103,10 +107,12 @@ impl Traffic {
         }
     }
 
+    /// The BV ahead (see [`Traffic::order`]).
     pub fn front(&self) -> Bv {
         self.bvs[self.order().0]
     }
 
+    /// The BV behind (see [`Traffic::order`]).
     pub fn rear(&self) -> Bv {
         self.bvs[self.order().1]
     }

@@ -78,11 +78,14 @@ pub fn subtract(low: f64, high: f64, cuts: &[(f64, f64)]) -> Vec<(f64, f64)> {
 /// The zone at one time step: its free pieces.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ZoneSlice {
+    /// The time of the slice (s).
     pub t: f64,
+    /// The free intervals `(from, to)` of the right lane (m), ascending.
     pub pieces: Vec<(f64, f64)>,
 }
 
 impl ZoneSlice {
+    /// The total length of the free pieces (m).
     pub fn length(&self) -> f64 {
         self.pieces.iter().map(|(a, b)| b - a).sum()
     }

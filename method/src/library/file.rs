@@ -11,44 +11,76 @@ pub const FORMAT: &str = "tslg-library";
 /// The current format version.
 pub const VERSION: u32 = 1;
 
+/// Why a library file was refused.
 #[derive(Debug, Error, PartialEq)]
 pub enum LibraryFileError {
+    /// The text is not JSON of a library's shape (serde's message).
     #[error("not a library file: {0}")]
     Json(String),
+    /// The `format` tag is not this project's.
     #[error("not a library file: format is `{0}`, expected `{FORMAT}`")]
     Format(String),
+    /// A format version this build cannot read.
     #[error("library format version {0} is not supported (this build reads version {VERSION})")]
     Version(u32),
+    /// A cell number beyond the grid.
     #[error("library cell {index}: cell number {cell} is outside the grid of {cells} cells")]
     CellOutOfRange {
+        /// Position of the offending entry in `cells`.
         index: usize,
+        /// The cell number it gives.
         cell: usize,
+        /// Cells of the grid.
         cells: usize,
     },
     #[error(
         "library cell {index}: cell numbers must increase strictly ({cell} follows {previous})"
     )]
+    /// Cells out of order or repeated.
     CellsNotIncreasing {
+        /// Position of the offending entry in `cells`.
         index: usize,
+        /// The cell number it gives.
         cell: usize,
+        /// The cell number before it.
         previous: usize,
     },
+    /// A criticality that is not finite or not above γ.
     #[error("library cell {index}: criticality {value} must be a finite number above γ = {gamma}")]
     BadCriticality {
+        /// Position of the offending entry in `cells`.
         index: usize,
+        /// Its criticality.
         value: f64,
+        /// The library's γ.
         gamma: f64,
     },
+    /// A summary field out of its range (γ, μ_S, W).
     #[error("library field `{field}` = {value} is invalid: {reason}")]
     BadField {
+        /// The field's name.
         field: &'static str,
+        /// Its value.
         value: f64,
+        /// The range it must be in.
         reason: &'static str,
     },
+    /// The library is for another case.
     #[error("the library is for case `{library}`, not `{expected}`")]
-    WrongCase { library: String, expected: String },
+    WrongCase {
+        /// The library's case.
+        library: String,
+        /// The case it was opened for.
+        expected: String,
+    },
+    /// The library was built on another exposure than the campaign's.
     #[error("the library was built on exposure {library} but this campaign uses {campaign}; build the library on the same exposure")]
-    WrongExposure { library: String, campaign: String },
+    WrongExposure {
+        /// The library's exposure (name and fingerprint).
+        library: String,
+        /// The campaign's exposure.
+        campaign: String,
+    },
 }
 
 /// The file as written: the format tag and version, then the library's

@@ -18,9 +18,15 @@ use thiserror::Error;
 #[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum Threshold {
     /// `γ = m μ_S / N(X)` (Part I, Corollary 2; the default is m = 1).
-    Relative { m: f64 },
+    Relative {
+        /// The multiple m of the mean criticality per scenario.
+        m: f64,
+    },
     /// A fixed γ.
-    Absolute { gamma: f64 },
+    Absolute {
+        /// γ itself, in units of the criticality `V(x) = P(S|x) P(x)`.
+        gamma: f64,
+    },
 }
 
 impl Default for Threshold {
@@ -32,8 +38,10 @@ impl Default for Threshold {
 /// A threshold parameter outside its range.
 #[derive(Debug, Error, PartialEq)]
 pub enum ThresholdError {
+    /// The multiplier m is outside [1e-6, 1e6].
     #[error("threshold multiplier m = {} must be in [1e-6, 1e6]", crate::number::Num(*.0))]
     BadMultiplier(f64),
+    /// The absolute γ is outside [0, 1].
     #[error("absolute threshold γ = {} must be in [0, 1] (a criticality P(S|x) P(x) is at most 1)", crate::number::Num(*.0))]
     BadAbsolute(f64),
 }
@@ -70,13 +78,19 @@ pub enum SearchMethod {
     Exhaustive,
     /// Local searches of the auxiliary objective from `starts` uniform random
     /// cells, then a flood fill from every critical optimum.
-    Multistart { starts: usize, seed: u64 },
+    Multistart {
+        /// Random starting cells of the local searches.
+        starts: usize,
+        /// Seed of the starting cells.
+        seed: u64,
+    },
 }
 
 /// What a search did.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SearchReport {
+    /// The search that built the library.
     pub method: SearchMethod,
     /// Distinct cells on which the surrogate was simulated.
     pub sm_evaluations: usize,
@@ -89,6 +103,7 @@ pub struct SearchReport {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LibraryCell {
+    /// The cell's index in the case's grid (row-major over the axes).
     pub cell: usize,
     /// `V(x) = P(S|x) P(x)`.
     pub criticality: f64,
@@ -98,7 +113,9 @@ pub struct LibraryCell {
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ExposureRef {
+    /// The exposure's name (`builtin` or the table's name).
     pub name: String,
+    /// The exposure's fingerprint; campaigns sampling the library must use the same.
     pub fingerprint: String,
 }
 
@@ -106,13 +123,17 @@ pub struct ExposureRef {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Library {
+    /// The case the library is for (`cut-in`, `highway-exit`).
     pub case: String,
     /// The case's simulation preset (e.g. `paper-code`).
     pub preset: String,
     /// The surrogate model, as its specification.
     pub surrogate: serde_json::Value,
+    /// The exposure `P(x)` the library was built on.
     pub exposure: ExposureRef,
+    /// The scenario grid `X` the cells index.
     pub grid: Grid,
+    /// How γ was chosen.
     pub threshold: Threshold,
     /// The γ used.
     pub gamma: f64,
@@ -121,6 +142,7 @@ pub struct Library {
     pub mu_s: f64,
     /// `W = Σ_{x∈Φ} V(x)`.
     pub w: f64,
+    /// How the cells were found.
     pub search: SearchReport,
     /// Library cells in increasing cell order.
     pub cells: Vec<LibraryCell>,
@@ -129,7 +151,9 @@ pub struct Library {
 /// A library request: threshold and search.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LibraryRequest {
+    /// How γ is chosen.
     pub threshold: Threshold,
+    /// How the critical cells are searched.
     pub search: SearchMethod,
 }
 

@@ -49,30 +49,60 @@ pub enum ExposureSource {
     /// The case's documented built-in exposure model.
     Builtin,
     /// A table in the layout of SPEC §4 (see [`crate::ndd_table`]).
-    Table { name: String, text: String },
+    Table {
+        /// The table's name, shown with campaigns and libraries.
+        name: String,
+        /// The table's CSV text.
+        text: String,
+    },
 }
 
 /// Why a case, a vehicle or a library could not be used.
 #[derive(Debug, Error, PartialEq)]
 pub enum CaseError {
+    /// No case of that name.
     #[error("unknown case `{0}`; known cases: {known}", known = CASES.join(", "))]
     UnknownCase(String),
+    /// No preset of that name for the case.
     #[error("{0}")]
     Preset(String),
+    /// An exposure table that fails validation.
     #[error("exposure table `{name}` rejected: {reason}")]
-    Exposure { name: String, reason: String },
+    Exposure {
+        /// The table's name.
+        name: String,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// A vehicle specification the case cannot run.
     #[error("invalid vehicle for case {case}: {reason}")]
-    Vehicle { case: &'static str, reason: String },
+    Vehicle {
+        /// The case.
+        case: &'static str,
+        /// What is wrong with the vehicle.
+        reason: String,
+    },
+    /// A library request the case cannot build.
     #[error("invalid library request for case {case}: {reason}")]
-    Request { case: &'static str, reason: String },
+    Request {
+        /// The case.
+        case: &'static str,
+        /// What is wrong with the request.
+        reason: String,
+    },
+    /// A grid library file that cannot be used.
     #[error(transparent)]
     Library(#[from] LibraryFileError),
+    /// A car-following policy file that cannot be used.
     #[error(transparent)]
     Policy(#[from] PolicyFileError),
+    /// A test distribution that cannot be built.
     #[error(transparent)]
     Sampling(#[from] SamplingError),
+    /// The case has no exact answer for this request (e.g. car-following).
     #[error("{0}")]
     NoExactAnswer(String),
+    /// The surrogate search failed.
     #[error("the library could not be built: {0}")]
     Build(String),
 }
@@ -89,19 +119,24 @@ pub enum LibrarySearch {
 /// A build request; what is `None` takes the case's default.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct BuildRequest {
+    /// The criticality threshold; the case's default when `None`.
     pub threshold: Option<Threshold>,
+    /// The search or solver; the case's default when `None`.
     pub search: Option<LibrarySearch>,
 }
 
 /// A built library: its file in the case's format and its summary.
 #[derive(Debug, Clone, PartialEq)]
 pub struct BuiltLibrary {
+    /// The library file's bytes.
     pub file: Vec<u8>,
     /// The file's media type (JSON for grid cases, binary for car-following).
     pub media_type: &'static str,
     /// `N(Φ)`: library cells, or states with `P(S|s) > 0`.
     pub size: usize,
+    /// Surrogate simulations the search used.
     pub sm_evaluations: usize,
+    /// `μ_S = Σ_x V(x)`: the surrogate's event rate under the exposure (exact for exhaustive search, a lower bound otherwise).
     pub mu_s: f64,
     /// `W`: the criticality mass inside the library.
     pub w: f64,
@@ -110,6 +145,7 @@ pub struct BuiltLibrary {
 /// What one test gave.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TestOutcome {
+    /// Whether the test had the event `A`.
     pub event: bool,
     /// The importance weight `P/q` of the whole test.
     pub weight: f64,
@@ -118,9 +154,11 @@ pub struct TestOutcome {
 /// A test whose scenario and weight are fixed before it runs (grid cases).
 #[derive(Debug, Clone, PartialEq)]
 pub struct PlannedTest {
+    /// The scenario's grid cell.
     pub cell: usize,
     /// The scenario's parameters.
     pub scenario: Vec<f64>,
+    /// The importance weight `P(x)/q(x)`.
     pub weight: f64,
 }
 
@@ -192,6 +230,7 @@ pub trait ScenarioCase: Send + Sync {
     fn name(&self) -> &'static str;
     /// The simulation preset in force.
     fn preset(&self) -> String;
+    /// The exposure's name (`builtin` or the table's name).
     fn exposure_name(&self) -> &str;
     /// A fingerprint of the exposure; libraries and campaigns must share it.
     fn exposure_fingerprint(&self) -> String;

@@ -9,11 +9,17 @@ use crate::grid::Grid;
 /// One map: `values[i · y_centres.len() + j]` at `(x_centres[i], y_centres[j])`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PictureMap {
+    /// The map's title.
     pub title: String,
+    /// The horizontal axis's title, with its unit.
     pub x_label: String,
+    /// The horizontal cell centres, ascending.
     pub x_centres: Vec<f64>,
+    /// The vertical axis's title, with its unit.
     pub y_label: String,
+    /// The vertical cell centres, ascending.
     pub y_centres: Vec<f64>,
+    /// The values, `x_centres.len() × y_centres.len()` of them.
     pub values: Vec<f64>,
 }
 

@@ -23,6 +23,7 @@
 use super::{check, FollowerObservation, ParamError};
 use serde::{Deserialize, Serialize};
 
+/// Parameters of the ACC + AEB vehicle.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct AccAebParams {
@@ -72,6 +73,7 @@ impl Default for AccAebParams {
 }
 
 impl AccAebParams {
+    /// Checks every parameter is finite and in range.
     pub fn validate(&self) -> Result<(), ParamError> {
         const M: &str = "acc-aeb";
         let positive = |x: f64| x > 0.0;
@@ -127,6 +129,7 @@ impl AccAebParams {
         )
     }
 
+    /// The commanded acceleration (m/s²), before the world's clipping.
     pub fn acceleration(&self, obs: &FollowerObservation) -> f64 {
         let closing_speed = obs.speed - obs.lead_speed;
         let emergency = obs.gap < self.aeb_gap

@@ -37,6 +37,7 @@ impl Default for FvdmParams {
 }
 
 impl FvdmParams {
+    /// Checks every parameter is finite and in range.
     pub fn validate(&self) -> Result<(), ParamError> {
         check("fvdm", "k", self.k, |x| x > 0.0, "must be > 0")?;
         check("fvdm", "v1", self.v1, |x| x.is_finite(), "must be finite")?;
@@ -46,6 +47,7 @@ impl FvdmParams {
         check("fvdm", "length", self.length, |x| x >= 0.0, "must be ≥ 0")
     }
 
+    /// `a = k(V₁ + V₂ tanh(C₁(R − L) − C₂) − v)` (m/s²), before clipping.
     pub fn acceleration(&self, obs: &FollowerObservation) -> f64 {
         let optimal_speed =
             self.v1 + self.v2 * (self.c1 * (obs.gap - self.length) - self.c2).tanh();

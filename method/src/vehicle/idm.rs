@@ -45,6 +45,7 @@ impl Default for IdmParams {
 }
 
 impl IdmParams {
+    /// Checks every parameter is finite and in range.
     pub fn validate(&self) -> Result<(), ParamError> {
         check("idm", "alpha", self.alpha, |x| x > 0.0, "must be > 0")?;
         check("idm", "v0", self.v0, |x| x > 0.0, "must be > 0")?;

@@ -24,9 +24,13 @@ use thiserror::Error;
 #[derive(Debug, Error, PartialEq)]
 #[error("{model}: parameter `{parameter}` = {} {requirement}", crate::number::Num(*.value))]
 pub struct ParamError {
+    /// The model's name.
     pub model: &'static str,
+    /// The parameter's name.
     pub parameter: &'static str,
+    /// The value given.
     pub value: f64,
+    /// The range it must be in, in words.
     pub requirement: &'static str,
 }
 
@@ -81,12 +85,15 @@ pub struct FollowerObservation {
 pub struct FollowStep {
     /// Steps since the test started, and `time = step · dt` (s).
     pub step: usize,
+    /// Seconds since the test started.
     pub time: f64,
     /// Own front bumper from where the test started (m).
     pub position: f64,
+    /// What the follower sees: own speed, the leader's speed and the gap.
     pub obs: FollowerObservation,
     /// The world's acceleration bounds `(a_min, a_max)`.
     pub clip: (f64, f64),
+    /// The simulation's time step (s).
     pub dt: f64,
 }
 
@@ -94,6 +101,7 @@ pub struct FollowStep {
 /// fail, `Error = Infallible`, so the built-in path costs nothing extra) or
 /// an external program ([`crate::external::ExternalFollower`]).
 pub trait FollowDriver {
+    /// Why a decision failed (`Infallible` for built-in drivers).
     type Error;
     /// The commanded acceleration for the next step.
     fn decide(&mut self, step: &FollowStep) -> Result<f64, Self::Error>;
@@ -110,9 +118,13 @@ impl FollowDriver for Controller {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "model", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum VehicleSpec {
+    /// The Intelligent Driver Model.
     Idm(IdmParams),
+    /// The full velocity difference model.
     Fvdm(FvdmParams),
+    /// The switching ACC (incremental PI on the time-to-collision error).
     SwitchingAcc(SwitchingAccParams),
+    /// A constant-time-gap ACC with an autonomous emergency brake.
     AccAeb(AccAebParams),
 }
 
@@ -171,6 +183,7 @@ impl VehicleModel {
         }
     }
 
+    /// The model as written, with its parameters.
     pub fn spec(&self) -> &VehicleSpec {
         &self.0
     }

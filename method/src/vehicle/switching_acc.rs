@@ -43,6 +43,7 @@ impl Default for SwitchingAccParams {
 }
 
 impl SwitchingAccParams {
+    /// Checks every parameter is finite and in range.
     pub fn validate(&self) -> Result<(), ParamError> {
         check(
             "switching-acc",

@@ -48,19 +48,16 @@ pub struct AuditRow {
     pub id: i64,
     pub campaign_id: i64,
     pub test_index: i64,
-    pub reason: String,
     pub state: AuditState,
     pub first_worker: String,
     pub first_outcome: String,
     pub replica_worker: Option<String>,
     pub replica_outcome: Option<String>,
-    pub third_worker: Option<String>,
-    pub third_outcome: Option<String>,
     pub lease_id: Option<i64>,
 }
 
-const COLUMNS: &str = "id, campaign_id, test_index, reason, state, first_worker, first_outcome, \
-    replica_worker, replica_outcome, third_worker, third_outcome, lease_id";
+const COLUMNS: &str = "id, campaign_id, test_index, state, first_worker, first_outcome, \
+    replica_worker, replica_outcome, lease_id";
 
 /// States in which an audit waits for a run and holds the campaign's
 /// prefix at its test.

@@ -31,7 +31,6 @@ pub struct LeaseRow {
     pub resume_at: i64,
     pub attempt: i64,
     pub worker: String,
-    pub expires_at: i64,
     pub state: LeaseState,
     pub key: String,
     /// Unix ms when the current attempt was handed out.
@@ -43,7 +42,7 @@ pub struct LeaseRow {
 }
 
 pub const COLUMNS: &str = "id, campaign_id, start_index, end_index, resume_at, attempt, worker, \
-    expires_at, state, key, claimed_at, threads, audit_id";
+    state, key, claimed_at, threads, audit_id";
 
 /// Open audits past which a campaign gets no new range.
 const MAX_OPEN_AUDITS: i64 = 256;

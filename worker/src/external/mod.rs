@@ -14,7 +14,7 @@
 //! handshake.
 
 mod process;
-pub mod protocol;
+mod protocol;
 
 pub use process::{Capabilities, Fault, ProgramProcess};
 
@@ -43,7 +43,9 @@ const MAX_REASON: usize = 1800;
 /// (quotes and backslashes, no expansion) and run directly.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct ProgramSpec {
+    /// The name campaigns use for the program (`{"external": NAME}`).
     pub name: String,
+    /// The command and its arguments, run without a shell.
     pub command: Vec<String>,
 }
 
@@ -82,6 +84,7 @@ pub struct ProgramSettings {
 /// What running one test with a program gave.
 #[derive(Debug, Clone, PartialEq)]
 pub enum ProgramRun {
+    /// The program ran the test; its outcome.
     Done(TestOutcome),
     /// No valid outcome; the reason.
     Invalid(String),
@@ -134,10 +137,12 @@ impl Program {
         })
     }
 
+    /// The program's name.
     pub fn name(&self) -> &str {
         &self.spec.name
     }
 
+    /// What the program said it can drive, in its handshake.
     pub fn capabilities(&self) -> &Capabilities {
         &self.capabilities
     }
@@ -156,6 +161,7 @@ impl Program {
             .collect()
     }
 
+    /// Why the program is resting, while it is.
     pub fn unhealthy(&self) -> Option<UnhealthyProgram> {
         let health = lock(&self.health);
         health
@@ -380,14 +386,17 @@ impl Programs {
         Ok(Self { by_name })
     }
 
+    /// The program named `name`.
     pub fn get(&self, name: &str) -> Option<&Arc<Program>> {
         self.by_name.get(name)
     }
 
+    /// What the healthy programs offer, as the requirement strings of lease requests.
     pub fn offers(&self) -> Vec<String> {
         self.by_name.values().flat_map(|p| p.offers()).collect()
     }
 
+    /// The programs resting, with why.
     pub fn unhealthy(&self) -> Vec<UnhealthyProgram> {
         self.by_name
             .values()
@@ -395,6 +404,7 @@ impl Programs {
             .collect()
     }
 
+    /// Whether any program has rested long enough to be tried again.
     pub fn any_rested(&self) -> bool {
         self.by_name.values().any(|p| p.rested())
     }

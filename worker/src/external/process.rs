@@ -28,11 +28,22 @@ pub enum Fault {
     /// It could not be started.
     Spawn(String),
     /// It exited (a crash, or an early exit) or closed its stdout.
-    Exited { status: String, stderr: String },
+    Exited {
+        /// The exit status as the system describes it.
+        status: String,
+        /// The end of what it wrote to stderr.
+        stderr: String,
+    },
     /// No answer before the per-test deadline; it was killed.
-    Timeout { seconds: f64 },
+    Timeout {
+        /// The per-test deadline (s).
+        seconds: f64,
+    },
     /// A line that is not the message the protocol expects here.
-    Garbage { detail: String },
+    Garbage {
+        /// What was wrong with the line.
+        detail: String,
+    },
     /// It answered `{"type": "error"}`: it cannot run this test, but the
     /// conversation is intact.
     Refused(String),
@@ -64,7 +75,9 @@ impl fmt::Display for Fault {
 /// What a program said in its handshake.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Capabilities {
+    /// The name it gave itself, if any.
     pub name: Option<String>,
+    /// The cases it drives and in which modes (step, episode).
     pub cases: BTreeMap<String, Vec<ExternalMode>>,
 }
 
@@ -154,6 +167,7 @@ fn kill_group(group: i32) {
     }
 }
 
+/// One running process of a program, with its pipes.
 pub struct ProgramProcess {
     /// The per-test time limit, for the reason of a timeout.
     timeout: Duration,

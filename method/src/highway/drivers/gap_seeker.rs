@@ -36,6 +36,7 @@ use crate::highway::world::{Bv, ExitWorld};
 use crate::vehicle::{check, ParamError};
 use serde::{Deserialize, Serialize};
 
+/// Parameters of the gap seeker (a highway-exit VUT).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct GapSeekerParams {
@@ -51,9 +52,11 @@ pub struct GapSeekerParams {
     pub k_speed: f64,
     /// Comfort bounds of the seeker's commands (m/s²).
     pub brake: f64,
+    /// Upper comfort bound of the seeker's commands (m/s²).
     pub accelerate: f64,
     /// IDM in the right lane: desired speed (m/s) and headway (s).
     pub v0: f64,
+    /// IDM desired time headway in the right lane (s).
     pub headway: f64,
 }
 
@@ -74,6 +77,7 @@ impl Default for GapSeekerParams {
 }
 
 impl GapSeekerParams {
+    /// Checks every parameter is finite and in range.
     pub fn validate(&self) -> Result<(), ParamError> {
         let m = "gap-seeker";
         check(m, "front_gap", self.front_gap, |x| x >= 0.0, "must be ≥ 0")?;

@@ -34,6 +34,7 @@ use serde::{Deserialize, Serialize};
 /// Plan accelerations (m/s²), clamped to the world's bounds.
 const PLAN_ACCELS: [f64; 10] = [-4.0, -3.0, -2.0, -1.0, -0.5, 0.0, 0.5, 1.0, 1.5, 2.0];
 
+/// Parameters of the MOBIL driver (the highway-exit surrogate).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct MobilParams {
@@ -45,19 +46,26 @@ pub struct MobilParams {
     pub replan: f64,
     /// Prediction step (s) and horizon (s) of the speed plan.
     pub plan_step: f64,
+    /// Horizon of the speed plan (s).
     pub plan_horizon: f64,
     /// Utility lost per second of waiting for a gap (m/s² per s).
     pub wait_cost: f64,
     /// Bounds of the plan's accelerations (m/s²), within the world's.
     pub brake: f64,
+    /// Upper bound of the plan's accelerations (m/s²).
     pub accelerate: f64,
     /// IDM: desired speed v₀ (m/s), headway T (s), jam gap s₀ (m),
     /// acceleration α and comfortable braking b (m/s²), exponent δ.
     pub v0: f64,
+    /// IDM desired time headway T (s).
     pub headway: f64,
+    /// IDM jam distance s₀ (m).
     pub s0: f64,
+    /// IDM maximum acceleration α (m/s²).
     pub alpha: f64,
+    /// IDM comfortable deceleration b (m/s²).
     pub b: f64,
+    /// IDM acceleration exponent δ.
     pub delta: f64,
 }
 
@@ -84,6 +92,7 @@ impl Default for MobilParams {
 }
 
 impl MobilParams {
+    /// Checks every parameter is finite and in range.
     pub fn validate(&self) -> Result<(), ParamError> {
         let m = "mobil";
         check(
@@ -113,6 +122,7 @@ impl MobilParams {
         self.idm().validate(m)
     }
 
+    /// The IDM these parameters describe.
     pub fn idm(&self) -> Idm {
         Idm {
             alpha: self.alpha,

@@ -22,24 +22,33 @@ use thiserror::Error;
 /// The lane the VUT is in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Lane {
+    /// The left (through) lane, where every run starts.
     Left,
+    /// The right lane, which leads to the exit.
     Right,
 }
 
 /// What a driver sees at one step.
 #[derive(Debug, Clone, Copy)]
 pub struct DriverView<'a> {
+    /// The road and its constants.
     pub world: &'a ExitWorld,
+    /// Time since the run started (s).
     pub time: f64,
+    /// The VUT's position along the road (m).
     pub position: f64,
+    /// The VUT's speed (m/s).
     pub speed: f64,
+    /// The lane the VUT is in.
     pub lane: Lane,
+    /// The two background vehicles in the right lane, at this step.
     pub traffic: &'a Traffic,
 }
 
 /// What a driver does at one step.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Action {
+    /// Longitudinal acceleration over the next step (m/s²), clipped to the world's bounds.
     pub accel: f64,
     /// Change into the right lane now (ignored once there).
     pub change_lane: bool,
@@ -49,7 +58,9 @@ pub struct Action {
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "model", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum ExitVehicleSpec {
+    /// MOBIL lane changing with an IDM speed plan (the paper's surrogate).
     Mobil(MobilParams),
+    /// A gap seeker: accepts time gaps that shrink near the exit.
     GapSeeker(GapSeekerParams),
 }
 
@@ -84,6 +95,7 @@ impl From<ExitVehicle> for ExitVehicleSpec {
 }
 
 impl ExitVehicle {
+    /// The built-in vehicle `name` (`mobil`, `gap-seeker`) with its default parameters.
     pub fn builtin(name: &str) -> Result<Self, UnknownExitModel> {
         match name {
             "mobil" => Ok(Self(ExitVehicleSpec::Mobil(MobilParams::default()))),
@@ -92,6 +104,7 @@ impl ExitVehicle {
         }
     }
 
+    /// The model's name on the wire.
     pub fn name(&self) -> &'static str {
         match self.0 {
             ExitVehicleSpec::Mobil(_) => "mobil",
@@ -111,11 +124,14 @@ impl ExitVehicle {
 /// A driver with its memory for one run.
 #[derive(Debug, Clone)]
 pub enum Driver {
+    /// The MOBIL driver and its plan.
     Mobil(mobil::MobilDriver),
+    /// The gap seeker and its state.
     GapSeeker(gap_seeker::GapSeekerDriver),
 }
 
 impl Driver {
+    /// The driver's action at one step.
     pub fn act(&mut self, view: &DriverView) -> Action {
         match self {
             Driver::Mobil(d) => d.act(view),
@@ -127,7 +143,9 @@ impl Driver {
 /// Whatever drives the VUT on the highway: a built-in [`Driver`] (which
 /// cannot fail) or an external program (see [`super::external`]).
 pub trait ExitDriver {
+    /// Why a decision failed (`Infallible` for built-in drivers).
     type Error;
+    /// The action at the step `view` describes.
     fn decide(&mut self, view: &DriverView) -> Result<Action, Self::Error>;
 }
 
@@ -146,11 +164,17 @@ impl ExitDriver for Driver {
 /// not clip `s*`), a faster leader never makes this one brake.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Idm {
+    /// Maximum acceleration α (m/s²).
     pub alpha: f64,
+    /// Comfortable deceleration b (m/s²).
     pub b: f64,
+    /// Desired speed v₀ (m/s).
     pub v0: f64,
+    /// Desired time headway T (s).
     pub headway: f64,
+    /// Jam distance s₀ (m).
     pub s0: f64,
+    /// Acceleration exponent δ.
     pub delta: f64,
 }
 
@@ -166,6 +190,7 @@ impl Idm {
         delta: 4.0,
     };
 
+    /// Checks every parameter is finite and in range, naming `model` in the error.
     pub fn validate(&self, model: &'static str) -> Result<(), ParamError> {
         check(model, "alpha", self.alpha, |x| x > 0.0, "must be > 0")?;
         check(model, "b", self.b, |x| x > 0.0, "must be > 0")?;
@@ -198,10 +223,13 @@ impl Idm {
 /// either way), so nothing depends on the BVs' labels.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Neighbours {
+    /// The nearest BV at or ahead of the point, if any.
     pub ahead: Option<Bv>,
+    /// The nearest BV behind the point, if any.
     pub behind: Option<Bv>,
 }
 
+/// The right-lane neighbours of `position` among `bvs` (see [`Neighbours`]).
 pub fn neighbours(bvs: &[Bv; 2], position: f64) -> Neighbours {
     let mut n = Neighbours {
         ahead: None,
