@@ -112,41 +112,6 @@ impl CampaignResult {
         self.ci_low <= value && value <= self.ci_high
     }
 
-    /// What a careful reader should know that the interval does not say:
-    /// the vehicle failing outside the library (a surrogate mismatch), and an
-    /// interval of the precision asked for (`rₙ ≤ β`) that the outside bound
-    /// does not support (more
-    /// failure mass than β times the estimate could hide outside the
-    /// library). `beta` is the campaign's target.
-    pub fn warnings(&self, beta: f64) -> Vec<String> {
-        let mut warnings = Vec::new();
-        if self.mismatched_events > 0 {
-            warnings.push(format!(
-                "surrogate mismatch: the vehicle failed in {} tests whose scenario the \
-                 library's surrogate passes ({} events outside the library in all, {:.0}% of \
-                 the estimate): the library does not cover where this vehicle fails, so the \
-                 estimate rests on the few exploring tests. Check the guarded interval, or \
-                 build the library with a surrogate closer to this vehicle",
-                self.mismatched_events,
-                self.outside_events,
-                100.0 * self.outside_share.unwrap_or(0.0)
-            ));
-        }
-        if let (Some(upper), Some(high)) = (self.outside_upper, self.guarded_ci_high) {
-            let unseen = high - self.ci_high;
-            if self.relative_half_width <= beta && unseen > beta * self.estimate {
-                warnings.push(format!(
-                    "the interval does not bound what the library leaves out: up to {upper:.3e} \
-                     of failure mass may lie outside it ({} exploring tests, {} events), more \
-                     than β × the estimate; the guarded upper end is {high:.3e}. Rerun with \
-                     guard_outside (and outside: ndd) to test until it is bounded",
-                    self.outside_tests, self.outside_events
-                ));
-            }
-        }
-        warnings
-    }
-
     /// Whether the guarded interval `[ci_low, guarded_ci_high]` contains
     /// `value` (the plain one where there is no outside bound).
     pub fn guarded_covers(&self, value: f64) -> bool {

@@ -49,10 +49,13 @@ impl ImportanceEstimator {
         Self { largest, ..self }
     }
 
-    /// Adds one test with weight `weight` and outcome `event`.
+    /// Adds one test with weight `weight` and outcome `event`. An event of
+    /// weight 0 (a scenario the exposure never produces, `P(x) = 0`) adds
+    /// nothing to `S₁` or `S₂` and is not counted as an event: it carries
+    /// no failure mass, so it must not satisfy `min_events` either.
     pub fn push(&mut self, weight: f64, event: bool) {
         self.n += 1;
-        if event {
+        if event && weight > 0.0 {
             self.events += 1;
             self.s1 += weight;
             self.s2 += weight * weight;
@@ -388,6 +391,34 @@ mod tests {
     fn z_matches_the_authors_1_645() {
         assert!((z_for_confidence(0.90) - 1.6448536).abs() < 1e-6);
         assert!((z_for_confidence(0.95) - 1.9599640).abs() < 1e-6);
+    }
+
+    #[test]
+    fn an_event_of_weight_zero_is_not_an_event() {
+        // A failure in a scenario the exposure never produces carries no
+        // mass: it must not count toward min_events nor the health figures.
+        let rule = StoppingRule {
+            beta: 0.9,
+            confidence: 0.9,
+            n_min: 1,
+            min_events: 2,
+            max_tests: 100,
+            guard_outside: false,
+        };
+        let mut e = ImportanceEstimator::default();
+        e.push(0.5, true);
+        e.push(0.0, true);
+        e.push(0.5, true);
+        e.push(0.0, true);
+        assert_eq!((e.tests(), e.events()), (4, 2));
+        assert_eq!(e.sums(), (1.0, 0.5));
+        assert_eq!(e.effective_events(), 2.0);
+        let mut impossible = ImportanceEstimator::default();
+        for _ in 0..10 {
+            impossible.push(0.0, true);
+        }
+        assert_eq!(impossible.events(), 0);
+        assert_eq!(rule.decide(&impossible, rule.z()), Decision::Continue);
     }
 
     #[test]

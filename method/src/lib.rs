@@ -25,3 +25,4 @@ pub mod registry;
 pub mod sampling;
 pub mod tolerance;
 pub mod vehicle;
+pub mod warnings;

@@ -132,6 +132,23 @@ pub struct OutsideTally {
 }
 
 impl OutsideTally {
+    /// Counts one valid exploring test with the event and weight `weight`.
+    /// Only an event of positive weight counts as an event (in `k` of the
+    /// Clopper–Pearson bound and as a mismatch): a scenario of exposure 0
+    /// carries no failure mass, so `μ_out = Σ P(x) A(x)` is unchanged when
+    /// its events are left out, and `F` already skips such cells. Counting
+    /// them made `U` tend to a constant on libraries whose outside holds
+    /// many impossible failing cells, and the guard never held.
+    /// `surrogate_misses` is asked only for such events.
+    pub fn add(&mut self, weight: f64, surrogate_misses: impl FnOnce() -> bool) {
+        self.tests += 1;
+        if weight > 0.0 {
+            self.events += 1;
+            self.s1 += weight;
+            self.mismatches += u64::from(surrogate_misses());
+        }
+    }
+
     /// The guard's test: `U − S₁,out/n ≤ β S₁/n`, i.e. the failure mass
     /// outside the library may exceed the part of the estimate already
     /// drawn from there by at most β times the estimate. `s1` and `n` are
@@ -200,6 +217,41 @@ mod tests {
         }
         let proportional = OutsideMass::Proportional { total: 0.5 };
         assert_eq!(proportional.fill(0.25), 0.125);
+    }
+
+    #[test]
+    fn events_without_exposure_do_not_count_against_the_bound() {
+        // Ten outside cells, five of them impossible (P = 0); 200 exploring
+        // tests, 20 with the event, all in impossible cells: no failure
+        // mass is seen, so the bound is that of 0 events in 200 tests.
+        let mass = OutsideMass::uniform(vec![0.1, 0.0, 0.2, 0.0, 0.3, 0.0, 0.1, 0.0, 0.3, 0.0]);
+        let mut tally = OutsideTally::default();
+        let mut asked = 0;
+        for k in 0..200 {
+            if k % 10 == 0 {
+                tally.add(0.0, || {
+                    asked += 1;
+                    true
+                });
+            } else {
+                tally.tests += 1;
+            }
+        }
+        assert_eq!(
+            (tally.tests, tally.events, tally.mismatches, asked),
+            (200, 0, 0, 0)
+        );
+        let upper = mass.upper(tally.tests, tally.events, 0.9);
+        assert_eq!(upper, mass.fill(1.0 - 0.1f64.powf(1.0 / 200.0)));
+        // Had they counted, k = 20 of 200 would allow p ≈ 0.14: more than
+        // the exposure of the most exposed outside cell.
+        assert!(mass.upper(200, 20, 0.9) > 0.3);
+        // An event of positive weight counts, and its mismatch is asked.
+        tally.add(2.0, || true);
+        assert_eq!(
+            (tally.tests, tally.events, tally.s1, tally.mismatches),
+            (201, 1, 2.0, 1)
+        );
     }
 
     #[test]

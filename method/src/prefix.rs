@@ -265,12 +265,8 @@ impl PrefixFold {
             SparseOutcome::Event(weight) => {
                 self.estimator.push(weight, true);
                 if explored {
-                    self.outside.tests += 1;
-                    self.outside.events += 1;
-                    self.outside.s1 += weight;
-                    if pass.surrogate_misses.is_some_and(|misses| misses(index)) {
-                        self.outside.mismatches += 1;
-                    }
+                    let misses = || pass.surrogate_misses.is_some_and(|misses| misses(index));
+                    self.outside.add(weight, misses);
                 }
                 if self.stops(pass.rule, pass.z, pass.mass) {
                     return Some(Decision::Converged);
@@ -300,10 +296,7 @@ pub fn outside_tally(
         match outcomes.get(k) {
             Some(&(i, SparseOutcome::Invalid)) if i == index => {}
             Some(&(i, SparseOutcome::Event(w))) if i == index => {
-                tally.tests += 1;
-                tally.events += 1;
-                tally.s1 += w;
-                tally.mismatches += u64::from(surrogate_misses(index));
+                tally.add(w, || surrogate_misses(index));
             }
             _ => tally.tests += 1,
         }
@@ -350,14 +343,20 @@ mod tests {
         fold
     }
 
-    /// One test: invalid with probability 0.01, an event of weight in
-    /// [0.01, 3) with probability `p_event`, else no event.
+    /// One test: invalid with probability 0.01, an event with probability
+    /// `p_event` (of weight 0, a scenario without exposure, one time in
+    /// five; else of weight in [0.01, 3)), else no event.
     fn random_outcome(rng: &mut ChaCha8Rng, p_event: f64) -> Option<Option<f64>> {
         let u: f64 = rng.random();
         if u < 0.01 {
             None
         } else if u < 0.01 + p_event {
-            Some(Some(rng.random_range(0.01..3.0)))
+            let impossible = rng.random::<f64>() < 0.2;
+            Some(Some(if impossible {
+                0.0
+            } else {
+                rng.random_range(0.01..3.0)
+            }))
         } else {
             Some(None)
         }
@@ -429,9 +428,11 @@ mod tests {
                     fold.estimator.push(w, true);
                     if explores {
                         fold.outside.tests += 1;
-                        fold.outside.events += 1;
-                        fold.outside.s1 += w;
-                        fold.outside.mismatches += u64::from(index % 3 == 0);
+                        if w > 0.0 {
+                            fold.outside.events += 1;
+                            fold.outside.s1 += w;
+                            fold.outside.mismatches += u64::from(index % 3 == 0);
+                        }
                     }
                 }
                 Some(None) => {

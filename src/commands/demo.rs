@@ -14,6 +14,7 @@ use tslg_api::{
 };
 use tslg_client::Client;
 use tslg_method::exact::ExactReport;
+use tslg_method::warnings::Dialect;
 
 pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     tokio::runtime::Builder::new_multi_thread()
@@ -266,6 +267,6 @@ fn print_outside(by_library: &CampaignView, exact: Option<f64>) {
         );
     }
     for warning in &by_library.warnings {
-        println!("warning: {warning}");
+        println!("warning: {}", Dialect::Cli.translate(warning));
     }
 }

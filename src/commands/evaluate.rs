@@ -10,6 +10,7 @@ use tslg_method::exact::{event_cells, event_probability};
 use tslg_method::registry::exploring_share;
 use tslg_method::sampling::{LibraryDistribution, NddDistribution, TestDistribution};
 use tslg_method::vehicle::VehicleModel;
+use tslg_method::warnings::{warnings, Dialect, WarningContext};
 
 #[derive(Serialize)]
 struct Report {
@@ -99,7 +100,14 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
         result,
         exact,
         covers_exact: result.covers(exact),
-        warnings: result.warnings(rule.beta),
+        warnings: warnings(
+            &result,
+            WarningContext {
+                beta: rule.beta,
+                guard_outside: rule.guard_outside,
+                dialect: Dialect::Cli,
+            },
+        ),
     };
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
@@ -145,7 +153,7 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
             }
         );
     }
-    for warning in result.warnings(rule.beta) {
+    for warning in &report.warnings {
         println!("warning: {warning}");
     }
     Ok(())

@@ -6,6 +6,7 @@ use anyhow::Context;
 use tslg_api::CampaignView;
 use tslg_api::ExposureRequest;
 use tslg_client::Client;
+use tslg_method::warnings::Dialect;
 
 pub fn client(args: &ServerArgs) -> anyhow::Result<Client> {
     anyhow::ensure!(
@@ -80,7 +81,7 @@ pub fn describe(view: &CampaignView) -> String {
     let warnings: String = view
         .warnings
         .iter()
-        .map(|w| format!("\n  warning: {w}"))
+        .map(|w| format!("\n  warning: {}", Dialect::Cli.translate(w)))
         .collect();
     format!(
         "campaign {} ({} {}, vehicle {}): {}{}\n  tests {} (events {}, invalid {}), stop index {}\n  \

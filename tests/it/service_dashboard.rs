@@ -374,13 +374,13 @@ async fn library_pictures_and_pages_are_served_and_unknown_ids_are_404() {
     assert_eq!(response.headers()["content-type"], "image/svg+xml");
     let svg = response.text().await.unwrap();
     let doc = Document::parse(&svg).expect("XML");
-    // Exposure: every cell with P(x) > 0; library: its 287 cells.
+    // Exposure: every cell with P(x) > 0; library: its 286 cells.
     let cells = doc
         .descendants()
         .filter(|n| n.has_tag_name("rect") && n.attribute("fill") != Some("#FFFFFF"))
         .count();
     let exposed = 45 * 76; // the built-in exposure is positive everywhere
-    assert_eq!(cells, exposed + 287, "{cells}");
+    assert_eq!(cells, exposed + 286, "{cells}");
     let words = texts(&doc);
     assert!(
         words.iter().any(|t| t.starts_with("exposure P(x)")),

@@ -7,7 +7,9 @@ mod exposure_model;
 mod simulation;
 
 pub use exposure_model::{default_grid, CutInExposureModel};
-pub use simulation::{enhanced_ttc, normalised_ettc, CutInPreset, CutInRun, CutInSettings};
+pub use simulation::{
+    enhanced_ttc, normalised_ettc, CutInPreset, CutInRun, CutInSettings, SpeedBound,
+};
 
 use crate::case::{Case, SurrogateEvaluation};
 use crate::external::{DriverError, ExternalFollower, ExternalVehicle, NOMINAL_LENGTH};

@@ -18,13 +18,33 @@ pub struct CutInSettings {
     pub steps: usize,
     /// Acceleration bounds (m/s²).
     pub acceleration: (f64, f64),
-    /// Speed bounds of the vehicle under test (m/s); the acceleration is
-    /// limited so that one step never leaves them.
+    /// Speed bounds of the vehicle under test (m/s), kept as `speed_bound` says.
     pub speed: (f64, f64),
+    /// How the speed bounds act on a step.
+    #[serde(default)]
+    pub speed_bound: SpeedBound,
     /// An accident is a range `≤ accident_gap` (`inclusive`) or `< accident_gap`.
     pub accident_gap: f64,
     /// Whether a range equal to `accident_gap` is an accident.
     pub inclusive: bool,
+}
+
+/// How a cut-in step keeps the speed of the vehicle under test in bounds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SpeedBound {
+    /// The acceleration is limited to `[(v_min − v)/dt, (v_max − v)/dt]`,
+    /// so one step never leaves the bounds (the paper's Table III preset).
+    #[default]
+    LimitsAcceleration,
+    /// The authors' code (`update_state.m`): the acceleration is dropped
+    /// only when the speed already sits on a bound and the acceleration
+    /// pushes past it; otherwise the whole step uses it, the position
+    /// included (`x += v dt + a dt²/2`), and the speed `v + a dt` is
+    /// clipped to the bounds afterwards. A vehicle braking to a stop thus
+    /// covers less distance in its last step than one whose braking is
+    /// limited to the speed it has.
+    ClipsSpeed,
 }
 
 /// A named simulation preset.
@@ -49,6 +69,7 @@ impl CutInPreset {
                 steps: 10,
                 acceleration: (-3.0, 3.0),
                 speed: (0.0, 40.0),
+                speed_bound: SpeedBound::ClipsSpeed,
                 accident_gap: 0.0,
                 inclusive: true,
             },
@@ -59,6 +80,7 @@ impl CutInPreset {
                 steps: 100,
                 acceleration: (-4.0, 2.0),
                 speed: (2.0, 40.0),
+                speed_bound: SpeedBound::LimitsAcceleration,
                 accident_gap: 1.0,
                 inclusive: false,
             },
@@ -132,6 +154,26 @@ pub fn normalised_ettc(range: f64, range_rate: f64, relative_acceleration: f64, 
 }
 
 impl CutInSettings {
+    /// The acceleration a step at speed `speed` applies, from the driver's
+    /// `a` (already within the acceleration bounds); see [`SpeedBound`].
+    fn within_speed_bounds(&self, a: f64, speed: f64) -> f64 {
+        match self.speed_bound {
+            SpeedBound::LimitsAcceleration => a.clamp(
+                (self.speed.0 - speed) / self.dt,
+                (self.speed.1 - speed) / self.dt,
+            ),
+            SpeedBound::ClipsSpeed => {
+                let pushes_past =
+                    (speed >= self.speed.1 && a > 0.0) || (speed <= self.speed.0 && a < 0.0);
+                if pushes_past {
+                    0.0
+                } else {
+                    a
+                }
+            }
+        }
+    }
+
     fn is_accident(&self, gap: f64) -> bool {
         if self.inclusive {
             gap <= self.accident_gap
@@ -186,15 +228,15 @@ impl CutInSettings {
                     clip: self.acceleration,
                     dt: self.dt,
                 })?
-                .clamp(self.acceleration.0, self.acceleration.1)
-                .clamp(
-                    (self.speed.0 - speed) / self.dt,
-                    (self.speed.1 - speed) / self.dt,
-                );
+                .clamp(self.acceleration.0, self.acceleration.1);
+            let a = self.within_speed_bounds(a, speed);
             mnp_ettc = mnp_ettc.min(normalised_ettc(gap, lead_speed - speed, -a, u_i));
             gap += (lead_speed - speed) * self.dt - a * self.dt * self.dt / 2.0;
             position += speed * self.dt + a * self.dt * self.dt / 2.0;
             speed += a * self.dt;
+            if self.speed_bound == SpeedBound::ClipsSpeed {
+                speed = speed.clamp(self.speed.0, self.speed.1);
+            }
             if self.is_accident(gap) {
                 return Ok(CutInRun {
                     accident: true,
@@ -279,5 +321,38 @@ mod tests {
             .settings()
             .run(&idm, 0.74, 5.0, 100.0);
         assert_eq!(code.accident_step, None);
+    }
+
+    /// A driver that always commands full braking.
+    struct Brake;
+
+    impl FollowDriver for Brake {
+        type Error = std::convert::Infallible;
+        fn decide(&mut self, _: &FollowStep) -> Result<f64, Self::Error> {
+            Ok(-3.0)
+        }
+    }
+
+    #[test]
+    fn the_speed_floor_acts_as_each_preset_says() {
+        // Full braking from 20 m/s: speeds 17, 14, …, 2, then the step
+        // from 2 m/s. The authors' update (paper-code) applies the whole
+        // −3 m/s² to that step (x += 2 − 1.5 = 0.5 m) and clips the speed to
+        // 0; limiting the acceleration to −2 m/s² advances 1 m.
+        let code = CutInPreset::PaperCode.settings();
+        assert_eq!(code.speed_bound, SpeedBound::ClipsSpeed);
+        let limited = CutInSettings {
+            speed_bound: SpeedBound::LimitsAcceleration,
+            ..code
+        };
+        // Leader at 0 m/s (Ṙ = −20): the follower stops after 66.5 m with the
+        // authors' update (7 steps of 3 m/s², then 0.5 m) and after 67 m
+        // with the limited one. A gap of 66.75 m separates them.
+        let run = |s: &CutInSettings| s.run_with(&mut Brake, 66.75, -20.0, 100.0).unwrap();
+        assert_eq!(run(&code).accident_step, None);
+        assert_eq!(run(&limited).accident_step, Some(7));
+        // Stopped, neither creeps on: a far leader is never reached.
+        let far = |s: &CutInSettings| s.run_with(&mut Brake, 80.0, -20.0, 100.0).unwrap();
+        assert!(!far(&code).accident && !far(&limited).accident);
     }
 }

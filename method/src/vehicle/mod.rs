@@ -283,10 +283,20 @@ mod tests {
         // Closing at 10 m/s from 20 m: TTC ≈ 2 s < 5 s → brake.
         assert_eq!(c.acceleration(&obs(20.0, 10.0, 20.0), CLIP, 0.1), -3.0);
         let mut c = model.controller();
-        // TTC = 100/(5.01) = 19.96 s: e = 14.96, first step a = Ki·e·Ts = −2.02.
+        // The authors' first step: e_prev = 100/5 − 5 = 15 (no guard),
+        // e = 100/5.01 − 5 = 14.960; a = Kp (e − e_prev) + Ki (e + e_prev) Ts/2
+        // = −38.6 · (−0.0399) − 1.35 · 29.96 · 0.05 = −0.4814.
         let a = c.acceleration(&obs(20.0, 15.0, 100.0), CLIP, 0.1);
-        let e = 100.0 / 5.01 - 5.0;
-        assert!((a - (-1.35 * e * 0.1)).abs() < 1e-12);
+        let (e, e_prev) = (100.0 / 5.01 - 5.0, 15.0);
+        let expected = -38.6 * (e - e_prev) - 1.35 * (e + e_prev) * 0.1 / 2.0;
+        assert!((a - expected).abs() < 1e-12, "{a}");
+        assert!((a + 0.4814).abs() < 1e-4, "{a}");
+        // Equal speeds: the authors' ttc.m divides by 0.01, e_prev = 9995.
+        let mut c = model.controller();
+        let a = c.acceleration(&obs(20.0, 20.0, 100.0), CLIP, 0.1);
+        let e = 100.0 / 0.01 - 5.0;
+        let expected = (-1.35 * (2.0 * e) * 0.1 / 2.0_f64).clamp(CLIP.0, CLIP.1);
+        assert_eq!(a, expected);
     }
 
     #[test]

@@ -9,9 +9,13 @@ use serde::{Deserialize, Serialize};
 /// With `e = R / (v − v_lead + 0.01) − TTC*`:
 /// if `e > 0`, `a = a_prev + K_p (e − e_prev) + K_i (e + e_prev) T_s / 2`
 /// (the incremental, trapezoidal form of a PI controller); otherwise the
-/// controller brakes with `brake` (−3 m/s²). On the first step `e_prev = e`
-/// and `a_prev = 0`. The error is clamped to ±[`ERROR_CLAMP`] so that a zero
-/// closing speed does not produce infinities.
+/// controller brakes with `brake` (−3 m/s²). Before the first step, as in
+/// the authors' code (`value_function_Switch_ACC.m`, `ttc.m`), `a_prev = 0`
+/// and `e_prev = R / (v − v_lead) − TTC*` without the 0.01 guard
+/// (`R / 0.01 − TTC*` at equal speeds), so the first command already
+/// carries a proportional term. The error is clamped to ±[`ERROR_CLAMP`] so
+/// that a closing speed of exactly −0.01 m/s does not produce infinities
+/// (on the cut-in grid the initial errors stay below 9,000).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SwitchingAccParams {
@@ -92,9 +96,13 @@ impl SwitchingAccState {
         obs: &FollowerObservation,
         clip: (f64, f64),
     ) -> f64 {
-        let ttc = obs.gap / (obs.speed - obs.lead_speed + 0.01);
-        let e = (ttc - p.target_ttc).clamp(-ERROR_CLAMP, ERROR_CLAMP);
-        let (a_prev, e_prev) = self.previous.unwrap_or((0.0, e));
+        let error = |ttc: f64| (ttc - p.target_ttc).clamp(-ERROR_CLAMP, ERROR_CLAMP);
+        let e = error(obs.gap / (obs.speed - obs.lead_speed + 0.01));
+        let (a_prev, e_prev) = self.previous.unwrap_or_else(|| {
+            let closing = obs.speed - obs.lead_speed;
+            let initial = if closing != 0.0 { closing } else { 0.01 };
+            (0.0, error(obs.gap / initial))
+        });
         let a = if e > 0.0 {
             a_prev + p.kp * (e - e_prev) + p.ki * (e + e_prev) * p.ts / 2.0
         } else {

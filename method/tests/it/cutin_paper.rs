@@ -7,7 +7,7 @@ use tslg_method::campaign::run_campaign;
 use tslg_method::case::Case;
 use tslg_method::cutin::{CutIn, CutInExposureModel, CutInPreset};
 use tslg_method::estimator::{Decision, StoppingRule};
-use tslg_method::exact::exact_report;
+use tslg_method::exact::{event_cells, event_probability, exact_report};
 use tslg_method::library::SearchMethod;
 use tslg_method::sampling::{
     LibraryDistribution, NddDistribution, OutsideSpread, TestDistribution,
@@ -31,6 +31,18 @@ fn the_idm_library_on_the_authors_table_has_the_papers_184_cells() {
     // 2,863 cells of the table have positive exposure; only those are simulated.
     assert_eq!(lib.search.sm_evaluations, 2863);
     assert!((lib.mu_s - 8.662e-4).abs() < 1e-7, "μ_S = {}", lib.mu_s);
+}
+
+#[test]
+fn the_switching_acc_on_the_authors_table_fails_at_their_rate() {
+    // The authors' code gives the switching ACC P(A) = 9.417e-4 on their
+    // table; it needs their first step (no 0.01 guard in the initial TTC)
+    // and their speed update (the floor does not limit the acceleration).
+    // Before both, this was 1.0609e-3.
+    let Some(case) = table_case() else { return };
+    let acc = vehicle("switching-acc");
+    let p = event_probability(&case, &event_cells(&case, &acc));
+    assert!((p - 9.417e-4).abs() < 5e-8, "P(A) = {p}");
 }
 
 #[test]

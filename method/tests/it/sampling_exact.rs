@@ -126,7 +126,10 @@ fn test_i_depends_on_seed_and_index_alone() {
 }
 
 /// The first five cells of seed 5 with the built-in IDM library, ε = 0.1.
-const STABLE_FIRST_CELLS: [usize; 5] = [1980, 624, 1828, 1900, 2056];
+/// The stream is pinned for a given library; the library itself changed on
+/// 2026-11-25 (286 cells, was 287) when the paper-code preset took the
+/// authors' speed update (`SpeedBound::ClipsSpeed`), and with it the cells.
+const STABLE_FIRST_CELLS: [usize; 5] = [1979, 624, 1827, 1830, 930];
 
 #[test]
 fn the_estimator_is_unbiased_and_its_variance_matches_the_analytic_one() {

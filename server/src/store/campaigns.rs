@@ -12,6 +12,7 @@ use tslg_method::estimator::{Decision, ImportanceEstimator, StoppingRule};
 use tslg_method::outside::OutsideTally;
 use tslg_method::prefix::PrefixFold;
 use tslg_method::registry::ExposureSource;
+use tslg_method::warnings::{warnings, Dialect, WarningContext};
 
 #[derive(Debug, Clone, sqlx::FromRow)]
 pub struct CampaignRow {
@@ -175,7 +176,14 @@ impl CampaignRow {
             outside_upper: summary.outside_upper,
             guarded_ci_high: summary.guarded_ci_high.filter(|_| self.tests > 1),
             warnings: if self.tests > 1 {
-                summary.warnings(self.beta)
+                warnings(
+                    &summary,
+                    WarningContext {
+                        beta: self.beta,
+                        guard_outside: self.guard_outside,
+                        dialect: Dialect::Api,
+                    },
+                )
             } else {
                 Vec::new()
             },

@@ -1,0 +1,244 @@
+//! What a campaign's interval cannot show on its own, in words, and only on
+//! evidence (issue 21).
+//!
+//! A library campaign's interval assumes that the library covers where the
+//! vehicle under test fails; its ε share of exploring tests is the only
+//! check of that assumption. Two findings are worth a reader's attention:
+//!
+//! - **a surrogate mismatch**: an exploring test with the event (and a
+//!   positive weight) in a scenario where the library's surrogate has none.
+//!   That is direct evidence that the library misses part of this vehicle's
+//!   failures;
+//! - **an outside bound wider than accepted**: with the guard on, the
+//!   campaign stopped (at `max_tests`) while the upper bound `U` on the
+//!   failure mass outside the library still exceeds `β μ̂` beyond what the
+//!   outside tests already carry; without the guard, the same shortfall
+//!   when exploring tests did find events there (in scenarios where the
+//!   surrogate fails too; a mismatch says it already).
+//!
+//! A plain campaign whose exploring tests found nothing gets no warning: its
+//! outside bound is wide by construction (few tests sample there), and a
+//! warning on every campaign would tell a user nothing. What each answer
+//! assumes is stated with the answer instead (`docs/statistics.md`).
+//!
+//! The advice names the switches of whoever reads it: the API's fields or
+//! the command line's flags ([`Dialect`]).
+
+use crate::campaign::CampaignResult;
+use crate::estimator::Decision;
+
+/// Whose names the advice uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Dialect {
+    /// JSON fields of `POST /api/v1/campaigns`.
+    Api,
+    /// Flags of `tslg evaluate` and `tslg campaign start`.
+    Cli,
+}
+
+impl Dialect {
+    /// How to turn the outside guard on, in this dialect.
+    pub fn guard_advice(self) -> &'static str {
+        match self {
+            Dialect::Api => "`\"guard_outside\": true, \"outside\": \"ndd\"`",
+            Dialect::Cli => "`--guard-outside --outside ndd`",
+        }
+    }
+
+    /// The name of the test budget, in this dialect.
+    pub fn max_tests(self) -> &'static str {
+        match self {
+            Dialect::Api => "`max_tests`",
+            Dialect::Cli => "`--max-tests`",
+        }
+    }
+
+    /// `text` (written in the API's dialect, as the coordinator's views
+    /// are) with the advice in this dialect.
+    pub fn translate(self, text: &str) -> String {
+        text.replace(Dialect::Api.guard_advice(), self.guard_advice())
+            .replace(Dialect::Api.max_tests(), self.max_tests())
+    }
+}
+
+/// The campaign settings the warnings depend on.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WarningContext {
+    /// The campaign's target relative half-width β.
+    pub beta: f64,
+    /// Whether the campaign stops only under the outside guard.
+    pub guard_outside: bool,
+    /// Whose names the advice uses.
+    pub dialect: Dialect,
+}
+
+/// The warnings `result` deserves under `context`: empty unless the tests
+/// gave evidence (see the module documentation).
+pub fn warnings(result: &CampaignResult, context: WarningContext) -> Vec<String> {
+    let mut found = Vec::new();
+    let advice = context.dialect.guard_advice();
+    if result.mismatched_events > 0 {
+        let remedy = if context.guard_outside {
+            "The guard keeps the campaign testing until the outside bound is within β; a \
+             library built with a surrogate closer to this vehicle would need fewer tests"
+                .to_owned()
+        } else {
+            format!(
+                "Rerun with {advice} to test until the outside bound is within β, or build the \
+                 library with a surrogate closer to this vehicle"
+            )
+        };
+        found.push(format!(
+            "surrogate mismatch: the vehicle failed in {} exploring tests whose scenario the \
+             library's surrogate passes ({} events outside the library in all, {:.0}% of the \
+             estimate): the library does not cover where this vehicle fails, and the interval \
+             rests on the few exploring tests{bound}. {remedy}",
+            result.mismatched_events,
+            result.outside_events,
+            100.0 * result.outside_share.unwrap_or(0.0),
+            bound = match result.guarded_ci_high {
+                Some(high) => format!(" (the guarded upper end is {high:.3e})"),
+                None => String::new(),
+            }
+        ));
+    }
+    if let (Some(upper), Some(high)) = (result.outside_upper, result.guarded_ci_high) {
+        let unseen = high - result.ci_high;
+        let short = unseen > context.beta * result.estimate;
+        if context.guard_outside && short && result.status == Decision::Exhausted {
+            found.push(format!(
+                "the outside bound never came within β × the estimate: up to {upper:.3e} of \
+                 failure mass may lie outside the library ({} exploring tests, {} events); the \
+                 guarded upper end is {high:.3e}. Raise {}, or use a library that covers \
+                 this vehicle's failures",
+                result.outside_tests,
+                result.outside_events,
+                context.dialect.max_tests()
+            ));
+        }
+        let converged = result.relative_half_width <= context.beta;
+        // A mismatch already says this, with its advice.
+        let unexplained = result.outside_events > 0 && result.mismatched_events == 0;
+        if !context.guard_outside && short && converged && unexplained {
+            found.push(format!(
+                "the interval does not bound what the library leaves out: its exploring tests \
+                 found {} events outside it, and up to {upper:.3e} of failure mass may lie there \
+                 ({} exploring tests), more than β × the estimate; the guarded upper end is \
+                 {high:.3e}. Rerun with {advice} to test until it is bounded",
+                result.outside_events, result.outside_tests
+            ));
+        }
+    }
+    found
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A converged library campaign: μ̂ = 1e-3 ± 1.5e-4 from 2,000 tests,
+    /// 200 of them exploring without an event, and a wide outside bound
+    /// (U = 0.01): the state of every plain campaign of a matched pair.
+    fn matched() -> CampaignResult {
+        CampaignResult {
+            status: Decision::Converged,
+            tests: 2000,
+            events: 1800,
+            invalid: 0,
+            indices: 2000,
+            estimate: 1e-3,
+            half_width: 1.5e-4,
+            relative_half_width: 0.15,
+            ci_low: 8.5e-4,
+            ci_high: 1.15e-3,
+            effective_events: 1700.0,
+            largest_weight_share: Some(0.01),
+            outside_tests: 200,
+            outside_events: 0,
+            mismatched_events: 0,
+            outside_share: Some(0.0),
+            outside_upper: Some(0.01),
+            guarded_ci_high: Some(1.115e-2),
+        }
+    }
+
+    fn context(guard_outside: bool, dialect: Dialect) -> WarningContext {
+        WarningContext {
+            beta: 0.2,
+            guard_outside,
+            dialect,
+        }
+    }
+
+    #[test]
+    fn no_evidence_no_warning() {
+        // The outside bound is ten times the estimate, but no exploring
+        // test found anything: nothing to say.
+        assert!(warnings(&matched(), context(false, Dialect::Api)).is_empty());
+        assert!(warnings(&matched(), context(false, Dialect::Cli)).is_empty());
+    }
+
+    #[test]
+    fn a_mismatch_warns_once_and_advises_in_the_readers_names() {
+        let result = CampaignResult {
+            outside_events: 3,
+            mismatched_events: 2,
+            outside_share: Some(0.6),
+            ..matched()
+        };
+        let cli = warnings(&result, context(false, Dialect::Cli));
+        assert_eq!(cli.len(), 1, "{cli:?}");
+        assert!(cli[0].starts_with("surrogate mismatch: the vehicle failed in 2 exploring tests"));
+        assert!(
+            cli[0].contains("--guard-outside --outside ndd"),
+            "{}",
+            cli[0]
+        );
+        assert!(!cli[0].contains("guard_outside"), "{}", cli[0]);
+        let api = warnings(&result, context(false, Dialect::Api));
+        assert!(api[0].contains(r#""guard_outside": true"#), "{}", api[0]);
+        // The coordinator's text, shown by the command line, names flags.
+        assert_eq!(Dialect::Cli.translate(&api[0]), cli[0]);
+        // A guarded campaign is not told to turn the guard on.
+        let guarded = warnings(&result, context(true, Dialect::Cli));
+        assert_eq!(guarded.len(), 1);
+        assert!(!guarded[0].contains("--guard-outside"), "{}", guarded[0]);
+    }
+
+    #[test]
+    fn the_outside_bound_warns_when_the_guard_ran_out_of_tests() {
+        let converged = warnings(&matched(), context(true, Dialect::Cli));
+        assert!(converged.is_empty(), "{converged:?}");
+        let exhausted = CampaignResult {
+            status: Decision::Exhausted,
+            ..matched()
+        };
+        let found = warnings(&exhausted, context(true, Dialect::Cli));
+        assert_eq!(found.len(), 1);
+        assert!(found[0].contains("never came within β"), "{}", found[0]);
+        assert!(found[0].contains("`--max-tests`"), "{}", found[0]);
+        // Within the bound: nothing, exhausted or not.
+        let bounded = CampaignResult {
+            guarded_ci_high: Some(1.3e-3),
+            ..exhausted
+        };
+        assert!(warnings(&bounded, context(true, Dialect::Cli)).is_empty());
+    }
+
+    #[test]
+    fn events_outside_where_the_surrogate_fails_too_warn_a_plain_campaign() {
+        let result = CampaignResult {
+            outside_events: 2,
+            outside_share: Some(0.1),
+            ..matched()
+        };
+        let found = warnings(&result, context(false, Dialect::Api));
+        assert_eq!(found.len(), 1);
+        assert!(
+            found[0].starts_with("the interval does not bound"),
+            "{}",
+            found[0]
+        );
+        assert!(warnings(&result, context(true, Dialect::Api)).is_empty());
+    }
+}
