@@ -75,6 +75,16 @@ function fill(table, rows, empty) {
   }
 }
 
+// A mark on a campaign's status when it has warnings: their number, the
+// texts on hover, the campaign page for the full list.
+function warningMark(warnings) {
+  if (warnings.length === 0) return '';
+  return el('span', {
+    class: 'warned', title: warnings.join('\n\n'),
+    'data-field': 'warnings', 'data-value': warnings.length,
+  }, ` ⚠ ${warnings.length}`);
+}
+
 function campaignRow(c) {
   const r = c.relative_half_width;
   const halfWidth = el('td', { 'data-field': 'relative_half_width', 'data-value': r ?? '' },
@@ -85,7 +95,8 @@ function campaignRow(c) {
     el('td', {}, c.method === 'library' && c.library_id != null
       ? el('a', { href: `/libraries/${c.library_id}` }, `library ${c.library_id}`) : c.method),
     el('td', {}, fmt.vehicle(c.vut)),
-    el('td', { class: `status-${c.status}`, 'data-field': 'status' }, c.status),
+    el('td', { class: `status-${c.status}`, 'data-field': 'status' }, c.status,
+      warningMark(c.warnings ?? [])),
     num('tests', c.tests, fmt.count(c.tests)),
     num('events', c.events, fmt.count(c.events)),
     num('estimate', c.estimate, fmt.sci(c.estimate)),

@@ -144,6 +144,7 @@ async fn the_dashboard_follows_a_running_campaign_and_agrees_with_the_api() {
     // as long as the test looks at it, and is cancelled at the end.
     let request = campaign(Method::Ndd, library.id, "fvdm", 0.005, 1);
     let id = client.create_campaign(&request).await.unwrap().id;
+    let ndd = id;
     let driver = Driver::start();
     let browser = driver.connect().await;
 
@@ -306,5 +307,23 @@ async fn the_dashboard_follows_a_running_campaign_and_agrees_with_the_api() {
     );
     assert!(!view.warnings.is_empty());
     save("campaign-library.png", &browser.screenshot().await.unwrap());
+
+    // The overview marks the campaign with its warnings (their number, the
+    // texts on hover); the NDD campaign, which has none, is not marked.
+    browser
+        .goto(&format!("{}/?refresh=300", server.url))
+        .await
+        .unwrap();
+    let mark = format!("document.querySelector('#campaign-{id} [data-field=warnings]')");
+    let count = until(&browser, &format!("{mark}?.dataset.value"), "the mark").await;
+    assert_eq!(number(&count), view.warnings.len() as u64);
+    let title = eval(&browser, &format!("{mark}.title")).await;
+    assert_eq!(title, json!(view.warnings.join("\n\n")));
+    let unmarked = eval(
+        &browser,
+        &format!("document.querySelector('#campaign-{ndd} [data-field=warnings]') === null"),
+    )
+    .await;
+    assert_eq!(unmarked, json!(true));
     browser.close().await.unwrap();
 }
