@@ -111,6 +111,11 @@ fn default_confidence() -> f64 {
     0.9
 }
 
+/// The largest grid on which the coordinator computes a campaign's exact
+/// `P(A)` when it is created (one simulation per scenario: about 60 ms on
+/// highway-exit `coarse`, 10 s on its 1.6 × 10⁶-scenario `paper` grid).
+pub const EXACT_MAX_SCENARIOS: usize = 100_000;
+
 /// A campaign's state.
 #[cfg_attr(feature = "sqlx", derive(sqlx::Type), sqlx(rename_all = "kebab-case"))]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
@@ -264,6 +269,12 @@ pub struct CampaignView {
     /// `outside_upper`: the upper end of the guarded interval.
     #[serde(default)]
     pub guarded_ci_high: Option<f64>,
+    /// `P(A)` by enumeration of the grid: present for a built-in vehicle on
+    /// a grid case of at most [`EXACT_MAX_SCENARIOS`] scenarios (cut-in,
+    /// highway-exit `coarse`), computed when the campaign was created. It
+    /// lets a user check the campaign's interval against the truth.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub exact_probability: Option<f64>,
     /// What the numbers cannot show on their own, in words (surrogate
     /// mismatch, an interval the outside bound does not support).
     #[serde(default)]

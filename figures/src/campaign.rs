@@ -31,15 +31,21 @@ fn test_range(points: &[HistoryPoint]) -> (f64, f64) {
     log_range(plotted(points).map(|p| p.tests as f64), 1.0, 1.0)
 }
 
-/// The estimate with its interval band against tests. The y axis runs from
-/// 0 to a little above the largest estimate and the last interval's upper
-/// end; the band is clipped to it (early intervals are wide).
+/// The estimate with its interval band against tests, and the exact
+/// `P(A)` as a dashed line where the campaign knows it. The y axis runs
+/// from 0 to a little above the largest estimate, the last interval's
+/// upper end and the exact value; the band is clipped to it (early
+/// intervals are wide).
 pub fn estimate_svg(view: &CampaignView, points: &[HistoryPoint]) -> Result<String, FigureError> {
     let (x0, x1) = test_range(points);
+    let exact = view
+        .exact_probability
+        .filter(|p| p.is_finite() && *p >= 0.0);
     let y1 = linear_top(
         plotted(points)
             .map(|p| p.estimate)
-            .chain(plotted(points).last().map(|p| p.ci_high)),
+            .chain(plotted(points).last().map(|p| p.ci_high))
+            .chain(exact),
         1.15,
     );
     let clip = |y: f64| if y.is_nan() { 0.0 } else { y.clamp(0.0, y1) };
@@ -72,6 +78,20 @@ pub fn estimate_svg(view: &CampaignView, points: &[HistoryPoint]) -> Result<Stri
             .map_err(fail)?
             .label("estimate")
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], ESTIMATE.stroke_width(2)));
+        if let Some(p) = exact {
+            chart
+                .draw_series(DashedLineSeries::new(
+                    [(x0, p), (x1, p)],
+                    6,
+                    4,
+                    LIMIT.stroke_width(2),
+                ))
+                .map_err(fail)?
+                .label(format!("exact P(A) = {}", number(p)))
+                .legend(|(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 18, y)], LIMIT.stroke_width(2))
+                });
+        }
         Ok(())
     })
 }

@@ -45,6 +45,7 @@ fn view() -> CampaignView {
         outside_share: None,
         outside_upper: None,
         guarded_ci_high: None,
+        exact_probability: None,
         warnings: Vec::new(),
         tests_per_second: Some(1000.0),
         seconds_left: Some(5.0),
@@ -136,6 +137,48 @@ fn the_estimate_figure_holds_the_line_and_the_band_of_every_plotted_point() {
         band.attribute("points").unwrap().split_whitespace().count(),
         80
     );
+}
+
+#[test]
+fn the_exact_value_is_a_dashed_line_at_its_height_when_known() {
+    let unknown = estimate_svg(&view(), &history()).unwrap();
+    let doc = Document::parse(&unknown).unwrap();
+    assert!(lines(&doc, "#C82828").is_empty());
+    assert!(!texts(&doc).iter().any(|t| t.starts_with("exact")));
+    // P(A) = 1.2e-4, above the final estimate 1.0075e-4.
+    let known = CampaignView {
+        exact_probability: Some(1.2e-4),
+        ..view()
+    };
+    let svg = estimate_svg(&known, &history()).unwrap();
+    let doc = Document::parse(&svg).unwrap();
+    assert!(
+        texts(&doc).iter().any(|t| t == "exact P(A) = 1.20e-4"),
+        "{:?}",
+        texts(&doc)
+    );
+    let dashes = lines(&doc, "#C82828");
+    let height = dashes[0][0].1;
+    let at_height = dashes
+        .iter()
+        .filter(|s| s.iter().all(|p| p.1 == height))
+        .count();
+    assert!(
+        at_height > 10 && at_height == dashes.len() - 1,
+        "{dashes:?}"
+    );
+    // Pixel heights are linear in P(A) from 0 at the bottom: two points of
+    // the estimate line give the scale.
+    let line = lines(&doc, "#1F5DA6")
+        .into_iter()
+        .max_by_key(|l| l.len())
+        .unwrap();
+    let points = history();
+    let (a, b) = (&points[1], points.last().unwrap());
+    let (ya, yb) = (line[0].1, line[39].1);
+    let per_unit = (yb - ya) / (a.estimate - b.estimate);
+    let expected = yb - (1.2e-4 - b.estimate) * per_unit;
+    assert!((height - expected).abs() <= 1.5, "{height} vs {expected}");
 }
 
 #[test]

@@ -9,7 +9,7 @@ use crate::store::campaigns::{self, CampaignRow, NewCampaign};
 use crate::store::libraries::{self, LibraryRow};
 use crate::validate::check_name;
 use std::sync::Arc;
-use tslg_api::{CampaignStatus, CreateCampaign, LibraryStatus, Method};
+use tslg_api::{CampaignStatus, CreateCampaign, LibraryStatus, Method, EXACT_MAX_SCENARIOS};
 use tslg_client::wire;
 use tslg_method::estimator::{default_n_min, StoppingRule, DEFAULT_MIN_EVENTS};
 use tslg_method::external::ExternalVut;
@@ -91,13 +91,14 @@ async fn library_of(
 }
 
 /// The case opened for the campaign, its vehicle in full, the spread of ε,
-/// and its tests when they can be prepared now (an NDD campaign, or a
-/// ready library).
+/// its tests when they can be prepared now (an NDD campaign, or a ready
+/// library) and its exact `P(A)` where the case can enumerate it.
 struct Opened {
     case: Arc<dyn ScenarioCase>,
     vut: serde_json::Value,
     outside: OutsideSpread,
     tests: Option<Arc<dyn CampaignTests>>,
+    exact_probability: Option<f64>,
 }
 
 fn open(
@@ -117,11 +118,18 @@ fn open(
     } else {
         None
     };
+    // Built-in vehicles on small grids only: an external program does not
+    // run on the coordinator, car-following has no grid to enumerate, and a
+    // large grid would hold the request for seconds.
+    let exact_probability = (case.total_scenarios() <= EXACT_MAX_SCENARIOS)
+        .then(|| case.exact_event_probability(&vut).ok())
+        .flatten();
     Ok(Opened {
         case,
         vut,
         outside,
         tests,
+        exact_probability,
     })
 }
 
@@ -181,6 +189,7 @@ pub async fn start(state: &AppState, req: CreateCampaign) -> Result<CampaignRow,
             rule,
             seed: req.seed,
             status,
+            exact_probability: opened.exact_probability,
         },
     )
     .await?;

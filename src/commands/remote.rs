@@ -78,6 +78,18 @@ pub fn describe(view: &CampaignView) -> String {
         ),
         None => String::new(),
     };
+    let exact = match (view.exact_probability, view.ci_low, view.ci_high) {
+        (Some(p), Some(low), Some(high)) => format!(
+            "\n  exact P(A) {p:.3e} (by enumeration of the grid): {} the interval",
+            if low <= p && p <= high {
+                "inside"
+            } else {
+                "OUTSIDE"
+            }
+        ),
+        (Some(p), _, _) => format!("\n  exact P(A) {p:.3e} (by enumeration of the grid)"),
+        _ => String::new(),
+    };
     let warnings: String = view
         .warnings
         .iter()
@@ -85,7 +97,7 @@ pub fn describe(view: &CampaignView) -> String {
         .collect();
     format!(
         "campaign {} ({} {}, vehicle {}): {}{}\n  tests {} (events {}, invalid {}), stop index {}\n  \
-         estimate {}  interval [{}, {}]  relative half-width {} (β {}, confidence {}){health}{outside}{warnings}",
+         estimate {}  interval [{}, {}]  relative half-width {} (β {}, confidence {}){exact}{health}{outside}{warnings}",
         view.id,
         view.case,
         view.method.as_str(),

@@ -293,7 +293,11 @@ async fn the_report_writes_the_dashboard_figures_as_svg_with_the_numbers_as_csv(
         series(&doc)
     );
     let words = texts(&doc);
-    for label in ["estimate", "90% interval", "tests"] {
+    // A built-in vehicle on cut-in: the coordinator enumerated the grid at
+    // the start and the figure draws that exact P(A).
+    assert_eq!(view.exact_probability, Some(exact("fvdm")));
+    let exact_label = format!("exact P(A) = {:.2e}", exact("fvdm"));
+    for label in ["estimate", "90% interval", "tests", &exact_label] {
         assert!(words.iter().any(|t| t == label), "{label} in {words:?}");
     }
     let half_width = std::fs::read_to_string(out.join("relative-half-width.svg")).unwrap();

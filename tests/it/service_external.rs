@@ -74,6 +74,8 @@ async fn a_python_idm_runs_cut_in_and_car_following_exactly_like_the_builtin_idm
         view.ci_low.unwrap() <= exact && exact <= view.ci_high.unwrap(),
         "{exact} outside {view:?}"
     );
+    // The coordinator does not run programs: it knows no exact answer.
+    assert_eq!(view.exact_probability, None);
 
     // Car-following in step mode, on the risky preset's library.
     let library = build_library(

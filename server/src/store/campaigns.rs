@@ -61,6 +61,8 @@ pub struct CampaignRow {
     pub audits_waived: i64,
     /// The weights of every event recorded, folded or not.
     pub reported_s1: f64,
+    /// `P(A)` by enumeration of the grid, where it was computed.
+    pub exact_probability: Option<f64>,
     pub created_at: String,
     pub updated_at: String,
 }
@@ -70,7 +72,8 @@ pub const COLUMNS: &str = "id, case_name, preset, method, library_id, exposure_n
     min_events, max_tests, seed, status, status_detail, next_index, indices, tests, events, invalid, s1, s2, \
     largest, guard_outside, outside_tests, outside_events, outside_s1, outside_upper, \
     outside_mismatches, \
-    cost_per_test, worker_seconds, audits_waived, reported_s1, created_at, updated_at";
+    cost_per_test, worker_seconds, audits_waived, reported_s1, exact_probability, created_at, \
+    updated_at";
 
 impl CampaignRow {
     pub fn seed(&self) -> u64 {
@@ -175,6 +178,7 @@ impl CampaignRow {
             outside_share: summary.outside_share,
             outside_upper: summary.outside_upper,
             guarded_ci_high: summary.guarded_ci_high.filter(|_| self.tests > 1),
+            exact_probability: self.exact_probability,
             warnings: if self.tests > 1 {
                 warnings(
                     &summary,
@@ -277,14 +281,16 @@ pub struct NewCampaign {
     pub rule: StoppingRule,
     pub seed: u64,
     pub status: CampaignStatus,
+    /// `P(A)` by enumeration, where the case could compute it.
+    pub exact_probability: Option<f64>,
 }
 
 pub async fn insert(pool: &SqlitePool, new: &NewCampaign) -> Result<CampaignRow, ApiError> {
     let sql = format!(
         "INSERT INTO campaigns (case_name, preset, method, library_id, exposure_name, \
          exposure_fingerprint, exposure_table, vut, requires, epsilon, outside, beta, confidence, \
-         n_min, min_events, max_tests, seed, status, guard_outside) \
-         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) \
+         n_min, min_events, max_tests, seed, status, guard_outside, exact_probability) \
+         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) \
          RETURNING {COLUMNS}"
     );
     Ok(sqlx::query_as(&sql)
@@ -307,6 +313,7 @@ pub async fn insert(pool: &SqlitePool, new: &NewCampaign) -> Result<CampaignRow,
         .bind(new.seed as i64)
         .bind(new.status.as_str())
         .bind(new.rule.guard_outside)
+        .bind(new.exact_probability)
         .fetch_one(pool)
         .await?)
 }
