@@ -6,8 +6,8 @@ use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::str::FromStr;
 
-/// Simulation settings. Two named presets exist; see [`CutInPreset::paper_code`]
-/// and [`CutInPreset::paper_table`].
+/// Simulation settings. Two named presets exist; see [`CutInPreset::PaperCode`]
+/// and [`CutInPreset::PaperTable`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct CutInSettings {
     /// Speed of the vehicle under test at the cut-in (m/s); the leader drives at `v + Ṙ`.

@@ -13,7 +13,7 @@ use serde::{Deserialize, Serialize};
 /// the authors' code (`value_function_Switch_ACC.m`, `ttc.m`), `a_prev = 0`
 /// and `e_prev = R / (v − v_lead) − TTC*` without the 0.01 guard
 /// (`R / 0.01 − TTC*` at equal speeds), so the first command already
-/// carries a proportional term. The error is clamped to ±[`ERROR_CLAMP`] so
+/// carries a proportional term. The error is clamped to ±`ERROR_CLAMP` (10⁴ s) so
 /// that a closing speed of exactly −0.01 m/s does not produce infinities
 /// (on the cut-in grid the initial errors stay below 9,000).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
