@@ -6,13 +6,20 @@
 //! estimate at the stop, and flags coverage well below nominal: below
 //! `c − 2.33 √(c(1 − c)/R)`, where a correct interval falls one time in a
 //! hundred.
+//!
+//! With `--curve-to N` it measures instead the coverage of the plain
+//! interval at *every* number of tests `n = 2 … N`: each replicate folds
+//! its tests one by one and checks its interval at each `n`, so a default
+//! `n_min` is chosen on the whole curve rather than on a few values (the
+//! ε-greedy split makes the curve a lattice; docs/statistics.md).
 
+use anyhow::Context;
 use rayon::prelude::*;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::sync::Arc;
 use tslg_method::campaign::{run_campaign_tests, CampaignResult};
-use tslg_method::estimator::{default_n_min, Decision, StoppingRule};
+use tslg_method::estimator::{default_n_min, Decision, ImportanceEstimator, StoppingRule};
 use tslg_method::library::SearchMethod;
 use tslg_method::registry::{
     exploring_share, open_case, BuildRequest, ExposureSource, LibrarySearch, ScenarioCase,
@@ -53,9 +60,18 @@ pub struct ValidateArgs {
     /// Budget of each campaign.
     #[arg(long, default_value_t = 2_000_000)]
     pub max_tests: u64,
-    /// Write validation.md and validation.csv to this directory.
+    /// Write validation.md and validation.csv (curve.csv with
+    /// --curve-to) to this directory.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// An exposure table in the layout of the authors' cut-in table (cut-in
+    /// only); default: each case's built-in exposure.
+    #[arg(long)]
+    pub ndd_table: Option<PathBuf>,
+    /// Measure the plain interval's coverage at every number of tests from
+    /// 2 to N (no stopping rule) instead of at the stop.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(2..=1_000_000))]
+    pub curve_to: Option<u64>,
 }
 
 /// One configuration: a case, a library's surrogate, a vehicle and a rule.
@@ -129,6 +145,9 @@ impl Row {
 pub fn run(args: &ValidateArgs) -> anyhow::Result<()> {
     let replicates = args.replicates.unwrap_or(if args.quick { 50 } else { 200 });
     anyhow::ensure!(replicates >= 2, "--replicates must be at least 2");
+    if let Some(to) = args.curve_to {
+        return curves(args, replicates, to);
+    }
     let mut rows = Vec::new();
     for case_name in &args.cases {
         for setup in setups(case_name, args)? {
@@ -169,7 +188,7 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
             "tslg validate needs an exact answer; `{other}` has none (cases: cut-in, highway-exit)"
         ),
     };
-    let case = open_case(case_name, preset, &ExposureSource::Builtin)?;
+    let case = open_case(case_name, preset, &exposure(args)?)?;
     let mut setups = Vec::new();
     for &(surrogate, vut) in pairs {
         let library = case
@@ -221,6 +240,123 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
         }
     }
     Ok(setups)
+}
+
+/// The exposure `--ndd-table` names, or the built-in one.
+fn exposure(args: &ValidateArgs) -> anyhow::Result<ExposureSource> {
+    let Some(path) = &args.ndd_table else {
+        return Ok(ExposureSource::Builtin);
+    };
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read the NDD table {}", path.display()))?;
+    let name = path.file_name().map_or_else(
+        || path.display().to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    );
+    Ok(ExposureSource::Table { name, text })
+}
+
+/// The coverage curves of every setup: printed as a summary, written as
+/// `curve.csv` (one row per setup and n).
+fn curves(args: &ValidateArgs, replicates: u64, to: u64) -> anyhow::Result<()> {
+    let mut table = String::from(
+        "| case | exposure | surrogate | vehicle | ε | R | n_min | worst coverage for n ≥ n_min (at n) | \
+         coverage at n_min and at N | n ≥ n_min below the floor |\n\
+         |---|---|---|---|---|---|---|---|---|---|\n",
+    );
+    let mut csv = String::from("case,exposure,surrogate,vehicle,epsilon,replicates,n,coverage\n");
+    for case_name in &args.cases {
+        for setup in setups(case_name, args)?
+            .iter()
+            .filter(|s| !s.rule.guard_outside)
+        {
+            let curve = coverage_curve(setup, replicates, to)?;
+            let exposure = setup.case.exposure_name().to_owned();
+            for (k, c) in curve.iter().enumerate() {
+                let _ = writeln!(
+                    csv,
+                    "{},{exposure},{},{},{},{replicates},{},{c}",
+                    setup.case_name,
+                    setup.surrogate,
+                    setup.vut,
+                    setup.epsilon,
+                    k + 2
+                );
+            }
+            let c = args.confidence;
+            let floor = c - 2.33 * (c * (1.0 - c) / replicates as f64).sqrt();
+            // Where a campaign of the default rule can stop: n ≥ n_min.
+            let n_min = setup.rule.n_min.clamp(2, to);
+            let stoppable = &curve[(n_min - 2) as usize..];
+            let (worst, at) = stoppable
+                .iter()
+                .enumerate()
+                .map(|(k, &c)| (c, n_min + k as u64))
+                .fold((f64::INFINITY, 0), |a, b| if b.0 < a.0 { b } else { a });
+            let line = format!(
+                "| {} | {exposure} | {} | {} | {} | {replicates} | {n_min} | {worst:.3} ({at}) | \
+                 {:.3}, {:.3} | {} of {} |",
+                setup.case_name,
+                setup.surrogate,
+                setup.vut,
+                setup.epsilon,
+                stoppable[0],
+                stoppable[stoppable.len() - 1],
+                stoppable.iter().filter(|&&c| c < floor).count(),
+                stoppable.len()
+            );
+            eprintln!("{line}");
+            let _ = writeln!(table, "{line}");
+        }
+    }
+    let _ = writeln!(
+        table,
+        "\nThe plain interval's coverage at every n (no stopping rule), nominal {:.2}; \
+         the floor is c − 2.33 √(c(1 − c)/R).",
+        args.confidence
+    );
+    println!("{table}");
+    if let Some(dir) = &args.out {
+        std::fs::create_dir_all(dir)?;
+        std::fs::write(dir.join("curve.md"), &table)?;
+        std::fs::write(dir.join("curve.csv"), &csv)?;
+        eprintln!("written to {}", dir.display());
+    }
+    Ok(())
+}
+
+/// The share of replicates whose plain interval holds the exact `P(A)`
+/// after `n` tests, for `n = 2 … to` (index `n − 2`): each seed's tests are
+/// folded one by one, in index order, as a campaign folds them.
+fn coverage_curve(setup: &Setup, replicates: u64, to: u64) -> anyhow::Result<Vec<f64>> {
+    let vut = serde_json::json!({ "model": setup.vut });
+    let z = setup.rule.z();
+    let covered = (0..replicates)
+        .into_par_iter()
+        .map(|seed| {
+            let tests = setup.case.campaign(
+                Some(&setup.library),
+                &vut,
+                setup.epsilon,
+                setup.outside,
+                seed,
+            )?;
+            let mut estimator = ImportanceEstimator::default();
+            let mut covers = Vec::with_capacity(to as usize - 1);
+            for index in 0..to {
+                let outcome = tests.run(index);
+                estimator.push(outcome.weight, outcome.event);
+                if index >= 1 {
+                    let (low, high) = estimator.interval(z);
+                    covers.push(low <= setup.truth && setup.truth <= high);
+                }
+            }
+            Ok(covers)
+        })
+        .collect::<anyhow::Result<Vec<Vec<bool>>>>()?;
+    Ok((0..to as usize - 1)
+        .map(|k| covered.iter().filter(|c| c[k]).count() as f64 / replicates as f64)
+        .collect())
 }
 
 /// Runs the campaigns of seeds `0..replicates`.

@@ -541,6 +541,71 @@ fn validation_cell(
 }
 
 #[test]
+fn validate_measures_the_coverage_curve_at_every_n_on_the_authors_table() {
+    let Some(table) = shared_table() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let out = tslg(&[
+        "validate",
+        "--cases",
+        "cut-in",
+        "--ndd-table",
+        table.to_str().unwrap(),
+        "--curve-to",
+        "100",
+        "--replicates",
+        "1000",
+        "--out",
+        dir.path().to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let csv = std::fs::read_to_string(dir.path().join("curve.csv")).unwrap();
+    // Four pairings, n = 2 … 100 each.
+    assert_eq!(csv.lines().count(), 1 + 4 * 99, "{csv}");
+    let coverage = |surrogate: &str, vut: &str, n: u64| -> f64 {
+        let prefix = format!("cut-in,cutin_ndd_spmd.csv,{surrogate},{vut},0.1,1000,{n},");
+        let line = csv.lines().find(|l| l.starts_with(&prefix));
+        line.unwrap_or_else(|| panic!("no {prefix} in {csv}"))[prefix.len()..]
+            .parse()
+            .unwrap()
+    };
+    // The matched IDM: the exact lattice of the Binomial split (by
+    // enumeration in method/tests/it/cutin_paper.rs), within three
+    // standard errors of 1,000 replicates.
+    for (n, exact) in [
+        (20, 0.8672),
+        (25, 0.9187),
+        (30, 0.7905),
+        (40, 0.9040),
+        (100, 0.8622),
+    ] {
+        let measured = coverage("idm", "idm", n);
+        let se = (exact * (1.0 - exact) / 1000.0f64).sqrt();
+        assert!(
+            (measured - exact).abs() < 3.0 * se,
+            "n {n}: {measured} against {exact}"
+        );
+    }
+    // The IDM library testing the FVDM: far below nominal at every n.
+    assert!((2..=100).all(|n| coverage("idm", "fvdm", n) < 0.5), "{csv}");
+    let summary = stdout(&out);
+    assert!(
+        summary.contains("| idm | fvdm | 0.1 | 1000 | 100 |"),
+        "{summary}"
+    );
+    // Tables are for cut-in only.
+    let refused = tslg(&[
+        "validate",
+        "--cases",
+        "highway-exit",
+        "--ndd-table",
+        table.to_str().unwrap(),
+        "--curve-to",
+        "10",
+    ]);
+    assert!(!refused.status.success());
+}
+
+#[test]
 fn validate_flags_the_mismatched_pair_and_the_guard_restores_coverage() {
     let dir = tempfile::tempdir().unwrap();
     let out = tslg(&[
