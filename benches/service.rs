@@ -34,6 +34,7 @@ fn request(tests: u64) -> CreateCampaign {
         min_events: None,
         guard_outside: false,
         outside: None,
+        split: None,
     }
 }
 
@@ -44,6 +45,7 @@ fn in_process(tests: u64) -> f64 {
             None,
             &serde_json::json!({"model": "idm"}),
             0.1,
+            Default::default(),
             Default::default(),
             1,
         )
@@ -190,6 +192,7 @@ fn high_event_in_process(beta: f64) -> (f64, u64) {
             Some(&library.file),
             &serde_json::json!({"model": "fvdm"}),
             0.1,
+            Default::default(),
             Default::default(),
             1,
         )

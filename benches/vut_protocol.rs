@@ -12,7 +12,7 @@
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 use tslg_method::registry::{open_case, CampaignTests, ExposureSource};
-use tslg_method::sampling::OutsideSpread;
+use tslg_method::sampling::{OutsideSpread, Split};
 use tslg_worker::external::{Program, ProgramRun, ProgramSettings, ProgramSpec};
 
 /// Runs tests `0..n` and returns the seconds they took.
@@ -81,7 +81,7 @@ fn main() {
     let follow = open_case("car-following", None, &ExposureSource::Builtin).unwrap();
     let ndd = |vut: serde_json::Value| {
         follow
-            .campaign(None, &vut, 0.0, OutsideSpread::Ndd, 1)
+            .campaign(None, &vut, 0.0, OutsideSpread::Ndd, Split::Stratified, 1)
             .unwrap()
     };
     let builtin = ndd(serde_json::json!({"model": "idm"}));
@@ -111,7 +111,14 @@ fn main() {
     let cut_in = open_case("cut-in", None, &ExposureSource::Builtin).unwrap();
     let ndd = |vut: serde_json::Value| {
         cut_in
-            .campaign(None, &vut, 0.0, OutsideSpread::Uniform, 1)
+            .campaign(
+                None,
+                &vut,
+                0.0,
+                OutsideSpread::Uniform,
+                Split::Stratified,
+                1,
+            )
             .unwrap()
     };
     let builtin = ndd(serde_json::json!({"model": "fvdm"}));
@@ -144,6 +151,7 @@ fn main() {
                 &serde_json::json!({"external": "rs-fvdm"}),
                 0.0,
                 OutsideSpread::Ndd,
+                Split::Stratified,
                 1,
             )
             .unwrap();

@@ -352,6 +352,31 @@ pub struct ExplorationArgs {
     /// Default: the case's, uniform for grid cases, ndd for car-following.
     #[arg(long, value_enum)]
     pub outside: Option<OutsideArg>,
+    /// How tests are split between the library and the outside (grid
+    /// cases): `stratified` (test i explores exactly when ⌊(i+1)ε⌋ > ⌊iε⌋,
+    /// each stratum weighted by its share) or `random` (the paper's: each
+    /// test explores with probability ε).
+    #[arg(long, value_enum, default_value_t = SplitArg::Stratified)]
+    pub split: SplitArg,
+}
+
+#[derive(Debug, Clone, Copy, ValueEnum, PartialEq, Eq)]
+pub enum SplitArg {
+    Stratified,
+    Random,
+}
+
+impl SplitArg {
+    pub fn split(self) -> tslg_method::sampling::Split {
+        match self {
+            SplitArg::Stratified => tslg_method::sampling::Split::Stratified,
+            SplitArg::Random => tslg_method::sampling::Split::Random,
+        }
+    }
+
+    pub fn wire(self) -> tslg_api::Split {
+        tslg_client::wire::wire_split(self.split())
+    }
 }
 
 #[derive(Debug, Clone, Args)]

@@ -26,6 +26,33 @@ impl Method {
     }
 }
 
+/// How a library campaign of a grid case splits its tests between the
+/// library and the scenarios outside it (docs/statistics.md, "Strata").
+#[cfg_attr(feature = "sqlx", derive(sqlx::Type), sqlx(rename_all = "kebab-case"))]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, ToSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum Split {
+    /// Test `i` explores exactly when `⌊(i + 1)ε⌋ > ⌊iε⌋`, and the estimate
+    /// weights the two strata by their shares `1 − ε` and `ε`: no noise from
+    /// how many tests happened to explore.
+    Stratified,
+    /// Each test explores with probability ε, as in the paper. The default
+    /// of a plan that does not say (campaigns created before the
+    /// stratified split).
+    #[default]
+    Random,
+}
+
+impl Split {
+    /// The split's name on the wire (`stratified`, `random`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Split::Stratified => "stratified",
+            Split::Random => "random",
+        }
+    }
+}
+
 /// How a library campaign spreads its exploration share ε outside the library.
 #[cfg_attr(feature = "sqlx", derive(sqlx::Type), sqlx(rename_all = "kebab-case"))]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, ToSchema)]
@@ -73,6 +100,11 @@ pub struct CreateCampaign {
     /// (`uniform` for grid cases, `ndd` for car-following).
     #[serde(default)]
     pub outside: Option<Outside>,
+    /// How tests are split between the library and the outside (grid
+    /// cases); `stratified` when absent. Car-following explores in each
+    /// decision and ignores it.
+    #[serde(default)]
+    pub split: Option<Split>,
     /// Target relative half-width β, in (0, 1).
     #[serde(default = "default_beta")]
     pub beta: f64,
@@ -186,6 +218,8 @@ pub struct CampaignView {
     pub epsilon: f64,
     /// How the ε share is spread outside the library.
     pub outside: Outside,
+    /// How the tests are split between the library and the outside.
+    pub split: Split,
     /// Target relative half-width β: the campaign stops once `rₙ ≤ β`.
     pub beta: f64,
     /// Confidence level c of the interval (z is its two-sided normal quantile).
@@ -374,6 +408,10 @@ pub struct CampaignPlan {
     /// How the ε share is spread outside the library.
     #[serde(default)]
     pub outside: Outside,
+    /// How the tests are split between the library and the outside
+    /// (`random` from a coordinator that does not say).
+    #[serde(default)]
+    pub split: Split,
     /// Seed of the test streams.
     pub seed: u64,
     /// The vehicle under test, as given at creation.

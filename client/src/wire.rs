@@ -45,6 +45,22 @@ pub fn outside_spread(outside: Outside) -> OutsideSpread {
     }
 }
 
+/// The method's split of a wire split.
+pub fn split(split: tslg_api::Split) -> tslg_method::sampling::Split {
+    match split {
+        tslg_api::Split::Stratified => tslg_method::sampling::Split::Stratified,
+        tslg_api::Split::Random => tslg_method::sampling::Split::Random,
+    }
+}
+
+/// The wire form of a split.
+pub fn wire_split(split: tslg_method::sampling::Split) -> tslg_api::Split {
+    match split {
+        tslg_method::sampling::Split::Stratified => tslg_api::Split::Stratified,
+        tslg_method::sampling::Split::Random => tslg_api::Split::Random,
+    }
+}
+
 /// The wire form of a spread of ε.
 pub fn outside(spread: OutsideSpread) -> Outside {
     match spread {

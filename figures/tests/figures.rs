@@ -16,6 +16,7 @@ fn view() -> CampaignView {
         vut: serde_json::json!({"model": "idm"}),
         epsilon: 0.1,
         outside: Outside::Uniform,
+        split: Default::default(),
         beta: 0.2,
         confidence: 0.9,
         n_min: 30,

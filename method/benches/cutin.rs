@@ -10,7 +10,7 @@ use tslg_method::case::Case;
 use tslg_method::cutin::{CutIn, CutInPreset};
 use tslg_method::estimator::StoppingRule;
 use tslg_method::library::{build_library, LibraryRequest, SearchMethod, Threshold};
-use tslg_method::sampling::{LibraryDistribution, OutsideSpread, TestDistribution};
+use tslg_method::sampling::{LibraryDistribution, OutsideSpread, Split, TestDistribution};
 use tslg_method::vehicle::{VehicleModel, BUILTIN_MODELS};
 
 const REPEATS: usize = 7;
@@ -96,8 +96,14 @@ fn main() {
             search: SearchMethod::Exhaustive,
         },
     );
-    let q =
-        LibraryDistribution::new(&library, case.exposure(), 0.1, OutsideSpread::Uniform).unwrap();
+    let q = LibraryDistribution::new(
+        &library,
+        case.exposure(),
+        0.1,
+        OutsideSpread::Uniform,
+        Split::Random,
+    )
+    .unwrap();
     let draws = 1_000_000u64;
     let secs = median_seconds(|| {
         for i in 0..draws {

@@ -12,7 +12,7 @@ use tslg_method::case::Case;
 use tslg_method::exact::{event_cells, exact_report};
 use tslg_method::highway::{ExitVehicle, HighwayExit, HighwayPreset};
 use tslg_method::library::{build_library, Library, LibraryRequest, SearchMethod, Threshold};
-use tslg_method::sampling::{LibraryDistribution, OutsideSpread};
+use tslg_method::sampling::{LibraryDistribution, OutsideSpread, Split};
 
 const REPEATS: usize = 3;
 
@@ -109,8 +109,14 @@ fn main() {
             t.elapsed().as_secs_f64()
         );
     }
-    let q = LibraryDistribution::new(&exhaustive, case.exposure(), 0.1, OutsideSpread::Uniform)
-        .expect("valid distribution");
+    let q = LibraryDistribution::new(
+        &exhaustive,
+        case.exposure(),
+        0.1,
+        OutsideSpread::Uniform,
+        Split::Random,
+    )
+    .expect("valid distribution");
     let in_library: std::collections::HashSet<usize> =
         exhaustive.cells.iter().map(|c| c.cell).collect();
     for spec in [

@@ -27,7 +27,9 @@ pub struct CampaignResult {
     /// Test indices in the resolved prefix (`tests + invalid`); the stop
     /// index once the campaign has stopped.
     pub indices: u64,
-    /// `μ̂ₙ = S₁/n`, `S₁ = Σ wᵢyᵢ`.
+    /// `μ̂ₙ = S₁/n`, `S₁ = Σ wᵢyᵢ`; for a stratified campaign
+    /// `(1 − ε) S₁,in/n_in + ε S₁,out/n_out`
+    /// ([`crate::prefix::PrefixFold::estimate`]).
     pub estimate: f64,
     /// `z σ̂/√n`, the normal interval's half-width.
     pub half_width: f64,
@@ -48,7 +50,8 @@ pub struct CampaignResult {
     pub outside_events: u64,
     /// Those events where the library's surrogate has no event.
     pub mismatched_events: u64,
-    /// The events outside the library's share of the estimate `S₁,out/S₁`:
+    /// The events outside the library's share of the estimate (`S₁,out/S₁`,
+    /// or `ε (S₁,out/n_out)/μ̂` for a stratified campaign):
     /// the vehicle fails where the surrogate found nothing critical.
     pub outside_share: Option<f64>,
     /// `U`: the upper confidence bound on the failure mass outside the
@@ -56,7 +59,8 @@ pub struct CampaignResult {
     /// library outside to bound (the NDD, car-following).
     pub outside_upper: Option<f64>,
     /// The interval's upper end with the outside part of the estimate
-    /// replaced by its bound: `max(ci_high, ci_high − S₁,out/n + U)`.
+    /// ([`crate::prefix::PrefixFold::outside_estimate`]) replaced by its
+    /// bound: `max(ci_high, ci_high − μ̂_out + U)`.
     pub guarded_ci_high: Option<f64>,
 }
 
@@ -82,18 +86,18 @@ impl CampaignResult {
         outside_upper: Option<f64>,
     ) -> Self {
         let e = &fold.estimator;
-        let (ci_low, ci_high) = e.interval(z);
+        let (ci_low, ci_high) = fold.interval(z);
         let (s1, _) = e.sums();
-        let n = e.tests().max(1) as f64;
+        let outside_part = fold.outside_estimate();
         Self {
             status,
             tests: e.tests(),
             events: e.events(),
             invalid: fold.invalid,
             indices: fold.indices,
-            estimate: e.estimate(),
-            half_width: e.half_width(z),
-            relative_half_width: e.relative_half_width(z),
+            estimate: fold.estimate(),
+            half_width: fold.half_width(z),
+            relative_half_width: fold.relative_half_width(z),
             ci_low,
             ci_high,
             effective_events: e.effective_events(),
@@ -101,9 +105,10 @@ impl CampaignResult {
             outside_tests: fold.outside.tests,
             outside_events: fold.outside.events,
             mismatched_events: fold.outside.mismatches,
-            outside_share: (outside_upper.is_some() && s1 > 0.0).then(|| fold.outside.s1 / s1),
+            outside_share: (outside_upper.is_some() && s1 > 0.0)
+                .then(|| (outside_part / fold.estimate()).min(1.0)),
             outside_upper,
-            guarded_ci_high: outside_upper.map(|u| ci_high.max(ci_high - fold.outside.s1 / n + u)),
+            guarded_ci_high: outside_upper.map(|u| ci_high.max(ci_high - outside_part + u)),
         }
     }
 
@@ -133,6 +138,9 @@ pub struct Explorer<'a> {
     pub mass: &'a OutsideMass,
     /// See [`Exploration::surrogate_misses`].
     pub surrogate_misses: &'a (dyn Fn(u64) -> bool + Sync),
+    /// The exploring share a stratified campaign's estimate stratifies on
+    /// ([`PrefixFold::strata`]).
+    pub strata: Option<f64>,
 }
 
 /// Runs one campaign on a case given as its event test `is_event(cell)`
@@ -157,6 +165,7 @@ pub fn run_campaign_with(
             explores: &explores,
             mass,
             surrogate_misses: &misses,
+            strata: distribution.strata(),
         }),
         rule,
     )
@@ -185,7 +194,7 @@ pub fn run_outcome_campaign(
 ) -> CampaignResult {
     let z = rule.z();
     let mass = explorer.map(|e| e.mass);
-    let mut fold = PrefixFold::default();
+    let mut fold = PrefixFold::with_strata(explorer.and_then(|e| e.strata));
     let mut batch = FIRST_BATCH;
     loop {
         let from = fold.indices;
@@ -243,6 +252,7 @@ pub fn run_campaign_tests(
             explores: &explores,
             mass,
             surrogate_misses: &misses,
+            strata: tests.strata(),
         }),
         rule,
     )

@@ -40,6 +40,37 @@ pub fn library_variance<C: Case>(case: &C, events: &[usize], q: &LibraryDistribu
     second - mu * mu
 }
 
+/// The per-test variance of the stratified estimate
+/// ([`crate::sampling::Split::Stratified`]): with the strata holding their
+/// shares, `Var(μ̂ₙ) = σ²_strat/n` where
+/// `σ²_strat = (1 − ε) Var_{q_in}(w A) + ε Var_{q_out}(w A)`, `w = P/q` the
+/// mixture weight. It is the mixture's [`library_variance`] less the
+/// between-strata part `(1 − ε) ε (μ_in/(1 − ε) − μ_out/ε)²`.
+pub fn stratified_library_variance<C: Case>(
+    case: &C,
+    events: &[usize],
+    q: &LibraryDistribution,
+) -> f64 {
+    let epsilon = q.epsilon();
+    // Σ over events of q(x)·x and q(x)·x² per stratum, x = P/q.
+    let (mut first, mut second) = ([0.0f64; 2], [0.0f64; 2]);
+    for &c in events {
+        let p = case.exposure().p(c);
+        let stratum = usize::from(!q.contains(c));
+        first[stratum] += p;
+        second[stratum] += p * p / q.q(c).max(PROBABILITY_FLOOR);
+    }
+    let shares = [1.0 - epsilon, epsilon];
+    (0..2)
+        .filter(|&h| shares[h] > 0.0)
+        .map(|h| {
+            // Under q_h = q/π_h: E[x] = Σ q x/π_h, E[x²] = Σ q x²/π_h.
+            let mean = first[h] / shares[h];
+            shares[h] * (second[h] / shares[h] - mean * mean)
+        })
+        .sum()
+}
+
 /// `z² σ² / (β² μ²)`: expected library tests to relative half-width β.
 pub fn expected_library_tests(variance: f64, mu: f64, beta: f64, z: f64) -> f64 {
     z * z * variance / (beta * beta * mu * mu)

@@ -47,6 +47,55 @@ impl std::str::FromStr for OutsideSpread {
     }
 }
 
+/// How a library campaign's tests are split between the library and the
+/// scenarios outside it (docs/statistics.md, "Strata").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Split {
+    /// Each test explores with probability ε (the paper's ε-greedy draw):
+    /// the number of library tests in a prefix of `n` is Binomial(n, 1 − ε),
+    /// and for a vehicle the library covers that split is nearly the whole
+    /// variance of the estimate. Campaigns created before the stratified
+    /// design keep it.
+    Random,
+    /// Test `i` explores exactly when `⌊(i + 1)ε⌋ > ⌊iε⌋`: every prefix of
+    /// `n` tests holds `⌊nε⌋` exploring tests, and the estimate weights each
+    /// stratum by its share, `μ̂ = (1 − ε) m̂_in + ε m̂_out`
+    /// ([`crate::prefix::PrefixFold::estimate`]). The default.
+    #[default]
+    Stratified,
+}
+
+impl Split {
+    /// The name on the command line and in the API.
+    pub fn name(self) -> &'static str {
+        match self {
+            Split::Random => "random",
+            Split::Stratified => "stratified",
+        }
+    }
+}
+
+impl std::str::FromStr for Split {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "random" => Ok(Split::Random),
+            "stratified" => Ok(Split::Stratified),
+            other => Err(format!(
+                "unknown split `{other}`; splits are stratified, random"
+            )),
+        }
+    }
+}
+
+/// Whether test `index` explores under the stratified split with share
+/// `epsilon`: `⌊(i + 1)ε⌋ > ⌊iε⌋`, so tests `0..n` hold `⌊nε⌋` exploring
+/// tests (in exact arithmetic; in `f64` the same on every machine).
+pub fn stratified_explores(epsilon: f64, index: u64) -> bool {
+    epsilon > 0.0 && ((index + 1) as f64 * epsilon).floor() > (index as f64 * epsilon).floor()
+}
+
 /// The smallest positive ε: a smaller share explores so rarely (one test
 /// in a million) that no campaign sees it, and tiny values only make the
 /// outside weights `P(x)/(ε/N)` overflow.
@@ -110,6 +159,7 @@ pub struct LibraryDistribution {
     inside_q: Vec<f64>,
     epsilon: f64,
     outside: OutsideSpread,
+    split: Split,
     outside_cells: usize,
     /// For the NDD spread: alias over the outside cells with positive exposure.
     outside_ndd: Option<(Vec<usize>, WeightedAliasIndex<f64>, f64)>,
@@ -119,12 +169,15 @@ pub struct LibraryDistribution {
 }
 
 impl LibraryDistribution {
-    /// The ε-greedy distribution of `library` on `exposure`, with ε spread outside as `outside` says.
+    /// The ε-greedy distribution of `library` on `exposure`, with ε spread
+    /// outside as `outside` says and tests split between the library and
+    /// the outside as `split` says.
     pub fn new(
         library: &Library,
         exposure: &GridMass,
         epsilon: f64,
         outside: OutsideSpread,
+        split: Split,
     ) -> Result<Self, SamplingError> {
         check_epsilon(epsilon)?;
         let n = exposure.grid().len();
@@ -177,6 +230,7 @@ impl LibraryDistribution {
             inside_q,
             epsilon,
             outside,
+            split,
             outside_cells,
             outside_ndd,
             outside_mass: Default::default(),
@@ -202,10 +256,14 @@ impl LibraryDistribution {
     }
 
     /// Whether test `index` of a campaign with seed `seed` explores: draws
-    /// its scenario outside the library (the first number of its stream
-    /// falls below ε, as in [`Self::sample`]).
+    /// its scenario outside the library. Under the random split the first
+    /// number of its stream falls below ε; under the stratified split the
+    /// index alone decides ([`stratified_explores`]).
     pub fn explores(&self, seed: u64, index: u64) -> bool {
-        self.explore(&mut test_rng(seed, index))
+        match self.split {
+            Split::Random => self.explore(&mut test_rng(seed, index)),
+            Split::Stratified => stratified_explores(self.epsilon, index),
+        }
     }
 
     fn explore<R: Rng + ?Sized>(&self, rng: &mut R) -> bool {
@@ -215,6 +273,18 @@ impl LibraryDistribution {
     /// The ε actually in force (0 when nothing lies outside the library).
     pub fn epsilon(&self) -> f64 {
         self.epsilon
+    }
+
+    /// The split of the tests between the library and the outside.
+    pub fn split(&self) -> Split {
+        self.split
+    }
+
+    /// The exploring share the estimate stratifies on: ε in force under the
+    /// stratified split, `None` under the random one or when nothing is
+    /// explored ([`crate::prefix::PrefixFold::strata`]).
+    pub fn strata(&self) -> Option<f64> {
+        (self.split == Split::Stratified && self.epsilon > 0.0).then_some(self.epsilon)
     }
 
     /// `q(x)`.
@@ -236,9 +306,17 @@ impl LibraryDistribution {
         self.in_library[cell].is_some()
     }
 
-    /// Draws one scenario.
+    /// Draws one scenario by the random split (each draw explores with
+    /// probability ε).
     pub fn sample<R: Rng + ?Sized>(&self, rng: &mut R) -> usize {
-        if !self.explore(rng) {
+        let explore = self.explore(rng);
+        self.sample_stratum(rng, explore)
+    }
+
+    /// Draws one scenario of the library (`q_in = V/W`) or, when `explore`,
+    /// of the outside (`q_out`, spread as the distribution says).
+    fn sample_stratum<R: Rng + ?Sized>(&self, rng: &mut R, explore: bool) -> usize {
+        if !explore {
             return self.cells[self.inside.sample(rng)];
         }
         match (&self.outside, &self.outside_ndd) {
@@ -266,9 +344,17 @@ impl LibraryDistribution {
         k + lo
     }
 
-    /// A test's scenario and weight `P(x)/q(x)`.
+    /// A test's scenario and weight `P(x)/q(x)`, `q` being the mixture
+    /// `(1 − ε) q_in + ε q_out` under either split: a stratum's own weight
+    /// `P/q_in` or `P/q_out` is this times `1 − ε` or `ε`.
     pub fn draw(&self, seed: u64, index: u64) -> Draw {
-        let cell = self.sample(&mut test_rng(seed, index));
+        let mut rng = test_rng(seed, index);
+        let cell = match self.split {
+            Split::Random => self.sample(&mut rng),
+            Split::Stratified => {
+                self.sample_stratum(&mut rng, stratified_explores(self.epsilon, index))
+            }
+        };
         Draw {
             cell,
             weight: self.exposure.p(cell) / self.q(cell).max(PROBABILITY_FLOOR),
@@ -338,6 +424,15 @@ impl TestDistribution {
         match self {
             TestDistribution::Library(d) => d.explores(seed, index),
             TestDistribution::Ndd(_) => false,
+        }
+    }
+
+    /// The exploring share the estimate stratifies on
+    /// ([`LibraryDistribution::strata`]); `None` for the NDD.
+    pub fn strata(&self) -> Option<f64> {
+        match self {
+            TestDistribution::Library(d) => d.strata(),
+            TestDistribution::Ndd(_) => None,
         }
     }
 

@@ -17,7 +17,7 @@ use tslg_method::registry::{
     exploring_share, open_case, CampaignTests, CaseError, ExposureSource, ScenarioCase,
     SEQUENTIAL_CASES,
 };
-use tslg_method::sampling::{check_epsilon, OutsideSpread};
+use tslg_method::sampling::{check_epsilon, OutsideSpread, Split};
 
 fn bad(message: impl Into<String>) -> ApiError {
     ApiError::Unprocessable(message.into())
@@ -97,6 +97,7 @@ struct Opened {
     case: Arc<dyn ScenarioCase>,
     vut: serde_json::Value,
     outside: OutsideSpread,
+    split: Split,
     tests: Option<Arc<dyn CampaignTests>>,
     exact_probability: Option<f64>,
 }
@@ -113,8 +114,9 @@ fn open(
         Some(o) => wire::outside_spread(o),
         None => case.default_outside(),
     };
+    let split = req.split.map_or(Split::default(), wire::split);
     let tests = if req.method == Method::Ndd || file.is_some() {
-        Some(case.campaign(file, &vut, req.epsilon, outside, req.seed)?)
+        Some(case.campaign(file, &vut, req.epsilon, outside, split, req.seed)?)
     } else {
         None
     };
@@ -128,6 +130,7 @@ fn open(
         case,
         vut,
         outside,
+        split,
         tests,
         exact_probability,
     })
@@ -186,6 +189,7 @@ pub async fn start(state: &AppState, req: CreateCampaign) -> Result<CampaignRow,
             requires,
             epsilon: req.epsilon,
             outside: wire::outside(opened.outside),
+            split: wire::wire_split(opened.split),
             rule,
             seed: req.seed,
             status,

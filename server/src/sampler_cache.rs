@@ -69,6 +69,7 @@ fn build(row: &CampaignRow, file: Option<&[u8]>) -> anyhow::Result<Arc<dyn Campa
         &vut,
         row.epsilon,
         tslg_client::wire::outside_spread(row.outside),
+        tslg_client::wire::split(row.split),
         row.seed(),
     )?)
 }

@@ -25,6 +25,7 @@ pub fn start(args: &CampaignStartArgs) -> anyhow::Result<()> {
         vut: vehicle_json(&args.vut)?,
         epsilon: args.exploration.epsilon,
         outside: args.exploration.outside.map(OutsideArg::wire),
+        split: Some(args.exploration.split.wire()),
         beta: args.rule.beta,
         confidence: args.rule.confidence,
         max_tests: args.rule.max_tests,

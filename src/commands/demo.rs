@@ -84,6 +84,7 @@ async fn drive(
         vut: vut.clone(),
         epsilon: args.exploration.epsilon,
         outside: args.exploration.outside.map(crate::OutsideArg::wire),
+        split: Some(args.exploration.split.wire()),
         beta: args.beta,
         confidence: 0.9,
         max_tests: args.max_tests,

@@ -75,6 +75,7 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
                     case.exposure(),
                     args.exploration.epsilon,
                     outside,
+                    args.exploration.split.split(),
                 )
                 .context("cannot sample from this library")?,
             );

@@ -9,7 +9,7 @@ use tslg_method::cutin::CutIn;
 use tslg_method::estimator::{z_for_confidence, StoppingRule};
 use tslg_method::exact::exact_report;
 use tslg_method::library::{build_library, LibraryRequest, SearchMethod, Threshold};
-use tslg_method::sampling::{LibraryDistribution, OutsideSpread};
+use tslg_method::sampling::{LibraryDistribution, OutsideSpread, Split};
 use tslg_method::vehicle::{VehicleModel, BUILTIN_MODELS};
 
 pub fn run(args: &ExactArgs) -> anyhow::Result<()> {
@@ -51,6 +51,8 @@ fn print_table(case: &CutIn, surrogate: &VehicleModel, args: &ExactArgs) -> anyh
         case.exposure(),
         args.epsilon,
         OutsideSpread::Uniform,
+        // The analytic figures are the mixture's, `Var_q(P A/q)`.
+        Split::Random,
     )
     .context("the surrogate's library is empty")?;
     let z = z_for_confidence(args.confidence);

@@ -234,6 +234,7 @@ pub fn load_campaign() -> CreateCampaign {
         min_events: None,
         guard_outside: false,
         outside: None,
+        split: None,
     }
 }
 

@@ -67,9 +67,11 @@ pub fn describe(view: &CampaignView) -> String {
     };
     let outside = match view.outside_upper {
         Some(upper) => format!(
-            "\n  outside the library: {} exploring tests, {} events; failure mass there ≤ {upper:.3e} \
-             ({:.0}% bound), guarded interval [{}, {}]{}",
+            "\n  outside the library: {} exploring tests (ε {}, {} split), {} events; failure mass \
+             there ≤ {upper:.3e} ({:.0}% bound), guarded interval [{}, {}]{}",
             view.outside_tests,
+            view.epsilon,
+            view.split.as_str(),
             view.outside_events,
             view.confidence * 100.0,
             sci(view.ci_low),

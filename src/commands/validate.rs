@@ -19,12 +19,13 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::sync::Arc;
 use tslg_method::campaign::{run_campaign_tests, CampaignResult};
-use tslg_method::estimator::{default_n_min, Decision, ImportanceEstimator, StoppingRule};
+use tslg_method::estimator::{default_n_min, Decision, StoppingRule};
 use tslg_method::library::SearchMethod;
+use tslg_method::prefix::PrefixFold;
 use tslg_method::registry::{
     exploring_share, open_case, BuildRequest, ExposureSource, LibrarySearch, ScenarioCase,
 };
-use tslg_method::sampling::OutsideSpread;
+use tslg_method::sampling::{OutsideSpread, Split};
 
 #[derive(Debug, clap::Args)]
 pub struct ValidateArgs {
@@ -51,6 +52,10 @@ pub struct ValidateArgs {
     /// ε of the plain library campaigns (spread as the case does by default).
     #[arg(long, default_value_t = 0.1)]
     pub epsilon: f64,
+    /// The splits of the tests between the library and the outside to
+    /// compare (comma-separated): stratified, random.
+    #[arg(long, value_delimiter = ',', value_enum, default_values_t = [crate::SplitArg::Stratified])]
+    pub splits: Vec<crate::SplitArg>,
     /// Also run each pairing with the outside guard (ε 0.5, outside spread ndd).
     #[arg(long)]
     pub guard: bool,
@@ -83,6 +88,7 @@ struct Setup {
     library: Vec<u8>,
     epsilon: f64,
     outside: OutsideSpread,
+    split: Split,
     rule: StoppingRule,
     truth: f64,
 }
@@ -94,6 +100,7 @@ pub struct Row {
     vut: &'static str,
     epsilon: f64,
     outside: OutsideSpread,
+    split: Split,
     rule: StoppingRule,
     truth: f64,
     runs: Vec<CampaignResult>,
@@ -213,7 +220,10 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
                 )],
                 given => given.to_vec(),
             };
-            for &n_min in &n_mins {
+            for (&n_min, &split) in n_mins
+                .iter()
+                .flat_map(|n| args.splits.iter().map(move |s| (n, s)))
+            {
                 for &min_events in &args.min_events {
                     let rule = StoppingRule {
                         beta: args.beta,
@@ -232,6 +242,7 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
                         library: library.clone(),
                         epsilon,
                         outside,
+                        split: split.split(),
                         rule,
                         truth,
                     });
@@ -260,11 +271,13 @@ fn exposure(args: &ValidateArgs) -> anyhow::Result<ExposureSource> {
 /// `curve.csv` (one row per setup and n).
 fn curves(args: &ValidateArgs, replicates: u64, to: u64) -> anyhow::Result<()> {
     let mut table = String::from(
-        "| case | exposure | surrogate | vehicle | ε | R | n_min | worst coverage for n ≥ n_min (at n) | \
-         coverage at n_min and at N | n ≥ n_min below the floor |\n\
-         |---|---|---|---|---|---|---|---|---|---|\n",
+        "| case | exposure | surrogate | vehicle | ε | split | R | n_min | \
+         worst coverage for n ≥ n_min (at n) | coverage at n_min and at N | \
+         n ≥ n_min below the floor |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|\n",
     );
-    let mut csv = String::from("case,exposure,surrogate,vehicle,epsilon,replicates,n,coverage\n");
+    let mut csv =
+        String::from("case,exposure,surrogate,vehicle,epsilon,split,replicates,n,coverage\n");
     for case_name in &args.cases {
         for setup in setups(case_name, args)?
             .iter()
@@ -275,11 +288,12 @@ fn curves(args: &ValidateArgs, replicates: u64, to: u64) -> anyhow::Result<()> {
             for (k, c) in curve.iter().enumerate() {
                 let _ = writeln!(
                     csv,
-                    "{},{exposure},{},{},{},{replicates},{},{c}",
+                    "{},{exposure},{},{},{},{},{replicates},{},{c}",
                     setup.case_name,
                     setup.surrogate,
                     setup.vut,
                     setup.epsilon,
+                    setup.split.name(),
                     k + 2
                 );
             }
@@ -294,12 +308,13 @@ fn curves(args: &ValidateArgs, replicates: u64, to: u64) -> anyhow::Result<()> {
                 .map(|(k, &c)| (c, n_min + k as u64))
                 .fold((f64::INFINITY, 0), |a, b| if b.0 < a.0 { b } else { a });
             let line = format!(
-                "| {} | {exposure} | {} | {} | {} | {replicates} | {n_min} | {worst:.3} ({at}) | \
-                 {:.3}, {:.3} | {} of {} |",
+                "| {} | {exposure} | {} | {} | {} | {} | {replicates} | {n_min} | \
+                 {worst:.3} ({at}) | {:.3}, {:.3} | {} of {} |",
                 setup.case_name,
                 setup.surrogate,
                 setup.vut,
                 setup.epsilon,
+                setup.split.name(),
                 stoppable[0],
                 stoppable[stoppable.len() - 1],
                 stoppable.iter().filter(|&&c| c < floor).count(),
@@ -339,15 +354,22 @@ fn coverage_curve(setup: &Setup, replicates: u64, to: u64) -> anyhow::Result<Vec
                 &vut,
                 setup.epsilon,
                 setup.outside,
+                setup.split,
                 seed,
             )?;
-            let mut estimator = ImportanceEstimator::default();
+            let mut fold = PrefixFold::with_strata(tests.strata());
             let mut covers = Vec::with_capacity(to as usize - 1);
             for index in 0..to {
                 let outcome = tests.run(index);
-                estimator.push(outcome.weight, outcome.event);
+                fold.estimator.push(outcome.weight, outcome.event);
+                if tests.explores(index) {
+                    fold.outside
+                        .add(outcome.weight * f64::from(u8::from(outcome.event)), || {
+                            false
+                        });
+                }
                 if index >= 1 {
-                    let (low, high) = estimator.interval(z);
+                    let (low, high) = fold.interval(z);
                     covers.push(low <= setup.truth && setup.truth <= high);
                 }
             }
@@ -370,6 +392,7 @@ fn replicate(setup: &Setup, replicates: u64) -> anyhow::Result<Row> {
                 &vut,
                 setup.epsilon,
                 setup.outside,
+                setup.split,
                 seed,
             )?;
             Ok(run_campaign_tests(tests.as_ref(), &setup.rule, &|_| false))
@@ -381,18 +404,20 @@ fn replicate(setup: &Setup, replicates: u64) -> anyhow::Result<Row> {
         vut: setup.vut,
         epsilon: setup.epsilon,
         outside: setup.outside,
+        split: setup.split,
         rule: setup.rule,
         truth: setup.truth,
         runs,
     })
 }
 
-const HEADER: [&str; 17] = [
+const HEADER: [&str; 18] = [
     "case",
     "surrogate",
     "vehicle",
     "ε",
     "outside",
+    "split",
     "guard",
     "n_min",
     "min_events",
@@ -424,6 +449,7 @@ fn cells(row: &Row) -> Vec<String> {
         row.vut.into(),
         format!("{}", row.epsilon),
         format!("{:?}", row.outside).to_lowercase(),
+        row.split.name().into(),
         if row.rule.guard_outside { "yes" } else { "no" }.into(),
         row.rule.n_min.to_string(),
         row.rule.min_events.to_string(),

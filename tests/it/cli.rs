@@ -535,7 +535,7 @@ fn validation_cell(
     table
         .lines()
         .map(|l| l.split('|').map(str::trim).collect::<Vec<_>>())
-        .find(|c| c.len() > at && c[2] == surrogate && c[3] == vehicle && c[6] == guard)
+        .find(|c| c.len() > at && c[2] == surrogate && c[3] == vehicle && c[7] == guard)
         .unwrap_or_else(|| panic!("no row {surrogate} → {vehicle} in\n{table}"))[at]
         .to_owned()
 }
@@ -554,21 +554,24 @@ fn validate_measures_the_coverage_curve_at_every_n_on_the_authors_table() {
         "100",
         "--replicates",
         "1000",
+        "--splits",
+        "random,stratified",
         "--out",
         dir.path().to_str().unwrap(),
     ]);
     assert!(out.status.success(), "{}", stderr(&out));
     let csv = std::fs::read_to_string(dir.path().join("curve.csv")).unwrap();
-    // Four pairings, n = 2 … 100 each.
-    assert_eq!(csv.lines().count(), 1 + 4 * 99, "{csv}");
-    let coverage = |surrogate: &str, vut: &str, n: u64| -> f64 {
-        let prefix = format!("cut-in,cutin_ndd_spmd.csv,{surrogate},{vut},0.1,1000,{n},");
+    // Four pairings under two splits, n = 2 … 100 each.
+    assert_eq!(csv.lines().count(), 1 + 2 * 4 * 99, "{csv}");
+    let split_coverage = |surrogate: &str, vut: &str, split: &str, n: u64| -> f64 {
+        let prefix = format!("cut-in,cutin_ndd_spmd.csv,{surrogate},{vut},0.1,{split},1000,{n},");
         let line = csv.lines().find(|l| l.starts_with(&prefix));
         line.unwrap_or_else(|| panic!("no {prefix} in {csv}"))[prefix.len()..]
             .parse()
             .unwrap()
     };
-    // The matched IDM: the exact lattice of the Binomial split (by
+    let coverage = |surrogate: &str, vut: &str, n: u64| split_coverage(surrogate, vut, "random", n);
+    // The matched IDM under the random split: the exact lattice of the Binomial split (by
     // enumeration in method/tests/it/cutin_paper.rs), within three
     // standard errors of 1,000 replicates.
     for (n, exact) in [
@@ -585,11 +588,25 @@ fn validate_measures_the_coverage_curve_at_every_n_on_the_authors_table() {
             "n {n}: {measured} against {exact}"
         );
     }
-    // The IDM library testing the FVDM: far below nominal at every n.
-    assert!((2..=100).all(|n| coverage("idm", "fvdm", n) < 0.5), "{csv}");
+    // Stratified, the split is no noise: from the first exploring test
+    // (n = 10) every interval of the matched pairs holds P(A).
+    for vut in ["idm", "fvdm"] {
+        assert!(
+            (10..=100).all(|n| split_coverage(vut, vut, "stratified", n) == 1.0),
+            "{csv}"
+        );
+    }
+    // The IDM library testing the FVDM: far below nominal at every n,
+    // whatever the split: the library does not cover the vehicle.
+    for split in ["random", "stratified"] {
+        assert!(
+            (2..=100).all(|n| split_coverage("idm", "fvdm", split, n) < 0.5),
+            "{csv}"
+        );
+    }
     let summary = stdout(&out);
     assert!(
-        summary.contains("| idm | fvdm | 0.1 | 1000 | 100 |"),
+        summary.contains("| idm | fvdm | 0.1 | random | 1000 | 100 |"),
         "{summary}"
     );
     // Tables are for cut-in only.

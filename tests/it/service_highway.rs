@@ -36,6 +36,7 @@ fn request(
         n_min: None,
         min_events: None,
         guard_outside: false,
+        split: None,
     }
 }
 

@@ -34,7 +34,7 @@ async fn a_mismatched_surrogate_is_flagged_and_the_guard_keeps_testing_until_the
 
     // The plain rule: converged at n_min, the interval far below P(A),
     // but the outside bound and the guarded interval say what is unknown.
-    // Its two exploring tests found nothing: no warning without evidence.
+    // It warns only on evidence: an event among its three exploring tests.
     let plain = CreateCampaign {
         n_min: Some(30),
         ..campaign(Method::Library, library.id, "fvdm", 0.2, 3)
@@ -45,8 +45,14 @@ async fn a_mismatched_surrogate_is_flagged_and_the_guard_keeps_testing_until_the
     assert!(view.ci_high.unwrap() < exact, "{view:?}");
     assert!(view.guarded_ci_high.unwrap() >= exact, "{view:?}");
     assert!(view.outside_upper.unwrap() > 0.2 * view.estimate.unwrap());
-    assert_eq!(view.outside_events, 0, "{view:?}");
-    assert!(view.warnings.is_empty(), "{:?}", view.warnings);
+    assert_eq!(view.outside_tests, 3, "{view:?}");
+    assert_eq!(
+        view.warnings
+            .iter()
+            .any(|w| w.contains("does not bound what the library leaves out")),
+        view.outside_events > 0,
+        "{view:?}"
+    );
     assert_same(&view, &in_process(Some("idm"), &plain));
 
     // Guarded: many more tests, the vehicle's failures outside the library
@@ -81,9 +87,13 @@ async fn a_mismatched_surrogate_is_flagged_and_the_guard_keeps_testing_until_the
     assert_same(&view, &in_process(Some("idm"), &request));
 
     // A surrogate that fails wherever the vehicle does (the FVDM's library
-    // testing the IDM): the guarded campaign meets the vehicle's failures
-    // outside the library, and none is a mismatch, so no such warning.
+    // testing the IDM): whatever failures of the vehicle the guarded
+    // campaign meets outside the library (about 11 % of its failure mass
+    // lies there, and each exploring test finds it with probability near
+    // 10⁻⁴, so a campaign of this size meets one or two, or none), none is
+    // a mismatch, so no such warning; the guarded interval holds P(A).
     let covering = ready_library(&client, "fvdm", true).await;
+    let exact_idm = crate::support::exact("idm");
     let request = CreateCampaign {
         vut: serde_json::json!({"model": "idm"}),
         ..guarded(covering.id, 0.2)
@@ -91,8 +101,9 @@ async fn a_mismatched_surrogate_is_flagged_and_the_guard_keeps_testing_until_the
     let id = client.create_campaign(&request).await.unwrap().id;
     let view = finished(&client, id, Duration::from_secs(120)).await;
     assert_eq!(view.status, CampaignStatus::Converged);
-    assert!(view.outside_events > 0, "{view:?}");
+    assert!(view.outside_tests > 1000, "{view:?}");
     assert_eq!(view.mismatched_events, 0, "{view:?}");
+    assert!(view.ci_low.unwrap() <= exact_idm && exact_idm <= view.guarded_ci_high.unwrap());
     assert!(
         !view
             .warnings

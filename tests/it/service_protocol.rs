@@ -91,6 +91,7 @@ async fn results_are_idempotent_fenced_on_the_attempt_and_leases_expire_and_retu
             &json!({"model": "idm"}),
             0.1,
             Default::default(),
+            Default::default(),
             3,
         )
         .unwrap();
@@ -216,7 +217,10 @@ async fn results_are_idempotent_fenced_on_the_attempt_and_leases_expire_and_retu
 
     let view = client.campaign(id).await.unwrap();
     assert_eq!((view.indices, view.events), (100, events.len() as u64));
-    let mut fold = tslg_method::prefix::PrefixFold::default();
+    // The campaign's own estimate: stratified, its exploring tests known
+    // from the index alone.
+    let mut fold = tslg_method::prefix::PrefixFold::with_strata(campaign.strata());
+    assert_eq!(campaign.strata(), Some(0.1));
     let rule = tslg_method::estimator::StoppingRule {
         beta: 0.01,
         confidence: 0.9,
@@ -229,11 +233,16 @@ async fn results_are_idempotent_fenced_on_the_attempt_and_leases_expire_and_retu
         .iter()
         .map(|e| (e.index, tslg_method::prefix::SparseOutcome::Event(e.weight)))
         .collect();
-    fold.advance(&rule, rule.z(), 100, &sparse, None).unwrap();
-    assert_eq!(
-        view.estimate.unwrap().to_bits(),
-        fold.estimator.estimate().to_bits()
-    );
+    let explored: Vec<u64> = (0..100).filter(|&i| campaign.explores(i)).collect();
+    assert_eq!(explored, (0..10).map(|k| 10 * k + 9).collect::<Vec<u64>>());
+    let exploration = tslg_method::prefix::Exploration {
+        explored: &explored,
+        mass: campaign.outside_mass().unwrap(),
+        surrogate_misses: &|i| campaign.surrogate_misses(i),
+    };
+    fold.advance(&rule, rule.z(), 100, &sparse, Some(exploration))
+        .unwrap();
+    assert_eq!(view.estimate.unwrap().to_bits(), fold.estimate().to_bits());
 
     // Cancelled: later results are acknowledged and ignored.
     let next = claim(&client, "w2").await.expect("a new lease");
@@ -533,6 +542,7 @@ async fn a_late_result_counts_until_the_lease_is_taken_over_and_nothing_counts_a
             Some(&file),
             &json!({"model": "idm"}),
             0.1,
+            Default::default(),
             Default::default(),
             3,
         )

@@ -69,6 +69,7 @@ async fn a_forged_report_on_a_builtin_vehicle_is_refused_and_its_worker_undone()
             &request.vut,
             0.1,
             Default::default(),
+            Default::default(),
             request.seed,
         )
         .unwrap();

@@ -31,7 +31,8 @@ impl PreparedCampaign {
             plan.exposure_fingerprint
         );
         let outside = wire::outside_spread(plan.outside);
-        let tests = case.campaign(library, &plan.vut, plan.epsilon, outside, plan.seed)?;
+        let split = wire::split(plan.split);
+        let tests = case.campaign(library, &plan.vut, plan.epsilon, outside, split, plan.seed)?;
         Ok(Self { tests })
     }
 }

@@ -14,7 +14,9 @@ use crate::exact::{event_cells, event_probability, exact_report, ExactReport};
 use crate::external::{DriverError, ExternalVehicle, ExternalVut, TestStart};
 use crate::library::{build_library_observed, Library, LibraryRequest, SearchMethod};
 use crate::progress::Progress;
-use crate::sampling::{LibraryDistribution, NddDistribution, OutsideSpread, TestDistribution};
+use crate::sampling::{
+    LibraryDistribution, NddDistribution, OutsideSpread, Split, TestDistribution,
+};
 use serde::de::DeserializeOwned;
 use serde::Serialize;
 use std::sync::atomic::{AtomicU8, Ordering};
@@ -161,6 +163,7 @@ where
         vut: &serde_json::Value,
         epsilon: f64,
         outside: OutsideSpread,
+        split: Split,
         seed: u64,
     ) -> Result<Arc<dyn CampaignTests>, CaseError> {
         let vehicle = self.campaign_vehicle(vut)?;
@@ -172,6 +175,7 @@ where
                     self.case.exposure(),
                     epsilon,
                     outside,
+                    split,
                 )?);
                 (distribution, self.vehicle(&library.surrogate).ok())
             }
@@ -226,7 +230,15 @@ where
     ) -> Result<ExactReport, CaseError> {
         let vehicle = self.builtin(spec, "an exact answer")?;
         let library = self.library(file)?;
-        let q = LibraryDistribution::new(&library, self.case.exposure(), epsilon, outside)?;
+        // The analytic figures are the mixture's (`Var_q(P A/q)`), which the
+        // pooled variance of either split estimates.
+        let q = LibraryDistribution::new(
+            &library,
+            self.case.exposure(),
+            epsilon,
+            outside,
+            Split::Random,
+        )?;
         Ok(exact_report(
             self.case.as_ref(),
             &vehicle,
@@ -343,6 +355,10 @@ where
 
     fn explores(&self, index: u64) -> bool {
         self.distribution.explores(self.seed, index)
+    }
+
+    fn strata(&self) -> Option<f64> {
+        self.distribution.strata()
     }
 
     fn outside_mass(&self) -> Option<&crate::outside::OutsideMass> {

@@ -21,7 +21,7 @@ use crate::external::{
 };
 use crate::library::{ExposureRef, LibraryFileError};
 use crate::progress::Progress;
-use crate::sampling::OutsideSpread;
+use crate::sampling::{OutsideSpread, Split};
 use crate::vehicle::VehicleModel;
 use std::sync::{Arc, Mutex, Weak};
 
@@ -235,6 +235,7 @@ impl ScenarioCase for FollowScenarioCase {
         vut: &serde_json::Value,
         epsilon: f64,
         outside: OutsideSpread,
+        _split: Split,
         seed: u64,
     ) -> Result<Arc<dyn CampaignTests>, CaseError> {
         let vut = self.campaign_vehicle(vut)?;

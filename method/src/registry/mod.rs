@@ -20,7 +20,7 @@ use crate::external::{DriverError, ExternalVehicle, ExternalVut};
 use crate::highway::{HighwayExit, HighwayPreset};
 use crate::library::{LibraryFileError, SearchMethod, Threshold};
 use crate::progress::Progress;
-use crate::sampling::{OutsideSpread, SamplingError};
+use crate::sampling::{OutsideSpread, SamplingError, Split};
 use cells::Registered;
 use follow::FollowScenarioCase;
 use serde::{Deserialize, Serialize};
@@ -209,6 +209,12 @@ pub trait CampaignTests: Send + Sync {
     fn explores(&self, _index: u64) -> bool {
         false
     }
+    /// The exploring share the estimate stratifies on: ε of a library
+    /// campaign of a grid case under the stratified split
+    /// ([`crate::prefix::PrefixFold::strata`]); `None` otherwise.
+    fn strata(&self) -> Option<f64> {
+        None
+    }
     /// The fill that bounds the failure mass outside the library
     /// ([`crate::outside`]); `None` for the NDD and for cases whose
     /// exploration is per decision (car-following).
@@ -261,14 +267,16 @@ pub trait ScenarioCase: Send + Sync {
         progress: &Progress,
     ) -> Result<BuiltLibrary, CaseError>;
     /// The tests of a campaign of `vut`: from the library `file` with
-    /// exploration `epsilon` spread by `outside`, or from the NDD when
-    /// `file` is `None`.
+    /// exploration `epsilon` spread by `outside` and tests split by `split`
+    /// (grid cases; car-following explores per decision), or from the NDD
+    /// when `file` is `None`.
     fn campaign(
         &self,
         file: Option<&[u8]>,
         vut: &serde_json::Value,
         epsilon: f64,
         outside: OutsideSpread,
+        split: Split,
         seed: u64,
     ) -> Result<Arc<dyn CampaignTests>, CaseError>;
     /// The picture of a library file: the exposure beside the library's

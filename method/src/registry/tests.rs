@@ -35,6 +35,7 @@ fn the_registered_cut_in_case_answers_like_the_typed_one() {
             &json!({"model": "idm"}),
             0.1,
             OutsideSpread::Uniform,
+            Split::Stratified,
             3,
         )
         .unwrap();
@@ -126,6 +127,7 @@ fn the_highway_exit_case_opens_by_name_with_its_presets_and_only_its_own_exposur
             &json!({"model": "mobil"}),
             0.1,
             OutsideSpread::Uniform,
+            Split::Stratified,
             0,
         )
         .unwrap();
@@ -190,6 +192,7 @@ fn the_car_following_case_learns_a_policy_file_and_replays_reported_accidents() 
             &json!({"model": "acc-aeb"}),
             0.1,
             OutsideSpread::Ndd,
+            Split::Stratified,
             5,
         )
         .unwrap();
@@ -220,6 +223,7 @@ fn the_car_following_case_learns_a_policy_file_and_replays_reported_accidents() 
             &json!({"model": "idm"}),
             0.1,
             OutsideSpread::Ndd,
+            Split::Stratified,
             0,
         )
         .err()
@@ -253,6 +257,7 @@ fn the_coordinators_replay_gives_every_tests_outcome_and_nothing_for_programs() 
                 &json!({ "model": vut }),
                 0.1,
                 OutsideSpread::Uniform,
+                Split::Stratified,
                 9,
             )
             .unwrap();
@@ -276,13 +281,21 @@ fn the_coordinators_replay_gives_every_tests_outcome_and_nothing_for_programs() 
             &json!({"external": "mine"}),
             0.1,
             OutsideSpread::Uniform,
+            Split::Stratified,
             9,
         )
         .unwrap();
     assert_eq!(program.replay(0), None);
     let follow = open_case("car-following", Some("risky"), &ExposureSource::Builtin).unwrap();
     let tests = follow
-        .campaign(None, &json!({"model": "idm"}), 0.1, OutsideSpread::Ndd, 2)
+        .campaign(
+            None,
+            &json!({"model": "idm"}),
+            0.1,
+            OutsideSpread::Ndd,
+            Split::Stratified,
+            2,
+        )
         .unwrap();
     for index in 0..200 {
         let (run, replay) = (tests.run(index), tests.replay(index).unwrap());

@@ -22,8 +22,10 @@ pub fn shared_table() -> Option<String> {
     }
 }
 
+use tslg_method::case::Case;
 use tslg_method::cutin::CutIn;
 use tslg_method::library::{build_library, Library, LibraryRequest, SearchMethod, Threshold};
+use tslg_method::sampling::{LibraryDistribution, OutsideSpread, Split};
 use tslg_method::vehicle::VehicleModel;
 
 pub fn vehicle(name: &str) -> VehicleModel {
@@ -53,4 +55,18 @@ pub fn median(values: &mut [u64]) -> f64 {
     } else {
         (values[n / 2 - 1] + values[n / 2]) as f64 / 2.0
     }
+}
+
+/// The paper's ε-greedy distribution of `library` on `case`'s exposure: ε
+/// spread uniformly outside the library, each test exploring with
+/// probability ε (the random split).
+pub fn paper_q(case: &CutIn, library: &Library, epsilon: f64) -> LibraryDistribution {
+    LibraryDistribution::new(
+        library,
+        case.exposure(),
+        epsilon,
+        OutsideSpread::Uniform,
+        Split::Random,
+    )
+    .expect("a non-empty library on its own grid")
 }

@@ -2,16 +2,14 @@
 //! the grid. Tests that need the authors' table skip (and say why) when
 //! `../shared/data` is absent; the built-in exposure always runs.
 
-use crate::common::{library, median, shared_table, vehicle};
+use crate::common::{library, median, paper_q, shared_table, vehicle};
 use tslg_method::campaign::run_campaign;
 use tslg_method::case::Case;
 use tslg_method::cutin::{CutIn, CutInExposureModel, CutInPreset};
 use tslg_method::estimator::{Decision, StoppingRule};
 use tslg_method::exact::{event_cells, event_probability, exact_report};
 use tslg_method::library::SearchMethod;
-use tslg_method::sampling::{
-    LibraryDistribution, NddDistribution, OutsideSpread, TestDistribution,
-};
+use tslg_method::sampling::{NddDistribution, TestDistribution};
 
 fn table_case() -> Option<CutIn> {
     let text = shared_table()?;
@@ -55,7 +53,7 @@ fn the_guard_stops_for_the_librarys_own_surrogate_under_the_uniform_spread() {
     // ε 0.1 and β 0.2, for any seed (the estimate is W from the start).
     let Some(case) = table_case() else { return };
     let lib = library(&case, "idm", SearchMethod::Exhaustive);
-    let q = LibraryDistribution::new(&lib, case.exposure(), 0.1, OutsideSpread::Uniform).unwrap();
+    let q = paper_q(&case, &lib, 0.1);
     let rule = StoppingRule {
         guard_outside: true,
         ..StoppingRule::new(0.2, 3_000_000)
@@ -136,7 +134,7 @@ struct Coverage {
 /// `runs` seeded library campaigns of `vut` with a library of `surrogate`.
 fn coverage(case: &CutIn, surrogate: &str, vut: &str, runs: u64) -> Coverage {
     let lib = library(case, surrogate, SearchMethod::Exhaustive);
-    let q = LibraryDistribution::new(&lib, case.exposure(), 0.1, OutsideSpread::Uniform).unwrap();
+    let q = paper_q(&case, &lib, 0.1);
     let rule = StoppingRule::new(0.2, 1_000_000);
     let exact = exact_report(case, &vehicle(vut), &q, rule.beta, rule.z());
     let distribution = TestDistribution::library(q);
@@ -210,9 +208,7 @@ fn library_and_ndd_campaigns_agree() {
         &case,
         &idm,
         Some(&vehicle("fvdm")),
-        &TestDistribution::library(
-            LibraryDistribution::new(&lib, case.exposure(), 0.1, OutsideSpread::Uniform).unwrap(),
-        ),
+        &TestDistribution::library(paper_q(&case, &lib, 0.1)),
         &rule,
         7,
     );
@@ -276,8 +272,7 @@ fn the_epsilon_greedy_split_makes_a_matched_pairs_coverage_ride_a_lattice() {
         (0.05, 200, 0.8525),
     ];
     for (epsilon, n, coverage) in measured {
-        let q = LibraryDistribution::new(&lib, case.exposure(), epsilon, OutsideSpread::Uniform)
-            .unwrap();
+        let q = paper_q(&case, &lib, epsilon);
         let truth = exact_report(&case, &idm, &q, 0.2, z).probability;
         assert!(
             (truth - lib.w).abs() < 1e-12 * lib.w,

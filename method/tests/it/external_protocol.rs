@@ -172,8 +172,15 @@ fn cut_in_in_step_and_episode_mode_matches_the_builtin_model() {
         .build_library(&json!({"model": "idm"}), &BuildRequest::default())
         .unwrap();
     let campaign = |vut: Value| {
-        case.campaign(Some(&built.file), &vut, 0.1, OutsideSpread::Uniform, 11)
-            .unwrap()
+        case.campaign(
+            Some(&built.file),
+            &vut,
+            0.1,
+            OutsideSpread::Uniform,
+            Default::default(),
+            11,
+        )
+        .unwrap()
     };
     let builtin = campaign(json!({"model": "idm"}));
     for mode in ["step", "episode"] {
@@ -191,8 +198,15 @@ fn highway_exit_in_step_and_episode_mode_matches_the_builtin_model() {
         .build_library(&json!({"model": "mobil"}), &BuildRequest::default())
         .unwrap();
     let campaign = |vut: Value| {
-        case.campaign(Some(&built.file), &vut, 0.1, OutsideSpread::Uniform, 2)
-            .unwrap()
+        case.campaign(
+            Some(&built.file),
+            &vut,
+            0.1,
+            OutsideSpread::Uniform,
+            Default::default(),
+            2,
+        )
+        .unwrap()
     };
     let builtin = campaign(json!({"model": "mobil"}));
     for mode in ["step", "episode"] {
@@ -209,8 +223,15 @@ fn car_following_in_step_mode_matches_the_builtin_model_and_is_not_replayed() {
         .build_library(&json!({"model": "idm"}), &BuildRequest::default())
         .unwrap();
     let campaign = |vut: Value| {
-        case.campaign(Some(&built.file), &vut, 0.1, OutsideSpread::Ndd, 4)
-            .unwrap()
+        case.campaign(
+            Some(&built.file),
+            &vut,
+            0.1,
+            OutsideSpread::Ndd,
+            Default::default(),
+            4,
+        )
+        .unwrap()
     };
     let builtin = campaign(json!({"model": "idm"}));
     let program = campaign(json!({"external": "mirror"}));

@@ -125,6 +125,7 @@ fn check_library(case: &str, preset: Option<&str>, bytes: &[u8]) -> bool {
         &serde_json::json!({"model": "idm"}),
         0.1,
         Default::default(),
+        Default::default(),
         1,
     )
     .is_ok()

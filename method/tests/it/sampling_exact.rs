@@ -1,15 +1,18 @@
 //! Sampling and estimation checked against exact answers on the grid.
 
-use crate::common::{library, vehicle};
+use crate::common::{library, paper_q, vehicle};
 use std::collections::HashMap;
 use tslg_method::campaign::run_campaign;
 use tslg_method::case::Case;
 use tslg_method::cutin::{CutIn, CutInPreset};
 use tslg_method::estimator::{z_for_confidence, ImportanceEstimator, StoppingRule};
-use tslg_method::exact::{event_cells, event_probability, library_variance};
+use tslg_method::exact::{
+    event_cells, event_probability, library_variance, stratified_library_variance,
+};
 use tslg_method::library::{Library, SearchMethod};
+use tslg_method::prefix::PrefixFold;
 use tslg_method::sampling::{
-    LibraryDistribution, NddDistribution, OutsideSpread, TestDistribution,
+    LibraryDistribution, NddDistribution, OutsideSpread, Split, TestDistribution,
 };
 
 fn setup() -> (CutIn, Library) {
@@ -22,7 +25,8 @@ fn setup() -> (CutIn, Library) {
 fn q_is_a_distribution_with_epsilon_outside_the_library() {
     let (case, lib) = setup();
     for spread in [OutsideSpread::Uniform, OutsideSpread::Ndd] {
-        let q = LibraryDistribution::new(&lib, case.exposure(), 0.1, spread).unwrap();
+        let q =
+            LibraryDistribution::new(&lib, case.exposure(), 0.1, spread, Split::Random).unwrap();
         let total: f64 = (0..case.grid().len()).map(|c| q.q(c)).sum();
         let outside: f64 = (0..case.grid().len())
             .filter(|&c| !q.contains(c))
@@ -35,7 +39,7 @@ fn q_is_a_distribution_with_epsilon_outside_the_library() {
         );
     }
     // Uniform: every outside cell gets ε/(N − N(Φ)).
-    let q = LibraryDistribution::new(&lib, case.exposure(), 0.1, OutsideSpread::Uniform).unwrap();
+    let q = paper_q(&case, &lib, 0.1);
     let outside_cell = (0..case.grid().len()).find(|&c| !q.contains(c)).unwrap();
     assert_eq!(q.q(outside_cell), 0.1 / (3420 - lib.size()) as f64);
 }
@@ -64,8 +68,12 @@ fn chi_square(
 fn draws_follow_q_exactly() {
     let (case, lib) = setup();
     let draws = 400_000u64;
-    for spread in [OutsideSpread::Uniform, OutsideSpread::Ndd] {
-        let q = LibraryDistribution::new(&lib, case.exposure(), 0.3, spread).unwrap();
+    for (spread, split) in [
+        (OutsideSpread::Uniform, Split::Random),
+        (OutsideSpread::Ndd, Split::Random),
+        (OutsideSpread::Uniform, Split::Stratified),
+    ] {
+        let q = LibraryDistribution::new(&lib, case.exposure(), 0.3, spread, split).unwrap();
         let mut counts = HashMap::new();
         for i in 0..draws {
             *counts.entry(q.draw(11, i).cell).or_insert(0u64) += 1;
@@ -97,7 +105,7 @@ fn draws_follow_q_exactly() {
 #[test]
 fn uniform_outside_sampling_picks_the_kth_outside_cell() {
     let (case, lib) = setup();
-    let q = LibraryDistribution::new(&lib, case.exposure(), 0.999, OutsideSpread::Uniform).unwrap();
+    let q = paper_q(&case, &lib, 0.999);
     let outside: Vec<usize> = (0..case.grid().len()).filter(|&c| !q.contains(c)).collect();
     let mut seen = std::collections::HashSet::new();
     for i in 0..200_000 {
@@ -113,7 +121,7 @@ fn uniform_outside_sampling_picks_the_kth_outside_cell() {
 #[test]
 fn test_i_depends_on_seed_and_index_alone() {
     let (case, lib) = setup();
-    let q = LibraryDistribution::new(&lib, case.exposure(), 0.1, OutsideSpread::Uniform).unwrap();
+    let q = paper_q(&case, &lib, 0.1);
     let forward: Vec<_> = (0..1000).map(|i| q.draw(5, i)).collect();
     let backward: Vec<_> = (0..1000).rev().map(|i| q.draw(5, i)).collect();
     assert!(forward.iter().eq(backward.iter().rev()));
@@ -135,7 +143,7 @@ const STABLE_FIRST_CELLS: [usize; 5] = [1979, 624, 1827, 1830, 930];
 fn the_estimator_is_unbiased_and_its_variance_matches_the_analytic_one() {
     let (case, lib) = setup();
     let vut = vehicle("fvdm");
-    let q = LibraryDistribution::new(&lib, case.exposure(), 0.1, OutsideSpread::Uniform).unwrap();
+    let q = paper_q(&case, &lib, 0.1);
     let events = event_cells(&case, &vut);
     let is_event: std::collections::HashSet<usize> = events.iter().copied().collect();
     let mu = event_probability(&case, &events);
@@ -175,7 +183,7 @@ fn the_estimator_is_unbiased_and_its_variance_matches_the_analytic_one() {
 #[test]
 fn campaigns_do_not_depend_on_the_number_of_threads() {
     let (case, lib) = setup();
-    let q = LibraryDistribution::new(&lib, case.exposure(), 0.1, OutsideSpread::Uniform).unwrap();
+    let q = paper_q(&case, &lib, 0.1);
     let dist = TestDistribution::library(q);
     let rule = StoppingRule::new(0.2, 100_000);
     let vut = vehicle("acc-aeb");
@@ -194,4 +202,60 @@ fn campaigns_do_not_depend_on_the_number_of_threads() {
     let exhausted = run_campaign(&case, &vut, None, &ndd, &rule, 1);
     assert_eq!(exhausted.tests, 5_000);
     assert!((z_for_confidence(0.9) - rule.z()).abs() < 1e-15);
+}
+
+#[test]
+fn the_stratified_estimate_is_unbiased_with_the_within_strata_variance() {
+    // The IDM (the library's own surrogate: the split between the strata
+    // is nearly all of the mixture's variance) and the FVDM (part of its
+    // failure mass outside the library, where the weights are large).
+    let (case, lib) = setup();
+    let q = LibraryDistribution::new(
+        &lib,
+        case.exposure(),
+        0.1,
+        OutsideSpread::Uniform,
+        Split::Stratified,
+    )
+    .unwrap();
+    let (n, seeds) = (2_000u64, 400u64);
+    for (name, gain) in [("idm", 0.5), ("fvdm", 0.97)] {
+        let events = event_cells(&case, &vehicle(name));
+        let is_event: std::collections::HashSet<usize> = events.iter().copied().collect();
+        let mu = event_probability(&case, &events);
+        let within = stratified_library_variance(&case, &events, &q);
+        let mixture = library_variance(&case, &events, &q);
+        assert!(within < gain * mixture, "{name}: {within:e} vs {mixture:e}");
+        let estimates: Vec<f64> = (0..seeds)
+            .map(|seed| {
+                let mut fold = PrefixFold::with_strata(q.strata());
+                for i in 0..n {
+                    let d = q.draw(seed, i);
+                    let event = is_event.contains(&d.cell);
+                    fold.estimator.push(d.weight, event);
+                    if q.explores(seed, i) {
+                        fold.outside
+                            .add(if event { d.weight } else { 0.0 }, || false);
+                    }
+                }
+                assert_eq!(fold.outside.tests, n / 10);
+                fold.estimate()
+            })
+            .collect();
+        let mean = estimates.iter().sum::<f64>() / seeds as f64;
+        let var = estimates.iter().map(|e| (e - mean).powi(2)).sum::<f64>() / (seeds - 1) as f64;
+        let se = (within / n as f64 / seeds as f64).sqrt();
+        assert!(
+            (mean - mu).abs() < 4.0 * se,
+            "{name}: mean {mean:e} vs μ {mu:e} (se {se:e})"
+        );
+        // The spread of the estimates across seeds is the exact
+        // within-strata variance (a sample variance of 400 has a relative
+        // s.e. near 0.1 for normal data; these are heavier-tailed).
+        let ratio = var / (within / n as f64);
+        assert!(
+            (0.7..1.4).contains(&ratio),
+            "{name}: variance ratio {ratio}"
+        );
+    }
 }

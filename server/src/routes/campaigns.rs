@@ -127,6 +127,7 @@ pub async fn plan(
         },
         epsilon: row.epsilon,
         outside: row.outside,
+        split: row.split,
         seed: row.seed(),
         vut: serde_json::from_str(&row.vut).map_err(|e| ApiError::Internal(e.into()))?,
     }))

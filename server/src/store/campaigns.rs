@@ -6,6 +6,7 @@ use crate::store::audits::AuditState;
 use sqlx::SqlitePool;
 use tslg_api::{
     AuditCounts, CampaignStatus, CampaignView, ExposureRequest, HistoryPoint, Method, Outside,
+    Split,
 };
 use tslg_method::campaign::CampaignResult;
 use tslg_method::estimator::{Decision, ImportanceEstimator, StoppingRule};
@@ -29,6 +30,10 @@ pub struct CampaignRow {
     pub requires: Option<String>,
     pub epsilon: f64,
     pub outside: Outside,
+    /// How the tests are split between the library and the outside.
+    pub split: Split,
+    /// The exploring share the estimate stratifies on (NULL: the plain mean).
+    pub strata_epsilon: Option<f64>,
     pub beta: f64,
     pub confidence: f64,
     pub n_min: i64,
@@ -68,8 +73,8 @@ pub struct CampaignRow {
 }
 
 pub const COLUMNS: &str = "id, case_name, preset, method, library_id, exposure_name, \
-    exposure_fingerprint, exposure_table, vut, requires, epsilon, outside, beta, confidence, n_min, \
-    min_events, max_tests, seed, status, status_detail, next_index, indices, tests, events, invalid, s1, s2, \
+    exposure_fingerprint, exposure_table, vut, requires, epsilon, outside, split, strata_epsilon, \
+    beta, confidence, n_min, min_events, max_tests, seed, status, status_detail, next_index, indices, tests, events, invalid, s1, s2, \
     largest, guard_outside, outside_tests, outside_events, outside_s1, outside_upper, \
     outside_mismatches, \
     cost_per_test, worker_seconds, audits_waived, reported_s1, exact_probability, created_at, \
@@ -109,6 +114,7 @@ impl CampaignRow {
                 s1: self.outside_s1,
                 mismatches: self.outside_mismatches as u64,
             },
+            strata: self.strata_epsilon,
         }
     }
 
@@ -149,6 +155,7 @@ impl CampaignRow {
             vut: serde_json::from_str(&self.vut).unwrap_or_default(),
             epsilon: self.epsilon,
             outside: self.outside,
+            split: self.split,
             beta: self.beta,
             confidence: self.confidence,
             n_min: rule.n_min,
@@ -251,14 +258,18 @@ pub fn audit_counts(row: &CampaignRow, states: &[(AuditState, i64)]) -> (AuditCo
 /// The estimate, interval and relative half-width of a prefix.
 pub fn point(fold: &PrefixFold, z: f64) -> HistoryPoint {
     let e = &fold.estimator;
-    let (ci_low, ci_high) = e.interval(z);
-    let r = e.relative_half_width(z);
+    let (ci_low, ci_high) = fold.interval(z);
+    let r = fold.relative_half_width(z);
     HistoryPoint {
         tests: e.tests(),
         indices: fold.indices,
         events: e.events(),
-        estimate: e.estimate(),
-        half_width: if e.tests() > 0 { e.half_width(z) } else { 0.0 },
+        estimate: fold.estimate(),
+        half_width: if e.tests() > 0 {
+            fold.half_width(z)
+        } else {
+            0.0
+        },
         relative_half_width: r.is_finite().then_some(r),
         ci_low: if e.tests() > 0 { ci_low } else { 0.0 },
         ci_high: if e.tests() > 0 { ci_high } else { 0.0 },
@@ -278,6 +289,7 @@ pub struct NewCampaign {
     pub requires: Option<String>,
     pub epsilon: f64,
     pub outside: Outside,
+    pub split: Split,
     pub rule: StoppingRule,
     pub seed: u64,
     pub status: CampaignStatus,
@@ -289,8 +301,8 @@ pub async fn insert(pool: &SqlitePool, new: &NewCampaign) -> Result<CampaignRow,
     let sql = format!(
         "INSERT INTO campaigns (case_name, preset, method, library_id, exposure_name, \
          exposure_fingerprint, exposure_table, vut, requires, epsilon, outside, beta, confidence, \
-         n_min, min_events, max_tests, seed, status, guard_outside, exact_probability) \
-         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) \
+         n_min, min_events, max_tests, seed, status, guard_outside, exact_probability, split) \
+         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) \
          RETURNING {COLUMNS}"
     );
     Ok(sqlx::query_as(&sql)
@@ -314,6 +326,7 @@ pub async fn insert(pool: &SqlitePool, new: &NewCampaign) -> Result<CampaignRow,
         .bind(new.status.as_str())
         .bind(new.rule.guard_outside)
         .bind(new.exact_probability)
+        .bind(new.split.as_str())
         .fetch_one(pool)
         .await?)
 }
@@ -369,8 +382,9 @@ pub async fn history(
     row: &CampaignRow,
     max: usize,
 ) -> Result<Vec<HistoryPoint>, ApiError> {
-    let rows: Vec<(i64, i64, i64, f64, f64)> = sqlx::query_as(
-        "SELECT indices, tests, events, s1, s2 FROM history WHERE campaign_id = ? ORDER BY indices",
+    let rows: Vec<(i64, i64, i64, f64, f64, i64, f64)> = sqlx::query_as(
+        "SELECT indices, tests, events, s1, s2, outside_tests, outside_s1 FROM history \
+         WHERE campaign_id = ? ORDER BY indices",
     )
     .bind(row.id)
     .fetch_all(pool)
@@ -378,15 +392,22 @@ pub async fn history(
     let z = row.rule().z();
     let mut points: Vec<HistoryPoint> = rows
         .into_iter()
-        .map(|(indices, tests, events, s1, s2)| {
-            let fold = PrefixFold {
-                estimator: ImportanceEstimator::from_sums(tests as u64, events as u64, s1, s2),
-                indices: indices as u64,
-                invalid: (indices - tests) as u64,
-                outside: OutsideTally::default(),
-            };
-            point(&fold, z)
-        })
+        .map(
+            |(indices, tests, events, s1, s2, outside_tests, outside_s1)| {
+                let fold = PrefixFold {
+                    estimator: ImportanceEstimator::from_sums(tests as u64, events as u64, s1, s2),
+                    indices: indices as u64,
+                    invalid: (indices - tests) as u64,
+                    outside: OutsideTally {
+                        tests: outside_tests as u64,
+                        s1: outside_s1,
+                        ..OutsideTally::default()
+                    },
+                    strata: row.strata_epsilon,
+                };
+                point(&fold, z)
+            },
+        )
         .collect();
     let current = row.fold();
     if current.indices > points.last().map_or(0, |p| p.indices) {

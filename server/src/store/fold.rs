@@ -121,6 +121,9 @@ pub async fn fold_prefix(
     let from = fold.indices;
     let outcomes = reports::outcomes(conn, campaign.id, from, frontier).await?;
     let tests = tests.filter(|t| t.outside_mass().is_some());
+    // The campaign's tests say whether its estimate stratifies (ε in force
+    // under the stratified split); persisted with the sums.
+    fold.strata = tests.as_ref().and_then(|t| t.strata());
     let mut explored = Vec::new();
     if let Some(tests) = &tests {
         if campaign.outside_upper.is_none() && from > 0 {
@@ -220,7 +223,7 @@ async fn write(
     sqlx::query(
         "UPDATE campaigns SET indices = ?, tests = ?, events = ?, invalid = ?, s1 = ?, s2 = ?, \
          largest = ?, outside_tests = ?, outside_events = ?, outside_s1 = ?, outside_upper = ?, \
-         outside_mismatches = ?, \
+         outside_mismatches = ?, strata_epsilon = ?, \
          status = ?, status_detail = COALESCE(?, status_detail), \
          updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now') WHERE id = ?",
     )
@@ -236,6 +239,7 @@ async fn write(
     .bind(fold.outside.s1)
     .bind(upper)
     .bind(fold.outside.mismatches as i64)
+    .bind(fold.strata)
     .bind(status.as_str())
     .bind(detail)
     .bind(campaign.id)
@@ -243,7 +247,8 @@ async fn write(
     .await?;
     for batch in folded.course.chunks(INSERT_BATCH) {
         QueryBuilder::<Sqlite>::new(
-            "INSERT OR REPLACE INTO history (campaign_id, indices, tests, events, s1, s2) ",
+            "INSERT OR REPLACE INTO history (campaign_id, indices, tests, events, s1, s2, \
+             outside_tests, outside_s1) ",
         )
         .push_values(batch, |mut row, state| {
             let (s1, s2) = state.estimator.sums();
@@ -252,7 +257,9 @@ async fn write(
                 .push_bind(state.estimator.tests() as i64)
                 .push_bind(state.estimator.events() as i64)
                 .push_bind(s1)
-                .push_bind(s2);
+                .push_bind(s2)
+                .push_bind(state.outside.tests as i64)
+                .push_bind(state.outside.s1);
         })
         .build()
         .execute(&mut *conn)

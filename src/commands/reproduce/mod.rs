@@ -277,6 +277,7 @@ async fn run_case(
             vut: vut.clone(),
             epsilon: setting.epsilon,
             outside: None,
+            split: None,
             beta: setting.beta,
             confidence: 0.9,
             max_tests: 10_000_000,

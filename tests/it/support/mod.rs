@@ -246,6 +246,7 @@ pub fn campaign(
         n_min: None,
         min_events: None,
         outside: Default::default(),
+        split: None,
         guard_outside: false,
     }
 }
@@ -355,8 +356,18 @@ pub fn in_process_with_invalid(
         Some(o) => o.as_str().parse().unwrap(),
         None => case.default_outside(),
     };
+    let split = request
+        .split
+        .map_or(Default::default(), tslg_client::wire::split);
     let tests = case
-        .campaign(file, &request.vut, request.epsilon, outside, request.seed)
+        .campaign(
+            file,
+            &request.vut,
+            request.epsilon,
+            outside,
+            split,
+            request.seed,
+        )
         .unwrap();
     let rule = StoppingRule {
         beta: request.beta,
