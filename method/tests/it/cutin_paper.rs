@@ -134,7 +134,7 @@ struct Coverage {
 /// `runs` seeded library campaigns of `vut` with a library of `surrogate`.
 fn coverage(case: &CutIn, surrogate: &str, vut: &str, runs: u64) -> Coverage {
     let lib = library(case, surrogate, SearchMethod::Exhaustive);
-    let q = paper_q(&case, &lib, 0.1);
+    let q = paper_q(case, &lib, 0.1);
     let rule = StoppingRule::new(0.2, 1_000_000);
     let exact = exact_report(case, &vehicle(vut), &q, rule.beta, rule.z());
     let distribution = TestDistribution::library(q);
