@@ -258,9 +258,9 @@ impl PrefixFold {
     /// within-strata variance (the stratified estimate's) plus the
     /// between-strata part `Σ_h π_h (m_h − m)²` (Cochran 1977, §5.6).
     /// The within-strata estimate alone collapses to 0 whenever the
-    /// exploring stratum has no event yet, which on a library that leaves
-    /// a little failure mass outside gave intervals of width near 0 and
-    /// coverage 0.13–0.62 (docs/statistics.md).
+    /// exploring stratum has no event yet: on the IDM's built-in library,
+    /// which leaves 1.3 % of its failure mass outside, it covers 0.31 at
+    /// n = 100 where the pooled one covers always (docs/statistics.md).
     pub fn half_width(&self, z: f64) -> f64 {
         self.estimator.half_width(z)
     }

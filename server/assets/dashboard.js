@@ -166,7 +166,8 @@ async function campaignPage() {
   set('beta', c.beta);
   set('rate', fmt.rate(c.tests_per_second), c.tests_per_second);
   set('left', fmt.seconds(c.seconds_left), c.seconds_left);
-  set('detail', c.status_detail ?? `${c.case}, ${c.method}, vehicle ${fmt.vehicle(c.vut)}, seed ${c.seed}`);
+  const sampling = c.method === 'library' ? `, ε ${c.epsilon} (${c.split} split)` : '';
+  set('detail', c.status_detail ?? `${c.case}, ${c.method}${sampling}, vehicle ${fmt.vehicle(c.vut)}, seed ${c.seed}`);
   // The outside bound and the guarded interval exist for library campaigns
   // of grid cases (docs/statistics.md).
   set('outside-upper', fmt.sci(c.outside_upper), c.outside_upper);

@@ -121,9 +121,11 @@ pub async fn fold_prefix(
     let from = fold.indices;
     let outcomes = reports::outcomes(conn, campaign.id, from, frontier).await?;
     let tests = tests.filter(|t| t.outside_mass().is_some());
-    // The campaign's tests say whether its estimate stratifies (ε in force
-    // under the stratified split); persisted with the sums.
-    fold.strata = tests.as_ref().and_then(|t| t.strata());
+    // A library campaign's tests say whether its estimate stratifies (ε in
+    // force under the stratified split); persisted with the sums.
+    if let Some(tests) = &tests {
+        fold.strata = tests.strata();
+    }
     let mut explored = Vec::new();
     if let Some(tests) = &tests {
         if campaign.outside_upper.is_none() && from > 0 {
