@@ -42,7 +42,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             threshold: Threshold::default(),
             search: SearchMethod::Exhaustive,
         };
-        let spec = serde_json::to_value(&surrogate)?;
+        let spec = serde_json::to_value(surrogate)?;
         let library = build_library(&case, &surrogate, spec, preset.name(), &request);
         let mut v = vec![0.0; grid.len()];
         for c in &library.cells {
