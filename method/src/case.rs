@@ -43,6 +43,18 @@ pub trait Case: Sync {
     /// deterministic, so `P(A|x)` is this as 0 or 1.
     fn is_event(&self, vehicle: &Self::Vehicle, cell: usize) -> bool;
 
+    /// How close `vehicle` came to the event in scenario `cell`, in
+    /// `[0, 1]`: 0 for the event, small for a near miss, 1 for a run that
+    /// never came near it. Adaptive campaigns search from the near misses
+    /// (docs/adaptive-design.md). The default knows only the outcome.
+    fn criticality(&self, vehicle: &Self::Vehicle, cell: usize) -> f64 {
+        if self.is_event(vehicle, cell) {
+            0.0
+        } else {
+            1.0
+        }
+    }
+
     /// The constants an external program is told at each reset (time
     /// step, horizon, bounds, lanes).
     fn external_world(&self) -> serde_json::Value;

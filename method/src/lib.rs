@@ -3,6 +3,7 @@
 //! search, sampling, estimation and exact answers. No I/O beyond parsing text
 //! handed in, no async, no HTTP: usable alone from a program or a benchmark.
 
+pub mod adaptive;
 pub mod campaign;
 pub mod carfollow;
 pub mod case;

@@ -144,6 +144,12 @@ impl Case for CutIn {
         self.run(vehicle, cell).accident
     }
 
+    /// mnpETTC: the smallest normalised enhanced time to collision over the
+    /// run, 0 after an accident ([`CutInRun::mnp_ettc`]).
+    fn criticality(&self, vehicle: &VehicleModel, cell: usize) -> f64 {
+        self.run(vehicle, cell).mnp_ettc
+    }
+
     /// The simulation settings (`initial_speed`, `dt`, `steps`,
     /// `acceleration` and `speed` bounds, `accident_gap` with `inclusive`)
     /// and the one-lane layout.

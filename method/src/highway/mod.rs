@@ -171,6 +171,18 @@ impl Case for HighwayExit {
         self.run(vehicle, cell).outcome.is_failure()
     }
 
+    /// The share of the road to the exit still ahead when the vehicle
+    /// changed lanes, `(exit − p)/exit` at the lane change: near 0 when it
+    /// made the exit at the last moment; 0 for a failure.
+    fn criticality(&self, vehicle: &ExitVehicle, cell: usize) -> f64 {
+        let run = self.run(vehicle, cell);
+        match (run.outcome.is_failure(), run.lane_change) {
+            (true, _) => 0.0,
+            (false, Some((_, p))) => ((self.world.exit - p) / self.world.exit).clamp(0.0, 1.0),
+            (false, None) => 1.0,
+        }
+    }
+
     fn external_world(&self) -> serde_json::Value {
         let mut world = external::world_block(&self.world);
         world["preset"] = self.preset.name().into();

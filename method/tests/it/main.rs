@@ -2,6 +2,7 @@
 //! readers, one test binary.
 
 #[allow(dead_code)]
+mod adaptive;
 mod common;
 
 mod carfollow_library;
