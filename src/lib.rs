@@ -319,6 +319,14 @@ pub enum MethodArg {
     Ndd,
 }
 
+/// How `tslg evaluate` draws its tests.
+#[derive(Debug, Clone, Copy, ValueEnum, PartialEq, Eq)]
+pub enum EvaluateMethodArg {
+    Library,
+    Adaptive,
+    Ndd,
+}
+
 #[derive(Debug, Clone, Copy, ValueEnum, PartialEq, Eq)]
 pub enum OutsideArg {
     Uniform,
@@ -413,11 +421,14 @@ pub struct EvaluateArgs {
     /// The vehicle under test: a built-in name or a JSON specification.
     #[arg(long)]
     pub vut: String,
-    /// `library` (importance sampling from a library) or `ndd` (the naturalistic baseline).
+    /// `library` (importance sampling from a library), `adaptive` (search
+    /// from the library's failures and the near misses, then sample the
+    /// failures found; docs/adaptive-design.md) or `ndd` (the naturalistic
+    /// baseline).
     #[arg(long, value_enum, default_value = "library")]
-    pub method: MethodArg,
-    /// The library file (method `library`).
-    #[arg(long, required_if_eq("method", "library"))]
+    pub method: EvaluateMethodArg,
+    /// The library file (methods `library` and `adaptive`).
+    #[arg(long, required_if_eq_any([("method", "library"), ("method", "adaptive")]))]
     pub library: Option<PathBuf>,
     #[command(flatten)]
     pub exploration: ExplorationArgs,

@@ -7,16 +7,16 @@
 //!
 //! 1. **Library**: the first `library_tests` tests are drawn from the
 //!    library's ε-greedy distribution, as a library campaign's are.
-//! 2. **Search**: every untested neighbour of a *seed* (a scenario where the
-//!    vehicle failed, or came within `near_miss` of failing by its
-//!    [`Case::criticality`]) whose exposure exceeds `exposure_floor` times
-//!    the failure mass found so far is tested once, in cell order; repeated
-//!    until no seed has such a neighbour. The failure mass the search finds
-//!    is known exactly (the vehicles are deterministic), but it is only a
-//!    lower bound: what it rests on is that the vehicle's failures are
-//!    reachable from the library's through failures and near misses.
-//! 3. **Estimation**: the failing scenarios found so far, `K`, become a
-//!    library with `V(x) = P(x)`, sampled with the stratified split
+//! 2. **Search**: every untested neighbour outside the library of a *seed*
+//!    (a scenario where the vehicle failed, or came within `near_miss` of
+//!    failing by its [`Case::criticality`]) whose exposure exceeds
+//!    `exposure_floor` times the failure mass found so far is tested once,
+//!    in cell order; repeated until no seed has such a neighbour. What it
+//!    rests on is that the vehicle's failures outside the library are
+//!    reachable through failures and near misses from what the tests meet.
+//! 3. **Estimation**: the failing scenarios found and the library's cells
+//!    not yet tested, `K` ([`Planner::support`]), become a library with
+//!    `V(x) = P(x)`, sampled with the stratified split
 //!    ([`crate::sampling::Split::Stratified`]) and a share
 //!    `1/explore_every` spread by exposure over the rest of the grid. Every
 //!    weight is bounded (`P(K)/(1 − ε)` inside, `P(X \ K)/ε` outside), and
@@ -238,10 +238,17 @@ impl<'a, C: Case> Planner<'a, C> {
         let floor = self.settings.exposure_floor * found;
         let grid = self.case.grid();
         let mut wanted = vec![false; grid.len()];
+        // The library's cells are sampled by the estimation stage whatever
+        // the search finds: it does not spend tests on them.
+        let mut in_library = vec![false; grid.len()];
+        for c in &self.library.cells {
+            in_library[c.cell] = true;
+        }
         for (cell, c) in knowledge.criticality.iter().enumerate() {
             if c.is_some_and(|c| c <= self.settings.near_miss) {
                 for n in grid.neighbours(cell) {
-                    if knowledge.criticality[n].is_none() && exposure.p(n) > floor {
+                    if knowledge.criticality[n].is_none() && exposure.p(n) > floor && !in_library[n]
+                    {
                         wanted[n] = true;
                     }
                 }
@@ -250,12 +257,33 @@ impl<'a, C: Case> Planner<'a, C> {
         (0..grid.len()).filter(|&c| wanted[c]).collect()
     }
 
-    /// The found failures as a library (`V = P`), explored by exposure with
-    /// share `1/explore_every`; the exposure itself when none has been found.
+    /// The cells an estimation stage samples besides its exploring share:
+    /// the failures found and the library's cells not yet tested (a tested
+    /// cell that passed needs no test: the vehicles are deterministic).
+    pub fn support(&self, knowledge: &Knowledge) -> Vec<usize> {
+        let untested_library = self
+            .library
+            .cells
+            .iter()
+            .map(|c| c.cell)
+            .filter(|&c| knowledge.criticality[c].is_none());
+        let mut support: Vec<usize> = knowledge
+            .failures
+            .iter()
+            .copied()
+            .chain(untested_library)
+            .collect();
+        support.sort_unstable();
+        support.dedup();
+        support
+    }
+
+    /// The support as a library (`V = P`), explored by exposure with share
+    /// `1/explore_every`; the exposure itself when the support is empty.
     fn estimation(&self, knowledge: &Knowledge) -> TestDistribution {
         let exposure = self.case.exposure();
-        let mut cells: Vec<LibraryCell> = knowledge
-            .failures
+        let mut cells: Vec<LibraryCell> = self
+            .support(knowledge)
             .iter()
             .filter(|&&c| exposure.p(c) > 0.0)
             .map(|&cell| LibraryCell {
@@ -298,8 +326,9 @@ pub struct AdaptiveResult {
     pub search_tests: u64,
     /// Stages run (library, searches, estimations).
     pub stages: u64,
-    /// The exposure of the failing scenarios found, `P(K)`.
-    pub found_mass: f64,
+    /// The cells the last estimation stage sampled besides its exploring
+    /// share ([`Planner::support`]).
+    pub support: Vec<usize>,
 }
 
 /// Runs an adaptive campaign of built-in `vehicle` on `library` to `rule`.
@@ -372,7 +401,7 @@ pub fn run_adaptive<C: Case>(
                         search_tests,
                         stages,
                         &knowledge,
-                        case,
+                        &planner,
                     ));
                 }
             }
@@ -390,7 +419,7 @@ pub fn run_adaptive<C: Case>(
                 search_tests,
                 stages,
                 &knowledge,
-                case,
+                &planner,
             ));
         }
         stage = planner.next(&knowledge);
@@ -407,7 +436,7 @@ fn finish<C: Case>(
     search_tests: u64,
     stages: u64,
     knowledge: &Knowledge,
-    case: &C,
+    planner: &Planner<'_, C>,
 ) -> AdaptiveResult {
     let mut result = CampaignResult::from_fold(status, fold, rule, None);
     result.indices = indices;
@@ -416,10 +445,6 @@ fn finish<C: Case>(
         library_tests,
         search_tests,
         stages,
-        found_mass: knowledge
-            .failures
-            .iter()
-            .map(|&c| case.exposure().p(c))
-            .sum(),
+        support: planner.support(knowledge),
     }
 }

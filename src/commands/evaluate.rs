@@ -1,9 +1,10 @@
 //! `tslg evaluate`: one campaign in this process.
 
 use crate::inputs::{check_epsilon, load_case, parse_vehicle, read_library, stopping_rule};
-use crate::{EvaluateArgs, MethodArg, OutsideArg};
+use crate::{EvaluateArgs, EvaluateMethodArg as MethodArg, OutsideArg};
 use anyhow::Context;
 use serde::Serialize;
+use tslg_method::adaptive::{run_adaptive, AdaptiveSettings};
 use tslg_method::campaign::{run_campaign, CampaignResult};
 use tslg_method::case::Case;
 use tslg_method::exact::{event_cells, event_probability};
@@ -18,16 +19,35 @@ struct Report {
     vut: &'static str,
     #[serde(flatten)]
     result: CampaignResult,
+    /// Adaptive campaigns: the tests spent finding the failures.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    search: Option<Search>,
     exact: f64,
     covers_exact: bool,
     warnings: Vec<String>,
 }
 
+/// What an adaptive campaign spent finding the vehicle's failures, and
+/// where its estimation stage sampled.
+#[derive(Serialize)]
+struct Search {
+    library_tests: u64,
+    search_tests: u64,
+    stages: u64,
+    /// Cells the last estimation stage sampled besides its exploring share.
+    support_cells: usize,
+    /// The cells of the support.
+    #[serde(skip)]
+    support: Vec<usize>,
+}
+
 pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
     check_epsilon(args.exploration.epsilon)?;
     let library = match (args.method, &args.library) {
-        (MethodArg::Library, None) => anyhow::bail!("--library is required with --method library"),
-        (MethodArg::Library, Some(path)) => Some(read_library(path)?),
+        (MethodArg::Library | MethodArg::Adaptive, None) => {
+            anyhow::bail!("--library is required with --method library and adaptive")
+        }
+        (MethodArg::Library | MethodArg::Adaptive, Some(path)) => Some(read_library(path)?),
         (MethodArg::Ndd, _) => None,
     };
     // The tests run on the simulation the library was built on: its preset,
@@ -55,14 +75,48 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
             args.exploration.epsilon,
         ),
     )?;
+    let (result, search) = if args.method == MethodArg::Adaptive {
+        let library = library.as_ref().expect("read above for --method adaptive");
+        library.check_matches(&case)?;
+        let adaptive = run_adaptive(
+            &case,
+            &vut,
+            library,
+            args.exploration.epsilon,
+            AdaptiveSettings::default(),
+            &rule,
+            args.seed,
+        )?;
+        let search = Search {
+            library_tests: adaptive.library_tests,
+            search_tests: adaptive.search_tests,
+            stages: adaptive.stages,
+            support_cells: adaptive.support.len(),
+            support: adaptive.support,
+        };
+        (adaptive.result, Some(search))
+    } else {
+        (sampled(args, &case, &vut, &rule, library.as_ref())?, None)
+    };
+    report(args, &case, &vut, &rule, result, search)
+}
+
+/// A library or NDD campaign of `vut`.
+fn sampled(
+    args: &EvaluateArgs,
+    case: &tslg_method::cutin::CutIn,
+    vut: &VehicleModel,
+    rule: &tslg_method::estimator::StoppingRule,
+    library: Option<&tslg_method::library::Library>,
+) -> anyhow::Result<CampaignResult> {
     let (distribution, surrogate) = match args.method {
-        MethodArg::Ndd => (
+        MethodArg::Ndd | MethodArg::Adaptive => (
             TestDistribution::Ndd(NddDistribution::new(case.exposure())),
             None,
         ),
         MethodArg::Library => {
-            let library = library.as_ref().expect("read above for --method library");
-            library.check_matches(&case)?;
+            let library = library.expect("read above for --method library");
+            library.check_matches(case)?;
             let outside = args
                 .exploration
                 .outside
@@ -82,23 +136,36 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
             (distribution, Some(surrogate))
         }
     };
-    let result = run_campaign(
-        &case,
-        &vut,
+    Ok(run_campaign(
+        case,
+        vut,
         surrogate.as_ref(),
         &distribution,
-        &rule,
+        rule,
         args.seed,
-    );
+    ))
+}
+
+fn report(
+    args: &EvaluateArgs,
+    case: &tslg_method::cutin::CutIn,
+    vut: &VehicleModel,
+    rule: &tslg_method::estimator::StoppingRule,
+    result: CampaignResult,
+    search: Option<Search>,
+) -> anyhow::Result<()> {
     // Cut-in vehicles are deterministic on a 3,420-cell grid: the exact answer is cheap.
-    let exact = event_probability(&case, &event_cells(&case, &vut));
+    let events = event_cells(case, vut);
+    let exact = event_probability(case, &events);
     let report = Report {
         method: match args.method {
             MethodArg::Library => "library",
+            MethodArg::Adaptive => "adaptive",
             MethodArg::Ndd => "ndd",
         },
         vut: vut.name(),
         result,
+        search,
         exact,
         covers_exact: result.covers(exact),
         warnings: warnings(
@@ -117,7 +184,30 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
     println!("method             {}", report.method);
     println!("vehicle under test {}", report.vut);
     println!("status             {:?}", result.status);
-    println!("tests              {}", result.tests);
+    if let Some(search) = &report.search {
+        println!(
+            "tests              {} ({} library, {} searching, {} estimating; {} stages)",
+            result.indices, search.library_tests, search.search_tests, result.tests, search.stages
+        );
+        let held: f64 = search
+            .support
+            .iter()
+            .filter(|c| events.binary_search(c).is_ok())
+            .map(|&c| case.exposure().p(c))
+            .sum();
+        println!(
+            "sampled cells      {} holding {:.1}% of the exact P(A); the rest only the exploring \
+             tests meet",
+            search.support_cells,
+            100.0 * held / exact
+        );
+        println!(
+            "assumes            the vehicle's failures outside the library are reachable from the \
+             scenarios its tests met through failures and near misses (docs/adaptive-design.md)"
+        );
+    } else {
+        println!("tests              {}", result.tests);
+    }
     println!("events             {}", result.events);
     println!("estimate           {:.4e}", result.estimate);
     println!(

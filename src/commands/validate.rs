@@ -18,6 +18,7 @@ use rayon::prelude::*;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::sync::Arc;
+use tslg_method::adaptive::AdaptiveSettings;
 use tslg_method::campaign::{run_campaign_tests, CampaignResult};
 use tslg_method::estimator::{default_n_min, Decision, StoppingRule};
 use tslg_method::library::SearchMethod;
@@ -56,9 +57,15 @@ pub struct ValidateArgs {
     /// compare (comma-separated): stratified, random.
     #[arg(long, value_delimiter = ',', value_enum, default_values_t = [crate::SplitArg::Stratified])]
     pub splits: Vec<crate::SplitArg>,
-    /// Also run each pairing with the outside guard (ε 0.5, outside spread ndd).
+    /// Also run each pairing with the outside guard (ε 0.5, outside spread
+    /// ndd); the same as adding `guarded` to --methods.
     #[arg(long)]
     pub guard: bool,
+    /// The methods to compare (comma-separated): plain (the library
+    /// campaign), guarded (with the outside guard, ε 0.5, outside spread
+    /// ndd), adaptive (docs/adaptive-design.md). Writes methods.csv.
+    #[arg(long, value_delimiter = ',', value_enum, default_values_t = [ValidateMethod::Plain])]
+    pub methods: Vec<ValidateMethod>,
     /// A quick run: 50 replicates (unless given) and highway-exit's coarse preset.
     #[arg(long)]
     pub quick: bool,
@@ -79,8 +86,30 @@ pub struct ValidateArgs {
     pub curve_to: Option<u64>,
 }
 
+/// A way of running a pairing's campaigns.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ValidateMethod {
+    /// A library campaign.
+    Plain,
+    /// A library campaign with the outside guard.
+    Guarded,
+    /// An adaptive campaign.
+    Adaptive,
+}
+
+impl ValidateMethod {
+    fn name(self) -> &'static str {
+        match self {
+            ValidateMethod::Plain => "plain",
+            ValidateMethod::Guarded => "guarded",
+            ValidateMethod::Adaptive => "adaptive",
+        }
+    }
+}
+
 /// One configuration: a case, a library's surrogate, a vehicle and a rule.
 struct Setup {
+    method: ValidateMethod,
     case: Arc<dyn ScenarioCase>,
     case_name: String,
     surrogate: &'static str,
@@ -95,6 +124,8 @@ struct Setup {
 
 /// What the replicates of one setup did.
 pub struct Row {
+    method: ValidateMethod,
+    exposure: String,
     case: String,
     surrogate: &'static str,
     vut: &'static str,
@@ -109,6 +140,16 @@ pub struct Row {
 impl Row {
     fn coverage(&self, covers: impl Fn(&CampaignResult) -> bool) -> f64 {
         self.runs.iter().filter(|r| covers(r)).count() as f64 / self.runs.len() as f64
+    }
+
+    /// The coverage of the interval the method answers with: the guarded
+    /// interval `[ci_low, guarded_ci_high]` for a guarded campaign, the
+    /// plain one otherwise.
+    fn answer_coverage(&self) -> f64 {
+        match self.method {
+            ValidateMethod::Guarded => self.coverage(|r| r.guarded_covers(self.truth)),
+            _ => self.coverage(|r| r.covers(self.truth)),
+        }
     }
 
     /// The coverage a correct interval stays above but one time in a hundred.
@@ -130,8 +171,10 @@ impl Row {
         (mean / self.truth - 1.0, (var / n).sqrt() / self.truth)
     }
 
+    /// A quantile of the tests each campaign ran (for an adaptive one,
+    /// its library, search and estimation tests).
     fn tests_quantile(&self, q: f64) -> u64 {
-        let mut tests: Vec<u64> = self.runs.iter().map(|r| r.tests).collect();
+        let mut tests: Vec<u64> = self.runs.iter().map(|r| r.indices).collect();
         tests.sort_unstable();
         tests[((tests.len() - 1) as f64 * q).round() as usize]
     }
@@ -165,10 +208,12 @@ pub fn run(args: &ValidateArgs) -> anyhow::Result<()> {
     }
     let table = markdown(&rows);
     println!("{table}");
+    println!("{}", methods_markdown(&rows, args));
     if let Some(dir) = &args.out {
         std::fs::create_dir_all(dir)?;
         std::fs::write(dir.join("validation.md"), &table)?;
         std::fs::write(dir.join("validation.csv"), csv(&rows))?;
+        std::fs::write(dir.join("methods.csv"), methods_csv(&rows))?;
         eprintln!("written to {}", dir.display());
     }
     Ok(())
@@ -185,6 +230,8 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
                 ("fvdm", "fvdm"),
                 ("fvdm", "idm"),
                 ("idm", "fvdm"),
+                ("idm", "switching-acc"),
+                ("idm", "acc-aeb"),
             ],
         ),
         "highway-exit" => (
@@ -208,16 +255,28 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
             )?
             .file;
         let truth = case.exact_event_probability(&serde_json::json!({ "model": vut }))?;
-        let mut variants = vec![(args.epsilon, case.default_outside(), false)];
-        if args.guard {
-            variants.push((0.5, OutsideSpread::Ndd, true));
+        let mut variants = Vec::new();
+        if args.methods.contains(&ValidateMethod::Plain) {
+            variants.push((ValidateMethod::Plain, args.epsilon, case.default_outside()));
         }
-        for &(epsilon, outside, guard_outside) in &variants {
+        if args.guard || args.methods.contains(&ValidateMethod::Guarded) {
+            variants.push((ValidateMethod::Guarded, 0.5, OutsideSpread::Ndd));
+        }
+        if args.methods.contains(&ValidateMethod::Adaptive) {
+            variants.push((
+                ValidateMethod::Adaptive,
+                args.epsilon,
+                case.default_outside(),
+            ));
+        }
+        for &(method, epsilon, outside) in &variants {
+            let guard_outside = method == ValidateMethod::Guarded;
+            // An adaptive campaign's n_min counts its estimation tests.
+            let share = (method != ValidateMethod::Adaptive)
+                .then(|| exploring_share(case_name, true, epsilon))
+                .flatten();
             let n_mins = match args.n_min.as_slice() {
-                [] => vec![default_n_min(
-                    exploring_share(case_name, true, epsilon),
-                    args.max_tests,
-                )],
+                [] => vec![default_n_min(share, args.max_tests)],
                 given => given.to_vec(),
             };
             for (&n_min, &split) in n_mins
@@ -235,6 +294,7 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
                     };
                     rule.validate()?;
                     setups.push(Setup {
+                        method,
                         case: Arc::clone(&case),
                         case_name: case_name.to_owned(),
                         surrogate,
@@ -387,6 +447,17 @@ fn replicate(setup: &Setup, replicates: u64) -> anyhow::Result<Row> {
     let runs = (0..replicates)
         .into_par_iter()
         .map(|seed| {
+            if setup.method == ValidateMethod::Adaptive {
+                let run = setup.case.adaptive_campaign(
+                    &setup.library,
+                    &vut,
+                    setup.epsilon,
+                    AdaptiveSettings::default(),
+                    &setup.rule,
+                    seed,
+                )?;
+                return Ok(run.result);
+            }
             let tests = setup.case.campaign(
                 Some(&setup.library),
                 &vut,
@@ -399,6 +470,8 @@ fn replicate(setup: &Setup, replicates: u64) -> anyhow::Result<Row> {
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
     Ok(Row {
+        method: setup.method,
+        exposure: setup.case.exposure_name().to_owned(),
         case: setup.case_name.clone(),
         surrogate: setup.surrogate,
         vut: setup.vut,
@@ -411,7 +484,7 @@ fn replicate(setup: &Setup, replicates: u64) -> anyhow::Result<Row> {
     })
 }
 
-const HEADER: [&str; 18] = [
+const HEADER: [&str; 19] = [
     "case",
     "surrogate",
     "vehicle",
@@ -430,6 +503,7 @@ const HEADER: [&str; 18] = [
     "coverage guarded",
     "bias (± s.e.)",
     "flag",
+    "method",
 ];
 
 fn cells(row: &Row) -> Vec<String> {
@@ -462,6 +536,7 @@ fn cells(row: &Row) -> Vec<String> {
         format!("{:.3}", row.coverage(|r| r.guarded_covers(row.truth))),
         format!("{:+.3} ± {:.3}", bias, se),
         flag,
+        row.method.name().into(),
     ]
 }
 
@@ -504,5 +579,60 @@ fn csv(rows: &[Row]) -> String {
             .collect();
         out += &(line.join(",") + "\n");
     }
+    out
+}
+
+/// The expected tests of the NDD baseline to relative half-width β at
+/// confidence c: `z²(1 − μ)/(β²μ)` with the exact `μ`.
+fn ndd_tests(row: &Row) -> f64 {
+    let z = row.rule.z();
+    z * z * (1.0 - row.truth) / (row.rule.beta.powi(2) * row.truth)
+}
+
+/// The cells of one pairing and method: `case, exposure, surrogate, vut,
+/// method, replicates, coverage, median_tests, ndd_tests`.
+fn method_cells(row: &Row) -> [String; 9] {
+    [
+        row.case.clone(),
+        row.exposure.clone(),
+        row.surrogate.into(),
+        row.vut.into(),
+        row.method.name().into(),
+        row.runs.len().to_string(),
+        format!("{:.4}", row.answer_coverage()),
+        row.tests_quantile(0.5).to_string(),
+        format!("{:.0}", ndd_tests(row)),
+    ]
+}
+
+/// One line per pairing and method ([`method_cells`]).
+fn methods_csv(rows: &[Row]) -> String {
+    let mut out = String::from(
+        "case,exposure,surrogate,vut,method,replicates,coverage,median_tests,ndd_tests\n",
+    );
+    for row in rows {
+        let _ = writeln!(out, "{}", method_cells(row).join(","));
+    }
+    out
+}
+
+/// The same as a Markdown table, with the ratio of the NDD baseline's
+/// tests to the median.
+fn methods_markdown(rows: &[Row], args: &ValidateArgs) -> String {
+    let mut out = String::from(
+        "| case | exposure | surrogate | vehicle | method | R | coverage | median tests | NDD tests | NDD / median |\n\
+         |---|---|---|---|---|---|---|---|---|---|\n",
+    );
+    for row in rows {
+        let ratio = ndd_tests(row) / row.tests_quantile(0.5).max(1) as f64;
+        let _ = writeln!(out, "| {} | {ratio:.1} |", method_cells(row).join(" | "));
+    }
+    let _ = writeln!(
+        out,
+        "\nCoverage of the {:.0} % interval each method answers with (guarded: \
+         [ci_low, guarded_ci_high]); NDD tests z²(1 − μ)/(β²μ) at β {}.",
+        100.0 * args.confidence,
+        args.beta
+    );
     out
 }

@@ -8,8 +8,9 @@ use super::{
     BuildRequest, BuiltLibrary, CampaignTests, CaseError, LibrarySearch, PlannedTest, ScenarioCase,
     TestOutcome,
 };
+use crate::adaptive::{run_adaptive, AdaptiveResult, AdaptiveSettings};
 use crate::case::Case;
-use crate::estimator::z_for_confidence;
+use crate::estimator::{z_for_confidence, StoppingRule};
 use crate::exact::{event_cells, event_probability, exact_report, ExactReport};
 use crate::external::{DriverError, ExternalVehicle, ExternalVut, TestStart};
 use crate::library::{build_library_observed, Library, LibraryRequest, SearchMethod};
@@ -209,6 +210,28 @@ where
             project(grid, |cell| exposure.p(cell), x, y, "exposure P(x)"),
             project(grid, |cell| q[cell], x, y, "library q(x) = V(x)/W"),
         ])
+    }
+
+    fn adaptive_campaign(
+        &self,
+        file: &[u8],
+        vut: &serde_json::Value,
+        epsilon: f64,
+        settings: AdaptiveSettings,
+        rule: &StoppingRule,
+        seed: u64,
+    ) -> Result<AdaptiveResult, CaseError> {
+        let vehicle = self.builtin(vut, "an adaptive campaign in this process")?;
+        let library = self.library(file)?;
+        Ok(run_adaptive(
+            self.case.as_ref(),
+            &vehicle,
+            &library,
+            epsilon,
+            settings,
+            rule,
+            seed,
+        )?)
     }
 
     fn exact_event_probability(&self, spec: &serde_json::Value) -> Result<f64, CaseError> {

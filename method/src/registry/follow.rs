@@ -11,10 +11,12 @@ use super::{
     BuildRequest, BuiltLibrary, CampaignTests, CaseError, LibrarySearch, PlannedTest, ScenarioCase,
     TestOutcome,
 };
+use crate::adaptive::{AdaptiveResult, AdaptiveSettings};
 use crate::carfollow::case::{CarFollowing, PolicySolver};
 use crate::carfollow::file::{PolicyHeader, PolicyLibraryFile, MEDIA_TYPE, VERSION};
 use crate::carfollow::library::PolicyLibrary;
 use crate::carfollow::sampling::FollowSampler;
+use crate::estimator::StoppingRule;
 use crate::exact::ExactReport;
 use crate::external::{
     DriverError, ExternalFollower, ExternalVehicle, ExternalVut, TestStart, NOMINAL_LENGTH,
@@ -297,6 +299,22 @@ impl ScenarioCase for FollowScenarioCase {
                 }
             }),
         ])
+    }
+
+    fn adaptive_campaign(
+        &self,
+        _file: &[u8],
+        _vut: &serde_json::Value,
+        _epsilon: f64,
+        _settings: AdaptiveSettings,
+        _rule: &StoppingRule,
+        _seed: u64,
+    ) -> Result<AdaptiveResult, CaseError> {
+        Err(CaseError::Unsupported(
+            "adaptive campaigns search the cells of a grid case (cut-in, highway-exit); \
+             car-following samples its scenarios while they run"
+                .into(),
+        ))
     }
 
     fn exact_event_probability(&self, _: &serde_json::Value) -> Result<f64, CaseError> {

@@ -12,9 +12,11 @@ mod vut;
 
 pub use picture::PictureMap;
 
+use crate::adaptive::{AdaptiveError, AdaptiveResult, AdaptiveSettings};
 use crate::carfollow::case::{CarFollowing, FollowPreset, PolicySolver};
 use crate::carfollow::file::PolicyFileError;
 use crate::cutin::{CutIn, CutInError, CutInPreset};
+use crate::estimator::StoppingRule;
 use crate::exact::ExactReport;
 use crate::external::{DriverError, ExternalVehicle, ExternalVut};
 use crate::highway::{HighwayExit, HighwayPreset};
@@ -105,6 +107,12 @@ pub enum CaseError {
     /// The surrogate search failed.
     #[error("the library could not be built: {0}")]
     Build(String),
+    /// An adaptive campaign that cannot run.
+    #[error(transparent)]
+    Adaptive(#[from] AdaptiveError),
+    /// What this case does not do.
+    #[error("{0}")]
+    Unsupported(String),
 }
 
 /// How a library is searched or learned.
@@ -282,6 +290,17 @@ pub trait ScenarioCase: Send + Sync {
     /// The picture of a library file: the exposure beside the library's
     /// sampling distribution (ε = 0), projected onto two axes.
     fn library_picture(&self, file: &[u8]) -> Result<Vec<PictureMap>, CaseError>;
+    /// Runs an adaptive campaign ([`crate::adaptive`]) of built-in vehicle
+    /// `vut` on the library `file`, in this process. Grid cases only.
+    fn adaptive_campaign(
+        &self,
+        file: &[u8],
+        vut: &serde_json::Value,
+        epsilon: f64,
+        settings: AdaptiveSettings,
+        rule: &StoppingRule,
+        seed: u64,
+    ) -> Result<AdaptiveResult, CaseError>;
     /// The exact `P(A)` of a vehicle by enumeration of the grid.
     fn exact_event_probability(&self, vehicle: &serde_json::Value) -> Result<f64, CaseError>;
     /// `P(A)` with the expected tests of a library campaign and of the NDD

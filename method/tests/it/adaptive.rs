@@ -67,16 +67,26 @@ fn adaptive_campaigns_cover_where_the_search_reaches_every_failure() {
         let (runs, mu, ndd) = campaigns(&case, surrogate, vut, 200);
         let coverage = runs.iter().filter(|r| r.result.covers(mu)).count() as f64 / 200.0;
         let ratio = ndd / median_tests(&runs);
-        // The share of campaigns whose search found 99 % of the failure mass.
-        let found = runs.iter().filter(|r| r.found_mass > 0.99 * mu).count() as f64 / 200.0;
+        // The share of campaigns whose estimation stage's support K holds
+        // 95 % of the failure mass (the rest only its exploring share meets).
+        let events: std::collections::HashSet<usize> =
+            event_cells(&case, &vehicle(vut)).into_iter().collect();
+        let held = |r: &AdaptiveResult| -> f64 {
+            r.support
+                .iter()
+                .filter(|c| events.contains(c))
+                .map(|&c| case.exposure().p(c))
+                .sum()
+        };
+        let found = runs.iter().filter(|r| held(r) > 0.95 * mu).count() as f64 / 200.0;
         eprintln!(
             "{surrogate} → {vut}: coverage {coverage}, median tests {} (NDD {ndd:.0}, \
-             ratio {ratio:.0}), searches that found 99 % of the failure mass {found}",
+             ratio {ratio:.0}), supports holding 95 % of the failure mass {found}",
             median_tests(&runs)
         );
         assert!(coverage >= 0.87, "{surrogate} → {vut}: coverage {coverage}");
         assert!(ratio >= least_ratio, "{surrogate} → {vut}: ratio {ratio}");
-        assert!(found >= 0.9, "{surrogate} → {vut}: found {found}");
+        assert!(found >= 0.85, "{surrogate} → {vut}: found {found}");
         // The estimate counts only estimation tests, each weighted by its
         // own stage's distribution; the search tests are the cost.
         for r in &runs {
