@@ -3,8 +3,9 @@
 //! `cargo bench -p tslg-method --bench cutin`. Each figure is the median of
 //! several repetitions, so one noisy run does not decide it.
 
+mod common;
+
 use std::hint::black_box;
-use std::time::Instant;
 use tslg_method::campaign::run_campaign;
 use tslg_method::case::Case;
 use tslg_method::cutin::{CutIn, CutInPreset};
@@ -15,17 +16,8 @@ use tslg_method::vehicle::{VehicleModel, BUILTIN_MODELS};
 
 const REPEATS: usize = 7;
 
-/// Median wall time of `f` in seconds over [`REPEATS`] runs.
-fn median_seconds(mut f: impl FnMut()) -> f64 {
-    let mut times: Vec<f64> = (0..REPEATS)
-        .map(|_| {
-            let t = Instant::now();
-            f();
-            t.elapsed().as_secs_f64()
-        })
-        .collect();
-    times.sort_by(f64::total_cmp);
-    times[REPEATS / 2]
+fn median_seconds(f: impl FnMut()) -> f64 {
+    common::median_seconds(REPEATS, f)
 }
 
 fn main() {

@@ -347,10 +347,13 @@ pub fn run_adaptive<C: Case>(
         return Err(AdaptiveError::Guard);
     }
     let planner = Planner::new(case, library, epsilon, settings)?;
-    let observe = |cell: usize| Observation {
-        cell,
-        event: case.is_event(vehicle, cell),
-        criticality: case.criticality(vehicle, cell),
+    let observe = |cell: usize| {
+        let (event, criticality) = case.event_and_criticality(vehicle, cell);
+        Observation {
+            cell,
+            event,
+            criticality,
+        }
     };
     let mut knowledge = Knowledge::new(case.grid().len());
     let mut fold = PrefixFold::default();

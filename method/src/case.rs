@@ -55,6 +55,15 @@ pub trait Case: Sync {
         }
     }
 
+    /// [`Case::is_event`] and [`Case::criticality`] together; cases whose
+    /// criticality comes from the same run override it to simulate once.
+    fn event_and_criticality(&self, vehicle: &Self::Vehicle, cell: usize) -> (bool, f64) {
+        (
+            self.is_event(vehicle, cell),
+            self.criticality(vehicle, cell),
+        )
+    }
+
     /// The constants an external program is told at each reset (time
     /// step, horizon, bounds, lanes).
     fn external_world(&self) -> serde_json::Value;

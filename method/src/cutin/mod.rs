@@ -150,6 +150,11 @@ impl Case for CutIn {
         self.run(vehicle, cell).mnp_ettc
     }
 
+    fn event_and_criticality(&self, vehicle: &VehicleModel, cell: usize) -> (bool, f64) {
+        let run = self.run(vehicle, cell);
+        (run.accident, run.mnp_ettc)
+    }
+
     /// The simulation settings (`initial_speed`, `dt`, `steps`,
     /// `acceleration` and `speed` bounds, `accident_gap` with `inclusive`)
     /// and the one-lane layout.

@@ -175,12 +175,17 @@ impl Case for HighwayExit {
     /// changed lanes, `(exit − p)/exit` at the lane change: near 0 when it
     /// made the exit at the last moment; 0 for a failure.
     fn criticality(&self, vehicle: &ExitVehicle, cell: usize) -> f64 {
+        self.event_and_criticality(vehicle, cell).1
+    }
+
+    fn event_and_criticality(&self, vehicle: &ExitVehicle, cell: usize) -> (bool, f64) {
         let run = self.run(vehicle, cell);
-        match (run.outcome.is_failure(), run.lane_change) {
+        let criticality = match (run.outcome.is_failure(), run.lane_change) {
             (true, _) => 0.0,
             (false, Some((_, p))) => ((self.world.exit - p) / self.world.exit).clamp(0.0, 1.0),
             (false, None) => 1.0,
-        }
+        };
+        (run.outcome.is_failure(), criticality)
     }
 
     fn external_world(&self) -> serde_json::Value {
