@@ -13,7 +13,7 @@
 mod common;
 
 use std::hint::black_box;
-use tslg_method::adaptive::{AdaptiveSettings, Knowledge, Observation, Planner, Stage};
+use tslg_method::adaptive::{AdaptiveSettings, Observation, Planner, Stage};
 use tslg_method::case::Case;
 use tslg_method::cutin::{CutIn, CutInPreset};
 use tslg_method::library::{build_library, LibraryRequest, SearchMethod, Threshold};
@@ -56,7 +56,7 @@ fn main() {
     };
     println!("| stage | kind | tests | plan (µs) | tests (µs) | plan / tests |");
     println!("|---|---|---|---|---|---|");
-    let mut knowledge = Knowledge::new(case.grid().len());
+    let mut knowledge = planner.knowledge();
     let mut stage = planner.first();
     let (mut from, mut plan_total, mut tests_total) = (0u64, 0.0, 0.0);
     for k in 0..12 {
@@ -66,7 +66,7 @@ fn main() {
         });
         let observations = run_stage(&stage, from, len);
         for o in &observations {
-            knowledge.observe(o);
+            planner.observe(&mut knowledge, o);
         }
         from += len;
         let plan = median_seconds(|| {

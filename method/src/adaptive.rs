@@ -40,6 +40,7 @@ use crate::sampling::{
 };
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use std::sync::Arc;
 
 /// How an adaptive campaign searches and samples.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -88,40 +89,31 @@ pub struct Observation {
 #[derive(Debug, Clone)]
 pub enum Stage {
     /// Draws from the library's distribution.
-    Library(TestDistribution),
+    Library(Arc<TestDistribution>),
     /// The cells to test, one per test, in order.
     Search(Vec<usize>),
-    /// Draws from the found failures and the exposure outside them.
-    Estimate(TestDistribution),
+    /// Draws from the support and the exposure outside it.
+    Estimate(Arc<TestDistribution>),
 }
 
-/// What the tests so far showed, per cell.
+/// What the tests so far showed, per cell, kept by [`Planner::observe`]:
+/// the search's candidates are gathered as seeds are met, so planning a
+/// stage does not rescan the grid.
 #[derive(Debug, Clone)]
 pub struct Knowledge {
     /// The criticality of each tested cell (0 for a failure).
     criticality: Vec<Option<f64>>,
+    /// The failing cells, in the order they were found.
     failures: Vec<usize>,
+    /// `Σ P(x)` over `failures`, summed in that order.
+    failure_mass: f64,
+    /// Cells outside the library with exposure that neighboured a seed
+    /// when it was met and were untested then (each once).
+    candidates: Vec<usize>,
+    is_candidate: Vec<bool>,
 }
 
 impl Knowledge {
-    /// Nothing tested yet on a grid of `cells` cells.
-    pub fn new(cells: usize) -> Self {
-        Self {
-            criticality: vec![None; cells],
-            failures: Vec::new(),
-        }
-    }
-
-    /// Records a test; a cell's outcome is the same every time it is run.
-    pub fn observe(&mut self, o: &Observation) {
-        if self.criticality[o.cell].is_none() {
-            self.criticality[o.cell] = Some(if o.event { 0.0 } else { o.criticality });
-            if o.event {
-                self.failures.push(o.cell);
-            }
-        }
-    }
-
     /// The failing cells found, in the order they were found.
     pub fn failures(&self) -> &[usize] {
         &self.failures
@@ -151,6 +143,10 @@ pub struct Planner<'a, C: Case> {
     library: &'a Library,
     epsilon: f64,
     settings: AdaptiveSettings,
+    in_library: Vec<bool>,
+    /// The last estimation stage's support and distribution, reused while
+    /// the support is unchanged.
+    estimation: std::sync::Mutex<Option<(Vec<usize>, Arc<TestDistribution>)>>,
 }
 
 impl<'a, C: Case> Planner<'a, C> {
@@ -188,17 +184,64 @@ impl<'a, C: Case> Planner<'a, C> {
             OutsideSpread::Uniform,
             Split::Stratified,
         )?;
+        let mut in_library = vec![false; case.grid().len()];
+        for c in &library.cells {
+            in_library[c.cell] = true;
+        }
         Ok(Self {
             case,
             library,
             epsilon,
             settings,
+            in_library,
+            estimation: Default::default(),
         })
+    }
+
+    /// Nothing tested yet.
+    pub fn knowledge(&self) -> Knowledge {
+        let cells = self.case.grid().len();
+        Knowledge {
+            criticality: vec![None; cells],
+            failures: Vec::new(),
+            failure_mass: 0.0,
+            candidates: Vec::new(),
+            is_candidate: vec![false; cells],
+        }
+    }
+
+    /// Records a test in `knowledge`; a cell's outcome is the same every
+    /// time it is run, so only its first test counts. A seed (a failure, or
+    /// a near miss within `near_miss`) adds its untested neighbours outside
+    /// the library, with exposure, to the search's candidates.
+    pub fn observe(&self, knowledge: &mut Knowledge, o: &Observation) {
+        if knowledge.criticality[o.cell].is_some() {
+            return;
+        }
+        let criticality = if o.event { 0.0 } else { o.criticality };
+        knowledge.criticality[o.cell] = Some(criticality);
+        let exposure = self.case.exposure();
+        if o.event {
+            knowledge.failures.push(o.cell);
+            knowledge.failure_mass += exposure.p(o.cell);
+        }
+        if criticality <= self.settings.near_miss {
+            for n in self.case.grid().neighbours(o.cell) {
+                if knowledge.criticality[n].is_none()
+                    && !self.in_library[n]
+                    && exposure.p(n) > 0.0
+                    && !knowledge.is_candidate[n]
+                {
+                    knowledge.is_candidate[n] = true;
+                    knowledge.candidates.push(n);
+                }
+            }
+        }
     }
 
     /// The first stage: the library's own distribution.
     pub fn first(&self) -> Stage {
-        Stage::Library(TestDistribution::library(
+        Stage::Library(Arc::new(TestDistribution::library(
             LibraryDistribution::new(
                 self.library,
                 self.case.exposure(),
@@ -207,7 +250,7 @@ impl<'a, C: Case> Planner<'a, C> {
                 Split::Stratified,
             )
             .expect("checked in Planner::new"),
-        ))
+        )))
     }
 
     /// How many tests `stage` has.
@@ -227,34 +270,34 @@ impl<'a, C: Case> Planner<'a, C> {
         if !frontier.is_empty() {
             return Stage::Search(frontier);
         }
-        Stage::Estimate(self.estimation(knowledge))
-    }
-
-    /// Untested neighbours of the seeds whose exposure exceeds the floor, in
-    /// cell order.
-    fn frontier(&self, knowledge: &Knowledge) -> Vec<usize> {
-        let exposure = self.case.exposure();
-        let found: f64 = knowledge.failures.iter().map(|&c| exposure.p(c)).sum();
-        let floor = self.settings.exposure_floor * found;
-        let grid = self.case.grid();
-        let mut wanted = vec![false; grid.len()];
-        // The library's cells are sampled by the estimation stage whatever
-        // the search finds: it does not spend tests on them.
-        let mut in_library = vec![false; grid.len()];
-        for c in &self.library.cells {
-            in_library[c.cell] = true;
-        }
-        for (cell, c) in knowledge.criticality.iter().enumerate() {
-            if c.is_some_and(|c| c <= self.settings.near_miss) {
-                for n in grid.neighbours(cell) {
-                    if knowledge.criticality[n].is_none() && exposure.p(n) > floor && !in_library[n]
-                    {
-                        wanted[n] = true;
-                    }
-                }
+        let support = self.support(knowledge);
+        let mut cache = self
+            .estimation
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner());
+        if let Some((cached, distribution)) = cache.as_ref() {
+            if *cached == support {
+                return Stage::Estimate(Arc::clone(distribution));
             }
         }
-        (0..grid.len()).filter(|&c| wanted[c]).collect()
+        let distribution = Arc::new(self.estimation(&support));
+        *cache = Some((support, Arc::clone(&distribution)));
+        Stage::Estimate(distribution)
+    }
+
+    /// Untested neighbours outside the library of the seeds, whose exposure
+    /// exceeds the floor, in cell order.
+    fn frontier(&self, knowledge: &Knowledge) -> Vec<usize> {
+        let exposure = self.case.exposure();
+        let floor = self.settings.exposure_floor * knowledge.failure_mass;
+        let mut frontier: Vec<usize> = knowledge
+            .candidates
+            .iter()
+            .copied()
+            .filter(|&n| knowledge.criticality[n].is_none() && exposure.p(n) > floor)
+            .collect();
+        frontier.sort_unstable();
+        frontier
     }
 
     /// The cells an estimation stage samples besides its exploring share:
@@ -280,10 +323,9 @@ impl<'a, C: Case> Planner<'a, C> {
 
     /// The support as a library (`V = P`), explored by exposure with share
     /// `1/explore_every`; the exposure itself when the support is empty.
-    fn estimation(&self, knowledge: &Knowledge) -> TestDistribution {
+    fn estimation(&self, support: &[usize]) -> TestDistribution {
         let exposure = self.case.exposure();
-        let mut cells: Vec<LibraryCell> = self
-            .support(knowledge)
+        let mut cells: Vec<LibraryCell> = support
             .iter()
             .filter(|&&c| exposure.p(c) > 0.0)
             .map(|&cell| LibraryCell {
@@ -355,7 +397,7 @@ pub fn run_adaptive<C: Case>(
             criticality,
         }
     };
-    let mut knowledge = Knowledge::new(case.grid().len());
+    let mut knowledge = planner.knowledge();
     let mut fold = PrefixFold::default();
     let z = rule.z();
     let (mut index, mut library_tests, mut search_tests, mut stages) = (0u64, 0, 0, 0);
@@ -410,7 +452,7 @@ pub fn run_adaptive<C: Case>(
             }
         }
         for (o, _) in &observations {
-            knowledge.observe(o);
+            planner.observe(&mut knowledge, o);
         }
         if index >= rule.max_tests {
             return Ok(finish(
@@ -449,5 +491,68 @@ fn finish<C: Case>(
         search_tests,
         stages,
         support: planner.support(knowledge),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cutin::{CutIn, CutInPreset};
+    use crate::library::{build_library, LibraryRequest, SearchMethod, Threshold};
+    use crate::vehicle::VehicleModel;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    /// The frontier by scanning every tested cell's neighbourhood afresh.
+    fn frontier_by_scan<C: Case>(planner: &Planner<'_, C>, knowledge: &Knowledge) -> Vec<usize> {
+        let exposure = planner.case.exposure();
+        let found: f64 = knowledge.failures.iter().map(|&c| exposure.p(c)).sum();
+        let floor = planner.settings.exposure_floor * found;
+        let grid = planner.case.grid();
+        let mut wanted = vec![false; grid.len()];
+        for (cell, c) in knowledge.criticality.iter().enumerate() {
+            if c.is_some_and(|c| c <= planner.settings.near_miss) {
+                for n in grid.neighbours(cell) {
+                    if knowledge.criticality[n].is_none()
+                        && exposure.p(n) > floor
+                        && !planner.in_library[n]
+                    {
+                        wanted[n] = true;
+                    }
+                }
+            }
+        }
+        (0..grid.len()).filter(|&c| wanted[c]).collect()
+    }
+
+    #[test]
+    fn the_kept_frontier_is_the_scanned_one_after_every_observation() {
+        let case = CutIn::builtin(CutInPreset::PaperCode);
+        let idm = VehicleModel::builtin("idm").unwrap();
+        let request = LibraryRequest {
+            threshold: Threshold::default(),
+            search: SearchMethod::Exhaustive,
+        };
+        let spec = serde_json::to_value(idm).unwrap();
+        let library = build_library(&case, &idm, spec, "paper-code", &request);
+        let planner = Planner::new(&case, &library, 0.1, AdaptiveSettings::default()).unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        for _ in 0..5 {
+            let mut knowledge = planner.knowledge();
+            for _ in 0..800 {
+                let cell = rng.random_range(0..case.grid().len());
+                let o = Observation {
+                    cell,
+                    event: rng.random::<f64>() < 0.2,
+                    criticality: rng.random::<f64>() * 0.3,
+                };
+                planner.observe(&mut knowledge, &o);
+                assert_eq!(
+                    planner.frontier(&knowledge),
+                    frontier_by_scan(&planner, &knowledge)
+                );
+            }
+            assert!(!knowledge.failures().is_empty());
+        }
     }
 }
