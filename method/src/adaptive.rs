@@ -141,9 +141,10 @@ pub enum AdaptiveError {
 pub struct Planner<'a, C: Case> {
     case: &'a C,
     library: &'a Library,
-    epsilon: f64,
     settings: AdaptiveSettings,
     in_library: Vec<bool>,
+    /// The first stage's distribution: the library's, ε-greedy.
+    library_stage: Arc<TestDistribution>,
     /// The last estimation stage's support and distribution, reused while
     /// the support is unchanged.
     estimation: std::sync::Mutex<Option<(Vec<usize>, Arc<TestDistribution>)>>,
@@ -176,14 +177,13 @@ impl<'a, C: Case> Planner<'a, C> {
                 "near_miss must be in [0, 1] and exposure_floor in [0, 1)".into(),
             ));
         }
-        // Fails early when the library cannot be sampled.
-        LibraryDistribution::new(
+        let library_stage = Arc::new(TestDistribution::library(LibraryDistribution::new(
             library,
             case.exposure(),
             epsilon,
             OutsideSpread::Uniform,
             Split::Stratified,
-        )?;
+        )?));
         let mut in_library = vec![false; case.grid().len()];
         for c in &library.cells {
             in_library[c.cell] = true;
@@ -191,9 +191,9 @@ impl<'a, C: Case> Planner<'a, C> {
         Ok(Self {
             case,
             library,
-            epsilon,
             settings,
             in_library,
+            library_stage,
             estimation: Default::default(),
         })
     }
@@ -241,16 +241,7 @@ impl<'a, C: Case> Planner<'a, C> {
 
     /// The first stage: the library's own distribution.
     pub fn first(&self) -> Stage {
-        Stage::Library(Arc::new(TestDistribution::library(
-            LibraryDistribution::new(
-                self.library,
-                self.case.exposure(),
-                self.epsilon,
-                OutsideSpread::Uniform,
-                Split::Stratified,
-            )
-            .expect("checked in Planner::new"),
-        )))
+        Stage::Library(Arc::clone(&self.library_stage))
     }
 
     /// How many tests `stage` has.
@@ -400,7 +391,13 @@ pub fn run_adaptive<C: Case>(
     let mut knowledge = planner.knowledge();
     let mut fold = PrefixFold::default();
     let z = rule.z();
-    let (mut index, mut library_tests, mut search_tests, mut stages) = (0u64, 0, 0, 0);
+    // The rule of the estimation tests; the budget counts every test.
+    let estimation_rule = StoppingRule {
+        max_tests: u64::MAX,
+        ..*rule
+    };
+    let mut index = 0u64;
+    let mut spent = Spent::default();
     let mut stage = planner.first();
     loop {
         let len = planner.len(&stage).min(rule.max_tests - index);
@@ -415,11 +412,11 @@ pub fn run_adaptive<C: Case>(
                 Stage::Search(cells) => (observe(cells[(i - from) as usize]), 0.0),
             })
             .collect();
-        stages += 1;
+        spent.stages += 1;
         index += len;
         match &stage {
-            Stage::Library(_) => library_tests += len,
-            Stage::Search(_) => search_tests += len,
+            Stage::Library(_) => spent.library_tests += len,
+            Stage::Search(_) => spent.search_tests += len,
             Stage::Estimate(_) => {
                 let to = fold.indices + len;
                 let events: Vec<(u64, SparseOutcome)> = observations
@@ -428,26 +425,13 @@ pub fn run_adaptive<C: Case>(
                     .filter(|(_, (o, _))| o.event)
                     .map(|(k, &(_, w))| (fold.indices + k as u64, SparseOutcome::Event(w)))
                     .collect();
-                let estimation_rule = StoppingRule {
-                    max_tests: u64::MAX,
-                    ..*rule
-                };
                 if let Some(status) = fold
                     .advance(&estimation_rule, z, to, &events, None)
                     .expect("bounded weights in index order")
                 {
                     let used = index - (to - fold.indices);
-                    return Ok(finish(
-                        status,
-                        &fold,
-                        rule,
-                        used,
-                        library_tests,
-                        search_tests,
-                        stages,
-                        &knowledge,
-                        &planner,
-                    ));
+                    let support = planner.support(&knowledge);
+                    return Ok(spent.result(status, &fold, rule, used, support));
                 }
             }
         }
@@ -455,42 +439,41 @@ pub fn run_adaptive<C: Case>(
             planner.observe(&mut knowledge, o);
         }
         if index >= rule.max_tests {
-            return Ok(finish(
-                Decision::Exhausted,
-                &fold,
-                rule,
-                index,
-                library_tests,
-                search_tests,
-                stages,
-                &knowledge,
-                &planner,
-            ));
+            let support = planner.support(&knowledge);
+            return Ok(spent.result(Decision::Exhausted, &fold, rule, index, support));
         }
         stage = planner.next(&knowledge);
     }
 }
 
-#[allow(clippy::too_many_arguments)]
-fn finish<C: Case>(
-    status: Decision,
-    fold: &PrefixFold,
-    rule: &StoppingRule,
-    indices: u64,
+/// The tests an adaptive campaign spent outside its estimate.
+#[derive(Default)]
+struct Spent {
     library_tests: u64,
     search_tests: u64,
     stages: u64,
-    knowledge: &Knowledge,
-    planner: &Planner<'_, C>,
-) -> AdaptiveResult {
-    let mut result = CampaignResult::from_fold(status, fold, rule, None);
-    result.indices = indices;
-    AdaptiveResult {
-        result,
-        library_tests,
-        search_tests,
-        stages,
-        support: planner.support(knowledge),
+}
+
+impl Spent {
+    /// The campaign's result after `indices` tests in all, the estimate
+    /// being `fold`'s.
+    fn result(
+        self,
+        status: Decision,
+        fold: &PrefixFold,
+        rule: &StoppingRule,
+        indices: u64,
+        support: Vec<usize>,
+    ) -> AdaptiveResult {
+        let mut result = CampaignResult::from_fold(status, fold, rule, None);
+        result.indices = indices;
+        AdaptiveResult {
+            result,
+            library_tests: self.library_tests,
+            search_tests: self.search_tests,
+            stages: self.stages,
+            support,
+        }
     }
 }
 

@@ -226,6 +226,18 @@ impl PrefixFold {
         }
     }
 
+    /// Adds one valid test with weight `weight` and outcome `event`, drawn
+    /// outside the library when `explored`: the one-test step of
+    /// [`PrefixFold::advance`] without the rule, for a curve that checks
+    /// the interval at every `n` (no surrogate mismatch is counted).
+    pub fn push(&mut self, weight: f64, event: bool, explored: bool) {
+        self.indices += 1;
+        self.estimator.push(weight, event);
+        if explored {
+            self.outside.add(if event { weight } else { 0.0 }, || false);
+        }
+    }
+
     /// `μ̂ₙ`: `S₁/n`, or for a stratified campaign
     /// [`stratified_estimate`] (0 before the first test).
     pub fn estimate(&self) -> f64 {

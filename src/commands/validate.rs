@@ -24,7 +24,8 @@ use tslg_method::estimator::{default_n_min, Decision, StoppingRule};
 use tslg_method::library::SearchMethod;
 use tslg_method::prefix::PrefixFold;
 use tslg_method::registry::{
-    exploring_share, open_case, BuildRequest, ExposureSource, LibrarySearch, ScenarioCase,
+    exploring_share, open_case, BuildRequest, CampaignTests, CaseError, ExposureSource,
+    LibrarySearch, ScenarioCase,
 };
 use tslg_method::sampling::{OutsideSpread, Split};
 
@@ -120,6 +121,24 @@ struct Setup {
     split: Split,
     rule: StoppingRule,
     truth: f64,
+}
+
+impl Setup {
+    /// The library campaign of `vut` seeded `seed`.
+    fn tests(
+        &self,
+        vut: &serde_json::Value,
+        seed: u64,
+    ) -> Result<Arc<dyn CampaignTests>, CaseError> {
+        self.case.campaign(
+            Some(&self.library),
+            vut,
+            self.epsilon,
+            self.outside,
+            self.split,
+            seed,
+        )
+    }
 }
 
 /// What the replicates of one setup did.
@@ -409,25 +428,12 @@ fn coverage_curve(setup: &Setup, replicates: u64, to: u64) -> anyhow::Result<Vec
     let covered = (0..replicates)
         .into_par_iter()
         .map(|seed| {
-            let tests = setup.case.campaign(
-                Some(&setup.library),
-                &vut,
-                setup.epsilon,
-                setup.outside,
-                setup.split,
-                seed,
-            )?;
+            let tests = setup.tests(&vut, seed)?;
             let mut fold = PrefixFold::with_strata(tests.strata());
             let mut covers = Vec::with_capacity(to as usize - 1);
             for index in 0..to {
                 let outcome = tests.run(index);
-                fold.estimator.push(outcome.weight, outcome.event);
-                if tests.explores(index) {
-                    fold.outside
-                        .add(outcome.weight * f64::from(u8::from(outcome.event)), || {
-                            false
-                        });
-                }
+                fold.push(outcome.weight, outcome.event, tests.explores(index));
                 if index >= 1 {
                     let (low, high) = fold.interval(z);
                     covers.push(low <= setup.truth && setup.truth <= high);
@@ -458,14 +464,7 @@ fn replicate(setup: &Setup, replicates: u64) -> anyhow::Result<Row> {
                 )?;
                 return Ok(run.result);
             }
-            let tests = setup.case.campaign(
-                Some(&setup.library),
-                &vut,
-                setup.epsilon,
-                setup.outside,
-                setup.split,
-                seed,
-            )?;
+            let tests = setup.tests(&vut, seed)?;
             Ok(run_campaign_tests(tests.as_ref(), &setup.rule, &|_| false))
         })
         .collect::<anyhow::Result<Vec<_>>>()?;

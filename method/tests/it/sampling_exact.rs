@@ -204,20 +204,25 @@ fn campaigns_do_not_depend_on_the_number_of_threads() {
     assert!((z_for_confidence(0.9) - rule.z()).abs() < 1e-15);
 }
 
+/// The library's distribution at ε 0.1 under the stratified split.
+fn stratified_q(case: &CutIn, lib: &Library) -> LibraryDistribution {
+    LibraryDistribution::new(
+        lib,
+        case.exposure(),
+        0.1,
+        OutsideSpread::Uniform,
+        Split::Stratified,
+    )
+    .unwrap()
+}
+
 #[test]
 fn the_stratified_estimate_is_unbiased_with_the_within_strata_variance() {
     // The IDM (the library's own surrogate: the split between the strata
     // is nearly all of the mixture's variance) and the FVDM (part of its
     // failure mass outside the library, where the weights are large).
     let (case, lib) = setup();
-    let q = LibraryDistribution::new(
-        &lib,
-        case.exposure(),
-        0.1,
-        OutsideSpread::Uniform,
-        Split::Stratified,
-    )
-    .unwrap();
+    let q = stratified_q(&case, &lib);
     let (n, seeds) = (2_000u64, 400u64);
     for (name, gain) in [("idm", 0.5), ("fvdm", 0.97)] {
         let events = event_cells(&case, &vehicle(name));
@@ -231,12 +236,7 @@ fn the_stratified_estimate_is_unbiased_with_the_within_strata_variance() {
                 let mut fold = PrefixFold::with_strata(q.strata());
                 for i in 0..n {
                     let d = q.draw(seed, i);
-                    let event = is_event.contains(&d.cell);
-                    fold.estimator.push(d.weight, event);
-                    if q.explores(seed, i) {
-                        fold.outside
-                            .add(if event { d.weight } else { 0.0 }, || false);
-                    }
+                    fold.push(d.weight, is_event.contains(&d.cell), q.explores(seed, i));
                 }
                 assert_eq!(fold.outside.tests, n / 10);
                 fold.estimate()
@@ -269,14 +269,7 @@ fn the_pooled_variance_covers_where_the_within_strata_one_collapses() {
     // interval is nearly a point below P(A). The pooled variance keeps the
     // between-strata part and covers (docs/statistics.md, "Strata").
     let (case, lib) = setup();
-    let q = LibraryDistribution::new(
-        &lib,
-        case.exposure(),
-        0.1,
-        OutsideSpread::Uniform,
-        Split::Stratified,
-    )
-    .unwrap();
+    let q = stratified_q(&case, &lib);
     let events = event_cells(&case, &vehicle("idm"));
     let is_event: std::collections::HashSet<usize> = events.iter().copied().collect();
     let mu = event_probability(&case, &events);
@@ -291,11 +284,8 @@ fn the_pooled_variance_covers_where_the_within_strata_one_collapses() {
             let d = q.draw(seed, i);
             let event = is_event.contains(&d.cell);
             let explores = q.explores(seed, i);
-            fold.estimator.push(d.weight, event);
+            fold.push(d.weight, event, explores);
             let x = if event { d.weight } else { 0.0 };
-            if explores {
-                fold.outside.add(x, || false);
-            }
             let (share, h) = if explores { (0.1, 1) } else { (0.9, 0) };
             let own = share * x;
             strata[h].0 += 1.0;
