@@ -137,10 +137,27 @@ pub enum AdaptiveError {
     Sampling(#[from] SamplingError),
 }
 
+/// The case a planner plans for: borrowed for a campaign run in one
+/// call, shared for one a coordinator keeps between reports.
+enum Held<'a, C> {
+    Borrowed(&'a C),
+    Shared(Arc<C>),
+}
+
+impl<C> std::ops::Deref for Held<'_, C> {
+    type Target = C;
+    fn deref(&self) -> &C {
+        match self {
+            Held::Borrowed(c) => c,
+            Held::Shared(c) => c,
+        }
+    }
+}
+
 /// Plans the stages of one adaptive campaign of a grid case.
 pub struct Planner<'a, C: Case> {
-    case: &'a C,
-    library: &'a Library,
+    case: Held<'a, C>,
+    library: Library,
     settings: AdaptiveSettings,
     in_library: Vec<bool>,
     /// The first stage's distribution: the library's, ε-greedy.
@@ -148,6 +165,33 @@ pub struct Planner<'a, C: Case> {
     /// The last estimation stage's support and distribution, reused while
     /// the support is unchanged.
     estimation: std::sync::Mutex<Option<(Vec<usize>, Arc<TestDistribution>)>>,
+}
+
+impl<C: Case> Planner<'static, C> {
+    /// [`Planner::new`] holding its case, to be kept between calls.
+    pub fn shared(
+        case: Arc<C>,
+        library: &Library,
+        epsilon: f64,
+        settings: AdaptiveSettings,
+    ) -> Result<Self, AdaptiveError> {
+        let Planner {
+            library,
+            settings,
+            in_library,
+            library_stage,
+            estimation,
+            ..
+        } = Planner::new(case.as_ref(), library, epsilon, settings)?;
+        Ok(Planner {
+            case: Held::Shared(case),
+            library,
+            settings,
+            in_library,
+            library_stage,
+            estimation,
+        })
+    }
 }
 
 impl<'a, C: Case> Planner<'a, C> {
@@ -189,13 +233,18 @@ impl<'a, C: Case> Planner<'a, C> {
             in_library[c.cell] = true;
         }
         Ok(Self {
-            case,
-            library,
+            case: Held::Borrowed(case),
+            library: library.clone(),
             settings,
             in_library,
             library_stage,
             estimation: Default::default(),
         })
+    }
+
+    /// The case planned for.
+    pub fn case(&self) -> &C {
+        &self.case
     }
 
     /// Nothing tested yet.
@@ -364,9 +413,233 @@ pub struct AdaptiveResult {
     pub support: Vec<usize>,
 }
 
+/// What one test of a stage gave, in the stage's index order.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum TestResult {
+    /// The vehicle ran the scenario.
+    Done {
+        /// Whether it had the event.
+        event: bool,
+        /// How close it came ([`Case::criticality`]); only whether it is
+        /// within `near_miss` matters to the plan.
+        criticality: f64,
+    },
+    /// The test has no valid outcome: it teaches nothing and, in an
+    /// estimation stage, does not count in `n`.
+    Invalid,
+}
+
+/// One planned stage: tests `start..start + len`.
+#[derive(Debug, Clone)]
+pub struct PlannedStage {
+    /// Its first test index.
+    pub start: u64,
+    /// Its tests (fewer than planned when the budget ends inside it).
+    pub len: u64,
+    /// What it draws.
+    pub stage: Stage,
+}
+
+impl PlannedStage {
+    /// One past its last test index.
+    pub fn end(&self) -> u64 {
+        self.start + self.len
+    }
+
+    /// The cell and weight of test `index` (inside the stage) under `seed`;
+    /// a search test's weight is 0: it does not enter the estimate.
+    pub fn test(&self, seed: u64, index: u64) -> (usize, f64) {
+        match &self.stage {
+            Stage::Library(d) | Stage::Estimate(d) => {
+                let draw = d.draw(seed, index);
+                (draw.cell, draw.weight)
+            }
+            Stage::Search(cells) => (cells[(index - self.start) as usize], 0.0),
+        }
+    }
+
+    /// `"library"`, `"search"` or `"estimate"`.
+    pub fn kind(&self) -> &'static str {
+        match self.stage {
+            Stage::Library(_) => "library",
+            Stage::Search(_) => "search",
+            Stage::Estimate(_) => "estimate",
+        }
+    }
+}
+
+/// Where an adaptive campaign stands: the stages planned so far (the last
+/// is the one running), what their tests showed, and the estimate. It is a
+/// function of the seed and the results of the resolved stages alone, so a
+/// coordinator rebuilds it from what it stored, and
+/// [`run_adaptive`] and a service campaign walk through the same states.
+#[derive(Debug, Clone)]
+pub struct AdaptiveState {
+    seed: u64,
+    knowledge: Knowledge,
+    fold: PrefixFold,
+    spent: Spent,
+    stages: Vec<PlannedStage>,
+    finished: Option<AdaptiveResult>,
+}
+
+impl AdaptiveState {
+    /// The stage running (the last planned).
+    pub fn current(&self) -> &PlannedStage {
+        self.stages.last().expect("a campaign starts with a stage")
+    }
+
+    /// Every stage planned, in order.
+    pub fn stages(&self) -> &[PlannedStage] {
+        &self.stages
+    }
+
+    /// The stage test `index` belongs to, if planned.
+    pub fn stage_of(&self, index: u64) -> Option<&PlannedStage> {
+        let k = self.stages.partition_point(|s| s.end() <= index);
+        self.stages.get(k).filter(|s| s.start <= index)
+    }
+
+    /// The seed of the test streams.
+    pub fn seed(&self) -> u64 {
+        self.seed
+    }
+
+    /// The estimation tests' fold.
+    pub fn fold(&self) -> &PrefixFold {
+        &self.fold
+    }
+
+    /// The result, once the campaign stopped.
+    pub fn finished(&self) -> Option<&AdaptiveResult> {
+        self.finished.as_ref()
+    }
+
+    /// What the tests showed.
+    pub fn knowledge(&self) -> &Knowledge {
+        &self.knowledge
+    }
+
+    /// Tests of the library stage, of the searches, and stages resolved.
+    pub fn spent(&self) -> (u64, u64, u64) {
+        let s = &self.spent;
+        (s.library_tests, s.search_tests, s.stages)
+    }
+}
+
+impl<C: Case> Planner<'_, C> {
+    /// A campaign under `seed` before any test: its library stage planned.
+    pub fn start(&self, rule: &StoppingRule, seed: u64) -> AdaptiveState {
+        let stage = self.first();
+        let len = self.len(&stage).min(rule.max_tests);
+        AdaptiveState {
+            seed,
+            knowledge: self.knowledge(),
+            fold: PrefixFold::default(),
+            spent: Spent::default(),
+            stages: vec![PlannedStage {
+                start: 0,
+                len,
+                stage,
+            }],
+            finished: None,
+        }
+    }
+
+    /// Resolves the running stage with its tests' `results` (in index
+    /// order, one per test): an estimation stage's events enter the
+    /// estimate, whose rule may stop the campaign inside the stage (at the
+    /// index where the rule first holds, as for any campaign); otherwise
+    /// the next stage is planned, unless the budget is spent.
+    ///
+    /// # Panics
+    /// When the campaign has finished or `results` is not one per test.
+    pub fn resolve(&self, state: &mut AdaptiveState, rule: &StoppingRule, results: &[TestResult]) {
+        assert!(state.finished.is_none(), "the campaign has finished");
+        let planned = state.current().clone();
+        assert_eq!(results.len() as u64, planned.len, "one result per test");
+        let seed = state.seed;
+        state.spent.stages += 1;
+        let observations: Vec<Option<Observation>> = results
+            .iter()
+            .enumerate()
+            .map(|(k, r)| match *r {
+                TestResult::Done { event, criticality } => Some(Observation {
+                    cell: planned.test(seed, planned.start + k as u64).0,
+                    event,
+                    criticality,
+                }),
+                TestResult::Invalid => None,
+            })
+            .collect();
+        match &planned.stage {
+            Stage::Library(_) => state.spent.library_tests += planned.len,
+            Stage::Search(_) => state.spent.search_tests += planned.len,
+            Stage::Estimate(_) => {
+                let from = state.fold.indices;
+                let to = from + planned.len;
+                let outcomes: Vec<(u64, SparseOutcome)> = results
+                    .iter()
+                    .enumerate()
+                    .filter_map(|(k, r)| {
+                        let i = from + k as u64;
+                        match r {
+                            TestResult::Done { event: true, .. } => Some((
+                                i,
+                                SparseOutcome::Event(
+                                    planned.test(seed, planned.start + k as u64).1,
+                                ),
+                            )),
+                            TestResult::Done { .. } => None,
+                            TestResult::Invalid => Some((i, SparseOutcome::Invalid)),
+                        }
+                    })
+                    .collect();
+                // The rule of the estimation tests; the budget counts every test.
+                let estimation_rule = StoppingRule {
+                    max_tests: u64::MAX,
+                    ..*rule
+                };
+                let decided = state
+                    .fold
+                    .advance(&estimation_rule, rule.z(), to, &outcomes, None)
+                    .expect("bounded weights in index order");
+                if let Some(status) = decided {
+                    let used = planned.end() - (to - state.fold.indices);
+                    let support = self.support(&state.knowledge);
+                    state.finished =
+                        Some(state.spent.result(status, &state.fold, rule, used, support));
+                    return;
+                }
+            }
+        }
+        for o in observations.iter().flatten() {
+            self.observe(&mut state.knowledge, o);
+        }
+        if planned.end() >= rule.max_tests {
+            let support = self.support(&state.knowledge);
+            state.finished = Some(state.spent.result(
+                Decision::Exhausted,
+                &state.fold,
+                rule,
+                planned.end(),
+                support,
+            ));
+            return;
+        }
+        let stage = self.next(&state.knowledge);
+        let len = self.len(&stage).min(rule.max_tests - planned.end());
+        state.stages.push(PlannedStage {
+            start: planned.end(),
+            len,
+            stage,
+        });
+    }
+}
+
 /// Runs an adaptive campaign of built-in `vehicle` on `library` to `rule`.
-/// Tests run in parallel within a stage and are folded in index order, so
-/// the result does not depend on the number of threads.
+/// Tests run in parallel within a stage and are resolved in index order,
+/// so the result does not depend on the number of threads.
 pub fn run_adaptive<C: Case>(
     case: &C,
     vehicle: &C::Vehicle,
@@ -380,74 +653,26 @@ pub fn run_adaptive<C: Case>(
         return Err(AdaptiveError::Guard);
     }
     let planner = Planner::new(case, library, epsilon, settings)?;
-    let observe = |cell: usize| {
-        let (event, criticality) = case.event_and_criticality(vehicle, cell);
-        Observation {
-            cell,
-            event,
-            criticality,
-        }
-    };
-    let mut knowledge = planner.knowledge();
-    let mut fold = PrefixFold::default();
-    let z = rule.z();
-    // The rule of the estimation tests; the budget counts every test.
-    let estimation_rule = StoppingRule {
-        max_tests: u64::MAX,
-        ..*rule
-    };
-    let mut index = 0u64;
-    let mut spent = Spent::default();
-    let mut stage = planner.first();
+    let mut state = planner.start(rule, seed);
     loop {
-        let len = planner.len(&stage).min(rule.max_tests - index);
-        let from = index;
-        let observations: Vec<(Observation, f64)> = (from..from + len)
+        if let Some(result) = state.finished() {
+            return Ok(result.clone());
+        }
+        let stage = state.current();
+        let results: Vec<TestResult> = (stage.start..stage.end())
             .into_par_iter()
-            .map(|i| match &stage {
-                Stage::Library(d) | Stage::Estimate(d) => {
-                    let draw = d.draw(seed, i);
-                    (observe(draw.cell), draw.weight)
-                }
-                Stage::Search(cells) => (observe(cells[(i - from) as usize]), 0.0),
+            .map(|i| {
+                let (event, criticality) =
+                    case.event_and_criticality(vehicle, stage.test(seed, i).0);
+                TestResult::Done { event, criticality }
             })
             .collect();
-        spent.stages += 1;
-        index += len;
-        match &stage {
-            Stage::Library(_) => spent.library_tests += len,
-            Stage::Search(_) => spent.search_tests += len,
-            Stage::Estimate(_) => {
-                let to = fold.indices + len;
-                let events: Vec<(u64, SparseOutcome)> = observations
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, (o, _))| o.event)
-                    .map(|(k, &(_, w))| (fold.indices + k as u64, SparseOutcome::Event(w)))
-                    .collect();
-                if let Some(status) = fold
-                    .advance(&estimation_rule, z, to, &events, None)
-                    .expect("bounded weights in index order")
-                {
-                    let used = index - (to - fold.indices);
-                    let support = planner.support(&knowledge);
-                    return Ok(spent.result(status, &fold, rule, used, support));
-                }
-            }
-        }
-        for (o, _) in &observations {
-            planner.observe(&mut knowledge, o);
-        }
-        if index >= rule.max_tests {
-            let support = planner.support(&knowledge);
-            return Ok(spent.result(Decision::Exhausted, &fold, rule, index, support));
-        }
-        stage = planner.next(&knowledge);
+        planner.resolve(&mut state, rule, &results);
     }
 }
 
 /// The tests an adaptive campaign spent outside its estimate.
-#[derive(Default)]
+#[derive(Debug, Clone, Default)]
 struct Spent {
     library_tests: u64,
     search_tests: u64,
@@ -458,7 +683,7 @@ impl Spent {
     /// The campaign's result after `indices` tests in all, the estimate
     /// being `fold`'s.
     fn result(
-        self,
+        &self,
         status: Decision,
         fold: &PrefixFold,
         rule: &StoppingRule,

@@ -77,6 +77,35 @@ pub trait Case: Sync {
         cell: usize,
     ) -> Result<bool, DriverError>;
 
+    /// [`Case::external_step_event`] with the criticality of the run
+    /// ([`Case::criticality`]) where the case's loop measures it; `None`
+    /// where it does not.
+    fn external_step_event_and_criticality(
+        &self,
+        vut: &mut dyn ExternalVehicle,
+        cell: usize,
+    ) -> Result<(bool, Option<f64>), DriverError> {
+        Ok((self.external_step_event(vut, cell)?, None))
+    }
+
+    /// [`Case::external_event`] with the run's criticality: measured by the
+    /// case in step mode, reported by the program in episode mode
+    /// (protocol version 2); `None` when neither says.
+    fn external_event_and_criticality(
+        &self,
+        vut: &mut dyn ExternalVehicle,
+        mode: ExternalMode,
+        cell: usize,
+    ) -> Result<(bool, Option<f64>), DriverError> {
+        match mode {
+            ExternalMode::Step => self.external_step_event_and_criticality(vut, cell),
+            ExternalMode::Episode => {
+                let outcome = vut.episode(&self.external_scenario(cell))?;
+                Ok((outcome.event, outcome.checked_criticality()?))
+            }
+        }
+    }
+
     /// Whether an external program has the event in scenario `cell`: in
     /// step mode by [`Case::external_step_event`]; in episode mode it is
     /// handed [`Case::external_scenario`] and reports the outcome. The

@@ -13,8 +13,12 @@ use crate::vehicle::{FollowDriver, FollowStep};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
-/// The protocol version this build speaks.
-pub const PROTOCOL_VERSION: u32 = 1;
+/// The protocol version this build speaks. Version 2 added an episode's
+/// optional `criticality`; programs speaking version 1 keep working.
+pub const PROTOCOL_VERSION: u32 = 2;
+
+/// The oldest protocol version a program may speak.
+pub const OLDEST_PROTOCOL_VERSION: u32 = 1;
 
 /// Longest program name.
 pub const MAX_NAME_LENGTH: usize = 64;
@@ -177,9 +181,29 @@ pub struct EpisodeOutcome {
     /// Whether the event happened (an accident; on the highway exit, a
     /// failure to exit).
     pub event: bool,
+    /// How close the vehicle came to the event, in `[0, 1]` (0 for the
+    /// event, small for a near miss; e.g. the minimum normalised time to
+    /// collision): adaptive campaigns search from near misses. Protocol
+    /// version 2; optional.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub criticality: Option<f64>,
     /// Anything the program wants logged.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub note: Option<String>,
+}
+
+impl EpisodeOutcome {
+    /// The criticality, checked: `None` when not sent; an error when it
+    /// is not a number in `[0, 1]`.
+    pub fn checked_criticality(&self) -> Result<Option<f64>, DriverError> {
+        match self.criticality {
+            None => Ok(None),
+            Some(c) if (0.0..=1.0).contains(&c) => Ok(Some(if self.event { 0.0 } else { c })),
+            Some(c) => Err(DriverError(format!(
+                "the program reported criticality {c}; it must be a number in [0, 1]"
+            ))),
+        }
+    }
 }
 
 /// Why a test with an external program has no valid outcome: the reason

@@ -171,6 +171,15 @@ impl Case for CutIn {
         vut: &mut dyn ExternalVehicle,
         cell: usize,
     ) -> Result<bool, DriverError> {
+        Ok(self.external_step_event_and_criticality(vut, cell)?.0)
+    }
+
+    /// The case's loop measures mnpETTC as it drives the program.
+    fn external_step_event_and_criticality(
+        &self,
+        vut: &mut dyn ExternalVehicle,
+        cell: usize,
+    ) -> Result<(bool, Option<f64>), DriverError> {
         let grid = self.exposure.grid();
         let run = self.settings.run_with(
             &mut ExternalFollower { vut },
@@ -178,7 +187,7 @@ impl Case for CutIn {
             grid.value(cell, 1),
             self.objective.u_i,
         )?;
-        Ok(run.accident)
+        Ok((run.accident, Some(run.mnp_ettc)))
     }
 
     fn evaluate_surrogate(&self, surrogate: &VehicleModel, cell: usize) -> SurrogateEvaluation {

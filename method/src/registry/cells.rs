@@ -2,13 +2,14 @@
 //! vehicles are serde types, libraries of cells in the JSON library format,
 //! and tests drawn as a cell and a weight before the vehicle runs.
 
+use super::adaptive_tests::AdaptiveCellCampaign;
 use super::picture::{project, PictureMap};
 use super::vut::{runner, CampaignVehicle, Runner};
 use super::{
     BuildRequest, BuiltLibrary, CampaignTests, CaseError, LibrarySearch, PlannedTest, ScenarioCase,
     TestOutcome,
 };
-use crate::adaptive::{run_adaptive, AdaptiveResult, AdaptiveSettings};
+use crate::adaptive::{run_adaptive, AdaptiveError, AdaptiveResult, AdaptiveSettings, Planner};
 use crate::case::Case;
 use crate::estimator::{z_for_confidence, StoppingRule};
 use crate::exact::{event_cells, event_probability, exact_report, ExactReport};
@@ -234,6 +235,26 @@ where
         )?)
     }
 
+    fn adaptive_tests(
+        &self,
+        file: &[u8],
+        vut: &serde_json::Value,
+        epsilon: f64,
+        settings: AdaptiveSettings,
+        rule: &StoppingRule,
+        seed: u64,
+    ) -> Result<Arc<dyn CampaignTests>, CaseError> {
+        if rule.guard_outside {
+            return Err(AdaptiveError::Guard.into());
+        }
+        let vehicle = self.campaign_vehicle(vut)?;
+        let library = self.library(file)?;
+        let planner = Planner::shared(Arc::clone(&self.case), &library, epsilon, settings)?;
+        Ok(Arc::new(AdaptiveCellCampaign::new(
+            planner, vehicle, settings, *rule, seed,
+        )))
+    }
+
     fn exact_event_probability(&self, spec: &serde_json::Value) -> Result<f64, CaseError> {
         let vehicle = self.builtin(spec, "an exact answer")?;
         Ok(event_probability(
@@ -386,6 +407,35 @@ where
 
     fn outside_mass(&self) -> Option<&crate::outside::OutsideMass> {
         self.distribution.outside_mass()
+    }
+
+    fn run_cell(
+        &self,
+        index: u64,
+        cell: usize,
+        program: Option<&mut dyn ExternalVehicle>,
+    ) -> Result<(bool, Option<f64>), DriverError> {
+        if cell >= self.case.grid().len() {
+            return Err(DriverError(format!(
+                "test {index} names cell {cell}; the grid has {} cells",
+                self.case.grid().len()
+            )));
+        }
+        let start = TestStart {
+            case: self.case.name(),
+            mode: Default::default(),
+            index,
+            world: &self.world,
+        };
+        match runner(&self.vehicle, program, start)? {
+            Runner::Builtin(vehicle) => {
+                let (event, criticality) = self.case.event_and_criticality(vehicle, cell);
+                Ok((event, Some(criticality)))
+            }
+            Runner::Program(program, mode) => self
+                .case
+                .external_event_and_criticality(program, mode, cell),
+        }
     }
 
     fn surrogate_misses(&self, index: u64) -> bool {

@@ -310,11 +310,19 @@ impl ScenarioCase for FollowScenarioCase {
         _rule: &StoppingRule,
         _seed: u64,
     ) -> Result<AdaptiveResult, CaseError> {
-        Err(CaseError::Unsupported(
-            "adaptive campaigns search the cells of a grid case (cut-in, highway-exit); \
-             car-following samples its scenarios while they run"
-                .into(),
-        ))
+        Err(no_adaptive())
+    }
+
+    fn adaptive_tests(
+        &self,
+        _file: &[u8],
+        _vut: &serde_json::Value,
+        _epsilon: f64,
+        _settings: AdaptiveSettings,
+        _rule: &StoppingRule,
+        _seed: u64,
+    ) -> Result<Arc<dyn CampaignTests>, CaseError> {
+        Err(no_adaptive())
     }
 
     fn exact_event_probability(&self, _: &serde_json::Value) -> Result<f64, CaseError> {
@@ -413,4 +421,13 @@ impl CampaignTests for FollowCampaign {
     fn replay(&self, index: u64) -> Option<TestOutcome> {
         self.vut.external().is_none().then(|| self.run(index))
     }
+}
+
+/// Why car-following has no adaptive campaigns (docs/adaptive-design.md).
+fn no_adaptive() -> CaseError {
+    CaseError::Unsupported(
+        "adaptive campaigns search the cells of a grid case (cut-in, highway-exit); \
+         car-following samples its scenarios while they run"
+            .into(),
+    )
 }

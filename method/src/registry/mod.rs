@@ -5,6 +5,7 @@
 //! campaign's tests are run (worker) and checked (coordinator) by index.
 //! Adding a case means one arm in [`open_case`].
 
+mod adaptive_tests;
 mod cells;
 mod follow;
 mod picture;
@@ -12,7 +13,7 @@ mod vut;
 
 pub use picture::PictureMap;
 
-use crate::adaptive::{AdaptiveError, AdaptiveResult, AdaptiveSettings};
+use crate::adaptive::{AdaptiveError, AdaptiveResult, AdaptiveSettings, TestResult};
 use crate::carfollow::case::{CarFollowing, FollowPreset, PolicySolver};
 use crate::carfollow::file::PolicyFileError;
 use crate::cutin::{CutIn, CutInError, CutInPreset};
@@ -235,6 +236,65 @@ pub trait CampaignTests: Send + Sync {
     fn surrogate_misses(&self, _index: u64) -> bool {
         false
     }
+    /// Runs the vehicle (built-in, or `program`) on scenario `cell` as test
+    /// `index`, the cell given by the lease (an adaptive campaign's stages
+    /// are planned by the coordinator): the event and how close it came
+    /// ([`crate::case::Case::criticality`]; `None` when a program does not
+    /// say). Grid cases only.
+    fn run_cell(
+        &self,
+        _index: u64,
+        _cell: usize,
+        _program: Option<&mut dyn ExternalVehicle>,
+    ) -> Result<(bool, Option<f64>), DriverError> {
+        Err(DriverError(
+            "this case's scenarios are not grid cells a lease can name".into(),
+        ))
+    }
+    /// An adaptive campaign's stages, as the coordinator plans them.
+    fn adaptive(&self) -> Option<&dyn AdaptiveStages> {
+        None
+    }
+}
+
+/// The stages of an adaptive campaign ([`crate::adaptive`]) as a
+/// coordinator keeps them between reports: the running stage, and the step
+/// that resolves it once every one of its tests has a result.
+pub trait AdaptiveStages: Send + Sync {
+    /// The running stage's tests `start..end`; `None` once the campaign
+    /// has finished.
+    fn running(&self) -> Option<(u64, u64)>;
+    /// The campaign's settings.
+    fn settings(&self) -> AdaptiveSettings;
+    /// The event and criticality of tests `from..to` (inside the running
+    /// stage) on the built-in vehicle, run here; `None` for a program.
+    fn replay_stage(&self, from: u64, to: u64) -> Option<Vec<(bool, f64)>>;
+    /// Resolves the running stage with one result per test
+    /// ([`crate::adaptive::Planner::resolve`]).
+    fn resolve(&self, results: &[TestResult]);
+    /// Where the campaign stands.
+    fn progress(&self) -> AdaptiveProgress;
+}
+
+/// An adaptive campaign's state, as a coordinator persists and shows it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AdaptiveProgress {
+    /// The estimation tests' fold.
+    pub fold: crate::prefix::PrefixFold,
+    /// The running stage's tests `start..end` and its kind; `None` once
+    /// finished.
+    pub running: Option<(u64, u64, &'static str)>,
+    /// Tests of the library stage.
+    pub library_tests: u64,
+    /// Tests of the search stages.
+    pub search_tests: u64,
+    /// Stages resolved.
+    pub stages: u64,
+    /// Cells of the support the estimation samples besides its exploring
+    /// share.
+    pub support: usize,
+    /// The result, once the campaign stopped.
+    pub finished: Option<AdaptiveResult>,
 }
 
 /// A case opened for a service: everything the coordinator and the worker
@@ -301,6 +361,18 @@ pub trait ScenarioCase: Send + Sync {
         rule: &StoppingRule,
         seed: u64,
     ) -> Result<AdaptiveResult, CaseError>;
+    /// The tests of a service adaptive campaign of `vut` on the library
+    /// `file`: the coordinator's copy plans its stages
+    /// ([`CampaignTests::adaptive`]). Grid cases only.
+    fn adaptive_tests(
+        &self,
+        file: &[u8],
+        vut: &serde_json::Value,
+        epsilon: f64,
+        settings: AdaptiveSettings,
+        rule: &StoppingRule,
+        seed: u64,
+    ) -> Result<Arc<dyn CampaignTests>, CaseError>;
     /// The exact `P(A)` of a vehicle by enumeration of the grid.
     fn exact_event_probability(&self, vehicle: &serde_json::Value) -> Result<f64, CaseError>;
     /// `P(A)` with the expected tests of a library campaign and of the NDD

@@ -161,3 +161,84 @@ fn adaptive_campaigns_cover_highway_exit_for_the_surrogate_and_the_gap_seeker() 
         assert!(ratio >= least_ratio, "{vut}: ratio {ratio}");
     }
 }
+
+/// The coordinator's copy of a service campaign, resolved stage by stage
+/// from what a worker's copy reports for the cells the stages name, runs
+/// the campaign [`run_adaptive`] runs in one process, bit for bit, on both
+/// grid cases; an invalid test teaches nothing and does not count.
+#[test]
+fn a_service_adaptive_campaign_resolved_from_workers_runs_is_the_in_process_one() {
+    use tslg_method::adaptive::TestResult;
+    use tslg_method::registry::{open_case, ExposureSource};
+    use tslg_method::sampling::{OutsideSpread, Split};
+    for (case_name, preset, surrogate, vut, seeds) in [
+        (
+            "cut-in",
+            "paper-code",
+            serde_json::json!({"model": "idm"}),
+            serde_json::json!({"model": "fvdm"}),
+            0..6u64,
+        ),
+        (
+            "cut-in",
+            "paper-code",
+            serde_json::json!({"model": "idm"}),
+            serde_json::json!({"model": "switching-acc"}),
+            0..3,
+        ),
+        (
+            "highway-exit",
+            "coarse",
+            serde_json::json!({"model": "mobil"}),
+            serde_json::json!({"model": "gap-seeker"}),
+            0..2,
+        ),
+    ] {
+        let case = open_case(case_name, Some(preset), &ExposureSource::Builtin).unwrap();
+        let request = tslg_method::registry::BuildRequest {
+            threshold: None,
+            search: Some(tslg_method::registry::LibrarySearch::Cells(
+                SearchMethod::Exhaustive,
+            )),
+        };
+        let surrogate = case.normalise_vehicle(&surrogate).unwrap();
+        let vut = case.normalise_vehicle(&vut).unwrap();
+        let file = case.build_library(&surrogate, &request).unwrap().file;
+        let rule = StoppingRule::new(0.2, 1_000_000);
+        let settings = AdaptiveSettings::default();
+        for seed in seeds {
+            let in_process = case
+                .adaptive_campaign(&file, &vut, 0.1, settings, &rule, seed)
+                .unwrap();
+            let coordinator = case
+                .adaptive_tests(&file, &vut, 0.1, settings, &rule, seed)
+                .unwrap();
+            let worker = case
+                .campaign(
+                    Some(&file),
+                    &vut,
+                    0.1,
+                    OutsideSpread::Uniform,
+                    Split::Stratified,
+                    seed,
+                )
+                .unwrap();
+            let stages = coordinator.adaptive().unwrap();
+            while let Some((from, to)) = stages.running() {
+                let results: Vec<TestResult> = (from..to)
+                    .map(|i| {
+                        let planned = coordinator.planned(i).unwrap();
+                        let (event, criticality) = worker.run_cell(i, planned.cell, None).unwrap();
+                        TestResult::Done {
+                            event,
+                            criticality: criticality.unwrap(),
+                        }
+                    })
+                    .collect();
+                stages.resolve(&results);
+            }
+            let done = stages.progress().finished.unwrap();
+            assert_eq!(done, in_process, "{case_name} {vut} seed {seed}");
+        }
+    }
+}

@@ -143,7 +143,11 @@ impl ExternalVehicle for Mirror {
             }
             other => panic!("no episodes in {other}"),
         };
-        Ok(through_json(&EpisodeOutcome { event, note: None }))
+        Ok(through_json(&EpisodeOutcome {
+            event,
+            criticality: None,
+            note: None,
+        }))
     }
 }
 
