@@ -147,6 +147,7 @@ async fn round_trips(count: usize, library: bool) -> anyhow::Result<(Vec<f64>, f
             })
             .collect();
         let mut report = ResultReport {
+            near_misses: Vec::new(),
             worker: "bench".into(),
             attempt: lease.attempt,
             key: lease.key.clone(),

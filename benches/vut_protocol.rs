@@ -42,7 +42,7 @@ fn program(spec: &str) -> Option<Program> {
 
 fn drive(program: &Program, tests: &dyn CampaignTests, index: u64) {
     match program.run_test(tests, 0, index) {
-        ProgramRun::Done(_) => {}
+        ProgramRun::Done(..) => {}
         other => panic!("test {index}: {other:?}"),
     }
 }

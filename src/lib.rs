@@ -157,7 +157,8 @@ pub struct CampaignStartArgs {
     /// The case.
     #[arg(long, default_value = "cut-in")]
     pub case: String,
-    /// `library` or `ndd`.
+    /// `library`, `adaptive` (stages that learn where this vehicle fails,
+    /// from the library; grid cases) or `ndd`.
     #[arg(long, value_enum, default_value = "library")]
     pub method: MethodArg,
     /// The library (on the coordinator) to sample from; for `ndd`, the exposure to use.
@@ -316,6 +317,7 @@ pub struct BuildArgs {
 #[derive(Debug, Clone, Copy, ValueEnum, PartialEq, Eq)]
 pub enum MethodArg {
     Library,
+    Adaptive,
     Ndd,
 }
 

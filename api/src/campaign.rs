@@ -5,6 +5,36 @@ use crate::library::ExposureRequest;
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 
+/// Where an adaptive campaign stands. Only its estimation tests enter the
+/// estimate (`tests`, `events`); `indices` counts every test.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct AdaptiveView {
+    /// Tests of the library stage.
+    pub library_tests: u64,
+    /// Tests spent searching around failures and near misses.
+    pub search_tests: u64,
+    /// Stages resolved.
+    pub stages: u64,
+    /// The running stage (`library`, `search` or `estimate`) and its tests
+    /// `[start, end)`; absent once the campaign stopped.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub running: Option<RunningStage>,
+    /// Cells the estimation samples besides its exploring share: the
+    /// failures found and the library's cells not yet tested.
+    pub support: u64,
+}
+
+/// An adaptive campaign's running stage.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct RunningStage {
+    /// `library`, `search` or `estimate`.
+    pub kind: String,
+    /// Its first test index.
+    pub start: u64,
+    /// One past its last test index.
+    pub end: u64,
+}
+
 /// How tests are drawn.
 #[cfg_attr(feature = "sqlx", derive(sqlx::Type), sqlx(rename_all = "kebab-case"))]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
@@ -14,6 +44,11 @@ pub enum Method {
     Library,
     /// From the naturalistic distribution itself (the baseline), weight 1.
     Ndd,
+    /// In stages that learn where this vehicle fails: the library's tests,
+    /// a search around the failures and near misses they meet, then
+    /// estimation on the failures found (grid cases; docs/statistics.md,
+    /// "Adaptive campaigns").
+    Adaptive,
 }
 
 impl Method {
@@ -22,7 +57,13 @@ impl Method {
         match self {
             Method::Library => "library",
             Method::Ndd => "ndd",
+            Method::Adaptive => "adaptive",
         }
+    }
+
+    /// Whether the campaign draws from a library (`library`, `adaptive`).
+    pub fn uses_library(self) -> bool {
+        matches!(self, Method::Library | Method::Adaptive)
     }
 }
 
@@ -309,6 +350,9 @@ pub struct CampaignView {
     /// lets a user check the campaign's interval against the truth.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub exact_probability: Option<f64>,
+    /// An adaptive campaign's stages so far; `None` for other methods.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub adaptive: Option<AdaptiveView>,
     /// What the numbers cannot show on their own, in words (surrogate
     /// mismatch, an interval the outside bound does not support).
     #[serde(default)]
@@ -417,4 +461,9 @@ pub struct CampaignPlan {
     /// The vehicle under test, as given at creation.
     #[schema(value_type = Object)]
     pub vut: serde_json::Value,
+    /// For `method: adaptive`: report the criticality of every test at or
+    /// below this (`near_misses` in a result report). Each test's cell and
+    /// weight come with its lease (`tests`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub near_miss: Option<f64>,
 }

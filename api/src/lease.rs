@@ -288,6 +288,21 @@ pub struct ResultReport {
     /// Threads the tests ran on (1 when absent).
     #[serde(default = "one")]
     pub threads: u32,
+    /// Adaptive campaigns: the tests of the range whose criticality was at
+    /// most the plan's `near_miss` (events need not be listed), in
+    /// increasing index.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub near_misses: Vec<NearMiss>,
+}
+
+/// A test that came close to the event.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct NearMiss {
+    /// The test's index.
+    pub index: u64,
+    /// How close it came, in `[0, 1]` (0 is the event).
+    pub criticality: f64,
 }
 
 fn one() -> u32 {

@@ -47,6 +47,7 @@ fn view() -> CampaignView {
         outside_upper: None,
         guarded_ci_high: None,
         exact_probability: None,
+        adaptive: None,
         warnings: Vec::new(),
         tests_per_second: Some(1000.0),
         seconds_left: Some(5.0),

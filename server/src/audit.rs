@@ -346,6 +346,27 @@ async fn take_back(conn: &mut SqliteConnection, id: i64, worker: &str) -> Result
         .await?;
         crate::store::leases::insert_redo(&mut *conn, id, from as u64, to as u64).await?;
     }
+    if campaign.method == tslg_api::Method::Adaptive && campaign.indices > first {
+        // Later stages were planned from those results: they cannot be
+        // planned again without running the campaign again.
+        let detail = format!(
+            "results of worker `{worker}` from test {first} on were taken back (it was caught \
+             reporting what others could not reproduce); the adaptive stages planned from them \
+             cannot stand: start the campaign again"
+        );
+        sqlx::query("UPDATE campaigns SET status = 'failed', status_detail = ? WHERE id = ?")
+            .bind(detail)
+            .bind(id)
+            .execute(&mut *conn)
+            .await?;
+        sqlx::query(
+            "UPDATE leases SET state = 'cancelled' WHERE campaign_id = ? AND state = 'active'",
+        )
+        .bind(id)
+        .execute(&mut *conn)
+        .await?;
+        return Ok(true);
+    }
     if campaign.indices > first {
         let detail = format!(
             "results of worker `{worker}` from test {first} on were taken back (it was caught \

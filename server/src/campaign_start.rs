@@ -11,6 +11,7 @@ use crate::validate::check_name;
 use std::sync::Arc;
 use tslg_api::{CampaignStatus, CreateCampaign, LibraryStatus, Method, EXACT_MAX_SCENARIOS};
 use tslg_client::wire;
+use tslg_method::adaptive::AdaptiveSettings;
 use tslg_method::estimator::{default_n_min, StoppingRule, DEFAULT_MIN_EVENTS};
 use tslg_method::external::ExternalVut;
 use tslg_method::registry::{
@@ -48,6 +49,20 @@ pub fn rule_of(req: &CreateCampaign) -> Result<StoppingRule, ApiError> {
              every scenario by its exposure and has no outside to guard",
         ));
     }
+    if req.guard_outside && req.method == Method::Adaptive {
+        return Err(bad(
+            "guard_outside bounds the outside of a fixed library; an adaptive campaign's \
+             support grows as it learns, and its estimation stages explore by exposure outside \
+             it (docs/statistics.md, \"Adaptive campaigns\")",
+        ));
+    }
+    if req.method == Method::Adaptive && SEQUENTIAL_CASES.contains(&req.case.as_str()) {
+        return Err(bad(format!(
+            "method `adaptive` searches the cells of a grid case (cut-in, highway-exit); a {} \
+             campaign samples its scenarios while they run",
+            req.case
+        )));
+    }
     if req.guard_outside && SEQUENTIAL_CASES.contains(&req.case.as_str()) {
         return Err(bad(format!(
             "guard_outside applies to the grid cases (cut-in, highway-exit): a {} campaign \
@@ -64,7 +79,12 @@ async fn library_of(
     req: &CreateCampaign,
 ) -> Result<Option<LibraryRow>, ApiError> {
     let library = match (req.method, req.library_id) {
-        (Method::Library, None) => return Err(bad("method `library` needs a library_id")),
+        (Method::Library | Method::Adaptive, None) => {
+            return Err(bad(format!(
+                "method `{}` needs a library_id",
+                req.method.as_str()
+            )))
+        }
         (_, Some(id)) => Some(
             libraries::get(&state.db.read, id)
                 .await
@@ -79,7 +99,7 @@ async fn library_of(
                 lib.id, lib.case_name, req.case
             )));
         }
-        if lib.status == LibraryStatus::Failed && req.method == Method::Library {
+        if lib.status == LibraryStatus::Failed && req.method.uses_library() {
             return Err(bad(format!(
                 "library {} failed to build: {}",
                 lib.id,
@@ -104,6 +124,7 @@ struct Opened {
 
 fn open(
     req: &CreateCampaign,
+    rule: &StoppingRule,
     preset: Option<&str>,
     exposure: &ExposureSource,
     file: Option<&[u8]>,
@@ -115,10 +136,19 @@ fn open(
         None => case.default_outside(),
     };
     let split = req.split.map_or(Split::default(), wire::split);
-    let tests = if req.method == Method::Ndd || file.is_some() {
-        Some(case.campaign(file, &vut, req.epsilon, outside, split, req.seed)?)
-    } else {
-        None
+    let tests = match (req.method, file) {
+        (Method::Adaptive, Some(file)) => Some(case.adaptive_tests(
+            file,
+            &vut,
+            req.epsilon,
+            AdaptiveSettings::default(),
+            rule,
+            req.seed,
+        )?),
+        (Method::Ndd, _) | (Method::Library, Some(_)) => {
+            Some(case.campaign(file, &vut, req.epsilon, outside, split, req.seed)?)
+        }
+        _ => None,
     };
     // Built-in vehicles on small grids only: an external program does not
     // run on the coordinator, car-following has no grid to enumerate, and a
@@ -145,7 +175,7 @@ pub async fn start(state: &AppState, req: CreateCampaign) -> Result<CampaignRow,
     });
     let preset = library.as_ref().map(|l| l.preset.clone());
     let file = match &library {
-        Some(lib) if req.method == Method::Library && lib.status == LibraryStatus::Ready => Some(
+        Some(lib) if req.method.uses_library() && lib.status == LibraryStatus::Ready => Some(
             libraries::file(&state.db.read, lib.id)
                 .await?
                 .ok_or_else(|| {
@@ -157,7 +187,7 @@ pub async fn start(state: &AppState, req: CreateCampaign) -> Result<CampaignRow,
     };
     let (request, source) = (req.clone(), exposure.clone());
     let opened = tokio::task::spawn_blocking(move || {
-        open(&request, preset.as_deref(), &source, file.as_deref())
+        open(&request, &rule, preset.as_deref(), &source, file.as_deref())
     })
     .await
     .map_err(|e| ApiError::Internal(e.into()))?
@@ -167,7 +197,7 @@ pub async fn start(state: &AppState, req: CreateCampaign) -> Result<CampaignRow,
         .and_then(Result::ok)
         .map(|e| e.requirement(opened.case.name()));
     let status = match &library {
-        Some(lib) if req.method == Method::Library && lib.status == LibraryStatus::Building => {
+        Some(lib) if req.method.uses_library() && lib.status == LibraryStatus::Building => {
             CampaignStatus::Pending
         }
         _ => CampaignStatus::Running,
@@ -194,6 +224,15 @@ pub async fn start(state: &AppState, req: CreateCampaign) -> Result<CampaignRow,
             seed: req.seed,
             status,
             exact_probability: opened.exact_probability,
+            first_stage: (req.method == Method::Adaptive).then(|| {
+                (
+                    0,
+                    AdaptiveSettings::default()
+                        .library_tests
+                        .min(rule.max_tests),
+                    "library",
+                )
+            }),
         },
     )
     .await?;

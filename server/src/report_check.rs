@@ -118,6 +118,7 @@ pub fn check_report(report: &ResultReport) -> Result<CheckedReport, ApiError> {
         ));
     }
     reasons.sort_by_key(|(i, _)| *i);
+    check_near_misses(report)?;
     Ok(CheckedReport {
         from: report.from,
         to: report.to,
@@ -125,4 +126,35 @@ pub fn check_report(report: &ResultReport) -> Result<CheckedReport, ApiError> {
         outcomes,
         reasons,
     })
+}
+
+/// Near misses: at most one per test of the range, in increasing index,
+/// each criticality a number in `[0, 1]`.
+fn check_near_misses(report: &ResultReport) -> Result<(), ApiError> {
+    let bad = |m: String| Err(ApiError::Unprocessable(m));
+    let mut last = None;
+    for m in &report.near_misses {
+        if m.index < report.from || m.index >= report.to {
+            return bad(format!(
+                "near miss at test {} lies outside the reported range {}..{}",
+                m.index, report.from, report.to
+            ));
+        }
+        if last.is_some_and(|l| m.index <= l) {
+            return bad(format!(
+                "near misses must be in increasing index; test {} follows {}",
+                m.index,
+                last.unwrap_or_default()
+            ));
+        }
+        if !(0.0..=1.0).contains(&m.criticality) {
+            return bad(format!(
+                "near miss at test {} has criticality {}; it must be in [0, 1]",
+                m.index,
+                Num(m.criticality)
+            ));
+        }
+        last = Some(m.index);
+    }
+    Ok(())
 }

@@ -43,9 +43,9 @@ pub async fn receive(
     } else {
         Some(state.samplers.get(&state.db, &campaign).await?)
     };
-    let library_tests = || tests.clone().filter(|_| campaign.method == Method::Library);
+    let library_tests = || tests.clone().filter(|_| campaign.method.uses_library());
     let recorded = if lease.audit_id.is_some() {
-        audit::record_audit_run(&state.db, library_tests(), lease_id, report, checked).await?
+        audit::record_audit_run(&state.db, library_tests(), lease_id, report, checked).await
     } else {
         let mut plan = AuditPlan::default();
         let mut explored = None;
@@ -67,8 +67,16 @@ pub async fn receive(
             audits: &plan,
             explored: explored.as_ref(),
         };
-        results::record(&state.db, config, lease_id, report, checked, found).await?
+        results::record(&state.db, config, lease_id, report, checked, found).await
     };
+    // An adaptive campaign's stages live in memory with its tests: a
+    // report that failed may have resolved a stage it did not persist, so
+    // the copy is rebuilt from what is stored.
+    let recorded = recorded.inspect_err(|_| {
+        if campaign.method == Method::Adaptive {
+            state.samplers.forget(campaign.id);
+        }
+    })?;
     account(state, report, &recorded);
     Ok(recorded.ack)
 }

@@ -10,6 +10,7 @@ use anyhow::Context;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use tslg_api::Method;
+use tslg_method::adaptive::AdaptiveSettings;
 use tslg_method::registry::{open_case, CampaignTests};
 
 #[derive(Default)]
@@ -27,7 +28,7 @@ impl SamplerCache {
             return Ok(Arc::clone(sampler));
         }
         let file = match row.library_id {
-            Some(id) if row.method == Method::Library => Some(
+            Some(id) if row.method.uses_library() => Some(
                 libraries::file(&db.read, id)
                     .await?
                     .with_context(|| format!("library {id} of campaign {} has no file", row.id))?
@@ -37,9 +38,14 @@ impl SamplerCache {
         };
         let row = row.clone();
         let id = row.id;
-        let tests = tokio::task::spawn_blocking(move || build(&row, file.as_deref()))
+        let built = row.clone();
+        let tests = tokio::task::spawn_blocking(move || build(&built, file.as_deref()))
             .await
             .context("campaign build task failed")??;
+        // An adaptive campaign's copy resolves again the stages its stored
+        // state has passed.
+        let mut conn = db.read.acquire().await?;
+        crate::store::adaptive::catch_up(&mut conn, &row, &tests).await?;
         self.lock().insert(id, Arc::clone(&tests));
         Ok(tests)
     }
@@ -64,6 +70,17 @@ impl SamplerCache {
 fn build(row: &CampaignRow, file: Option<&[u8]>) -> anyhow::Result<Arc<dyn CampaignTests>> {
     let case = open_case(&row.case_name, Some(&row.preset), &row.exposure_source())?;
     let vut: serde_json::Value = serde_json::from_str(&row.vut)?;
+    if row.method == Method::Adaptive {
+        let file = file.context("an adaptive campaign needs its library file")?;
+        return Ok(case.adaptive_tests(
+            file,
+            &vut,
+            row.epsilon,
+            AdaptiveSettings::default(),
+            &row.rule(),
+            row.seed(),
+        )?);
+    }
     Ok(case.campaign(
         file,
         &vut,

@@ -19,6 +19,7 @@ pub fn start(args: &CampaignStartArgs) -> anyhow::Result<()> {
         case: args.case.clone(),
         method: match args.method {
             MethodArg::Library => Method::Library,
+            MethodArg::Adaptive => Method::Adaptive,
             MethodArg::Ndd => Method::Ndd,
         },
         library_id: args.library_id,

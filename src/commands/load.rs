@@ -330,6 +330,7 @@ async fn simulated_worker(
             invalid: Vec::new(),
             events: Vec::new(),
             packed_events: None,
+            near_misses: Vec::new(),
         };
         let found = events.len() as u64;
         report.pack_events(&events);

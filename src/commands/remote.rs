@@ -92,6 +92,23 @@ pub fn describe(view: &CampaignView) -> String {
         (Some(p), _, _) => format!("\n  exact P(A) {p:.3e} (by enumeration of the grid)"),
         _ => String::new(),
     };
+    let adaptive = match &view.adaptive {
+        Some(a) => format!(
+            "\n  adaptive: {} library and {} search tests found where the vehicle fails; the \
+             estimate uses only the estimation tests, on {} cells (failures found, library \
+             cells untested), {} stages{}\n  assumes: the vehicle's failures outside the \
+             library are reachable through failures and near misses from what the tests met",
+            a.library_tests,
+            a.search_tests,
+            a.support,
+            a.stages,
+            a.running.as_ref().map_or(String::new(), |r| format!(
+                "; running a {} stage, tests {}..{}",
+                r.kind, r.start, r.end
+            ))
+        ),
+        None => String::new(),
+    };
     let warnings: String = view
         .warnings
         .iter()
@@ -99,7 +116,7 @@ pub fn describe(view: &CampaignView) -> String {
         .collect();
     format!(
         "campaign {} ({} {}, vehicle {}): {}{}\n  tests {} (events {}, invalid {}), stop index {}\n  \
-         estimate {}  interval [{}, {}]  relative half-width {} (β {}, confidence {}){exact}{health}{outside}{warnings}",
+         estimate {}  interval [{}, {}]  relative half-width {} (β {}, confidence {}){exact}{health}{outside}{adaptive}{warnings}",
         view.id,
         view.case,
         view.method.as_str(),

@@ -8,6 +8,7 @@ mod browser_dashboard;
 mod cli;
 mod reproduce;
 mod service_access;
+mod service_adaptive;
 mod service_adversarial;
 mod service_bad_input;
 mod service_carfollow;

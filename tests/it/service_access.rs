@@ -182,6 +182,7 @@ async fn tokens_open_only_their_part_of_the_api_and_never_reach_the_logs() {
         "Debug hides the key"
     );
     let report = ResultReport {
+        near_misses: Vec::new(),
         worker: "honest".into(),
         attempt: lease.attempt,
         key: lease.key.clone(),
@@ -195,6 +196,7 @@ async fn tokens_open_only_their_part_of_the_api_and_never_reach_the_logs() {
     };
     let forged_key = LeaseKey("0".repeat(32));
     let forged = ResultReport {
+        near_misses: Vec::new(),
         key: forged_key.clone(),
         ..report.clone()
     };

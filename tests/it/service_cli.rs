@@ -124,6 +124,7 @@ async fn invalid_tests_use_indices_but_are_not_counted_as_tests() {
         reason: "simulator crashed".into(),
     };
     let report = ResultReport {
+        near_misses: Vec::new(),
         worker: "w".into(),
         attempt: 1,
         key: lease.key.clone(),
@@ -145,6 +146,7 @@ async fn invalid_tests_use_indices_but_are_not_counted_as_tests() {
     assert_eq!(view.audits.unwrap().open, 0);
     // Reporting the same tests as valid now conflicts.
     let flipped = ResultReport {
+        near_misses: Vec::new(),
         invalid: vec![reason(5)],
         ..report
     };

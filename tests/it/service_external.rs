@@ -409,7 +409,7 @@ fn a_worker_refuses_to_start_with_a_program_it_cannot_use() {
         ),
         (
             python("old", "tests/fixtures/faulty_vut.py", "bad-hello 1"),
-            "it speaks protocol version 99; this worker speaks 1",
+            "it speaks protocol version 99; this worker speaks versions 1 to 2",
         ),
     ] {
         let output = std::process::Command::new(env!("CARGO_BIN_EXE_tslg-worker"))

@@ -16,6 +16,7 @@ use tslg_method::registry::{open_case, BuildRequest, ExposureSource, LibrarySear
 /// `worker`'s report on `lease` (its attempt and key) of `from..to`.
 fn report(worker: &str, lease: &Lease, from: u64, to: u64, events: &[EventResult]) -> ResultReport {
     ResultReport {
+        near_misses: Vec::new(),
         worker: worker.into(),
         attempt: lease.attempt,
         key: lease.key.clone(),
@@ -183,6 +184,7 @@ async fn results_are_idempotent_fenced_on_the_attempt_and_leases_expire_and_retu
         &http,
         &results(&lease),
         &ResultReport {
+            near_misses: Vec::new(),
             attempt: 2,
             ..report("w1", &lease, 50, 100, &events)
         },

@@ -117,6 +117,7 @@ async fn claim_and_report(
     // Errors (the coordinator is gone) end the simulated worker.
     let lease = client.claim(&ask).await.ok()??;
     let report = ResultReport {
+        near_misses: Vec::new(),
         worker: worker.into(),
         attempt: lease.attempt,
         key: lease.key.clone(),

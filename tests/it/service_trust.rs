@@ -27,6 +27,7 @@ fn ask(worker: &str, offers: &[&str]) -> LeaseRequest {
 /// A report of `lease` whole, with `events`.
 fn whole(lease: &Lease, worker: &str, events: Vec<EventResult>) -> ResultReport {
     ResultReport {
+        near_misses: Vec::new(),
         worker: worker.into(),
         attempt: lease.attempt,
         key: lease.key.clone(),

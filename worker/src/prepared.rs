@@ -12,6 +12,9 @@ use tslg_method::registry::{open_case, CampaignTests};
 pub struct PreparedCampaign {
     /// The campaign's tests: scenario, weight and simulation of any index.
     pub tests: Arc<dyn CampaignTests>,
+    /// An adaptive campaign's near-miss criticality (its leases name their
+    /// tests' cells).
+    pub near_miss: Option<f64>,
 }
 
 impl PreparedCampaign {
@@ -33,7 +36,10 @@ impl PreparedCampaign {
         let outside = wire::outside_spread(plan.outside);
         let split = wire::split(plan.split);
         let tests = case.campaign(library, &plan.vut, plan.epsilon, outside, split, plan.seed)?;
-        Ok(Self { tests })
+        Ok(Self {
+            tests,
+            near_miss: plan.near_miss,
+        })
     }
 }
 
@@ -69,8 +75,8 @@ impl Cache {
         }
         let plan = client.plan(campaign).await?;
         let library = match (plan.method, plan.library_id) {
-            (Method::Library, Some(id)) => Some(self.library(client, id).await?),
-            (Method::Library, None) => {
+            (Method::Library | Method::Adaptive, Some(id)) => Some(self.library(client, id).await?),
+            (Method::Library | Method::Adaptive, None) => {
                 return Err(PrepareError::Unusable(
                     "library campaign without a library".into(),
                 ))

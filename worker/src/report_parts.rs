@@ -7,8 +7,8 @@
 //! where the previous ended, as the coordinator requires.
 
 use tslg_api::{
-    EventResult, InvalidResult, LeaseKey, ResultReport, MAX_INVALID_REASON, MAX_REPORT_EVENTS,
-    MAX_REPORT_INVALID, MAX_REPORT_TESTS,
+    EventResult, InvalidResult, LeaseKey, NearMiss, ResultReport, MAX_INVALID_REASON,
+    MAX_REPORT_EVENTS, MAX_REPORT_INVALID, MAX_REPORT_TESTS,
 };
 
 /// Who reports, on which attempt.
@@ -81,6 +81,7 @@ pub fn report_parts(
                 .collect(),
             compute_seconds: seconds * (end - start) as f64 / (to - from) as f64,
             threads: who.threads,
+            near_misses: Vec::new(),
         };
         let list: Vec<(u64, f64)> = events[e..e_end]
             .iter()
@@ -91,6 +92,17 @@ pub fn report_parts(
         (start, e, v) = (end, e_end, v_end);
     }
     parts
+}
+
+/// Puts each near miss (in index order) into the part whose range holds it.
+pub fn attach_near_misses(parts: &mut [ResultReport], near_misses: &[NearMiss]) {
+    for part in parts {
+        part.near_misses = near_misses
+            .iter()
+            .copied()
+            .filter(|m| (part.from..part.to).contains(&m.index))
+            .collect();
+    }
 }
 
 /// `text` cut to at most `max` bytes at a character boundary.

@@ -9,7 +9,7 @@ use crate::backoff::Backoff;
 use crate::config::WorkerConfig;
 use crate::external::{Program, ProgramRun, ProgramSettings, Programs};
 use crate::prepared::{Cache, PrepareError, PreparedCampaign};
-use crate::report_parts::{report_parts, PartLimits, Reporter};
+use crate::report_parts::{attach_near_misses, report_parts, PartLimits, Reporter};
 use crate::sending::{fence_of, LeaseLink, Tail};
 use rand::SeedableRng;
 use rayon::prelude::*;
@@ -19,7 +19,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tokio::sync::watch;
-use tslg_api::{EventResult, InvalidResult, Lease, LeaseFence, LeaseRequest};
+use tslg_api::{EventResult, InvalidResult, Lease, LeaseFence, LeaseRequest, NearMiss};
 use tslg_client::{CallError, Client};
 use tslg_method::registry::TestOutcome;
 
@@ -243,15 +243,55 @@ impl Worker {
             Duration::from_secs_f64(lease.heartbeat_seconds.max(0.1)),
             Arc::clone(&proceed),
         ));
+        // An adaptive campaign's lease names each test's cell and weight.
+        let near_miss = prepared.near_miss;
+        let planned: Option<Arc<Planned>> = lease.tests.as_ref().map(|tests| {
+            Arc::new(Planned {
+                first: lease.resume_at,
+                tests: tests.iter().map(|t| (t.cell, t.weight)).collect(),
+                near_miss,
+            })
+        });
+        if planned.is_none() && near_miss.is_some() {
+            let reason = format!(
+                "lease {} of adaptive campaign {} does not name its tests' cells",
+                lease.id, lease.campaign_id
+            );
+            link.give_back(&reason).await;
+            anyhow::bail!(reason);
+        }
+        if let Some(p) = &planned {
+            if p.tests.len() as u64 != lease.end - lease.resume_at {
+                let reason = format!(
+                    "lease {} lists {} tests for its range {}..{}",
+                    lease.id,
+                    p.tests.len(),
+                    lease.resume_at,
+                    lease.end
+                );
+                link.give_back(&reason).await;
+                anyhow::bail!(reason);
+            }
+        }
         let mut at = lease.resume_at;
         let mut chunk = FIRST_CHUNK_PER_THREAD * self.threads as u64;
         let pool = Arc::clone(&self.pool);
         let start = |from: u64, chunk: u64| {
             let to = (from + chunk).min(lease.end);
             let (pool, p, program) = (Arc::clone(&pool), Arc::clone(&prepared), program.clone());
+            let planned = planned.clone();
             let campaign = lease.campaign_id;
             let handle = tokio::task::spawn_blocking(move || {
-                pool.install(|| run_range(&p, program.as_deref(), campaign, from, to))
+                pool.install(|| {
+                    run_range(
+                        &p,
+                        program.as_deref(),
+                        planned.as_deref(),
+                        campaign,
+                        from,
+                        to,
+                    )
+                })
             });
             (from, to, Instant::now(), handle)
         };
@@ -281,7 +321,7 @@ impl Worker {
                 key: &lease.key,
                 threads: self.threads as u32,
             };
-            let parts = report_parts(
+            let mut parts = report_parts(
                 &who,
                 from,
                 ran.end,
@@ -290,6 +330,7 @@ impl Worker {
                 &ran.invalid,
                 PartLimits::default(),
             );
+            attach_near_misses(&mut parts, &ran.near_misses);
             self.summary.events += found;
             if running.is_none() && ran.end == lease.end && !self.stopping() {
                 // The lease's last chunk: its reports go while the threads
@@ -361,6 +402,18 @@ pub struct RangeRun {
     pub end: u64,
     pub events: Vec<EventResult>,
     pub invalid: Vec<InvalidResult>,
+    /// Tests without the event that came within the plan's `near_miss`
+    /// (adaptive campaigns).
+    pub near_misses: Vec<NearMiss>,
+}
+
+/// The tests a lease names (adaptive campaigns): the cell and weight of
+/// each index from `first`.
+pub struct Planned {
+    pub first: u64,
+    pub tests: Vec<(u64, f64)>,
+    /// Criticality at or below which a test is reported as a near miss.
+    pub near_miss: Option<f64>,
 }
 
 /// Runs tests `from..to` in parallel, on the campaign's built-in vehicle or
@@ -368,22 +421,32 @@ pub struct RangeRun {
 pub fn run_range(
     p: &PreparedCampaign,
     program: Option<&Program>,
+    planned: Option<&Planned>,
     campaign: i64,
     from: u64,
     to: u64,
 ) -> RangeRun {
+    let near = |c: Option<f64>| {
+        planned
+            .and_then(|p| p.near_miss)
+            .is_some_and(|n| c.is_some_and(|c| c <= n))
+    };
     let mut found: Vec<(u64, ProgramRun)> = (from..to)
         .into_par_iter()
         .filter_map(|index| {
-            let run = match program {
-                Some(program) => program.run_test(p.tests.as_ref(), campaign, index),
-                None => match run_builtin(p, index) {
-                    Ok(outcome) => ProgramRun::Done(outcome),
+            let cell = planned.map(|p| p.tests[(index - p.first) as usize]);
+            let run = match (program, cell) {
+                (Some(program), None) => program.run_test(p.tests.as_ref(), campaign, index),
+                (Some(program), Some((cell, weight))) => {
+                    program.run_cell(p.tests.as_ref(), campaign, index, cell as usize, weight)
+                }
+                (None, cell) => match run_builtin(p, index, cell) {
+                    Ok((outcome, criticality)) => ProgramRun::Done(outcome, criticality),
                     Err(reason) => ProgramRun::Invalid(reason),
                 },
             };
             match run {
-                ProgramRun::Done(outcome) if !outcome.event => None,
+                ProgramRun::Done(outcome, c) if !outcome.event && !near(c) => None,
                 other => Some((index, other)),
             }
         })
@@ -399,9 +462,13 @@ pub fn run_range(
     };
     for (index, run) in found.into_iter().take_while(|(i, _)| *i < end) {
         match run {
-            ProgramRun::Done(outcome) => ran.events.push(EventResult {
+            ProgramRun::Done(outcome, _) if outcome.event => ran.events.push(EventResult {
                 index,
                 weight: outcome.weight,
+            }),
+            ProgramRun::Done(_, criticality) => ran.near_misses.push(NearMiss {
+                index,
+                criticality: criticality.unwrap_or(1.0),
             }),
             ProgramRun::Invalid(reason) => ran.invalid.push(InvalidResult { index, reason }),
             ProgramRun::Skipped => unreachable!("skipped tests are past the end"),
@@ -410,10 +477,23 @@ pub fn run_range(
     ran
 }
 
-fn run_builtin(p: &PreparedCampaign, index: u64) -> Result<TestOutcome, String> {
+/// Runs test `index` on the built-in vehicle: drawn from the campaign's
+/// plan, or on the `(cell, weight)` its lease names.
+fn run_builtin(
+    p: &PreparedCampaign,
+    index: u64,
+    cell: Option<(u64, f64)>,
+) -> Result<(TestOutcome, Option<f64>), String> {
+    let run = || match cell {
+        None => p.tests.run_with(index, None).map(|o| (o, None)),
+        Some((cell, weight)) => p
+            .tests
+            .run_cell(index, cell as usize, None)
+            .map(|(event, c)| (TestOutcome { event, weight }, c)),
+    };
     let mut last = String::new();
     for _ in 0..INVALID_TRIES {
-        match catch_unwind(AssertUnwindSafe(|| p.tests.run_with(index, None))) {
+        match catch_unwind(AssertUnwindSafe(run)) {
             Ok(Ok(outcome)) => return Ok(outcome),
             Ok(Err(e)) => return Err(e.0),
             Err(panic) => last = crate::panics::panic_message(panic.as_ref()),

@@ -120,7 +120,7 @@ pub async fn plan(
         exposure: row.exposure_request(),
         exposure_fingerprint: row.exposure_fingerprint.clone(),
         method: row.method,
-        library_id: if row.method == Method::Library {
+        library_id: if row.method.uses_library() {
             row.library_id
         } else {
             None
@@ -130,6 +130,8 @@ pub async fn plan(
         split: row.split,
         seed: row.seed(),
         vut: serde_json::from_str(&row.vut).map_err(|e| ApiError::Internal(e.into()))?,
+        near_miss: (row.method == Method::Adaptive)
+            .then(|| tslg_method::adaptive::AdaptiveSettings::default().near_miss),
     }))
 }
 

@@ -11,8 +11,8 @@ use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
 use axum::Json;
 use tslg_api::{
-    HeartbeatAck, Lease, LeaseFence, LeaseKey, LeaseRelease, LeaseRequest, Problem, ResultAck,
-    ResultReport, TestCase, WorkerList, MAX_INVALID_REASON,
+    HeartbeatAck, Lease, LeaseFence, LeaseKey, LeaseRelease, LeaseRequest, Method, Problem,
+    ResultAck, ResultReport, TestCase, WorkerList, MAX_INVALID_REASON,
 };
 use tslg_method::external::{check_program_name, ExternalMode};
 
@@ -66,8 +66,10 @@ pub async fn claim(
     let Some(row) = leases::claim(&state.db, &state.config, &ask).await? else {
         return Ok(StatusCode::NO_CONTENT.into_response());
     };
-    let tests = if req.include_tests {
-        let campaign = campaigns::get(&state.db.read, row.campaign_id).await?;
+    let campaign = campaigns::get(&state.db.read, row.campaign_id).await?;
+    // An adaptive campaign's tests are planned by the coordinator stage by
+    // stage: every lease names its tests' cells and weights.
+    let tests = if req.include_tests || campaign.method == Method::Adaptive {
         let tests = state.samplers.get(&state.db, &campaign).await?;
         let (from, to) = (row.resume_at as u64, row.end_index as u64);
         let list = tokio::task::spawn_blocking(move || {

@@ -5,8 +5,8 @@ use crate::lease_size::predicted_unleased;
 use crate::store::audits::AuditState;
 use sqlx::SqlitePool;
 use tslg_api::{
-    AuditCounts, CampaignStatus, CampaignView, ExposureRequest, HistoryPoint, Method, Outside,
-    Split,
+    AdaptiveView, AuditCounts, CampaignStatus, CampaignView, ExposureRequest, HistoryPoint, Method,
+    Outside, RunningStage, Split,
 };
 use tslg_method::campaign::CampaignResult;
 use tslg_method::estimator::{Decision, ImportanceEstimator, StoppingRule};
@@ -68,16 +68,29 @@ pub struct CampaignRow {
     pub reported_s1: f64,
     /// `P(A)` by enumeration of the grid, where it was computed.
     pub exact_probability: Option<f64>,
+    /// An adaptive campaign's running stage `[stage_start, stage_end)` and
+    /// kind; NULL for other methods and once it stopped.
+    pub stage_start: Option<i64>,
+    pub stage_end: Option<i64>,
+    pub stage_kind: Option<String>,
+    pub library_tests: i64,
+    pub search_tests: i64,
+    pub stages: i64,
+    pub support: i64,
     pub created_at: String,
     pub updated_at: String,
 }
 
-pub const COLUMNS: &str = "id, case_name, preset, method, library_id, exposure_name, \
+/// An adaptive campaign is stored as method 'library' with `adaptive = 1`
+/// (migrations/…14_adaptive.sql) and read as `adaptive`.
+pub const COLUMNS: &str = "id, case_name, preset, \
+    CASE WHEN adaptive = 1 THEN 'adaptive' ELSE method END AS method, library_id, exposure_name, \
     exposure_fingerprint, exposure_table, vut, requires, epsilon, outside, split, strata_epsilon, \
     beta, confidence, n_min, min_events, max_tests, seed, status, status_detail, next_index, indices, tests, events, invalid, s1, s2, \
     largest, guard_outside, outside_tests, outside_events, outside_s1, outside_upper, \
     outside_mismatches, \
-    cost_per_test, worker_seconds, audits_waived, reported_s1, exact_probability, created_at, \
+    cost_per_test, worker_seconds, audits_waived, reported_s1, exact_probability, \
+    stage_start, stage_end, stage_kind, library_tests, search_tests, stages, support, created_at, \
     updated_at";
 
 impl CampaignRow {
@@ -186,6 +199,22 @@ impl CampaignRow {
             outside_upper: summary.outside_upper,
             guarded_ci_high: summary.guarded_ci_high.filter(|_| self.tests > 1),
             exact_probability: self.exact_probability,
+            adaptive: (self.method == Method::Adaptive).then(|| AdaptiveView {
+                library_tests: self.library_tests as u64,
+                search_tests: self.search_tests as u64,
+                stages: self.stages as u64,
+                running: match (self.stage_start, self.stage_end, &self.stage_kind) {
+                    (Some(start), Some(end), Some(kind)) if !self.status.is_final() => {
+                        Some(RunningStage {
+                            kind: kind.clone(),
+                            start: start as u64,
+                            end: end as u64,
+                        })
+                    }
+                    _ => None,
+                },
+                support: self.support as u64,
+            }),
             warnings: if self.tests > 1 {
                 warnings(
                     &summary,
@@ -295,20 +324,30 @@ pub struct NewCampaign {
     pub status: CampaignStatus,
     /// `P(A)` by enumeration, where the case could compute it.
     pub exact_probability: Option<f64>,
+    /// An adaptive campaign's first stage: its tests `start..end` and kind.
+    pub first_stage: Option<(u64, u64, &'static str)>,
 }
 
 pub async fn insert(pool: &SqlitePool, new: &NewCampaign) -> Result<CampaignRow, ApiError> {
     let sql = format!(
         "INSERT INTO campaigns (case_name, preset, method, library_id, exposure_name, \
          exposure_fingerprint, exposure_table, vut, requires, epsilon, outside, beta, confidence, \
-         n_min, min_events, max_tests, seed, status, guard_outside, exact_probability, split) \
-         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) \
+         n_min, min_events, max_tests, seed, status, guard_outside, exact_probability, split, \
+         adaptive, stage_start, stage_end, stage_kind) \
+         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) \
          RETURNING {COLUMNS}"
     );
+    let adaptive = new.method == Method::Adaptive;
+    let stored_method = if adaptive {
+        Method::Library
+    } else {
+        new.method
+    };
+    let first_stage = new.first_stage.as_ref();
     Ok(sqlx::query_as(&sql)
         .bind(&new.case_name)
         .bind(&new.preset)
-        .bind(new.method.as_str())
+        .bind(stored_method.as_str())
         .bind(new.library_id)
         .bind(&new.exposure_name)
         .bind(&new.exposure_fingerprint)
@@ -327,6 +366,10 @@ pub async fn insert(pool: &SqlitePool, new: &NewCampaign) -> Result<CampaignRow,
         .bind(new.rule.guard_outside)
         .bind(new.exact_probability)
         .bind(new.split.as_str())
+        .bind(adaptive)
+        .bind(first_stage.map(|s| s.0 as i64))
+        .bind(first_stage.map(|s| s.1 as i64))
+        .bind(first_stage.map(|s| s.2))
         .fetch_one(pool)
         .await?)
 }

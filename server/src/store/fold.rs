@@ -16,7 +16,7 @@ use crate::store::campaigns::CampaignRow;
 use crate::store::reports;
 use sqlx::{QueryBuilder, Sqlite, SqliteConnection};
 use std::sync::Arc;
-use tslg_api::CampaignStatus;
+use tslg_api::{CampaignStatus, Method};
 use tslg_method::estimator::{Decision, StoppingRule};
 use tslg_method::outside::OutsideMass;
 use tslg_method::prefix::{outside_tally, Exploration, FoldError, PrefixFold, SparseOutcome};
@@ -76,7 +76,10 @@ pub fn fold_step(
 /// the campaign's active leases (below it every outcome is recorded), its
 /// `next_index`, and its first open audit (a test two workers have not yet
 /// agreed on, [`crate::audit`]).
-async fn frontier(conn: &mut SqliteConnection, campaign: &CampaignRow) -> Result<u64, ApiError> {
+pub(crate) async fn frontier(
+    conn: &mut SqliteConnection,
+    campaign: &CampaignRow,
+) -> Result<u64, ApiError> {
     let (open,): (Option<i64>,) = sqlx::query_as(
         "SELECT MIN(resume_at) FROM leases WHERE campaign_id = ? AND state = 'active' \
          AND audit_id IS NULL",
@@ -103,6 +106,8 @@ async fn explored_tests(
 }
 
 /// Folds the newly resolved prefix of `campaign` and persists the
+/// estimate (an adaptive campaign resolves its stages instead,
+/// [`crate::store::adaptive`]), and
 /// estimate, its history points and, when the rule stops the campaign, its
 /// final status. `tests` are a library campaign's tests, which say which
 /// tests explored outside the library; `None` for the NDD. `known` are the
@@ -113,6 +118,15 @@ pub async fn fold_prefix(
     tests: Option<Arc<dyn CampaignTests>>,
     known: Option<&Explored>,
 ) -> Result<Option<CampaignStatus>, ApiError> {
+    if campaign.method == Method::Adaptive {
+        let tests = tests.ok_or_else(|| {
+            anyhow::anyhow!(
+                "adaptive campaign {} folded without its stages",
+                campaign.id
+            )
+        })?;
+        return crate::store::adaptive::resolve_stages(conn, campaign, &tests).await;
+    }
     let frontier = frontier(conn, campaign).await?;
     let mut fold = campaign.fold();
     if frontier <= fold.indices {
@@ -270,20 +284,7 @@ async fn write(
     if folded.decision.is_none() {
         return Ok(None);
     }
-    sqlx::query("UPDATE leases SET state = 'cancelled' WHERE campaign_id = ? AND state = 'active'")
-        .bind(campaign.id)
-        .execute(&mut *conn)
-        .await?;
-    // Audits past the stop check tests that no longer count.
-    sqlx::query(&format!(
-        "UPDATE audits SET state = 'past' WHERE campaign_id = ? AND test_index >= ? \
-         AND state IN {}",
-        audits::OPEN
-    ))
-    .bind(campaign.id)
-    .bind(fold.indices as i64)
-    .execute(&mut *conn)
-    .await?;
+    close_stopped(conn, campaign.id, fold.indices).await?;
     tracing::info!(
         campaign = campaign.id,
         status = status.as_str(),
@@ -291,4 +292,27 @@ async fn write(
         "campaign stopped"
     );
     Ok(Some(status))
+}
+
+/// A stopped campaign's leases cancelled, and its audits of tests past the
+/// stop index `stop` set aside (they check tests that no longer count).
+pub(crate) async fn close_stopped(
+    conn: &mut SqliteConnection,
+    campaign: i64,
+    stop: u64,
+) -> Result<(), ApiError> {
+    sqlx::query("UPDATE leases SET state = 'cancelled' WHERE campaign_id = ? AND state = 'active'")
+        .bind(campaign)
+        .execute(&mut *conn)
+        .await?;
+    sqlx::query(&format!(
+        "UPDATE audits SET state = 'past' WHERE campaign_id = ? AND test_index >= ? \
+         AND state IN {}",
+        audits::OPEN
+    ))
+    .bind(campaign)
+    .bind(stop as i64)
+    .execute(&mut *conn)
+    .await?;
+    Ok(())
 }

@@ -157,6 +157,7 @@ pub async fn claim(
     let sql = format!(
         "SELECT {CAMPAIGN_COLUMNS} FROM campaigns c WHERE status = 'running' \
          AND next_index < max_tests {planned_only} {runnable} \
+         AND (stage_end IS NULL OR next_index < stage_end) \
          AND (SELECT COUNT(*) FROM audits a WHERE a.campaign_id = c.id \
               AND a.state IN {open}) < {MAX_OPEN_AUDITS} \
          ORDER BY next_turn_at, id LIMIT 1",
@@ -296,8 +297,17 @@ fn expected_ms(campaign: &CampaignRow, size: u64, threads: u32) -> i64 {
     ms.round().clamp(0.0, MAX_EXPECTED_MS as f64) as i64
 }
 
+/// An adaptive campaign's leases end with its running stage: the next is
+/// planned from this one's results.
 fn new_lease_size(config: &Config, campaign: &CampaignRow, threads: u32) -> u64 {
-    let budget_left = (campaign.max_tests - campaign.next_index).max(0) as u64;
+    let end = campaign
+        .stage_end
+        .map_or(campaign.max_tests, |e| e.min(campaign.max_tests));
+    let mut budget_left = (end - campaign.next_index).max(0) as u64;
+    if campaign.stage_end.is_some() {
+        // Its leases list their tests.
+        budget_left = budget_left.min(MAX_INLINE_LEASE);
+    }
     if let Some(fixed) = config.lease_size {
         return fixed.min(budget_left);
     }

@@ -1,6 +1,7 @@
 //! Database access, one module per table family. Every write runs on the
 //! single writer connection ([`crate::db::Database::write`]).
 
+pub mod adaptive;
 pub mod audits;
 pub mod campaigns;
 pub mod fold;

@@ -21,7 +21,7 @@ use crate::store::leases::{self, check_fence, LeaseRow, LeaseState};
 use crate::store::reports::{self, NewReport};
 use sqlx::SqliteConnection;
 use std::sync::Arc;
-use tslg_api::{CampaignStatus, ResultAck, ResultReport};
+use tslg_api::{CampaignStatus, Method, ResultAck, ResultReport};
 use tslg_method::number::Num;
 use tslg_method::prefix::SparseOutcome;
 use tslg_method::registry::CampaignTests;
@@ -204,6 +204,15 @@ async fn store_new_part(
         },
     )
     .await?;
+    if campaign.method == Method::Adaptive {
+        crate::store::adaptive::store_near_misses(
+            &mut *conn,
+            campaign.id,
+            &report.near_misses,
+            new_from,
+        )
+        .await?;
+    }
     let done = checked.to == lease.end_index as u64;
     let moved = sqlx::query(
         "UPDATE leases SET resume_at = ?, expires_at = ?, state = ? \

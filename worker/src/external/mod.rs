@@ -81,11 +81,16 @@ pub struct ProgramSettings {
     pub cooldown: Duration,
 }
 
+/// One test driven through a program: its outcome and criticality.
+type TestRun<'a> =
+    dyn Fn(&mut dyn ExternalVehicle) -> Result<(TestOutcome, Option<f64>), DriverError> + 'a;
+
 /// What running one test with a program gave.
 #[derive(Debug, Clone, PartialEq)]
 pub enum ProgramRun {
-    /// The program ran the test; its outcome.
-    Done(TestOutcome),
+    /// The program ran the test; its outcome, and its criticality when
+    /// known (adaptive campaigns, [`Program::run_cell`]).
+    Done(TestOutcome, Option<f64>),
     /// No valid outcome; the reason.
     Invalid(String),
     /// Not run: the program is unhealthy.
@@ -237,6 +242,33 @@ impl Program {
     /// Runs test `index` of `tests` (campaign `campaign`) with this
     /// program: a process from the pool, or a new one.
     pub fn run_test(&self, tests: &dyn CampaignTests, campaign: i64, index: u64) -> ProgramRun {
+        self.run(campaign, &|vut| {
+            tests
+                .run_with(index, Some(vut))
+                .map(|outcome| (outcome, None))
+        })
+    }
+
+    /// Runs test `index` of `tests` on the scenario `cell` its lease names,
+    /// with `weight` from the lease (adaptive campaigns).
+    pub fn run_cell(
+        &self,
+        tests: &dyn CampaignTests,
+        campaign: i64,
+        index: u64,
+        cell: usize,
+        weight: f64,
+    ) -> ProgramRun {
+        self.run(campaign, &|vut| {
+            tests
+                .run_cell(index, cell, Some(vut))
+                .map(|(event, criticality)| (TestOutcome { event, weight }, criticality))
+        })
+    }
+
+    /// Runs one test with `test` on a process from the pool (or a new
+    /// one), retrying once; failures count toward the program's health.
+    fn run(&self, campaign: i64, test: &TestRun<'_>) -> ProgramRun {
         if self.stopped.load(Ordering::Relaxed) || lock(&self.health).unhealthy.is_some() {
             return ProgramRun::Skipped;
         }
@@ -257,18 +289,16 @@ impl Program {
                 deadline,
                 fault: None,
             };
-            let result = catch_unwind(AssertUnwindSafe(|| {
-                tests.run_with(index, Some(&mut session))
-            }));
+            let result = catch_unwind(AssertUnwindSafe(|| test(&mut session)));
             let fault = session.fault.take();
             match result {
-                Ok(Ok(outcome)) => {
+                Ok(Ok((outcome, criticality))) => {
                     lock(&self.idle).push(process);
                     let mut health = lock(&self.health);
                     if health.unhealthy.is_none() {
                         health.failures = 0;
                     }
-                    return ProgramRun::Done(outcome);
+                    return ProgramRun::Done(outcome, criticality);
                 }
                 Ok(Err(DriverError(reason))) => {
                     last = reason;

@@ -15,7 +15,7 @@ use std::process::{Child, ChildStdin, Command, Stdio};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError, TryRecvError};
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
-use tslg_method::external::{ExternalMode, PROTOCOL_VERSION};
+use tslg_method::external::{ExternalMode, OLDEST_PROTOCOL_VERSION, PROTOCOL_VERSION};
 
 /// Lines of stderr kept for a failure's reason.
 const STDERR_LINES: usize = 8;
@@ -227,13 +227,16 @@ impl ProgramProcess {
         };
         match process.call(&hello, "hello", deadline)? {
             Reply::Hello {
-                protocol: PROTOCOL_VERSION,
+                protocol,
                 name,
                 cases,
-            } => Ok((process, Capabilities { name, cases })),
+            } if (OLDEST_PROTOCOL_VERSION..=PROTOCOL_VERSION).contains(&protocol) => {
+                Ok((process, Capabilities { name, cases }))
+            }
             Reply::Hello { protocol, .. } => Err(Fault::Garbage {
                 detail: format!(
-                    "it speaks protocol version {protocol}; this worker speaks {PROTOCOL_VERSION}"
+                    "it speaks protocol version {protocol}; this worker speaks versions \
+                     {OLDEST_PROTOCOL_VERSION} to {PROTOCOL_VERSION}"
                 ),
             }),
             other => Err(unexpected("hello", &other)),

@@ -1,0 +1,258 @@
+//! Adaptive campaigns' stages on the coordinator ([`tslg_method::adaptive`]).
+//!
+//! A lease never reaches past the running stage (`campaigns.stage_end`).
+//! When every test of the stage has its result (the prefix's frontier, as
+//! for any campaign, passes its end), the stage is resolved in the report's
+//! transaction: its events and invalid tests as stored, each test's
+//! criticality run again here for a built-in vehicle or as the program's
+//! worker reported it (`near_misses`), give the estimate's step and the
+//! next stage's plan. What is persisted (the estimate, the running stage,
+//! the counts, a history point) follows from the results alone, so the
+//! coordinator's copy rebuilt after a restart resolves the same stages
+//! again ([`catch_up`]) and the campaign is the in-process one.
+
+use crate::error::ApiError;
+use crate::store::campaigns::CampaignRow;
+use crate::store::fold::{close_stopped, frontier};
+use crate::store::reports;
+use sqlx::SqliteConnection;
+use std::sync::Arc;
+use tslg_api::{CampaignStatus, NearMiss};
+use tslg_method::adaptive::TestResult;
+use tslg_method::estimator::Decision;
+use tslg_method::prefix::SparseOutcome;
+use tslg_method::registry::{AdaptiveStages, CampaignTests};
+
+/// The results of the running stage's tests `from..to`, in index order.
+async fn stage_results(
+    conn: &mut SqliteConnection,
+    campaign: i64,
+    tests: &Arc<dyn CampaignTests>,
+    from: u64,
+    to: u64,
+) -> Result<Vec<TestResult>, ApiError> {
+    let stages = tests.adaptive().expect("an adaptive campaign's tests");
+    let outcomes = reports::outcomes(&mut *conn, campaign, from, to).await?;
+    let replayed = {
+        let tests = Arc::clone(tests);
+        tokio::task::spawn_blocking(move || {
+            tests
+                .adaptive()
+                .expect("an adaptive campaign's tests")
+                .replay_stage(from, to)
+        })
+        .await
+        .map_err(|e| ApiError::Internal(e.into()))?
+    };
+    let near_misses: Vec<(i64, f64)> = if replayed.is_some() {
+        Vec::new()
+    } else {
+        sqlx::query_as(
+            "SELECT test_index, criticality FROM near_misses \
+             WHERE campaign_id = ? AND test_index >= ? AND test_index < ? ORDER BY test_index",
+        )
+        .bind(campaign)
+        .bind(from as i64)
+        .bind(to as i64)
+        .fetch_all(&mut *conn)
+        .await?
+    };
+    // A test that did not come within `near_miss` is "far": only whether a
+    // criticality is within it matters to the plan.
+    let far = 1.0f64.max(stages.settings().near_miss);
+    let mut results: Vec<TestResult> = (from..to)
+        .map(|i| TestResult::Done {
+            event: false,
+            criticality: replayed.as_ref().map_or(far, |r| r[(i - from) as usize].1),
+        })
+        .collect();
+    for (i, c) in near_misses {
+        if let TestResult::Done { criticality, .. } = &mut results[(i as u64 - from) as usize] {
+            *criticality = c;
+        }
+    }
+    for (i, outcome) in outcomes {
+        let slot = &mut results[(i - from) as usize];
+        *slot = match outcome {
+            SparseOutcome::Invalid => TestResult::Invalid,
+            SparseOutcome::Event(_) => TestResult::Done {
+                event: true,
+                criticality: 0.0,
+            },
+        };
+    }
+    Ok(results)
+}
+
+/// Resolves the stages of `tests` that `campaign`'s stored state has
+/// already passed: the coordinator's copy, rebuilt, catches up with it.
+pub async fn catch_up(
+    conn: &mut SqliteConnection,
+    campaign: &CampaignRow,
+    tests: &Arc<dyn CampaignTests>,
+) -> Result<(), ApiError> {
+    let Some(stages) = tests.adaptive() else {
+        return Ok(());
+    };
+    let resolved_to = match campaign.stage_start {
+        Some(start) => start as u64,
+        // Stopped: every stage that ran was resolved.
+        None => campaign.indices as u64,
+    };
+    while let Some((from, to)) = stages.running() {
+        if to > resolved_to {
+            break;
+        }
+        let results = stage_results(conn, campaign.id, tests, from, to).await?;
+        stages.resolve(&results);
+    }
+    Ok(())
+}
+
+/// Resolves every stage of `campaign` whose tests all have results, and
+/// persists where it stands; the final status when it stopped.
+pub async fn resolve_stages(
+    conn: &mut SqliteConnection,
+    campaign: &CampaignRow,
+    tests: &Arc<dyn CampaignTests>,
+) -> Result<Option<CampaignStatus>, ApiError> {
+    let stages: &dyn AdaptiveStages = tests
+        .adaptive()
+        .ok_or_else(|| anyhow::anyhow!("campaign {} has no adaptive stages", campaign.id))?;
+    let in_step = match (stages.running(), campaign.stage_start) {
+        (Some((from, _)), Some(start)) => from == start as u64,
+        _ => false,
+    };
+    if !in_step {
+        return Err(ApiError::Internal(anyhow::anyhow!(
+            "the coordinator's copy of adaptive campaign {} is not at its stored stage",
+            campaign.id
+        )));
+    }
+    let frontier = frontier(&mut *conn, campaign).await?;
+    let mut resolved = false;
+    while let Some((from, to)) = stages.running() {
+        if frontier < to {
+            break;
+        }
+        let results = stage_results(&mut *conn, campaign.id, tests, from, to).await?;
+        stages.resolve(&results);
+        resolved = true;
+    }
+    if !resolved {
+        return Ok(None);
+    }
+    write(conn, campaign, stages).await
+}
+
+/// Persists the campaign's state after resolving stages.
+async fn write(
+    conn: &mut SqliteConnection,
+    campaign: &CampaignRow,
+    stages: &dyn AdaptiveStages,
+) -> Result<Option<CampaignStatus>, ApiError> {
+    let p = stages.progress();
+    let fold = p.fold;
+    let (s1, s2) = fold.estimator.sums();
+    let (status, detail, indices) = match &p.finished {
+        None => (CampaignStatus::Running, None, p.running.map_or(0, |r| r.0)),
+        Some(done) => {
+            let (status, detail) = match done.result.status {
+                Decision::Converged => (
+                    CampaignStatus::Converged,
+                    format!(
+                        "relative half-width ≤ β = {} after test index {} ({} estimation \
+                         tests; {} library and {} search tests found where the vehicle fails)",
+                        campaign.beta,
+                        done.result.indices - 1,
+                        fold.indices,
+                        done.library_tests,
+                        done.search_tests
+                    ),
+                ),
+                _ => (
+                    CampaignStatus::Exhausted,
+                    format!(
+                        "max_tests = {} used up before the relative half-width reached β = {}",
+                        campaign.max_tests, campaign.beta
+                    ),
+                ),
+            };
+            (status, Some(detail), done.result.indices)
+        }
+    };
+    let running = p.running;
+    sqlx::query(
+        "UPDATE campaigns SET indices = ?, tests = ?, events = ?, invalid = ?, s1 = ?, s2 = ?, \
+         largest = ?, stage_start = ?, stage_end = ?, stage_kind = ?, library_tests = ?, \
+         search_tests = ?, stages = ?, support = ?, status = ?, \
+         status_detail = COALESCE(?, status_detail), \
+         updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now') WHERE id = ?",
+    )
+    .bind(indices as i64)
+    .bind(fold.estimator.tests() as i64)
+    .bind(fold.estimator.events() as i64)
+    .bind(fold.invalid as i64)
+    .bind(s1)
+    .bind(s2)
+    .bind(fold.estimator.largest_term())
+    .bind(running.map(|r| r.0 as i64))
+    .bind(running.map(|r| r.1 as i64))
+    .bind(running.map(|r| r.2))
+    .bind(p.library_tests as i64)
+    .bind(p.search_tests as i64)
+    .bind(p.stages as i64)
+    .bind(p.support as i64)
+    .bind(status.as_str())
+    .bind(detail)
+    .bind(campaign.id)
+    .execute(&mut *conn)
+    .await?;
+    if fold.estimator.tests() > 0 {
+        sqlx::query(
+            "INSERT OR REPLACE INTO history (campaign_id, indices, tests, events, s1, s2, \
+             outside_tests, outside_s1) VALUES (?, ?, ?, ?, ?, ?, 0, 0)",
+        )
+        .bind(campaign.id)
+        .bind(indices as i64)
+        .bind(fold.estimator.tests() as i64)
+        .bind(fold.estimator.events() as i64)
+        .bind(s1)
+        .bind(s2)
+        .execute(&mut *conn)
+        .await?;
+    }
+    if p.finished.is_none() {
+        return Ok(None);
+    }
+    close_stopped(conn, campaign.id, indices).await?;
+    tracing::info!(
+        campaign = campaign.id,
+        status = status.as_str(),
+        tests = indices,
+        "adaptive campaign stopped"
+    );
+    Ok(Some(status))
+}
+
+/// Stores a report's near misses of the part `new_from..` (a program's;
+/// a built-in vehicle's are run again here).
+pub async fn store_near_misses(
+    conn: &mut SqliteConnection,
+    campaign: i64,
+    near_misses: &[NearMiss],
+    new_from: u64,
+) -> Result<(), ApiError> {
+    for m in near_misses.iter().filter(|m| m.index >= new_from) {
+        sqlx::query(
+            "INSERT OR REPLACE INTO near_misses (campaign_id, test_index, criticality) \
+             VALUES (?, ?, ?)",
+        )
+        .bind(campaign)
+        .bind(m.index as i64)
+        .bind(m.criticality)
+        .execute(&mut *conn)
+        .await?;
+    }
+    Ok(())
+}

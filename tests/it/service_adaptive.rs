@@ -1,0 +1,194 @@
+//! Adaptive campaigns through the service: the coordinator plans each stage
+//! from the results of the stages before it, leases never reach past the
+//! running stage and name each test's cell, and the answer is the in-process
+//! one to the bit, whatever the lease size, the number of workers, a
+//! coordinator restart mid-campaign, or a vehicle that is an external
+//! program driven in step mode (its criticality measured by the case's own
+//! loop) rather than the built-in model.
+
+use crate::support::*;
+use std::time::{Duration, Instant};
+use tslg_api::{CampaignStatus, CampaignView, CreateCampaign, Method};
+use tslg_method::adaptive::{AdaptiveResult, AdaptiveSettings};
+use tslg_method::estimator::{default_n_min, StoppingRule};
+use tslg_method::library::SearchMethod;
+use tslg_method::registry::{open_case, BuildRequest, ExposureSource, LibrarySearch};
+
+/// The same adaptive campaign in this process, on the IDM's exhaustive
+/// library of the built-in cut-in.
+fn adaptive_in_process(request: &CreateCampaign, vut: &str) -> AdaptiveResult {
+    let case = open_case("cut-in", None, &ExposureSource::Builtin).unwrap();
+    let library = case
+        .build_library(
+            &serde_json::json!({"model": "idm"}),
+            &BuildRequest {
+                threshold: None,
+                search: Some(LibrarySearch::Cells(SearchMethod::Exhaustive)),
+            },
+        )
+        .unwrap();
+    let rule = StoppingRule {
+        beta: request.beta,
+        confidence: request.confidence,
+        n_min: default_n_min(None, request.max_tests),
+        min_events: 10,
+        max_tests: request.max_tests,
+        guard_outside: false,
+    };
+    case.adaptive_campaign(
+        &library.file,
+        &serde_json::json!({"model": vut}),
+        request.epsilon,
+        AdaptiveSettings::default(),
+        &rule,
+        request.seed,
+    )
+    .unwrap()
+}
+
+/// The service's campaign ended where the in-process run did, its
+/// estimate and interval to the bit, with the same stages.
+fn assert_same_adaptive(view: &CampaignView, own: &AdaptiveResult) {
+    let r = &own.result;
+    assert_eq!(view.indices, r.indices, "tests in all");
+    assert_eq!(
+        (view.tests, view.events),
+        (r.tests, r.events),
+        "estimation tests"
+    );
+    let bits = |x: Option<f64>| x.map(f64::to_bits);
+    assert_eq!(bits(view.estimate), Some(r.estimate.to_bits()), "estimate");
+    assert_eq!(bits(view.ci_low), Some(r.ci_low.to_bits()), "ci_low");
+    assert_eq!(bits(view.ci_high), Some(r.ci_high.to_bits()), "ci_high");
+    let a = view.adaptive.as_ref().expect("adaptive figures");
+    assert_eq!(
+        (a.library_tests, a.search_tests, a.stages, a.support),
+        (
+            own.library_tests,
+            own.search_tests,
+            own.stages,
+            own.support.len() as u64
+        ),
+        "stages"
+    );
+    assert!(a.running.is_none());
+}
+
+fn adaptive(library_id: i64, vut: serde_json::Value, seed: u64) -> CreateCampaign {
+    CreateCampaign {
+        vut,
+        ..campaign(Method::Adaptive, library_id, "fvdm", 0.2, seed)
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_adaptive_campaign_through_the_service_is_the_in_process_one() {
+    let dir = scratch();
+    let database = dir.path().join("db.sqlite");
+    // Leases of 37 tests: stages of 100 end inside leases.
+    let server = ServerProcess::start(&database, &["--lease-size", "37"]);
+    let address = server.address.clone();
+    let _workers = two_workers(&server.url);
+    let client = server.client();
+    let library = ready_library(&client, "idm", true).await;
+    let exact = exact("fvdm");
+
+    // The IDM's library misses most of the FVDM's failures; the adaptive
+    // campaign finds them and its interval holds P(A).
+    let request = adaptive(library.id, serde_json::json!({"model": "fvdm"}), 3);
+    let own = adaptive_in_process(&request, "fvdm");
+    assert!(own.search_tests > 0, "{own:?}");
+    let id = client.create_campaign(&request).await.unwrap().id;
+    let view = finished(&client, id, Duration::from_secs(120)).await;
+    assert_eq!(view.status, CampaignStatus::Converged, "{view:?}");
+    assert_eq!(view.method, Method::Adaptive);
+    assert_same_adaptive(&view, &own);
+    assert!(
+        view.ci_low.unwrap() <= exact && exact <= view.ci_high.unwrap(),
+        "{view:?}"
+    );
+    // No lease reached past the stage the campaign stopped in.
+    let stage = AdaptiveSettings::default().stage_tests;
+    assert!(view.leased - view.indices < stage, "{view:?}");
+
+    // A coordinator killed mid-campaign rebuilds its stages from the
+    // database and ends at the same answer.
+    let request = adaptive(library.id, serde_json::json!({"model": "fvdm"}), 11);
+    let own = adaptive_in_process(&request, "fvdm");
+    let id = client.create_campaign(&request).await.unwrap().id;
+    let started = Instant::now();
+    loop {
+        let view = client.campaign(id).await.unwrap();
+        let stages = view.adaptive.as_ref().map_or(0, |a| a.stages);
+        if stages >= 3 || view.status.is_final() {
+            assert_eq!(
+                view.status,
+                CampaignStatus::Running,
+                "killed too late: {view:?}"
+            );
+            break;
+        }
+        assert!(started.elapsed() < Duration::from_secs(60), "{view:?}");
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+    server.kill();
+    let server = ServerProcess::start_on(&database, &address, &["--lease-size", "37"]);
+    let client = server.client();
+    let view = finished(&client, id, Duration::from_secs(120)).await;
+    assert_same_adaptive(&view, &own);
+
+    // Refused with a precise reason: the guard, and car-following.
+    let guarded = CreateCampaign {
+        guard_outside: true,
+        ..adaptive(library.id, serde_json::json!({"model": "fvdm"}), 1)
+    };
+    let refused = client
+        .create_campaign(&guarded)
+        .await
+        .unwrap_err()
+        .to_string();
+    assert!(
+        refused.contains("422") && refused.contains("adaptive"),
+        "{refused}"
+    );
+    let following = CreateCampaign {
+        case: "car-following".into(),
+        ..adaptive(library.id, serde_json::json!({"model": "fvdm"}), 1)
+    };
+    let refused = client
+        .create_campaign(&following)
+        .await
+        .unwrap_err()
+        .to_string();
+    assert!(
+        refused.contains("422") && refused.contains("grid case"),
+        "{refused}"
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_external_program_in_step_mode_runs_the_adaptive_campaign_of_its_built_in_twin() {
+    // examples/fvdm_vut.rs drives the FVDM as the built-in model does; in
+    // step mode the case's loop measures its mnpETTC, so its near misses
+    // and the stages planned from them are the built-in FVDM's.
+    let dir = scratch();
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &["--lease-size", "64"]);
+    let bin = std::path::Path::new(env!("CARGO_BIN_EXE_tslg"))
+        .parent()
+        .unwrap()
+        .join("examples/fvdm_vut");
+    let exec = format!("rs-fvdm={}", bin.display());
+    let _worker = WorkerProcess::start_with(&server.url, 2, "rs", &["--vut-exec", &exec]);
+    let client = server.client();
+    let library = ready_library(&client, "idm", true).await;
+    let request = adaptive(
+        library.id,
+        serde_json::json!({"external": "rs-fvdm", "mode": "step"}),
+        5,
+    );
+    let own = adaptive_in_process(&request, "fvdm");
+    let id = client.create_campaign(&request).await.unwrap().id;
+    let view = finished(&client, id, Duration::from_secs(240)).await;
+    assert_eq!(view.status, CampaignStatus::Converged, "{view:?}");
+    assert_same_adaptive(&view, &own);
+}
