@@ -50,7 +50,10 @@ pub enum MassError {
 #[derive(Debug, Clone, PartialEq)]
 pub struct GridMass {
     grid: Grid,
-    mass: Vec<f64>,
+    /// Shared: a distribution built on the exposure (an adaptive
+    /// campaign's estimation stage) clones it without copying the grid's
+    /// masses.
+    mass: std::sync::Arc<[f64]>,
     /// The sum of the masses as given, before renormalisation.
     original_sum: f64,
 }
@@ -116,7 +119,7 @@ impl GridMass {
         }
         Self {
             grid,
-            mass,
+            mass: mass.into(),
             original_sum: sum,
         }
     }
@@ -178,7 +181,7 @@ impl GridMass {
         0.5 * self
             .mass
             .iter()
-            .zip(&other.mass)
+            .zip(other.mass.iter())
             .map(|(a, b)| (a - b).abs())
             .sum::<f64>()
     }

@@ -92,8 +92,10 @@ function campaignRow(c) {
   return el('tr', { id: `campaign-${c.id}`, 'data-status': c.status },
     el('td', {}, el('a', { href: `/campaigns/${c.id}` }, c.id)),
     el('td', {}, c.case),
-    el('td', {}, c.method === 'library' && c.library_id != null
-      ? el('a', { href: `/libraries/${c.library_id}` }, `library ${c.library_id}`) : c.method),
+    el('td', {}, c.method !== 'ndd' && c.library_id != null
+      ? el('a', { href: `/libraries/${c.library_id}` },
+        c.method === 'adaptive' ? `adaptive, library ${c.library_id}` : `library ${c.library_id}`)
+      : c.method),
     el('td', {}, fmt.vehicle(c.vut)),
     el('td', { class: `status-${c.status}`, 'data-field': 'status' }, c.status,
       warningMark(c.warnings ?? [])),
@@ -166,7 +168,10 @@ async function campaignPage() {
   set('beta', c.beta);
   set('rate', fmt.rate(c.tests_per_second), c.tests_per_second);
   set('left', fmt.seconds(c.seconds_left), c.seconds_left);
-  const sampling = c.method === 'library' ? `, ε ${c.epsilon} (${c.split} split)` : '';
+  const a = c.adaptive;
+  const sampling = c.method === 'library' ? `, ε ${c.epsilon} (${c.split} split)`
+    : a ? `: ${a.library_tests} library and ${a.search_tests} search tests, ${a.stages} stages`
+      + (a.running ? `, running a ${a.running.kind} stage` : '') : '';
   set('detail', c.status_detail ?? `${c.case}, ${c.method}${sampling}, vehicle ${fmt.vehicle(c.vut)}, seed ${c.seed}`);
   // The outside bound and the guarded interval exist for library campaigns
   // of grid cases (docs/statistics.md).

@@ -1,14 +1,16 @@
 //! `tslg demo`: the whole service in one command. Starts a coordinator on an
 //! embedded SQLite file and local workers, builds the case's library through
-//! the API, runs a library campaign and the NDD baseline of the same vehicle
-//! side by side with progress, and prints both beside the exact answer (or,
-//! for car-following, where no enumeration exists, beside each other).
+//! the API, runs a library campaign, an adaptive campaign (grid cases) and
+//! the NDD baseline of the same vehicle side by side with progress, and
+//! prints them beside the exact answer (or, for car-following, where no
+//! enumeration exists, beside each other), each with what its interval
+//! assumes. On cut-in the vehicle is by default the FVDM, which fails where
+//! the IDM's library does not.
 
-use crate::commands::local::{build_library, exact_report, ExactQuestion, Local};
-use crate::commands::progress::CampaignBars;
+use crate::commands::local::{build_library, exact_report, watch_campaigns, ExactQuestion, Local};
 use crate::commands::remote::{exposure_request, vehicle_json};
 use crate::DemoArgs;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 use tslg_api::{
     CampaignView, CreateCampaign, CreateLibrary, ExposureRequest, Method, SearchRequest,
 };
@@ -93,9 +95,20 @@ async fn drive(
         min_events: None,
         guard_outside: false,
     };
-    let by_library = client.create_campaign(&request(Method::Library)).await?;
-    let by_ndd = client.create_campaign(&request(Method::Ndd)).await?;
-    let (by_library, by_ndd) = watch_both(&client, by_library.id, by_ndd.id).await?;
+    // Car-following samples its scenarios while they run: no cells for an
+    // adaptive campaign to search.
+    let methods: &[Method] = if library.case == "car-following" {
+        &[Method::Library, Method::Ndd]
+    } else {
+        &[Method::Library, Method::Adaptive, Method::Ndd]
+    };
+    let mut ids = Vec::new();
+    for &method in methods {
+        ids.push(client.create_campaign(&request(method)).await?.id);
+    }
+    let labels: Vec<&str> = methods.iter().map(|m| m.as_str()).collect();
+    let views = watch_campaigns(&client, &ids, &labels).await?;
+    let by_library = &views[0];
     let exact = exact_report(ExactQuestion {
         case: args.case.case.clone(),
         preset: args.case.preset.clone(),
@@ -108,7 +121,7 @@ async fn drive(
         confidence: 0.9,
     })
     .await?;
-    print_table(args, &by_library, &by_ndd, exact.as_ref());
+    print_table(args, &views, exact.as_ref());
     Ok(())
 }
 
@@ -129,37 +142,35 @@ fn demo_search(case: &str) -> Option<SearchRequest> {
     }
 }
 
-/// `--vut`, else the surrogate (the case's default when neither is given).
+/// `--vut`; else on cut-in the FVDM, which fails where the IDM library does
+/// not (a vehicle that is not the surrogate, as a user's never is);
+/// elsewhere the surrogate (the case's default when neither is given).
 fn demo_vut(args: &DemoArgs) -> &str {
     match &args.vut {
         Some(vut) => vut,
+        None if args.case.case == "cut-in" && args.surrogate.is_none() => "fvdm",
         None => args.case.vehicle_or_default(&args.surrogate),
     }
 }
 
-async fn watch_both(
-    client: &Client,
-    a: i64,
-    b: i64,
-) -> anyhow::Result<(CampaignView, CampaignView)> {
-    let bars = CampaignBars::new(&["library", "ndd"]);
-    loop {
-        let (x, y) = (client.campaign(a).await?, client.campaign(b).await?);
-        bars.update(0, &x);
-        bars.update(1, &y);
-        if x.status.is_final() && y.status.is_final() {
-            return Ok((x, y));
+/// What a method's interval rests on, in one line
+/// (docs/statistics.md, "What each answer assumes").
+fn assumes(method: Method) -> &'static str {
+    match method {
+        Method::Library => {
+            "the library holds the vehicle's failures: the surrogate fails where it does"
         }
-        tokio::time::sleep(Duration::from_millis(200)).await;
+        Method::Adaptive => {
+            "the vehicle's failures outside the library are reachable through failures and \
+             near misses from what its tests met"
+        }
+        Method::Ndd => "nothing beyond the exposure model: every scenario sampled as it occurs",
     }
 }
 
-fn print_table(
-    args: &DemoArgs,
-    by_library: &CampaignView,
-    by_ndd: &CampaignView,
-    report: Option<&ExactReport>,
-) {
+fn print_table(args: &DemoArgs, views: &[CampaignView], report: Option<&ExactReport>) {
+    let by_library = &views[0];
+    let by_ndd = &views[views.len() - 1];
     let exact = report.map(|r| r.probability);
     let interval = |v: &CampaignView| (v.ci_low.unwrap_or(f64::NAN), v.ci_high.unwrap_or(f64::NAN));
     println!(
@@ -179,7 +190,8 @@ fn print_table(
         if exact.is_some() { "covers" } else { "" },
         "status"
     );
-    for (name, v) in [("library", by_library), ("ndd", by_ndd)] {
+    for v in views {
+        let name = v.method.as_str();
         let (lo, hi) = interval(v);
         let covers = match exact {
             Some(p) if lo <= p && p <= hi => "yes",
@@ -189,7 +201,7 @@ fn print_table(
         println!(
             "{:<8} {:>10} {:>7} {:>11.3e} {:>25} {:>8} {:>10}",
             name,
-            v.tests,
+            v.indices,
             v.events,
             v.estimate.unwrap_or(f64::NAN),
             format!("[{lo:.3e}, {hi:.3e}]"),
@@ -197,8 +209,25 @@ fn print_table(
             v.status.as_str()
         );
     }
+    println!();
+    for v in views {
+        println!("{:<8} assumes {}", v.method.as_str(), assumes(v.method));
+        if let Some(a) = &v.adaptive {
+            println!(
+                "{:<8}   ({} library and {} search tests found where the vehicle fails; {} \
+                 estimation tests)",
+                "", a.library_tests, a.search_tests, v.tests
+            );
+        }
+    }
     print_outside(by_library, exact);
-    let measured = by_ndd.tests as f64 / by_library.tests.max(1) as f64;
+    let measured = by_ndd.tests as f64 / by_library.indices.max(1) as f64;
+    if let Some(adaptive) = views.iter().find(|v| v.method == Method::Adaptive) {
+        println!(
+            "\nNDD tests / adaptive tests: {:.0} measured",
+            by_ndd.tests as f64 / adaptive.indices.max(1) as f64
+        );
+    }
     let Some(report) = report else {
         let ((a, b), (c, d)) = (interval(by_library), interval(by_ndd));
         println!(
@@ -221,7 +250,7 @@ fn print_table(
     };
     let exact = report.probability;
     println!("\nexact P(A) by enumeration: {exact:.4e}");
-    let misses = [by_library, by_ndd].iter().any(|v| {
+    let misses = views.iter().any(|v| {
         let (lo, hi) = interval(v);
         !(lo <= exact && exact <= hi)
     });
@@ -236,7 +265,8 @@ fn print_table(
             "warning: the library's analytic variance needs about {:.0} tests and the campaign \
              stopped after {}: this vehicle fails mostly outside the surrogate's library, and \
              the heavy-weight tests that would correct the estimate have not come up yet. \
-             Trust the NDD baseline (see docs/models.md on the surrogate's coverage).",
+             Trust the adaptive campaign or the NDD baseline (see docs/models.md on the \
+             surrogate's coverage).",
             report.library_tests, by_library.tests
         );
     }

@@ -3,9 +3,10 @@
 //! library built through the API, and the exact answer computed beside it.
 
 use crate::commands::campaign::wait_for_library;
+use crate::commands::progress::CampaignBars;
 use crate::service::LocalService;
 use std::path::{Path, PathBuf};
-use tslg_api::{CreateLibrary, ExposureRequest, LibraryStatus, LibraryView, Outside};
+use tslg_api::{CampaignView, CreateLibrary, ExposureRequest, LibraryStatus, LibraryView, Outside};
 use tslg_client::wire::exposure_source;
 use tslg_client::Client;
 use tslg_method::exact::ExactReport;
@@ -122,4 +123,26 @@ pub async fn exact_report(question: ExactQuestion) -> anyhow::Result<Option<Exac
         }
     })
     .await?
+}
+
+/// Polls campaigns `ids` with a progress bar each (`labels`) until all
+/// have stopped; their final views, in order.
+pub async fn watch_campaigns(
+    client: &Client,
+    ids: &[i64],
+    labels: &[&str],
+) -> anyhow::Result<Vec<CampaignView>> {
+    let bars = CampaignBars::new(labels);
+    loop {
+        let mut views = Vec::with_capacity(ids.len());
+        for (k, &id) in ids.iter().enumerate() {
+            let view = client.campaign(id).await?;
+            bars.update(k, &view);
+            views.push(view);
+        }
+        if views.iter().all(|v| v.status.is_final()) {
+            return Ok(views);
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(200)).await;
+    }
 }

@@ -4,6 +4,7 @@ pub mod campaign;
 pub mod demo;
 pub mod evaluate;
 pub mod exact;
+pub mod held_out;
 pub mod library;
 pub mod load;
 pub mod local;

@@ -13,6 +13,7 @@
 //! `n_min` is chosen on the whole curve rather than on a few values (the
 //! ε-greedy split makes the curve a lattice; docs/statistics.md).
 
+use crate::commands::held_out::{self, ProgramTable, TabulatedTests};
 use anyhow::Context;
 use rayon::prelude::*;
 use std::fmt::Write as _;
@@ -85,6 +86,12 @@ pub struct ValidateArgs {
     /// 2 to N (no stopping rule) instead of at the stop.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(2..=1_000_000))]
     pub curve_to: Option<u64>,
+    /// A held-out vehicle under test: an external program (as
+    /// `tslg-worker --vut-exec`), tested in step mode with the library of
+    /// the case's default surrogate. It is run once on every cell with
+    /// exposure, which gives its exact P(A); repeatable.
+    #[arg(long, value_name = "NAME=COMMAND")]
+    pub vut_exec: Vec<String>,
 }
 
 /// A way of running a pairing's campaigns.
@@ -114,7 +121,10 @@ struct Setup {
     case: Arc<dyn ScenarioCase>,
     case_name: String,
     surrogate: &'static str,
-    vut: &'static str,
+    vut: String,
+    /// An external program's outcomes on every cell (`--vut-exec`); `None`
+    /// for a built-in model.
+    table: Option<Arc<ProgramTable>>,
     library: Vec<u8>,
     epsilon: f64,
     outside: OutsideSpread,
@@ -124,20 +134,59 @@ struct Setup {
 }
 
 impl Setup {
-    /// The library campaign of `vut` seeded `seed`.
-    fn tests(
-        &self,
-        vut: &serde_json::Value,
-        seed: u64,
-    ) -> Result<Arc<dyn CampaignTests>, CaseError> {
-        self.case.campaign(
+    /// The vehicle's specification.
+    fn vut_spec(&self) -> serde_json::Value {
+        match &self.table {
+            Some(table) => table.spec.clone(),
+            None => serde_json::json!({ "model": self.vut }),
+        }
+    }
+
+    /// The library campaign's tests seeded `seed` (a program's outcomes
+    /// from its table).
+    fn tests(&self, seed: u64) -> Result<Arc<dyn CampaignTests>, CaseError> {
+        let tests = self.case.campaign(
             Some(&self.library),
-            vut,
+            &self.vut_spec(),
             self.epsilon,
             self.outside,
             self.split,
             seed,
-        )
+        )?;
+        Ok(match &self.table {
+            Some(table) => Arc::new(TabulatedTests {
+                inner: tests,
+                outcomes: Arc::clone(&table.outcomes),
+            }),
+            None => tests,
+        })
+    }
+
+    /// The campaign seeded `seed`.
+    fn campaign(&self, seed: u64) -> anyhow::Result<CampaignResult> {
+        if self.method != ValidateMethod::Adaptive {
+            let tests = self.tests(seed)?;
+            return Ok(run_campaign_tests(tests.as_ref(), &self.rule, &|_| false));
+        }
+        let run = match &self.table {
+            Some(table) => held_out::adaptive_campaign(
+                self.case.as_ref(),
+                &self.library,
+                table,
+                self.epsilon,
+                &self.rule,
+                seed,
+            )?,
+            None => self.case.adaptive_campaign(
+                &self.library,
+                &self.vut_spec(),
+                self.epsilon,
+                AdaptiveSettings::default(),
+                &self.rule,
+                seed,
+            )?,
+        };
+        Ok(run.result)
     }
 }
 
@@ -147,7 +196,7 @@ pub struct Row {
     exposure: String,
     case: String,
     surrogate: &'static str,
-    vut: &'static str,
+    vut: String,
     epsilon: f64,
     outside: OutsideSpread,
     split: Split,
@@ -262,8 +311,22 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
         ),
     };
     let case = open_case(case_name, preset, &exposure(args)?)?;
+    // Held-out programs, tested with the library of the case's first
+    // surrogate.
+    let mut vehicles: Vec<(&'static str, String, Option<Arc<ProgramTable>>)> = pairs
+        .iter()
+        .map(|&(surrogate, vut)| (surrogate, vut.to_owned(), None))
+        .collect();
+    for exec in &args.vut_exec {
+        let table = held_out::tabulate(case.as_ref(), exec)?;
+        eprintln!(
+            "{case_name}: program `{}` on every cell: exact P(A) {:.4e}",
+            table.name, table.probability
+        );
+        vehicles.push((pairs[0].0, table.name.clone(), Some(Arc::new(table))));
+    }
     let mut setups = Vec::new();
-    for &(surrogate, vut) in pairs {
+    for (surrogate, vut, table) in vehicles {
         let library = case
             .build_library(
                 &serde_json::json!({ "model": surrogate }),
@@ -273,7 +336,10 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
                 },
             )?
             .file;
-        let truth = case.exact_event_probability(&serde_json::json!({ "model": vut }))?;
+        let truth = match &table {
+            Some(t) => t.probability,
+            None => case.exact_event_probability(&serde_json::json!({ "model": vut }))?,
+        };
         let mut variants = Vec::new();
         if args.methods.contains(&ValidateMethod::Plain) {
             variants.push((ValidateMethod::Plain, args.epsilon, case.default_outside()));
@@ -317,7 +383,8 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
                         case: Arc::clone(&case),
                         case_name: case_name.to_owned(),
                         surrogate,
-                        vut,
+                        vut: vut.clone(),
+                        table: table.clone(),
                         library: library.clone(),
                         epsilon,
                         outside,
@@ -423,12 +490,11 @@ fn curves(args: &ValidateArgs, replicates: u64, to: u64) -> anyhow::Result<()> {
 /// after `n` tests, for `n = 2 … to` (index `n − 2`): each seed's tests are
 /// folded one by one, in index order, as a campaign folds them.
 fn coverage_curve(setup: &Setup, replicates: u64, to: u64) -> anyhow::Result<Vec<f64>> {
-    let vut = serde_json::json!({ "model": setup.vut });
     let z = setup.rule.z();
     let covered = (0..replicates)
         .into_par_iter()
         .map(|seed| {
-            let tests = setup.tests(&vut, seed)?;
+            let tests = setup.tests(seed)?;
             let mut fold = PrefixFold::with_strata(tests.strata());
             let mut covers = Vec::with_capacity(to as usize - 1);
             for index in 0..to {
@@ -449,31 +515,16 @@ fn coverage_curve(setup: &Setup, replicates: u64, to: u64) -> anyhow::Result<Vec
 
 /// Runs the campaigns of seeds `0..replicates`.
 fn replicate(setup: &Setup, replicates: u64) -> anyhow::Result<Row> {
-    let vut = serde_json::json!({ "model": setup.vut });
     let runs = (0..replicates)
         .into_par_iter()
-        .map(|seed| {
-            if setup.method == ValidateMethod::Adaptive {
-                let run = setup.case.adaptive_campaign(
-                    &setup.library,
-                    &vut,
-                    setup.epsilon,
-                    AdaptiveSettings::default(),
-                    &setup.rule,
-                    seed,
-                )?;
-                return Ok(run.result);
-            }
-            let tests = setup.tests(&vut, seed)?;
-            Ok(run_campaign_tests(tests.as_ref(), &setup.rule, &|_| false))
-        })
+        .map(|seed| setup.campaign(seed))
         .collect::<anyhow::Result<Vec<_>>>()?;
     Ok(Row {
         method: setup.method,
         exposure: setup.case.exposure_name().to_owned(),
         case: setup.case_name.clone(),
         surrogate: setup.surrogate,
-        vut: setup.vut,
+        vut: setup.vut.clone(),
         epsilon: setup.epsilon,
         outside: setup.outside,
         split: setup.split,
@@ -519,7 +570,7 @@ fn cells(row: &Row) -> Vec<String> {
     vec![
         row.case.clone(),
         row.surrogate.into(),
-        row.vut.into(),
+        row.vut.clone(),
         format!("{}", row.epsilon),
         format!("{:?}", row.outside).to_lowercase(),
         row.split.name().into(),
@@ -595,7 +646,7 @@ fn method_cells(row: &Row) -> [String; 9] {
         row.case.clone(),
         row.exposure.clone(),
         row.surrogate.into(),
-        row.vut.into(),
+        row.vut.clone(),
         row.method.name().into(),
         row.runs.len().to_string(),
         format!("{:.4}", row.answer_coverage()),

@@ -172,6 +172,13 @@ fn evaluate_adaptive_finds_what_the_idm_library_misses_of_the_fvdm() {
 #[test]
 fn validate_compares_the_methods_in_one_csv() {
     let dir = tempfile::tempdir().unwrap();
+    // The FVDM again, as an external program in step mode (examples/fvdm_vut.rs):
+    // a held-out vehicle, run once on every cell.
+    let program = std::path::Path::new(env!("CARGO_BIN_EXE_tslg"))
+        .parent()
+        .unwrap()
+        .join("examples/fvdm_vut");
+    let exec = format!("rs-fvdm={}", program.display());
     let out = tslg(&[
         "validate",
         "--cases",
@@ -180,6 +187,8 @@ fn validate_compares_the_methods_in_one_csv() {
         "plain,adaptive",
         "--replicates",
         "20",
+        "--vut-exec",
+        &exec,
         "--out",
         dir.path().to_str().unwrap(),
     ]);
@@ -196,8 +205,17 @@ fn validate_compares_the_methods_in_one_csv() {
             .find(|c| c[2] == "idm" && c[3] == vut && c[4] == method)
             .unwrap_or_else(|| panic!("no idm → {vut} {method} in {csv}"))
     };
-    // Six pairings, two methods.
-    assert_eq!(csv.lines().count(), 1 + 6 * 2, "{csv}");
+    // Six pairings and the program, two methods.
+    assert_eq!(csv.lines().count(), 1 + 7 * 2, "{csv}");
+    // The program drives as the built-in FVDM does: the same exact P(A)
+    // (the NDD column is computed from it) and the same campaigns.
+    for method in ["plain", "adaptive"] {
+        assert_eq!(
+            row("rs-fvdm", method)[5..],
+            row("fvdm", method)[5..],
+            "{csv}"
+        );
+    }
     let number = |c: &[String], k: usize| c[k].parse::<f64>().unwrap();
     let plain = row("fvdm", "plain");
     let adaptive = row("fvdm", "adaptive");
@@ -501,7 +519,12 @@ fn a_library_cannot_be_used_with_another_exposure() {
 
 /// The demo's table has a `library` and an `ndd` row, both converged.
 fn assert_both_campaigns_converged(text: &str) {
-    for method in ["library", "ndd"] {
+    assert_campaigns_converged(text, &["library", "ndd"]);
+}
+
+/// The demo's table has a converged row per method.
+fn assert_campaigns_converged(text: &str, methods: &[&str]) {
+    for method in methods {
         let row = text
             .lines()
             .find(|l| l.starts_with(&format!("{method} ")))
@@ -536,6 +559,35 @@ fn demo_runs_both_campaigns_through_a_local_service_and_prints_the_table() {
         "{text}"
     );
     assert!(stderr(&o).contains("converged"), "progress is shown");
+}
+
+#[test]
+fn the_default_demo_tests_a_vehicle_that_is_not_the_surrogate_three_ways() {
+    // No --vut: on cut-in the FVDM, tested with the IDM's library.
+    let o = tslg(&["demo", "--seed", "2"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = stdout(&o);
+    assert!(text.contains("cut-in library 1 of idm"), "{text}");
+    assert!(text.contains("vehicle under test fvdm"), "{text}");
+    assert_campaigns_converged(&text, &["library", "adaptive", "ndd"]);
+    // One line per row saying what its interval rests on.
+    for line in [
+        "library  assumes the library holds the vehicle's failures",
+        "adaptive assumes the vehicle's failures outside the library are reachable",
+        "ndd      assumes nothing beyond the exposure model",
+    ] {
+        assert!(text.contains(line), "{line} in {text}");
+    }
+    assert!(
+        text.contains("search tests found where the vehicle fails"),
+        "{text}"
+    );
+    assert!(text.contains("NDD tests / adaptive tests: "), "{text}");
+    // The exact P(A) of the FVDM on the built-in exposure (docs/models.md).
+    assert!(
+        text.contains("exact P(A) by enumeration: 5.3608e-3"),
+        "{text}"
+    );
 }
 
 #[test]

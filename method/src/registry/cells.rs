@@ -255,6 +255,11 @@ where
         )))
     }
 
+    fn cell_exposures(&self) -> Result<Vec<f64>, CaseError> {
+        let exposure = self.case.exposure();
+        Ok((0..self.case.grid().len()).map(|c| exposure.p(c)).collect())
+    }
+
     fn exact_event_probability(&self, spec: &serde_json::Value) -> Result<f64, CaseError> {
         let vehicle = self.builtin(spec, "an exact answer")?;
         Ok(event_probability(

@@ -313,6 +313,12 @@ impl ScenarioCase for FollowScenarioCase {
         Err(no_adaptive())
     }
 
+    fn cell_exposures(&self) -> Result<Vec<f64>, CaseError> {
+        Err(CaseError::NoExactAnswer(
+            "car-following has no grid of scenarios: its tests are sequences of decisions".into(),
+        ))
+    }
+
     fn adaptive_tests(
         &self,
         _file: &[u8],

@@ -375,6 +375,10 @@ pub trait ScenarioCase: Send + Sync {
     ) -> Result<Arc<dyn CampaignTests>, CaseError>;
     /// The exact `P(A)` of a vehicle by enumeration of the grid.
     fn exact_event_probability(&self, vehicle: &serde_json::Value) -> Result<f64, CaseError>;
+    /// `P(x)` of every grid cell, in cell order: with a vehicle's outcome
+    /// on every cell (an external program's, run once per cell) it gives
+    /// the exact `P(A)`. Grid cases only.
+    fn cell_exposures(&self) -> Result<Vec<f64>, CaseError>;
     /// `P(A)` with the expected tests of a library campaign and of the NDD
     /// baseline to relative half-width `beta` at `confidence`: the analytic
     /// acceleration ratio (SPEC §3).

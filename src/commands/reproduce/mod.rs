@@ -3,7 +3,8 @@
 //! each case's library through the API with the paper's settings where they
 //! are known (ε 0.05 and β 0.3 for cut-in, ε 0.1 and β 0.2 for the others,
 //! 90% confidence, the authors' exposure table when given), run R seeded
-//! library campaigns per vehicle, and then the NDD baseline when its
+//! library campaigns per vehicle (and on the grid cases one guarded and R
+//! adaptive campaigns), and then the NDD baseline when its
 //! expected number of tests fits the budget; otherwise the NDD count is the
 //! analytic `z² (1 − μ)/(β² μ)` with μ the exact `P(A)` or, for
 //! car-following, the library campaigns' median estimate. The table
@@ -11,12 +12,10 @@
 
 mod table;
 
-use crate::commands::local::{build_library, exact_report, ExactQuestion, Local};
-use crate::commands::progress::CampaignBars;
+use crate::commands::local::{build_library, exact_report, watch_campaigns, ExactQuestion, Local};
 use crate::commands::remote::exposure_request;
 use crate::CaseArgs;
 use std::path::PathBuf;
-use std::time::Duration;
 use tslg_api::{
     CampaignView, CreateCampaign, CreateLibrary, ExposureRequest, Method, Outside, SearchRequest,
 };
@@ -172,6 +171,9 @@ pub struct Row {
     pub library_runs: Vec<CampaignView>,
     /// The guarded campaign (grid cases).
     pub guarded_run: Option<CampaignView>,
+    /// Adaptive campaigns, one per seed of the library campaigns (grid
+    /// cases; none for car-following).
+    pub adaptive_runs: Vec<CampaignView>,
     pub ndd_run: Option<CampaignView>,
     pub ndd_tests: f64,
     pub ndd_source: NddSource,
@@ -306,7 +308,20 @@ async fn run_case(
             request.guard_outside = true;
             ids.push(client.create_campaign(&request).await?.id);
         }
+        // Grid cases: as many adaptive campaigns, same seeds (stages that
+        // learn where this vehicle fails; docs/statistics.md).
+        if guarded {
+            for k in 0..replicates {
+                let request = request(Method::Adaptive, seed + k);
+                ids.push(client.create_campaign(&request).await?.id);
+            }
+        }
         let mut library_runs = watch(client, &ids, &format!("{} {label}", setting.case)).await?;
+        let adaptive_runs = if guarded {
+            library_runs.split_off(library_runs.len() - replicates as usize)
+        } else {
+            Vec::new()
+        };
         let guarded_run = guarded.then(|| library_runs.pop()).flatten();
         let exact = exact_report(ExactQuestion {
             case: setting.case.into(),
@@ -346,6 +361,7 @@ async fn run_case(
             beta: setting.beta,
             library_runs,
             guarded_run,
+            adaptive_runs,
             ndd_run,
             ndd_tests,
             ndd_source,
@@ -394,17 +410,10 @@ async fn watch(client: &Client, ids: &[i64], label: &str) -> anyhow::Result<Vec<
             }
         })
         .collect();
-    let bars = CampaignBars::new(&labels.iter().map(String::as_str).collect::<Vec<_>>());
-    loop {
-        let mut views = Vec::new();
-        for (k, &id) in ids.iter().enumerate() {
-            let view = client.campaign(id).await?;
-            bars.update(k, &view);
-            views.push(view);
-        }
-        if views.iter().all(|v| v.status.is_final()) {
-            return Ok(views);
-        }
-        tokio::time::sleep(Duration::from_millis(200)).await;
-    }
+    watch_campaigns(
+        client,
+        ids,
+        &labels.iter().map(String::as_str).collect::<Vec<_>>(),
+    )
+    .await
 }

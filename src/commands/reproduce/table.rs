@@ -18,9 +18,46 @@ impl Row {
         *lower_median(&self.library_tests()).expect("at least one library campaign")
     }
 
-    /// The plain library campaigns, then the guarded one.
+    /// The plain library campaigns, the guarded one, then the adaptive ones.
     fn campaigns(&self) -> impl Iterator<Item = &CampaignView> {
-        self.library_runs.iter().chain(&self.guarded_run)
+        self.library_runs
+            .iter()
+            .chain(&self.guarded_run)
+            .chain(&self.adaptive_runs)
+    }
+
+    /// The adaptive campaigns' test counts (every test: library, search and
+    /// estimation), sorted.
+    fn adaptive_tests(&self) -> Vec<u64> {
+        let mut tests: Vec<u64> = self.adaptive_runs.iter().map(|v| v.indices).collect();
+        tests.sort_unstable();
+        tests
+    }
+
+    /// Median adaptive tests, their range, and NDD tests / median; `-`
+    /// without adaptive campaigns.
+    fn adaptive_summary(&self) -> (String, String) {
+        let tests = self.adaptive_tests();
+        match lower_median(&tests) {
+            Some(&median) => (
+                format!("{median} ({}–{})", tests[0], tests[tests.len() - 1]),
+                format!("{:.3e}", self.ndd_tests / median.max(1) as f64),
+            ),
+            None => ("-".into(), "-".into()),
+        }
+    }
+
+    /// How many adaptive intervals contain the exact `P(A)`.
+    fn adaptive_covering(&self) -> Option<usize> {
+        let p = self.exact?.probability;
+        Some(
+            self.adaptive_runs
+                .iter()
+                .filter(
+                    |v| matches!((v.ci_low, v.ci_high), (Some(lo), Some(hi)) if lo <= p && p <= hi),
+                )
+                .count(),
+        )
     }
 
     /// NDD tests / median library tests.
@@ -83,17 +120,20 @@ pub fn markdown(rows: &[Row], replicates: u64, budget: u64) -> String {
          tests are at most {budget}, else analytic. Ratio = NDD tests / median library tests.\n"
     );
     out += "## Tests\n\n";
+    out += "Adaptive ratio = NDD tests / median adaptive tests (every test counted).\n\n";
     out += "| case | library: cells (paper) | vehicle | ε | β | library tests: median (range) | \
-            analytic library tests | guarded campaign tests | NDD tests | NDD from | ratio | \
-            analytic ratio | paper: library / NDD tests (ratio) |\n";
-    out += &"|---".repeat(13);
+            analytic library tests | guarded campaign tests | adaptive tests: median (range) | \
+            NDD tests | NDD from | ratio | adaptive ratio | analytic ratio | \
+            paper: library / NDD tests (ratio) |\n";
+    out += &"|---".repeat(15);
     out += "|\n";
     for row in rows {
         let tests = row.library_tests();
         let paper = row.paper;
+        let (adaptive_tests, adaptive_ratio) = row.adaptive_summary();
         let _ = writeln!(
             out,
-            "| {} | {} of {} ({}) | {} | {} | {} | {} ({}–{}) | {} | {} | {} | {} | {:.3e} | {} | {} / {} ({:.0}) |",
+            "| {} | {} of {} ({}) | {} | {} | {} | {} ({}–{}) | {} | {} | {adaptive_tests} | {} | {} | {:.3e} | {adaptive_ratio} | {} | {} / {} ({:.0}) |",
             row.case,
             row.library_size,
             row.total_scenarios,
@@ -119,7 +159,7 @@ pub fn markdown(rows: &[Row], replicates: u64, budget: u64) -> String {
     }
     out += "\n## Estimates\n\n";
     out += "| case | vehicle | exact P(A) | library, first seed: estimate [90% interval] | \
-            intervals covering P(A): plain, guarded | outside bound U | guarded high | \
+            intervals covering P(A): plain, guarded, adaptive | outside bound U | guarded high | \
             campaigns with warnings | guarded campaign: estimate [low, guarded high] | \
             NDD: estimate [90% interval] |\n";
     out += &"|---".repeat(10);
@@ -135,7 +175,12 @@ pub fn markdown(rows: &[Row], replicates: u64, budget: u64) -> String {
             interval(first),
             row.covering()
                 .map_or("- (no exact answer)".into(), |(plain, guarded)| {
-                    format!("{plain}/{n}, {guarded}/{n}", n = row.library_runs.len())
+                    format!(
+                        "{plain}/{n}, {guarded}/{n}, {}/{}",
+                        row.adaptive_covering().unwrap_or(0),
+                        row.adaptive_runs.len(),
+                        n = row.library_runs.len()
+                    )
                 }),
             sci(first.outside_upper),
             sci(first.guarded_ci_high),
@@ -153,6 +198,9 @@ pub fn markdown(rows: &[Row], replicates: u64, budget: u64) -> String {
             row.ndd_run.as_ref().map_or("not run".into(), interval),
         );
     }
+    out += "\nAdaptive campaigns count every test they ran (library, search and estimation); \
+            their interval assumes the vehicle's failures outside the library are reachable \
+            through failures and near misses from what the tests met.\n";
     out += "\n## Library campaigns\n\n";
     out += "| case | vehicle | campaign | seed | status | tests | events | \
             estimate [90% interval] | outside tests, events | U | guarded high | warnings |\n";
@@ -168,7 +216,7 @@ pub fn markdown(rows: &[Row], replicates: u64, budget: u64) -> String {
                 kind(v),
                 v.seed,
                 v.status.as_str(),
-                v.tests,
+                tests_run(v),
                 v.events,
                 interval(v),
                 v.outside_tests,
@@ -192,13 +240,26 @@ pub fn markdown(rows: &[Row], replicates: u64, budget: u64) -> String {
     out
 }
 
-/// How a campaign sampled: the plain library campaign, or the guarded one
-/// (ε 0.5 spread by the exposure, the outside guard on).
+/// How a campaign sampled: the plain library campaign, the guarded one
+/// (ε 0.5 spread by the exposure, the outside guard on), or adaptive.
 fn kind(view: &CampaignView) -> &'static str {
-    if view.guard_outside {
+    if view.method == tslg_api::Method::Adaptive {
+        "adaptive"
+    } else if view.guard_outside {
         "library-guarded"
     } else {
         "library"
+    }
+}
+
+/// The tests a campaign ran: an adaptive campaign's include those spent
+/// finding where the vehicle fails, which its `tests` (the estimate's) do
+/// not.
+fn tests_run(view: &CampaignView) -> u64 {
+    if view.adaptive.is_some() {
+        view.indices
+    } else {
+        view.tests
     }
 }
 
@@ -227,7 +288,7 @@ pub fn csv(rows: &[Row]) -> String {
                 row.beta.to_string(),
                 v.seed.to_string(),
                 v.status.as_str().to_owned(),
-                v.tests.to_string(),
+                tests_run(v).to_string(),
                 v.events.to_string(),
                 opt(v.estimate),
                 opt(v.ci_low),
