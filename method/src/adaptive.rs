@@ -33,11 +33,12 @@
 use crate::campaign::CampaignResult;
 use crate::case::Case;
 use crate::estimator::{Decision, StoppingRule};
-use crate::library::{Library, LibraryCell};
+use crate::library::Library;
 use crate::prefix::{PrefixFold, SparseOutcome};
 use crate::sampling::{
     LibraryDistribution, NddDistribution, OutsideSpread, SamplingError, Split, TestDistribution,
 };
+use crate::support_sampling::SupportDistribution;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
@@ -105,6 +106,9 @@ pub struct Knowledge {
     criticality: Vec<Option<f64>>,
     /// The failing cells, in the order they were found.
     failures: Vec<usize>,
+    /// [`Planner::support`], kept as tests are observed: the failures
+    /// found and the library's untested cells, increasing.
+    support: Vec<usize>,
     /// `Σ P(x)` over `failures`, summed in that order.
     failure_mass: f64,
     /// Cells outside the library with exposure that neighboured a seed
@@ -157,7 +161,13 @@ impl<C> std::ops::Deref for Held<'_, C> {
 /// Plans the stages of one adaptive campaign of a grid case.
 pub struct Planner<'a, C: Case> {
     case: Held<'a, C>,
-    library: Library,
+    /// The library's cells.
+    library_cells: Vec<usize>,
+    /// The exposure's alias table, and its cells with exposure: what every
+    /// estimation stage draws its exploring tests from
+    /// ([`SupportDistribution`]), built once.
+    everywhere: Arc<NddDistribution>,
+    exposed: usize,
     settings: AdaptiveSettings,
     in_library: Vec<bool>,
     /// The first stage's distribution: the library's, ε-greedy.
@@ -176,7 +186,9 @@ impl<C: Case> Planner<'static, C> {
         settings: AdaptiveSettings,
     ) -> Result<Self, AdaptiveError> {
         let Planner {
-            library,
+            library_cells,
+            everywhere,
+            exposed,
             settings,
             in_library,
             library_stage,
@@ -185,7 +197,9 @@ impl<C: Case> Planner<'static, C> {
         } = Planner::new(case.as_ref(), library, epsilon, settings)?;
         Ok(Planner {
             case: Held::Shared(case),
-            library,
+            library_cells,
+            everywhere,
+            exposed,
             settings,
             in_library,
             library_stage,
@@ -234,7 +248,13 @@ impl<'a, C: Case> Planner<'a, C> {
         }
         Ok(Self {
             case: Held::Borrowed(case),
-            library: library.clone(),
+            library_cells: {
+                let mut cells: Vec<usize> = library.cells.iter().map(|c| c.cell).collect();
+                cells.sort_unstable();
+                cells
+            },
+            everywhere: Arc::new(NddDistribution::new(case.exposure())),
+            exposed: case.exposure().support_size(),
             settings,
             in_library,
             library_stage,
@@ -253,6 +273,7 @@ impl<'a, C: Case> Planner<'a, C> {
         Knowledge {
             criticality: vec![None; cells],
             failures: Vec::new(),
+            support: self.library_cells.clone(),
             failure_mass: 0.0,
             candidates: Vec::new(),
             is_candidate: vec![false; cells],
@@ -273,6 +294,15 @@ impl<'a, C: Case> Planner<'a, C> {
         if o.event {
             knowledge.failures.push(o.cell);
             knowledge.failure_mass += exposure.p(o.cell);
+        }
+        // A failure joins the support; a library cell that passed leaves it.
+        let at = knowledge.support.binary_search(&o.cell);
+        match (o.event, at) {
+            (true, Err(k)) => knowledge.support.insert(k, o.cell),
+            (false, Ok(k)) => {
+                knowledge.support.remove(k);
+            }
+            _ => {}
         }
         if criticality <= self.settings.near_miss {
             for n in self.case.grid().neighbours(o.cell) {
@@ -344,56 +374,30 @@ impl<'a, C: Case> Planner<'a, C> {
     /// the failures found and the library's cells not yet tested (a tested
     /// cell that passed needs no test: the vehicles are deterministic).
     pub fn support(&self, knowledge: &Knowledge) -> Vec<usize> {
-        let untested_library = self
-            .library
-            .cells
-            .iter()
-            .map(|c| c.cell)
-            .filter(|&c| knowledge.criticality[c].is_none());
-        let mut support: Vec<usize> = knowledge
-            .failures
-            .iter()
-            .copied()
-            .chain(untested_library)
-            .collect();
-        support.sort_unstable();
-        support.dedup();
-        support
+        knowledge.support.clone()
     }
 
     /// The support as a library (`V = P`), explored by exposure with share
     /// `1/explore_every`; the exposure itself when the support is empty.
     fn estimation(&self, support: &[usize]) -> TestDistribution {
         let exposure = self.case.exposure();
-        let mut cells: Vec<LibraryCell> = support
+        // The support is increasing ([`Planner::support`]).
+        let cells: Vec<usize> = support
             .iter()
-            .filter(|&&c| exposure.p(c) > 0.0)
-            .map(|&cell| LibraryCell {
-                cell,
-                criticality: exposure.p(cell),
-            })
+            .copied()
+            .filter(|&c| exposure.p(c) > 0.0)
             .collect();
         if cells.is_empty() {
-            return TestDistribution::Ndd(NddDistribution::new(exposure));
+            return TestDistribution::Ndd(NddDistribution::clone(&self.everywhere));
         }
-        cells.sort_by_key(|c| c.cell);
-        let w = cells.iter().map(|c| c.criticality).sum();
-        let found = Library {
-            cells,
-            w,
-            ..self.library.clone()
-        };
         let epsilon = 1.0 / self.settings.explore_every as f64;
-        TestDistribution::library(
-            LibraryDistribution::new(
-                &found,
-                exposure,
-                epsilon,
-                OutsideSpread::Ndd,
-                Split::Stratified,
-            )
-            .expect("a non-empty library of cells with exposure"),
-        )
+        TestDistribution::Support(Box::new(SupportDistribution::new(
+            exposure,
+            Arc::clone(&self.everywhere),
+            self.exposed,
+            cells,
+            epsilon,
+        )))
     }
 }
 
@@ -734,7 +738,7 @@ mod tests {
     }
 
     #[test]
-    fn the_kept_frontier_is_the_scanned_one_after_every_observation() {
+    fn the_kept_frontier_and_support_are_the_scanned_ones_after_every_observation() {
         let case = CutIn::builtin(CutInPreset::PaperCode);
         let idm = VehicleModel::builtin("idm").unwrap();
         let request = LibraryRequest {
@@ -759,6 +763,22 @@ mod tests {
                     planner.frontier(&knowledge),
                     frontier_by_scan(&planner, &knowledge)
                 );
+                // The merged support is the sorted union.
+                let mut union: Vec<usize> = knowledge
+                    .failures()
+                    .iter()
+                    .copied()
+                    .chain(
+                        library
+                            .cells
+                            .iter()
+                            .map(|c| c.cell)
+                            .filter(|&c| knowledge.criticality[c].is_none()),
+                    )
+                    .collect();
+                union.sort_unstable();
+                union.dedup();
+                assert_eq!(planner.support(&knowledge), union);
             }
             assert!(!knowledge.failures().is_empty());
         }

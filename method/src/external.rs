@@ -304,6 +304,24 @@ mod tests {
     }
 
     #[test]
+    fn an_episode_may_report_its_criticality_from_protocol_version_2() {
+        let outcome = |json: &str| serde_json::from_str::<EpisodeOutcome>(json).unwrap();
+        // Version 1: no criticality; still an outcome.
+        let v1 = outcome(r#"{"event": false}"#);
+        assert_eq!(v1.checked_criticality(), Ok(None));
+        let near = outcome(r#"{"event": false, "criticality": 0.03}"#);
+        assert_eq!(near.checked_criticality(), Ok(Some(0.03)));
+        // An event is criticality 0 whatever the program says.
+        let event = outcome(r#"{"event": true, "criticality": 0.4}"#);
+        assert_eq!(event.checked_criticality(), Ok(Some(0.0)));
+        for bad in ["1.5", "-0.1"] {
+            let wrong = outcome(&format!(r#"{{"event": false, "criticality": {bad}}}"#));
+            let error = wrong.checked_criticality().unwrap_err();
+            assert!(error.0.contains("must be a number in [0, 1]"), "{error}");
+        }
+    }
+
+    #[test]
     fn messages_have_the_documented_shape() {
         let o = Observation {
             step: 3,

@@ -24,6 +24,7 @@ pub mod prefix;
 pub mod progress;
 pub mod registry;
 pub mod sampling;
+pub mod support_sampling;
 pub mod tolerance;
 pub mod vehicle;
 pub mod warnings;

@@ -379,9 +379,14 @@ impl NddDistribution {
     /// Test `index` of the campaign seeded `seed`: a cell drawn from `P`, weight 1.
     pub fn draw(&self, seed: u64, index: u64) -> Draw {
         Draw {
-            cell: self.alias.sample(&mut test_rng(seed, index)),
+            cell: self.sample(&mut test_rng(seed, index)),
             weight: 1.0,
         }
+    }
+
+    /// A cell drawn from `P` with `rng`.
+    pub fn sample<R: Rng + ?Sized>(&self, rng: &mut R) -> usize {
+        self.alias.sample(rng)
     }
 }
 
@@ -392,6 +397,8 @@ pub enum TestDistribution {
     Library(Box<LibraryDistribution>),
     /// From the naturalistic exposure (the baseline).
     Ndd(NddDistribution),
+    /// An adaptive campaign's estimation stage on its support.
+    Support(Box<crate::support_sampling::SupportDistribution>),
 }
 
 impl TestDistribution {
@@ -405,6 +412,7 @@ impl TestDistribution {
         match self {
             TestDistribution::Library(d) => d.draw(seed, index),
             TestDistribution::Ndd(d) => d.draw(seed, index),
+            TestDistribution::Support(d) => d.draw(seed, index),
         }
     }
 
@@ -416,6 +424,7 @@ impl TestDistribution {
         match self {
             TestDistribution::Library(d) => !d.contains(draw.cell),
             TestDistribution::Ndd(_) => false,
+            TestDistribution::Support(d) => !d.contains(draw.cell),
         }
     }
 
@@ -424,6 +433,7 @@ impl TestDistribution {
         match self {
             TestDistribution::Library(d) => d.explores(seed, index),
             TestDistribution::Ndd(_) => false,
+            TestDistribution::Support(d) => stratified_explores(d.epsilon(), index),
         }
     }
 
@@ -433,6 +443,7 @@ impl TestDistribution {
         match self {
             TestDistribution::Library(d) => d.strata(),
             TestDistribution::Ndd(_) => None,
+            TestDistribution::Support(d) => Some(d.epsilon()).filter(|&e| e > 0.0),
         }
     }
 
@@ -441,7 +452,7 @@ impl TestDistribution {
     pub fn outside_mass(&self) -> Option<&OutsideMass> {
         match self {
             TestDistribution::Library(d) => Some(d.outside_mass()),
-            TestDistribution::Ndd(_) => None,
+            TestDistribution::Ndd(_) | TestDistribution::Support(_) => None,
         }
     }
 }

@@ -37,8 +37,9 @@ pub struct ProgramTable {
     pub probability: f64,
 }
 
-/// Runs `exec` (`NAME=COMMAND`) on every cell of `case` with exposure.
-pub fn tabulate(case: &dyn ScenarioCase, exec: &str) -> anyhow::Result<ProgramTable> {
+/// Runs `exec` (`NAME=COMMAND`) on every cell of `case` with exposure;
+/// `None` when the program does not drive `case` in step mode.
+pub fn tabulate(case: &dyn ScenarioCase, exec: &str) -> anyhow::Result<Option<ProgramTable>> {
     let name = exec
         .split_once('=')
         .map(|(n, _)| n.to_owned())
@@ -55,12 +56,10 @@ pub fn tabulate(case: &dyn ScenarioCase, exec: &str) -> anyhow::Result<ProgramTa
         case.name(),
         tslg_method::external::ExternalMode::Step,
     );
-    anyhow::ensure!(
-        programs.offers().contains(&requirement),
-        "--vut-exec {name}: the program does not drive {} in step mode (it offers {:?})",
-        case.name(),
-        programs.offers()
-    );
+    if !programs.offers().contains(&requirement) {
+        programs.stop();
+        return Ok(None);
+    }
     let program = Arc::clone(programs.get(&name).expect("started"));
     let spec = serde_json::json!({"external": name, "mode": "step"});
     let tests = case.campaign(None, &spec, 0.0, OutsideSpread::Uniform, Split::Random, 0)?;
@@ -98,12 +97,12 @@ pub fn tabulate(case: &dyn ScenarioCase, exec: &str) -> anyhow::Result<ProgramTa
         .filter(|((event, _), _)| *event)
         .map(|(_, p)| p)
         .sum();
-    Ok(ProgramTable {
+    Ok(Some(ProgramTable {
         name,
         spec,
         outcomes: Arc::new(outcomes),
         probability,
-    })
+    }))
 }
 
 /// A campaign's tests whose vehicle is a program's table: every draw as

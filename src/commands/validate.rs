@@ -88,8 +88,8 @@ pub struct ValidateArgs {
     pub curve_to: Option<u64>,
     /// A held-out vehicle under test: an external program (as
     /// `tslg-worker --vut-exec`), tested in step mode with the library of
-    /// the case's default surrogate. It is run once on every cell with
-    /// exposure, which gives its exact P(A); repeatable.
+    /// the case's default surrogate, on each case it drives. It is run once
+    /// on every cell with exposure, which gives its exact P(A); repeatable.
     #[arg(long, value_name = "NAME=COMMAND")]
     pub vut_exec: Vec<String>,
 }
@@ -318,7 +318,10 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
         .map(|&(surrogate, vut)| (surrogate, vut.to_owned(), None))
         .collect();
     for exec in &args.vut_exec {
-        let table = held_out::tabulate(case.as_ref(), exec)?;
+        let Some(table) = held_out::tabulate(case.as_ref(), exec)? else {
+            eprintln!("{case_name}: `{exec}` does not drive this case in step mode; skipped");
+            continue;
+        };
         eprintln!(
             "{case_name}: program `{}` on every cell: exact P(A) {:.4e}",
             table.name, table.probability

@@ -135,6 +135,17 @@ impl HighwayExit {
         simulation::run(&self.world, vehicle, self.scenario(cell))
     }
 
+    /// A run's criticality ([`Case::criticality`]): 0 for a failure, the
+    /// share of the road to the exit still ahead at the lane change
+    /// otherwise (1 without one).
+    fn run_criticality(&self, run: &ExitRun) -> f64 {
+        match (run.outcome.is_failure(), run.lane_change) {
+            (true, _) => 0.0,
+            (false, Some((_, p))) => ((self.world.exit - p) / self.world.exit).clamp(0.0, 1.0),
+            (false, None) => 1.0,
+        }
+    }
+
     /// `J(x)` of a scenario.
     pub fn objective(&self, x: [f64; 4]) -> f64 {
         let area = zone::zone_area(&self.world, x);
@@ -180,12 +191,7 @@ impl Case for HighwayExit {
 
     fn event_and_criticality(&self, vehicle: &ExitVehicle, cell: usize) -> (bool, f64) {
         let run = self.run(vehicle, cell);
-        let criticality = match (run.outcome.is_failure(), run.lane_change) {
-            (true, _) => 0.0,
-            (false, Some((_, p))) => ((self.world.exit - p) / self.world.exit).clamp(0.0, 1.0),
-            (false, None) => 1.0,
-        };
-        (run.outcome.is_failure(), criticality)
+        (run.outcome.is_failure(), self.run_criticality(&run))
     }
 
     fn external_world(&self) -> serde_json::Value {
@@ -199,12 +205,21 @@ impl Case for HighwayExit {
         vut: &mut dyn ExternalVehicle,
         cell: usize,
     ) -> Result<bool, DriverError> {
+        Ok(self.external_step_event_and_criticality(vut, cell)?.0)
+    }
+
+    /// The case's loop sees where the program changes lanes.
+    fn external_step_event_and_criticality(
+        &self,
+        vut: &mut dyn ExternalVehicle,
+        cell: usize,
+    ) -> Result<(bool, Option<f64>), DriverError> {
         let run = simulation::run_with(
             &self.world,
             &mut external::ExternalExitDriver { vut },
             self.scenario(cell),
         )?;
-        Ok(run.outcome.is_failure())
+        Ok((run.outcome.is_failure(), Some(self.run_criticality(&run))))
     }
 
     fn evaluate_surrogate(&self, surrogate: &ExitVehicle, cell: usize) -> SurrogateEvaluation {

@@ -84,7 +84,18 @@ fn adaptive_campaigns_cover_where_the_search_reaches_every_failure() {
              ratio {ratio:.0}), supports holding 95 % of the failure mass {found}",
             median_tests(&runs)
         );
-        assert!(coverage >= 0.87, "{surrogate} → {vut}: coverage {coverage}");
+        // The target is coverage ≥ 0.87 at c = 0.9 (issue 21). Over 200
+        // seeds a pairing that meets it exactly shows less than 0.87 half
+        // the time, so the check allows its sampling error: it fails one
+        // time in a hundred for a pairing at the target, and almost surely
+        // for one far below it (a plain library campaign: 0.05–0.36).
+        // FVDM → IDM, the closest, covers 0.883 over 1,000 seeds
+        // (docs/adaptive-design.md).
+        let floor = 0.87 - 2.33 * (0.87f64 * 0.13 / 200.0).sqrt();
+        assert!(
+            coverage >= floor,
+            "{surrogate} → {vut}: coverage {coverage} below {floor:.3}"
+        );
         assert!(ratio >= least_ratio, "{surrogate} → {vut}: ratio {ratio}");
         assert!(found >= 0.85, "{surrogate} → {vut}: found {found}");
         // The estimate counts only estimation tests, each weighted by its

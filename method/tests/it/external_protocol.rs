@@ -169,6 +169,29 @@ fn agree(builtin: &dyn CampaignTests, program: &dyn CampaignTests, n: u64) -> us
     events
 }
 
+/// Runs the cells of `tests`' first `n` tests as an adaptive campaign's
+/// lease names them, on the built-in model and through the double: the same
+/// events, and in step mode the same criticality, which the case measures
+/// as it drives the program (in episode mode this double sends none).
+fn agree_on_cells(builtin: &dyn CampaignTests, program: &dyn CampaignTests, mode: &str, n: u64) {
+    let mut mirror = Mirror::default();
+    for index in 0..n {
+        let cell = builtin.planned(index).unwrap().cell;
+        let (event, criticality) = builtin.run_cell(index, cell, None).unwrap();
+        let (got, measured) = program.run_cell(index, cell, Some(&mut mirror)).unwrap();
+        assert_eq!(got, event, "test {index}");
+        match mode {
+            "step" => assert_eq!(
+                measured.map(f64::to_bits),
+                criticality.map(f64::to_bits),
+                "test {index}"
+            ),
+            _ => assert_eq!(measured, None),
+        }
+    }
+    assert_eq!(mirror.resets, n, "one reset per test");
+}
+
 #[test]
 fn cut_in_in_step_and_episode_mode_matches_the_builtin_model() {
     let case = open_case("cut-in", None, &ExposureSource::Builtin).unwrap();
@@ -192,6 +215,7 @@ fn cut_in_in_step_and_episode_mode_matches_the_builtin_model() {
         assert_eq!(program.external().unwrap().external, "mirror");
         let events = agree(builtin.as_ref(), program.as_ref(), 1500);
         assert!(events > 100, "{mode}: {events} events");
+        agree_on_cells(builtin.as_ref(), program.as_ref(), mode, 300);
     }
 }
 
@@ -217,6 +241,7 @@ fn highway_exit_in_step_and_episode_mode_matches_the_builtin_model() {
         let program = campaign(json!({"external": "mirror", "mode": mode}));
         let events = agree(builtin.as_ref(), program.as_ref(), 400);
         assert!(events > 5, "{mode}: {events} failures");
+        agree_on_cells(builtin.as_ref(), program.as_ref(), mode, 200);
     }
 }
 
