@@ -230,8 +230,8 @@ pub enum LibraryCommand {
 #[derive(Debug, Clone, Args)]
 pub struct CaseArgs {
     /// The case: `cut-in`, `highway-exit` or `car-following` (the offline
-    /// commands `library build`, `evaluate` and `exact` support cut-in only;
-    /// the service runs all three).
+    /// commands `library build` and `exact` support cut-in only, `evaluate`
+    /// cut-in and car-following; the service runs all three).
     #[arg(long, default_value = "cut-in")]
     pub case: String,
     /// An exposure table in the layout of the authors' cut-in table (row 0: range-rate
@@ -429,9 +429,15 @@ pub struct EvaluateArgs {
     /// baseline).
     #[arg(long, value_enum, default_value = "library")]
     pub method: EvaluateMethodArg,
-    /// The library file (methods `library` and `adaptive`).
-    #[arg(long, required_if_eq_any([("method", "library"), ("method", "adaptive")]))]
+    /// The library file (methods `library` and `adaptive` of grid cases).
+    #[arg(long)]
     pub library: Option<PathBuf>,
+    /// Car-following: the surrogate whose policy library is learned in
+    /// this process by dynamic programming (methods `library` and
+    /// `adaptive`; default `idm`). Grid cases take the surrogate of
+    /// `--library`.
+    #[arg(long)]
+    pub surrogate: Option<String>,
     #[command(flatten)]
     pub exploration: ExplorationArgs,
     #[command(flatten)]

@@ -599,17 +599,9 @@ impl<C: Case> Planner<'_, C> {
                         }
                     })
                     .collect();
-                // The rule of the estimation tests; the budget counts every test.
-                let estimation_rule = StoppingRule {
-                    max_tests: u64::MAX,
-                    ..*rule
-                };
-                let decided = state
-                    .fold
-                    .advance(&estimation_rule, rule.z(), to, &outcomes, None)
-                    .expect("bounded weights in index order");
-                if let Some(status) = decided {
-                    let used = planned.end() - (to - state.fold.indices);
+                if let Some((status, used)) =
+                    fold_estimation_stage(&mut state.fold, rule, planned.end(), to, &outcomes)
+                {
                     let support = self.support(&state.knowledge);
                     state.finished =
                         Some(state.spent.result(status, &state.fold, rule, used, support));
@@ -639,6 +631,28 @@ impl<C: Case> Planner<'_, C> {
             stage,
         });
     }
+}
+
+/// Folds an estimation stage's `outcomes` (estimation indices up to `to`)
+/// into `fold` under `rule`, whose budget counts every test and so is not
+/// the estimation tests' (they stop only by the rule). When the rule holds
+/// inside the stage, the decision and the campaign's indices used: the
+/// stage's end (`stage_end`) less the tests after the stop.
+pub(crate) fn fold_estimation_stage(
+    fold: &mut PrefixFold,
+    rule: &StoppingRule,
+    stage_end: u64,
+    to: u64,
+    outcomes: &[(u64, SparseOutcome)],
+) -> Option<(Decision, u64)> {
+    let estimation_rule = StoppingRule {
+        max_tests: u64::MAX,
+        ..*rule
+    };
+    let decided = fold
+        .advance(&estimation_rule, rule.z(), to, outcomes, None)
+        .expect("bounded weights in index order");
+    decided.map(|status| (status, stage_end - (to - fold.indices)))
 }
 
 /// Runs an adaptive campaign of built-in `vehicle` on `library` to `rule`.

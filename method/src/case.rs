@@ -75,18 +75,18 @@ pub trait Case: Sync {
         &self,
         vut: &mut dyn ExternalVehicle,
         cell: usize,
-    ) -> Result<bool, DriverError>;
+    ) -> Result<bool, DriverError> {
+        Ok(self.external_step_event_and_criticality(vut, cell)?.0)
+    }
 
     /// [`Case::external_step_event`] with the criticality of the run
-    /// ([`Case::criticality`]) where the case's loop measures it; `None`
-    /// where it does not.
+    /// ([`Case::criticality`]), which the case's loop measures as it drives
+    /// the program; `None` where it does not.
     fn external_step_event_and_criticality(
         &self,
         vut: &mut dyn ExternalVehicle,
         cell: usize,
-    ) -> Result<(bool, Option<f64>), DriverError> {
-        Ok((self.external_step_event(vut, cell)?, None))
-    }
+    ) -> Result<(bool, Option<f64>), DriverError>;
 
     /// [`Case::external_event`] with the run's criticality: measured by the
     /// case in step mode, reported by the program in episode mode

@@ -337,6 +337,18 @@ pub enum Decision {
     Exhausted,
 }
 
+impl Decision {
+    /// The name users read: `continue`, `converged` or `exhausted` (as
+    /// serialised).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Decision::Continue => "continue",
+            Decision::Converged => "converged",
+            Decision::Exhausted => "exhausted",
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -58,9 +58,11 @@ pub fn rule_of(req: &CreateCampaign) -> Result<StoppingRule, ApiError> {
     }
     if req.method == Method::Adaptive && SEQUENTIAL_CASES.contains(&req.case.as_str()) {
         return Err(bad(format!(
-            "method `adaptive` searches the cells of a grid case (cut-in, highway-exit); a {} \
-             campaign samples its scenarios while they run",
-            req.case
+            "method `adaptive` runs through the service on the grid cases (cut-in, \
+             highway-exit); a {} adaptive campaign probes the vehicle from grid states, which \
+             workers cannot be leased yet: run it in process with `tslg evaluate --case {} \
+             --method adaptive` (docs/adaptive-design.md)",
+            req.case, req.case
         )));
     }
     if req.guard_outside && SEQUENTIAL_CASES.contains(&req.case.as_str()) {

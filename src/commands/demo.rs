@@ -95,8 +95,8 @@ async fn drive(
         min_events: None,
         guard_outside: false,
     };
-    // Car-following samples its scenarios while they run: no cells for an
-    // adaptive campaign to search.
+    // A car-following adaptive campaign probes the vehicle from grid states,
+    // which the service cannot lease yet: it runs in process (tslg evaluate).
     let methods: &[Method] = if library.case == "car-following" {
         &[Method::Library, Method::Ndd]
     } else {

@@ -43,6 +43,16 @@ struct Search {
 
 pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
     check_epsilon(args.exploration.epsilon)?;
+    if args.case.case == "car-following" {
+        return super::evaluate_follow::run(args);
+    }
+    if args.surrogate.is_some() {
+        anyhow::bail!(
+            "--surrogate is for car-following, whose policy is learned in this process; a {} \
+             campaign takes the surrogate of its --library file",
+            args.case.case
+        );
+    }
     let library = match (args.method, &args.library) {
         (MethodArg::Library | MethodArg::Adaptive, None) => {
             anyhow::bail!("--library is required with --method library and adaptive")
@@ -183,7 +193,7 @@ fn report(
     }
     println!("method             {}", report.method);
     println!("vehicle under test {}", report.vut);
-    println!("status             {:?}", result.status);
+    println!("status             {}", result.status.as_str());
     if let Some(search) = &report.search {
         println!(
             "tests              {} ({} library, {} searching, {} estimating; {} stages)",
@@ -208,18 +218,7 @@ fn report(
     } else {
         println!("tests              {}", result.tests);
     }
-    println!("events             {}", result.events);
-    println!("estimate           {:.4e}", result.estimate);
-    println!(
-        "{:.0}% interval       [{:.4e}, {:.4e}]",
-        100.0 * rule.confidence,
-        result.ci_low,
-        result.ci_high
-    );
-    println!(
-        "relative half-width {:.4} (beta {})",
-        result.relative_half_width, rule.beta
-    );
+    print_estimate(&result, rule);
     println!(
         "exact P(A)         {:.4e} ({})",
         exact,
@@ -248,4 +247,20 @@ fn report(
         println!("warning: {warning}");
     }
     Ok(())
+}
+
+/// The events, estimate, interval and relative half-width of `result`.
+pub(super) fn print_estimate(result: &CampaignResult, rule: &tslg_method::estimator::StoppingRule) {
+    println!("events             {}", result.events);
+    println!("estimate           {:.4e}", result.estimate);
+    println!(
+        "{:.0}% interval       [{:.4e}, {:.4e}]",
+        100.0 * rule.confidence,
+        result.ci_low,
+        result.ci_high
+    );
+    println!(
+        "relative half-width {:.4} (beta {})",
+        result.relative_half_width, rule.beta
+    );
 }

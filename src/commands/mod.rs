@@ -3,6 +3,7 @@
 pub mod campaign;
 pub mod demo;
 pub mod evaluate;
+pub mod evaluate_follow;
 pub mod exact;
 pub mod held_out;
 pub mod library;

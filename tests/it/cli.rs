@@ -170,6 +170,98 @@ fn evaluate_adaptive_finds_what_the_idm_library_misses_of_the_fvdm() {
 }
 
 #[test]
+fn evaluate_runs_car_following_campaigns_in_process_and_adapts_the_policy() {
+    let lagged = r#"{"model": "acc-aeb", "actuator_lag": 0.3}"#;
+    let run = |method: &str| -> serde_json::Value {
+        let o = tslg(&[
+            "evaluate",
+            "--case",
+            "car-following",
+            "--preset",
+            "risky",
+            "--method",
+            method,
+            "--vut",
+            lagged,
+            "--seed",
+            "3",
+            "--json",
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        serde_json::from_slice(&o.stdout).unwrap()
+    };
+    let adaptive = run("adaptive");
+    assert_eq!(adaptive["method"], "adaptive");
+    assert_eq!(adaptive["status"], "converged");
+    assert_eq!(adaptive["vut"]["actuator_lag"], 0.3);
+    let learning = &adaptive["learning"];
+    let (library, probes) = (
+        learning["library_tests"].as_u64().unwrap(),
+        learning["probes"].as_u64().unwrap(),
+    );
+    assert_eq!(library, 100);
+    assert!(probes > 1_000, "{adaptive}");
+    assert_eq!(
+        adaptive["indices"].as_u64().unwrap(),
+        library + probes + adaptive["tests"].as_u64().unwrap()
+    );
+    // The vehicle's driving, probes included, is far below the NDD
+    // baseline's 3.8 × 10⁵ tests.
+    let driving = learning["test_equivalents"].as_f64().unwrap();
+    assert!(
+        driving > probes as f64 / 30.0 && driving < 38_000.0,
+        "{adaptive}"
+    );
+    let ndd = run("ndd");
+    assert_eq!(ndd["status"], "converged");
+    assert!(ndd["learning"].is_null());
+    assert!(ndd["tests"].as_u64().unwrap() > 50_000, "{ndd}");
+    // Both estimates are near the vehicle's P(A) ≈ 1.79e-4 (NDD, 2 × 10⁷
+    // tests): within three half-widths, which fails about one seed in 10³.
+    for r in [&adaptive, &ndd] {
+        let (estimate, half_width) = (
+            r["estimate"].as_f64().unwrap(),
+            r["half_width"].as_f64().unwrap(),
+        );
+        assert!((estimate - 1.79e-4).abs() < 3.0 * half_width, "{r}");
+    }
+    // What the grid cases take is refused with the reason.
+    for (args, expected) in [
+        (
+            vec!["--library", "x.json"],
+            "--library: a car-following library",
+        ),
+        (
+            vec!["--guard-outside"],
+            "--guard-outside applies to the grid cases",
+        ),
+        (vec!["--preset", "fast"], "presets are paper"),
+        (vec!["--surrogate", "nobody"], "invalid surrogate"),
+    ] {
+        let mut all = vec!["evaluate", "--case", "car-following", "--vut", "idm"];
+        all.extend(args);
+        let o = tslg(&all);
+        assert!(!o.status.success());
+        assert!(stderr(&o).contains(expected), "{}", stderr(&o));
+    }
+    let o = tslg(&[
+        "evaluate",
+        "--surrogate",
+        "idm",
+        "--vut",
+        "idm",
+        "--method",
+        "ndd",
+    ]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("--surrogate is for car-following"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+#[test]
 fn validate_compares_the_methods_in_one_csv() {
     let dir = tempfile::tempdir().unwrap();
     // The FVDM again, as an external program in step mode (examples/fvdm_vut.rs):

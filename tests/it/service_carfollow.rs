@@ -103,6 +103,24 @@ async fn car_following_library_campaigns_agree_with_ndd_baselines_with_far_fewer
         "{problem}"
     );
 
+    // An adaptive car-following campaign probes the vehicle from grid
+    // states, which workers cannot be leased yet: refused with where it runs.
+    let refused = http
+        .post(format!("{}/api/v1/campaigns", server.url))
+        .json(&request(Method::Adaptive, library.id, "idm", 7))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(refused.status(), reqwest::StatusCode::UNPROCESSABLE_ENTITY);
+    let problem: serde_json::Value = refused.json().await.unwrap();
+    assert!(
+        problem["detail"]
+            .as_str()
+            .unwrap()
+            .contains("tslg evaluate --case car-following --method adaptive"),
+        "{problem}"
+    );
+
     // The surrogate, and the ACC+AEB: another controller, whose failures
     // the IDM's library covers (docs/statistics.md has the coverage of both).
     for vut in ["idm", "acc-aeb"] {

@@ -4,6 +4,7 @@
 //! `Q(s, u)` over 45,885 states and 31 actions, learned for a surrogate
 //! model, and tests sample the BV's actions from it while they run.
 
+pub mod adaptive;
 pub mod case;
 mod exposure_model;
 pub mod file;
@@ -16,7 +17,7 @@ pub use case::{CarFollowing, FollowPreset, PolicySolver};
 pub use exposure_model::FollowExposureModel;
 pub use file::PolicyLibraryFile;
 pub use library::{dynamic_programming, temporal_difference, PolicyLibrary, Transitions, Zone};
-pub use sampling::{FollowSampler, FollowTest};
+pub use sampling::{FollowDecision, FollowSampler, FollowTest};
 pub use states::StateGrid;
 pub use world::{FollowState, FollowWorld};
 

@@ -20,7 +20,7 @@
 use super::exposure_model::FollowExposureModel;
 use super::library::PolicyLibrary;
 use super::states::StateGrid;
-use super::world::{advance_with, FollowWorld, Odometer};
+use super::world::{advance_with, FollowState, FollowWorld, Odometer};
 use crate::sampling::{test_rng, OutsideSpread, SamplingError};
 use crate::vehicle::{FollowDriver, VehicleModel};
 use rand::Rng;
@@ -44,6 +44,17 @@ impl FollowTest {
     pub fn weight(&self) -> f64 {
         self.log_weight.exp()
     }
+}
+
+/// One BV decision of a test ([`FollowSampler::run_traced`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FollowDecision {
+    /// The continuous state the decision was taken in.
+    pub from: FollowState,
+    /// The BV's action (index into the world's actions).
+    pub action: usize,
+    /// The state one decision later; `None` for an accident.
+    pub to: Option<FollowState>,
 }
 
 /// Draws `k` with probability `p[k]` by inverse CDF (31 actions: a scan is
@@ -174,6 +185,19 @@ impl FollowSampler {
         seed: u64,
         index: u64,
     ) -> Result<FollowTest, D::Error> {
+        self.run_traced(driver, seed, index, |_| {})
+    }
+
+    /// [`FollowSampler::run_with`], telling `observe` each BV decision as
+    /// it is taken: where the vehicle was, what the BV did, where the
+    /// vehicle ended (what an adaptive campaign learns the vehicle from).
+    pub fn run_traced<D: FollowDriver>(
+        &self,
+        driver: &mut D,
+        seed: u64,
+        index: u64,
+        mut observe: impl FnMut(FollowDecision),
+    ) -> Result<FollowTest, D::Error> {
         let mut rng = test_rng(seed, index);
         let s1 = self.initial_alias.sample(&mut rng);
         let mut log_weight = (self.initial[s1] / self.initial_q[s1]).ln();
@@ -209,7 +233,13 @@ impl FollowSampler {
                 None => draw_index(ndd, r),
             };
             let action = self.world.action(k);
-            match advance_with(&self.world, x, action, driver, &mut odometer)? {
+            let next = advance_with(&self.world, x, action, driver, &mut odometer)?;
+            observe(FollowDecision {
+                from: x,
+                action: k,
+                to: next,
+            });
+            match next {
                 None => {
                     return Ok(FollowTest {
                         accident: true,

@@ -166,14 +166,6 @@ impl Case for CutIn {
         world
     }
 
-    fn external_step_event(
-        &self,
-        vut: &mut dyn ExternalVehicle,
-        cell: usize,
-    ) -> Result<bool, DriverError> {
-        Ok(self.external_step_event_and_criticality(vut, cell)?.0)
-    }
-
     /// The case's loop measures mnpETTC as it drives the program.
     fn external_step_event_and_criticality(
         &self,

@@ -200,14 +200,6 @@ impl Case for HighwayExit {
         world
     }
 
-    fn external_step_event(
-        &self,
-        vut: &mut dyn ExternalVehicle,
-        cell: usize,
-    ) -> Result<bool, DriverError> {
-        Ok(self.external_step_event_and_criticality(vut, cell)?.0)
-    }
-
     /// The case's loop sees where the program changes lanes.
     fn external_step_event_and_criticality(
         &self,

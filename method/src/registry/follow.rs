@@ -432,8 +432,10 @@ impl CampaignTests for FollowCampaign {
 /// Why car-following has no adaptive campaigns (docs/adaptive-design.md).
 fn no_adaptive() -> CaseError {
     CaseError::Unsupported(
-        "adaptive campaigns search the cells of a grid case (cut-in, highway-exit); \
-         car-following samples its scenarios while they run"
+        "adaptive campaigns run through the service on the grid cases (cut-in, \
+         highway-exit); a car-following adaptive campaign probes the vehicle from grid states, \
+         which workers cannot be leased yet: run it in process with `tslg evaluate --case \
+         car-following --method adaptive`"
             .into(),
     )
 }

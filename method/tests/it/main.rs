@@ -5,6 +5,7 @@
 mod adaptive;
 mod common;
 
+mod carfollow_adaptive;
 mod carfollow_library;
 mod cutin_paper;
 mod external_protocol;
