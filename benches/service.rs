@@ -15,8 +15,9 @@ use tslg_api::{
 };
 use tslg_client::Client;
 use tslg_method::campaign::run_indexed_campaign;
+use tslg_method::cases::open_case;
 use tslg_method::estimator::{default_n_min, StoppingRule, MIN_BETA};
-use tslg_method::registry::{open_case, ExposureSource};
+use tslg_method::registry::ExposureSource;
 
 fn request(tests: u64) -> CreateCampaign {
     CreateCampaign {

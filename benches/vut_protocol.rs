@@ -11,7 +11,8 @@
 
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
-use tslg_method::registry::{open_case, CampaignTests, ExposureSource};
+use tslg_method::cases::open_case;
+use tslg_method::registry::{CampaignTests, ExposureSource};
 use tslg_method::sampling::{OutsideSpread, Split};
 use tslg_worker::external::{Program, ProgramRun, ProgramSettings, ProgramSpec};
 

@@ -4,7 +4,7 @@
 use crate::{CaseArgs, RuleArgs};
 use anyhow::{bail, Context};
 use std::path::Path;
-use tslg_method::cutin::{CutIn, CutInPreset};
+use tslg_method::cases::cutin::{CutIn, CutInPreset};
 use tslg_method::estimator::StoppingRule;
 use tslg_method::library::Library;
 use tslg_method::vehicle::VehicleModel;
@@ -12,13 +12,7 @@ use tslg_method::vehicle::VehicleModel;
 /// The cut-in case on the requested exposure and preset. A table whose sum
 /// was off 1 by a little is renormalised, and the user is told.
 pub fn load_case(args: &CaseArgs) -> anyhow::Result<CutIn> {
-    if !tslg_method::registry::CASES.contains(&args.case.as_str()) {
-        bail!(
-            "unknown case `{}`; known cases: {}",
-            args.case,
-            tslg_method::registry::CASES.join(", ")
-        );
-    }
+    tslg_method::cases::descriptor(&args.case)?;
     if args.case != "cut-in" {
         bail!(
             "case `{}` is not supported by the offline commands (library build, evaluate, exact), which run cut-in only; every case runs through the service (tslg demo --case, tslg campaign start)",

@@ -18,7 +18,7 @@ use std::hint::black_box;
 use std::time::Instant;
 use tslg_method::adaptive::{AdaptiveSettings, Observation, Planner, Stage};
 use tslg_method::case::Case;
-use tslg_method::cutin::{CutIn, CutInPreset};
+use tslg_method::cases::cutin::{CutIn, CutInPreset};
 use tslg_method::library::{build_library, LibraryRequest, SearchMethod, Threshold};
 use tslg_method::vehicle::VehicleModel;
 

@@ -4,7 +4,7 @@
 //! difference. Run with `cargo bench -p tslg-method --bench carfollow`.
 
 use std::time::Instant;
-use tslg_method::carfollow::{
+use tslg_method::cases::carfollow::{
     dynamic_programming, temporal_difference, FollowExposureModel, FollowState, FollowWorld,
     StateGrid, Transitions,
 };
@@ -13,7 +13,7 @@ fn main() {
     let world = FollowWorld::paper();
     let grid = StateGrid::paper();
     let exposure = FollowExposureModel::default();
-    let idm = tslg_method::carfollow::highway_vehicle("idm").expect("built-in");
+    let idm = tslg_method::cases::carfollow::highway_vehicle("idm").expect("built-in");
     println!("| measurement | value |");
     println!("|---|---|");
     let t = Instant::now();

@@ -1,4 +1,4 @@
-//! Adaptive campaigns on car-following (`tslg_method::carfollow::adaptive`)
+//! Adaptive campaigns on car-following (`tslg_method::cases::carfollow::adaptive`)
 //! against the library campaign they repair, the ceiling of any adaptation
 //! of the Q-values, and learning from the tests' trajectories alone.
 //!
@@ -26,12 +26,12 @@ use rayon::prelude::*;
 use std::sync::Arc;
 use std::time::Instant;
 use tslg_method::campaign::{mean_weight, seeded_coverage};
-use tslg_method::carfollow::adaptive::{
+use tslg_method::cases::carfollow::adaptive::{
     run_follow_adaptive, FollowAdaptiveSettings, FollowPlanner,
 };
-use tslg_method::carfollow::case::DP_TOLERANCE;
-use tslg_method::carfollow::library::Next;
-use tslg_method::carfollow::{
+use tslg_method::cases::carfollow::case::DP_TOLERANCE;
+use tslg_method::cases::carfollow::library::Next;
+use tslg_method::cases::carfollow::{
     dynamic_programming, CarFollowing, FollowDecision, FollowPreset, FollowSampler, PolicyLibrary,
     PolicySolver, Transitions, Zone,
 };

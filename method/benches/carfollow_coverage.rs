@@ -9,7 +9,7 @@
 use std::sync::Arc;
 use std::time::Instant;
 use tslg_method::campaign::{mean_weight, seeded_coverage};
-use tslg_method::carfollow::{
+use tslg_method::cases::carfollow::{
     highway_vehicle, CarFollowing, FollowPreset, FollowSampler, PolicySolver,
 };
 use tslg_method::estimator::StoppingRule;

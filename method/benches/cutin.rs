@@ -8,7 +8,7 @@ mod common;
 use std::hint::black_box;
 use tslg_method::campaign::run_campaign;
 use tslg_method::case::Case;
-use tslg_method::cutin::{CutIn, CutInPreset};
+use tslg_method::cases::cutin::{CutIn, CutInPreset};
 use tslg_method::estimator::StoppingRule;
 use tslg_method::library::{build_library, LibraryRequest, SearchMethod, Threshold};
 use tslg_method::sampling::{LibraryDistribution, OutsideSpread, Split, TestDistribution};

@@ -9,8 +9,8 @@
 use std::hint::black_box;
 use std::time::Instant;
 use tslg_method::case::Case;
+use tslg_method::cases::highway::{ExitVehicle, HighwayExit, HighwayPreset};
 use tslg_method::exact::{event_cells, exact_report};
-use tslg_method::highway::{ExitVehicle, HighwayExit, HighwayPreset};
 use tslg_method::library::{build_library, Library, LibraryRequest, SearchMethod, Threshold};
 use tslg_method::sampling::{LibraryDistribution, OutsideSpread, Split};
 

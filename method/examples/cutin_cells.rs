@@ -11,7 +11,7 @@
 
 use std::io::Write;
 use tslg_method::case::Case;
-use tslg_method::cutin::{CutIn, CutInPreset};
+use tslg_method::cases::cutin::{CutIn, CutInPreset};
 use tslg_method::library::{build_library, LibraryRequest, SearchMethod, Threshold};
 use tslg_method::vehicle::VehicleModel;
 

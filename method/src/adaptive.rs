@@ -723,7 +723,7 @@ impl Spent {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cutin::{CutIn, CutInPreset};
+    use crate::cases::cutin::{CutIn, CutInPreset};
     use crate::library::{build_library, LibraryRequest, SearchMethod, Threshold};
     use crate::vehicle::VehicleModel;
     use rand::{Rng, SeedableRng};

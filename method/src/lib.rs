@@ -5,15 +5,14 @@
 
 pub mod adaptive;
 pub mod campaign;
-pub mod carfollow;
 pub mod case;
-pub mod cutin;
+pub mod cases;
 pub mod density;
+pub mod descriptor;
 pub mod estimator;
 pub mod exact;
 pub mod external;
 pub mod grid;
-pub mod highway;
 pub mod library;
 pub mod mass;
 pub mod ndd_table;

@@ -5,10 +5,11 @@ use crate::state::AppState;
 use crate::store::libraries::{self, Built};
 use std::time::Instant;
 use tslg_api::{CreateLibrary, SearchRequest, ThresholdRequest};
-use tslg_method::carfollow::PolicySolver;
+use tslg_method::cases::carfollow::PolicySolver;
+use tslg_method::cases::open_case;
 use tslg_method::library::{SearchMethod, Threshold};
 use tslg_method::progress::Progress;
-use tslg_method::registry::{open_case, BuildRequest, BuiltLibrary, LibrarySearch};
+use tslg_method::registry::{BuildRequest, BuiltLibrary, LibrarySearch};
 
 /// The method's threshold and search from the request, validated; what the
 /// request leaves out is the case's default.

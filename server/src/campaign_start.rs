@@ -12,29 +12,39 @@ use std::sync::Arc;
 use tslg_api::{CampaignStatus, CreateCampaign, LibraryStatus, Method, EXACT_MAX_SCENARIOS};
 use tslg_client::wire;
 use tslg_method::adaptive::AdaptiveSettings;
+use tslg_method::cases::open_case;
+use tslg_method::cases::{descriptor, descriptors};
 use tslg_method::estimator::{default_n_min, StoppingRule, DEFAULT_MIN_EVENTS};
 use tslg_method::external::ExternalVut;
-use tslg_method::registry::{
-    exploring_share, open_case, CampaignTests, CaseError, ExposureSource, ScenarioCase,
-    SEQUENTIAL_CASES,
-};
+use tslg_method::registry::{CampaignTests, CaseError, ExposureSource, ScenarioCase};
 use tslg_method::sampling::{check_epsilon, OutsideSpread, Split};
 
 fn bad(message: impl Into<String>) -> ApiError {
     ApiError::Unprocessable(message.into())
 }
 
+/// The names of the grid cases, comma-separated.
+fn grid_cases() -> String {
+    descriptors()
+        .iter()
+        .filter(|d| d.is_grid())
+        .map(|d| d.name)
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 /// The stopping rule a request asks for, with the defaults filled in, and
 /// every number checked against the method's ranges; pure.
 pub fn rule_of(req: &CreateCampaign) -> Result<StoppingRule, ApiError> {
     check_name("case", &req.case, 64)?;
+    let case = descriptor(&req.case).map_err(|e| bad(e.to_string()))?;
     check_epsilon(req.epsilon).map_err(|e| bad(e.to_string()))?;
     let rule = StoppingRule {
         beta: req.beta,
         confidence: req.confidence,
         n_min: req.n_min.unwrap_or_else(|| {
             default_n_min(
-                exploring_share(&req.case, req.method == Method::Library, req.epsilon),
+                case.exploring_share(req.method == Method::Library, req.epsilon),
                 req.max_tests,
             )
         }),
@@ -56,19 +66,22 @@ pub fn rule_of(req: &CreateCampaign) -> Result<StoppingRule, ApiError> {
              it (docs/statistics.md, \"Adaptive campaigns\")",
         ));
     }
-    if req.method == Method::Adaptive && SEQUENTIAL_CASES.contains(&req.case.as_str()) {
+    if req.method == Method::Adaptive && !case.is_grid() {
         return Err(bad(format!(
-            "method `adaptive` runs through the service on the grid cases (cut-in, \
-             highway-exit); a {} adaptive campaign probes the vehicle from grid states, which \
-             workers cannot be leased yet: run it in process with `tslg evaluate --case {} \
-             --method adaptive` (docs/adaptive-design.md)",
-            req.case, req.case
+            "method `adaptive` runs through the service on the grid cases ({}); a {} adaptive \
+             campaign probes the vehicle from grid states, which workers cannot be leased yet: \
+             run it in process with `tslg evaluate --case {} --method adaptive` \
+             (docs/adaptive-design.md)",
+            grid_cases(),
+            req.case,
+            req.case
         )));
     }
-    if req.guard_outside && SEQUENTIAL_CASES.contains(&req.case.as_str()) {
+    if req.guard_outside && !case.is_grid() {
         return Err(bad(format!(
-            "guard_outside applies to the grid cases (cut-in, highway-exit): a {} campaign \
-             explores per decision, and no bound on its outside mass is defined",
+            "guard_outside applies to the grid cases ({}): a {} campaign explores per \
+             decision, and no bound on its outside mass is defined",
+            grid_cases(),
             req.case
         )));
     }

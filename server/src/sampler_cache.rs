@@ -11,7 +11,8 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use tslg_api::Method;
 use tslg_method::adaptive::AdaptiveSettings;
-use tslg_method::registry::{open_case, CampaignTests};
+use tslg_method::cases::open_case;
+use tslg_method::registry::CampaignTests;
 
 #[derive(Default)]
 pub struct SamplerCache {

@@ -8,7 +8,6 @@ use tslg_method::adaptive::{run_adaptive, AdaptiveSettings};
 use tslg_method::campaign::{run_campaign, CampaignResult};
 use tslg_method::case::Case;
 use tslg_method::exact::{event_cells, event_probability};
-use tslg_method::registry::exploring_share;
 use tslg_method::sampling::{LibraryDistribution, NddDistribution, TestDistribution};
 use tslg_method::vehicle::VehicleModel;
 use tslg_method::warnings::{warnings, Dialect, WarningContext};
@@ -79,11 +78,8 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
     let vut = parse_vehicle(&args.vut, "vehicle under test")?;
     let rule = stopping_rule(
         &args.rule,
-        exploring_share(
-            &args.case.case,
-            args.method == MethodArg::Library,
-            args.exploration.epsilon,
-        ),
+        tslg_method::cases::descriptor(&args.case.case)?
+            .exploring_share(args.method == MethodArg::Library, args.exploration.epsilon),
     )?;
     let (result, search) = if args.method == MethodArg::Adaptive {
         let library = library.as_ref().expect("read above for --method adaptive");
@@ -114,7 +110,7 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
 /// A library or NDD campaign of `vut`.
 fn sampled(
     args: &EvaluateArgs,
-    case: &tslg_method::cutin::CutIn,
+    case: &tslg_method::cases::cutin::CutIn,
     vut: &VehicleModel,
     rule: &tslg_method::estimator::StoppingRule,
     library: Option<&tslg_method::library::Library>,
@@ -158,7 +154,7 @@ fn sampled(
 
 fn report(
     args: &EvaluateArgs,
-    case: &tslg_method::cutin::CutIn,
+    case: &tslg_method::cases::cutin::CutIn,
     vut: &VehicleModel,
     rule: &tslg_method::estimator::StoppingRule,
     result: CampaignResult,

@@ -9,10 +9,10 @@ use anyhow::Context;
 use serde::Serialize;
 use std::sync::Arc;
 use tslg_method::campaign::{run_indexed_campaign, CampaignResult};
-use tslg_method::carfollow::adaptive::{
+use tslg_method::cases::carfollow::adaptive::{
     run_follow_adaptive, FollowAdaptiveSettings, FollowPlanner,
 };
-use tslg_method::carfollow::{CarFollowing, FollowPreset, FollowSampler, PolicySolver};
+use tslg_method::cases::carfollow::{CarFollowing, FollowPreset, FollowSampler, PolicySolver};
 use tslg_method::sampling::OutsideSpread;
 use tslg_method::vehicle::VehicleModel;
 use tslg_method::warnings::{warnings, Dialect, WarningContext};

@@ -5,7 +5,7 @@ use crate::inputs::{check_epsilon, load_case, parse_vehicle};
 use crate::{CaseArgs, ExactArgs};
 use anyhow::Context;
 use tslg_method::case::Case;
-use tslg_method::cutin::CutIn;
+use tslg_method::cases::cutin::CutIn;
 use tslg_method::estimator::{z_for_confidence, StoppingRule};
 use tslg_method::exact::exact_report;
 use tslg_method::library::{build_library, LibraryRequest, SearchMethod, Threshold};

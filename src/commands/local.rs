@@ -9,8 +9,9 @@ use std::path::{Path, PathBuf};
 use tslg_api::{CampaignView, CreateLibrary, ExposureRequest, LibraryStatus, LibraryView, Outside};
 use tslg_client::wire::exposure_source;
 use tslg_client::Client;
+use tslg_method::cases::open_case;
 use tslg_method::exact::ExactReport;
-use tslg_method::registry::{open_case, CaseError};
+use tslg_method::registry::CaseError;
 use tslg_method::sampling::OutsideSpread;
 
 /// A local coordinator and its workers; the scratch database is removed on

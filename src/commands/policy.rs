@@ -5,7 +5,7 @@
 use crate::{PolicyArgs, SolverArg};
 use anyhow::{bail, Context};
 use std::time::Instant;
-use tslg_method::carfollow::{
+use tslg_method::cases::carfollow::{
     dynamic_programming, highway_vehicle, temporal_difference, FollowExposureModel, FollowState,
     FollowWorld, StateGrid, Transitions, Zone, FOLLOW_MODELS,
 };

@@ -21,12 +21,12 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use tslg_method::adaptive::AdaptiveSettings;
 use tslg_method::campaign::{run_campaign_tests, CampaignResult};
+use tslg_method::cases::open_case;
 use tslg_method::estimator::{default_n_min, Decision, StoppingRule};
 use tslg_method::library::SearchMethod;
 use tslg_method::prefix::PrefixFold;
 use tslg_method::registry::{
-    exploring_share, open_case, BuildRequest, CampaignTests, CaseError, ExposureSource,
-    LibrarySearch, ScenarioCase,
+    BuildRequest, CampaignTests, CaseError, ExposureSource, LibrarySearch, ScenarioCase,
 };
 use tslg_method::sampling::{OutsideSpread, Split};
 
@@ -361,7 +361,7 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
             let guard_outside = method == ValidateMethod::Guarded;
             // An adaptive campaign's n_min counts its estimation tests.
             let share = (method != ValidateMethod::Adaptive)
-                .then(|| exploring_share(case_name, true, epsilon))
+                .then(|| case.descriptor().exploring_share(true, epsilon))
                 .flatten();
             let n_mins = match args.n_min.as_slice() {
                 [] => vec![default_n_min(share, args.max_tests)],

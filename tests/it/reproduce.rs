@@ -3,10 +3,11 @@
 
 use std::collections::HashMap;
 use std::process::Command;
+use tslg_method::cases::open_case;
 use tslg_method::estimator::z_for_confidence;
 use tslg_method::exact::expected_ndd_tests;
 use tslg_method::library::SearchMethod;
-use tslg_method::registry::{open_case, BuildRequest, ExposureSource, LibrarySearch};
+use tslg_method::registry::{BuildRequest, ExposureSource, LibrarySearch};
 
 /// The CSV as one map per line, keyed by the header.
 fn records(csv: &str) -> Vec<HashMap<String, String>> {

@@ -10,9 +10,10 @@ use crate::support::*;
 use std::time::{Duration, Instant};
 use tslg_api::{CampaignStatus, CampaignView, CreateCampaign, Method};
 use tslg_method::adaptive::{AdaptiveResult, AdaptiveSettings};
+use tslg_method::cases::open_case;
 use tslg_method::estimator::{default_n_min, StoppingRule};
 use tslg_method::library::SearchMethod;
-use tslg_method::registry::{open_case, BuildRequest, ExposureSource, LibrarySearch};
+use tslg_method::registry::{BuildRequest, ExposureSource, LibrarySearch};
 
 /// The same adaptive campaign in this process, on the IDM's exhaustive
 /// library of the built-in cut-in.

@@ -6,7 +6,8 @@
 use crate::support::*;
 use std::time::Duration;
 use tslg_api::{CampaignStatus, CreateCampaign, CreateLibrary, Method, Outside};
-use tslg_method::registry::{open_case, ExposureSource};
+use tslg_method::cases::open_case;
+use tslg_method::registry::ExposureSource;
 
 fn exact(vut: &serde_json::Value) -> f64 {
     open_case("highway-exit", Some("coarse"), &ExposureSource::Builtin)

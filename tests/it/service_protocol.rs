@@ -10,8 +10,9 @@ use std::time::Duration;
 use tslg_api::{
     CampaignStatus, EventResult, Lease, LeaseFence, LeaseRequest, Method, ResultAck, ResultReport,
 };
+use tslg_method::cases::open_case;
 use tslg_method::library::SearchMethod;
-use tslg_method::registry::{open_case, BuildRequest, ExposureSource, LibrarySearch};
+use tslg_method::registry::{BuildRequest, ExposureSource, LibrarySearch};
 
 /// `worker`'s report on `lease` (its attempt and key) of `from..to`.
 fn report(worker: &str, lease: &Lease, from: u64, to: u64, events: &[EventResult]) -> ResultReport {
@@ -313,7 +314,7 @@ async fn bad_requests_get_precise_problems_and_the_server_keeps_serving() {
         (
             with("case", json!("lane-keep")),
             StatusCode::UNPROCESSABLE_ENTITY,
-            "library 1 was built for case `cut-in`, not `lane-keep`",
+            "unknown case `lane-keep`; known cases: cut-in, highway-exit, car-following",
         ),
         (
             with("vut", json!({"model": "tesla"})),

@@ -11,7 +11,8 @@ use std::path::Path;
 use std::time::{Duration, Instant};
 use tslg_api::{CampaignStatus, EventResult, Lease, LeaseRequest, Method, ResultReport};
 use tslg_client::{CallError, Client};
-use tslg_method::registry::{open_case, CampaignTests, ExposureSource};
+use tslg_method::cases::open_case;
+use tslg_method::registry::{CampaignTests, ExposureSource};
 
 fn ask(worker: &str, offers: &[&str]) -> LeaseRequest {
     LeaseRequest {

@@ -6,7 +6,8 @@ use std::collections::HashMap;
 use std::sync::Arc;
 use tslg_api::{CampaignPlan, Method};
 use tslg_client::{wire, CallError, Client};
-use tslg_method::registry::{open_case, CampaignTests};
+use tslg_method::cases::open_case;
+use tslg_method::registry::CampaignTests;
 
 /// What the worker needs to run any test of one campaign.
 pub struct PreparedCampaign {

@@ -4,8 +4,12 @@
 mod exhaustive;
 mod file;
 mod multistart;
+mod policy_solver;
+mod search;
 
 pub use file::LibraryFileError;
+pub use policy_solver::PolicySolver;
+pub use search::LibrarySearch;
 
 use crate::case::Case;
 use crate::grid::Grid;

@@ -11,6 +11,7 @@ use super::{
 };
 use crate::adaptive::{run_adaptive, AdaptiveError, AdaptiveResult, AdaptiveSettings, Planner};
 use crate::case::Case;
+use crate::descriptor::CaseDescriptor;
 use crate::estimator::{z_for_confidence, StoppingRule};
 use crate::exact::{event_cells, event_probability, exact_report, ExactReport};
 use crate::external::{DriverError, ExternalVehicle, ExternalVut, TestStart};
@@ -27,9 +28,10 @@ use std::sync::{Arc, OnceLock};
 /// The media type of the JSON library file.
 const LIBRARY_MEDIA_TYPE: &str = "application/json";
 
-pub(super) struct Registered<C> {
+pub(crate) struct Registered<C> {
     case: Arc<C>,
     preset: String,
+    descriptor: CaseDescriptor,
 }
 
 impl<C> Registered<C>
@@ -37,10 +39,11 @@ where
     C: Case,
     C::Vehicle: DeserializeOwned,
 {
-    pub(super) fn new(case: C, preset: &str) -> Self {
+    pub(crate) fn new(case: C, preset: &str, descriptor: CaseDescriptor) -> Self {
         Self {
             case: Arc::new(case),
             preset: preset.to_owned(),
+            descriptor,
         }
     }
 
@@ -77,10 +80,10 @@ where
 
     fn search(&self, request: &BuildRequest) -> Result<SearchMethod, CaseError> {
         match request.search {
-            None => Ok(SearchMethod::Multistart {
-                starts: 50,
-                seed: 0,
-            }),
+            None => match self.descriptor.default_search {
+                LibrarySearch::Cells(method) => Ok(method),
+                LibrarySearch::Policy(_) => unreachable!("a grid case's default searches cells"),
+            },
             Some(LibrarySearch::Cells(method)) => Ok(method),
             Some(LibrarySearch::Policy(_)) => Err(CaseError::Request {
                 case: self.case.name(),
@@ -117,8 +120,8 @@ where
         self.case.grid().len()
     }
 
-    fn default_outside(&self) -> OutsideSpread {
-        OutsideSpread::Uniform
+    fn descriptor(&self) -> &CaseDescriptor {
+        &self.descriptor
     }
 
     fn normalise_vehicle(&self, spec: &serde_json::Value) -> Result<serde_json::Value, CaseError> {

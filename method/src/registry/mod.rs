@@ -6,44 +6,24 @@
 //! Adding a case means one arm in [`open_case`].
 
 mod adaptive_tests;
-mod cells;
-mod follow;
-mod picture;
-mod vut;
+pub(crate) mod cells;
+pub(crate) mod picture;
+pub(crate) mod vut;
 
 pub use picture::PictureMap;
 
 use crate::adaptive::{AdaptiveError, AdaptiveResult, AdaptiveSettings, TestResult};
-use crate::carfollow::case::{CarFollowing, FollowPreset, PolicySolver};
-use crate::carfollow::file::PolicyFileError;
-use crate::cutin::{CutIn, CutInError, CutInPreset};
+use crate::descriptor::CaseDescriptor;
 use crate::estimator::StoppingRule;
 use crate::exact::ExactReport;
 use crate::external::{DriverError, ExternalVehicle, ExternalVut};
-use crate::highway::{HighwayExit, HighwayPreset};
-use crate::library::{LibraryFileError, SearchMethod, Threshold};
+pub use crate::library::LibrarySearch;
+use crate::library::{LibraryFileError, Threshold};
 use crate::progress::Progress;
 use crate::sampling::{OutsideSpread, SamplingError, Split};
-use cells::Registered;
-use follow::FollowScenarioCase;
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 use thiserror::Error;
-
-/// Names of the cases [`open_case`] knows.
-pub const CASES: [&str; 3] = ["cut-in", "highway-exit", "car-following"];
-
-/// Cases whose tests sample their scenario while they run: a lease cannot
-/// list their scenarios in advance ([`CampaignTests::planned`] is `None`).
-pub const SEQUENTIAL_CASES: [&str; 1] = ["car-following"];
-
-/// The probability that one test of a campaign explores outside the
-/// library: ε for a library campaign of a grid case, `None` for the NDD and
-/// for the sequential cases (which explore in every decision). It sets the
-/// default `n_min` ([`crate::estimator::default_n_min`]).
-pub fn exploring_share(case: &str, library: bool, epsilon: f64) -> Option<f64> {
-    (library && !SEQUENTIAL_CASES.contains(&case)).then_some(epsilon)
-}
 
 /// Where a case's exposure `P(x)` comes from.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
@@ -64,8 +44,13 @@ pub enum ExposureSource {
 #[derive(Debug, Error, PartialEq)]
 pub enum CaseError {
     /// No case of that name.
-    #[error("unknown case `{0}`; known cases: {known}", known = CASES.join(", "))]
-    UnknownCase(String),
+    #[error("unknown case `{name}`; known cases: {known}")]
+    UnknownCase {
+        /// The name asked for.
+        name: String,
+        /// The cases there are, comma-separated.
+        known: String,
+    },
     /// No preset of that name for the case.
     #[error("{0}")]
     Preset(String),
@@ -96,9 +81,9 @@ pub enum CaseError {
     /// A grid library file that cannot be used.
     #[error(transparent)]
     Library(#[from] LibraryFileError),
-    /// A car-following policy file that cannot be used.
-    #[error(transparent)]
-    Policy(#[from] PolicyFileError),
+    /// A policy library file (car-following) that cannot be used.
+    #[error("{0}")]
+    PolicyFile(String),
     /// A test distribution that cannot be built.
     #[error(transparent)]
     Sampling(#[from] SamplingError),
@@ -114,15 +99,6 @@ pub enum CaseError {
     /// What this case does not do.
     #[error("{0}")]
     Unsupported(String),
-}
-
-/// How a library is searched or learned.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum LibrarySearch {
-    /// Over the cells of a grid case (cut-in, highway-exit).
-    Cells(SearchMethod),
-    /// Q-values of the car-following case.
-    Policy(PolicySolver),
 }
 
 /// A build request; what is `None` takes the case's default.
@@ -310,8 +286,12 @@ pub trait ScenarioCase: Send + Sync {
     fn exposure_fingerprint(&self) -> String;
     /// `N(X)`: the grid's scenarios (for car-following, its initial states).
     fn total_scenarios(&self) -> usize;
+    /// Everything the service and the command line know about the case.
+    fn descriptor(&self) -> &CaseDescriptor;
     /// How a campaign spreads ε when the request does not say.
-    fn default_outside(&self) -> OutsideSpread;
+    fn default_outside(&self) -> OutsideSpread {
+        self.descriptor().default_outside
+    }
     /// The vehicle specification validated and written out in full (every
     /// parameter with its value), as it is stored. An external program is
     /// `{"external": NAME, "mode": "step" | "episode"}`.
@@ -392,66 +372,3 @@ pub trait ScenarioCase: Send + Sync {
         confidence: f64,
     ) -> Result<ExactReport, CaseError>;
 }
-
-/// Opens `case` with `preset` (the case's default when `None`) on `exposure`.
-pub fn open_case(
-    case: &str,
-    preset: Option<&str>,
-    exposure: &ExposureSource,
-) -> Result<Arc<dyn ScenarioCase>, CaseError> {
-    let builtin_only = |case: &str| {
-        if let ExposureSource::Table { name, .. } = exposure {
-            return Err(CaseError::Exposure {
-                name: name.clone(),
-                reason: format!(
-                    "the {case} case has only its built-in exposure model \
-                     (docs/models.md); omit the table"
-                ),
-            });
-        }
-        Ok(())
-    };
-    match case {
-        "cut-in" => {
-            let preset: CutInPreset = match preset {
-                None => CutInPreset::default(),
-                Some(p) => p.parse().map_err(CaseError::Preset)?,
-            };
-            let opened = match exposure {
-                ExposureSource::Builtin => CutIn::builtin(preset),
-                ExposureSource::Table { name, text } => {
-                    CutIn::from_table(text, name.clone(), preset)
-                        .map(|(case, _)| case)
-                        .map_err(|e: CutInError| CaseError::Exposure {
-                            name: name.clone(),
-                            reason: e.to_string(),
-                        })?
-                }
-            };
-            Ok(Arc::new(Registered::new(opened, preset.name())))
-        }
-        "highway-exit" => {
-            let preset: HighwayPreset = match preset {
-                None => HighwayPreset::default(),
-                Some(p) => p.parse().map_err(CaseError::Preset)?,
-            };
-            builtin_only(case)?;
-            Ok(Arc::new(Registered::new(
-                HighwayExit::builtin(preset),
-                preset.name(),
-            )))
-        }
-        "car-following" => {
-            let preset: FollowPreset = match preset {
-                None => FollowPreset::default(),
-                Some(p) => p.parse().map_err(CaseError::Preset)?,
-            };
-            builtin_only(case)?;
-            Ok(Arc::new(FollowScenarioCase::new(CarFollowing::new(preset))))
-        }
-        other => Err(CaseError::UnknownCase(other.to_owned())),
-    }
-}
-
-#[cfg(test)]
-mod tests;

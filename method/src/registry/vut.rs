@@ -6,7 +6,7 @@ use crate::external::{DriverError, ExternalMode, ExternalVehicle, ExternalVut, T
 
 /// The vehicle a campaign tests.
 #[derive(Debug, Clone)]
-pub(super) enum CampaignVehicle<V> {
+pub(crate) enum CampaignVehicle<V> {
     Builtin(V),
     External(ExternalVut),
 }
@@ -15,7 +15,7 @@ impl<V> CampaignVehicle<V> {
     /// Parses `spec`: `{"external": …}` names a program (in episode mode
     /// only where the case can hand over a whole scenario), anything else
     /// goes to `builtin`.
-    pub(super) fn parse(
+    pub(crate) fn parse(
         case: &'static str,
         spec: &serde_json::Value,
         episode: bool,
@@ -39,7 +39,7 @@ impl<V> CampaignVehicle<V> {
 
     /// The built-in model, or the error for `purpose` (a library build or
     /// an exact answer, which run on the coordinator).
-    pub(super) fn into_builtin(self, case: &'static str, purpose: &str) -> Result<V, CaseError> {
+    pub(crate) fn into_builtin(self, case: &'static str, purpose: &str) -> Result<V, CaseError> {
         match self {
             Self::Builtin(v) => Ok(v),
             Self::External(e) => Err(CaseError::Vehicle {
@@ -54,7 +54,7 @@ impl<V> CampaignVehicle<V> {
     }
 
     /// The specification written out in full, as it is stored.
-    pub(super) fn to_spec(&self) -> serde_json::Value
+    pub(crate) fn to_spec(&self) -> serde_json::Value
     where
         V: serde::Serialize,
     {
@@ -65,7 +65,7 @@ impl<V> CampaignVehicle<V> {
         spec.expect("vehicle specifications serialise")
     }
 
-    pub(super) fn external(&self) -> Option<&ExternalVut> {
+    pub(crate) fn external(&self) -> Option<&ExternalVut> {
         match self {
             Self::Builtin(_) => None,
             Self::External(e) => Some(e),
@@ -75,7 +75,7 @@ impl<V> CampaignVehicle<V> {
 
 /// How test `index` is run: on the built-in model, or by a program (sent
 /// its `reset` first, so nothing leaks from the test before).
-pub(super) enum Runner<'v, 'p, V> {
+pub(crate) enum Runner<'v, 'p, V> {
     Builtin(&'v V),
     Program(&'p mut dyn ExternalVehicle, ExternalMode),
 }
@@ -83,7 +83,7 @@ pub(super) enum Runner<'v, 'p, V> {
 /// Picks the runner of a test: `program` when given (in the campaign's
 /// mode when its vehicle is that program, else step mode), else the
 /// built-in model.
-pub(super) fn runner<'v, 'p, V>(
+pub(crate) fn runner<'v, 'p, V>(
     vehicle: &'v CampaignVehicle<V>,
     program: Option<&'p mut dyn ExternalVehicle>,
     start: TestStart<'_>,

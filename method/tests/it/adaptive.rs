@@ -5,10 +5,10 @@
 use crate::common::{library, vehicle};
 use tslg_method::adaptive::{run_adaptive, AdaptiveResult, AdaptiveSettings};
 use tslg_method::case::Case;
-use tslg_method::cutin::{CutIn, CutInPreset};
+use tslg_method::cases::cutin::{CutIn, CutInPreset};
+use tslg_method::cases::highway::{ExitVehicle, HighwayExit, HighwayPreset};
 use tslg_method::estimator::{z_for_confidence, StoppingRule};
 use tslg_method::exact::{event_cells, event_probability};
-use tslg_method::highway::{ExitVehicle, HighwayExit, HighwayPreset};
 use tslg_method::library::{build_library, LibraryRequest, SearchMethod, Threshold};
 
 /// The campaigns of seeds `0..seeds` of `vut` on `surrogate`'s exhaustive
@@ -180,7 +180,8 @@ fn adaptive_campaigns_cover_highway_exit_for_the_surrogate_and_the_gap_seeker() 
 #[test]
 fn a_service_adaptive_campaign_resolved_from_workers_runs_is_the_in_process_one() {
     use tslg_method::adaptive::TestResult;
-    use tslg_method::registry::{open_case, ExposureSource};
+    use tslg_method::cases::open_case;
+    use tslg_method::registry::ExposureSource;
     use tslg_method::sampling::{OutsideSpread, Split};
     for (case_name, preset, surrogate, vut, seeds) in [
         (

@@ -1,4 +1,4 @@
-//! Adaptive car-following campaigns (`tslg_method::carfollow::adaptive`):
+//! Adaptive car-following campaigns (`tslg_method::cases::carfollow::adaptive`):
 //! the IDM's library misses where the ACC+AEB with a 0.3 s actuator lag
 //! fails (its plain campaigns are about 9 % low and cover 0.72); probing
 //! the vehicle where it differs from the surrogate repairs the estimate at
@@ -6,10 +6,10 @@
 
 use std::sync::{Arc, OnceLock};
 use tslg_method::campaign::mean_weight;
-use tslg_method::carfollow::adaptive::{
+use tslg_method::cases::carfollow::adaptive::{
     run_follow_adaptive, FollowAdaptiveResult, FollowAdaptiveSettings, FollowPlanner,
 };
-use tslg_method::carfollow::{CarFollowing, FollowPreset, FollowSampler, PolicySolver};
+use tslg_method::cases::carfollow::{CarFollowing, FollowPreset, FollowSampler, PolicySolver};
 use tslg_method::estimator::StoppingRule;
 use tslg_method::sampling::OutsideSpread;
 use tslg_method::vehicle::VehicleModel;

@@ -4,8 +4,8 @@
 
 use std::sync::{Arc, OnceLock};
 use tslg_method::campaign::{mean_weight, run_indexed_campaign, seeded_coverage};
-use tslg_method::carfollow::library::Next;
-use tslg_method::carfollow::*;
+use tslg_method::cases::carfollow::library::Next;
+use tslg_method::cases::carfollow::*;
 use tslg_method::estimator::StoppingRule;
 use tslg_method::sampling::OutsideSpread;
 
@@ -215,7 +215,7 @@ fn library_weights_average_one_and_tests_are_reproducible() {
 
 #[test]
 fn the_binary_library_file_round_trips_and_rejects_damage() {
-    use tslg_method::carfollow::file::{PolicyFileError, PolicyHeader, VERSION};
+    use tslg_method::cases::carfollow::file::{PolicyFileError, PolicyHeader, VERSION};
     let b = built();
     let file = PolicyLibraryFile {
         header: PolicyHeader {

@@ -23,7 +23,7 @@ pub fn shared_table() -> Option<String> {
 }
 
 use tslg_method::case::Case;
-use tslg_method::cutin::CutIn;
+use tslg_method::cases::cutin::CutIn;
 use tslg_method::library::{build_library, Library, LibraryRequest, SearchMethod, Threshold};
 use tslg_method::sampling::{LibraryDistribution, OutsideSpread, Split};
 use tslg_method::vehicle::VehicleModel;

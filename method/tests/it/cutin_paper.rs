@@ -5,7 +5,7 @@
 use crate::common::{library, median, paper_q, shared_table, vehicle};
 use tslg_method::campaign::run_campaign;
 use tslg_method::case::Case;
-use tslg_method::cutin::{CutIn, CutInExposureModel, CutInPreset};
+use tslg_method::cases::cutin::{CutIn, CutInExposureModel, CutInPreset};
 use tslg_method::estimator::{Decision, StoppingRule};
 use tslg_method::exact::{event_cells, event_probability, exact_report};
 use tslg_method::library::SearchMethod;

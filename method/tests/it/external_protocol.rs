@@ -5,16 +5,17 @@
 //! both modes.
 
 use serde_json::{json, Value};
-use tslg_method::carfollow::highway_vehicle;
-use tslg_method::cutin::CutInPreset;
+use tslg_method::cases::carfollow::highway_vehicle;
+use tslg_method::cases::cutin::CutInPreset;
+use tslg_method::cases::highway::drivers::{Driver, DriverView, Lane};
+use tslg_method::cases::highway::external::RIGHT_LANE;
+use tslg_method::cases::highway::world::{ExitWorld, Traffic};
+use tslg_method::cases::highway::{simulation, ExitVehicle};
+use tslg_method::cases::open_case;
 use tslg_method::external::{
     Control, DriverError, EpisodeOutcome, ExternalVehicle, Observation, TestStart,
 };
-use tslg_method::highway::drivers::{Driver, DriverView, Lane};
-use tslg_method::highway::external::RIGHT_LANE;
-use tslg_method::highway::world::{ExitWorld, Traffic};
-use tslg_method::highway::{simulation, ExitVehicle};
-use tslg_method::registry::{open_case, BuildRequest, CampaignTests, ExposureSource};
+use tslg_method::registry::{BuildRequest, CampaignTests, ExposureSource};
 use tslg_method::sampling::OutsideSpread;
 use tslg_method::vehicle::{Controller, FollowerObservation, VehicleModel};
 

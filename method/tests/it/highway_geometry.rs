@@ -4,9 +4,9 @@
 //! zone, and the symmetry of the scenario in the BVs' labels.
 
 use tslg_method::case::Case;
-use tslg_method::highway::simulation::run;
-use tslg_method::highway::zone::{reachable_area, zone, zone_area};
-use tslg_method::highway::{
+use tslg_method::cases::highway::simulation::run;
+use tslg_method::cases::highway::zone::{reachable_area, zone, zone_area};
+use tslg_method::cases::highway::{
     ExitOutcome, ExitVehicle, ExitWorld, HighwayExit, HighwayPreset, EXIT_MODELS,
 };
 

@@ -8,10 +8,11 @@
 
 use proptest::prelude::*;
 use std::sync::LazyLock;
-use tslg_method::carfollow::file::PolicyLibraryFile;
+use tslg_method::cases::carfollow::file::PolicyLibraryFile;
+use tslg_method::cases::open_case;
 use tslg_method::library::SearchMethod;
 use tslg_method::ndd_table::parse_table;
-use tslg_method::registry::{open_case, BuildRequest, ExposureSource, LibrarySearch};
+use tslg_method::registry::{BuildRequest, ExposureSource, LibrarySearch};
 
 /// A small valid table: ranges 1, 3, 5 m by range rates −1, 0, 1 m/s.
 const SMALL_TABLE: &str = ",-1,0,1\n1,0.1,0.1,0\n3,0.2,0.1,0.1\n5,0.2,0.1,0.1\n";

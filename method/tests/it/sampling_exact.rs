@@ -4,7 +4,7 @@ use crate::common::{library, paper_q, vehicle};
 use std::collections::HashMap;
 use tslg_method::campaign::run_campaign;
 use tslg_method::case::Case;
-use tslg_method::cutin::{CutIn, CutInPreset};
+use tslg_method::cases::cutin::{CutIn, CutInPreset};
 use tslg_method::estimator::{z_for_confidence, ImportanceEstimator, StoppingRule};
 use tslg_method::exact::{
     event_cells, event_probability, library_variance, stratified_library_variance,

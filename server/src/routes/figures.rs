@@ -11,7 +11,8 @@ use axum::http::header;
 use axum::response::{IntoResponse, Response};
 use std::sync::Arc;
 use tslg_figures::{FigureError, Heatmap, HeatmapAxis};
-use tslg_method::registry::{open_case, PictureMap};
+use tslg_method::cases::open_case;
+use tslg_method::registry::PictureMap;
 
 fn svg(figure: Result<String, FigureError>) -> Result<Response, ApiError> {
     let figure = figure.map_err(|e| ApiError::Internal(e.into()))?;

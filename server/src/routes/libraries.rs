@@ -11,7 +11,7 @@ use axum::http::{header, StatusCode};
 use axum::response::IntoResponse;
 use axum::Json;
 use tslg_api::{CreateLibrary, ExposureRequest, LibraryView, Problem};
-use tslg_method::registry::open_case;
+use tslg_method::cases::open_case;
 
 /// Starts a library build; poll the library until `status` is `ready`.
 #[utoipa::path(post, path = "/api/v1/libraries", request_body = CreateLibrary, responses(

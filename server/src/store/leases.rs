@@ -10,7 +10,6 @@ use crate::store::campaigns::{self, CampaignRow, COLUMNS as CAMPAIGN_COLUMNS};
 use sqlx::SqliteConnection;
 use subtle::ConstantTimeEq;
 use tslg_api::{CampaignStatus, HeartbeatAck, LeaseFence};
-use tslg_method::registry::SEQUENTIAL_CASES;
 
 /// Where a lease stands: being worked on (or expired, waiting for another
 /// worker), fully reported, or cancelled with its campaign.
@@ -106,11 +105,18 @@ pub async fn claim(
     // A client that needs each test's scenario in the lease can only take
     // campaigns whose scenarios are fixed before the test runs.
     let planned_only = if inline {
-        let sequential: Vec<String> = SEQUENTIAL_CASES.iter().map(|c| format!("'{c}'")).collect();
-        format!("AND c.case_name NOT IN ({})", sequential.join(", "))
+        "AND c.case_name NOT IN (SELECT value FROM json_each(?))"
     } else {
-        String::new()
+        ""
     };
+    // The cases whose scenarios are drawn while a test runs, as a JSON
+    // array bound to the query (only when `inline`).
+    let sequential: Vec<&str> = tslg_method::cases::descriptors()
+        .iter()
+        .filter(|d| !d.is_grid())
+        .map(|d| d.name)
+        .collect();
+    let sequential = serde_json::to_string(&sequential).expect("strings serialise");
     let offered = serde_json::to_string(offers).expect("strings serialise");
     let runnable = "AND (c.requires IS NULL OR c.requires IN (SELECT value FROM json_each(?)))";
     let mut tx = db.write.begin().await?;
@@ -126,17 +132,18 @@ pub async fn claim(
                      ORDER BY l.campaign_id, l.resume_at LIMIT 1) \
          RETURNING {COLUMNS}"
     );
-    let reclaimed: Option<LeaseRow> = sqlx::query_as(&sql)
+    let mut query = sqlx::query_as(&sql)
         .bind(worker)
         .bind(expires)
         .bind(new_key())
         .bind(now)
         .bind(threads)
         .bind(now)
-        .bind(span_limit)
-        .bind(&offered)
-        .fetch_optional(&mut *tx)
-        .await?;
+        .bind(span_limit);
+    if inline {
+        query = query.bind(&sequential);
+    }
+    let reclaimed: Option<LeaseRow> = query.bind(&offered).fetch_optional(&mut *tx).await?;
     if let Some(lease) = reclaimed {
         tx.commit().await?;
         tracing::info!(
@@ -163,10 +170,11 @@ pub async fn claim(
          ORDER BY next_turn_at, id LIMIT 1",
         open = audits::OPEN
     );
-    let Some(campaign): Option<CampaignRow> = sqlx::query_as(&sql)
-        .bind(&offered)
-        .fetch_optional(&mut *tx)
-        .await?
+    let mut query = sqlx::query_as(&sql);
+    if inline {
+        query = query.bind(&sequential);
+    }
+    let Some(campaign): Option<CampaignRow> = query.bind(&offered).fetch_optional(&mut *tx).await?
     else {
         return Ok(None);
     };

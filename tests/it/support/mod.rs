@@ -14,11 +14,10 @@ use tslg_api::{
 };
 use tslg_client::Client;
 use tslg_method::campaign::{run_campaign_tests, CampaignResult};
+use tslg_method::cases::open_case;
 use tslg_method::estimator::{default_n_min, StoppingRule};
 use tslg_method::library::SearchMethod;
-use tslg_method::registry::{
-    exploring_share, open_case, BuildRequest, ExposureSource, LibrarySearch,
-};
+use tslg_method::registry::{BuildRequest, ExposureSource, LibrarySearch};
 
 /// A `tslg-server` process; killed when dropped.
 pub struct ServerProcess {
@@ -374,11 +373,9 @@ pub fn in_process_with_invalid(
         confidence: request.confidence,
         n_min: request.n_min.unwrap_or_else(|| {
             default_n_min(
-                exploring_share(
-                    &request.case,
-                    request.method == Method::Library,
-                    request.epsilon,
-                ),
+                tslg_method::cases::descriptor(&request.case)
+                    .unwrap()
+                    .exploring_share(request.method == Method::Library, request.epsilon),
                 request.max_tests,
             )
         }),

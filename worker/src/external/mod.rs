@@ -30,7 +30,7 @@ use tslg_method::external::{
     check_program_name, requirement, Control, DriverError, EpisodeOutcome, ExternalVehicle,
     Observation, TestStart,
 };
-use tslg_method::registry::{CampaignTests, TestOutcome, CASES};
+use tslg_method::registry::{CampaignTests, TestOutcome};
 
 /// Times a test is tried with a fresh or intact process before it is
 /// reported `invalid`.
@@ -127,7 +127,7 @@ impl Program {
             ProgramProcess::start(&spec.command, &settings.worker, settings.timeout, deadline)
                 .map_err(|f| format!("--vut-exec {}: the program {f}", spec.name))?;
         for case in capabilities.cases.keys() {
-            if !CASES.contains(&case.as_str()) {
+            if tslg_method::cases::descriptor(case).is_err() {
                 tracing::warn!(program = %spec.name, case, "the program offers an unknown case");
             }
         }
@@ -161,7 +161,7 @@ impl Program {
         self.capabilities
             .cases
             .iter()
-            .filter(|(case, _)| CASES.contains(&case.as_str()))
+            .filter(|(case, _)| tslg_method::cases::descriptor(case).is_ok())
             .flat_map(|(case, modes)| modes.iter().map(|m| requirement(self.name(), case, *m)))
             .collect()
     }

@@ -3,6 +3,7 @@
 //! A scenario is `x = (R, Ṙ)`, the range and range rate at the moment a
 //! background vehicle cuts in; the event is an accident during the run.
 
+pub mod descriptor;
 mod exposure_model;
 mod simulation;
 

@@ -5,17 +5,12 @@
 //! the test (300 steps, microseconds); an external program's cannot be
 //! replayed there.
 
-use super::picture::PictureMap;
-use super::vut::{runner, CampaignVehicle, Runner};
-use super::{
-    BuildRequest, BuiltLibrary, CampaignTests, CaseError, LibrarySearch, PlannedTest, ScenarioCase,
-    TestOutcome,
-};
 use crate::adaptive::{AdaptiveResult, AdaptiveSettings};
-use crate::carfollow::case::{CarFollowing, PolicySolver};
-use crate::carfollow::file::{PolicyHeader, PolicyLibraryFile, MEDIA_TYPE, VERSION};
-use crate::carfollow::library::PolicyLibrary;
-use crate::carfollow::sampling::FollowSampler;
+use crate::cases::carfollow::case::{CarFollowing, PolicySolver};
+use crate::cases::carfollow::file::{PolicyHeader, PolicyLibraryFile, MEDIA_TYPE, VERSION};
+use crate::cases::carfollow::library::PolicyLibrary;
+use crate::cases::carfollow::sampling::FollowSampler;
+use crate::descriptor::CaseDescriptor;
 use crate::estimator::StoppingRule;
 use crate::exact::ExactReport;
 use crate::external::{
@@ -23,21 +18,32 @@ use crate::external::{
 };
 use crate::library::{ExposureRef, LibraryFileError};
 use crate::progress::Progress;
+use crate::registry::picture::PictureMap;
+use crate::registry::vut::{runner, CampaignVehicle, Runner};
+use crate::registry::{
+    BuildRequest, BuiltLibrary, CampaignTests, CaseError, LibrarySearch, PlannedTest, ScenarioCase,
+    TestOutcome,
+};
 use crate::sampling::{OutsideSpread, Split};
 use crate::vehicle::VehicleModel;
 use std::sync::{Arc, Mutex, Weak};
 
-const NAME: &str = "car-following";
+use super::descriptor::NAME;
 
 pub(super) struct FollowScenarioCase {
     case: CarFollowing,
     fingerprint: String,
+    descriptor: CaseDescriptor,
 }
 
 impl FollowScenarioCase {
     pub(super) fn new(case: CarFollowing) -> Self {
         let fingerprint = case.fingerprint();
-        Self { case, fingerprint }
+        Self {
+            case,
+            fingerprint,
+            descriptor: super::descriptor::descriptor(),
+        }
     }
 
     fn vehicle(&self, spec: &serde_json::Value) -> Result<VehicleModel, CaseError> {
@@ -99,7 +105,8 @@ impl FollowScenarioCase {
     /// exposure.
     fn library(&self, file: &[u8]) -> Result<PolicyLibraryFile, CaseError> {
         let read =
-            PolicyLibraryFile::from_bytes_for(file, self.case.grid.len(), self.case.world.actions)?;
+            PolicyLibraryFile::from_bytes_for(file, self.case.grid.len(), self.case.world.actions)
+                .map_err(|e| CaseError::PolicyFile(e.to_string()))?;
         let h = &read.header;
         if h.case != NAME {
             return Err(LibraryFileError::WrongCase {
@@ -174,8 +181,8 @@ impl ScenarioCase for FollowScenarioCase {
         self.case.grid.len()
     }
 
-    fn default_outside(&self) -> OutsideSpread {
-        OutsideSpread::Ndd
+    fn descriptor(&self) -> &CaseDescriptor {
+        &self.descriptor
     }
 
     fn normalise_vehicle(&self, spec: &serde_json::Value) -> Result<serde_json::Value, CaseError> {
@@ -282,9 +289,9 @@ impl ScenarioCase for FollowScenarioCase {
             }
             PictureMap {
                 title: title.to_owned(),
-                x_label: "range R (m)".into(),
+                x_label: self.descriptor.picture_axes[0].into(),
                 x_centres: axis(grid.range),
-                y_label: "range rate Ṙ (m/s)".into(),
+                y_label: self.descriptor.picture_axes[1].into(),
                 y_centres: axis(grid.range_rate),
                 values,
             }

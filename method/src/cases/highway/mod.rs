@@ -5,6 +5,7 @@
 //! the VUT did not reach the off-ramp in the right lane (it stayed in the
 //! left lane, or collided).
 
+pub mod descriptor;
 pub mod drivers;
 mod exposure_model;
 pub mod external;

@@ -27,7 +27,7 @@
 //! assumes the follower brakes up to `b_safe`) can still end in a collision.
 
 use super::{neighbours, safe_gaps, within_speed_bounds, Action, DriverView, Idm, Lane};
-use crate::highway::world::{Bv, ExitWorld};
+use crate::cases::highway::world::{Bv, ExitWorld};
 use crate::vehicle::{check, ParamError};
 use serde::{Deserialize, Serialize};
 

@@ -1,7 +1,11 @@
 use super::*;
 use crate::case::Case;
+use crate::cases::carfollow::PolicySolver;
+use crate::cases::cutin::{CutIn, CutInPreset};
 use crate::exact::event_cells;
 use crate::library::{Library, SearchMethod};
+use crate::registry::{BuildRequest, LibrarySearch};
+use crate::sampling::{OutsideSpread, Split};
 use serde_json::json;
 
 #[test]

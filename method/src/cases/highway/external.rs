@@ -89,7 +89,7 @@ impl ExitDriver for ExternalExitDriver<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::highway::world::Traffic;
+    use crate::cases::highway::world::Traffic;
 
     #[test]
     fn the_gap_is_given_for_the_bv_ahead_in_the_right_lane_only() {

@@ -6,10 +6,12 @@
 
 pub mod adaptive;
 pub mod case;
+pub mod descriptor;
 mod exposure_model;
 pub mod file;
 pub mod library;
 pub mod sampling;
+pub(crate) mod service;
 pub mod states;
 pub mod world;
 

@@ -12,7 +12,7 @@ use super::states::StateGrid;
 use super::world::FollowWorld;
 use crate::progress::Progress;
 use crate::vehicle::VehicleModel;
-use serde::{Deserialize, Serialize};
+
 use std::str::FromStr;
 
 /// The world and exposure in force.
@@ -64,21 +64,7 @@ impl FromStr for FollowPreset {
     }
 }
 
-/// How the Q-values are computed (SPEC §6): both reach the same fixed point.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "method", rename_all = "kebab-case", deny_unknown_fields)]
-pub enum PolicySolver {
-    /// Backward dynamic programming to a largest change below 10⁻¹³.
-    DynamicProgramming,
-    /// The paper's TD(0) with learning rate `alpha`, until every `|δ|` of a
-    /// sweep is below 10⁻¹⁰.
-    TemporalDifference {
-        /// Learning rate α ∈ [10⁻³, 1].
-        alpha: f64,
-        /// Seed of the sampled episodes.
-        seed: u64,
-    },
-}
+pub use crate::library::PolicySolver;
 
 /// The smallest TD learning rate accepted: TD needs about 3 × 10⁶/α
 /// updates on the paper's grid (2.8 × 10⁷ at α = 0.1).
@@ -91,21 +77,6 @@ pub const DP_TOLERANCE: f64 = 1e-13;
 pub const TD_TOLERANCE: f64 = 1e-10;
 
 impl PolicySolver {
-    /// Checks the solver's parameters (α in [10⁻³, 1]).
-    pub fn validate(&self) -> Result<(), String> {
-        match *self {
-            // Below 10⁻³ the TD iteration would need thousands of sweeps
-            // per digit of its tolerance.
-            PolicySolver::TemporalDifference { alpha, .. } if !(1e-3..=1.0).contains(&alpha) => {
-                Err(format!(
-                    "TD learning rate alpha = {} must be in [0.001, 1]",
-                    crate::number::Num(alpha)
-                ))
-            }
-            _ => Ok(()),
-        }
-    }
-
     /// The library, or why the solver stopped short of its tolerance.
     pub fn solve(&self, transitions: &Transitions) -> Result<PolicyLibrary, String> {
         let (library, cap) = match *self {

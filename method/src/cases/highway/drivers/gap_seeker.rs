@@ -32,7 +32,7 @@
 use super::{
     follow_in_right_lane, neighbours, safe_gaps, within_speed_bounds, Action, DriverView, Idm, Lane,
 };
-use crate::highway::world::{Bv, ExitWorld};
+use crate::cases::highway::world::{Bv, ExitWorld};
 use crate::vehicle::{check, ParamError};
 use serde::{Deserialize, Serialize};
 

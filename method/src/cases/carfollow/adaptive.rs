@@ -47,7 +47,7 @@ use super::world::{advance_with, FollowWorld, Odometer};
 use super::{CarFollowing, FollowDecision, FollowSampler, FollowTest};
 use crate::adaptive::{fold_estimation_stage, AdaptiveError};
 use crate::campaign::CampaignResult;
-use crate::carfollow::case::DP_TOLERANCE;
+use crate::cases::carfollow::case::DP_TOLERANCE;
 use crate::estimator::{Decision, StoppingRule};
 use crate::prefix::{PrefixFold, SparseOutcome};
 use crate::sampling::OutsideSpread;
@@ -599,9 +599,9 @@ pub fn run_follow_adaptive(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::carfollow::library::zone;
-    use crate::carfollow::world::advance;
-    use crate::carfollow::FollowPreset;
+    use crate::cases::carfollow::library::zone;
+    use crate::cases::carfollow::world::advance;
+    use crate::cases::carfollow::FollowPreset;
 
     #[test]
     fn a_probe_is_the_vehicles_zone_and_transitions() {

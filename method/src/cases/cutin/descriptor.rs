@@ -1,0 +1,109 @@
+//! What the service and the command line know about the cut-in case.
+
+use super::{CutIn, CutInError, CutInPreset};
+use crate::cases::{
+    CaseDescriptor, PaperFigures, Preset, Reproduction, Scenarios, TableFormat, Validation,
+};
+use crate::library::{LibrarySearch, SearchMethod, Threshold};
+use crate::registry::cells::Registered;
+use crate::registry::{CaseError, ExposureSource, ScenarioCase};
+use crate::sampling::OutsideSpread;
+use serde_json::json;
+use std::sync::Arc;
+
+/// The cut-in case's descriptor.
+pub fn descriptor() -> CaseDescriptor {
+    CaseDescriptor {
+        name: "cut-in",
+        summary: "Safety, two dimensions: a background vehicle cuts in at range R and range \
+                  rate Ṙ; the event is an accident (paper Section IV.A).",
+        presets: vec![
+            Preset {
+                name: "paper-code",
+                summary: "the authors' code: 10 steps of 0.1 s, their speed update",
+            },
+            Preset {
+                name: "paper-table",
+                summary: "the paper's Table III: 100 steps of 0.1 s",
+            },
+        ],
+        vehicles: vec!["idm", "fvdm", "switching-acc", "acc-aeb"],
+        default_surrogate: "idm",
+        // The paper's search; its recall is 1 on this grid.
+        default_search: LibrarySearch::Cells(SearchMethod::Multistart {
+            starts: 50,
+            seed: 0,
+        }),
+        multistart_starts: 50,
+        default_threshold: Some(Threshold::default()),
+        scenarios: Scenarios::Grid,
+        scenario_unit: "scenarios",
+        build_unit: "searched",
+        tables: vec![TableFormat {
+            holds: "P(R, Ṙ): the joint exposure of range and range rate",
+            doc: "docs/api.md#exposure-tables",
+        }],
+        default_outside: OutsideSpread::Uniform,
+        picture_axes: ["range R (m)", "range rate Ṙ (m/s)"],
+        // The FVDM fails where the IDM's library does not.
+        demo_vut: Some("fvdm"),
+        demo_search: None,
+        validation: Some(Validation {
+            pairs: vec![
+                ("idm", "idm"),
+                ("fvdm", "fvdm"),
+                ("fvdm", "idm"),
+                ("idm", "fvdm"),
+                ("idm", "switching-acc"),
+                ("idm", "acc-aeb"),
+            ],
+            quick_preset: None,
+        }),
+        reproduction: Reproduction {
+            preset: "paper-code",
+            surrogate: "idm",
+            search: LibrarySearch::Cells(SearchMethod::Multistart {
+                starts: 50,
+                seed: 0,
+            }),
+            epsilon: 0.05,
+            beta: 0.3,
+            vehicles: vec![
+                ("idm", json!({"model": "idm"})),
+                ("acc-aeb", json!({"model": "acc-aeb"})),
+            ],
+            takes_table: true,
+            paper: PaperFigures {
+                library_size: Some(184),
+                library_tests: 51.0,
+                ndd_tests: 9.63e4,
+            },
+        },
+    }
+}
+
+/// Opens the cut-in case with `preset` on `exposure` (the built-in model or
+/// a table of `P(R, Ṙ)`).
+pub fn open(
+    preset: Option<&str>,
+    exposure: &ExposureSource,
+) -> Result<Arc<dyn ScenarioCase>, CaseError> {
+    let preset: CutInPreset = match preset {
+        None => CutInPreset::default(),
+        Some(p) => p.parse().map_err(CaseError::Preset)?,
+    };
+    let opened = match exposure {
+        ExposureSource::Builtin => CutIn::builtin(preset),
+        ExposureSource::Table { name, text } => CutIn::from_table(text, name.clone(), preset)
+            .map(|(case, _)| case)
+            .map_err(|e: CutInError| CaseError::Exposure {
+                name: name.clone(),
+                reason: e.to_string(),
+            })?,
+    };
+    Ok(Arc::new(Registered::new(
+        opened,
+        preset.name(),
+        descriptor(),
+    )))
+}
