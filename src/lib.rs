@@ -22,6 +22,12 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
+    /// List the cases with their presets, vehicles and defaults.
+    Cases {
+        /// Print JSON (as `GET /api/v1/cases` answers).
+        #[arg(long)]
+        json: bool,
+    },
     /// Build or inspect scenario libraries.
     #[command(subcommand)]
     Library(LibraryCommand),
@@ -189,25 +195,11 @@ pub struct LibraryCreateArgs {
     #[command(flatten)]
     pub case: CaseArgs,
     /// The surrogate model: a built-in name or a JSON specification
-    /// (default: the case's, idm or mobil).
+    /// (default: the case's).
     #[arg(long)]
     pub surrogate: Option<String>,
-    /// Search strategy (default: the case's, multistart for grid cases,
-    /// dynamic-programming for car-following).
-    #[arg(long, value_enum)]
-    pub search: Option<SearchArg>,
-    /// Starting points of the multistart search (default: 50 cut-in, 100 highway-exit).
-    #[arg(long)]
-    pub starts: Option<usize>,
-    /// Seed of the multistart starting points or of the TD update order.
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
-    /// Learning rate of temporal-difference learning.
-    #[arg(long, default_value_t = 0.1)]
-    pub alpha: f64,
-    /// Threshold γ = m·μ_S/N(X) with this m (grid cases; default 1).
-    #[arg(long)]
-    pub threshold_m: Option<f64>,
+    #[command(flatten)]
+    pub search: SearchArgs,
     /// Wait until the build is done.
     #[arg(long)]
     pub wait: bool,
@@ -229,44 +221,100 @@ pub enum LibraryCommand {
 /// Which case, exposure and simulation preset.
 #[derive(Debug, Clone, Args)]
 pub struct CaseArgs {
-    /// The case: `cut-in`, `highway-exit` or `car-following` (the offline
-    /// commands `library build` and `exact` support cut-in only, `evaluate`
-    /// cut-in and car-following; the service runs all three).
-    #[arg(long, default_value = "cut-in")]
-    pub case: String,
+    /// The case: `cut-in` (the default), `highway-exit` or `car-following`
+    /// (`tslg cases` describes them). Commands given a library file take
+    /// its case when this is left out.
+    #[arg(long)]
+    pub case: Option<String>,
     /// An exposure table in the layout of the authors' cut-in table (row 0: range-rate
     /// labels; column 0: range labels; body: joint probability). Default: the built-in model.
     #[arg(long, env = "TSLG_NDD_TABLE")]
     pub ndd_table: Option<PathBuf>,
-    /// Simulation preset. cut-in: `paper-code` (the authors' code, default) or
-    /// `paper-table` (the paper's Table III); highway-exit: `paper` (the 61 × 21 × 61 × 21
-    /// grid, default) or `coarse` (16 × 6 × 16 × 6); car-following: `paper` (the
-    /// built-in exposure, default) or `risky` (short headways, harsh braking).
+    /// Simulation preset (`tslg cases` lists each case's; default: the
+    /// case's first). cut-in: `paper-code` or `paper-table`; highway-exit:
+    /// `paper` or `coarse`; car-following: `paper` or `risky`.
     #[arg(long)]
     pub preset: Option<String>,
 }
 
 impl CaseArgs {
-    /// The built-in vehicle used when `--surrogate` or `--vut` is not given:
-    /// `idm` for cut-in, `mobil` for highway-exit.
-    pub fn default_vehicle(&self) -> &'static str {
-        match self.case.as_str() {
-            "highway-exit" => "mobil",
-            _ => "idm",
-        }
+    /// The case named, or cut-in.
+    pub fn name(&self) -> &str {
+        self.case.as_deref().unwrap_or("cut-in")
     }
 
-    /// `given`, or the case's default vehicle.
-    pub fn vehicle_or_default<'a>(&self, given: &'a Option<String>) -> &'a str {
-        given.as_deref().unwrap_or(self.default_vehicle())
+    /// The named case's descriptor.
+    pub fn descriptor(&self) -> anyhow::Result<tslg_method::cases::CaseDescriptor> {
+        Ok(tslg_method::cases::descriptor(self.name())?)
     }
 
-    /// Starting points of a multistart search when not given: 50 for
-    /// cut-in, 100 for highway-exit (the paper's).
-    pub fn default_starts(&self) -> usize {
-        match self.case.as_str() {
-            "highway-exit" => 100,
-            _ => 50,
+    /// `given`, or the case's default surrogate.
+    pub fn vehicle_or_default<'a>(&self, given: &'a Option<String>) -> anyhow::Result<&'a str> {
+        Ok(match given {
+            Some(v) => v.as_str(),
+            None => self.descriptor()?.default_surrogate,
+        })
+    }
+}
+
+/// How a library is searched, as `library build` and `library create` take
+/// it; what is left out takes the case's default (its descriptor).
+#[derive(Debug, Clone, Args)]
+pub struct SearchArgs {
+    /// Search strategy (default: the case's: multistart on cut-in,
+    /// exhaustive on highway-exit, dynamic-programming on car-following).
+    #[arg(long, value_enum)]
+    pub search: Option<SearchArg>,
+    /// Starting points of the multistart search (default: the case's, 50
+    /// on cut-in, 100 on highway-exit).
+    #[arg(long)]
+    pub starts: Option<usize>,
+    /// Seed of the multistart starting points or of the TD update order.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Learning rate of temporal-difference learning.
+    #[arg(long, default_value_t = 0.1)]
+    pub alpha: f64,
+    /// Threshold γ = m·μ_S/N(X) with this m (grid cases; default 1).
+    #[arg(long)]
+    pub threshold_m: Option<f64>,
+    /// An absolute threshold γ instead (grid cases).
+    #[arg(long, conflicts_with = "threshold_m")]
+    pub gamma: Option<f64>,
+}
+
+impl SearchArgs {
+    /// The search asked for on `case`; `None` for the case's default.
+    pub fn search(
+        &self,
+        case: &tslg_method::cases::CaseDescriptor,
+    ) -> Option<tslg_method::library::LibrarySearch> {
+        use tslg_method::library::{LibrarySearch, PolicySolver, SearchMethod};
+        self.search.map(|search| match search {
+            SearchArg::Exhaustive => LibrarySearch::Cells(SearchMethod::Exhaustive),
+            SearchArg::Multistart => LibrarySearch::Cells(SearchMethod::Multistart {
+                starts: self.starts.unwrap_or(case.multistart_starts),
+                seed: self.seed,
+            }),
+            SearchArg::DynamicProgramming => {
+                LibrarySearch::Policy(PolicySolver::DynamicProgramming)
+            }
+            SearchArg::TemporalDifference => {
+                LibrarySearch::Policy(PolicySolver::TemporalDifference {
+                    alpha: self.alpha,
+                    seed: self.seed,
+                })
+            }
+        })
+    }
+
+    /// The threshold asked for; `None` for the case's default.
+    pub fn threshold(&self) -> Option<tslg_method::library::Threshold> {
+        use tslg_method::library::Threshold;
+        match (self.gamma, self.threshold_m) {
+            (Some(gamma), _) => Some(Threshold::Absolute { gamma }),
+            (None, Some(m)) => Some(Threshold::Relative { m }),
+            (None, None) => None,
         }
     }
 }
@@ -287,29 +335,19 @@ pub enum SearchArg {
 pub struct BuildArgs {
     #[command(flatten)]
     pub case: CaseArgs,
-    /// The surrogate model: a built-in name (idm, fvdm, switching-acc, acc-aeb)
-    /// or a JSON specification such as '{"model":"idm","v0":25}'.
-    #[arg(long, default_value = "idm")]
-    pub surrogate: String,
-    /// Search strategy.
-    #[arg(long, value_enum, default_value = "exhaustive")]
-    pub search: SearchArg,
-    /// Starting points of the multistart search.
-    #[arg(long, default_value_t = 50)]
-    pub starts: usize,
-    /// Seed of the multistart starting points.
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
-    /// Threshold γ = m·μ_S/N(X) with this m.
-    #[arg(long, default_value_t = 1.0, conflicts_with = "gamma")]
-    pub threshold_m: f64,
-    /// An absolute threshold γ instead.
+    /// The surrogate model: a built-in name (`tslg cases` lists each case's)
+    /// or a JSON specification such as '{"model":"idm","v0":25}' (default:
+    /// the case's).
     #[arg(long)]
-    pub gamma: Option<f64>,
-    /// Also run the exhaustive search and report the recall of a multistart search.
+    pub surrogate: Option<String>,
+    #[command(flatten)]
+    pub search: SearchArgs,
+    /// Also run the exhaustive search and report the recall of a multistart
+    /// search (grid cases).
     #[arg(long)]
     pub recall: bool,
-    /// Where to write the library (JSON; see docs/library-format.md).
+    /// Where to write the library (JSON for grid cases, the binary policy
+    /// format for car-following; docs/library-format.md).
     #[arg(long, short)]
     pub out: PathBuf,
 }
@@ -429,15 +467,10 @@ pub struct EvaluateArgs {
     /// baseline).
     #[arg(long, value_enum, default_value = "library")]
     pub method: EvaluateMethodArg,
-    /// The library file (methods `library` and `adaptive` of grid cases).
+    /// The library file (methods `library` and `adaptive`), as `tslg
+    /// library build` writes it: the campaign runs on its case and preset.
     #[arg(long)]
     pub library: Option<PathBuf>,
-    /// Car-following: the surrogate whose policy library is learned in
-    /// this process by dynamic programming (methods `library` and
-    /// `adaptive`; default `idm`). Grid cases take the surrogate of
-    /// `--library`.
-    #[arg(long)]
-    pub surrogate: Option<String>,
     #[command(flatten)]
     pub exploration: ExplorationArgs,
     #[command(flatten)]
@@ -454,9 +487,10 @@ pub struct EvaluateArgs {
 pub struct ExactArgs {
     #[command(flatten)]
     pub case: CaseArgs,
-    /// The surrogate whose library the expected library tests refer to.
-    #[arg(long, default_value = "idm")]
-    pub surrogate: String,
+    /// The surrogate whose library the expected library tests refer to
+    /// (default: the case's).
+    #[arg(long)]
+    pub surrogate: Option<String>,
     /// ε of the library distribution.
     #[arg(long, default_value_t = 0.1)]
     pub epsilon: f64,
@@ -502,6 +536,7 @@ pub struct DemoArgs {
 /// Runs a parsed command line.
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
+        Command::Cases { json } => commands::cases::run(json),
         Command::Library(LibraryCommand::Build(args)) => commands::library::build(&args),
         Command::Library(LibraryCommand::Show { file }) => commands::library::show(&file),
         Command::Evaluate(args) => commands::evaluate::run(&args),

@@ -7,11 +7,13 @@
 //! case they are used with.
 
 mod campaign;
+mod case;
 mod lease;
 mod library;
 pub mod packed;
 
 pub use campaign::*;
+pub use case::*;
 pub use lease::*;
 pub use library::*;
 

@@ -69,6 +69,90 @@ pub fn outside(spread: OutsideSpread) -> Outside {
     }
 }
 
+/// The wire form of a library search.
+pub fn search_request(search: tslg_method::library::LibrarySearch) -> tslg_api::SearchRequest {
+    use tslg_api::SearchRequest;
+    use tslg_method::library::{LibrarySearch, PolicySolver, SearchMethod};
+    match search {
+        LibrarySearch::Cells(SearchMethod::Exhaustive) => SearchRequest::Exhaustive,
+        LibrarySearch::Cells(SearchMethod::Multistart { starts, seed }) => {
+            SearchRequest::Multistart { starts, seed }
+        }
+        LibrarySearch::Policy(PolicySolver::DynamicProgramming) => {
+            SearchRequest::DynamicProgramming
+        }
+        LibrarySearch::Policy(PolicySolver::TemporalDifference { alpha, seed }) => {
+            SearchRequest::TemporalDifference { alpha, seed }
+        }
+    }
+}
+
+/// A library search from its wire form.
+pub fn library_search(search: tslg_api::SearchRequest) -> tslg_method::library::LibrarySearch {
+    use tslg_api::SearchRequest;
+    use tslg_method::library::{LibrarySearch, PolicySolver, SearchMethod};
+    match search {
+        SearchRequest::Exhaustive => LibrarySearch::Cells(SearchMethod::Exhaustive),
+        SearchRequest::Multistart { starts, seed } => {
+            LibrarySearch::Cells(SearchMethod::Multistart { starts, seed })
+        }
+        SearchRequest::DynamicProgramming => {
+            LibrarySearch::Policy(PolicySolver::DynamicProgramming)
+        }
+        SearchRequest::TemporalDifference { alpha, seed } => {
+            LibrarySearch::Policy(PolicySolver::TemporalDifference { alpha, seed })
+        }
+    }
+}
+
+/// The wire form of a library threshold.
+pub fn threshold_request(threshold: tslg_method::library::Threshold) -> tslg_api::ThresholdRequest {
+    use tslg_api::ThresholdRequest;
+    use tslg_method::library::Threshold;
+    match threshold {
+        Threshold::Relative { m } => ThresholdRequest::Relative { m },
+        Threshold::Absolute { gamma } => ThresholdRequest::Absolute { gamma },
+    }
+}
+
+/// The wire form of a case's descriptor.
+pub fn case_view(case: &tslg_method::cases::CaseDescriptor) -> tslg_api::CaseView {
+    use tslg_api::{CaseView, PresetView, ScenarioKind, TableView};
+    CaseView {
+        name: case.name.to_owned(),
+        summary: case.summary.to_owned(),
+        presets: case
+            .presets
+            .iter()
+            .map(|p| PresetView {
+                name: p.name.to_owned(),
+                summary: p.summary.to_owned(),
+            })
+            .collect(),
+        vehicles: case.vehicles.iter().map(|v| (*v).to_owned()).collect(),
+        default_surrogate: case.default_surrogate.to_owned(),
+        default_search: search_request(case.default_search),
+        scenarios: if case.is_grid() {
+            ScenarioKind::Grid
+        } else {
+            ScenarioKind::Sequential
+        },
+        scenario_unit: case.scenario_unit.to_owned(),
+        tables: case
+            .tables
+            .iter()
+            .map(|t| TableView {
+                holds: t.holds.to_owned(),
+                doc: t.doc.to_owned(),
+            })
+            .collect(),
+        default_outside: outside(case.default_outside),
+        picture_axes: case.picture_axes.map(str::to_owned),
+        exact_answers: case.is_grid(),
+        adaptive: case.is_grid(),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

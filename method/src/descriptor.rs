@@ -114,8 +114,6 @@ pub struct CaseDescriptor {
     /// A vehicle the demo tests when none is named, one that is not the
     /// surrogate (as a user's never is); `None`: the surrogate.
     pub demo_vut: Option<&'static str>,
-    /// The demo's library search, when it differs from the default.
-    pub demo_search: Option<LibrarySearch>,
     /// What `tslg validate` runs (grid cases with exact answers).
     pub validation: Option<Validation>,
     /// What `tslg reproduce` runs.

@@ -5,9 +5,8 @@ use crate::state::AppState;
 use crate::store::libraries::{self, Built};
 use std::time::Instant;
 use tslg_api::{CreateLibrary, SearchRequest, ThresholdRequest};
-use tslg_method::cases::carfollow::PolicySolver;
 use tslg_method::cases::open_case;
-use tslg_method::library::{SearchMethod, Threshold};
+use tslg_method::library::Threshold;
 use tslg_method::progress::Progress;
 use tslg_method::registry::{BuildRequest, BuiltLibrary, LibrarySearch};
 
@@ -22,27 +21,15 @@ pub fn build_request(req: &CreateLibrary) -> Result<BuildRequest, String> {
     if let Some(t) = threshold {
         t.validate().map_err(|e| e.to_string())?;
     }
-    let search = match req.search {
-        None => None,
-        Some(SearchRequest::Exhaustive) => Some(LibrarySearch::Cells(SearchMethod::Exhaustive)),
-        Some(SearchRequest::Multistart { starts, seed }) => {
-            if !(1..=100_000).contains(&starts) {
-                return Err(format!("search.starts = {starts} must be in 1..=100000"));
-            }
-            Some(LibrarySearch::Cells(SearchMethod::Multistart {
-                starts,
-                seed,
-            }))
+    if let Some(SearchRequest::Multistart { starts, .. }) = req.search {
+        if !(1..=100_000).contains(&starts) {
+            return Err(format!("search.starts = {starts} must be in 1..=100000"));
         }
-        Some(SearchRequest::DynamicProgramming) => {
-            Some(LibrarySearch::Policy(PolicySolver::DynamicProgramming))
-        }
-        Some(SearchRequest::TemporalDifference { alpha, seed }) => {
-            let solver = PolicySolver::TemporalDifference { alpha, seed };
-            solver.validate()?;
-            Some(LibrarySearch::Policy(solver))
-        }
-    };
+    }
+    let search = req.search.map(tslg_client::wire::library_search);
+    if let Some(LibrarySearch::Policy(solver)) = search {
+        solver.validate()?;
+    }
     Ok(BuildRequest { threshold, search })
 }
 

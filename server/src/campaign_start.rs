@@ -70,8 +70,8 @@ pub fn rule_of(req: &CreateCampaign) -> Result<StoppingRule, ApiError> {
         return Err(bad(format!(
             "method `adaptive` runs through the service on the grid cases ({}); a {} adaptive \
              campaign probes the vehicle from grid states, which workers cannot be leased yet: \
-             run it in process with `tslg evaluate --case {} --method adaptive` \
-             (docs/adaptive-design.md)",
+             run it in process with `tslg library build --case {} -o POLICY` and `tslg \
+             evaluate --library POLICY --method adaptive` (docs/adaptive-design.md)",
             grid_cases(),
             req.case,
             req.case

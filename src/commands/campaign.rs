@@ -3,14 +3,11 @@
 
 use crate::commands::progress::{BuildBar, CampaignBars};
 use crate::commands::remote::{block_on, client, describe, exposure_request, vehicle_json};
-use crate::{CampaignStartArgs, LibraryCreateArgs, MethodArg, OutsideArg, SearchArg, ServerArgs};
+use crate::{CampaignStartArgs, LibraryCreateArgs, MethodArg, OutsideArg, ServerArgs};
 use anyhow::Context;
 use std::path::Path;
 use std::time::Duration;
-use tslg_api::{
-    CreateCampaign, CreateLibrary, LibraryStatus, LibraryView, Method, SearchRequest,
-    ThresholdRequest,
-};
+use tslg_api::{CreateCampaign, CreateLibrary, LibraryStatus, LibraryView, Method};
 use tslg_client::Client;
 
 pub fn start(args: &CampaignStartArgs) -> anyhow::Result<()> {
@@ -130,24 +127,23 @@ pub fn cancel(server: &ServerArgs, id: i64) -> anyhow::Result<()> {
 pub fn create_library(args: &LibraryCreateArgs) -> anyhow::Result<()> {
     let client = client(&args.server)?;
     let exposure = exposure_request(&args.case)?;
+    let descriptor = args.case.descriptor()?;
+    if args.search.starts == Some(0) {
+        anyhow::bail!("--starts must be at least 1");
+    }
     let request = CreateLibrary {
-        case: args.case.case.clone(),
+        case: descriptor.name.to_owned(),
         preset: args.case.preset.clone(),
-        surrogate: vehicle_json(args.case.vehicle_or_default(&args.surrogate))?,
+        surrogate: vehicle_json(args.case.vehicle_or_default(&args.surrogate)?)?,
         exposure,
-        search: args.search.map(|search| match search {
-            SearchArg::Exhaustive => SearchRequest::Exhaustive,
-            SearchArg::Multistart => SearchRequest::Multistart {
-                starts: args.starts.unwrap_or(args.case.default_starts()),
-                seed: args.seed,
-            },
-            SearchArg::DynamicProgramming => SearchRequest::DynamicProgramming,
-            SearchArg::TemporalDifference => SearchRequest::TemporalDifference {
-                alpha: args.alpha,
-                seed: args.seed,
-            },
-        }),
-        threshold: args.threshold_m.map(|m| ThresholdRequest::Relative { m }),
+        search: args
+            .search
+            .search(&descriptor)
+            .map(tslg_client::wire::search_request),
+        threshold: args
+            .search
+            .threshold()
+            .map(tslg_client::wire::threshold_request),
     };
     block_on(async {
         let view = client.create_library(&request).await?;

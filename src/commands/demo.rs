@@ -11,9 +11,7 @@ use crate::commands::local::{build_library, exact_report, watch_campaigns, Exact
 use crate::commands::remote::{exposure_request, vehicle_json};
 use crate::DemoArgs;
 use std::time::Instant;
-use tslg_api::{
-    CampaignView, CreateCampaign, CreateLibrary, ExposureRequest, Method, SearchRequest,
-};
+use tslg_api::{CampaignView, CreateCampaign, CreateLibrary, ExposureRequest, Method};
 use tslg_client::Client;
 use tslg_method::exact::ExactReport;
 use tslg_method::warnings::Dialect;
@@ -28,7 +26,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
 
 async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
     let exposure = exposure_request(&args.case)?;
-    let vut = vehicle_json(demo_vut(args))?;
+    let vut = vehicle_json(&demo_vut(args)?)?;
     let local = Local::start(args.database.as_deref(), args.workers, "demo").await?;
     println!(
         "coordinator {} on {}, {} workers × {} threads",
@@ -50,37 +48,33 @@ async fn drive(
 ) -> anyhow::Result<()> {
     let client = Client::new(url, None)?;
     let started = Instant::now();
+    let descriptor = args.case.descriptor()?;
+    let surrogate = args.case.vehicle_or_default(&args.surrogate)?;
     let library = build_library(
         &client,
         &CreateLibrary {
-            case: args.case.case.clone(),
+            case: descriptor.name.to_owned(),
             preset: args.case.preset.clone(),
-            surrogate: vehicle_json(args.case.vehicle_or_default(&args.surrogate))?,
+            surrogate: vehicle_json(surrogate)?,
             exposure: exposure.clone(),
-            search: demo_search(&args.case.case),
+            search: None,
             threshold: None,
         },
     )
     .await?;
-    // A car-following library is a policy over initial states.
-    let unit = if library.case == "car-following" {
-        "states"
-    } else {
-        "scenarios"
-    };
     println!(
-        "{} library {} of {}: {} of {} {unit} ({} surrogate runs, {:.2} s), exposure {}",
+        "{} library {} of {surrogate}: {} of {} {} ({} surrogate runs, {:.2} s), exposure {}",
         library.case,
         library.id,
-        args.case.vehicle_or_default(&args.surrogate),
         library.size.unwrap_or(0),
         library.total_scenarios,
+        descriptor.scenario_unit,
         library.sm_evaluations.unwrap_or(0),
         started.elapsed().as_secs_f64(),
         library.exposure
     );
     let request = |method| CreateCampaign {
-        case: args.case.case.clone(),
+        case: descriptor.name.to_owned(),
         method,
         library_id: Some(library.id),
         vut: vut.clone(),
@@ -95,12 +89,13 @@ async fn drive(
         min_events: None,
         guard_outside: false,
     };
-    // A car-following adaptive campaign probes the vehicle from grid states,
-    // which the service cannot lease yet: it runs in process (tslg evaluate).
-    let methods: &[Method] = if library.case == "car-following" {
-        &[Method::Library, Method::Ndd]
-    } else {
+    // The service runs adaptive campaigns of grid cases; a sequential
+    // case's probes the vehicle from grid states, which it cannot lease
+    // yet (`tslg evaluate` runs them).
+    let methods: &[Method] = if descriptor.is_grid() {
         &[Method::Library, Method::Adaptive, Method::Ndd]
+    } else {
+        &[Method::Library, Method::Ndd]
     };
     let mut ids = Vec::new();
     for &method in methods {
@@ -110,7 +105,7 @@ async fn drive(
     let views = watch_campaigns(&client, &ids, &labels).await?;
     let by_library = &views[0];
     let exact = exact_report(ExactQuestion {
-        case: args.case.case.clone(),
+        case: descriptor.name.to_owned(),
         preset: args.case.preset.clone(),
         exposure,
         vut,
@@ -125,32 +120,16 @@ async fn drive(
     Ok(())
 }
 
-/// The library search of the demo: multistart for cut-in (the paper's
-/// method, recall 1 there); exhaustive for highway-exit, where the
-/// surrogate's failures are scattered islands that a 100-start multistart
-/// finds only a few of (its recall is in docs/benchmarks.md) and where
-/// enumerating all 1.64 × 10⁶ scenarios takes seconds; the case's default
-/// (dynamic programming) for car-following.
-fn demo_search(case: &str) -> Option<SearchRequest> {
-    match case {
-        "highway-exit" => Some(SearchRequest::Exhaustive),
-        "cut-in" => Some(SearchRequest::Multistart {
-            starts: 50,
-            seed: 0,
-        }),
-        _ => None,
-    }
-}
-
-/// `--vut`; else on cut-in the FVDM, which fails where the IDM library does
-/// not (a vehicle that is not the surrogate, as a user's never is);
-/// elsewhere the surrogate (the case's default when neither is given).
-fn demo_vut(args: &DemoArgs) -> &str {
-    match &args.vut {
-        Some(vut) => vut,
-        None if args.case.case == "cut-in" && args.surrogate.is_none() => "fvdm",
-        None => args.case.vehicle_or_default(&args.surrogate),
-    }
+/// `--vut`; else the case's demo vehicle, one that is not the surrogate
+/// (on cut-in the FVDM, which fails where the IDM library does not), when
+/// the surrogate is the case's own; else the surrogate.
+fn demo_vut(args: &DemoArgs) -> anyhow::Result<String> {
+    let descriptor = args.case.descriptor()?;
+    Ok(match (&args.vut, descriptor.demo_vut) {
+        (Some(vut), _) => vut.clone(),
+        (None, Some(vut)) if args.surrogate.is_none() => vut.to_owned(),
+        (None, _) => args.case.vehicle_or_default(&args.surrogate)?.to_owned(),
+    })
 }
 
 /// What a method's interval rests on, in one line
@@ -175,7 +154,7 @@ fn print_table(args: &DemoArgs, views: &[CampaignView], report: Option<&ExactRep
     let interval = |v: &CampaignView| (v.ci_low.unwrap_or(f64::NAN), v.ci_high.unwrap_or(f64::NAN));
     println!(
         "\nvehicle under test {}, β {}, confidence 0.9, ε {}, seed {}\n",
-        demo_vut(args),
+        demo_vut(args).unwrap_or_default(),
         args.beta,
         args.exploration.epsilon,
         args.seed

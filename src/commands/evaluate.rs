@@ -1,28 +1,35 @@
-//! `tslg evaluate`: one campaign in this process.
+//! `tslg evaluate`: one campaign in this process, on any case, through its
+//! descriptor and the registry: the NDD baseline, a library campaign, or an
+//! adaptive one. On a grid case small enough to enumerate
+//! ([`tslg_api::EXACT_MAX_SCENARIOS`]) the exact P(A) is printed beside it.
 
-use crate::inputs::{check_epsilon, load_case, parse_vehicle, read_library, stopping_rule};
+use crate::inputs::{
+    case_of_library, check_epsilon, open, read_library_file, stopping_rule, vehicle_spec,
+};
 use crate::{EvaluateArgs, EvaluateMethodArg as MethodArg, OutsideArg};
-use anyhow::Context;
 use serde::Serialize;
-use tslg_method::adaptive::{run_adaptive, AdaptiveSettings};
-use tslg_method::campaign::{run_campaign, CampaignResult};
-use tslg_method::case::Case;
-use tslg_method::exact::{event_cells, event_probability};
-use tslg_method::sampling::{LibraryDistribution, NddDistribution, TestDistribution};
-use tslg_method::vehicle::VehicleModel;
+use tslg_method::adaptive::AdaptiveSettings;
+use tslg_method::campaign::{run_campaign_tests, CampaignResult};
+use tslg_method::estimator::StoppingRule;
+use tslg_method::registry::{AdaptiveRun, ScenarioCase};
 use tslg_method::warnings::{warnings, Dialect, WarningContext};
 
 #[derive(Serialize)]
 struct Report {
+    case: &'static str,
+    #[serde(skip)]
+    grid: bool,
+    preset: String,
     method: &'static str,
-    vut: &'static str,
+    vut: serde_json::Value,
     #[serde(flatten)]
     result: CampaignResult,
     /// Adaptive campaigns: the tests spent finding the failures.
     #[serde(skip_serializing_if = "Option::is_none")]
     search: Option<Search>,
-    exact: f64,
-    covers_exact: bool,
+    /// The exact P(A) by enumeration, where the case has one this size.
+    exact: Option<f64>,
+    covers_exact: Option<bool>,
     warnings: Vec<String>,
 }
 
@@ -31,149 +38,112 @@ struct Report {
 #[derive(Serialize)]
 struct Search {
     library_tests: u64,
+    /// Search tests (grid cases) or states probed (car-following).
     search_tests: u64,
     stages: u64,
-    /// Cells the last estimation stage sampled besides its exploring share.
+    /// The vehicle's driving in tests' worth (car-following counts its
+    /// probes' decisions).
+    driving: f64,
+    /// Cells the last estimation stage sampled besides its exploring share
+    /// (grid cases).
     support_cells: usize,
-    /// The cells of the support.
     #[serde(skip)]
-    support: Vec<usize>,
+    assumes: &'static str,
+    #[serde(skip)]
+    search_kind: &'static str,
 }
 
 pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
     check_epsilon(args.exploration.epsilon)?;
-    if args.case.case == "car-following" {
-        return super::evaluate_follow::run(args);
-    }
-    if args.surrogate.is_some() {
-        anyhow::bail!(
-            "--surrogate is for car-following, whose policy is learned in this process; a {} \
-             campaign takes the surrogate of its --library file",
-            args.case.case
-        );
-    }
     let library = match (args.method, &args.library) {
         (MethodArg::Library | MethodArg::Adaptive, None) => {
             anyhow::bail!("--library is required with --method library and adaptive")
         }
-        (MethodArg::Library | MethodArg::Adaptive, Some(path)) => Some(read_library(path)?),
+        (MethodArg::Library | MethodArg::Adaptive, Some(path)) => Some(read_library_file(path)?),
         (MethodArg::Ndd, _) => None,
     };
-    // The tests run on the simulation the library was built on: its preset,
-    // unless --preset says the same.
-    let mut case_args = args.case.clone();
-    if let Some(library) = &library {
-        match &case_args.preset {
-            None => case_args.preset = Some(library.preset.clone()),
-            Some(preset) if *preset != library.preset => anyhow::bail!(
-                "--preset {preset}: the library was built on preset {}, and its criticality \
-                 means nothing on another simulation; leave --preset out or build the library \
-                 with --preset {preset}",
-                library.preset
-            ),
-            Some(_) => {}
-        }
-    }
-    let case = load_case(&case_args)?;
-    let vut = parse_vehicle(&args.vut, "vehicle under test")?;
+    // The tests run on the case and simulation the library was built on.
+    let case_args = match &library {
+        Some((_, head)) => case_of_library(&args.case, head)?,
+        None => args.case.clone(),
+    };
+    let case = open(&case_args)?;
+    let descriptor = case.descriptor().clone();
+    let vut = vehicle_spec(case.as_ref(), &args.vut, "vehicle under test")?;
     let rule = stopping_rule(
         &args.rule,
-        tslg_method::cases::descriptor(&args.case.case)?
-            .exploring_share(args.method == MethodArg::Library, args.exploration.epsilon),
+        descriptor.exploring_share(args.method == MethodArg::Library, args.exploration.epsilon),
     )?;
-    let (result, search) = if args.method == MethodArg::Adaptive {
-        let library = library.as_ref().expect("read above for --method adaptive");
-        library.check_matches(&case)?;
-        let adaptive = run_adaptive(
-            &case,
-            &vut,
-            library,
-            args.exploration.epsilon,
-            AdaptiveSettings::default(),
-            &rule,
-            args.seed,
-        )?;
-        let search = Search {
-            library_tests: adaptive.library_tests,
-            search_tests: adaptive.search_tests,
-            stages: adaptive.stages,
-            support_cells: adaptive.support.len(),
-            support: adaptive.support,
-        };
-        (adaptive.result, Some(search))
-    } else {
-        (sampled(args, &case, &vut, &rule, library.as_ref())?, None)
-    };
-    report(args, &case, &vut, &rule, result, search)
-}
-
-/// A library or NDD campaign of `vut`.
-fn sampled(
-    args: &EvaluateArgs,
-    case: &tslg_method::cases::cutin::CutIn,
-    vut: &VehicleModel,
-    rule: &tslg_method::estimator::StoppingRule,
-    library: Option<&tslg_method::library::Library>,
-) -> anyhow::Result<CampaignResult> {
-    let (distribution, surrogate) = match args.method {
-        MethodArg::Ndd | MethodArg::Adaptive => (
-            TestDistribution::Ndd(NddDistribution::new(case.exposure())),
-            None,
-        ),
-        MethodArg::Library => {
-            let library = library.expect("read above for --method library");
-            library.check_matches(case)?;
-            let outside = args
-                .exploration
-                .outside
-                .map_or(Default::default(), OutsideArg::spread);
-            let surrogate: VehicleModel = serde_json::from_value(library.surrogate.clone())
-                .context("the library's surrogate is not a built-in cut-in model")?;
-            let distribution = TestDistribution::library(
-                LibraryDistribution::new(
-                    library,
-                    case.exposure(),
-                    args.exploration.epsilon,
-                    outside,
-                    args.exploration.split.split(),
-                )
-                .context("cannot sample from this library")?,
-            );
-            (distribution, Some(surrogate))
+    anyhow::ensure!(
+        !rule.guard_outside || descriptor.is_grid(),
+        "--guard-outside applies to the grid cases: a {} campaign explores per decision, and \
+         no bound on its outside mass is defined",
+        descriptor.name
+    );
+    let outside = args
+        .exploration
+        .outside
+        .map_or(descriptor.default_outside, OutsideArg::spread);
+    let file = library.as_ref().map(|(bytes, _)| bytes.as_slice());
+    let (result, search) = match (args.method, file) {
+        (MethodArg::Adaptive, Some(file)) => {
+            let run = case.adaptive_campaign(
+                file,
+                &vut,
+                args.exploration.epsilon,
+                AdaptiveSettings::default(),
+                &rule,
+                args.seed,
+            )?;
+            let AdaptiveRun {
+                result,
+                library_tests,
+                search_tests,
+                stages,
+                driving,
+                support,
+                assumes,
+                search_kind,
+            } = run;
+            let search = Search {
+                library_tests,
+                search_tests,
+                stages,
+                driving,
+                support_cells: support.len(),
+                assumes,
+                search_kind,
+            };
+            (result, Some(search))
+        }
+        (_, file) => {
+            let file = file.filter(|_| args.method == MethodArg::Library);
+            let tests = case.campaign(
+                file,
+                &vut,
+                args.exploration.epsilon,
+                outside,
+                args.exploration.split.split(),
+                args.seed,
+            )?;
+            (run_campaign_tests(tests.as_ref(), &rule, &|_| false), None)
         }
     };
-    Ok(run_campaign(
-        case,
-        vut,
-        surrogate.as_ref(),
-        &distribution,
-        rule,
-        args.seed,
-    ))
-}
-
-fn report(
-    args: &EvaluateArgs,
-    case: &tslg_method::cases::cutin::CutIn,
-    vut: &VehicleModel,
-    rule: &tslg_method::estimator::StoppingRule,
-    result: CampaignResult,
-    search: Option<Search>,
-) -> anyhow::Result<()> {
-    // Cut-in vehicles are deterministic on a 3,420-cell grid: the exact answer is cheap.
-    let events = event_cells(case, vut);
-    let exact = event_probability(case, &events);
+    let exact = exact_answer(case.as_ref(), &vut);
     let report = Report {
+        case: descriptor.name,
+        grid: descriptor.is_grid(),
+        preset: case.preset(),
         method: match args.method {
             MethodArg::Library => "library",
             MethodArg::Adaptive => "adaptive",
             MethodArg::Ndd => "ndd",
         },
-        vut: vut.name(),
+        vut,
         result,
         search,
         exact,
-        covers_exact: result.covers(exact),
+        covers_exact: exact.map(|p| result.covers(p)),
         warnings: warnings(
             &result,
             WarningContext {
@@ -187,66 +157,95 @@ fn report(
         println!("{}", serde_json::to_string_pretty(&report)?);
         return Ok(());
     }
+    print(&report, &rule);
+    Ok(())
+}
+
+/// P(A) by enumeration of the grid, where the case has one and it is
+/// small enough to run here in a few seconds.
+fn exact_answer(case: &dyn ScenarioCase, vut: &serde_json::Value) -> Option<f64> {
+    let small = case.total_scenarios() <= tslg_api::EXACT_MAX_SCENARIOS;
+    (case.descriptor().is_grid() && small)
+        .then(|| case.exact_event_probability(vut).ok())
+        .flatten()
+}
+
+fn print(report: &Report, rule: &StoppingRule) {
+    let result = &report.result;
+    println!("case               {} ({})", report.case, report.preset);
     println!("method             {}", report.method);
-    println!("vehicle under test {}", report.vut);
-    println!("status             {}", result.status.as_str());
-    if let Some(search) = &report.search {
-        println!(
-            "tests              {} ({} library, {} searching, {} estimating; {} stages)",
-            result.indices, search.library_tests, search.search_tests, result.tests, search.stages
-        );
-        let held: f64 = search
-            .support
-            .iter()
-            .filter(|c| events.binary_search(c).is_ok())
-            .map(|&c| case.exposure().p(c))
-            .sum();
-        println!(
-            "sampled cells      {} holding {:.1}% of the exact P(A); the rest only the exploring \
-             tests meet",
-            search.support_cells,
-            100.0 * held / exact
-        );
-        println!(
-            "assumes            the vehicle's failures outside the library are reachable from the \
-             scenarios its tests met through failures and near misses (docs/adaptive-design.md)"
-        );
-    } else {
-        println!("tests              {}", result.tests);
-    }
-    print_estimate(&result, rule);
     println!(
-        "exact P(A)         {:.4e} ({})",
-        exact,
-        if report.covers_exact {
-            "inside the interval"
-        } else {
-            "OUTSIDE the interval"
-        }
+        "vehicle under test {}",
+        crate::inputs::vehicle_name(&report.vut)
     );
+    println!("status             {}", result.status.as_str());
+    match &report.search {
+        Some(search) => {
+            println!(
+                "tests              {} ({} library, {} {}, {} estimating; {} stages)",
+                result.indices,
+                search.library_tests,
+                search.search_tests,
+                search.search_kind,
+                result.tests,
+                search.stages
+            );
+            if search.driving != result.indices as f64 {
+                println!(
+                    "driving            {:.0} tests' worth (the probes' decisions counted)",
+                    search.driving
+                );
+            }
+            println!("assumes            {}", search.assumes);
+        }
+        None => println!("tests              {}", result.tests),
+    }
+    print_estimate(result, rule);
+    match (report.exact, report.covers_exact) {
+        (Some(exact), Some(covers)) => println!(
+            "exact P(A)         {exact:.4e} ({})",
+            if covers {
+                "inside the interval"
+            } else {
+                "OUTSIDE the interval"
+            }
+        ),
+        _ if report.grid => println!(
+            "exact P(A)         not computed: enumeration here stops at {} scenarios",
+            tslg_api::EXACT_MAX_SCENARIOS
+        ),
+        _ => println!("exact P(A)         none: no enumeration reaches this case's scenarios"),
+    }
     if let (Some(upper), Some(high)) = (result.outside_upper, result.guarded_ci_high) {
         println!(
             "outside library    {} exploring tests, {} events; failure mass there ≤ {upper:.4e}",
             result.outside_tests, result.outside_events
         );
+        let covers = report
+            .exact
+            .map(|exact| {
+                format!(
+                    " (exact {})",
+                    if result.guarded_covers(exact) {
+                        "inside"
+                    } else {
+                        "OUTSIDE"
+                    }
+                )
+            })
+            .unwrap_or_default();
         println!(
-            "guarded interval   [{:.4e}, {high:.4e}] (exact {})",
-            result.ci_low,
-            if result.guarded_covers(exact) {
-                "inside"
-            } else {
-                "OUTSIDE"
-            }
+            "guarded interval   [{:.4e}, {high:.4e}]{covers}",
+            result.ci_low
         );
     }
     for warning in &report.warnings {
         println!("warning: {warning}");
     }
-    Ok(())
 }
 
 /// The events, estimate, interval and relative half-width of `result`.
-pub(super) fn print_estimate(result: &CampaignResult, rule: &tslg_method::estimator::StoppingRule) {
+fn print_estimate(result: &CampaignResult, rule: &StoppingRule) {
     println!("events             {}", result.events);
     println!("estimate           {:.4e}", result.estimate);
     println!(

@@ -1,16 +1,14 @@
-//! `tslg exact`: exact P(A) of each built-in vehicle by enumeration, and the
-//! analytic number of tests a library campaign and the NDD baseline need.
+//! `tslg exact`: exact P(A) of each built-in vehicle of a case by
+//! enumeration, and the analytic number of tests a library campaign and the
+//! NDD baseline need, for every grid case through its descriptor and the
+//! registry.
 
-use crate::inputs::{check_epsilon, load_case, parse_vehicle};
+use crate::inputs::{check_epsilon, open, vehicle_name, vehicle_spec};
 use crate::{CaseArgs, ExactArgs};
 use anyhow::Context;
-use tslg_method::case::Case;
-use tslg_method::cases::cutin::CutIn;
-use tslg_method::estimator::{z_for_confidence, StoppingRule};
-use tslg_method::exact::exact_report;
-use tslg_method::library::{build_library, LibraryRequest, SearchMethod, Threshold};
-use tslg_method::sampling::{LibraryDistribution, OutsideSpread, Split};
-use tslg_method::vehicle::{VehicleModel, BUILTIN_MODELS};
+use tslg_method::estimator::StoppingRule;
+use tslg_method::library::{LibrarySearch, SearchMethod};
+use tslg_method::registry::{BuildRequest, ScenarioCase};
 
 pub fn run(args: &ExactArgs) -> anyhow::Result<()> {
     check_epsilon(args.epsilon)?;
@@ -22,46 +20,47 @@ pub fn run(args: &ExactArgs) -> anyhow::Result<()> {
     }
     .validate()
     .map_err(|e| anyhow::anyhow!("--{e}"))?;
-    let surrogate = parse_vehicle(&args.surrogate, "surrogate")?;
-    let builtin = load_case(&CaseArgs {
+    let descriptor = args.case.descriptor()?;
+    anyhow::ensure!(
+        descriptor.is_grid(),
+        "case {}: no enumeration reaches its scenarios, so it has no exact answer (its \
+         campaigns are checked against a high-precision reference: docs/statistics.md)",
+        descriptor.name
+    );
+    let builtin = open(&CaseArgs {
         ndd_table: None,
         ..args.case.clone()
     })?;
-    print_table(&builtin, &surrogate, args)?;
+    print_table(builtin.as_ref(), args)?;
     if args.case.ndd_table.is_some() {
         println!();
-        print_table(&load_case(&args.case)?, &surrogate, args)?;
+        print_table(open(&args.case)?.as_ref(), args)?;
     }
     Ok(())
 }
 
-fn print_table(case: &CutIn, surrogate: &VehicleModel, args: &ExactArgs) -> anyhow::Result<()> {
-    let library = build_library(
+fn print_table(case: &dyn ScenarioCase, args: &ExactArgs) -> anyhow::Result<()> {
+    let descriptor = case.descriptor();
+    let surrogate = vehicle_spec(
         case,
-        surrogate,
-        serde_json::to_value(surrogate)?,
-        case.preset().name(),
-        &LibraryRequest {
-            threshold: Threshold::default(),
-            search: SearchMethod::Exhaustive,
+        args.case.vehicle_or_default(&args.surrogate)?,
+        "surrogate",
+    )?;
+    let library = case.build_library(
+        &surrogate,
+        &BuildRequest {
+            threshold: None,
+            search: Some(LibrarySearch::Cells(SearchMethod::Exhaustive)),
         },
-    );
-    let q = LibraryDistribution::new(
-        &library,
-        case.exposure(),
-        args.epsilon,
-        OutsideSpread::Uniform,
-        // The analytic figures are the mixture's, `Var_q(P A/q)`.
-        Split::Random,
-    )
-    .context("the surrogate's library is empty")?;
-    let z = z_for_confidence(args.confidence);
+    )?;
     println!(
-        "exposure {} | preset {} | library of {} ({} cells), epsilon {}, beta {}, confidence {}",
+        "case {} | exposure {} | preset {} | library of {} ({} cells), epsilon {}, beta {}, \
+         confidence {}",
+        descriptor.name,
         case.exposure_name(),
         case.preset(),
-        surrogate.name(),
-        library.size(),
+        vehicle_name(&surrogate),
+        library.size,
         args.epsilon,
         args.beta,
         args.confidence
@@ -70,9 +69,18 @@ fn print_table(case: &CutIn, surrogate: &VehicleModel, args: &ExactArgs) -> anyh
         "{:<14} {:>12} {:>14} {:>14} {:>10}",
         "vehicle", "exact P(A)", "library tests", "NDD tests", "ratio"
     );
-    for name in BUILTIN_MODELS {
-        let vut = VehicleModel::builtin(name)?;
-        let r = exact_report(case, &vut, &q, args.beta, z);
+    for name in &descriptor.vehicles {
+        let vut = vehicle_spec(case, name, "vehicle")?;
+        let r = case
+            .exact_report(
+                &vut,
+                &library.file,
+                args.epsilon,
+                descriptor.default_outside,
+                args.beta,
+                args.confidence,
+            )
+            .with_context(|| format!("the exact answer of {name}"))?;
         println!(
             "{:<14} {:>12.4e} {:>14.1} {:>14.0} {:>10.1}",
             name,

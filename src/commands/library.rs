@@ -1,104 +1,111 @@
-//! `tslg library build` and `tslg library show`.
+//! `tslg library build` and `tslg library show`, for every case through
+//! its descriptor and the registry.
 
 use crate::commands::progress::with_progress;
-use crate::inputs::{load_case, parse_vehicle, read_library};
-use crate::{BuildArgs, SearchArg};
-use anyhow::{bail, Context};
+use crate::inputs::{open, read_library_file, vehicle_name, vehicle_spec};
+use crate::BuildArgs;
+use anyhow::Context;
 use std::path::Path;
 use std::time::Instant;
-use tslg_method::library::{
-    build_library_observed, Library, LibraryRequest, SearchMethod, Threshold,
-};
+use tslg_method::cases::open_case;
+use tslg_method::library::{Library, LibrarySearch, SearchMethod};
+use tslg_method::registry::{BuildRequest, ExposureSource, LibrarySummary, ScenarioCase};
 
 pub fn build(args: &BuildArgs) -> anyhow::Result<()> {
-    let case = load_case(&args.case)?;
-    let surrogate = parse_vehicle(&args.surrogate, "surrogate")?;
-    let threshold = match args.gamma {
-        Some(gamma) => Threshold::Absolute { gamma },
-        None => Threshold::Relative {
-            m: args.threshold_m,
-        },
-    };
-    threshold.validate().context("invalid threshold")?;
-    let search = match args.search {
-        SearchArg::DynamicProgramming | SearchArg::TemporalDifference => bail!(
-            "dynamic-programming and temporal-difference learn car-following libraries, \
-             which the service builds: tslg library create --case car-following"
-        ),
-        SearchArg::Exhaustive => SearchMethod::Exhaustive,
-        SearchArg::Multistart => {
-            if args.starts == 0 {
-                bail!("--starts must be at least 1");
-            }
-            SearchMethod::Multistart {
-                starts: args.starts,
-                seed: args.seed,
-            }
-        }
-    };
-    let spec = serde_json::to_value(surrogate)?;
-    let preset = case.preset().name();
-    let started = Instant::now();
-    let mut library = with_progress("search", |progress| {
-        build_library_observed(
-            &case,
-            &surrogate,
-            spec.clone(),
-            preset,
-            &LibraryRequest { threshold, search },
-            progress,
-        )
-    });
-    let elapsed = started.elapsed();
-    if args.recall && search != SearchMethod::Exhaustive {
-        let reference = with_progress("recall", |progress| {
-            build_library_observed(
-                &case,
-                &surrogate,
-                spec,
-                preset,
-                &LibraryRequest {
-                    threshold,
-                    search: SearchMethod::Exhaustive,
-                },
-                progress,
-            )
-        });
-        library.search.recall = Some(library.recall_against(&reference));
+    let case = open(&args.case)?;
+    let descriptor = case.descriptor().clone();
+    let surrogate = vehicle_spec(
+        case.as_ref(),
+        args.case.vehicle_or_default(&args.surrogate)?,
+        "surrogate",
+    )?;
+    if let Some(threshold) = args.search.threshold() {
+        threshold.validate().context("invalid threshold")?;
     }
-    std::fs::write(&args.out, library.to_json())
+    if args.search.starts == Some(0) {
+        anyhow::bail!("--starts must be at least 1");
+    }
+    let request = BuildRequest {
+        threshold: args.search.threshold(),
+        search: args.search.search(&descriptor),
+    };
+    case.check_request(&request)?;
+    let started = Instant::now();
+    let built = with_progress(descriptor.build_unit, |progress| {
+        case.build_library_observed(&surrogate, &request, progress)
+    })?;
+    let elapsed = started.elapsed();
+    let mut file = built.file;
+    let multistart = matches!(
+        request.search.unwrap_or(descriptor.default_search),
+        LibrarySearch::Cells(SearchMethod::Multistart { .. })
+    );
+    if args.recall {
+        anyhow::ensure!(
+            descriptor.is_grid(),
+            "--recall measures a multistart search against the exhaustive one: grid cases only"
+        );
+        // An exhaustive library is its own reference.
+        if multistart {
+            file = with_recall(case.as_ref(), &surrogate, &request, &file)?;
+        }
+    }
+    std::fs::write(&args.out, &file)
         .with_context(|| format!("cannot write {}", args.out.display()))?;
-    print_summary(&library);
+    print_summary(&case.library_summary(&file)?, descriptor.scenario_unit);
     println!("build time         {:.3} s", elapsed.as_secs_f64());
     println!("written to         {}", args.out.display());
     Ok(())
 }
 
-pub fn show(file: &Path) -> anyhow::Result<()> {
-    print_summary(&read_library(file)?);
+/// The grid library `file` with the recall of its multistart search against
+/// an exhaustive search of the same surrogate.
+fn with_recall(
+    case: &dyn ScenarioCase,
+    surrogate: &serde_json::Value,
+    request: &BuildRequest,
+    file: &[u8],
+) -> anyhow::Result<Vec<u8>> {
+    let exhaustive = BuildRequest {
+        search: Some(LibrarySearch::Cells(SearchMethod::Exhaustive)),
+        ..*request
+    };
+    let reference = with_progress("recall", |progress| {
+        case.build_library_observed(surrogate, &exhaustive, progress)
+    })?;
+    let read = |bytes: &[u8]| -> anyhow::Result<Library> {
+        Ok(Library::from_json(std::str::from_utf8(bytes)?)?)
+    };
+    let mut library = read(file)?;
+    library.search.recall = Some(library.recall_against(&read(&reference.file)?));
+    Ok(library.to_json().into_bytes())
+}
+
+pub fn show(path: &Path) -> anyhow::Result<()> {
+    let (file, head) = read_library_file(path)?;
+    // The summary reads the file alone: the case opens on its built-in
+    // exposure whatever the library was built on.
+    let case = open_case(&head.case, Some(&head.preset), &ExposureSource::Builtin)?;
+    let summary = case
+        .library_summary(&file)
+        .with_context(|| format!("library file {} rejected", path.display()))?;
+    print_summary(&summary, case.descriptor().scenario_unit);
     Ok(())
 }
 
-fn print_summary(library: &Library) {
-    let n = library.total_scenarios();
+fn print_summary(library: &LibrarySummary, unit: &str) {
+    let n = library.total;
     println!("case               {} ({})", library.case, library.preset);
-    println!(
-        "surrogate          {}",
-        library
-            .surrogate
-            .get("model")
-            .and_then(|m| m.as_str())
-            .unwrap_or("?")
-    );
+    println!("surrogate          {}", vehicle_name(&library.surrogate));
     println!(
         "exposure           {} (fingerprint {})",
         library.exposure.name, library.exposure.fingerprint
     );
     println!(
-        "library size       {} of {} scenarios ({:.2}%)",
-        library.size(),
+        "library size       {} of {} {unit} ({:.2}%)",
+        library.size,
         n,
-        100.0 * library.size() as f64 / n as f64
+        100.0 * library.size as f64 / n as f64
     );
     println!("mu_S               {:.6e}", library.mu_s);
     println!(
@@ -106,16 +113,12 @@ fn print_summary(library: &Library) {
         library.w,
         100.0 * library.w / library.mu_s
     );
-    println!("gamma              {:.6e}", library.gamma);
-    let method = match library.search.method {
-        SearchMethod::Exhaustive => "exhaustive".to_owned(),
-        SearchMethod::Multistart { starts, seed } => {
-            format!("multistart ({starts} starts, seed {seed})")
-        }
-    };
-    println!("search             {method}");
-    println!("SM evaluations     {}", library.search.sm_evaluations);
-    if let Some(recall) = library.search.recall {
+    if let Some(gamma) = library.gamma {
+        println!("gamma              {gamma:.6e}");
+    }
+    println!("search             {}", library.search);
+    println!("SM evaluations     {}", library.sm_evaluations);
+    if let Some(recall) = library.recall {
         println!(
             "recall             {:.2}% of the exhaustive library's criticality",
             100.0 * recall

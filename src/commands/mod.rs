@@ -1,9 +1,9 @@
 //! One module per subcommand.
 
 pub mod campaign;
+pub mod cases;
 pub mod demo;
 pub mod evaluate;
-pub mod evaluate_follow;
 pub mod exact;
 pub mod held_out;
 pub mod library;

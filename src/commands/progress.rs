@@ -142,13 +142,9 @@ impl BuildBar {
     }
 }
 
-/// What a build's progress counts.
+/// What a build's progress counts (the case's descriptor says).
 fn search_unit(case: &str) -> &'static str {
-    if case == "car-following" {
-        "surrogate transitions"
-    } else {
-        "searched"
-    }
+    tslg_method::cases::descriptor(case).map_or("searched", |d| d.build_unit)
 }
 
 /// Runs `work` with a bar on stderr that follows the [`Progress`] it

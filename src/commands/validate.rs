@@ -32,9 +32,10 @@ use tslg_method::sampling::{OutsideSpread, Split};
 
 #[derive(Debug, clap::Args)]
 pub struct ValidateArgs {
-    /// The cases to validate (those with an exact answer).
-    #[arg(long, value_delimiter = ',', default_values = ["cut-in", "highway-exit"])]
-    pub cases: Vec<String>,
+    /// The cases to validate (default: every case with an exact answer:
+    /// cut-in, highway-exit).
+    #[arg(long, value_delimiter = ',')]
+    pub cases: Option<Vec<String>>,
     /// Replicate campaigns (seeds 0..R) per configuration (default 200, 50
     /// with --quick).
     #[arg(long)]
@@ -169,24 +170,31 @@ impl Setup {
             return Ok(run_campaign_tests(tests.as_ref(), &self.rule, &|_| false));
         }
         let run = match &self.table {
-            Some(table) => held_out::adaptive_campaign(
-                self.case.as_ref(),
-                &self.library,
-                table,
-                self.epsilon,
-                &self.rule,
-                seed,
-            )?,
-            None => self.case.adaptive_campaign(
-                &self.library,
-                &self.vut_spec(),
-                self.epsilon,
-                AdaptiveSettings::default(),
-                &self.rule,
-                seed,
-            )?,
+            Some(table) => {
+                held_out::adaptive_campaign(
+                    self.case.as_ref(),
+                    &self.library,
+                    table,
+                    self.epsilon,
+                    &self.rule,
+                    seed,
+                )?
+                .result
+            }
+            None => {
+                self.case
+                    .adaptive_campaign(
+                        &self.library,
+                        &self.vut_spec(),
+                        self.epsilon,
+                        AdaptiveSettings::default(),
+                        &self.rule,
+                        seed,
+                    )?
+                    .result
+            }
         };
-        Ok(run.result)
+        Ok(run)
     }
 }
 
@@ -267,7 +275,7 @@ pub fn run(args: &ValidateArgs) -> anyhow::Result<()> {
         return curves(args, replicates, to);
     }
     let mut rows = Vec::new();
-    for case_name in &args.cases {
+    for case_name in &cases(args) {
         for setup in setups(case_name, args)? {
             let row = replicate(&setup, replicates)?;
             eprintln!("{}", markdown_line(&row));
@@ -290,26 +298,20 @@ pub fn run(args: &ValidateArgs) -> anyhow::Result<()> {
 /// The pairings of a case: each surrogate with itself and with the other
 /// vehicle, under every (n_min, min_events) asked for, plain and guarded.
 fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
-    let (preset, pairs): (Option<&str>, &[(&'static str, &'static str)]) = match case_name {
-        "cut-in" => (
-            None,
-            &[
-                ("idm", "idm"),
-                ("fvdm", "fvdm"),
-                ("fvdm", "idm"),
-                ("idm", "fvdm"),
-                ("idm", "switching-acc"),
-                ("idm", "acc-aeb"),
-            ],
-        ),
-        "highway-exit" => (
-            args.quick.then_some("coarse"),
-            &[("mobil", "mobil"), ("mobil", "gap-seeker")],
-        ),
-        other => anyhow::bail!(
-            "tslg validate needs an exact answer; `{other}` has none (cases: cut-in, highway-exit)"
-        ),
+    let descriptor = tslg_method::cases::descriptor(case_name)?;
+    let Some(validation) = descriptor.validation.clone() else {
+        let grid: Vec<&str> = tslg_method::cases::descriptors()
+            .iter()
+            .filter(|d| d.validation.is_some())
+            .map(|d| d.name)
+            .collect();
+        anyhow::bail!(
+            "tslg validate needs an exact answer; `{case_name}` has none (cases: {})",
+            grid.join(", ")
+        )
     };
+    let preset = validation.quick_preset.filter(|_| args.quick);
+    let pairs = validation.pairs.as_slice();
     let case = open_case(case_name, preset, &exposure(args)?)?;
     // Held-out programs, tested with the library of the case's first
     // surrogate.
@@ -427,7 +429,7 @@ fn curves(args: &ValidateArgs, replicates: u64, to: u64) -> anyhow::Result<()> {
     );
     let mut csv =
         String::from("case,exposure,surrogate,vehicle,epsilon,split,replicates,n,coverage\n");
-    for case_name in &args.cases {
+    for case_name in &cases(args) {
         for setup in setups(case_name, args)?
             .iter()
             .filter(|s| !s.rule.guard_outside)
@@ -688,4 +690,15 @@ fn methods_markdown(rows: &[Row], args: &ValidateArgs) -> String {
         args.beta
     );
     out
+}
+
+/// The cases asked for, or every case with an exact answer.
+fn cases(args: &ValidateArgs) -> Vec<String> {
+    args.cases.clone().unwrap_or_else(|| {
+        tslg_method::cases::descriptors()
+            .iter()
+            .filter(|d| d.validation.is_some())
+            .map(|d| d.name.to_owned())
+            .collect()
+    })
 }

@@ -171,14 +171,42 @@ fn evaluate_adaptive_finds_what_the_idm_library_misses_of_the_fvdm() {
 
 #[test]
 fn evaluate_runs_car_following_campaigns_in_process_and_adapts_the_policy() {
+    // The offline commands work on every case through its descriptor: the
+    // IDM's policy library learned here, then campaigns on its case and
+    // preset (taken from the file).
+    let dir = tempfile::tempdir().unwrap();
+    let lib = dir.path().join("idm.policy");
+    let lib = lib.to_str().unwrap();
+    let o = tslg(&[
+        "library",
+        "build",
+        "--case",
+        "car-following",
+        "--preset",
+        "risky",
+        "-o",
+        lib,
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stdout(&o).contains("dynamic programming"), "{}", stdout(&o));
+    let shown = tslg(&["library", "show", lib]);
+    assert!(shown.status.success(), "{}", stderr(&shown));
+    assert!(
+        stdout(&shown).contains("car-following (risky)"),
+        "{}",
+        stdout(&shown)
+    );
+    assert!(
+        stdout(&shown).contains("of 45885 states"),
+        "{}",
+        stdout(&shown)
+    );
     let lagged = r#"{"model": "acc-aeb", "actuator_lag": 0.3}"#;
     let run = |method: &str| -> serde_json::Value {
         let o = tslg(&[
             "evaluate",
-            "--case",
-            "car-following",
-            "--preset",
-            "risky",
+            "--library",
+            lib,
             "--method",
             method,
             "--vut",
@@ -191,13 +219,21 @@ fn evaluate_runs_car_following_campaigns_in_process_and_adapts_the_policy() {
         serde_json::from_slice(&o.stdout).unwrap()
     };
     let adaptive = run("adaptive");
-    assert_eq!(adaptive["method"], "adaptive");
+    assert_eq!(
+        (&adaptive["case"], &adaptive["preset"], &adaptive["method"]),
+        (
+            &serde_json::json!("car-following"),
+            &serde_json::json!("risky"),
+            &serde_json::json!("adaptive")
+        )
+    );
     assert_eq!(adaptive["status"], "converged");
     assert_eq!(adaptive["vut"]["actuator_lag"], 0.3);
-    let learning = &adaptive["learning"];
+    assert!(adaptive["exact"].is_null());
+    let search = &adaptive["search"];
     let (library, probes) = (
-        learning["library_tests"].as_u64().unwrap(),
-        learning["probes"].as_u64().unwrap(),
+        search["library_tests"].as_u64().unwrap(),
+        search["search_tests"].as_u64().unwrap(),
     );
     assert_eq!(library, 100);
     assert!(probes > 1_000, "{adaptive}");
@@ -207,14 +243,28 @@ fn evaluate_runs_car_following_campaigns_in_process_and_adapts_the_policy() {
     );
     // The vehicle's driving, probes included, is far below the NDD
     // baseline's 3.8 × 10⁵ tests.
-    let driving = learning["test_equivalents"].as_f64().unwrap();
+    let driving = search["driving"].as_f64().unwrap();
     assert!(
         driving > probes as f64 / 30.0 && driving < 38_000.0,
         "{adaptive}"
     );
-    let ndd = run("ndd");
+    let o = tslg(&[
+        "evaluate",
+        "--case",
+        "car-following",
+        "--preset",
+        "risky",
+        "--method",
+        "ndd",
+        "--vut",
+        lagged,
+        "--seed",
+        "3",
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let ndd: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(ndd["status"], "converged");
-    assert!(ndd["learning"].is_null());
     assert!(ndd["tests"].as_u64().unwrap() > 50_000, "{ndd}");
     // Both estimates are near the vehicle's P(A) ≈ 1.79e-4 (NDD, 2 × 10⁷
     // tests): within three half-widths, which fails about one seed in 10³.
@@ -225,40 +275,41 @@ fn evaluate_runs_car_following_campaigns_in_process_and_adapts_the_policy() {
         );
         assert!((estimate - 1.79e-4).abs() < 3.0 * half_width, "{r}");
     }
-    // What the grid cases take is refused with the reason.
+    // What the file or the case refuses, with the reason.
     for (args, expected) in [
         (
-            vec!["--library", "x.json"],
-            "--library: a car-following library",
+            vec!["--library", lib, "--case", "cut-in"],
+            "the library was built for case car-following",
         ),
         (
-            vec!["--guard-outside"],
+            vec!["--library", lib, "--preset", "paper"],
+            "the library was built on preset risky",
+        ),
+        (
+            vec!["--library", lib, "--guard-outside"],
             "--guard-outside applies to the grid cases",
         ),
-        (vec!["--preset", "fast"], "presets are paper"),
-        (vec!["--surrogate", "nobody"], "invalid surrogate"),
+        (
+            vec![
+                "--case",
+                "car-following",
+                "--preset",
+                "fast",
+                "--method",
+                "ndd",
+            ],
+            "presets are paper",
+        ),
     ] {
-        let mut all = vec!["evaluate", "--case", "car-following", "--vut", "idm"];
+        let mut all = vec!["evaluate", "--vut", "idm"];
         all.extend(args);
         let o = tslg(&all);
         assert!(!o.status.success());
         assert!(stderr(&o).contains(expected), "{}", stderr(&o));
     }
-    let o = tslg(&[
-        "evaluate",
-        "--surrogate",
-        "idm",
-        "--vut",
-        "idm",
-        "--method",
-        "ndd",
-    ]);
+    let o = tslg(&["exact", "--case", "car-following"]);
     assert!(!o.status.success());
-    assert!(
-        stderr(&o).contains("--surrogate is for car-following"),
-        "{}",
-        stderr(&o)
-    );
+    assert!(stderr(&o).contains("no exact answer"), "{}", stderr(&o));
 }
 
 #[test]
@@ -492,7 +543,7 @@ fn bad_input_gets_a_message_and_a_non_zero_exit() {
                 "--vut".into(),
                 "tesla".into(),
             ],
-            "unknown vehicle model `tesla`",
+            "unknown variant `tesla`",
         ),
         (
             vec![
@@ -566,10 +617,25 @@ fn bad_input_gets_a_message_and_a_non_zero_exit() {
                 "build".into(),
                 "--case".into(),
                 "highway-exit".into(),
+                "--ndd-table".into(),
+                write(dir.path(), "any.csv", ",0,1\n1,0.5,0.5\n"),
                 "-o".into(),
                 "x".into(),
             ],
-            "every case runs through the service",
+            "the highway-exit case has only its built-in exposure model",
+        ),
+        (
+            vec![
+                "library".into(),
+                "build".into(),
+                "--case".into(),
+                "car-following".into(),
+                "--search".into(),
+                "multistart".into(),
+                "-o".into(),
+                "x".into(),
+            ],
+            "search.method is dynamic-programming or temporal-difference",
         ),
     ];
     for (args, expected) in cases {
@@ -582,6 +648,71 @@ fn bad_input_gets_a_message_and_a_non_zero_exit() {
             stderr(&o)
         );
     }
+}
+
+#[test]
+fn the_offline_commands_run_highway_exit_through_its_descriptor() {
+    // The case's default search (exhaustive, its descriptor says why) on
+    // the coarse grid, a library and an adaptive campaign of the
+    // gap-seeker, each with the exact P(A) by enumeration, and `exact`.
+    let dir = tempfile::tempdir().unwrap();
+    let lib = dir.path().join("mobil.json");
+    let lib = lib.to_str().unwrap();
+    let o = tslg(&[
+        "library",
+        "build",
+        "--case",
+        "highway-exit",
+        "--preset",
+        "coarse",
+        "-o",
+        lib,
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = stdout(&o);
+    assert_eq!(field(&text, "case"), "highway-exit (coarse)");
+    assert_eq!(field(&text, "surrogate"), "mobil");
+    assert_eq!(field(&text, "search"), "exhaustive");
+    assert!(
+        field(&text, "library size").contains("of 9216 scenarios"),
+        "{text}"
+    );
+    let run = |method: &str| -> serde_json::Value {
+        let o = tslg(&[
+            "evaluate",
+            "--library",
+            lib,
+            "--method",
+            method,
+            "--vut",
+            "gap-seeker",
+            "--json",
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        serde_json::from_slice(&o.stdout).unwrap()
+    };
+    let exact = {
+        let o = tslg(&["exact", "--case", "highway-exit", "--preset", "coarse"]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let text = stdout(&o);
+        let row = text.lines().find(|l| l.starts_with("gap-seeker")).unwrap();
+        row.split_whitespace()
+            .nth(1)
+            .unwrap()
+            .parse::<f64>()
+            .unwrap()
+    };
+    for method in ["library", "adaptive"] {
+        let r = run(method);
+        assert_eq!(r["case"], "highway-exit");
+        assert_eq!(r["preset"], "coarse");
+        // The exact answer is the one `tslg exact` prints, to its digits.
+        let e = r["exact"].as_f64().unwrap();
+        assert!((e - exact).abs() <= 5e-5 * exact, "{e} vs {exact}");
+    }
+    // The plain library of MOBIL misses most of the gap-seeker's failures
+    // (validate: coverage 0.02); the adaptive campaign finds them.
+    assert_eq!(run("adaptive")["covers_exact"], true);
 }
 
 #[test]

@@ -9,15 +9,15 @@
 use crate::support::*;
 use std::time::{Duration, Instant};
 use tslg_api::{CampaignStatus, CampaignView, CreateCampaign, Method};
-use tslg_method::adaptive::{AdaptiveResult, AdaptiveSettings};
+use tslg_method::adaptive::AdaptiveSettings;
 use tslg_method::cases::open_case;
 use tslg_method::estimator::{default_n_min, StoppingRule};
 use tslg_method::library::SearchMethod;
-use tslg_method::registry::{BuildRequest, ExposureSource, LibrarySearch};
+use tslg_method::registry::{AdaptiveRun, BuildRequest, ExposureSource, LibrarySearch};
 
 /// The same adaptive campaign in this process, on the IDM's exhaustive
 /// library of the built-in cut-in.
-fn adaptive_in_process(request: &CreateCampaign, vut: &str) -> AdaptiveResult {
+fn adaptive_in_process(request: &CreateCampaign, vut: &str) -> AdaptiveRun {
     let case = open_case("cut-in", None, &ExposureSource::Builtin).unwrap();
     let library = case
         .build_library(
@@ -49,7 +49,7 @@ fn adaptive_in_process(request: &CreateCampaign, vut: &str) -> AdaptiveResult {
 
 /// The service's campaign ended where the in-process run did, its
 /// estimate and interval to the bit, with the same stages.
-fn assert_same_adaptive(view: &CampaignView, own: &AdaptiveResult) {
+fn assert_same_adaptive(view: &CampaignView, own: &AdaptiveRun) {
     let r = &own.result;
     assert_eq!(view.indices, r.indices, "tests in all");
     assert_eq!(

@@ -117,7 +117,7 @@ async fn car_following_library_campaigns_agree_with_ndd_baselines_with_far_fewer
         problem["detail"]
             .as_str()
             .unwrap()
-            .contains("tslg evaluate --case car-following --method adaptive"),
+            .contains("tslg evaluate --library POLICY --method adaptive"),
         "{problem}"
     );
 

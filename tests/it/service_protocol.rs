@@ -525,6 +525,34 @@ async fn the_openapi_document_describes_the_contract() {
     ] {
         assert!(view[field].is_object(), "CampaignView.{field} missing");
     }
+    // The cases, as their descriptors say: what a client needs to build a
+    // request without reading the code.
+    assert!(doc["paths"]["/api/v1/cases"].is_object());
+    let cases: Value = reqwest::get(format!("{}/api/v1/cases", server.url))
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    let names: Vec<&str> = cases
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|c| c["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["cut-in", "highway-exit", "car-following"]);
+    let highway = &cases[1];
+    assert_eq!(highway["presets"][0]["name"], "paper");
+    assert_eq!(highway["default_surrogate"], "mobil");
+    assert_eq!(highway["default_search"]["method"], "exhaustive");
+    assert_eq!(highway["tables"], serde_json::json!([]));
+    let following = &cases[2];
+    assert_eq!(
+        (&following["scenarios"], &following["default_outside"]),
+        (&serde_json::json!("sequential"), &serde_json::json!("ndd"))
+    );
+    assert_eq!(following["adaptive"], false);
+    assert_eq!(cases[0]["tables"].as_array().unwrap().len(), 1);
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -3,11 +3,13 @@
 
 mod exhaustive;
 mod file;
+mod head;
 mod multistart;
 mod policy_solver;
 mod search;
 
 pub use file::LibraryFileError;
+pub use head::{read_head, LibraryHead, POLICY_MAGIC};
 pub use policy_solver::PolicySolver;
 pub use search::LibrarySearch;
 

@@ -6,10 +6,10 @@ use super::adaptive_tests::AdaptiveCellCampaign;
 use super::picture::{project, PictureMap};
 use super::vut::{runner, CampaignVehicle, Runner};
 use super::{
-    BuildRequest, BuiltLibrary, CampaignTests, CaseError, LibrarySearch, PlannedTest, ScenarioCase,
-    TestOutcome,
+    AdaptiveRun, BuildRequest, BuiltLibrary, CampaignTests, CaseError, LibrarySearch,
+    LibrarySummary, PlannedTest, ScenarioCase, TestOutcome,
 };
-use crate::adaptive::{run_adaptive, AdaptiveError, AdaptiveResult, AdaptiveSettings, Planner};
+use crate::adaptive::{run_adaptive, AdaptiveError, AdaptiveSettings, Planner};
 use crate::case::Case;
 use crate::descriptor::CaseDescriptor;
 use crate::estimator::{z_for_confidence, StoppingRule};
@@ -32,6 +32,7 @@ pub(crate) struct Registered<C> {
     case: Arc<C>,
     preset: String,
     descriptor: CaseDescriptor,
+    note: Option<String>,
 }
 
 impl<C> Registered<C>
@@ -44,7 +45,14 @@ where
             case: Arc::new(case),
             preset: preset.to_owned(),
             descriptor,
+            note: None,
         }
+    }
+
+    /// The case with `note` on how its exposure was read
+    /// ([`ScenarioCase::exposure_note`]).
+    pub(crate) fn with_note(self, note: Option<String>) -> Self {
+        Self { note, ..self }
     }
 
     fn vehicle(&self, spec: &serde_json::Value) -> Result<C::Vehicle, CaseError> {
@@ -124,6 +132,10 @@ where
         &self.descriptor
     }
 
+    fn exposure_note(&self) -> Option<String> {
+        self.note.clone()
+    }
+
     fn normalise_vehicle(&self, spec: &serde_json::Value) -> Result<serde_json::Value, CaseError> {
         Ok(self.campaign_vehicle(spec)?.to_spec())
     }
@@ -200,6 +212,32 @@ where
         }))
     }
 
+    fn library_summary(&self, file: &[u8]) -> Result<LibrarySummary, CaseError> {
+        let text = std::str::from_utf8(file).map_err(|e| {
+            CaseError::Library(crate::library::LibraryFileError::Json(e.to_string()))
+        })?;
+        let library = Library::from_json(text)?;
+        Ok(LibrarySummary {
+            case: library.case.clone(),
+            preset: library.preset.clone(),
+            surrogate: library.surrogate.clone(),
+            exposure: library.exposure.clone(),
+            size: library.size(),
+            total: library.total_scenarios(),
+            mu_s: library.mu_s,
+            w: library.w,
+            gamma: Some(library.gamma),
+            search: match library.search.method {
+                SearchMethod::Exhaustive => "exhaustive".to_owned(),
+                SearchMethod::Multistart { starts, seed } => {
+                    format!("multistart ({starts} starts, seed {seed})")
+                }
+            },
+            sm_evaluations: library.search.sm_evaluations,
+            recall: library.search.recall,
+        })
+    }
+
     fn library_picture(&self, file: &[u8]) -> Result<Vec<PictureMap>, CaseError> {
         let library = self.library(file)?;
         let grid = self.case.grid();
@@ -224,10 +262,10 @@ where
         settings: AdaptiveSettings,
         rule: &StoppingRule,
         seed: u64,
-    ) -> Result<AdaptiveResult, CaseError> {
+    ) -> Result<AdaptiveRun, CaseError> {
         let vehicle = self.builtin(vut, "an adaptive campaign in this process")?;
         let library = self.library(file)?;
-        Ok(run_adaptive(
+        Ok(AdaptiveRun::from_grid(run_adaptive(
             self.case.as_ref(),
             &vehicle,
             &library,
@@ -235,7 +273,7 @@ where
             settings,
             rule,
             seed,
-        )?)
+        )?))
     }
 
     fn adaptive_tests(

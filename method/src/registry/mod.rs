@@ -127,6 +127,36 @@ pub struct BuiltLibrary {
     pub w: f64,
 }
 
+/// What a library file holds, as `tslg library show` prints it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LibrarySummary {
+    /// The case and preset it was built for.
+    pub case: String,
+    /// The case's preset.
+    pub preset: String,
+    /// The surrogate, as its specification.
+    pub surrogate: serde_json::Value,
+    /// The exposure's name and fingerprint.
+    pub exposure: crate::library::ExposureRef,
+    /// `N(Φ)`: its cells or states.
+    pub size: usize,
+    /// `N(X)`: the case's scenarios (grid cells or states).
+    pub total: usize,
+    /// `μ_S`.
+    pub mu_s: f64,
+    /// `W = Σ_{x∈Φ} V(x)`.
+    pub w: f64,
+    /// The threshold γ (grid cases).
+    pub gamma: Option<f64>,
+    /// How it was searched or learned, in words.
+    pub search: String,
+    /// Surrogate simulations the search used.
+    pub sm_evaluations: usize,
+    /// The share of the exhaustive library's criticality a multistart
+    /// search found, when measured.
+    pub recall: Option<f64>,
+}
+
 /// What one test gave.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TestOutcome {
@@ -252,6 +282,50 @@ pub trait AdaptiveStages: Send + Sync {
     fn progress(&self) -> AdaptiveProgress;
 }
 
+/// What an adaptive campaign run in this process did, whatever the case
+/// ([`ScenarioCase::adaptive_campaign`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct AdaptiveRun {
+    /// The estimate over the estimation tests; `indices` counts every
+    /// index the campaign used.
+    pub result: crate::campaign::CampaignResult,
+    /// Tests of the library stage.
+    pub library_tests: u64,
+    /// What learning where the vehicle fails took: search tests (grid
+    /// cases) or states probed (car-following).
+    pub search_tests: u64,
+    /// Stages run.
+    pub stages: u64,
+    /// The vehicle's driving, in tests' worth: every test, and the probes'
+    /// decisions over a test's (car-following).
+    pub driving: f64,
+    /// The cells the last estimation stage sampled besides its exploring
+    /// share (grid cases; empty otherwise).
+    pub support: Vec<usize>,
+    /// What its interval assumes, in a sentence.
+    pub assumes: &'static str,
+    /// What its search tests do: `searching` (cells) or `probing` (states).
+    pub search_kind: &'static str,
+}
+
+impl AdaptiveRun {
+    /// A grid case's run ([`crate::adaptive::run_adaptive`]).
+    pub fn from_grid(run: AdaptiveResult) -> Self {
+        Self {
+            driving: run.result.indices as f64,
+            result: run.result,
+            library_tests: run.library_tests,
+            search_tests: run.search_tests,
+            stages: run.stages,
+            support: run.support,
+            assumes: "the vehicle's failures outside the library are reachable from the \
+                      scenarios its tests met through failures and near misses \
+                      (docs/adaptive-design.md)",
+            search_kind: "searching",
+        }
+    }
+}
+
 /// An adaptive campaign's state, as a coordinator persists and shows it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct AdaptiveProgress {
@@ -288,6 +362,11 @@ pub trait ScenarioCase: Send + Sync {
     fn total_scenarios(&self) -> usize;
     /// Everything the service and the command line know about the case.
     fn descriptor(&self) -> &CaseDescriptor;
+    /// What the user should know about how the exposure was read (a table
+    /// renormalised to sum to 1), if anything.
+    fn exposure_note(&self) -> Option<String> {
+        None
+    }
     /// How a campaign spreads ε when the request does not say.
     fn default_outside(&self) -> OutsideSpread {
         self.descriptor().default_outside
@@ -327,11 +406,16 @@ pub trait ScenarioCase: Send + Sync {
         split: Split,
         seed: u64,
     ) -> Result<Arc<dyn CampaignTests>, CaseError>;
+    /// What library `file` holds (read without checking that it was built
+    /// on this case's exposure).
+    fn library_summary(&self, file: &[u8]) -> Result<LibrarySummary, CaseError>;
     /// The picture of a library file: the exposure beside the library's
     /// sampling distribution (ε = 0), projected onto two axes.
     fn library_picture(&self, file: &[u8]) -> Result<Vec<PictureMap>, CaseError>;
-    /// Runs an adaptive campaign ([`crate::adaptive`]) of built-in vehicle
-    /// `vut` on the library `file`, in this process. Grid cases only.
+    /// Runs an adaptive campaign of built-in vehicle `vut` on the library
+    /// `file`, in this process: [`crate::adaptive`] with `settings` on a
+    /// grid case, [`crate::cases::carfollow::adaptive`] with its own on
+    /// car-following.
     fn adaptive_campaign(
         &self,
         file: &[u8],
@@ -340,7 +424,7 @@ pub trait ScenarioCase: Send + Sync {
         settings: AdaptiveSettings,
         rule: &StoppingRule,
         seed: u64,
-    ) -> Result<AdaptiveResult, CaseError>;
+    ) -> Result<AdaptiveRun, CaseError>;
     /// The tests of a service adaptive campaign of `vut` on the library
     /// `file`: the coordinator's copy plans its stages
     /// ([`CampaignTests::adaptive`]). Grid cases only.

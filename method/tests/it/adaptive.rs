@@ -10,6 +10,7 @@ use tslg_method::cases::highway::{ExitVehicle, HighwayExit, HighwayPreset};
 use tslg_method::estimator::{z_for_confidence, StoppingRule};
 use tslg_method::exact::{event_cells, event_probability};
 use tslg_method::library::{build_library, LibraryRequest, SearchMethod, Threshold};
+use tslg_method::registry::AdaptiveRun;
 
 /// The campaigns of seeds `0..seeds` of `vut` on `surrogate`'s exhaustive
 /// library, with `P(A)` and the NDD baseline's expected tests.
@@ -250,7 +251,11 @@ fn a_service_adaptive_campaign_resolved_from_workers_runs_is_the_in_process_one(
                 stages.resolve(&results);
             }
             let done = stages.progress().finished.unwrap();
-            assert_eq!(done, in_process, "{case_name} {vut} seed {seed}");
+            assert_eq!(
+                AdaptiveRun::from_grid(done),
+                in_process,
+                "{case_name} {vut} seed {seed}"
+            );
         }
     }
 }

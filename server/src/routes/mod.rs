@@ -7,6 +7,7 @@
 
 mod auth;
 mod campaigns;
+mod cases;
 mod dashboard;
 mod extract;
 mod figures;
@@ -47,6 +48,7 @@ pub fn router(state: AppState) -> Router {
         .route("/healthz", get(health::healthz))
         .route("/api/v1/openapi.json", get(openapi::document));
     let read = Router::new()
+        .route("/api/v1/cases", get(cases::list))
         .route("/api/v1/libraries", get(libraries::list))
         .route("/api/v1/libraries/{id}", get(libraries::get_one))
         .route("/api/v1/campaigns", get(campaigns::list))

@@ -18,6 +18,7 @@ use utoipa::OpenApi;
     ),
     paths(
         super::health::healthz,
+        super::cases::list,
         super::libraries::create,
         super::libraries::list,
         super::libraries::get_one,

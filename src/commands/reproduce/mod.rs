@@ -25,9 +25,9 @@ use tslg_method::exact::{expected_ndd_tests, ExactReport};
 
 #[derive(Debug, clap::Args)]
 pub struct ReproduceArgs {
-    /// The cases to run.
-    #[arg(long, value_delimiter = ',', default_values = ["cut-in", "highway-exit", "car-following"])]
-    pub cases: Vec<String>,
+    /// The cases to run (default: every case).
+    #[arg(long, value_delimiter = ',')]
+    pub cases: Option<Vec<String>>,
     /// The cut-in exposure table (the paper's: the authors' table,
     /// `../shared/data/cutin_ndd_spmd.csv`); default: the built-in model
     /// fitted to it.
@@ -58,14 +58,10 @@ pub struct ReproduceArgs {
 }
 
 /// The paper's own figures for a case (Part II, Section IV).
-#[derive(Debug, Clone, Copy)]
-pub struct Paper {
-    pub library_size: Option<u64>,
-    pub library_tests: f64,
-    pub ndd_tests: f64,
-}
+pub use tslg_method::cases::PaperFigures as Paper;
 
-/// One case as the paper ran it, and the vehicles we test with its library.
+/// One case as the paper ran it, and the vehicles we test with its library
+/// (the case's descriptor, [`tslg_method::cases::Reproduction`]).
 struct CaseSetting {
     case: &'static str,
     preset: &'static str,
@@ -77,72 +73,26 @@ struct CaseSetting {
     /// vehicles differ in how well the library covers them.
     vehicles: Vec<(&'static str, serde_json::Value)>,
     paper: Paper,
+    /// Grid cases also run a guarded and adaptive campaigns.
+    grid: bool,
+    /// Whether `--ndd-table` applies.
+    takes_table: bool,
 }
 
 fn settings(case: &str) -> anyhow::Result<CaseSetting> {
-    use serde_json::json;
-    Ok(match case {
-        "cut-in" => CaseSetting {
-            case: "cut-in",
-            preset: "paper-code",
-            surrogate: "idm",
-            // The paper's search, 50 starting points (recall 1 on this grid).
-            search: SearchRequest::Multistart {
-                starts: 50,
-                seed: 0,
-            },
-            epsilon: 0.05,
-            beta: 0.3,
-            vehicles: vec![
-                ("idm", json!({"model": "idm"})),
-                ("acc-aeb", json!({"model": "acc-aeb"})),
-            ],
-            paper: Paper {
-                library_size: Some(184),
-                library_tests: 51.0,
-                ndd_tests: 9.63e4,
-            },
-        },
-        "highway-exit" => CaseSetting {
-            case: "highway-exit",
-            preset: "paper",
-            surrogate: "mobil",
-            // Enumeration: MOBIL's failures are scattered islands that a
-            // 100-start multistart finds 3% of (docs/models.md), and all
-            // 1.64 × 10⁶ scenarios take seconds.
-            search: SearchRequest::Exhaustive,
-            epsilon: 0.1,
-            beta: 0.2,
-            vehicles: vec![
-                (
-                    "mobil p 0.3",
-                    json!({"model": "mobil", "politeness": 0.3, "wait_cost": 0.5}),
-                ),
-                ("gap-seeker", json!({"model": "gap-seeker"})),
-            ],
-            paper: Paper {
-                library_size: Some(1895),
-                library_tests: 2.6e3,
-                ndd_tests: 6.6e5,
-            },
-        },
-        "car-following" => CaseSetting {
-            case: "car-following",
-            preset: "paper",
-            surrogate: "idm",
-            search: SearchRequest::DynamicProgramming,
-            epsilon: 0.1,
-            beta: 0.2,
-            vehicles: vec![("acc-aeb", json!({"model": "acc-aeb"}))],
-            paper: Paper {
-                library_size: None,
-                library_tests: 50.0,
-                ndd_tests: 1.875e7,
-            },
-        },
-        other => {
-            anyhow::bail!("unknown case `{other}` (cases: cut-in, highway-exit, car-following)")
-        }
+    let descriptor = tslg_method::cases::descriptor(case)?;
+    let r = descriptor.reproduction.clone();
+    Ok(CaseSetting {
+        case: descriptor.name,
+        preset: r.preset,
+        surrogate: r.surrogate,
+        search: tslg_client::wire::search_request(r.search),
+        epsilon: r.epsilon,
+        beta: r.beta,
+        vehicles: r.vehicles,
+        paper: r.paper,
+        grid: descriptor.is_grid(),
+        takes_table: r.takes_table,
     })
 }
 
@@ -187,13 +137,18 @@ pub fn run(args: &ReproduceArgs) -> anyhow::Result<()> {
     let budget = args
         .ndd_budget
         .unwrap_or(if args.quick { 2_000_000 } else { 100_000_000 });
-    let cases = args
-        .cases
+    let names: Vec<String> = args.cases.clone().unwrap_or_else(|| {
+        tslg_method::cases::descriptors()
+            .iter()
+            .map(|d| d.name.to_owned())
+            .collect()
+    });
+    let cases = names
         .iter()
         .map(|c| settings(c))
         .collect::<anyhow::Result<Vec<_>>>()?;
     let exposure = exposure_request(&CaseArgs {
-        case: "cut-in".into(),
+        case: None,
         ndd_table: args.ndd_table.clone(),
         preset: None,
     })?;
@@ -211,9 +166,10 @@ pub fn run(args: &ReproduceArgs) -> anyhow::Result<()> {
             let mut rows = Vec::new();
             let mut outcome = Ok(());
             for case in &cases {
-                let exposure = match case.case {
-                    "cut-in" => exposure.clone(),
-                    _ => ExposureRequest::Builtin,
+                let exposure = if case.takes_table {
+                    exposure.clone()
+                } else {
+                    ExposureRequest::Builtin
                 };
                 match run_case(&client, case, exposure, replicates, args.seed, budget).await {
                     Ok(mut case_rows) => rows.append(&mut case_rows),
@@ -300,7 +256,7 @@ async fn run_case(
         // Grid cases: one campaign that does not assume the library covers
         // the vehicle's failures (the outside guard, with ε 0.5 spread by
         // the exposure so exploring tests weigh at most P(X∖Φ)/ε).
-        let guarded = setting.case != "car-following";
+        let guarded = setting.grid;
         if guarded {
             let mut request = request(Method::Library, seed);
             request.epsilon = 0.5;

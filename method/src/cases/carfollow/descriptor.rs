@@ -43,7 +43,6 @@ pub fn descriptor() -> CaseDescriptor {
         default_outside: OutsideSpread::Ndd,
         picture_axes: ["range R (m)", "range rate Ṙ (m/s)"],
         demo_vut: None,
-        demo_search: None,
         validation: None,
         reproduction: Reproduction {
             preset: "paper",

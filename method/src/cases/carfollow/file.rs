@@ -24,7 +24,7 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 /// The first eight bytes of every policy library file.
-pub const MAGIC: &[u8; 8] = b"TSLGPOL\0";
+pub const MAGIC: &[u8; 8] = crate::library::POLICY_MAGIC;
 /// The current format version.
 pub const VERSION: u32 = 1;
 /// The media type the service serves the file with.

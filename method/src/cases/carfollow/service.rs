@@ -5,7 +5,8 @@
 //! the test (300 steps, microseconds); an external program's cannot be
 //! replayed there.
 
-use crate::adaptive::{AdaptiveResult, AdaptiveSettings};
+use super::adaptive::{run_follow_adaptive, FollowAdaptiveSettings, FollowPlanner};
+use crate::adaptive::AdaptiveSettings;
 use crate::cases::carfollow::case::{CarFollowing, PolicySolver};
 use crate::cases::carfollow::file::{PolicyHeader, PolicyLibraryFile, MEDIA_TYPE, VERSION};
 use crate::cases::carfollow::library::PolicyLibrary;
@@ -21,8 +22,8 @@ use crate::progress::Progress;
 use crate::registry::picture::PictureMap;
 use crate::registry::vut::{runner, CampaignVehicle, Runner};
 use crate::registry::{
-    BuildRequest, BuiltLibrary, CampaignTests, CaseError, LibrarySearch, PlannedTest, ScenarioCase,
-    TestOutcome,
+    AdaptiveRun, BuildRequest, BuiltLibrary, CampaignTests, CaseError, LibrarySearch,
+    LibrarySummary, PlannedTest, ScenarioCase, TestOutcome,
 };
 use crate::sampling::{OutsideSpread, Split};
 use crate::vehicle::VehicleModel;
@@ -267,6 +268,34 @@ impl ScenarioCase for FollowScenarioCase {
         }))
     }
 
+    fn library_summary(&self, file: &[u8]) -> Result<LibrarySummary, CaseError> {
+        let read = PolicyLibraryFile::from_bytes(file)
+            .map_err(|e| CaseError::PolicyFile(e.to_string()))?;
+        let h = read.header;
+        Ok(LibrarySummary {
+            case: h.case,
+            preset: h.preset,
+            surrogate: h.surrogate,
+            exposure: h.exposure,
+            size: h.library_states,
+            total: h.states,
+            mu_s: h.mu_s,
+            w: h.mu_s,
+            gamma: None,
+            search: match h.solver {
+                PolicySolver::DynamicProgramming => {
+                    format!("dynamic programming ({} sweeps)", h.iterations)
+                }
+                PolicySolver::TemporalDifference { alpha, seed } => format!(
+                    "temporal difference (alpha {alpha}, seed {seed}, {} updates)",
+                    h.iterations
+                ),
+            },
+            sm_evaluations: h.sm_evaluations,
+            recall: None,
+        })
+    }
+
     /// Initial states over range and range rate (summed over the BV's
     /// speed): `P(s)` beside the library's `q(s) = P(s) P(S|s) / μ_S`.
     fn library_picture(&self, file: &[u8]) -> Result<Vec<PictureMap>, CaseError> {
@@ -308,16 +337,43 @@ impl ScenarioCase for FollowScenarioCase {
         ])
     }
 
+    /// The policy learned toward the vehicle ([`super::adaptive`], with its
+    /// own settings: `settings` are the grid cases').
     fn adaptive_campaign(
         &self,
-        _file: &[u8],
-        _vut: &serde_json::Value,
-        _epsilon: f64,
+        file: &[u8],
+        vut: &serde_json::Value,
+        epsilon: f64,
         _settings: AdaptiveSettings,
-        _rule: &StoppingRule,
-        _seed: u64,
-    ) -> Result<AdaptiveResult, CaseError> {
-        Err(no_adaptive())
+        rule: &StoppingRule,
+        seed: u64,
+    ) -> Result<AdaptiveRun, CaseError> {
+        let vehicle = self
+            .campaign_vehicle(vut)?
+            .into_builtin(NAME, "an adaptive campaign in this process")?;
+        let read = self.library(file)?;
+        let surrogate = self.vehicle(&read.header.surrogate)?;
+        let planner = FollowPlanner::new(
+            Arc::new(self.case.clone()),
+            &surrogate,
+            self.shared_library(file)?,
+            epsilon,
+            OutsideSpread::Ndd,
+            FollowAdaptiveSettings::default(),
+        )?;
+        let run = run_follow_adaptive(&planner, &vehicle, rule, seed)?;
+        Ok(AdaptiveRun {
+            driving: run.test_equivalents(self.case.world.decisions),
+            result: run.result,
+            library_tests: run.library_tests,
+            search_tests: run.probes,
+            stages: run.stages,
+            support: Vec::new(),
+            assumes: "the vehicle's failures lie in the region, connected to the accidents its \
+                      tests met, where it is dangerous and unlike the surrogate \
+                      (docs/adaptive-design.md)",
+            search_kind: "probing",
+        })
     }
 
     fn cell_exposures(&self) -> Result<Vec<f64>, CaseError> {
@@ -441,8 +497,8 @@ fn no_adaptive() -> CaseError {
     CaseError::Unsupported(
         "adaptive campaigns run through the service on the grid cases (cut-in, \
          highway-exit); a car-following adaptive campaign probes the vehicle from grid states, \
-         which workers cannot be leased yet: run it in process with `tslg evaluate --case \
-         car-following --method adaptive`"
+         which workers cannot be leased yet: run it in process with `tslg library build --case \
+         car-following -o POLICY` and `tslg evaluate --library POLICY --method adaptive`"
             .into(),
     )
 }

@@ -41,13 +41,12 @@ pub fn descriptor() -> CaseDescriptor {
         build_unit: "searched",
         tables: vec![TableFormat {
             holds: "P(R, Ṙ): the joint exposure of range and range rate",
-            doc: "docs/api.md#exposure-tables",
+            doc: "docs/models.md#exposure-tables---ndd-table-path",
         }],
         default_outside: OutsideSpread::Uniform,
         picture_axes: ["range R (m)", "range rate Ṙ (m/s)"],
         // The FVDM fails where the IDM's library does not.
         demo_vut: Some("fvdm"),
-        demo_search: None,
         validation: Some(Validation {
             pairs: vec![
                 ("idm", "idm"),
@@ -92,18 +91,26 @@ pub fn open(
         None => CutInPreset::default(),
         Some(p) => p.parse().map_err(CaseError::Preset)?,
     };
-    let opened = match exposure {
-        ExposureSource::Builtin => CutIn::builtin(preset),
-        ExposureSource::Table { name, text } => CutIn::from_table(text, name.clone(), preset)
-            .map(|(case, _)| case)
-            .map_err(|e: CutInError| CaseError::Exposure {
-                name: name.clone(),
-                reason: e.to_string(),
-            })?,
+    let (opened, note) = match exposure {
+        ExposureSource::Builtin => (CutIn::builtin(preset), None),
+        ExposureSource::Table { name, text } => {
+            let (case, table) =
+                CutIn::from_table(text, name.clone(), preset).map_err(|e: CutInError| {
+                    CaseError::Exposure {
+                        name: name.clone(),
+                        reason: e.to_string(),
+                    }
+                })?;
+            let note = table.mass.was_renormalised().then(|| {
+                format!(
+                    "the exposure table {name} sums to {:.7}; it was renormalised to 1",
+                    table.mass.original_sum()
+                )
+            });
+            (case, note)
+        }
     };
-    Ok(Arc::new(Registered::new(
-        opened,
-        preset.name(),
-        descriptor(),
-    )))
+    Ok(Arc::new(
+        Registered::new(opened, preset.name(), descriptor()).with_note(note),
+    ))
 }

@@ -50,7 +50,6 @@ pub fn descriptor() -> CaseDescriptor {
             "second background vehicle's position p₂ (m)",
         ],
         demo_vut: None,
-        demo_search: None,
         validation: Some(Validation {
             pairs: vec![("mobil", "mobil"), ("mobil", "gap-seeker")],
             quick_preset: Some("coarse"),
