@@ -12,26 +12,33 @@ use tslg_method::estimator::StoppingRule;
 use tslg_method::library::{read_head, LibraryHead};
 use tslg_method::registry::{ExposureSource, ScenarioCase};
 
-/// The exposure `args` names: the `--ndd-table` file, or the case's
-/// built-in model.
-pub fn exposure_source(args: &CaseArgs) -> anyhow::Result<ExposureSource> {
-    let Some(path) = &args.ndd_table else {
-        return Ok(ExposureSource::Builtin);
-    };
+/// An exposure table file: its name (the file's) and its text.
+pub fn read_table(path: &Path) -> anyhow::Result<(String, String)> {
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("cannot read the NDD table {}", path.display()))?;
     let name = path
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_else(|| path.display().to_string());
-    Ok(ExposureSource::Table { name, text })
+    Ok((name, text))
+}
+
+/// The exposure of table `path`, or the case's built-in model.
+pub fn exposure_source(path: Option<&Path>) -> anyhow::Result<ExposureSource> {
+    Ok(match path {
+        None => ExposureSource::Builtin,
+        Some(path) => {
+            let (name, text) = read_table(path)?;
+            ExposureSource::Table { name, text }
+        }
+    })
 }
 
 /// The case `args` names on its exposure and preset. What the user should
 /// know about how the exposure was read (a table renormalised to 1) is
 /// printed on stderr.
 pub fn open(args: &CaseArgs) -> anyhow::Result<Arc<dyn ScenarioCase>> {
-    let exposure = exposure_source(args)?;
+    let exposure = exposure_source(args.ndd_table.as_deref())?;
     let case = open_case(args.name(), args.preset.as_deref(), &exposure).with_context(|| {
         match &args.ndd_table {
             Some(path) => format!("case {} with NDD table {}", args.name(), path.display()),

@@ -28,6 +28,16 @@ pub enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Print a case's built-in exposure model as the table the case accepts
+    /// (`--ndd-table`): the format to fill with your own naturalistic data.
+    Table {
+        /// The case.
+        #[arg(long, default_value = "cut-in")]
+        case: String,
+        /// The preset (default: the case's).
+        #[arg(long)]
+        preset: Option<String>,
+    },
     /// Build or inspect scenario libraries.
     #[command(subcommand)]
     Library(LibraryCommand),
@@ -226,8 +236,10 @@ pub struct CaseArgs {
     /// its case when this is left out.
     #[arg(long)]
     pub case: Option<String>,
-    /// An exposure table in the layout of the authors' cut-in table (row 0: range-rate
-    /// labels; column 0: range labels; body: joint probability). Default: the built-in model.
+    /// An exposure table in the case's format (docs/bring-your-own.md;
+    /// `tslg table --case CASE` prints the built-in model in it): cut-in the
+    /// authors' layout of P(R, Ṙ), highway-exit P(v1, R, v2) rows,
+    /// car-following P(s) and P(u | v) rows. Default: the built-in model.
     #[arg(long, env = "TSLG_NDD_TABLE")]
     pub ndd_table: Option<PathBuf>,
     /// Simulation preset (`tslg cases` lists each case's; default: the
@@ -537,6 +549,13 @@ pub struct DemoArgs {
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Cases { json } => commands::cases::run(json),
+        Command::Table { case, preset } => {
+            print!(
+                "{}",
+                tslg_method::cases::builtin_table(&case, preset.as_deref())?
+            );
+            Ok(())
+        }
         Command::Library(LibraryCommand::Build(args)) => commands::library::build(&args),
         Command::Library(LibraryCommand::Show { file }) => commands::library::show(&file),
         Command::Evaluate(args) => commands::evaluate::run(&args),

@@ -146,6 +146,10 @@ pub struct LibraryView {
     pub exposure: String,
     /// The exposure's fingerprint; campaigns must use the same exposure.
     pub exposure_fingerprint: String,
+    /// For an uploaded table: how far it lies from the case's built-in model
+    /// (total variation distance) and whether its sum was renormalised.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub exposure_note: Option<String>,
     /// The surrogate model as given at creation.
     #[schema(value_type = Object)]
     pub surrogate: serde_json::Value,

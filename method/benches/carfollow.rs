@@ -5,14 +5,15 @@
 
 use std::time::Instant;
 use tslg_method::cases::carfollow::{
-    dynamic_programming, temporal_difference, FollowExposureModel, FollowState, FollowWorld,
-    StateGrid, Transitions,
+    dynamic_programming, temporal_difference, FollowExposure, FollowExposureModel, FollowState,
+    FollowWorld, StateGrid, Transitions,
 };
 
 fn main() {
     let world = FollowWorld::paper();
     let grid = StateGrid::paper();
-    let exposure = FollowExposureModel::default();
+    let model = FollowExposureModel::default();
+    let exposure = FollowExposure::from_model(&model, &world, &grid);
     let idm = tslg_method::cases::carfollow::highway_vehicle("idm").expect("built-in");
     println!("| measurement | value |");
     println!("|---|---|");
@@ -46,7 +47,7 @@ fn main() {
         "| largest abs(Q_DP − Q_TD) | {:.2e} |",
         dp.max_difference(&td)
     );
-    let initial = exposure.initial_states(&world, &grid);
+    let initial = &exposure.initial;
     let mu: f64 = initial.iter().zip(&dp.challenge).map(|(p, c)| p * c).sum();
     println!("| μ_S = Σ_s P(s) P(S|s) (the SM's accident rate on the grid chain) | {mu:.3e} |");
     let s = grid
@@ -56,7 +57,7 @@ fn main() {
             range_rate: -2.0,
         })
         .expect("on the grid");
-    let ndd = exposure.actions(&world, 38.0);
+    let ndd = model.actions(&world, 38.0);
     if let Some(lib) = dp.action_distribution(s) {
         let peak = (0..world.actions)
             .max_by(|&a, &b| lib[a].total_cmp(&lib[b]))

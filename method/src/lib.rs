@@ -14,6 +14,7 @@ pub mod exact;
 pub mod external;
 pub mod grid;
 pub mod library;
+pub mod long_table;
 pub mod mass;
 pub mod ndd_table;
 pub mod number;

@@ -76,6 +76,73 @@ pub enum TableError {
         /// The accepted distance from 1.
         tolerance: f64,
     },
+    /// A long table's header holds a number where a column name belongs.
+    #[error(
+        "line {line}, field {field}: a block starts with a header naming its columns, not a number"
+    )]
+    HeaderNotNamed {
+        /// Line number (from 1).
+        line: usize,
+        /// Field number (from 1).
+        field: usize,
+    },
+    /// More rows than a block may hold.
+    #[error("a block holds more than {max} rows")]
+    TooManyRows {
+        /// The limit.
+        max: usize,
+    },
+    /// A key value that is not a value of its grid axis.
+    #[error("line {line}, field {field}: {column} = {value} is not on the grid ({axis})")]
+    OffGrid {
+        /// Line number (from 1).
+        line: usize,
+        /// Field number (from 1).
+        field: usize,
+        /// The column.
+        column: String,
+        /// The value.
+        value: f64,
+        /// The axis' values, in words.
+        axis: String,
+    },
+    /// Two rows for the same point.
+    #[error("line {line} gives the same point as line {first}")]
+    Duplicate {
+        /// The later line.
+        line: usize,
+        /// The first line.
+        first: usize,
+    },
+    /// A block the case needs is not in the file.
+    #[error("{what} is missing: a block with columns {columns}")]
+    MissingBlock {
+        /// What the block holds.
+        what: String,
+        /// Its columns.
+        columns: String,
+    },
+    /// The same block twice.
+    #[error("line {line} repeats the block of line {first}")]
+    DuplicateBlock {
+        /// The second block's header line.
+        line: usize,
+        /// The first one's.
+        first: usize,
+    },
+    /// A block with columns the case does not read.
+    #[error("line {line}: a block with columns {columns} is not one this case reads ({expected})")]
+    UnknownBlock {
+        /// The header's line.
+        line: usize,
+        /// Its columns.
+        columns: String,
+        /// The blocks the case reads.
+        expected: String,
+    },
+    /// A table that is valid but says something the case cannot use.
+    #[error("{0}")]
+    Unusable(String),
 }
 
 /// A validated exposure table.

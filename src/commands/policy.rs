@@ -6,8 +6,8 @@ use crate::{PolicyArgs, SolverArg};
 use anyhow::{bail, Context};
 use std::time::Instant;
 use tslg_method::cases::carfollow::{
-    dynamic_programming, highway_vehicle, temporal_difference, FollowExposureModel, FollowState,
-    FollowWorld, StateGrid, Transitions, Zone, FOLLOW_MODELS,
+    dynamic_programming, highway_vehicle, temporal_difference, FollowExposure, FollowExposureModel,
+    FollowState, FollowWorld, StateGrid, Transitions, Zone, FOLLOW_MODELS,
 };
 
 /// `v,R,Ṙ` as three numbers.
@@ -52,6 +52,7 @@ pub fn run(args: &PolicyArgs) -> anyhow::Result<()> {
     };
     let started = Instant::now();
     let transitions = crate::commands::progress::with_progress("transitions", |progress| {
+        let exposure = FollowExposure::from_model(&exposure, &world, &grid);
         Transitions::compute_observed(&world, grid, &exposure, &surrogate, progress)
     });
     let library = match args.solver {

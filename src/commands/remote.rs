@@ -2,7 +2,6 @@
 //! one command, and how a campaign is shown.
 
 use crate::{CaseArgs, ServerArgs};
-use anyhow::Context;
 use tslg_api::CampaignView;
 use tslg_api::ExposureRequest;
 use tslg_client::Client;
@@ -141,13 +140,9 @@ pub fn describe(view: &CampaignView) -> String {
 pub fn exposure_request(case: &CaseArgs) -> anyhow::Result<ExposureRequest> {
     Ok(match &case.ndd_table {
         None => ExposureRequest::Builtin,
-        Some(path) => ExposureRequest::Table {
-            name: path.file_name().map_or_else(
-                || path.display().to_string(),
-                |n| n.to_string_lossy().into_owned(),
-            ),
-            text: std::fs::read_to_string(path)
-                .with_context(|| format!("cannot read the NDD table {}", path.display()))?,
-        },
+        Some(path) => {
+            let (name, text) = crate::inputs::read_table(path)?;
+            ExposureRequest::Table { name, text }
+        }
     })
 }

@@ -14,7 +14,6 @@
 //! ε-greedy split makes the curve a lattice; docs/statistics.md).
 
 use crate::commands::held_out::{self, ProgramTable, TabulatedTests};
-use anyhow::Context;
 use rayon::prelude::*;
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -406,16 +405,7 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
 
 /// The exposure `--ndd-table` names, or the built-in one.
 fn exposure(args: &ValidateArgs) -> anyhow::Result<ExposureSource> {
-    let Some(path) = &args.ndd_table else {
-        return Ok(ExposureSource::Builtin);
-    };
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("cannot read the NDD table {}", path.display()))?;
-    let name = path.file_name().map_or_else(
-        || path.display().to_string(),
-        |n| n.to_string_lossy().into_owned(),
-    );
-    Ok(ExposureSource::Table { name, text })
+    crate::inputs::exposure_source(args.ndd_table.as_deref())
 }
 
 /// The coverage curves of every setup: printed as a summary, written as

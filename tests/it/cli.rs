@@ -622,7 +622,8 @@ fn bad_input_gets_a_message_and_a_non_zero_exit() {
                 "-o".into(),
                 "x".into(),
             ],
-            "the highway-exit case has only its built-in exposure model",
+            "exposure table `any.csv` rejected: line 1, field 2: a block starts with a header \
+             naming its columns",
         ),
         (
             vec![

@@ -25,3 +25,4 @@ mod service_protocol;
 mod service_recovery;
 mod service_trust;
 mod service_upgrade;
+mod tables;

@@ -545,7 +545,10 @@ async fn the_openapi_document_describes_the_contract() {
     assert_eq!(highway["presets"][0]["name"], "paper");
     assert_eq!(highway["default_surrogate"], "mobil");
     assert_eq!(highway["default_search"]["method"], "exhaustive");
-    assert_eq!(highway["tables"], serde_json::json!([]));
+    assert_eq!(
+        highway["tables"][0]["doc"],
+        "docs/bring-your-own.md#highway-exit-pv1-r-v2"
+    );
     let following = &cases[2];
     assert_eq!(
         (&following["scenarios"], &following["default_outside"]),

@@ -29,6 +29,9 @@ pub struct BuiltinCase {
     pub descriptor: fn() -> CaseDescriptor,
     /// Opens it with `preset` (the default when `None`) on `exposure`.
     pub open: Opener,
+    /// Its built-in exposure model for `preset`, written as the table a
+    /// user would upload (the format its descriptor's `tables` names).
+    pub builtin_table: fn(Option<&str>) -> Result<String, CaseError>,
 }
 
 /// Every built-in case, in the order help texts list them.
@@ -36,14 +39,17 @@ pub const BUILTIN: [BuiltinCase; 3] = [
     BuiltinCase {
         descriptor: cutin::descriptor::descriptor,
         open: cutin::descriptor::open,
+        builtin_table: cutin::descriptor::builtin_table,
     },
     BuiltinCase {
         descriptor: highway::descriptor::descriptor,
         open: highway::descriptor::open,
+        builtin_table: highway::descriptor::builtin_table,
     },
     BuiltinCase {
         descriptor: carfollow::descriptor::descriptor,
         open: carfollow::descriptor::open,
+        builtin_table: carfollow::descriptor::builtin_table,
     },
 ];
 
@@ -76,6 +82,11 @@ pub fn descriptor(name: &str) -> Result<CaseDescriptor, CaseError> {
     builtin(name).map(|c| (c.descriptor)())
 }
 
+/// The built-in exposure of case `name` with `preset`, as a table.
+pub fn builtin_table(name: &str, preset: Option<&str>) -> Result<String, CaseError> {
+    (builtin(name)?.builtin_table)(preset)
+}
+
 /// Opens case `name` with `preset` (the case's default when `None`) on
 /// `exposure`.
 pub fn open_case(
@@ -86,22 +97,15 @@ pub fn open_case(
     (builtin(name)?.open)(preset, exposure)
 }
 
-/// Refuses a table for a case that has only its built-in exposure model.
-pub(crate) fn builtin_exposure_only(
-    case: &str,
-    exposure: &ExposureSource,
-) -> Result<(), CaseError> {
-    if let ExposureSource::Table { name, .. } = exposure {
-        return Err(CaseError::Exposure {
-            name: name.clone(),
-            reason: format!(
-                "the {case} case has only its built-in exposure model (docs/models.md); omit \
-                 the table"
-            ),
-        });
+/// What a user should know about an exposure table once read: how far it
+/// lies from the case's built-in model (total variation distance
+/// `½ Σ |P − P_builtin|` on the grid) and whether its sum was renormalised.
+pub(crate) fn table_note(name: &str, sum: f64, distance: f64) -> String {
+    let mut note = format!(
+        "exposure table {name}: total variation distance {distance:.3} from the built-in model"
+    );
+    if (sum - 1.0).abs() > 1e-12 {
+        note.push_str(&format!("; it sums to {sum:.7} and was renormalised to 1"));
     }
-    Ok(())
+    note
 }
-
-#[cfg(test)]
-mod tests;

@@ -19,12 +19,9 @@ fn built() -> &'static Built {
     static BUILT: OnceLock<Built> = OnceLock::new();
     BUILT.get_or_init(|| {
         let idm = highway_vehicle("idm").unwrap();
-        let transitions = Transitions::compute(
-            &FollowWorld::paper(),
-            StateGrid::paper(),
-            &FollowExposureModel::default(),
-            &idm,
-        );
+        let (world, grid) = (FollowWorld::paper(), StateGrid::paper());
+        let exposure = FollowExposure::from_model(&FollowExposureModel::default(), &world, &grid);
+        let transitions = Transitions::compute(&world, grid, &exposure, &idm);
         let dp = dynamic_programming(&transitions, 1e-13);
         Built { transitions, dp }
     })
@@ -191,7 +188,7 @@ fn library_weights_average_one_and_tests_are_reproducible() {
     let b = built();
     let world = FollowWorld::paper();
     let grid = StateGrid::paper();
-    let exposure = FollowExposureModel::default();
+    let exposure = FollowExposure::from_model(&FollowExposureModel::default(), &world, &grid);
     let sampler = FollowSampler::library(
         world,
         grid,

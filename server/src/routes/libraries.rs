@@ -64,6 +64,7 @@ pub async fn create(
             exposure_name: case.exposure_name(),
             exposure_fingerprint: &case.exposure_fingerprint(),
             exposure_table: table,
+            exposure_note: case.exposure_note().as_deref(),
             total_scenarios: case.total_scenarios(),
         },
     )

@@ -15,6 +15,7 @@ pub struct LibraryRow {
     pub exposure_name: String,
     pub exposure_fingerprint: String,
     pub exposure_table: Option<String>,
+    pub exposure_note: Option<String>,
     pub total_scenarios: i64,
     pub size: Option<i64>,
     pub sm_evaluations: Option<i64>,
@@ -26,8 +27,8 @@ pub struct LibraryRow {
 }
 
 const COLUMNS: &str = "id, case_name, preset, status, request, surrogate, exposure_name, \
-    exposure_fingerprint, exposure_table, total_scenarios, size, sm_evaluations, mu_s, w, \
-    build_seconds, error, created_at";
+    exposure_fingerprint, exposure_table, exposure_note, total_scenarios, size, sm_evaluations, \
+    mu_s, w, build_seconds, error, created_at";
 
 impl LibraryRow {
     pub fn exposure_source(&self) -> tslg_method::registry::ExposureSource {
@@ -42,6 +43,7 @@ impl LibraryRow {
             status: self.status,
             exposure: self.exposure_name.clone(),
             exposure_fingerprint: self.exposure_fingerprint.clone(),
+            exposure_note: self.exposure_note.clone(),
             surrogate: serde_json::from_str(&self.surrogate).unwrap_or_default(),
             size: self.size.map(|v| v as u64),
             total_scenarios: self.total_scenarios as u64,
@@ -65,14 +67,15 @@ pub struct NewLibrary<'a> {
     pub exposure_name: &'a str,
     pub exposure_fingerprint: &'a str,
     pub exposure_table: Option<&'a str>,
+    pub exposure_note: Option<&'a str>,
     pub total_scenarios: usize,
 }
 
 pub async fn insert(pool: &SqlitePool, new: &NewLibrary<'_>) -> Result<LibraryRow, ApiError> {
     let sql = format!(
         "INSERT INTO libraries (case_name, preset, status, request, surrogate, exposure_name, \
-         exposure_fingerprint, exposure_table, total_scenarios) \
-         VALUES (?, ?, 'building', ?, ?, ?, ?, ?, ?) RETURNING {COLUMNS}"
+         exposure_fingerprint, exposure_table, exposure_note, total_scenarios) \
+         VALUES (?, ?, 'building', ?, ?, ?, ?, ?, ?, ?) RETURNING {COLUMNS}"
     );
     Ok(sqlx::query_as(&sql)
         .bind(new.case_name)
@@ -82,6 +85,7 @@ pub async fn insert(pool: &SqlitePool, new: &NewLibrary<'_>) -> Result<LibraryRo
         .bind(new.exposure_name)
         .bind(new.exposure_fingerprint)
         .bind(new.exposure_table)
+        .bind(new.exposure_note)
         .bind(new.total_scenarios as i64)
         .fetch_one(pool)
         .await?)

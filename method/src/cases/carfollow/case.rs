@@ -2,6 +2,7 @@
 //! exposure), the case's vehicle defaults, library learning and campaign
 //! samplers.
 
+use super::exposure::FollowExposure;
 use super::exposure_model::FollowExposureModel;
 use super::library::{
     dynamic_programming, temporal_difference, PolicyLibrary, Transitions, Zone, DP_MAX_SWEEPS,
@@ -123,10 +124,13 @@ pub struct CarFollowing {
     pub world: FollowWorld,
     /// The grid of initial states `(v, R, Ṙ)`.
     pub grid: StateGrid,
-    /// The exposure model `P(s)`, `P(u|v)`.
-    pub exposure: FollowExposureModel,
-    /// `P(s)` on the grid.
+    /// `P(s)` on the grid and `P(u|v)` per grid speed: the preset's model,
+    /// or the user's tables.
+    pub exposure: FollowExposure,
+    /// `P(s)` on the grid (the exposure's, kept at hand).
     pub initial: Vec<f64>,
+    /// The exposure's name: `builtin` or the tables'.
+    pub exposure_name: String,
 }
 
 impl CarFollowing {
@@ -134,15 +138,35 @@ impl CarFollowing {
     pub fn new(preset: FollowPreset) -> Self {
         let world = FollowWorld::paper();
         let grid = StateGrid::paper();
-        let exposure = preset.exposure();
-        let initial = exposure.initial_states(&world, &grid);
+        let exposure = FollowExposure::from_model(&preset.exposure(), &world, &grid);
         Self {
             preset,
             world,
             grid,
+            initial: exposure.initial.clone(),
             exposure,
-            initial,
+            exposure_name: "builtin".into(),
         }
+    }
+
+    /// The case with the exposure of tables `text` ([`FollowExposure::from_tables`])
+    /// named `name`, and the sum of its `P(s)` as read.
+    pub fn from_tables(
+        preset: FollowPreset,
+        text: &str,
+        name: String,
+    ) -> Result<(Self, f64), crate::ndd_table::TableError> {
+        let builtin = Self::new(preset);
+        let (exposure, sum) = FollowExposure::from_tables(text, &builtin.world, &builtin.grid)?;
+        Ok((
+            Self {
+                initial: exposure.initial.clone(),
+                exposure,
+                exposure_name: name,
+                ..builtin
+            },
+            sum,
+        ))
     }
 
     /// A fingerprint of `P(s)` and `P(u|v)` (FNV-1a over their bits): a
@@ -151,8 +175,7 @@ impl CarFollowing {
         const OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
         const PRIME: u64 = 0x0000_0100_0000_01b3;
         let mut hash = OFFSET;
-        let actions = self.exposure.actions_by_speed(&self.world, &self.grid);
-        for x in self.initial.iter().chain(&actions) {
+        for x in self.initial.iter().chain(&self.exposure.actions) {
             for byte in x.to_bits().to_le_bytes() {
                 hash ^= u64::from(byte);
                 hash = hash.wrapping_mul(PRIME);

@@ -3,7 +3,7 @@
 use super::service::FollowScenarioCase;
 use super::{CarFollowing, FollowPreset};
 use crate::cases::{
-    builtin_exposure_only, CaseDescriptor, PaperFigures, Preset, Reproduction, Scenarios,
+    table_note, CaseDescriptor, PaperFigures, Preset, Reproduction, Scenarios, TableFormat,
 };
 use crate::library::{LibrarySearch, PolicySolver};
 use crate::registry::{CaseError, ExposureSource, ScenarioCase};
@@ -39,7 +39,11 @@ pub fn descriptor() -> CaseDescriptor {
         scenarios: Scenarios::Sequential,
         scenario_unit: "states",
         build_unit: "surrogate transitions",
-        tables: Vec::new(),
+        tables: vec![TableFormat {
+            holds: "P(s) over the initial states (v, R, Ṙ) and P(u | v), the BV's \
+                    acceleration law at each speed, in one file",
+            doc: "docs/bring-your-own.md#car-following-ps-and-pu--v",
+        }],
         default_outside: OutsideSpread::Ndd,
         picture_axes: ["range R (m)", "range rate Ṙ (m/s)"],
         demo_vut: None,
@@ -70,6 +74,37 @@ pub fn open(
         None => FollowPreset::default(),
         Some(p) => p.parse().map_err(CaseError::Preset)?,
     };
-    builtin_exposure_only(NAME, exposure)?;
-    Ok(Arc::new(FollowScenarioCase::new(CarFollowing::new(preset))))
+    let (case, note) = match exposure {
+        ExposureSource::Builtin => (CarFollowing::new(preset), None),
+        ExposureSource::Table { name, text } => {
+            let (case, sum) =
+                CarFollowing::from_tables(preset, text, name.clone()).map_err(|e| {
+                    CaseError::Exposure {
+                        name: name.clone(),
+                        reason: e.to_string(),
+                    }
+                })?;
+            let builtin = CarFollowing::new(preset);
+            let (states, laws) = case
+                .exposure
+                .distance(&builtin.exposure, case.world.actions);
+            let mut note = table_note(name, sum, states);
+            note.push_str(&format!(
+                " (P(s); P(u | v): at most {laws:.3} at any speed; preset {})",
+                preset.name()
+            ));
+            (case, Some(note))
+        }
+    };
+    Ok(Arc::new(FollowScenarioCase::new(case).with_note(note)))
+}
+
+/// The built-in `P(s)` and `P(u|v)` of `preset`, as tables.
+pub fn builtin_table(preset: Option<&str>) -> Result<String, CaseError> {
+    let preset: FollowPreset = match preset {
+        None => FollowPreset::default(),
+        Some(p) => p.parse().map_err(CaseError::Preset)?,
+    };
+    let case = CarFollowing::new(preset);
+    Ok(case.exposure.to_tables(&case.world, &case.grid))
 }

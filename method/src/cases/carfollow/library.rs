@@ -20,7 +20,7 @@
 //! uniformly ordered updates `Q ← Q + α δ`, `δ = P(u|s) Σ_{u'} Q(s', u') −
 //! Q(s, u)`, until every `|δ| < tolerance`).
 
-use super::exposure_model::FollowExposureModel;
+use super::exposure::FollowExposure;
 use super::states::StateGrid;
 use super::world::{advance, FollowState, FollowWorld};
 use crate::progress::Progress;
@@ -73,7 +73,7 @@ impl Transitions {
     pub fn compute(
         world: &FollowWorld,
         grid: StateGrid,
-        exposure: &FollowExposureModel,
+        exposure: &FollowExposure,
         surrogate: &VehicleModel,
     ) -> Self {
         Self::compute_observed(world, grid, exposure, surrogate, &Progress::default())
@@ -84,7 +84,7 @@ impl Transitions {
     pub fn compute_observed(
         world: &FollowWorld,
         grid: StateGrid,
-        exposure: &FollowExposureModel,
+        exposure: &FollowExposure,
         surrogate: &VehicleModel,
         progress: &Progress,
     ) -> Self {
@@ -113,7 +113,7 @@ impl Transitions {
             })
             .collect();
         // P(u|v) depends on the BV's speed only: one law per grid speed.
-        let by_speed = exposure.actions_by_speed(world, &grid);
+        let by_speed = &exposure.actions;
         let action_probability = (0..grid.len())
             .flat_map(|s| {
                 let i = grid.speed_index(grid.state(s).bv_speed);

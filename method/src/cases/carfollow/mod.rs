@@ -7,6 +7,7 @@
 pub mod adaptive;
 pub mod case;
 pub mod descriptor;
+pub mod exposure;
 mod exposure_model;
 pub mod file;
 pub mod library;
@@ -16,6 +17,7 @@ pub mod states;
 pub mod world;
 
 pub use case::{CarFollowing, FollowPreset, PolicySolver};
+pub use exposure::FollowExposure;
 pub use exposure_model::FollowExposureModel;
 pub use file::PolicyLibraryFile;
 pub use library::{dynamic_programming, temporal_difference, PolicyLibrary, Transitions, Zone};

@@ -17,7 +17,7 @@
 //! baseline samples from. Every draw comes from the counter-based stream of
 //! `(seed, index)`, so a test is reproducible from its index alone.
 
-use super::exposure_model::FollowExposureModel;
+use super::exposure::FollowExposure;
 use super::library::PolicyLibrary;
 use super::states::StateGrid;
 use super::world::{advance_with, FollowState, FollowWorld, Odometer};
@@ -94,8 +94,8 @@ struct LibraryMix {
 
 impl FollowSampler {
     /// The NDD baseline.
-    pub fn ndd(world: FollowWorld, grid: StateGrid, exposure: &FollowExposureModel) -> Self {
-        let initial = exposure.initial_states(&world, &grid);
+    pub fn ndd(world: FollowWorld, grid: StateGrid, exposure: &FollowExposure) -> Self {
+        let initial = exposure.initial.clone();
         Self::build(world, grid, exposure, initial.clone(), initial, None)
     }
 
@@ -104,7 +104,7 @@ impl FollowSampler {
     pub fn library(
         world: FollowWorld,
         grid: StateGrid,
-        exposure: &FollowExposureModel,
+        exposure: &FollowExposure,
         library: Arc<PolicyLibrary>,
         epsilon: f64,
         outside: OutsideSpread,
@@ -119,7 +119,7 @@ impl FollowSampler {
                 exposure: grid.len(),
             });
         }
-        let initial = exposure.initial_states(&world, &grid);
+        let initial = exposure.initial.clone();
         let mu: f64 = initial
             .iter()
             .zip(&library.challenge)
@@ -151,12 +151,12 @@ impl FollowSampler {
     fn build(
         world: FollowWorld,
         grid: StateGrid,
-        exposure: &FollowExposureModel,
+        exposure: &FollowExposure,
         initial: Vec<f64>,
         initial_q: Vec<f64>,
         library: Option<LibraryMix>,
     ) -> Self {
-        let ndd_actions = exposure.actions_by_speed(&world, &grid);
+        let ndd_actions = exposure.actions.clone();
         let initial_alias = Arc::new(
             WeightedAliasIndex::new(initial_q.clone()).expect("a positive initial distribution"),
         );

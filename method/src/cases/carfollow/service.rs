@@ -35,6 +35,7 @@ pub(super) struct FollowScenarioCase {
     case: CarFollowing,
     fingerprint: String,
     descriptor: CaseDescriptor,
+    note: Option<String>,
 }
 
 impl FollowScenarioCase {
@@ -44,7 +45,13 @@ impl FollowScenarioCase {
             case,
             fingerprint,
             descriptor: super::descriptor::descriptor(),
+            note: None,
         }
+    }
+
+    /// The case with `note` on how its exposure was read.
+    pub(super) fn with_note(self, note: Option<String>) -> Self {
+        Self { note, ..self }
     }
 
     fn vehicle(&self, spec: &serde_json::Value) -> Result<VehicleModel, CaseError> {
@@ -171,7 +178,7 @@ impl ScenarioCase for FollowScenarioCase {
     }
 
     fn exposure_name(&self) -> &str {
-        "builtin"
+        &self.case.exposure_name
     }
 
     fn exposure_fingerprint(&self) -> String {
@@ -184,6 +191,10 @@ impl ScenarioCase for FollowScenarioCase {
 
     fn descriptor(&self) -> &CaseDescriptor {
         &self.descriptor
+    }
+
+    fn exposure_note(&self) -> Option<String> {
+        self.note.clone()
     }
 
     fn normalise_vehicle(&self, spec: &serde_json::Value) -> Result<serde_json::Value, CaseError> {
@@ -215,7 +226,7 @@ impl ScenarioCase for FollowScenarioCase {
                 preset: self.preset(),
                 surrogate: serde_json::to_value(vehicle).expect("specifications serialise"),
                 exposure: ExposureRef {
-                    name: "builtin".into(),
+                    name: self.case.exposure_name.clone(),
                     fingerprint: self.fingerprint.clone(),
                 },
                 solver,

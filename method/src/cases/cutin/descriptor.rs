@@ -1,8 +1,10 @@
 //! What the service and the command line know about the cut-in case.
 
 use super::{CutIn, CutInError, CutInPreset};
+use crate::case::Case;
 use crate::cases::{
-    CaseDescriptor, PaperFigures, Preset, Reproduction, Scenarios, TableFormat, Validation,
+    table_note, CaseDescriptor, PaperFigures, Preset, Reproduction, Scenarios, TableFormat,
+    Validation,
 };
 use crate::library::{LibrarySearch, SearchMethod, Threshold};
 use crate::registry::cells::Registered;
@@ -41,7 +43,7 @@ pub fn descriptor() -> CaseDescriptor {
         build_unit: "searched",
         tables: vec![TableFormat {
             holds: "P(R, Ṙ): the joint exposure of range and range rate",
-            doc: "docs/models.md#exposure-tables---ndd-table-path",
+            doc: "docs/bring-your-own.md#cut-in-pr-ṙ",
         }],
         default_outside: OutsideSpread::Uniform,
         picture_axes: ["range R (m)", "range rate Ṙ (m/s)"],
@@ -101,16 +103,41 @@ pub fn open(
                         reason: e.to_string(),
                     }
                 })?;
-            let note = table.mass.was_renormalised().then(|| {
-                format!(
-                    "the exposure table {name} sums to {:.7}; it was renormalised to 1",
-                    table.mass.original_sum()
-                )
-            });
+            // The built-in model evaluated on the table's own grid.
+            let model =
+                super::CutInExposureModel::default().mass_on(case.exposure().grid().clone());
+            let distance = case.exposure().total_variation(&model);
+            let note = Some(table_note(name, table.mass.original_sum(), distance));
             (case, note)
         }
     };
     Ok(Arc::new(
         Registered::new(opened, preset.name(), descriptor()).with_note(note),
     ))
+}
+
+/// The built-in exposure of `preset` in the authors' layout: a header of
+/// range-rate labels, then one line per range with its probabilities.
+pub fn builtin_table(preset: Option<&str>) -> Result<String, CaseError> {
+    let preset: CutInPreset = match preset {
+        None => CutInPreset::default(),
+        Some(p) => p.parse().map_err(CaseError::Preset)?,
+    };
+    let case = CutIn::builtin(preset);
+    let mass = case.exposure();
+    let grid = mass.grid();
+    let (ranges, rates) = (&grid.axes()[0], &grid.axes()[1]);
+    let mut text = String::new();
+    for k in 0..rates.len() {
+        text.push_str(&format!(",{}", rates.value(k)));
+    }
+    text.push('\n');
+    for i in 0..ranges.len() {
+        text.push_str(&format!("{}", ranges.value(i)));
+        for k in 0..rates.len() {
+            text.push_str(&format!(",{}", mass.p(i * rates.len() + k)));
+        }
+        text.push('\n');
+    }
+    Ok(text)
 }

@@ -1,8 +1,9 @@
 //! What the service and the command line know about the highway-exit case.
 
 use super::{HighwayExit, HighwayPreset};
+use crate::case::Case;
 use crate::cases::{
-    builtin_exposure_only, CaseDescriptor, PaperFigures, Preset, Reproduction, Scenarios,
+    table_note, CaseDescriptor, PaperFigures, Preset, Reproduction, Scenarios, TableFormat,
     Validation,
 };
 use crate::library::{LibrarySearch, SearchMethod, Threshold};
@@ -43,7 +44,11 @@ pub fn descriptor() -> CaseDescriptor {
         scenarios: Scenarios::Grid,
         scenario_unit: "scenarios",
         build_unit: "searched",
-        tables: Vec::new(),
+        tables: vec![TableFormat {
+            holds: "P(v₁, R, v₂): leader speed, range p₁ − p₂ and follower speed of \
+                    car-following events, and optionally the range of p₁",
+            doc: "docs/bring-your-own.md#highway-exit-pv1-r-v2",
+        }],
         default_outside: OutsideSpread::Uniform,
         picture_axes: [
             "first background vehicle's position p₁ (m)",
@@ -86,10 +91,35 @@ pub fn open(
         None => HighwayPreset::default(),
         Some(p) => p.parse().map_err(CaseError::Preset)?,
     };
-    builtin_exposure_only(NAME, exposure)?;
-    Ok(Arc::new(Registered::new(
-        HighwayExit::builtin(preset),
-        preset.name(),
-        descriptor(),
-    )))
+    let (opened, note) = match exposure {
+        ExposureSource::Builtin => (HighwayExit::builtin(preset), None),
+        ExposureSource::Table { name, text } => {
+            let (case, sum) = HighwayExit::from_table(text, name.clone(), preset).map_err(|e| {
+                CaseError::Exposure {
+                    name: name.clone(),
+                    reason: e.to_string(),
+                }
+            })?;
+            let distance = case
+                .exposure()
+                .total_variation(HighwayExit::builtin(preset).exposure());
+            (case, Some(table_note(name, sum, distance)))
+        }
+    };
+    Ok(Arc::new(
+        Registered::new(opened, preset.name(), descriptor()).with_note(note),
+    ))
+}
+
+/// The built-in `P(v₁, R, v₂)` on `preset`'s grid, as a long table.
+pub fn builtin_table(preset: Option<&str>) -> Result<String, CaseError> {
+    let preset: HighwayPreset = match preset {
+        None => HighwayPreset::default(),
+        Some(p) => p.parse().map_err(CaseError::Preset)?,
+    };
+    let (dp, dv) = preset.steps();
+    Ok(super::table::builtin_table(
+        &super::ExitExposureModel::default(),
+        &super::exit_grid(dp, dv),
+    ))
 }

@@ -10,6 +10,7 @@ pub mod drivers;
 mod exposure_model;
 pub mod external;
 pub mod simulation;
+pub mod table;
 pub mod world;
 pub mod zone;
 
@@ -98,6 +99,7 @@ impl Default for ExitObjective {
 #[derive(Debug, Clone)]
 pub struct HighwayExit {
     exposure: GridMass,
+    exposure_name: String,
     world: ExitWorld,
     preset: HighwayPreset,
     objective: ExitObjective,
@@ -109,10 +111,31 @@ impl HighwayExit {
         let (dp, dv) = preset.steps();
         Self {
             exposure: ExitExposureModel::default().mass_on(exit_grid(dp, dv)),
+            exposure_name: "builtin".into(),
             world: ExitWorld::paper(),
             preset,
             objective: ExitObjective::default(),
         }
+    }
+
+    /// The case on the preset's grid with the exposure of table `text`
+    /// ([`table`]: `P(v₁, R, v₂)` and the range of `p₁`), named `name`, and
+    /// the sum of its probabilities as read.
+    pub fn from_table(
+        text: &str,
+        name: String,
+        preset: HighwayPreset,
+    ) -> Result<(Self, f64), crate::ndd_table::TableError> {
+        let (dp, dv) = preset.steps();
+        let (exposure, sum) = table::exposure_from_table(text, exit_grid(dp, dv))?;
+        Ok((
+            Self {
+                exposure,
+                exposure_name: name,
+                ..Self::builtin(preset)
+            },
+            sum,
+        ))
     }
 
     /// The preset the case was opened with.
@@ -170,7 +193,7 @@ impl Case for HighwayExit {
     }
 
     fn exposure_name(&self) -> &str {
-        "builtin"
+        &self.exposure_name
     }
 
     /// The two background vehicles' positions `p1, p2`: where they are
