@@ -5,12 +5,16 @@
 
 use crate::{CaseArgs, RuleArgs};
 use anyhow::Context;
-use std::path::Path;
-use std::sync::Arc;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex, OnceLock};
+use std::time::Duration;
 use tslg_method::cases::open_case;
+use tslg_method::cases::user::file::CaseFile;
 use tslg_method::estimator::StoppingRule;
+use tslg_method::external::{ProgramConversation, ProgramHost};
 use tslg_method::library::{read_head, LibraryHead};
 use tslg_method::registry::{ExposureSource, ScenarioCase};
+use tslg_worker::external::{ProgramSettings, ProgramSpec, Programs};
 
 /// An exposure table file: its name (the file's) and its text.
 pub fn read_table(path: &Path) -> anyhow::Result<(String, String)> {
@@ -34,17 +38,128 @@ pub fn exposure_source(path: Option<&Path>) -> anyhow::Result<ExposureSource> {
     })
 }
 
+/// A user-defined case's file, read and checked, and its folder.
+pub fn read_case_file(path: &Path) -> anyhow::Result<(CaseFile, PathBuf)> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read the case file {}", path.display()))?;
+    let file = CaseFile::parse(&text)
+        .map_err(anyhow::Error::msg)
+        .with_context(|| format!("case file {} rejected", path.display()))?;
+    let dir = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."))
+        .to_path_buf();
+    Ok((file, dir))
+}
+
+/// A user-defined case's programs, started when the case first runs one
+/// (a command that only reads the case starts none; a table that is wrong
+/// is reported before any program runs).
+struct LazyPrograms {
+    names: Vec<String>,
+    specs: Mutex<Option<Vec<ProgramSpec>>>,
+    settings: ProgramSettings,
+    started: OnceLock<Result<Programs, String>>,
+}
+
+impl ProgramHost for LazyPrograms {
+    fn has(&self, name: &str) -> bool {
+        self.names.iter().any(|n| n == name)
+    }
+
+    fn converse(
+        &self,
+        name: &str,
+        conversation: &ProgramConversation<'_>,
+    ) -> Result<(bool, Option<f64>), String> {
+        let programs = self.started.get_or_init(|| {
+            let specs = self
+                .specs
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .take()
+                .unwrap_or_default();
+            Programs::start_specs(specs, &self.settings)
+                .map_err(|e| format!("the programs could not start: {e}"))
+        });
+        programs
+            .as_ref()
+            .map_err(Clone::clone)?
+            .converse(name, conversation)
+    }
+}
+
+/// The user-defined case of `path` on `exposure` (its own table when
+/// built-in), its program and those of `--vut-exec` started here to run
+/// as its surrogates and vehicles.
+fn open_user_case(
+    path: &Path,
+    args: &CaseArgs,
+    exposure: &ExposureSource,
+) -> anyhow::Result<Arc<dyn ScenarioCase>> {
+    let (file, dir) = read_case_file(path)?;
+    anyhow::ensure!(
+        args.vut_timeout_seconds.is_finite() && args.vut_timeout_seconds > 0.0,
+        "--vut-timeout {} must be a positive number of seconds",
+        args.vut_timeout_seconds
+    );
+    let table_path = dir.join(&file.exposure);
+    let table = std::fs::read_to_string(&table_path).with_context(|| {
+        format!(
+            "case file {}: cannot read its exposure table {}",
+            path.display(),
+            table_path.display()
+        )
+    })?;
+    let mut own: ProgramSpec = format!("{}={}", file.program, file.command)
+        .parse()
+        .map_err(anyhow::Error::msg)
+        .with_context(|| format!("case file {}", path.display()))?;
+    own.dir = Some(dir);
+    let mut specs = vec![own];
+    for text in &args.vut_exec {
+        specs.push(text.parse().map_err(anyhow::Error::msg)?);
+    }
+    let settings = ProgramSettings {
+        worker: "tslg".into(),
+        timeout: Duration::from_secs_f64(args.vut_timeout_seconds),
+        max_failures: 5,
+        cooldown: Duration::from_secs(1),
+    };
+    let programs = LazyPrograms {
+        names: specs.iter().map(|s| s.name.clone()).collect(),
+        specs: Mutex::new(Some(specs)),
+        settings,
+        started: OnceLock::new(),
+    };
+    let table_name = file.exposure.clone();
+    Ok(tslg_method::cases::user::descriptor::open(
+        file,
+        &table_name,
+        &table,
+        args.preset.as_deref(),
+        exposure,
+        Some(Arc::new(programs)),
+    )?)
+}
+
 /// The case `args` names on its exposure and preset. What the user should
 /// know about how the exposure was read (a table renormalised to 1) is
 /// printed on stderr.
 pub fn open(args: &CaseArgs) -> anyhow::Result<Arc<dyn ScenarioCase>> {
     let exposure = exposure_source(args.ndd_table.as_deref())?;
-    let case = open_case(args.name(), args.preset.as_deref(), &exposure).with_context(|| {
-        match &args.ndd_table {
-            Some(path) => format!("case {} with NDD table {}", args.name(), path.display()),
-            None => format!("case {}", args.name()),
+    let case = match &args.case_file {
+        Some(path) => open_user_case(path, args, &exposure)?,
+        None => {
+            open_case(args.name(), args.preset.as_deref(), &exposure).with_context(
+                || match &args.ndd_table {
+                    Some(path) => format!("case {} with NDD table {}", args.name(), path.display()),
+                    None => format!("case {}", args.name()),
+                },
+            )?
         }
-    })?;
+    };
     if let Some(note) = case.exposure_note() {
         eprintln!("note: {note}");
     }
@@ -65,6 +180,22 @@ pub fn read_library_file(path: &Path) -> anyhow::Result<(Vec<u8>, LibraryHead)> 
 /// given a library runs on the simulation it was built on. A `--case` or
 /// `--preset` that says otherwise is an error with the reason.
 pub fn case_of_library(args: &CaseArgs, head: &LibraryHead) -> anyhow::Result<CaseArgs> {
+    if let Some(path) = &args.case_file {
+        let (file, _) = read_case_file(path)?;
+        anyhow::ensure!(
+            file.name == head.case,
+            "--case-file {}: the library was built for case {}, the file defines {}",
+            path.display(),
+            head.case,
+            file.name
+        );
+        return Ok(args.clone());
+    }
+    anyhow::ensure!(
+        tslg_method::cases::descriptor(&head.case).is_ok(),
+        "the library was built for case {}, which is not built in: give its --case-file",
+        head.case
+    );
     if let Some(case) = &args.case {
         anyhow::ensure!(
             *case == head.case,
@@ -84,11 +215,12 @@ pub fn case_of_library(args: &CaseArgs, head: &LibraryHead) -> anyhow::Result<Ca
     Ok(CaseArgs {
         case: Some(head.case.clone()),
         preset: Some(head.preset.clone()),
-        ndd_table: args.ndd_table.clone(),
+        ..args.clone()
     })
 }
 
-/// A vehicle given as a built-in name or as a JSON specification, written
+/// A vehicle given as a built-in name (a program's, on a user-defined
+/// case) or as a JSON specification, written
 /// out in full by `case` (its defaults for what the specification leaves
 /// out), or why `case` cannot run it.
 pub fn vehicle_spec(
@@ -98,6 +230,9 @@ pub fn vehicle_spec(
 ) -> anyhow::Result<serde_json::Value> {
     let spec = if text.trim_start().starts_with('{') {
         serde_json::from_str(text).with_context(|| format!("invalid {what} specification"))?
+    } else if case.descriptor().vehicles.is_empty() {
+        // A user-defined case's vehicles are programs.
+        serde_json::json!({ "external": text, "mode": "episode" })
     } else {
         serde_json::json!({ "model": text })
     };

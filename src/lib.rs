@@ -229,13 +229,26 @@ pub enum LibraryCommand {
 }
 
 /// Which case, exposure and simulation preset.
-#[derive(Debug, Clone, Args)]
+#[derive(Debug, Clone, Args, Default)]
 pub struct CaseArgs {
     /// The case: `cut-in` (the default), `highway-exit` or `car-following`
     /// (`tslg cases` describes them). Commands given a library file take
     /// its case when this is left out.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "case_file")]
     pub case: Option<String>,
+    /// A user-defined case: its case file (TOML; docs/bring-your-own.md).
+    /// The command starts the case's program itself.
+    #[arg(long, value_name = "FILE")]
+    pub case_file: Option<PathBuf>,
+    /// More programs this command runs for a user-defined case (vehicles
+    /// under test besides the case's own program), as `tslg-worker
+    /// --vut-exec`; repeatable.
+    #[arg(long, value_name = "NAME=COMMAND", requires = "case_file")]
+    pub vut_exec: Vec<String>,
+    /// Seconds a program may take for one scenario before it is killed and
+    /// tried once more (user-defined cases; as `tslg-worker --vut-timeout`).
+    #[arg(long = "vut-timeout", env = "TSLG_VUT_TIMEOUT", default_value_t = 60.0)]
+    pub vut_timeout_seconds: f64,
     /// An exposure table in the case's format (docs/bring-your-own.md;
     /// `tslg table --case CASE` prints the built-in model in it): cut-in the
     /// authors' layout of P(R, Ṙ), highway-exit P(v1, R, v2) rows,
@@ -255,9 +268,14 @@ impl CaseArgs {
         self.case.as_deref().unwrap_or("cut-in")
     }
 
-    /// The named case's descriptor.
+    /// The named case's descriptor (a user-defined case's from its file).
     pub fn descriptor(&self) -> anyhow::Result<tslg_method::cases::CaseDescriptor> {
-        Ok(tslg_method::cases::descriptor(self.name())?)
+        match &self.case_file {
+            Some(path) => Ok(tslg_method::cases::user::descriptor::descriptor(
+                &crate::inputs::read_case_file(path)?.0,
+            )),
+            None => Ok(tslg_method::cases::descriptor(self.name())?),
+        }
     }
 
     /// `given`, or the case's default surrogate.

@@ -141,4 +141,17 @@ pub trait Case: Sync {
     fn surrogate_challenge(&self, surrogate: &Self::Vehicle, cell: usize) -> f64 {
         self.evaluate_surrogate(surrogate, cell).challenge
     }
+
+    /// A vehicle this process runs itself for a specification that would
+    /// otherwise name an external program (a user-defined case's programs,
+    /// run by the caller's [`crate::external::ProgramHost`]); `None`: none.
+    fn resolve_vehicle(&self, _spec: &serde_json::Value) -> Option<Self::Vehicle> {
+        None
+    }
+
+    /// Why a vehicle this process ran failed (a program that crashed, hung
+    /// or answered garbage), if one did: what was computed since is void.
+    fn failure(&self) -> Option<String> {
+        None
+    }
 }

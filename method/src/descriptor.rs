@@ -116,8 +116,8 @@ pub struct CaseDescriptor {
     pub demo_vut: Option<&'static str>,
     /// What `tslg validate` runs (grid cases with exact answers).
     pub validation: Option<Validation>,
-    /// What `tslg reproduce` runs.
-    pub reproduction: Reproduction,
+    /// What `tslg reproduce` runs (the paper's cases).
+    pub reproduction: Option<Reproduction>,
 }
 
 impl CaseDescriptor {

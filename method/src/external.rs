@@ -223,6 +223,26 @@ pub trait ExternalVehicle {
     fn episode(&mut self, scenario: &serde_json::Value) -> Result<EpisodeOutcome, DriverError>;
 }
 
+/// One run of a program: given a fresh, handshaken program, the test's
+/// conversation (reset, then steps or an episode) and what it gave.
+pub type ProgramConversation<'a> =
+    dyn Fn(&mut dyn ExternalVehicle) -> Result<(bool, Option<f64>), DriverError> + Sync + 'a;
+
+/// Programs run in this process (the command line's, a worker's): what lets
+/// a case use a program as a surrogate, or as a vehicle it runs itself,
+/// without knowing how processes are started, pooled and retried.
+pub trait ProgramHost: Send + Sync {
+    /// Whether program `name` is here.
+    fn has(&self, name: &str) -> bool;
+    /// Holds `conversation` with program `name`: the event and criticality
+    /// it gave, or why the program gave none (after the host's retries).
+    fn converse(
+        &self,
+        name: &str,
+        conversation: &ProgramConversation<'_>,
+    ) -> Result<(bool, Option<f64>), String>;
+}
+
 /// Checks a control before the world applies it.
 pub fn checked_control(control: Control) -> Result<Control, DriverError> {
     if control.acceleration.is_finite() {

@@ -69,7 +69,16 @@ fn print_table(case: &dyn ScenarioCase, args: &ExactArgs) -> anyhow::Result<()> 
         "{:<14} {:>12} {:>14} {:>14} {:>10}",
         "vehicle", "exact P(A)", "library tests", "NDD tests", "ratio"
     );
-    for name in &descriptor.vehicles {
+    // A user-defined case's vehicles are its programs: its own, and those
+    // of --vut-exec.
+    let mut vehicles: Vec<String> = descriptor.vehicles.iter().map(|v| v.to_string()).collect();
+    if vehicles.is_empty() {
+        vehicles.push(descriptor.default_surrogate.to_owned());
+        for exec in &args.case.vut_exec {
+            vehicles.extend(exec.split_once('=').map(|(name, _)| name.to_owned()));
+        }
+    }
+    for name in &vehicles {
         let vut = vehicle_spec(case, name, "vehicle")?;
         let r = case
             .exact_report(

@@ -9,6 +9,7 @@ use std::path::Path;
 use std::time::Instant;
 use tslg_method::cases::open_case;
 use tslg_method::library::{Library, LibrarySearch, SearchMethod};
+use tslg_method::registry::cells::grid_library_summary;
 use tslg_method::registry::{BuildRequest, ExposureSource, LibrarySummary, ScenarioCase};
 
 pub fn build(args: &BuildArgs) -> anyhow::Result<()> {
@@ -83,13 +84,16 @@ fn with_recall(
 
 pub fn show(path: &Path) -> anyhow::Result<()> {
     let (file, head) = read_library_file(path)?;
-    // The summary reads the file alone: the case opens on its built-in
-    // exposure whatever the library was built on.
-    let case = open_case(&head.case, Some(&head.preset), &ExposureSource::Builtin)?;
-    let summary = case
-        .library_summary(&file)
-        .with_context(|| format!("library file {} rejected", path.display()))?;
-    print_summary(&summary, case.descriptor().scenario_unit);
+    // The summary reads the file alone: a built-in case opens on its
+    // built-in exposure whatever the library was built on; a user-defined
+    // case's library is a self-describing grid library.
+    let (summary, unit) = match open_case(&head.case, Some(&head.preset), &ExposureSource::Builtin)
+    {
+        Ok(case) => (case.library_summary(&file), case.descriptor().scenario_unit),
+        Err(_) => (grid_library_summary(&file), "scenarios"),
+    };
+    let summary = summary.with_context(|| format!("library file {} rejected", path.display()))?;
+    print_summary(&summary, unit);
     Ok(())
 }
 

@@ -26,3 +26,4 @@ mod service_recovery;
 mod service_trust;
 mod service_upgrade;
 mod tables;
+mod user_case;

@@ -13,6 +13,7 @@
 pub mod carfollow;
 pub mod cutin;
 pub mod highway;
+pub mod user;
 
 pub use crate::descriptor::{
     CaseDescriptor, PaperFigures, Preset, Reproduction, Scenarios, TableFormat, Validation,

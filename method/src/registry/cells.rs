@@ -68,7 +68,18 @@ where
         &self,
         spec: &serde_json::Value,
     ) -> Result<CampaignVehicle<C::Vehicle>, CaseError> {
+        if let Some(vehicle) = self.case.resolve_vehicle(spec) {
+            return Ok(CampaignVehicle::Builtin(vehicle));
+        }
         CampaignVehicle::parse(self.case.name(), spec, true, |spec| self.vehicle(spec))
+    }
+
+    /// Refuses what was computed with a vehicle run here that failed.
+    fn unfailed<T>(&self, value: T) -> Result<T, CaseError> {
+        match self.case.failure() {
+            None => Ok(value),
+            Some(reason) => Err(CaseError::Build(reason)),
+        }
     }
 
     /// A built-in model, for what runs on the coordinator (`purpose`).
@@ -136,6 +147,10 @@ where
         self.note.clone()
     }
 
+    fn failure(&self) -> Option<String> {
+        self.case.failure()
+    }
+
     fn normalise_vehicle(&self, spec: &serde_json::Value) -> Result<serde_json::Value, CaseError> {
         Ok(self.campaign_vehicle(spec)?.to_spec())
     }
@@ -156,14 +171,14 @@ where
             threshold: request.threshold.unwrap_or_default(),
             search: self.search(request)?,
         };
-        let library = build_library_observed(
+        let library = self.unfailed(build_library_observed(
             self.case.as_ref(),
             &vehicle,
             spec,
             &self.preset,
             &request,
             progress,
-        );
+        ))?;
         Ok(BuiltLibrary {
             file: library.to_json().into_bytes(),
             media_type: LIBRARY_MEDIA_TYPE,
@@ -213,29 +228,7 @@ where
     }
 
     fn library_summary(&self, file: &[u8]) -> Result<LibrarySummary, CaseError> {
-        let text = std::str::from_utf8(file).map_err(|e| {
-            CaseError::Library(crate::library::LibraryFileError::Json(e.to_string()))
-        })?;
-        let library = Library::from_json(text)?;
-        Ok(LibrarySummary {
-            case: library.case.clone(),
-            preset: library.preset.clone(),
-            surrogate: library.surrogate.clone(),
-            exposure: library.exposure.clone(),
-            size: library.size(),
-            total: library.total_scenarios(),
-            mu_s: library.mu_s,
-            w: library.w,
-            gamma: Some(library.gamma),
-            search: match library.search.method {
-                SearchMethod::Exhaustive => "exhaustive".to_owned(),
-                SearchMethod::Multistart { starts, seed } => {
-                    format!("multistart ({starts} starts, seed {seed})")
-                }
-            },
-            sm_evaluations: library.search.sm_evaluations,
-            recall: library.search.recall,
-        })
+        grid_library_summary(file)
     }
 
     fn library_picture(&self, file: &[u8]) -> Result<Vec<PictureMap>, CaseError> {
@@ -265,7 +258,7 @@ where
     ) -> Result<AdaptiveRun, CaseError> {
         let vehicle = self.builtin(vut, "an adaptive campaign in this process")?;
         let library = self.library(file)?;
-        Ok(AdaptiveRun::from_grid(run_adaptive(
+        let run = run_adaptive(
             self.case.as_ref(),
             &vehicle,
             &library,
@@ -273,7 +266,8 @@ where
             settings,
             rule,
             seed,
-        )?))
+        )?;
+        self.unfailed(AdaptiveRun::from_grid(run))
     }
 
     fn adaptive_tests(
@@ -303,7 +297,7 @@ where
 
     fn exact_event_probability(&self, spec: &serde_json::Value) -> Result<f64, CaseError> {
         let vehicle = self.builtin(spec, "an exact answer")?;
-        Ok(event_probability(
+        self.unfailed(event_probability(
             self.case.as_ref(),
             &event_cells(self.case.as_ref(), &vehicle),
         ))
@@ -329,7 +323,7 @@ where
             outside,
             Split::Random,
         )?;
-        Ok(exact_report(
+        self.unfailed(exact_report(
             self.case.as_ref(),
             &vehicle,
             &q,
@@ -491,4 +485,31 @@ where
                 .is_event(surrogate, self.distribution.draw(self.seed, index).cell)
         })
     }
+}
+
+/// What a grid library file holds (any grid case: the file is
+/// self-describing).
+pub fn grid_library_summary(file: &[u8]) -> Result<LibrarySummary, CaseError> {
+    let text = std::str::from_utf8(file)
+        .map_err(|e| CaseError::Library(crate::library::LibraryFileError::Json(e.to_string())))?;
+    let library = Library::from_json(text)?;
+    Ok(LibrarySummary {
+        case: library.case.clone(),
+        preset: library.preset.clone(),
+        surrogate: library.surrogate.clone(),
+        exposure: library.exposure.clone(),
+        size: library.size(),
+        total: library.total_scenarios(),
+        mu_s: library.mu_s,
+        w: library.w,
+        gamma: Some(library.gamma),
+        search: match library.search.method {
+            SearchMethod::Exhaustive => "exhaustive".to_owned(),
+            SearchMethod::Multistart { starts, seed } => {
+                format!("multistart ({starts} starts, seed {seed})")
+            }
+        },
+        sm_evaluations: library.search.sm_evaluations,
+        recall: library.search.recall,
+    })
 }

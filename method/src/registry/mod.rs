@@ -6,7 +6,7 @@
 //! Adding a case means one arm in [`open_case`].
 
 mod adaptive_tests;
-pub(crate) mod cells;
+pub mod cells;
 pub(crate) mod picture;
 pub(crate) mod vut;
 
@@ -365,6 +365,12 @@ pub trait ScenarioCase: Send + Sync {
     /// What the user should know about how the exposure was read (a table
     /// renormalised to sum to 1), if anything.
     fn exposure_note(&self) -> Option<String> {
+        None
+    }
+    /// Why a vehicle this process ran itself failed (a program run through
+    /// a [`crate::external::ProgramHost`]), if one did: results computed
+    /// since are void.
+    fn failure(&self) -> Option<String> {
         None
     }
     /// How a campaign spreads ε when the request does not say.

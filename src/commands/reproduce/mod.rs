@@ -81,7 +81,10 @@ struct CaseSetting {
 
 fn settings(case: &str) -> anyhow::Result<CaseSetting> {
     let descriptor = tslg_method::cases::descriptor(case)?;
-    let r = descriptor.reproduction.clone();
+    let r = descriptor
+        .reproduction
+        .clone()
+        .ok_or_else(|| anyhow::anyhow!("case {case} is not one of the paper's"))?;
     Ok(CaseSetting {
         case: descriptor.name,
         preset: r.preset,
@@ -148,9 +151,8 @@ pub fn run(args: &ReproduceArgs) -> anyhow::Result<()> {
         .map(|c| settings(c))
         .collect::<anyhow::Result<Vec<_>>>()?;
     let exposure = exposure_request(&CaseArgs {
-        case: None,
         ndd_table: args.ndd_table.clone(),
-        preset: None,
+        ..CaseArgs::default()
     })?;
     let rows = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)

@@ -47,6 +47,8 @@ pub struct ProgramSpec {
     pub name: String,
     /// The command and its arguments, run without a shell.
     pub command: Vec<String>,
+    /// The folder it runs in (a case file's; `None`: the worker's own).
+    pub dir: Option<std::path::PathBuf>,
 }
 
 impl FromStr for ProgramSpec {
@@ -64,6 +66,7 @@ impl FromStr for ProgramSpec {
         Ok(Self {
             name: name.to_owned(),
             command,
+            dir: None,
         })
     }
 }
@@ -123,9 +126,14 @@ impl Program {
     /// program that cannot start is a configuration error.
     pub fn start(spec: ProgramSpec, settings: ProgramSettings) -> Result<Self, String> {
         let deadline = Instant::now() + settings.timeout;
-        let (process, capabilities) =
-            ProgramProcess::start(&spec.command, &settings.worker, settings.timeout, deadline)
-                .map_err(|f| format!("--vut-exec {}: the program {f}", spec.name))?;
+        let (process, capabilities) = ProgramProcess::start(
+            &spec.command,
+            spec.dir.as_deref(),
+            &settings.worker,
+            settings.timeout,
+            deadline,
+        )
+        .map_err(|f| format!("--vut-exec {}: the program {f}", spec.name))?;
         for case in capabilities.cases.keys() {
             if tslg_method::cases::descriptor(case).is_err() {
                 tracing::warn!(program = %spec.name, case, "the program offers an unknown case");
@@ -213,6 +221,7 @@ impl Program {
     fn spawn(&self, deadline: Instant) -> Result<ProgramProcess, Fault> {
         ProgramProcess::start(
             &self.spec.command,
+            self.spec.dir.as_deref(),
             &self.settings.worker,
             self.settings.timeout,
             deadline,
@@ -404,11 +413,27 @@ pub struct Programs {
 impl Programs {
     /// Parses and starts every program (blocking: the handshakes).
     pub fn start(specs: &[String], settings: &ProgramSettings) -> Result<Self, String> {
+        let specs = specs
+            .iter()
+            .map(|text| text.parse())
+            .collect::<Result<Vec<ProgramSpec>, String>>()?;
+        let mut names: Vec<&str> = specs.iter().map(|s| s.name.as_str()).collect();
+        names.sort_unstable();
+        if let Some(pair) = names.windows(2).find(|w| w[0] == w[1]) {
+            return Err(format!("--vut-exec {}: the name is given twice", pair[0]));
+        }
+        Self::start_specs(specs, settings)
+    }
+
+    /// Starts the programs of `specs` (blocking: the handshakes).
+    pub fn start_specs(
+        specs: Vec<ProgramSpec>,
+        settings: &ProgramSettings,
+    ) -> Result<Self, String> {
         let mut by_name = BTreeMap::new();
-        for text in specs {
-            let spec: ProgramSpec = text.parse()?;
+        for spec in specs {
             if by_name.contains_key(&spec.name) {
-                return Err(format!("--vut-exec {}: the name is given twice", spec.name));
+                return Err(format!("program {}: the name is given twice", spec.name));
             }
             let name = spec.name.clone();
             by_name.insert(name, Arc::new(Program::start(spec, settings.clone())?));
@@ -451,6 +476,36 @@ impl Programs {
     pub fn probe_rested(&self) {
         for program in self.by_name.values() {
             program.probe();
+        }
+    }
+}
+
+/// The programs as a host a case runs them through in this process (the
+/// command line's user-defined cases: surrogates, vehicles, exact answers),
+/// with the same pooling, retries and fault reasons as a worker's tests.
+impl tslg_method::external::ProgramHost for Programs {
+    fn has(&self, name: &str) -> bool {
+        self.by_name.contains_key(name)
+    }
+
+    fn converse(
+        &self,
+        name: &str,
+        conversation: &tslg_method::external::ProgramConversation<'_>,
+    ) -> Result<(bool, Option<f64>), String> {
+        let program = self
+            .get(name)
+            .ok_or_else(|| format!("no program `{name}` runs here"))?;
+        match program.run(0, &|vut| {
+            conversation(vut)
+                .map(|(event, criticality)| (TestOutcome { event, weight: 1.0 }, criticality))
+        }) {
+            ProgramRun::Done(outcome, criticality) => Ok((outcome.event, criticality)),
+            ProgramRun::Invalid(reason) => Err(reason),
+            ProgramRun::Skipped => Err(format!(
+                "the program `{name}` is resting after repeated failures: {}",
+                program.unhealthy().map_or_else(String::new, |u| u.reason)
+            )),
         }
     }
 }

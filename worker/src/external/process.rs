@@ -185,6 +185,7 @@ impl ProgramProcess {
     /// timeout names.
     pub fn start(
         command: &[String],
+        dir: Option<&std::path::Path>,
         worker: &str,
         timeout: Duration,
         deadline: Instant,
@@ -192,7 +193,11 @@ impl ProgramProcess {
         let (program, args) = command
             .split_first()
             .ok_or_else(|| Fault::Spawn("empty command".into()))?;
-        let mut child = Command::new(program)
+        let mut command = Command::new(program);
+        if let Some(dir) = dir {
+            command.current_dir(dir);
+        }
+        let mut child = command
             .args(args)
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
@@ -459,7 +464,7 @@ print(json.dumps({"type": "hello", "protocol": 1, "name": str(os.getpid()), "cas
 
     fn start(command: &[String]) -> (ProgramProcess, Capabilities) {
         let timeout = Duration::from_secs(10);
-        ProgramProcess::start(command, "test", timeout, Instant::now() + timeout).unwrap()
+        ProgramProcess::start(command, None, "test", timeout, Instant::now() + timeout).unwrap()
     }
 
     /// Whether process `pid` is gone (or a zombie nobody has reaped yet).

@@ -48,7 +48,7 @@ pub fn descriptor() -> CaseDescriptor {
         picture_axes: ["range R (m)", "range rate Ṙ (m/s)"],
         demo_vut: None,
         validation: None,
-        reproduction: Reproduction {
+        reproduction: Some(Reproduction {
             preset: "paper",
             surrogate: "idm",
             search: LibrarySearch::Policy(PolicySolver::DynamicProgramming),
@@ -61,7 +61,7 @@ pub fn descriptor() -> CaseDescriptor {
                 library_tests: 50.0,
                 ndd_tests: 1.875e7,
             },
-        },
+        }),
     }
 }
 

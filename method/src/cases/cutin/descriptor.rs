@@ -60,7 +60,7 @@ pub fn descriptor() -> CaseDescriptor {
             ],
             quick_preset: None,
         }),
-        reproduction: Reproduction {
+        reproduction: Some(Reproduction {
             preset: "paper-code",
             surrogate: "idm",
             search: LibrarySearch::Cells(SearchMethod::Multistart {
@@ -79,7 +79,7 @@ pub fn descriptor() -> CaseDescriptor {
                 library_tests: 51.0,
                 ndd_tests: 9.63e4,
             },
-        },
+        }),
     }
 }
 

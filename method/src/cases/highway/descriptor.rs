@@ -59,7 +59,7 @@ pub fn descriptor() -> CaseDescriptor {
             pairs: vec![("mobil", "mobil"), ("mobil", "gap-seeker")],
             quick_preset: Some("coarse"),
         }),
-        reproduction: Reproduction {
+        reproduction: Some(Reproduction {
             preset: "paper",
             surrogate: "mobil",
             search: LibrarySearch::Cells(SearchMethod::Exhaustive),
@@ -78,7 +78,7 @@ pub fn descriptor() -> CaseDescriptor {
                 library_tests: 2.6e3,
                 ndd_tests: 6.6e5,
             },
-        },
+        }),
     }
 }
 
