@@ -28,6 +28,9 @@ pub enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Define user-defined cases on a running coordinator, or list its cases.
+    #[command(subcommand)]
+    Case(CaseCommand),
     /// Print a case's built-in exposure model as the table the case accepts
     /// (`--ndd-table`): the format to fill with your own naturalistic data.
     Table {
@@ -116,6 +119,26 @@ pub struct ServerArgs {
     /// one); for reading only, the read token will do.
     #[arg(long, env = "TSLG_ADMIN_TOKEN", hide_env_values = true)]
     pub token: Option<String>,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum CaseCommand {
+    /// Define a user-defined case from its case file (and the exposure table
+    /// it names) on a coordinator; libraries and campaigns then name it.
+    Create {
+        /// The case file (TOML; docs/bring-your-own.md).
+        file: PathBuf,
+        #[command(flatten)]
+        server: ServerArgs,
+    },
+    /// List the cases a coordinator runs, its user-defined ones included.
+    List {
+        #[command(flatten)]
+        server: ServerArgs,
+        /// Print JSON.
+        #[arg(long)]
+        json: bool,
+    },
 }
 
 #[derive(Debug, Subcommand)]
@@ -567,6 +590,10 @@ pub struct DemoArgs {
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Cases { json } => commands::cases::run(json),
+        Command::Case(CaseCommand::Create { file, server }) => {
+            commands::cases::create(&file, &server)
+        }
+        Command::Case(CaseCommand::List { server, json }) => commands::cases::list(&server, json),
         Command::Table { case, preset } => {
             print!(
                 "{}",

@@ -466,4 +466,8 @@ pub struct CampaignPlan {
     /// weight come with its lease (`tests`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub near_miss: Option<f64>,
+    /// For a user-defined case: its definition, which the worker registers
+    /// before it opens the case.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub user_case: Option<crate::UserCaseDefinition>,
 }

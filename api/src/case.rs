@@ -64,4 +64,34 @@ pub struct CaseView {
     pub exact_answers: bool,
     /// Whether the service runs its adaptive campaigns.
     pub adaptive: bool,
+    /// Whether a user defined it (`POST /api/v1/cases`).
+    #[serde(default)]
+    pub user_defined: bool,
+}
+
+/// A user-defined grid case (`POST /api/v1/cases`): its case file and its
+/// exposure table, as text (docs/bring-your-own.md).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct CreateCase {
+    /// The case file (TOML).
+    pub file: String,
+    /// The exposure table the file names (CSV: one column per dimension,
+    /// then `probability`).
+    pub table: String,
+    /// The table's name; the file's `exposure` when left out.
+    #[serde(default)]
+    pub table_name: Option<String>,
+}
+
+/// A user-defined case's definition as a campaign's plan carries it to the
+/// workers, which register it before they open the case.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
+pub struct UserCaseDefinition {
+    /// The case file (TOML).
+    pub file: String,
+    /// The exposure table's name.
+    pub table_name: String,
+    /// The exposure table (CSV).
+    pub table: String,
 }

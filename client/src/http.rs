@@ -180,6 +180,20 @@ impl Client {
         self.post("/api/v1/libraries", request).await
     }
 
+    /// `POST /api/v1/cases`: defines a user-defined case.
+    pub async fn create_case(
+        &self,
+        request: &tslg_api::CreateCase,
+    ) -> Result<tslg_api::CaseView, CallError> {
+        self.post("/api/v1/cases", request).await
+    }
+
+    /// `GET /api/v1/cases`: every case the coordinator runs.
+    pub async fn cases(&self) -> Result<Vec<tslg_api::CaseView>, CallError> {
+        self.json(self.request(reqwest::Method::GET, "/api/v1/cases"))
+            .await
+    }
+
     /// `GET /api/v1/libraries/{id}`.
     pub async fn library(&self, id: i64) -> Result<LibraryView, CallError> {
         self.json(self.request(reqwest::Method::GET, &format!("/api/v1/libraries/{id}")))

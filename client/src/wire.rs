@@ -150,6 +150,18 @@ pub fn case_view(case: &tslg_method::cases::CaseDescriptor) -> tslg_api::CaseVie
         picture_axes: case.picture_axes.map(str::to_owned),
         exact_answers: case.is_grid(),
         adaptive: case.is_grid(),
+        user_defined: tslg_method::cases::user::registry::get(case.name).is_some(),
+    }
+}
+
+/// A user-defined case's definition from its wire form.
+pub fn user_case_definition(
+    d: &tslg_api::UserCaseDefinition,
+) -> tslg_method::cases::user::registry::UserCaseDefinition {
+    tslg_method::cases::user::registry::UserCaseDefinition {
+        file: d.file.clone(),
+        table_name: d.table_name.clone(),
+        table: d.table.clone(),
     }
 }
 

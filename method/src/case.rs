@@ -142,6 +142,12 @@ pub trait Case: Sync {
         self.evaluate_surrogate(surrogate, cell).challenge
     }
 
+    /// The modes an external program can drive this case in, the default
+    /// first (the mode a specification that names none gets).
+    fn external_modes(&self) -> &'static [ExternalMode] {
+        &[ExternalMode::Step, ExternalMode::Episode]
+    }
+
     /// A vehicle this process runs itself for a specification that would
     /// otherwise name an external program (a user-defined case's programs,
     /// run by the caller's [`crate::external::ProgramHost`]); `None`: none.

@@ -54,6 +54,9 @@ pub async fn serve(
     }
     let db = db::Database::open(&config.database_url, config.durability).await?;
     store::reports::move_legacy_events(&db).await?;
+    store::user_cases::register_stored(&db.read)
+        .await
+        .map_err(|e| anyhow::anyhow!("user-defined cases: {e}"))?;
     let state = state::AppState::new(db, config);
     builder::resume_builds(&state).await?;
     let address = listener.local_addr()?;

@@ -1,20 +1,70 @@
 //! `tslg cases`: every case with its presets, vehicles and defaults, from
 //! the case descriptors (what `GET /api/v1/cases` serves).
 
-use tslg_client::wire::{case_view, search_request};
+use crate::commands::remote::{block_on, client};
+use crate::ServerArgs;
+use anyhow::Context;
+use std::path::Path;
+use tslg_api::{CaseView, ScenarioKind};
+use tslg_client::wire::case_view;
 
 pub fn run(json: bool) -> anyhow::Result<()> {
-    let cases = tslg_method::cases::descriptors();
+    let views: Vec<_> = tslg_method::cases::descriptors()
+        .iter()
+        .map(case_view)
+        .collect();
+    print_views(&views, json)
+}
+
+/// `tslg case create FILE`: the case file and its exposure table sent to
+/// the coordinator.
+pub fn create(path: &Path, server: &ServerArgs) -> anyhow::Result<()> {
+    let (file, dir) = crate::inputs::read_case_file(path)?;
+    let table_path = dir.join(&file.exposure);
+    let table = std::fs::read_to_string(&table_path)
+        .with_context(|| format!("cannot read the exposure table {}", table_path.display()))?;
+    let request = tslg_api::CreateCase {
+        file: std::fs::read_to_string(path)?,
+        table,
+        table_name: Some(file.exposure.clone()),
+    };
+    let client = client(server)?;
+    block_on(async {
+        let view = client.create_case(&request).await?;
+        println!(
+            "case {} defined on {}: {} (program {}, {})",
+            view.name,
+            server.server,
+            view.summary,
+            view.default_surrogate,
+            view.tables.first().map_or("", |t| t.holds.as_str())
+        );
+        Ok(())
+    })
+}
+
+/// `tslg case list`: a coordinator's cases.
+pub fn list(server: &ServerArgs, json: bool) -> anyhow::Result<()> {
+    let client = client(server)?;
+    let views = block_on(async { Ok(client.cases().await?) })?;
+    print_views(&views, json)
+}
+
+fn print_views(cases: &[CaseView], json: bool) -> anyhow::Result<()> {
     if json {
-        let views: Vec<_> = cases.iter().map(case_view).collect();
-        println!("{}", serde_json::to_string_pretty(&views)?);
+        println!("{}", serde_json::to_string_pretty(cases)?);
         return Ok(());
     }
     for (k, case) in cases.iter().enumerate() {
         if k > 0 {
             println!();
         }
-        println!("{}", case.name);
+        let user = if case.user_defined {
+            " (user-defined)"
+        } else {
+            ""
+        };
+        println!("{}{user}", case.name);
         println!("  {}", case.summary);
         for (i, preset) in case.presets.iter().enumerate() {
             let default = if i == 0 { " (default)" } else { "" };
@@ -24,11 +74,11 @@ pub fn run(json: bool) -> anyhow::Result<()> {
         println!(
             "  library: surrogate {} by default, search {}",
             case.default_surrogate,
-            serde_json::to_string(&search_request(case.default_search))?
+            serde_json::to_string(&case.default_search)?
         );
         println!(
             "  scenarios: {} ({})",
-            if case.is_grid() {
+            if case.scenarios == ScenarioKind::Grid {
                 "grid cells drawn before each test; exact answers and adaptive campaigns"
             } else {
                 "drawn while each test runs"

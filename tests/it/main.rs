@@ -25,5 +25,6 @@ mod service_protocol;
 mod service_recovery;
 mod service_trust;
 mod service_upgrade;
+mod service_user_case;
 mod tables;
 mod user_case;

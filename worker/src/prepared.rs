@@ -22,6 +22,9 @@ impl PreparedCampaign {
     /// Builds the sampler and vehicle from a plan (CPU work: call off the
     /// async runtime).
     pub fn new(plan: &CampaignPlan, library: Option<&[u8]>) -> anyhow::Result<Self> {
+        if let Some(definition) = &plan.user_case {
+            tslg_method::cases::user::registry::register(wire::user_case_definition(definition))?;
+        }
         let case = open_case(
             &plan.case,
             Some(&plan.preset),

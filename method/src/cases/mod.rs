@@ -54,16 +54,21 @@ pub const BUILTIN: [BuiltinCase; 3] = [
     },
 ];
 
-/// The descriptors of every case.
+/// The descriptors of every case: the built-in ones, then the user-defined
+/// cases registered in this process ([`user::registry`]), by name.
 pub fn descriptors() -> Vec<CaseDescriptor> {
-    BUILTIN.iter().map(|c| (c.descriptor)()).collect()
+    BUILTIN
+        .iter()
+        .map(|c| (c.descriptor)())
+        .chain(user::registry::descriptors())
+        .collect()
 }
 
 /// The names of every case, comma-separated (for messages).
 pub fn known() -> String {
-    BUILTIN
+    descriptors()
         .iter()
-        .map(|c| (c.descriptor)().name)
+        .map(|d| d.name)
         .collect::<Vec<_>>()
         .join(", ")
 }
@@ -78,9 +83,12 @@ fn builtin(name: &str) -> Result<&'static BuiltinCase, CaseError> {
         })
 }
 
-/// The descriptor of case `name`.
+/// The descriptor of case `name` (built-in or registered).
 pub fn descriptor(name: &str) -> Result<CaseDescriptor, CaseError> {
-    builtin(name).map(|c| (c.descriptor)())
+    match builtin(name) {
+        Ok(c) => Ok((c.descriptor)()),
+        Err(e) => user::registry::descriptor(name).ok_or(e),
+    }
 }
 
 /// The built-in exposure of case `name` with `preset`, as a table.
@@ -88,14 +96,20 @@ pub fn builtin_table(name: &str, preset: Option<&str>) -> Result<String, CaseErr
     (builtin(name)?.builtin_table)(preset)
 }
 
-/// Opens case `name` with `preset` (the case's default when `None`) on
-/// `exposure`.
+/// Opens case `name` (built-in, or a user-defined case registered in this
+/// process) with `preset` (the case's default when `None`) on `exposure`.
 pub fn open_case(
     name: &str,
     preset: Option<&str>,
     exposure: &ExposureSource,
 ) -> Result<Arc<dyn ScenarioCase>, CaseError> {
-    (builtin(name)?.open)(preset, exposure)
+    match builtin(name) {
+        Ok(c) => (c.open)(preset, exposure),
+        Err(e) => match user::registry::get(name) {
+            Some(definition) => definition.open(preset, exposure, None),
+            None => Err(e),
+        },
+    }
 }
 
 /// What a user should know about an exposure table once read: how far it

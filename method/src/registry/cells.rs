@@ -68,10 +68,32 @@ where
         &self,
         spec: &serde_json::Value,
     ) -> Result<CampaignVehicle<C::Vehicle>, CaseError> {
-        if let Some(vehicle) = self.case.resolve_vehicle(spec) {
+        let modes = self.case.external_modes();
+        // A program named without a mode gets the case's first.
+        let mut spec = spec.clone();
+        if let Some(object) = spec.as_object_mut() {
+            if object.contains_key("external") && !object.contains_key("mode") {
+                object.insert("mode".into(), modes[0].as_str().into());
+            }
+        }
+        if let Some(vehicle) = self.case.resolve_vehicle(&spec) {
             return Ok(CampaignVehicle::Builtin(vehicle));
         }
-        CampaignVehicle::parse(self.case.name(), spec, true, |spec| self.vehicle(spec))
+        let vehicle = CampaignVehicle::parse(self.case.name(), &spec, true, |spec| {
+            self.vehicle(spec)
+        })?;
+        if let CampaignVehicle::External(vut) = &vehicle {
+            if !modes.contains(&vut.mode) {
+                return Err(CaseError::Vehicle {
+                    case: self.case.name(),
+                    reason: format!(
+                        "its programs run in {} mode: the program is the simulation",
+                        modes[0].as_str()
+                    ),
+                });
+            }
+        }
+        Ok(vehicle)
     }
 
     /// Refuses what was computed with a vehicle run here that failed.

@@ -99,6 +99,9 @@ pub enum CaseError {
     /// What this case does not do.
     #[error("{0}")]
     Unsupported(String),
+    /// A user-defined case's name already holds another definition.
+    #[error("case {0} is already defined, differently: a case keeps its definition; name the new one otherwise")]
+    AlreadyDefined(String),
 }
 
 /// A build request; what is `None` takes the case's default.

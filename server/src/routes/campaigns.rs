@@ -132,6 +132,13 @@ pub async fn plan(
         vut: serde_json::from_str(&row.vut).map_err(|e| ApiError::Internal(e.into()))?,
         near_miss: (row.method == Method::Adaptive)
             .then(|| tslg_method::adaptive::AdaptiveSettings::default().near_miss),
+        user_case: crate::store::user_cases::get(&state.db.read, &row.case_name)
+            .await?
+            .map(|d| tslg_api::UserCaseDefinition {
+                file: d.file,
+                table_name: d.table_name,
+                table: d.table,
+            }),
     }))
 }
 

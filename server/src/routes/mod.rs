@@ -31,6 +31,7 @@ use std::sync::Arc;
 
 pub fn router(state: AppState) -> Router {
     let admin = Router::new()
+        .route("/api/v1/cases", post(cases::create))
         .route("/api/v1/libraries", post(libraries::create))
         .route("/api/v1/campaigns", post(campaigns::create))
         .route("/api/v1/campaigns/{id}/cancel", post(campaigns::cancel))

@@ -19,6 +19,7 @@ use utoipa::OpenApi;
     paths(
         super::health::healthz,
         super::cases::list,
+        super::cases::create,
         super::libraries::create,
         super::libraries::list,
         super::libraries::get_one,

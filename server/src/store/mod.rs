@@ -9,3 +9,4 @@ pub mod leases;
 pub mod libraries;
 pub mod reports;
 pub mod results;
+pub mod user_cases;

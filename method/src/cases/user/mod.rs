@@ -18,6 +18,7 @@
 
 pub mod descriptor;
 pub mod file;
+pub mod registry;
 
 use crate::case::{Case, SurrogateEvaluation};
 use crate::external::{DriverError, ExternalMode, ExternalVehicle, ProgramHost, TestStart};
@@ -296,6 +297,11 @@ impl Case for UserCase {
         } else {
             0.0
         }
+    }
+
+    /// The simulation is the program: it runs whole scenarios.
+    fn external_modes(&self) -> &'static [ExternalMode] {
+        &[ExternalMode::Episode]
     }
 
     /// A program this process can run, named as a campaign names it.
