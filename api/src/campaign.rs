@@ -49,6 +49,12 @@ pub enum Method {
     /// estimation on the failures found (grid cases; docs/statistics.md,
     /// "Adaptive campaigns").
     Adaptive,
+    /// A library build's surrogate runs, which the coordinator leases to
+    /// workers as tests: test `i` runs the surrogate on the `i`-th cell
+    /// with exposure (`build_of` names the library). Created by the
+    /// coordinator for a build whose surrogate is a program, not by
+    /// clients.
+    Enumerate,
 }
 
 impl Method {
@@ -58,6 +64,7 @@ impl Method {
             Method::Library => "library",
             Method::Ndd => "ndd",
             Method::Adaptive => "adaptive",
+            Method::Enumerate => "enumerate",
         }
     }
 

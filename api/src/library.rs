@@ -167,6 +167,10 @@ pub struct LibraryView {
     pub build_seconds: Option<f64>,
     /// Why the build failed.
     pub error: Option<String>,
+    /// While building on workers (a program as surrogate): what the build
+    /// waits for or how far it has come.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub status_detail: Option<String>,
     /// While building: the search's work items done of its total (cells
     /// for exhaustive search, starts for multistart, surrogate transitions
     /// for car-following). Absent while queued behind another build.

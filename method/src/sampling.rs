@@ -399,6 +399,10 @@ pub enum TestDistribution {
     Ndd(NddDistribution),
     /// An adaptive campaign's estimation stage on its support.
     Support(Box<crate::support_sampling::SupportDistribution>),
+    /// Every cell with exposure once, in cell order, weight 1: a library
+    /// build's surrogate runs leased to workers as tests (test `i` is the
+    /// `i`-th cell; the seed plays no part).
+    Enumeration(std::sync::Arc<[usize]>),
 }
 
 impl TestDistribution {
@@ -413,6 +417,10 @@ impl TestDistribution {
             TestDistribution::Library(d) => d.draw(seed, index),
             TestDistribution::Ndd(d) => d.draw(seed, index),
             TestDistribution::Support(d) => d.draw(seed, index),
+            TestDistribution::Enumeration(cells) => Draw {
+                cell: cells[(index as usize).min(cells.len() - 1)],
+                weight: 1.0,
+            },
         }
     }
 
@@ -423,7 +431,7 @@ impl TestDistribution {
     pub fn explored(&self, draw: &Draw) -> bool {
         match self {
             TestDistribution::Library(d) => !d.contains(draw.cell),
-            TestDistribution::Ndd(_) => false,
+            TestDistribution::Ndd(_) | TestDistribution::Enumeration(_) => false,
             TestDistribution::Support(d) => !d.contains(draw.cell),
         }
     }
@@ -432,7 +440,7 @@ impl TestDistribution {
     pub fn explores(&self, seed: u64, index: u64) -> bool {
         match self {
             TestDistribution::Library(d) => d.explores(seed, index),
-            TestDistribution::Ndd(_) => false,
+            TestDistribution::Ndd(_) | TestDistribution::Enumeration(_) => false,
             TestDistribution::Support(d) => stratified_explores(d.epsilon(), index),
         }
     }
@@ -442,7 +450,7 @@ impl TestDistribution {
     pub fn strata(&self) -> Option<f64> {
         match self {
             TestDistribution::Library(d) => d.strata(),
-            TestDistribution::Ndd(_) => None,
+            TestDistribution::Ndd(_) | TestDistribution::Enumeration(_) => None,
             TestDistribution::Support(d) => Some(d.epsilon()).filter(|&e| e > 0.0),
         }
     }
@@ -452,7 +460,9 @@ impl TestDistribution {
     pub fn outside_mass(&self) -> Option<&OutsideMass> {
         match self {
             TestDistribution::Library(d) => Some(d.outside_mass()),
-            TestDistribution::Ndd(_) | TestDistribution::Support(_) => None,
+            TestDistribution::Ndd(_)
+            | TestDistribution::Support(_)
+            | TestDistribution::Enumeration(_) => None,
         }
     }
 }

@@ -105,6 +105,17 @@ async fn record_build(
 /// Restarts the builds a stopped coordinator left unfinished.
 pub async fn resume_builds(state: &AppState) -> anyhow::Result<()> {
     for row in libraries::building(&state.db.read).await? {
+        // A build on workers goes on as its campaign does; one whose
+        // campaign stopped while the coordinator was down is recorded now.
+        if let Some(campaign) = crate::enumeration::campaign_of(state, row.id)
+            .await
+            .map_err(|e| anyhow::anyhow!("library {}: {e}", row.id))?
+        {
+            crate::enumeration::finish(state, campaign.id)
+                .await
+                .map_err(|e| anyhow::anyhow!("library {}: {e}", row.id))?;
+            continue;
+        }
         tracing::info!(library = row.id, "resuming an unfinished library build");
         spawn_build(state.clone(), row.id);
     }

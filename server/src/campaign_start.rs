@@ -37,6 +37,12 @@ fn grid_cases() -> String {
 /// every number checked against the method's ranges; pure.
 pub fn rule_of(req: &CreateCampaign) -> Result<StoppingRule, ApiError> {
     check_name("case", &req.case, 64)?;
+    if req.method == Method::Enumerate {
+        return Err(bad(
+            "method `enumerate` is the coordinator's own, for library builds whose surrogate \
+             is a program: POST /api/v1/libraries starts one",
+        ));
+    }
     let case = descriptor(&req.case).map_err(|e| bad(e.to_string()))?;
     check_epsilon(req.epsilon).map_err(|e| bad(e.to_string()))?;
     let rule = StoppingRule {
@@ -105,7 +111,7 @@ async fn library_of(
                 .await
                 .map_err(|_| bad(format!("library_id {id} does not name a library")))?,
         ),
-        (Method::Ndd, None) => None,
+        (Method::Ndd | Method::Enumerate, None) => None,
     };
     if let Some(lib) = &library {
         if lib.case_name != req.case {

@@ -9,6 +9,7 @@ mod builder;
 mod campaign_start;
 mod config;
 mod db;
+mod enumeration;
 mod error;
 mod history;
 mod latency;

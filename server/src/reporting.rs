@@ -97,6 +97,13 @@ fn account(state: &AppState, report: &ResultReport, recorded: &Recorded) {
     if recorded.stopped.is_some() {
         state.samplers.forget(recorded.campaign_id);
         state.throughput.forget(recorded.campaign_id);
+        // A library build's enumeration: the library from its events.
+        let (state, id) = (state.clone(), recorded.campaign_id);
+        tokio::spawn(async move {
+            if let Err(e) = crate::enumeration::finish(&state, id).await {
+                tracing::error!(campaign = id, error = %e, "a library built on workers could not be recorded");
+            }
+        });
     }
 }
 

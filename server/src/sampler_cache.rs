@@ -71,6 +71,9 @@ impl SamplerCache {
 fn build(row: &CampaignRow, file: Option<&[u8]>) -> anyhow::Result<Arc<dyn CampaignTests>> {
     let case = open_case(&row.case_name, Some(&row.preset), &row.exposure_source())?;
     let vut: serde_json::Value = serde_json::from_str(&row.vut)?;
+    if row.method == Method::Enumerate {
+        return Ok(case.enumeration(&vut)?);
+    }
     if row.method == Method::Adaptive {
         let file = file.context("an adaptive campaign needs its library file")?;
         return Ok(case.adaptive_tests(

@@ -144,6 +144,7 @@ fn assumes(method: Method) -> &'static str {
              near misses from what its tests met"
         }
         Method::Ndd => "nothing beyond the exposure model: every scenario sampled as it occurs",
+        Method::Enumerate => "no estimate: a library build's surrogate runs, every scenario once",
     }
 }
 

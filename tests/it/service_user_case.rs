@@ -142,3 +142,183 @@ async fn a_user_defined_case_is_defined_listed_and_run_by_workers_offering_its_p
         own["estimate"].as_f64().unwrap().to_bits()
     );
 }
+
+/// The library view of `id` once `done` holds, within `limit`.
+async fn library_when(
+    client: &tslg_client::Client,
+    id: i64,
+    limit: Duration,
+    done: impl Fn(&tslg_api::LibraryView) -> bool,
+) -> tslg_api::LibraryView {
+    let started = std::time::Instant::now();
+    loop {
+        let view = client.library(id).await.unwrap();
+        if done(&view) {
+            return view;
+        }
+        assert!(started.elapsed() < limit, "library {id} stuck: {view:?}");
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_program_surrogates_library_is_built_by_workers_and_is_the_offline_one() {
+    use tslg_api::{CreateLibrary, LibraryStatus, SearchRequest};
+    let dir = scratch();
+    // Short leases and a 1 s lease time-out: a killed worker's cells go to
+    // another worker soon.
+    let options = ["--lease-size", "300", "--lease-ttl-seconds", "1"];
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &options);
+    let client = server.client();
+    let case_file = repo("examples/cases/cut-in.toml");
+    assert!(
+        tslg(&["case", "create", &case_file, "--server", &server.url])
+            .status
+            .success()
+    );
+    let request = |search| CreateLibrary {
+        case: "cut-in-py".into(),
+        preset: None,
+        surrogate: serde_json::json!({"external": "cutin-idm"}),
+        exposure: Default::default(),
+        search,
+        threshold: None,
+    };
+    // Multistart descends through the program's answers: offline only.
+    let refused = client
+        .create_library(&request(Some(SearchRequest::Multistart {
+            starts: 5,
+            seed: 0,
+        })))
+        .await
+        .unwrap_err()
+        .to_string();
+    assert!(
+        refused.contains("runs on workers by exhaustive search"),
+        "{refused}"
+    );
+    let library = client.create_library(&request(None)).await.unwrap();
+    // No worker offers the program yet: the build says so.
+    let waiting = library_when(&client, library.id, Duration::from_secs(10), |v| {
+        v.status_detail.is_some()
+    })
+    .await;
+    assert!(
+        waiting
+            .status_detail
+            .as_deref()
+            .unwrap()
+            .contains("waiting for a worker offering cutin-idm:cut-in-py:episode"),
+        "{waiting:?}"
+    );
+    // A slow worker starts the build and is killed in the middle of it.
+    let slow = format!(
+        "cutin-idm=python3 {} slow cut-in-py",
+        repo("tests/fixtures/faulty_case.py")
+    );
+    let doomed = WorkerProcess::start_with(&server.url, 1, "doomed", &["--vut-exec", &slow]);
+    let started = library_when(&client, library.id, Duration::from_secs(60), |v| {
+        v.progress.as_ref().is_some_and(|p| p.done >= 300)
+    })
+    .await;
+    assert_eq!(started.status, LibraryStatus::Building, "killed too late");
+    assert_eq!(started.progress.unwrap().total, 3420);
+    doomed.kill();
+    let exec = format!(
+        "cutin-idm=python3 {} cut-in-py",
+        repo("examples/cases/cutin_idm.py")
+    );
+    // Two workers finish it: each audits the other's events (an external
+    // program's results are checked by another worker, docs/operations.md).
+    let rescuers = [
+        WorkerProcess::start_with(&server.url, 1, "rescuer-1", &["--vut-exec", &exec]),
+        WorkerProcess::start_with(&server.url, 1, "rescuer-2", &["--vut-exec", &exec]),
+    ];
+    let ready = library_when(&client, library.id, Duration::from_secs(120), |v| {
+        v.status != LibraryStatus::Building
+    })
+    .await;
+    assert_eq!(ready.status, LibraryStatus::Ready, "{ready:?}");
+    // The library is the one the command line builds running the program
+    // itself, byte for byte.
+    let served = client.library_file(library.id).await.unwrap();
+    let offline = dir.path().join("offline.json");
+    let o = tslg(&[
+        "library",
+        "build",
+        "--case-file",
+        &case_file,
+        "-o",
+        offline.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(
+        String::from_utf8(served).unwrap(),
+        std::fs::read_to_string(&offline).unwrap()
+    );
+    assert_eq!(ready.size, Some(286));
+
+    // A program that crashes on a cell fails the build with its reason.
+    let crash = format!(
+        "cutin-idm=python3 {} crash cut-in-py",
+        repo("tests/fixtures/faulty_case.py")
+    );
+    let broken = client
+        .create_library(&CreateLibrary {
+            threshold: Some(tslg_api::ThresholdRequest::Relative { m: 2.0 }),
+            ..request(None)
+        })
+        .await
+        .unwrap();
+    drop(rescuers);
+    let _crashers = [
+        WorkerProcess::start_with(&server.url, 1, "crasher-1", &["--vut-exec", &crash]),
+        WorkerProcess::start_with(&server.url, 1, "crasher-2", &["--vut-exec", &crash]),
+    ];
+    let failed = library_when(&client, broken.id, Duration::from_secs(120), |v| {
+        v.status != LibraryStatus::Building
+    })
+    .await;
+    assert_eq!(failed.status, LibraryStatus::Failed, "{failed:?}");
+    let error = failed.error.unwrap();
+    assert!(error.contains("injected crash at R = 51 m"), "{error}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_program_surrogate_of_a_builtin_case_is_built_by_workers_in_step_mode() {
+    use tslg_api::{CreateLibrary, LibraryStatus};
+    let dir = scratch();
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &[]);
+    let client = server.client();
+    let exec = format!("py-idm=python3 {}", repo("examples/python/idm_vut.py"));
+    let _workers = [
+        WorkerProcess::start_with(&server.url, 1, "py-1", &["--vut-exec", &exec]),
+        WorkerProcess::start_with(&server.url, 1, "py-2", &["--vut-exec", &exec]),
+    ];
+    let request = |surrogate| CreateLibrary {
+        case: "cut-in".into(),
+        preset: None,
+        surrogate,
+        exposure: Default::default(),
+        search: Some(tslg_api::SearchRequest::Exhaustive),
+        threshold: None,
+    };
+    let by_program = client
+        .create_library(&request(serde_json::json!({"external": "py-idm"})))
+        .await
+        .unwrap();
+    let builtin = build_library(&client, &request(serde_json::json!({"model": "idm"}))).await;
+    let by_program = library_when(&client, by_program.id, Duration::from_secs(120), |v| {
+        v.status != LibraryStatus::Building
+    })
+    .await;
+    assert_eq!(by_program.status, LibraryStatus::Ready, "{by_program:?}");
+    // The Python IDM, driven step by step by the workers, fails where the
+    // built-in IDM does.
+    assert_eq!(by_program.size, builtin.size);
+    assert_eq!(by_program.mu_s, builtin.mu_s);
+    assert_eq!(
+        by_program.surrogate,
+        serde_json::json!({"external": "py-idm", "mode": "step"})
+    );
+}

@@ -39,7 +39,12 @@ impl PreparedCampaign {
         );
         let outside = wire::outside_spread(plan.outside);
         let split = wire::split(plan.split);
-        let tests = case.campaign(library, &plan.vut, plan.epsilon, outside, split, plan.seed)?;
+        let tests = if plan.method == Method::Enumerate {
+            // A library build's surrogate runs.
+            case.enumeration(&plan.vut)?
+        } else {
+            case.campaign(library, &plan.vut, plan.epsilon, outside, split, plan.seed)?
+        };
         Ok(Self {
             tests,
             near_miss: plan.near_miss,
@@ -85,7 +90,7 @@ impl Cache {
                     "library campaign without a library".into(),
                 ))
             }
-            (Method::Ndd, _) => None,
+            (Method::Ndd | Method::Enumerate, _) => None,
         };
         let prepared = tokio::task::spawn_blocking(move || {
             PreparedCampaign::new(&plan, library.as_deref().map(Vec::as_slice))

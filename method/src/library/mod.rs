@@ -204,6 +204,50 @@ pub fn build_library_observed<C: Case>(
             multistart::search(case, surrogate, &request.threshold, starts, seed, progress)
         }
     };
+    library_of(case, surrogate_spec, preset, request, evaluated)
+}
+
+/// The exhaustive library of a surrogate whose runs on every cell with
+/// exposure were done elsewhere (on workers): `events` are the cells where
+/// it had the event, `P(S|x) = 1` there and 0 elsewhere, and `runs` the
+/// surrogate runs made.
+pub fn library_from_events<C: Case>(
+    case: &C,
+    surrogate_spec: serde_json::Value,
+    preset: &str,
+    threshold: Threshold,
+    events: &[usize],
+    runs: usize,
+) -> Library {
+    let exposure = case.exposure();
+    let critical = events
+        .iter()
+        .map(|&cell| (cell, exposure.p(cell)))
+        .filter(|&(_, v)| v > 0.0)
+        .collect();
+    library_of(
+        case,
+        surrogate_spec,
+        preset,
+        &LibraryRequest {
+            threshold,
+            search: SearchMethod::Exhaustive,
+        },
+        Evaluated {
+            critical,
+            sm_evaluations: runs,
+        },
+    )
+}
+
+/// The library the evaluated cells give under the request's threshold.
+fn library_of<C: Case>(
+    case: &C,
+    surrogate_spec: serde_json::Value,
+    preset: &str,
+    request: &LibraryRequest,
+    evaluated: Evaluated,
+) -> Library {
     let grid = case.grid();
     let mu_s: f64 = evaluated.critical.iter().map(|&(_, v)| v).sum();
     let gamma = request.threshold.gamma(mu_s, grid.len());

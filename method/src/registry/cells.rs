@@ -15,7 +15,9 @@ use crate::descriptor::CaseDescriptor;
 use crate::estimator::{z_for_confidence, StoppingRule};
 use crate::exact::{event_cells, event_probability, exact_report, ExactReport};
 use crate::external::{DriverError, ExternalVehicle, ExternalVut, TestStart};
-use crate::library::{build_library_observed, Library, LibraryRequest, SearchMethod};
+use crate::library::{
+    build_library_observed, library_from_events, Library, LibraryRequest, SearchMethod, Threshold,
+};
 use crate::progress::Progress;
 use crate::sampling::{
     LibraryDistribution, NddDistribution, OutsideSpread, Split, TestDistribution,
@@ -79,9 +81,8 @@ where
         if let Some(vehicle) = self.case.resolve_vehicle(&spec) {
             return Ok(CampaignVehicle::Builtin(vehicle));
         }
-        let vehicle = CampaignVehicle::parse(self.case.name(), &spec, true, |spec| {
-            self.vehicle(spec)
-        })?;
+        let vehicle =
+            CampaignVehicle::parse(self.case.name(), &spec, true, |spec| self.vehicle(spec))?;
         if let CampaignVehicle::External(vut) = &vehicle {
             if !modes.contains(&vut.mode) {
                 return Err(CaseError::Vehicle {
@@ -94,6 +95,14 @@ where
             }
         }
         Ok(vehicle)
+    }
+
+    /// The cells with exposure, in cell order: the tests of an enumeration.
+    fn enumerated_cells(&self) -> Arc<[usize]> {
+        let exposure = self.case.exposure();
+        (0..self.case.grid().len())
+            .filter(|&c| exposure.p(c) > 0.0)
+            .collect()
     }
 
     /// Refuses what was computed with a vehicle run here that failed.
@@ -251,6 +260,62 @@ where
 
     fn library_summary(&self, file: &[u8]) -> Result<LibrarySummary, CaseError> {
         grid_library_summary(file)
+    }
+
+    fn enumeration(
+        &self,
+        surrogate: &serde_json::Value,
+    ) -> Result<Arc<dyn CampaignTests>, CaseError> {
+        Ok(Arc::new(CellCampaign {
+            world: self.case.external_world(),
+            case: Arc::clone(&self.case),
+            vehicle: self.campaign_vehicle(surrogate)?,
+            surrogate: None,
+            distribution: TestDistribution::Enumeration(self.enumerated_cells()),
+            seed: 0,
+            outcomes: OnceLock::new(),
+        }))
+    }
+
+    fn enumeration_len(&self) -> u64 {
+        self.case.exposure().support_size() as u64
+    }
+
+    fn library_from_enumeration(
+        &self,
+        surrogate: &serde_json::Value,
+        threshold: Option<Threshold>,
+        events: &[u64],
+    ) -> Result<BuiltLibrary, CaseError> {
+        let spec = self.campaign_vehicle(surrogate)?.to_spec();
+        let cells = self.enumerated_cells();
+        let event_cells: Vec<usize> = events
+            .iter()
+            .map(|&i| {
+                cells.get(i as usize).copied().ok_or_else(|| {
+                    CaseError::Build(format!(
+                        "event at test {i} beyond the enumeration's {} cells",
+                        cells.len()
+                    ))
+                })
+            })
+            .collect::<Result<_, _>>()?;
+        let library = library_from_events(
+            self.case.as_ref(),
+            spec,
+            &self.preset,
+            threshold.unwrap_or_default(),
+            &event_cells,
+            cells.len(),
+        );
+        Ok(BuiltLibrary {
+            file: library.to_json().into_bytes(),
+            media_type: LIBRARY_MEDIA_TYPE,
+            size: library.size(),
+            sm_evaluations: library.search.sm_evaluations,
+            mu_s: library.mu_s,
+            w: library.w,
+        })
     }
 
     fn library_picture(&self, file: &[u8]) -> Result<Vec<PictureMap>, CaseError> {

@@ -415,6 +415,39 @@ pub trait ScenarioCase: Send + Sync {
         split: Split,
         seed: u64,
     ) -> Result<Arc<dyn CampaignTests>, CaseError>;
+    /// A library build's surrogate runs as a campaign's tests, so workers
+    /// run them (programs included) under the leases, checks and restarts
+    /// of any campaign: test `i` runs `surrogate` on the `i`-th cell with
+    /// exposure, in cell order, weight 1. Grid cases only.
+    fn enumeration(
+        &self,
+        surrogate: &serde_json::Value,
+    ) -> Result<Arc<dyn CampaignTests>, CaseError> {
+        let _ = surrogate;
+        Err(CaseError::Unsupported(format!(
+            "case {}: its libraries are not built by enumerating scenarios",
+            self.name()
+        )))
+    }
+    /// The number of tests of [`ScenarioCase::enumeration`]: the cells
+    /// with exposure.
+    fn enumeration_len(&self) -> u64 {
+        0
+    }
+    /// The exhaustive library of `surrogate` from its enumeration: the test
+    /// indices where it had the event.
+    fn library_from_enumeration(
+        &self,
+        surrogate: &serde_json::Value,
+        threshold: Option<Threshold>,
+        events: &[u64],
+    ) -> Result<BuiltLibrary, CaseError> {
+        let _ = (surrogate, threshold, events);
+        Err(CaseError::Unsupported(format!(
+            "case {}: its libraries are not built by enumerating scenarios",
+            self.name()
+        )))
+    }
     /// What library `file` holds (read without checking that it was built
     /// on this case's exposure).
     fn library_summary(&self, file: &[u8]) -> Result<LibrarySummary, CaseError>;

@@ -152,5 +152,7 @@ pub async fn cancel(
     let row = campaigns::cancel(&state.db.write, id).await?;
     state.samplers.forget(id);
     state.throughput.forget(id);
+    // Cancelling a library build's enumeration fails the build.
+    crate::enumeration::finish(&state, id).await?;
     Ok(Json(row.view()))
 }

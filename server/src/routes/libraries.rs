@@ -43,6 +43,10 @@ pub async fn create(
         )?;
         case.check_request(&request)?;
         let surrogate = case.normalise_vehicle(&checked.surrogate)?;
+        if crate::enumeration::is_program(&surrogate) {
+            crate::enumeration::check(case.as_ref(), &request)
+                .map_err(tslg_method::registry::CaseError::Unsupported)?;
+        }
         Ok::<_, tslg_method::registry::CaseError>((case, surrogate))
     })
     .await
@@ -53,6 +57,7 @@ pub async fn create(
         ExposureRequest::Table { text, .. } => Some(text.as_str()),
     };
     let request = serde_json::to_string(&req).map_err(|e| ApiError::Internal(e.into()))?;
+    let surrogate_spec = surrogate.clone();
     let surrogate = surrogate.to_string();
     let row = libraries::insert(
         &state.db.write,
@@ -69,12 +74,17 @@ pub async fn create(
         },
     )
     .await?;
-    spawn_build(state.clone(), row.id);
+    if crate::enumeration::is_program(&surrogate_spec) {
+        // A program runs on workers only: its build is their tests.
+        crate::enumeration::start(&state, &row, case, &surrogate_spec).await?;
+    } else {
+        spawn_build(state.clone(), row.id);
+    }
     let location = format!("/api/v1/libraries/{}", row.id);
     Ok((
         StatusCode::ACCEPTED,
         [(header::LOCATION, location)],
-        Json(live_view(&state, &row)),
+        Json(live_view(&state, &row).await?),
     ))
 }
 
@@ -82,7 +92,11 @@ pub async fn create(
 #[utoipa::path(get, path = "/api/v1/libraries", responses((status = 200, body = Vec<LibraryView>)))]
 pub async fn list(State(state): State<AppState>) -> Result<Json<Vec<LibraryView>>, ApiError> {
     let rows = libraries::list(&state.db.read).await?;
-    Ok(Json(rows.iter().map(|r| live_view(&state, r)).collect()))
+    let mut views = Vec::with_capacity(rows.len());
+    for row in &rows {
+        views.push(live_view(&state, row).await?);
+    }
+    Ok(Json(views))
 }
 
 /// One library's state.
@@ -92,10 +106,9 @@ pub async fn get_one(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
 ) -> Result<Json<LibraryView>, ApiError> {
-    Ok(Json(live_view(
-        &state,
-        &libraries::get(&state.db.read, id).await?,
-    )))
+    Ok(Json(
+        live_view(&state, &libraries::get(&state.db.read, id).await?).await?,
+    ))
 }
 
 /// The library file in its case's format (`docs/library-format.md`): JSON
@@ -115,8 +128,9 @@ pub async fn file(
 }
 
 /// A library's view with the progress of its build, while it runs.
-fn live_view(state: &AppState, row: &libraries::LibraryRow) -> LibraryView {
+async fn live_view(state: &AppState, row: &libraries::LibraryRow) -> Result<LibraryView, ApiError> {
     let mut view = row.view();
     state.build_progress.fill(&mut view);
-    view
+    crate::enumeration::progress(state, &mut view).await?;
+    Ok(view)
 }

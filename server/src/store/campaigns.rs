@@ -82,9 +82,11 @@ pub struct CampaignRow {
 }
 
 /// An adaptive campaign is stored as method 'library' with `adaptive = 1`
-/// (migrations/…14_adaptive.sql) and read as `adaptive`.
+/// (migrations/…14_adaptive.sql) and read as `adaptive`; a library build's
+/// enumeration as 'ndd' with `enumerate = 1` (…17_enumerate.sql).
 pub const COLUMNS: &str = "id, case_name, preset, \
-    CASE WHEN adaptive = 1 THEN 'adaptive' ELSE method END AS method, library_id, exposure_name, \
+    CASE WHEN adaptive = 1 THEN 'adaptive' WHEN enumerate = 1 THEN 'enumerate' ELSE method END \
+    AS method, library_id, exposure_name, \
     exposure_fingerprint, exposure_table, vut, requires, epsilon, outside, split, strata_epsilon, \
     beta, confidence, n_min, min_events, max_tests, seed, status, status_detail, next_index, indices, tests, events, invalid, s1, s2, \
     largest, guard_outside, outside_tests, outside_events, outside_s1, outside_upper, \
@@ -333,15 +335,16 @@ pub async fn insert(pool: &SqlitePool, new: &NewCampaign) -> Result<CampaignRow,
         "INSERT INTO campaigns (case_name, preset, method, library_id, exposure_name, \
          exposure_fingerprint, exposure_table, vut, requires, epsilon, outside, beta, confidence, \
          n_min, min_events, max_tests, seed, status, guard_outside, exact_probability, split, \
-         adaptive, stage_start, stage_end, stage_kind) \
-         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) \
+         adaptive, stage_start, stage_end, stage_kind, enumerate) \
+         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) \
          RETURNING {COLUMNS}"
     );
     let adaptive = new.method == Method::Adaptive;
-    let stored_method = if adaptive {
-        Method::Library
-    } else {
-        new.method
+    let enumerate = new.method == Method::Enumerate;
+    let stored_method = match new.method {
+        Method::Adaptive => Method::Library,
+        Method::Enumerate => Method::Ndd,
+        other => other,
     };
     let first_stage = new.first_stage.as_ref();
     Ok(sqlx::query_as(&sql)
@@ -370,6 +373,7 @@ pub async fn insert(pool: &SqlitePool, new: &NewCampaign) -> Result<CampaignRow,
         .bind(first_stage.map(|s| s.0 as i64))
         .bind(first_stage.map(|s| s.1 as i64))
         .bind(first_stage.map(|s| s.2))
+        .bind(enumerate)
         .fetch_one(pool)
         .await?)
 }

@@ -52,6 +52,7 @@ impl LibraryRow {
             w: self.w,
             build_seconds: self.build_seconds,
             error: self.error.clone(),
+            status_detail: None,
             progress: None,
             created_at: self.created_at.clone(),
         }

@@ -1,0 +1,243 @@
+//! Library builds whose surrogate is a program: the coordinator runs no
+//! program, so the surrogate's runs on every cell with exposure are the
+//! tests of a campaign of method `enumerate` (test `i`: the surrogate on the
+//! `i`-th cell; `library_id`: the library being built), leased to the
+//! workers that offer the program under the same fences, reports, checks
+//! and restarts as any campaign. When every test has its result, the
+//! events give the exhaustive library ([`ScenarioCase::library_from_enumeration`]);
+//! a test without a valid outcome fails the build with the program's reason.
+//! The library is the same whatever the number of workers and whoever ran
+//! which cell: each cell's outcome is the program's, and the library a
+//! function of the set of cells with the event.
+
+use crate::error::ApiError;
+use crate::state::AppState;
+use crate::store::campaigns::{self, CampaignRow, NewCampaign};
+use crate::store::libraries::{self, Built, LibraryRow};
+use crate::store::reports;
+use std::sync::Arc;
+use tslg_api::{CampaignStatus, CreateLibrary, LibraryStatus, Method, Outside, Split};
+use tslg_method::estimator::StoppingRule;
+use tslg_method::external::ExternalVut;
+use tslg_method::prefix::SparseOutcome;
+use tslg_method::registry::{BuildRequest, ScenarioCase};
+
+/// Whether a build request's surrogate is a program, which only workers
+/// can run.
+pub fn is_program(surrogate: &serde_json::Value) -> bool {
+    ExternalVut::from_spec(surrogate).is_some()
+}
+
+/// Checks that a program surrogate's build can run on workers: a grid case
+/// and exhaustive search (the search the cells' runs make; multistart with
+/// a program runs offline, `tslg library build --case-file`).
+pub fn check(case: &dyn ScenarioCase, request: &BuildRequest) -> Result<(), String> {
+    if !case.descriptor().is_grid() {
+        return Err(format!(
+            "a library of case {} is learned from a built-in surrogate; programs drive its \
+             campaigns, not its builds",
+            case.name()
+        ));
+    }
+    match request.search {
+        None
+        | Some(tslg_method::library::LibrarySearch::Cells(
+            tslg_method::library::SearchMethod::Exhaustive,
+        )) => Ok(()),
+        Some(_) => Err(
+            "a build with a program as surrogate runs on workers by exhaustive search (every \
+             cell once); multistart with a program runs offline: tslg library build \
+             --case-file"
+                .into(),
+        ),
+    }
+}
+
+/// Starts the build of `library` on workers: its enumeration campaign.
+pub async fn start(
+    state: &AppState,
+    library: &LibraryRow,
+    case: Arc<dyn ScenarioCase>,
+    surrogate: &serde_json::Value,
+) -> Result<CampaignRow, ApiError> {
+    let spec = surrogate.clone();
+    let (tests, len) = tokio::task::spawn_blocking(move || {
+        let tests = case.enumeration(&spec)?;
+        Ok::<_, tslg_method::registry::CaseError>((tests, case.enumeration_len()))
+    })
+    .await
+    .map_err(|e| ApiError::Internal(e.into()))?
+    .map_err(|e| ApiError::Unprocessable(e.to_string()))?;
+    let requires = ExternalVut::from_spec(surrogate)
+        .and_then(Result::ok)
+        .map(|e| e.requirement(&library.case_name));
+    // Every cell once: the rule holds only when all are in.
+    let rule = StoppingRule {
+        n_min: len,
+        min_events: 1,
+        ..StoppingRule::new(tslg_method::estimator::MAX_BETA, len.max(1))
+    };
+    let row = campaigns::insert(
+        &state.db.write,
+        &NewCampaign {
+            case_name: library.case_name.clone(),
+            preset: library.preset.clone(),
+            method: Method::Enumerate,
+            library_id: Some(library.id),
+            exposure_name: library.exposure_name.clone(),
+            exposure_fingerprint: library.exposure_fingerprint.clone(),
+            exposure_table: library.exposure_table.clone(),
+            vut: surrogate.to_string(),
+            requires,
+            epsilon: 0.0,
+            outside: Outside::Uniform,
+            split: Split::Random,
+            rule,
+            seed: 0,
+            status: CampaignStatus::Running,
+            exact_probability: None,
+            first_stage: None,
+        },
+    )
+    .await?;
+    state.samplers.insert(row.id, tests);
+    tracing::info!(
+        library = library.id,
+        campaign = row.id,
+        cells = len,
+        "library build leased to workers"
+    );
+    Ok(row)
+}
+
+/// The enumeration campaign of library `id`, if it is built on workers.
+pub async fn campaign_of(state: &AppState, id: i64) -> Result<Option<CampaignRow>, ApiError> {
+    let sql = format!(
+        "SELECT {} FROM campaigns WHERE library_id = ? AND enumerate = 1 \
+         ORDER BY id DESC LIMIT 1",
+        campaigns::COLUMNS
+    );
+    Ok(sqlx::query_as(&sql)
+        .bind(id)
+        .fetch_optional(&state.db.read)
+        .await?)
+}
+
+/// Records the library of a stopped enumeration campaign: ready from its
+/// events, or failed with the reason (a cell without a valid outcome, a
+/// cancelled build). Harmless when the library is done already.
+pub async fn finish(state: &AppState, campaign_id: i64) -> Result<(), ApiError> {
+    let campaign = campaigns::get(&state.db.read, campaign_id).await?;
+    let Some(id) = campaign
+        .library_id
+        .filter(|_| campaign.method == Method::Enumerate)
+    else {
+        return Ok(());
+    };
+    let library = libraries::get(&state.db.read, id).await?;
+    if library.status != LibraryStatus::Building || !campaign.status.is_final() {
+        return Ok(());
+    }
+    if matches!(
+        campaign.status,
+        CampaignStatus::Cancelled | CampaignStatus::Failed
+    ) {
+        let reason = format!(
+            "its build (campaign {campaign_id}) was {}: {}",
+            campaign.status.as_str(),
+            campaign
+                .status_detail
+                .as_deref()
+                .unwrap_or("no reason given")
+        );
+        return libraries::mark_failed(&state.db.write, id, &reason).await;
+    }
+    let mut conn = state.db.read.acquire().await?;
+    let outcomes = reports::outcomes(&mut conn, campaign_id, 0, campaign.indices as u64).await?;
+    if let Some(&(index, _)) = outcomes
+        .iter()
+        .find(|(_, o)| matches!(o, SparseOutcome::Invalid))
+    {
+        let reason: Option<(String,)> = sqlx::query_as(
+            "SELECT reason FROM invalid_tests WHERE campaign_id = ? AND test_index = ?",
+        )
+        .bind(campaign_id)
+        .bind(index as i64)
+        .fetch_optional(&mut *conn)
+        .await?;
+        let reason = format!(
+            "the surrogate gave no valid outcome at test {index} of its build (campaign \
+             {campaign_id}): {}",
+            reason.map_or_else(|| "no reason recorded".into(), |r| r.0)
+        );
+        return libraries::mark_failed(&state.db.write, id, &reason).await;
+    }
+    drop(conn);
+    let events: Vec<u64> = outcomes.into_iter().map(|(i, _)| i).collect();
+    let request: CreateLibrary =
+        serde_json::from_str(&library.request).map_err(|e| ApiError::Internal(e.into()))?;
+    let threshold = crate::builder::build_request(&request)
+        .map_err(ApiError::Unprocessable)?
+        .threshold;
+    let source = library.exposure_source();
+    let surrogate: serde_json::Value =
+        serde_json::from_str(&campaign.vut).map_err(|e| ApiError::Internal(e.into()))?;
+    let (case_name, preset) = (library.case_name.clone(), library.preset.clone());
+    let built = tokio::task::spawn_blocking(move || {
+        let case = tslg_method::cases::open_case(&case_name, Some(&preset), &source)?;
+        case.library_from_enumeration(&surrogate, threshold, &events)
+    })
+    .await
+    .map_err(|e| ApiError::Internal(e.into()))?;
+    match built {
+        Ok(built) => {
+            libraries::mark_ready(
+                &state.db.write,
+                id,
+                &Built {
+                    file: &built.file,
+                    media_type: built.media_type,
+                    size: built.size,
+                    sm_evaluations: built.sm_evaluations,
+                    mu_s: built.mu_s,
+                    w: built.w,
+                    seconds: campaign.worker_seconds,
+                },
+            )
+            .await?;
+            tracing::info!(library = id, size = built.size, "library built on workers");
+            Ok(())
+        }
+        Err(e) => libraries::mark_failed(&state.db.write, id, &e.to_string()).await,
+    }
+}
+
+/// What a library built on workers shows while it builds: its cells done
+/// of all, and, while no live worker offers its program, that it waits for
+/// one.
+pub async fn progress(state: &AppState, view: &mut tslg_api::LibraryView) -> Result<(), ApiError> {
+    if view.status != LibraryStatus::Building {
+        return Ok(());
+    }
+    let Some(campaign) = campaign_of(state, view.id).await? else {
+        return Ok(());
+    };
+    view.progress = Some(tslg_api::BuildProgress {
+        done: campaign.indices as u64,
+        total: campaign.max_tests as u64,
+    });
+    if let Some(requirement) = &campaign.requires {
+        if state.workers.live_offering(requirement).is_empty() {
+            view.status_detail = Some(format!(
+                "waiting for a worker offering {requirement} (tslg-worker --vut-exec; GET \
+                 /api/v1/workers lists what each offers): the coordinator runs no program"
+            ));
+        } else {
+            view.status_detail = Some(format!(
+                "surrogate runs leased to workers as campaign {}: {} of {} cells",
+                campaign.id, campaign.indices, campaign.max_tests
+            ));
+        }
+    }
+    Ok(())
+}
