@@ -23,6 +23,7 @@ mod service_load;
 mod service_outside;
 mod service_protocol;
 mod service_recovery;
+mod service_sumo;
 mod service_trust;
 mod service_upgrade;
 mod service_user_case;
