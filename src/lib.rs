@@ -187,6 +187,13 @@ pub enum CampaignCommand {
         #[command(flatten)]
         server: ServerArgs,
     },
+    /// Delete a stopped campaign and everything recorded for it.
+    Delete {
+        /// The campaign's id.
+        id: i64,
+        #[command(flatten)]
+        server: ServerArgs,
+    },
 }
 
 #[derive(Debug, Args)]
@@ -249,6 +256,13 @@ pub enum LibraryCommand {
     },
     /// Ask a running coordinator to build a library.
     Create(LibraryCreateArgs),
+    /// Delete a library no campaign uses from a coordinator (with its file).
+    Delete {
+        /// The library's id.
+        id: i64,
+        #[command(flatten)]
+        server: ServerArgs,
+    },
 }
 
 /// Which case, exposure and simulation preset.
@@ -606,6 +620,12 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Evaluate(args) => commands::evaluate::run(&args),
         Command::Exact(args) => commands::exact::run(&args),
         Command::Library(LibraryCommand::Create(args)) => commands::campaign::create_library(&args),
+        Command::Library(LibraryCommand::Delete { id, server }) => {
+            commands::campaign::delete_library(&server, id)
+        }
+        Command::Campaign(CampaignCommand::Delete { id, server }) => {
+            commands::campaign::delete_campaign(&server, id)
+        }
         Command::Demo(args) => commands::demo::run(&args),
         Command::Campaign(CampaignCommand::Start(args)) => commands::campaign::start(&args),
         Command::Campaign(CampaignCommand::Status { id, server, json }) => {

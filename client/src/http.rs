@@ -252,4 +252,18 @@ impl Client {
         )
         .await
     }
+
+    /// `DELETE /api/v1/campaigns/{id}`: a stopped campaign and its records.
+    pub async fn delete_campaign(&self, id: i64) -> Result<(), CallError> {
+        self.send(self.request(reqwest::Method::DELETE, &format!("/api/v1/campaigns/{id}")))
+            .await
+            .map(|_| ())
+    }
+
+    /// `DELETE /api/v1/libraries/{id}`: a library no campaign uses.
+    pub async fn delete_library(&self, id: i64) -> Result<(), CallError> {
+        self.send(self.request(reqwest::Method::DELETE, &format!("/api/v1/libraries/{id}")))
+            .await
+            .map(|_| ())
+    }
 }

@@ -178,3 +178,17 @@ pub async fn wait_for_library(
     bar.finish(&view);
     Ok(view)
 }
+
+pub fn delete_campaign(server: &ServerArgs, id: i64) -> anyhow::Result<()> {
+    let client = client(server)?;
+    block_on(async { Ok(client.delete_campaign(id).await?) })?;
+    println!("campaign {id} deleted");
+    Ok(())
+}
+
+pub fn delete_library(server: &ServerArgs, id: i64) -> anyhow::Result<()> {
+    let client = client(server)?;
+    block_on(async { Ok(client.delete_library(id).await?) })?;
+    println!("library {id} deleted");
+    Ok(())
+}

@@ -141,6 +141,27 @@ async fn a_user_defined_case_is_defined_listed_and_run_by_workers_offering_its_p
         view.estimate.unwrap().to_bits(),
         own["estimate"].as_f64().unwrap().to_bits()
     );
+    // A running campaign is not deleted; once cancelled it is, with its
+    // records.
+    let running = client.create_campaign(&request).await.unwrap().id;
+    let refused = client
+        .delete_campaign(running)
+        .await
+        .unwrap_err()
+        .to_string();
+    assert!(refused.contains("cancel it first"), "{refused}");
+    client.cancel_campaign(running).await.unwrap();
+    client.delete_campaign(running).await.unwrap();
+    assert!(client.campaign(running).await.is_err());
+    let o = tslg(&[
+        "campaign",
+        "delete",
+        &view.id.to_string(),
+        "--server",
+        &server.url,
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(client.campaign(view.id).await.is_err());
 }
 
 /// The library view of `id` once `done` holds, within `limit`.
@@ -282,6 +303,52 @@ async fn a_program_surrogates_library_is_built_by_workers_and_is_the_offline_one
     assert_eq!(failed.status, LibraryStatus::Failed, "{failed:?}");
     let error = failed.error.unwrap();
     assert!(error.contains("injected crash at R = 51 m"), "{error}");
+    // A failed library can be deleted, with the campaign that built it; the
+    // ready one only once no campaign uses it.
+    client.delete_library(broken.id).await.unwrap();
+    let gone = client.library(broken.id).await.unwrap_err().to_string();
+    assert!(gone.contains("does not exist"), "{gone}");
+    // A campaign on the library keeps it.
+    let user = client
+        .create_campaign(&CreateCampaign {
+            case: "cut-in-py".into(),
+            method: Method::Library,
+            library_id: Some(library.id),
+            vut: serde_json::json!({"external": "cutin-idm"}),
+            epsilon: 0.1,
+            outside: None,
+            split: None,
+            beta: 0.2,
+            confidence: 0.9,
+            max_tests: 100_000,
+            seed: 1,
+            n_min: None,
+            min_events: None,
+            guard_outside: false,
+        })
+        .await
+        .unwrap()
+        .id;
+    client.cancel_campaign(user).await.unwrap();
+    let kept = client
+        .delete_library(library.id)
+        .await
+        .unwrap_err()
+        .to_string();
+    assert!(
+        kept.contains(&format!("used by campaign(s) {user}")),
+        "{kept}"
+    );
+    client.delete_campaign(user).await.unwrap();
+    let o = tslg(&[
+        "library",
+        "delete",
+        &library.id.to_string(),
+        "--server",
+        &server.url,
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(client.library(library.id).await.is_err());
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

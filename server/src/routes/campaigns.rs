@@ -156,3 +156,19 @@ pub async fn cancel(
     crate::enumeration::finish(&state, id).await?;
     Ok(Json(row.view()))
 }
+
+/// Deletes a stopped campaign and everything recorded for it; 409 while it
+/// runs (cancel it first).
+#[utoipa::path(delete, path = "/api/v1/campaigns/{id}", params(("id" = i64, Path)), responses(
+    (status = 204), (status = 401, body = Problem), (status = 404, body = Problem),
+    (status = 409, body = Problem)))]
+pub async fn delete(
+    State(state): State<AppState>,
+    ApiPath(id): ApiPath<i64>,
+) -> Result<axum::http::StatusCode, ApiError> {
+    crate::store::deletion::delete_campaign(&state.db.write, id).await?;
+    state.samplers.forget(id);
+    state.throughput.forget(id);
+    tracing::info!(campaign = id, "campaign deleted");
+    Ok(axum::http::StatusCode::NO_CONTENT)
+}

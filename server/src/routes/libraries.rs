@@ -134,3 +134,18 @@ async fn live_view(state: &AppState, row: &libraries::LibraryRow) -> Result<Libr
     crate::enumeration::progress(state, &mut view).await?;
     Ok(view)
 }
+
+/// Deletes a library no campaign uses, with its file (and the campaign that
+/// built it on workers); 409 while it builds or is used.
+#[utoipa::path(delete, path = "/api/v1/libraries/{id}", params(("id" = i64, Path)), responses(
+    (status = 204), (status = 401, body = Problem), (status = 404, body = Problem),
+    (status = 409, body = Problem)))]
+pub async fn delete(
+    State(state): State<AppState>,
+    ApiPath(id): ApiPath<i64>,
+) -> Result<StatusCode, ApiError> {
+    crate::store::deletion::delete_library(&state.db.write, id).await?;
+    state.pictures.lock().await.remove(&id);
+    tracing::info!(library = id, "library deleted");
+    Ok(StatusCode::NO_CONTENT)
+}

@@ -35,6 +35,8 @@ pub fn router(state: AppState) -> Router {
         .route("/api/v1/libraries", post(libraries::create))
         .route("/api/v1/campaigns", post(campaigns::create))
         .route("/api/v1/campaigns/{id}/cancel", post(campaigns::cancel))
+        .route("/api/v1/campaigns/{id}", delete(campaigns::delete))
+        .route("/api/v1/libraries/{id}", delete(libraries::delete))
         .route("/api/v1/workers/{name}/flag", delete(leases::unflag))
         .route_layer(from_fn_with_state(state.clone(), auth::require_admin));
     let worker = Router::new()

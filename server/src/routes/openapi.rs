@@ -30,6 +30,8 @@ use utoipa::OpenApi;
         super::campaigns::history,
         super::campaigns::plan,
         super::campaigns::cancel,
+        super::campaigns::delete,
+        super::libraries::delete,
         super::leases::claim,
         super::leases::heartbeat,
         super::leases::release,

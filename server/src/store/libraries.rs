@@ -92,11 +92,14 @@ pub async fn insert(pool: &SqlitePool, new: &NewLibrary<'_>) -> Result<LibraryRo
         .await?)
 }
 
-pub async fn get(pool: &SqlitePool, id: i64) -> Result<LibraryRow, ApiError> {
+pub async fn get<'e, E>(executor: E, id: i64) -> Result<LibraryRow, ApiError>
+where
+    E: sqlx::Executor<'e, Database = sqlx::Sqlite>,
+{
     let sql = format!("SELECT {COLUMNS} FROM libraries WHERE id = ?");
     sqlx::query_as(&sql)
         .bind(id)
-        .fetch_optional(pool)
+        .fetch_optional(executor)
         .await?
         .ok_or_else(|| ApiError::NotFound(format!("library {id} does not exist")))
 }

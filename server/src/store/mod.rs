@@ -4,6 +4,7 @@
 pub mod adaptive;
 pub mod audits;
 pub mod campaigns;
+pub mod deletion;
 pub mod fold;
 pub mod leases;
 pub mod libraries;
