@@ -32,6 +32,20 @@ pub struct Config {
     #[arg(long, env = "TSLG_DURABILITY", value_enum, default_value = "full")]
     pub durability: crate::db::Durability,
 
+    /// Where exhaustive library builds with a built-in surrogate run:
+    /// `coordinator` (in its own threads: libraries build with no worker
+    /// up) or `workers` (the surrogate's run on every cell leased to the
+    /// workers as tests, as builds with a program surrogate always are:
+    /// the coordinator does no heavy simulation). Multistart searches and
+    /// car-following policies run on the coordinator either way.
+    #[arg(
+        long,
+        env = "TSLG_LIBRARY_BUILDS",
+        value_enum,
+        default_value = "coordinator"
+    )]
+    pub library_builds: BuildPlace,
+
     /// Token workers present as `Authorization: Bearer …` on the lease
     /// endpoints. When unset, workers need no token.
     #[arg(long, env = "TSLG_WORKER_TOKEN", hide_env_values = true)]
@@ -86,6 +100,16 @@ pub struct Config {
     /// `w ≥ share · (S₁ + w)`. 1 turns this off.
     #[arg(long, env = "TSLG_AUDIT_WEIGHT_SHARE", default_value_t = 0.05)]
     pub audit_weight_share: f64,
+}
+
+/// Where a library build with a built-in surrogate runs
+/// ([`Config::library_builds`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum BuildPlace {
+    /// In the coordinator's threads.
+    Coordinator,
+    /// On the workers, as the tests of an enumeration campaign.
+    Workers,
 }
 
 impl Config {

@@ -1,5 +1,7 @@
-//! Library builds whose surrogate is a program: the coordinator runs no
-//! program, so the surrogate's runs on every cell with exposure are the
+//! Library builds on workers. The coordinator runs no program, so a
+//! build whose surrogate is one always runs here; with `--library-builds
+//! workers` so does an exhaustive build with a built-in surrogate. The
+//! surrogate's runs on every cell with exposure are the
 //! tests of a campaign of method `enumerate` (test `i`: the surrogate on the
 //! `i`-th cell; `library_id`: the library being built), leased to the
 //! workers that offer the program under the same fences, reports, checks
@@ -24,8 +26,30 @@ use tslg_method::registry::{BuildRequest, ScenarioCase};
 
 /// Whether a build request's surrogate is a program, which only workers
 /// can run.
-pub fn is_program(surrogate: &serde_json::Value) -> bool {
+fn is_program(surrogate: &serde_json::Value) -> bool {
     ExternalVut::from_spec(surrogate).is_some()
+}
+
+/// Whether the build of `surrogate` runs on workers: a program's always
+/// (when [`check`] allows it), a built-in surrogate's when the coordinator
+/// sends builds to workers (`place`) and the build is an exhaustive search
+/// of a grid case, whose runs are one per cell. Multistart and policy
+/// searches choose their next runs from the last ones and stay on the
+/// coordinator.
+pub fn on_workers(
+    place: crate::config::BuildPlace,
+    case: &dyn ScenarioCase,
+    request: &BuildRequest,
+    surrogate: &serde_json::Value,
+) -> Result<bool, String> {
+    use tslg_method::library::{LibrarySearch, SearchMethod};
+    if is_program(surrogate) {
+        return check(case, request).map(|()| true);
+    }
+    let search = request.search.unwrap_or(case.descriptor().default_search);
+    Ok(place == crate::config::BuildPlace::Workers
+        && case.descriptor().is_grid()
+        && search == LibrarySearch::Cells(SearchMethod::Exhaustive))
 }
 
 /// Checks that a program surrogate's build can run on workers: a grid case
@@ -226,18 +250,20 @@ pub async fn progress(state: &AppState, view: &mut tslg_api::LibraryView) -> Res
         done: campaign.indices as u64,
         total: campaign.max_tests as u64,
     });
-    if let Some(requirement) = &campaign.requires {
-        if state.workers.live_offering(requirement).is_empty() {
-            view.status_detail = Some(format!(
-                "waiting for a worker offering {requirement} (tslg-worker --vut-exec; GET \
-                 /api/v1/workers lists what each offers): the coordinator runs no program"
-            ));
-        } else {
-            view.status_detail = Some(format!(
-                "surrogate runs leased to workers as campaign {}: {} of {} cells",
-                campaign.id, campaign.indices, campaign.max_tests
-            ));
-        }
-    }
+    view.status_detail = Some(match &campaign.requires {
+        Some(requirement) if state.workers.live_offering(requirement).is_empty() => format!(
+            "waiting for a worker offering {requirement} (tslg-worker --vut-exec; GET \
+             /api/v1/workers lists what each offers): the coordinator runs no program"
+        ),
+        None if state.workers.counts().0 == 0 => format!(
+            "waiting for a worker: the coordinator leases this build's {} surrogate runs to \
+             workers (--library-builds workers)",
+            campaign.max_tests
+        ),
+        _ => format!(
+            "surrogate runs leased to workers as campaign {}: {} of {} cells",
+            campaign.id, campaign.indices, campaign.max_tests
+        ),
+    });
     Ok(())
 }

@@ -11,6 +11,7 @@ mod service_access;
 mod service_adaptive;
 mod service_adversarial;
 mod service_bad_input;
+mod service_builds;
 mod service_carfollow;
 mod service_cli;
 mod service_dashboard;

@@ -35,7 +35,8 @@ pub async fn create(
         }
     }
     let checked = req.clone();
-    let (case, surrogate) = tokio::task::spawn_blocking(move || {
+    let place = state.config.library_builds;
+    let (case, surrogate, on_workers) = tokio::task::spawn_blocking(move || {
         let case = open_case(
             &checked.case,
             checked.preset.as_deref(),
@@ -43,11 +44,9 @@ pub async fn create(
         )?;
         case.check_request(&request)?;
         let surrogate = case.normalise_vehicle(&checked.surrogate)?;
-        if crate::enumeration::is_program(&surrogate) {
-            crate::enumeration::check(case.as_ref(), &request)
-                .map_err(tslg_method::registry::CaseError::Unsupported)?;
-        }
-        Ok::<_, tslg_method::registry::CaseError>((case, surrogate))
+        let on_workers = crate::enumeration::on_workers(place, case.as_ref(), &request, &surrogate)
+            .map_err(tslg_method::registry::CaseError::Unsupported)?;
+        Ok::<_, tslg_method::registry::CaseError>((case, surrogate, on_workers))
     })
     .await
     .map_err(|e| ApiError::Internal(e.into()))?
@@ -74,8 +73,8 @@ pub async fn create(
         },
     )
     .await?;
-    if crate::enumeration::is_program(&surrogate_spec) {
-        // A program runs on workers only: its build is their tests.
+    if on_workers {
+        // Its surrogate runs are the workers' tests.
         crate::enumeration::start(&state, &row, case, &surrogate_spec).await?;
     } else {
         spawn_build(state.clone(), row.id);
