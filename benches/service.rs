@@ -123,7 +123,9 @@ async fn round_trips(count: usize, library: bool) -> anyhow::Result<(Vec<f64>, f
     // outcomes, computed outside the timed requests.
     let prepared = tslg_worker::prepared::Cache::default()
         .get(&client, id)
-        .await?;
+        .await?
+        .tests()
+        .ok_or_else(|| anyhow::anyhow!("campaign {id} is a library build"))?;
     let mut times = Vec::with_capacity(count);
     let mut leased = 0u64;
     for _ in 0..count {

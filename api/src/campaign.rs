@@ -55,6 +55,12 @@ pub enum Method {
     /// coordinator for a build whose surrogate is a program, not by
     /// clients.
     Enumerate,
+    /// A library build that one worker runs whole (a multistart search, a
+    /// car-following policy): its one test is the build, and the worker
+    /// uploads the library to `POST /api/v1/leases/{id}/library`
+    /// (`build_search` and `build_threshold` in the plan say how to build
+    /// it). Created by the coordinator, not by clients.
+    Build,
 }
 
 impl Method {
@@ -65,6 +71,7 @@ impl Method {
             Method::Ndd => "ndd",
             Method::Adaptive => "adaptive",
             Method::Enumerate => "enumerate",
+            Method::Build => "build",
         }
     }
 
@@ -477,4 +484,12 @@ pub struct CampaignPlan {
     /// before it opens the case.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub user_case: Option<crate::UserCaseDefinition>,
+    /// For `method: build`: the library's search (the case's default when
+    /// absent).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub build_search: Option<crate::SearchRequest>,
+    /// For `method: build`: the library's threshold (the case's default
+    /// when absent).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub build_threshold: Option<crate::ThresholdRequest>,
 }

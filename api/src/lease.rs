@@ -359,3 +359,65 @@ pub struct ResultAck {
     /// The campaign's status now.
     pub campaign_status: CampaignStatus,
 }
+
+/// `POST /api/v1/leases/{id}/library`: the library a worker built whole
+/// for a campaign of method `build`, or why it could not.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct LibraryUpload {
+    /// The worker the lease was handed to.
+    pub worker: String,
+    /// The attempt the worker holds.
+    pub attempt: i64,
+    /// The lease's `key`, as handed out with this attempt.
+    pub key: LeaseKey,
+    /// Seconds the build took on the worker.
+    pub seconds: f64,
+    /// The library file, base64 (the bytes `GET
+    /// /api/v1/libraries/{id}/file` will serve); absent when the build
+    /// failed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub file: Option<String>,
+    /// Why the build failed (at most 2000 bytes): the search found no
+    /// failure of the surrogate, the solver did not converge. A failure
+    /// fails the library with this reason: the build is deterministic, so
+    /// another worker would fail the same way.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub failed: Option<String>,
+}
+
+impl LibraryUpload {
+    /// The fence part.
+    pub fn fence(&self) -> LeaseFence {
+        LeaseFence {
+            worker: self.worker.clone(),
+            attempt: self.attempt,
+            key: self.key.clone(),
+        }
+    }
+
+    /// The upload of a build that failed, saying why.
+    pub fn of_failure(fence: &LeaseFence, seconds: f64, reason: String) -> Self {
+        Self {
+            worker: fence.worker.clone(),
+            attempt: fence.attempt,
+            key: fence.key.clone(),
+            seconds,
+            file: None,
+            failed: Some(reason),
+        }
+    }
+
+    /// The upload of `file`, base64-encoded.
+    pub fn of_file(fence: &LeaseFence, seconds: f64, file: &[u8]) -> Self {
+        use base64::Engine;
+        Self {
+            worker: fence.worker.clone(),
+            attempt: fence.attempt,
+            key: fence.key.clone(),
+            seconds,
+            file: Some(base64::engine::general_purpose::STANDARD.encode(file)),
+            failed: None,
+        }
+    }
+}

@@ -8,7 +8,8 @@ use serde::Serialize;
 use std::time::Duration;
 use tslg_api::{
     CampaignPlan, CampaignView, CreateCampaign, CreateLibrary, HeartbeatAck, History, Lease,
-    LeaseFence, LeaseRelease, LeaseRequest, LibraryView, Problem, ResultAck, ResultReport,
+    LeaseFence, LeaseRelease, LeaseRequest, LibraryUpload, LibraryView, Problem, ResultAck,
+    ResultReport,
 };
 
 /// A failed call: worth retrying, or refused for good.
@@ -144,6 +145,24 @@ impl Client {
     pub async fn report(&self, lease: i64, report: &ResultReport) -> Result<ResultAck, CallError> {
         self.post(&format!("/api/v1/leases/{lease}/results"), report)
             .await
+    }
+
+    /// `POST /api/v1/leases/{lease}/library`: the library a worker built
+    /// whole for a campaign of method `build` (or why it failed).
+    pub async fn upload_library(
+        &self,
+        lease: i64,
+        upload: &LibraryUpload,
+    ) -> Result<(), CallError> {
+        self.send(
+            self.request(
+                reqwest::Method::POST,
+                &format!("/api/v1/leases/{lease}/library"),
+            )
+            .json(upload),
+        )
+        .await
+        .map(|_| ())
     }
 
     /// `GET /api/v1/campaigns/{campaign}/plan`: what any test of it needs.

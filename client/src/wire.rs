@@ -115,6 +115,16 @@ pub fn threshold_request(threshold: tslg_method::library::Threshold) -> tslg_api
     }
 }
 
+/// A library threshold from its wire form.
+pub fn threshold(threshold: tslg_api::ThresholdRequest) -> tslg_method::library::Threshold {
+    use tslg_api::ThresholdRequest;
+    use tslg_method::library::Threshold;
+    match threshold {
+        ThresholdRequest::Relative { m } => Threshold::Relative { m },
+        ThresholdRequest::Absolute { gamma } => Threshold::Absolute { gamma },
+    }
+}
+
 /// The wire form of a case's descriptor.
 pub fn case_view(case: &tslg_method::cases::CaseDescriptor) -> tslg_api::CaseView {
     use tslg_api::{CaseView, PresetView, ScenarioKind, TableView};

@@ -4,20 +4,15 @@
 use crate::state::AppState;
 use crate::store::libraries::{self, Built};
 use std::time::Instant;
-use tslg_api::{CreateLibrary, SearchRequest, ThresholdRequest};
+use tslg_api::{CreateLibrary, SearchRequest};
 use tslg_method::cases::open_case;
-use tslg_method::library::Threshold;
 use tslg_method::progress::Progress;
 use tslg_method::registry::{BuildRequest, BuiltLibrary, LibrarySearch};
 
 /// The method's threshold and search from the request, validated; what the
 /// request leaves out is the case's default.
 pub fn build_request(req: &CreateLibrary) -> Result<BuildRequest, String> {
-    let threshold = match req.threshold {
-        None => None,
-        Some(ThresholdRequest::Relative { m }) => Some(Threshold::Relative { m }),
-        Some(ThresholdRequest::Absolute { gamma }) => Some(Threshold::Absolute { gamma }),
-    };
+    let threshold = req.threshold.map(tslg_client::wire::threshold);
     if let Some(t) = threshold {
         t.validate().map_err(|e| e.to_string())?;
     }

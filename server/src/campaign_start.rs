@@ -37,11 +37,12 @@ fn grid_cases() -> String {
 /// every number checked against the method's ranges; pure.
 pub fn rule_of(req: &CreateCampaign) -> Result<StoppingRule, ApiError> {
     check_name("case", &req.case, 64)?;
-    if req.method == Method::Enumerate {
-        return Err(bad(
-            "method `enumerate` is the coordinator's own, for library builds whose surrogate \
-             is a program: POST /api/v1/libraries starts one",
-        ));
+    if matches!(req.method, Method::Enumerate | Method::Build) {
+        return Err(bad(format!(
+            "method `{}` is the coordinator's own, for library builds on workers: POST \
+             /api/v1/libraries starts one",
+            req.method.as_str()
+        )));
     }
     let case = descriptor(&req.case).map_err(|e| bad(e.to_string()))?;
     check_epsilon(req.epsilon).map_err(|e| bad(e.to_string()))?;
@@ -111,7 +112,7 @@ async fn library_of(
                 .await
                 .map_err(|_| bad(format!("library_id {id} does not name a library")))?,
         ),
-        (Method::Ndd | Method::Enumerate, None) => None,
+        (Method::Ndd | Method::Enumerate | Method::Build, None) => None,
     };
     if let Some(lib) = &library {
         if lib.case_name != req.case {

@@ -32,12 +32,13 @@ pub struct Config {
     #[arg(long, env = "TSLG_DURABILITY", value_enum, default_value = "full")]
     pub durability: crate::db::Durability,
 
-    /// Where exhaustive library builds with a built-in surrogate run:
-    /// `coordinator` (in its own threads: libraries build with no worker
-    /// up) or `workers` (the surrogate's run on every cell leased to the
-    /// workers as tests, as builds with a program surrogate always are:
-    /// the coordinator does no heavy simulation). Multistart searches and
-    /// car-following policies run on the coordinator either way.
+    /// Where library builds with a built-in surrogate run: `coordinator`
+    /// (in its own threads: libraries build with no worker up) or
+    /// `workers` (the coordinator does no heavy simulation): an exhaustive
+    /// search's run on every cell is leased to the workers as tests, as
+    /// builds with a program surrogate always are; a multistart search or
+    /// a car-following policy goes whole to one worker, which uploads the
+    /// file.
     #[arg(
         long,
         env = "TSLG_LIBRARY_BUILDS",
@@ -108,7 +109,7 @@ pub struct Config {
 pub enum BuildPlace {
     /// In the coordinator's threads.
     Coordinator,
-    /// On the workers, as the tests of an enumeration campaign.
+    /// On the workers: cell by cell (exhaustive), or whole on one.
     Workers,
 }
 

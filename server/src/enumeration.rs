@@ -30,26 +30,53 @@ fn is_program(surrogate: &serde_json::Value) -> bool {
     ExternalVut::from_spec(surrogate).is_some()
 }
 
-/// Whether the build of `surrogate` runs on workers: a program's always
-/// (when [`check`] allows it), a built-in surrogate's when the coordinator
-/// sends builds to workers (`place`) and the build is an exhaustive search
-/// of a grid case, whose runs are one per cell. Multistart and policy
-/// searches choose their next runs from the last ones and stay on the
-/// coordinator.
-pub fn on_workers(
+/// Where a library is built.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Placement {
+    /// On the coordinator ([`crate::builder`]).
+    Coordinator,
+    /// On workers, cell by cell: a campaign of method `enumerate`.
+    Cells,
+    /// On one worker, whole: a campaign of method `build`
+    /// ([`crate::whole_build`]).
+    Whole,
+}
+
+/// Where the build of `surrogate` runs: a program's always on workers
+/// (when [`check`] allows it), a built-in surrogate's on workers when the
+/// coordinator sends builds there (`place`). An exhaustive search of a
+/// grid case is leased cell by cell; a search that picks its next runs
+/// from the last (multistart, a car-following policy) goes whole to one
+/// worker.
+pub fn placement(
     place: crate::config::BuildPlace,
     case: &dyn ScenarioCase,
     request: &BuildRequest,
     surrogate: &serde_json::Value,
-) -> Result<bool, String> {
+) -> Result<Placement, String> {
     use tslg_method::library::{LibrarySearch, SearchMethod};
-    if is_program(surrogate) {
-        return check(case, request).map(|()| true);
-    }
     let search = request.search.unwrap_or(case.descriptor().default_search);
-    Ok(place == crate::config::BuildPlace::Workers
-        && case.descriptor().is_grid()
-        && search == LibrarySearch::Cells(SearchMethod::Exhaustive))
+    if is_program(surrogate) {
+        // A user-defined case's worker runs a multistart search through
+        // its program: whole, on one worker offering it.
+        let user = tslg_method::cases::user::registry::get(case.name()).is_some();
+        if user
+            && matches!(
+                request.search,
+                Some(LibrarySearch::Cells(SearchMethod::Multistart { .. }))
+            )
+        {
+            return Ok(Placement::Whole);
+        }
+        return check(case, request).map(|()| Placement::Cells);
+    }
+    let by_cells =
+        case.descriptor().is_grid() && search == LibrarySearch::Cells(SearchMethod::Exhaustive);
+    Ok(match place {
+        crate::config::BuildPlace::Coordinator => Placement::Coordinator,
+        crate::config::BuildPlace::Workers if by_cells => Placement::Cells,
+        crate::config::BuildPlace::Workers => Placement::Whole,
+    })
 }
 
 /// Checks that a program surrogate's build can run on workers: a grid case
@@ -69,9 +96,9 @@ pub fn check(case: &dyn ScenarioCase, request: &BuildRequest) -> Result<(), Stri
             tslg_method::library::SearchMethod::Exhaustive,
         )) => Ok(()),
         Some(_) => Err(
-            "a build with a program as surrogate runs on workers by exhaustive search (every \
-             cell once); multistart with a program runs offline: tslg library build \
-             --case-file"
+            "a build with a program as surrogate on a built-in case runs on workers by \
+             exhaustive search (every cell once); multistart through a program runs on a \
+             user-defined case (tslg case create) or offline (tslg library build --case-file)"
                 .into(),
         ),
     }
@@ -92,21 +119,42 @@ pub async fn start(
     .await
     .map_err(|e| ApiError::Internal(e.into()))?
     .map_err(|e| ApiError::Unprocessable(e.to_string()))?;
-    let requires = ExternalVut::from_spec(surrogate)
-        .and_then(Result::ok)
-        .map(|e| e.requirement(&library.case_name));
     // Every cell once: the rule holds only when all are in.
     let rule = StoppingRule {
         n_min: len,
         min_events: 1,
         ..StoppingRule::new(tslg_method::estimator::MAX_BETA, len.max(1))
     };
-    let row = campaigns::insert(
+    let row = insert_build(state, library, Method::Enumerate, surrogate, rule).await?;
+    state.samplers.insert(row.id, tests);
+    tracing::info!(
+        library = library.id,
+        campaign = row.id,
+        cells = len,
+        "library build leased to workers"
+    );
+    Ok(row)
+}
+
+/// Inserts the campaign that builds `library` on workers (method
+/// `enumerate` or `build`), running; a program's build goes only to workers
+/// offering it.
+pub async fn insert_build(
+    state: &AppState,
+    library: &LibraryRow,
+    method: Method,
+    surrogate: &serde_json::Value,
+    rule: StoppingRule,
+) -> Result<CampaignRow, ApiError> {
+    let requires = ExternalVut::from_spec(surrogate)
+        .and_then(Result::ok)
+        .map(|e| e.requirement(&library.case_name));
+    campaigns::insert(
         &state.db.write,
         &NewCampaign {
             case_name: library.case_name.clone(),
             preset: library.preset.clone(),
-            method: Method::Enumerate,
+            method,
             library_id: Some(library.id),
             exposure_name: library.exposure_name.clone(),
             exposure_fingerprint: library.exposure_fingerprint.clone(),
@@ -123,21 +171,13 @@ pub async fn start(
             first_stage: None,
         },
     )
-    .await?;
-    state.samplers.insert(row.id, tests);
-    tracing::info!(
-        library = library.id,
-        campaign = row.id,
-        cells = len,
-        "library build leased to workers"
-    );
-    Ok(row)
+    .await
 }
 
 /// The enumeration campaign of library `id`, if it is built on workers.
 pub async fn campaign_of(state: &AppState, id: i64) -> Result<Option<CampaignRow>, ApiError> {
     let sql = format!(
-        "SELECT {} FROM campaigns WHERE library_id = ? AND enumerate = 1 \
+        "SELECT {} FROM campaigns WHERE library_id = ? AND enumerate >= 1 \
          ORDER BY id DESC LIMIT 1",
         campaigns::COLUMNS
     );
@@ -154,7 +194,7 @@ pub async fn finish(state: &AppState, campaign_id: i64) -> Result<(), ApiError> 
     let campaign = campaigns::get(&state.db.read, campaign_id).await?;
     let Some(id) = campaign
         .library_id
-        .filter(|_| campaign.method == Method::Enumerate)
+        .filter(|_| matches!(campaign.method, Method::Enumerate | Method::Build))
     else {
         return Ok(());
     };
@@ -175,6 +215,10 @@ pub async fn finish(state: &AppState, campaign_id: i64) -> Result<(), ApiError> 
                 .unwrap_or("no reason given")
         );
         return libraries::mark_failed(&state.db.write, id, &reason).await;
+    }
+    if campaign.method == Method::Build {
+        // Its upload recorded the library with the campaign's end.
+        return Ok(());
     }
     let mut conn = state.db.read.acquire().await?;
     let outcomes = reports::outcomes(&mut conn, campaign_id, 0, campaign.indices as u64).await?;
@@ -246,6 +290,19 @@ pub async fn progress(state: &AppState, view: &mut tslg_api::LibraryView) -> Res
     let Some(campaign) = campaign_of(state, view.id).await? else {
         return Ok(());
     };
+    if campaign.method == Method::Build {
+        view.status_detail = Some(if state.workers.counts().0 == 0 {
+            "waiting for a worker: the coordinator leases this build whole to one worker \
+             (--library-builds workers)"
+                .to_owned()
+        } else {
+            format!(
+                "built whole by one worker as campaign {} (GET /api/v1/workers lists them)",
+                campaign.id
+            )
+        });
+        return Ok(());
+    }
     view.progress = Some(tslg_api::BuildProgress {
         done: campaign.indices as u64,
         total: campaign.max_tests as u64,

@@ -25,6 +25,7 @@ mod state;
 mod store;
 mod throughput;
 mod validate;
+mod whole_build;
 mod workers;
 
 // The crate's surface is the coordinator itself: `serve` with its `Config`,

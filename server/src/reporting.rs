@@ -38,6 +38,12 @@ pub async fn receive(
         let campaign = campaigns::get(&mut *conn, lease.campaign_id).await?;
         (lease, campaign)
     };
+    if campaign.method == Method::Build {
+        return Err(ApiError::Conflict(format!(
+            "lease {lease_id} is a library build: its worker uploads the library to POST \
+             /api/v1/leases/{lease_id}/library"
+        )));
+    }
     let tests = if campaign.status.is_final() {
         None
     } else {

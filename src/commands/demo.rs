@@ -145,6 +145,7 @@ fn assumes(method: Method) -> &'static str {
         }
         Method::Ndd => "nothing beyond the exposure model: every scenario sampled as it occurs",
         Method::Enumerate => "no estimate: a library build's surrogate runs, every scenario once",
+        Method::Build => "no estimate: a library built whole on one worker",
     }
 }
 

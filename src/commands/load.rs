@@ -239,7 +239,11 @@ pub fn load_campaign() -> CreateCampaign {
 }
 
 async fn load(worker: &Client, campaign_id: i64, shape: Shape) -> anyhow::Result<LoadReport> {
-    let prepared = Cache::default().get(worker, campaign_id).await?;
+    let prepared = Cache::default()
+        .get(worker, campaign_id)
+        .await?
+        .tests()
+        .ok_or_else(|| anyhow::anyhow!("campaign {campaign_id} is a library build, not tests"))?;
     let started = Instant::now();
     let tasks: Vec<_> = (0..shape.workers)
         .map(|w| {

@@ -158,6 +158,8 @@ async fn every_acknowledged_result_survives_a_coordinator_kill_and_counts_once()
     let prepared = tslg_worker::prepared::Cache::default()
         .get(&client, id)
         .await
+        .unwrap()
+        .tests()
         .unwrap();
     let tasks: Vec<_> = (0..8)
         .map(|w| {

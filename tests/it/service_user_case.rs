@@ -205,19 +205,15 @@ async fn a_program_surrogates_library_is_built_by_workers_and_is_the_offline_one
         search,
         threshold: None,
     };
-    // Multistart descends through the program's answers: offline only.
-    let refused = client
+    // Multistart descends through the program's answers: one worker
+    // offering it runs the whole search.
+    let multistart = client
         .create_library(&request(Some(SearchRequest::Multistart {
-            starts: 5,
-            seed: 0,
+            starts: 20,
+            seed: 4,
         })))
         .await
-        .unwrap_err()
-        .to_string();
-    assert!(
-        refused.contains("runs on workers by exhaustive search"),
-        "{refused}"
-    );
+        .unwrap();
     let library = client.create_library(&request(None)).await.unwrap();
     // No worker offers the program yet: the build says so.
     let waiting = library_when(&client, library.id, Duration::from_secs(10), |v| {
@@ -278,6 +274,32 @@ async fn a_program_surrogates_library_is_built_by_workers_and_is_the_offline_one
         std::fs::read_to_string(&offline).unwrap()
     );
     assert_eq!(ready.size, Some(286));
+    let searched = library_when(&client, multistart.id, Duration::from_secs(120), |v| {
+        v.status != LibraryStatus::Building
+    })
+    .await;
+    assert_eq!(searched.status, LibraryStatus::Ready, "{searched:?}");
+    let offline = dir.path().join("multistart.json");
+    let o = tslg(&[
+        "library",
+        "build",
+        "--case-file",
+        &case_file,
+        "--search",
+        "multistart",
+        "--starts",
+        "20",
+        "--seed",
+        "4",
+        "-o",
+        offline.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(
+        String::from_utf8(client.library_file(multistart.id).await.unwrap()).unwrap(),
+        std::fs::read_to_string(&offline).unwrap()
+    );
+    assert!(searched.size.unwrap() > 0, "{searched:?}");
 
     // A program that crashes on a cell fails the build with its reason.
     let crash = format!(

@@ -3,6 +3,7 @@
 //! vehicle under test on a rayon pool and reports the outcomes.
 
 mod backoff;
+mod building;
 mod config;
 pub mod external;
 mod panics;

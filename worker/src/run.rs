@@ -8,7 +8,7 @@
 use crate::backoff::Backoff;
 use crate::config::WorkerConfig;
 use crate::external::{Program, ProgramRun, ProgramSettings, Programs};
-use crate::prepared::{Cache, PrepareError, PreparedCampaign};
+use crate::prepared::{Cache, PrepareError, Prepared, PreparedCampaign};
 use crate::report_parts::{attach_near_misses, report_parts, PartLimits, Reporter};
 use crate::sending::{fence_of, LeaseLink, Tail};
 use rand::SeedableRng;
@@ -91,7 +91,9 @@ pub async fn run(
         name,
         threads,
         pool: Arc::new(pool),
-        cache: Cache::default(),
+        cache: Cache::with_host(
+            Arc::clone(&programs) as Arc<dyn tslg_method::external::ProgramHost>
+        ),
         programs,
         stop,
         summary: WorkerSummary::default(),
@@ -208,7 +210,12 @@ impl Worker {
             stop: self.stop.clone(),
         };
         let prepared = match self.cache.get(&self.client, lease.campaign_id).await {
-            Ok(p) => p,
+            Ok(Prepared::Tests(p)) => p,
+            Ok(Prepared::Build(build)) => {
+                let ran =
+                    crate::building::build_whole(&self.client, &self.pool, &lease, &link, build);
+                return ran.await;
+            }
             Err(e) => {
                 let error = match e {
                     PrepareError::Call(c) => anyhow::Error::from(c),
@@ -372,7 +379,7 @@ impl Worker {
     }
 }
 
-async fn heartbeat(
+pub(crate) async fn heartbeat(
     client: Client,
     lease: i64,
     fence: LeaseFence,

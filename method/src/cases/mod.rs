@@ -124,3 +124,6 @@ pub(crate) fn table_note(name: &str, sum: f64, distance: f64) -> String {
     }
     note
 }
+
+#[cfg(test)]
+mod tests;

@@ -151,9 +151,10 @@ fn the_highway_exit_case_opens_by_name_with_its_presets_and_only_its_own_exposur
         name: "t.csv".into(),
         text: "0,1\n1,1".into(),
     };
+    // Its tables are P(v₁, R, v₂) blocks (docs/bring-your-own.md).
     let err = open_case("highway-exit", None, &table).err().unwrap();
     assert!(
-        err.to_string().contains("only its built-in exposure"),
+        err.to_string().contains("a block starts with a header"),
         "{err}"
     );
     let err = open_case("highway-exit", Some("fine"), &ExposureSource::Builtin)
@@ -308,4 +309,41 @@ fn the_coordinators_replay_gives_every_tests_outcome_and_nothing_for_programs() 
             (replay.event, replay.weight.to_bits())
         );
     }
+}
+
+#[test]
+fn a_multistart_library_is_the_same_file_every_time_it_is_built() {
+    // Built by workers in other processes, a library must not depend on
+    // the order a hash map keeps its cells in (μ_S and γ are sums).
+    let case = open_case("cut-in", None, &ExposureSource::Builtin).unwrap();
+    let request = BuildRequest {
+        threshold: None,
+        search: Some(LibrarySearch::Cells(SearchMethod::Multistart {
+            starts: 50,
+            seed: 0,
+        })),
+    };
+    let build = || {
+        case.build_library(&json!({"model": "idm"}), &request)
+            .unwrap()
+    };
+    let first = build();
+    assert!(first.size > 100, "{}", first.size);
+    for _ in 0..8 {
+        assert!(build().file == first.file, "a rebuild differs");
+    }
+    // And a worker's upload of it passes the coordinator's check.
+    let again = case
+        .built_elsewhere(&first.file, &json!({"model": "idm"}), 64)
+        .unwrap();
+    assert_eq!((again.size, again.mu_s), (first.size, first.mu_s));
+    let fvdm_file = case
+        .build_library(&json!({"model": "fvdm"}), &request)
+        .unwrap()
+        .file;
+    let err = case
+        .built_elsewhere(&fvdm_file, &json!({"model": "idm"}), 64)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("the surrogate gives"), "{err}");
 }

@@ -129,12 +129,15 @@ pub(crate) fn search<C: Case>(
         }
         progress.add(1);
     }
-    let critical = s
+    // In cell order: μ_S is summed over this list, and a hash map's order
+    // changes from process to process (the last bits of μ_S and γ with it).
+    let mut critical: Vec<(usize, f64)> = s
         .memo
         .iter()
         .map(|(&cell, e)| (cell, s.criticality(cell, e)))
         .filter(|&(_, v)| v > 0.0)
         .collect();
+    critical.sort_unstable_by_key(|&(cell, _)| cell);
     Evaluated {
         critical,
         sm_evaluations: s.memo.len(),

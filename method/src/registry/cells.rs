@@ -262,6 +262,38 @@ where
         grid_library_summary(file)
     }
 
+    fn built_elsewhere(
+        &self,
+        file: &[u8],
+        surrogate: &serde_json::Value,
+        sample: usize,
+    ) -> Result<BuiltLibrary, CaseError> {
+        let library = self.library(file)?;
+        // A program surrogate runs on workers only: nothing to run here.
+        if let Ok(vehicle) = self.builtin(surrogate, "a library's surrogate") {
+            let step = (library.cells.len() / sample.max(1)).max(1);
+            for c in library.cells.iter().step_by(step).take(sample) {
+                let v = self.case.surrogate_challenge(&vehicle, c.cell)
+                    * self.case.exposure().p(c.cell);
+                if (v - c.criticality).abs() > 1e-12 * v.abs().max(c.criticality.abs()) {
+                    return Err(CaseError::Unsupported(format!(
+                        "library cell {} records criticality {:e}; the surrogate gives {v:e} \
+                         there",
+                        c.cell, c.criticality
+                    )));
+                }
+            }
+        }
+        Ok(BuiltLibrary {
+            file: file.to_vec(),
+            media_type: LIBRARY_MEDIA_TYPE,
+            size: library.size(),
+            sm_evaluations: library.search.sm_evaluations,
+            mu_s: library.mu_s,
+            w: library.w,
+        })
+    }
+
     fn enumeration(
         &self,
         surrogate: &serde_json::Value,

@@ -451,6 +451,18 @@ pub trait ScenarioCase: Send + Sync {
     /// What library `file` holds (read without checking that it was built
     /// on this case's exposure).
     fn library_summary(&self, file: &[u8]) -> Result<LibrarySummary, CaseError>;
+    /// A library `file` built elsewhere (by a worker) for `surrogate`,
+    /// checked as well as this process can without building it again: the
+    /// file reads as this case's library, and a grid case runs a built-in
+    /// surrogate again on up to `sample` of its cells, spread evenly, each
+    /// of which must carry the criticality `P(S|x)·P(x)` it records. What
+    /// [`ScenarioCase::build_library_observed`] would return for it.
+    fn built_elsewhere(
+        &self,
+        file: &[u8],
+        surrogate: &serde_json::Value,
+        sample: usize,
+    ) -> Result<BuiltLibrary, CaseError>;
     /// The picture of a library file: the exposure beside the library's
     /// sampling distribution (ε = 0), projected onto two axes.
     fn library_picture(&self, file: &[u8]) -> Result<Vec<PictureMap>, CaseError>;

@@ -113,6 +113,15 @@ pub async fn plan(
     ApiPath(id): ApiPath<i64>,
 ) -> Result<Json<CampaignPlan>, ApiError> {
     let row = campaigns::get(&state.db.read, id).await?;
+    let (build_search, build_threshold) = match (row.method, row.library_id) {
+        (Method::Build, Some(library)) => {
+            let library = crate::store::libraries::get(&state.db.read, library).await?;
+            let request: tslg_api::CreateLibrary =
+                serde_json::from_str(&library.request).map_err(|e| ApiError::Internal(e.into()))?;
+            (request.search, request.threshold)
+        }
+        _ => (None, None),
+    };
     Ok(Json(CampaignPlan {
         campaign_id: row.id,
         case: row.case_name.clone(),
@@ -139,6 +148,8 @@ pub async fn plan(
                 table_name: d.table_name,
                 table: d.table,
             }),
+        build_search,
+        build_threshold,
     }))
 }
 

@@ -11,8 +11,8 @@ use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
 use axum::Json;
 use tslg_api::{
-    HeartbeatAck, Lease, LeaseFence, LeaseKey, LeaseRelease, LeaseRequest, Method, Problem,
-    ResultAck, ResultReport, TestCase, WorkerList, MAX_INVALID_REASON,
+    HeartbeatAck, Lease, LeaseFence, LeaseKey, LeaseRelease, LeaseRequest, LibraryUpload, Method,
+    Problem, ResultAck, ResultReport, TestCase, WorkerList, MAX_INVALID_REASON,
 };
 use tslg_method::external::{check_program_name, ExternalMode};
 
@@ -228,6 +228,26 @@ pub async fn release(
         reason,
         "lease released"
     );
+    Ok(StatusCode::NO_CONTENT)
+}
+
+/// Uploads the library a worker built whole for a campaign of method
+/// `build` (or why the build failed): the library is ready (or failed)
+/// and the campaign done. A file that is not the library asked for is a
+/// 422 and changes nothing.
+#[utoipa::path(post, path = "/api/v1/leases/{id}/library", params(("id" = i64, Path)),
+    request_body = LibraryUpload, responses(
+    (status = 204, description = "Recorded"), (status = 403, body = Problem),
+    (status = 404, body = Problem),
+    (status = 409, description = "Not the lease's holder, or the build is no longer wanted", body = Problem),
+    (status = 422, body = Problem)))]
+pub async fn library(
+    State(state): State<AppState>,
+    ApiPath(id): ApiPath<i64>,
+    ApiJson(upload): ApiJson<LibraryUpload>,
+) -> Result<StatusCode, ApiError> {
+    check_worker(&upload.worker)?;
+    crate::whole_build::upload(&state, id, &upload).await?;
     Ok(StatusCode::NO_CONTENT)
 }
 

@@ -1,6 +1,7 @@
 //! `/api/v1/libraries`: build requests, state and files.
 
 use crate::builder::{build_request, spawn_build};
+use crate::enumeration::{placement, Placement};
 use crate::error::{ApiError, ApiJson};
 use crate::routes::ApiPath;
 use crate::state::AppState;
@@ -36,7 +37,7 @@ pub async fn create(
     }
     let checked = req.clone();
     let place = state.config.library_builds;
-    let (case, surrogate, on_workers) = tokio::task::spawn_blocking(move || {
+    let (case, surrogate, placement) = tokio::task::spawn_blocking(move || {
         let case = open_case(
             &checked.case,
             checked.preset.as_deref(),
@@ -44,9 +45,9 @@ pub async fn create(
         )?;
         case.check_request(&request)?;
         let surrogate = case.normalise_vehicle(&checked.surrogate)?;
-        let on_workers = crate::enumeration::on_workers(place, case.as_ref(), &request, &surrogate)
+        let placement = placement(place, case.as_ref(), &request, &surrogate)
             .map_err(tslg_method::registry::CaseError::Unsupported)?;
-        Ok::<_, tslg_method::registry::CaseError>((case, surrogate, on_workers))
+        Ok::<_, tslg_method::registry::CaseError>((case, surrogate, placement))
     })
     .await
     .map_err(|e| ApiError::Internal(e.into()))?
@@ -73,11 +74,15 @@ pub async fn create(
         },
     )
     .await?;
-    if on_workers {
+    match placement {
+        Placement::Coordinator => spawn_build(state.clone(), row.id),
         // Its surrogate runs are the workers' tests.
-        crate::enumeration::start(&state, &row, case, &surrogate_spec).await?;
-    } else {
-        spawn_build(state.clone(), row.id);
+        Placement::Cells => {
+            crate::enumeration::start(&state, &row, case, &surrogate_spec).await?;
+        }
+        Placement::Whole => {
+            crate::whole_build::start(&state, &row, &surrogate_spec).await?;
+        }
     }
     let location = format!("/api/v1/libraries/{}", row.id);
     Ok((

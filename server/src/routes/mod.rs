@@ -44,6 +44,7 @@ pub fn router(state: AppState) -> Router {
         .route("/api/v1/leases/{id}/heartbeat", post(leases::heartbeat))
         .route("/api/v1/leases/{id}/release", post(leases::release))
         .route("/api/v1/leases/{id}/results", post(leases::results))
+        .route("/api/v1/leases/{id}/library", post(leases::library))
         .route("/api/v1/campaigns/{id}/plan", get(campaigns::plan))
         .route("/api/v1/libraries/{id}/file", get(libraries::file))
         .route_layer(from_fn_with_state(state.clone(), auth::require_worker));

@@ -36,6 +36,7 @@ use utoipa::OpenApi;
         super::leases::heartbeat,
         super::leases::release,
         super::leases::results,
+        super::leases::library,
         super::leases::workers,
         super::leases::unflag,
         super::figures::estimate,

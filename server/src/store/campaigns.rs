@@ -83,9 +83,11 @@ pub struct CampaignRow {
 
 /// An adaptive campaign is stored as method 'library' with `adaptive = 1`
 /// (migrations/…14_adaptive.sql) and read as `adaptive`; a library build's
-/// enumeration as 'ndd' with `enumerate = 1` (…17_enumerate.sql).
+/// enumeration as 'ndd' with `enumerate = 1` (…17_enumerate.sql), a
+/// build one worker runs whole as 'ndd' with `enumerate = 2`.
 pub const COLUMNS: &str = "id, case_name, preset, \
-    CASE WHEN adaptive = 1 THEN 'adaptive' WHEN enumerate = 1 THEN 'enumerate' ELSE method END \
+    CASE WHEN adaptive = 1 THEN 'adaptive' WHEN enumerate = 1 THEN 'enumerate' \
+    WHEN enumerate = 2 THEN 'build' ELSE method END \
     AS method, library_id, exposure_name, \
     exposure_fingerprint, exposure_table, vut, requires, epsilon, outside, split, strata_epsilon, \
     beta, confidence, n_min, min_events, max_tests, seed, status, status_detail, next_index, indices, tests, events, invalid, s1, s2, \
@@ -340,10 +342,14 @@ pub async fn insert(pool: &SqlitePool, new: &NewCampaign) -> Result<CampaignRow,
          RETURNING {COLUMNS}"
     );
     let adaptive = new.method == Method::Adaptive;
-    let enumerate = new.method == Method::Enumerate;
+    let enumerate = match new.method {
+        Method::Enumerate => 1,
+        Method::Build => 2,
+        _ => 0,
+    };
     let stored_method = match new.method {
         Method::Adaptive => Method::Library,
-        Method::Enumerate => Method::Ndd,
+        Method::Enumerate | Method::Build => Method::Ndd,
         other => other,
     };
     let first_stage = new.first_stage.as_ref();

@@ -42,7 +42,10 @@ pub async fn delete_campaign(pool: &SqlitePool, id: i64) -> Result<(), ApiError>
             row.status.as_str()
         )));
     }
-    if row.method == tslg_api::Method::Enumerate {
+    if matches!(
+        row.method,
+        tslg_api::Method::Enumerate | tslg_api::Method::Build
+    ) {
         if let Some(library) = row.library_id {
             return Err(ApiError::Conflict(format!(
                 "campaign {id} built library {library}: it goes with the library \
@@ -80,7 +83,7 @@ pub async fn delete_library(pool: &SqlitePool, id: i64) -> Result<(), ApiError> 
         )));
     }
     let builds: Vec<(i64,)> =
-        sqlx::query_as("SELECT id FROM campaigns WHERE library_id = ? AND enumerate = 1")
+        sqlx::query_as("SELECT id FROM campaigns WHERE library_id = ? AND enumerate >= 1")
             .bind(id)
             .fetch_all(&mut *tx)
             .await?;

@@ -165,6 +165,17 @@ pub struct Built<'a> {
 /// Marks a library ready and lets its pending campaigns run.
 pub async fn mark_ready(pool: &SqlitePool, id: i64, built: &Built<'_>) -> Result<(), ApiError> {
     let mut tx = pool.begin().await?;
+    mark_ready_in(&mut tx, id, built).await?;
+    tx.commit().await?;
+    Ok(())
+}
+
+/// [`mark_ready`] inside the caller's transaction.
+pub async fn mark_ready_in(
+    tx: &mut sqlx::SqliteConnection,
+    id: i64,
+    built: &Built<'_>,
+) -> Result<(), ApiError> {
     sqlx::query(
         "UPDATE libraries SET status = 'ready', file = ?, media_type = ?, size = ?, \
          sm_evaluations = ?, mu_s = ?, w = ?, build_seconds = ? WHERE id = ?",
@@ -187,13 +198,23 @@ pub async fn mark_ready(pool: &SqlitePool, id: i64, built: &Built<'_>) -> Result
     .bind(id)
     .execute(&mut *tx)
     .await?;
-    tx.commit().await?;
     Ok(())
 }
 
 /// Marks a library failed, and its pending campaigns with it.
 pub async fn mark_failed(pool: &SqlitePool, id: i64, error: &str) -> Result<(), ApiError> {
     let mut tx = pool.begin().await?;
+    mark_failed_in(&mut tx, id, error).await?;
+    tx.commit().await?;
+    Ok(())
+}
+
+/// [`mark_failed`] inside the caller's transaction.
+pub async fn mark_failed_in(
+    tx: &mut sqlx::SqliteConnection,
+    id: i64,
+    error: &str,
+) -> Result<(), ApiError> {
     sqlx::query("UPDATE libraries SET status = 'failed', error = ? WHERE id = ?")
         .bind(error)
         .bind(id)
@@ -208,6 +229,5 @@ pub async fn mark_failed(pool: &SqlitePool, id: i64, error: &str) -> Result<(), 
     .bind(id)
     .execute(&mut *tx)
     .await?;
-    tx.commit().await?;
     Ok(())
 }

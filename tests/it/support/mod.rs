@@ -303,7 +303,9 @@ pub async fn real_events(
     let prepared = tslg_worker::prepared::Cache::default()
         .get(client, id)
         .await
-        .expect("the campaign's plan");
+        .expect("the campaign's plan")
+        .tests()
+        .expect("a campaign of tests");
     (from..to)
         .filter_map(|index| {
             let outcome = prepared.tests.run(index);

@@ -1,0 +1,248 @@
+//! Library builds one worker runs whole: a multistart search (each descent
+//! picks its next run from the last, so its runs cannot be leased cell by
+//! cell) or a car-following policy (dynamic programming or temporal
+//! difference over every state). With `--library-builds workers` the
+//! coordinator leases such a build as a campaign of method `build` with one
+//! test: the worker that takes it builds the library as `tslg library
+//! build` does, heartbeating while it runs, and uploads the file to `POST
+//! /api/v1/leases/{id}/library`. A worker killed mid-build stops
+//! heartbeating; its lease expires and another worker builds the same
+//! library from the start (the build is deterministic: its seed is in the
+//! request). The coordinator checks that the file is a library of the
+//! case, preset, exposure and surrogate it asked for and, on grid cases,
+//! runs the surrogate again on a sample of the library's cells: each must
+//! be a failure of it.
+
+use crate::error::ApiError;
+use crate::state::AppState;
+use crate::store::campaigns::{self, CampaignRow};
+use crate::store::libraries::{self, Built, LibraryRow};
+use crate::store::{audits, leases};
+use tslg_api::{CampaignStatus, LibraryStatus, LibraryUpload, Method};
+use tslg_method::estimator::StoppingRule;
+use tslg_method::registry::BuiltLibrary;
+
+/// Longest failure reason a worker's upload may carry.
+const MAX_FAILURE_REASON: usize = 2000;
+/// Library cells of a grid case the coordinator runs the surrogate on to
+/// check an uploaded library (a few microseconds each for the built-in
+/// vehicles).
+const CHECKED_CELLS: usize = 64;
+
+/// Starts the build of `library` by one worker: its campaign of method
+/// `build`, one test.
+pub async fn start(
+    state: &AppState,
+    library: &LibraryRow,
+    surrogate: &serde_json::Value,
+) -> Result<CampaignRow, ApiError> {
+    let rule = StoppingRule {
+        n_min: 1,
+        min_events: 1,
+        ..StoppingRule::new(tslg_method::estimator::MAX_BETA, 1)
+    };
+    let row =
+        crate::enumeration::insert_build(state, library, Method::Build, surrogate, rule).await?;
+    tracing::info!(
+        library = library.id,
+        campaign = row.id,
+        "library build leased whole to a worker"
+    );
+    Ok(row)
+}
+
+/// What a worker's upload says: the library's bytes, or why the build
+/// failed.
+enum Uploaded {
+    File(Vec<u8>),
+    Failed(String),
+}
+
+fn parse(upload: &LibraryUpload) -> Result<Uploaded, ApiError> {
+    let bad = |m: String| Err(ApiError::Unprocessable(m));
+    if !(upload.seconds.is_finite() && upload.seconds >= 0.0) {
+        return bad(format!(
+            "seconds = {} must be a finite number ≥ 0",
+            upload.seconds
+        ));
+    }
+    match (&upload.file, &upload.failed) {
+        (Some(file), None) => {
+            use base64::Engine;
+            base64::engine::general_purpose::STANDARD
+                .decode(file)
+                .map(Uploaded::File)
+                .or_else(|e| bad(format!("file is not base64: {e}")))
+        }
+        (None, Some(reason)) if reason.is_empty() || reason.len() > MAX_FAILURE_REASON => bad(
+            format!("failed must say why in 1 to {MAX_FAILURE_REASON} bytes"),
+        ),
+        (None, Some(reason)) => Ok(Uploaded::Failed(reason.clone())),
+        _ => bad("an upload carries exactly one of file and failed".into()),
+    }
+}
+
+/// The lease's campaign and library, when `upload` may be recorded on
+/// lease `id`: its holder's, of a running campaign of method `build`
+/// whose library is building.
+async fn holder_of(
+    conn: &mut sqlx::SqliteConnection,
+    id: i64,
+    upload: &LibraryUpload,
+) -> Result<(CampaignRow, LibraryRow), ApiError> {
+    audits::refuse_flagged(&mut *conn, &upload.worker).await?;
+    let lease = leases::get(&mut *conn, id).await?;
+    leases::check_fence(&lease, &upload.worker, upload.attempt, upload.key.as_str())?;
+    let campaign = campaigns::get(&mut *conn, lease.campaign_id).await?;
+    if campaign.method != Method::Build {
+        return Err(ApiError::Conflict(format!(
+            "lease {id} is of campaign {} of method {}: its results go to POST \
+             /api/v1/leases/{id}/results",
+            campaign.id,
+            campaign.method.as_str()
+        )));
+    }
+    if campaign.status != CampaignStatus::Running || lease.state != leases::LeaseState::Active {
+        return Err(ApiError::Conflict(format!(
+            "campaign {} is {}: the build is no longer wanted",
+            campaign.id,
+            campaign.status.as_str()
+        )));
+    }
+    let library_id = campaign
+        .library_id
+        .ok_or_else(|| ApiError::Internal(anyhow::anyhow!("build without a library")))?;
+    let library = libraries::get(&mut *conn, library_id).await?;
+    if library.status != LibraryStatus::Building {
+        return Err(ApiError::Conflict(format!(
+            "library {library_id} is {}: the build is no longer wanted",
+            library.status.as_str()
+        )));
+    }
+    Ok((campaign, library))
+}
+
+/// Checks an uploaded file against what the coordinator asked for
+/// ([`ScenarioCase::built_elsewhere`] and the summary's case, preset,
+/// exposure and surrogate); CPU work: call off the async runtime.
+///
+/// [`ScenarioCase::built_elsewhere`]: tslg_method::registry::ScenarioCase::built_elsewhere
+fn check_file(
+    campaign: &CampaignRow,
+    library: &LibraryRow,
+    file: &[u8],
+) -> Result<BuiltLibrary, String> {
+    let case = tslg_method::cases::open_case(
+        &campaign.case_name,
+        Some(&campaign.preset),
+        &campaign.exposure_source(),
+    )
+    .map_err(|e| e.to_string())?;
+    let summary = case
+        .library_summary(file)
+        .map_err(|e| format!("it is not a library: {e}"))?;
+    let surrogate: serde_json::Value =
+        serde_json::from_str(&library.surrogate).map_err(|e| e.to_string())?;
+    let differs = |what: &str, got: &dyn std::fmt::Debug, want: &dyn std::fmt::Debug| {
+        Err(format!("its {what} is {got:?}, the build's {want:?}"))
+    };
+    if summary.case != campaign.case_name {
+        return differs("case", &summary.case, &campaign.case_name);
+    }
+    if summary.preset != campaign.preset {
+        return differs("preset", &summary.preset, &campaign.preset);
+    }
+    if summary.exposure.fingerprint != campaign.exposure_fingerprint {
+        return differs(
+            "exposure",
+            &summary.exposure.fingerprint,
+            &campaign.exposure_fingerprint,
+        );
+    }
+    if summary.surrogate != surrogate {
+        return differs("surrogate", &summary.surrogate, &surrogate);
+    }
+    if summary.total as i64 != library.total_scenarios {
+        return differs("scenario count", &summary.total, &library.total_scenarios);
+    }
+    case.built_elsewhere(file, &surrogate, CHECKED_CELLS)
+        .map_err(|e| e.to_string())
+}
+
+/// Records a worker's upload on lease `id`: the library ready (and its
+/// campaign converged), or failed with the worker's reason. A file that is
+/// not the library asked for is a 422 and changes nothing: the lease
+/// expires and another worker builds it.
+pub async fn upload(state: &AppState, id: i64, upload: &LibraryUpload) -> Result<(), ApiError> {
+    let uploaded = parse(upload)?;
+    let (campaign, library) = {
+        let mut conn = state.db.read.acquire().await?;
+        holder_of(&mut conn, id, upload).await?
+    };
+    let checked = match uploaded {
+        Uploaded::Failed(reason) => Err(reason),
+        Uploaded::File(file) => {
+            let (c, l) = (campaign.clone(), library.clone());
+            let built = tokio::task::spawn_blocking(move || check_file(&c, &l, &file))
+                .await
+                .map_err(|e| ApiError::Internal(e.into()))?;
+            Ok(built.map_err(|e| {
+                ApiError::Unprocessable(format!(
+                    "the uploaded file is not library {}: {e}",
+                    library.id
+                ))
+            })?)
+        }
+    };
+    let mut tx = state.db.write.begin().await?;
+    // Again in the transaction: only the first upload of the holder counts.
+    let (campaign, library) = holder_of(&mut tx, id, upload).await?;
+    let (status, detail) = match &checked {
+        Ok(built) => {
+            libraries::mark_ready_in(
+                &mut tx,
+                library.id,
+                &Built {
+                    file: &built.file,
+                    media_type: built.media_type,
+                    size: built.size,
+                    sm_evaluations: built.sm_evaluations,
+                    mu_s: built.mu_s,
+                    w: built.w,
+                    seconds: upload.seconds,
+                },
+            )
+            .await?;
+            (CampaignStatus::Converged, None)
+        }
+        Err(reason) => {
+            let reason = format!("worker `{}` could not build it: {reason}", upload.worker);
+            libraries::mark_failed_in(&mut tx, library.id, &reason).await?;
+            (CampaignStatus::Failed, Some(reason))
+        }
+    };
+    sqlx::query(
+        "UPDATE campaigns SET status = ?, status_detail = ?, next_index = 1, indices = 1, \
+         tests = 1, worker_seconds = worker_seconds + ?, \
+         updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now') WHERE id = ?",
+    )
+    .bind(status.as_str())
+    .bind(&detail)
+    .bind(upload.seconds)
+    .bind(campaign.id)
+    .execute(&mut *tx)
+    .await?;
+    sqlx::query("UPDATE leases SET state = 'done', resume_at = end_index WHERE id = ?")
+        .bind(id)
+        .execute(&mut *tx)
+        .await?;
+    tx.commit().await?;
+    tracing::info!(
+        library = library.id,
+        campaign = campaign.id,
+        worker = %upload.worker,
+        ok = checked.is_ok(),
+        "library built whole on a worker"
+    );
+    Ok(())
+}
