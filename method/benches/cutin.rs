@@ -47,6 +47,32 @@ fn main() {
             );
         }
     }
+    // The batched path workers use (`Case::events`): the grid's cells in
+    // batches of eight, outcomes only.
+    for preset in [CutInPreset::PaperCode, CutInPreset::PaperTable] {
+        let case = CutIn::builtin(preset);
+        let cells: Vec<usize> = (0..case.grid().len()).collect();
+        let mut events = vec![false; cells.len()];
+        let rounds = if preset == CutInPreset::PaperCode {
+            200
+        } else {
+            20
+        };
+        for name in ["idm", "fvdm"] {
+            let vut = VehicleModel::builtin(name).unwrap();
+            let secs = median_seconds(|| {
+                for _ in 0..rounds {
+                    case.events(&vut, black_box(&cells), &mut events);
+                    black_box(&events);
+                }
+            });
+            println!(
+                "| {preset} batched simulations/s per core, {name} | {:.3e} ({:.0} ns each) |",
+                (rounds * cells.len()) as f64 / secs,
+                secs * 1e9 / (rounds * cells.len()) as f64
+            );
+        }
+    }
     let case = CutIn::builtin(CutInPreset::PaperCode);
     let idm = VehicleModel::builtin("idm").unwrap();
     for (label, search) in [

@@ -192,6 +192,30 @@ pub fn run_outcome_campaign(
     explorer: Option<Explorer<'_>>,
     rule: &StoppingRule,
 ) -> CampaignResult {
+    run_span_campaign(
+        &|from, to| {
+            (from..to)
+                .into_par_iter()
+                .filter_map(|i| outcome(i).map(|o| (i, o)))
+                .collect()
+        },
+        explorer,
+        rule,
+    )
+}
+
+/// Tests per span of [`run_campaign_tests`]: enough to fill a batch many
+/// times, few enough to spread a round over the threads.
+const SPAN: u64 = 1024;
+
+/// [`run_outcome_campaign`] with the outcomes of a span of tests at once:
+/// `span(from, to)` lists the tests of `from..to` with an event or invalid,
+/// in any order.
+pub fn run_span_campaign(
+    span: &(dyn Fn(u64, u64) -> Vec<(u64, SparseOutcome)> + Sync),
+    explorer: Option<Explorer<'_>>,
+    rule: &StoppingRule,
+) -> CampaignResult {
     let z = rule.z();
     let mass = explorer.map(|e| e.mass);
     let mut fold = PrefixFold::with_strata(explorer.and_then(|e| e.strata));
@@ -199,10 +223,7 @@ pub fn run_outcome_campaign(
     loop {
         let from = fold.indices;
         let to = (from + batch).min(rule.max_tests);
-        let mut events: Vec<(u64, SparseOutcome)> = (from..to)
-            .into_par_iter()
-            .filter_map(|i| outcome(i).map(|o| (i, o)))
-            .collect();
+        let mut events = span(from, to);
         events.sort_by_key(|&(i, _)| i);
         let explored: Vec<u64> = match explorer {
             Some(e) => (from..to)
@@ -238,16 +259,44 @@ pub fn run_campaign_tests(
 ) -> CampaignResult {
     let explores = |i| tests.explores(i);
     let misses = |i| tests.surrogate_misses(i);
-    run_outcome_campaign(
-        &|i| {
-            if invalid(i) {
-                return Some(SparseOutcome::Invalid);
-            }
-            let outcome = tests.run(i);
-            outcome
-                .event
-                .then_some(SparseOutcome::Event(outcome.weight))
-        },
+    let one = |i| {
+        if invalid(i) {
+            return Some(SparseOutcome::Invalid);
+        }
+        let outcome = tests.run(i);
+        outcome
+            .event
+            .then_some(SparseOutcome::Event(outcome.weight))
+    };
+    // Spans of tests run in parallel, each in batches where the case has
+    // them ([`CampaignTests::run_span`]).
+    let span = |from: u64, to: u64| -> Vec<(u64, SparseOutcome)> {
+        let starts: Vec<u64> = (from..to).step_by(SPAN as usize).collect();
+        starts
+            .into_par_iter()
+            .flat_map_iter(|start| {
+                let end = (start + SPAN).min(to);
+                let outcomes: Vec<(u64, SparseOutcome)> = match tests.run_span(start, end) {
+                    Some(outcomes) => (start..end)
+                        .zip(outcomes)
+                        .filter_map(|(i, o)| {
+                            if invalid(i) {
+                                Some((i, SparseOutcome::Invalid))
+                            } else {
+                                o.event.then_some((i, SparseOutcome::Event(o.weight)))
+                            }
+                        })
+                        .collect(),
+                    None => (start..end)
+                        .filter_map(|i| one(i).map(|o| (i, o)))
+                        .collect(),
+                };
+                outcomes
+            })
+            .collect()
+    };
+    run_span_campaign(
+        &span,
         tests.outside_mass().map(|mass| Explorer {
             explores: &explores,
             mass,

@@ -43,6 +43,14 @@ pub trait Case: Sync {
     /// deterministic, so `P(A|x)` is this as 0 or 1.
     fn is_event(&self, vehicle: &Self::Vehicle, cell: usize) -> bool;
 
+    /// [`Case::is_event`] for many cells: `events[i]` for `cells[i]` (of
+    /// the same length). Cases with a batched simulation override it.
+    fn events(&self, vehicle: &Self::Vehicle, cells: &[usize], events: &mut [bool]) {
+        for (event, &cell) in events.iter_mut().zip(cells) {
+            *event = self.is_event(vehicle, cell);
+        }
+    }
+
     /// How close `vehicle` came to the event in scenario `cell`, in
     /// `[0, 1]`: 0 for the event, small for a near miss, 1 for a run that
     /// never came near it. Adaptive campaigns search from the near misses

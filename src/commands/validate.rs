@@ -492,8 +492,10 @@ fn coverage_curve(setup: &Setup, replicates: u64, to: u64) -> anyhow::Result<Vec
             let tests = setup.tests(seed)?;
             let mut fold = PrefixFold::with_strata(tests.strata());
             let mut covers = Vec::with_capacity(to as usize - 1);
-            for index in 0..to {
-                let outcome = tests.run(index);
+            let outcomes = tests
+                .run_span(0, to)
+                .unwrap_or_else(|| (0..to).map(|index| tests.run(index)).collect());
+            for (index, outcome) in (0..to).zip(outcomes) {
                 fold.push(outcome.weight, outcome.event, tests.explores(index));
                 if index >= 1 {
                     let (low, high) = fold.interval(z);

@@ -433,6 +433,11 @@ pub fn run_range(
     from: u64,
     to: u64,
 ) -> RangeRun {
+    if program.is_none() && planned.is_none() {
+        if let Some(ran) = run_spans(p, from, to) {
+            return ran;
+        }
+    }
     let near = |c: Option<f64>| {
         planned
             .and_then(|p| p.near_miss)
@@ -486,6 +491,40 @@ pub fn run_range(
 
 /// Runs test `index` on the built-in vehicle: drawn from the campaign's
 /// plan, or on the `(cell, weight)` its lease names.
+/// Tests per span of a built-in vehicle's range, each run in batches
+/// where its case has them (`CampaignTests::run_span`).
+const SPAN: u64 = 1024;
+
+/// `from..to` on the campaign's built-in vehicle, span by span in parallel;
+/// `None` when the case runs tests one by one, or when a span panicked
+/// (the one-by-one path then retries each test and reports what fails).
+fn run_spans(p: &PreparedCampaign, from: u64, to: u64) -> Option<RangeRun> {
+    let starts: Vec<u64> = (from..to).step_by(SPAN as usize).collect();
+    let spans: Option<Vec<Vec<EventResult>>> = starts
+        .into_par_iter()
+        .map(|start| {
+            let end = (start + SPAN).min(to);
+            let outcomes =
+                catch_unwind(AssertUnwindSafe(|| p.tests.run_span(start, end))).ok()??;
+            Some(
+                (start..end)
+                    .zip(outcomes)
+                    .filter(|(_, o)| o.event)
+                    .map(|(index, o)| EventResult {
+                        index,
+                        weight: o.weight,
+                    })
+                    .collect(),
+            )
+        })
+        .collect();
+    Some(RangeRun {
+        end: to,
+        events: spans?.into_iter().flatten().collect(),
+        ..RangeRun::default()
+    })
+}
+
 fn run_builtin(
     p: &PreparedCampaign,
     index: u64,

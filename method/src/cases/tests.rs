@@ -347,3 +347,38 @@ fn a_multistart_library_is_the_same_file_every_time_it_is_built() {
         .to_string();
     assert!(err.contains("the surrogate gives"), "{err}");
 }
+
+#[test]
+fn a_span_of_tests_run_in_batches_is_the_tests_run_one_by_one() {
+    let case = open_case("cut-in", None, &ExposureSource::Builtin).unwrap();
+    let library = case
+        .build_library(&json!({"model": "idm"}), &BuildRequest::default())
+        .unwrap()
+        .file;
+    for vut in ["fvdm", "idm", "switching-acc"] {
+        let vut = json!({ "model": vut });
+        for file in [None, Some(library.as_slice())] {
+            let tests = case
+                .campaign(file, &vut, 0.1, OutsideSpread::Uniform, Split::Random, 7)
+                .unwrap();
+            let span = tests
+                .run_span(100, 3_101)
+                .expect("built-in vehicles run in spans");
+            let one_by_one: Vec<_> = (100..3_101).map(|i| tests.run(i)).collect();
+            assert_eq!(span, one_by_one, "{vut}, library: {}", file.is_some());
+            assert!(span.iter().any(|o| o.event), "{vut}");
+        }
+    }
+    // A program is run test by test by whoever hosts it.
+    let program = case
+        .campaign(
+            None,
+            &json!({"external": "py-idm"}),
+            0.1,
+            OutsideSpread::Uniform,
+            Split::Random,
+            7,
+        )
+        .unwrap();
+    assert!(program.run_span(0, 10).is_none());
+}

@@ -505,6 +505,28 @@ where
         })
     }
 
+    fn run_span(&self, from: u64, to: u64) -> Option<Vec<TestOutcome>> {
+        let CampaignVehicle::Builtin(vehicle) = &self.vehicle else {
+            return None;
+        };
+        let draws: Vec<_> = (from..to)
+            .map(|index| self.distribution.draw(self.seed, index))
+            .collect();
+        let cells: Vec<usize> = draws.iter().map(|d| d.cell).collect();
+        let mut events = vec![false; cells.len()];
+        self.case.events(vehicle, &cells, &mut events);
+        Some(
+            draws
+                .iter()
+                .zip(events)
+                .map(|(draw, event)| TestOutcome {
+                    event,
+                    weight: draw.weight,
+                })
+                .collect(),
+        )
+    }
+
     fn check_event(&self, index: u64, weight: f64) -> Result<(), String> {
         let expected = self.distribution.draw(self.seed, index).weight;
         if expected.to_bits() == weight.to_bits() {

@@ -202,6 +202,14 @@ pub trait CampaignTests: Send + Sync {
     fn run(&self, index: u64) -> TestOutcome {
         self.run_with(index, None).unwrap_or_else(|e| panic!("{e}"))
     }
+    /// The outcomes of tests `from..to`, in order, when the campaign's
+    /// vehicle is built in and its case runs many scenarios at once
+    /// ([`crate::case::Case::events`]): the same outcomes as [`Self::run`]
+    /// one by one. `None`: run them one by one.
+    fn run_span(&self, from: u64, to: u64) -> Option<Vec<TestOutcome>> {
+        let _ = (from, to);
+        None
+    }
     /// Checks a reported event against the campaign's own test `index`: a
     /// mismatch means the reporter samples differently (another version,
     /// another library) and its results must not enter the estimate. What

@@ -64,7 +64,8 @@ impl IdmParams {
             + v * self.headway
             + v * (v - obs.lead_speed) / (2.0 * (self.alpha * self.b).sqrt());
         let interaction = desired_gap / (obs.gap - self.length);
-        let a = self.alpha * (1.0 - (v / self.v0).powf(self.delta) - interaction * interaction);
+        let free = super::power::pow(v / self.v0, self.delta);
+        let a = self.alpha * (1.0 - free - interaction * interaction);
         if a.is_nan() {
             f64::NEG_INFINITY
         } else {

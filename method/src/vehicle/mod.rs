@@ -10,6 +10,7 @@
 mod acc_aeb;
 mod fvdm;
 mod idm;
+pub mod power;
 mod switching_acc;
 
 pub use acc_aeb::AccAebParams;

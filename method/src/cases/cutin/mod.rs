@@ -3,6 +3,7 @@
 //! A scenario is `x = (R, Ṙ)`, the range and range rate at the moment a
 //! background vehicle cuts in; the event is an accident during the run.
 
+pub mod batch;
 pub mod descriptor;
 mod exposure_model;
 mod simulation;
@@ -143,6 +144,31 @@ impl Case for CutIn {
 
     fn is_event(&self, vehicle: &VehicleModel, cell: usize) -> bool {
         self.run(vehicle, cell).accident
+    }
+
+    /// In batches of [`batch::LANES`] for the IDM and the FVDM (the last
+    /// one padded with its first scenario), one by one for the others.
+    fn events(&self, vehicle: &VehicleModel, cells: &[usize], events: &mut [bool]) {
+        let Some(follower) = batch::BatchFollower::of(vehicle) else {
+            for (event, &cell) in events.iter_mut().zip(cells) {
+                *event = self.is_event(vehicle, cell);
+            }
+            return;
+        };
+        let grid = self.exposure.grid();
+        for (cells, events) in cells
+            .chunks(batch::LANES)
+            .zip(events.chunks_mut(batch::LANES))
+        {
+            let mut range = [grid.value(cells[0], 0); batch::LANES];
+            let mut range_rate = [grid.value(cells[0], 1); batch::LANES];
+            for (i, &cell) in cells.iter().enumerate() {
+                range[i] = grid.value(cell, 0);
+                range_rate[i] = grid.value(cell, 1);
+            }
+            let crashed = batch::accidents(&self.settings, &follower, &range, &range_rate);
+            events.copy_from_slice(&crashed[..cells.len()]);
+        }
     }
 
     /// mnpETTC: the smallest normalised enhanced time to collision over the

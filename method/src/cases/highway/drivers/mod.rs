@@ -203,7 +203,7 @@ impl Idm {
     /// The acceleration at `speed` behind `leader` (bumper gap, speed), or on
     /// a free road. A gap ≤ 0 gives `−∞` (the caller's braking bound).
     pub fn accel(&self, speed: f64, leader: Option<(f64, f64)>) -> f64 {
-        let free = self.alpha * (1.0 - (speed / self.v0).powf(self.delta));
+        let free = self.alpha * (1.0 - crate::vehicle::power::pow(speed / self.v0, self.delta));
         let Some((gap, lead_speed)) = leader else {
             return free;
         };
