@@ -14,7 +14,6 @@ use tslg_api::{
     ResultReport, SearchRequest,
 };
 use tslg_client::Client;
-use tslg_method::campaign::run_indexed_campaign;
 use tslg_method::cases::open_case;
 use tslg_method::estimator::{default_n_min, StoppingRule, MIN_BETA};
 use tslg_method::registry::ExposureSource;
@@ -53,13 +52,8 @@ fn in_process(tests: u64) -> f64 {
         .unwrap();
     let rule = StoppingRule::new(MIN_BETA, tests);
     let started = Instant::now();
-    let result = run_indexed_campaign(
-        &|i| {
-            let outcome = campaign.run(i);
-            outcome.event.then_some(outcome.weight)
-        },
-        &rule,
-    );
+    // The in-process runner's own path: spans of tests in batches.
+    let result = tslg_method::campaign::run_campaign_tests(campaign.as_ref(), &rule, &|_| false);
     assert_eq!(result.indices, tests);
     started.elapsed().as_secs_f64()
 }
