@@ -5,8 +5,8 @@
 
 use std::time::Instant;
 use tslg_method::cases::carfollow::{
-    dynamic_programming, temporal_difference, FollowExposure, FollowExposureModel, FollowState,
-    FollowWorld, StateGrid, Transitions,
+    dynamic_programming, temporal_difference, FollowExposure, FollowExposureModel, FollowSampler,
+    FollowState, FollowWorld, StateGrid, Transitions,
 };
 
 fn main() {
@@ -17,6 +17,39 @@ fn main() {
     let idm = tslg_method::cases::carfollow::highway_vehicle("idm").expect("built-in");
     println!("| measurement | value |");
     println!("|---|---|");
+    // NDD tests one after another on one thread: 30 BV decisions, 300
+    // steps of the vehicle each (fewer when it crashes).
+    let ndd = FollowSampler::ndd(world, grid, &exposure);
+    for name in ["idm", "fvdm"] {
+        let vut = tslg_method::vehicle::VehicleModel::builtin(name).expect("built-in");
+        let tests = 200_000u64;
+        let t = Instant::now();
+        let crashes = (0..tests)
+            .filter(|&i| std::hint::black_box(ndd.run(&vut, 1, i)).accident)
+            .count();
+        let seconds = t.elapsed().as_secs_f64();
+        println!(
+            "| NDD test per core, {name} ({tests} tests, {crashes} accidents) | {:.2} µs |",
+            seconds * 1e6 / tests as f64
+        );
+        let follower = tslg_method::vehicle::batch::BatchFollower::of(&vut).expect("batched");
+        let indices: Vec<u64> = (0..tests).collect();
+        let t = Instant::now();
+        let crashes: usize = indices
+            .chunks(tslg_method::vehicle::batch::LANES)
+            .map(|lanes| {
+                std::hint::black_box(ndd.run_batch(&follower, 1, lanes))
+                    .iter()
+                    .filter(|test| test.accident)
+                    .count()
+            })
+            .sum();
+        let seconds = t.elapsed().as_secs_f64();
+        println!(
+            "| NDD test per core, batched, {name} ({tests} tests, {crashes} accidents) | {:.2} µs |",
+            seconds * 1e6 / tests as f64
+        );
+    }
     let t = Instant::now();
     let transitions = Transitions::compute(&world, grid, &exposure, &idm);
     println!(

@@ -382,3 +382,37 @@ fn a_span_of_tests_run_in_batches_is_the_tests_run_one_by_one() {
         .unwrap();
     assert!(program.run_span(0, 10).is_none());
 }
+
+#[test]
+fn car_following_tests_run_in_batches_are_the_tests_run_one_by_one() {
+    for preset in ["risky", "paper"] {
+        let case = open_case("car-following", Some(preset), &ExposureSource::Builtin).unwrap();
+        let policy = case
+            .build_library(&json!({"model": "idm"}), &BuildRequest::default())
+            .unwrap()
+            .file;
+        for vut in ["idm", "fvdm", "acc-aeb"] {
+            let vut = json!({ "model": vut });
+            for file in [None, Some(policy.as_slice())] {
+                let tests = case
+                    .campaign(file, &vut, 0.1, OutsideSpread::Ndd, Split::Random, 3)
+                    .unwrap();
+                let Some(span) = tests.run_span(50, 2_051) else {
+                    // A stateful follower runs one by one.
+                    assert_eq!(vut["model"], "acc-aeb");
+                    continue;
+                };
+                let one_by_one: Vec<_> = (50..2_051).map(|i| tests.run(i)).collect();
+                assert_eq!(
+                    span,
+                    one_by_one,
+                    "{preset}, {vut}, library: {}",
+                    file.is_some()
+                );
+                if file.is_some() || preset == "risky" {
+                    assert!(span.iter().any(|o| o.event), "{preset} {vut}: no accident");
+                }
+            }
+        }
+    }
+}

@@ -8,6 +8,7 @@
 //! has (the switching ACC remembers its last error and output).
 
 mod acc_aeb;
+pub mod batch;
 mod fvdm;
 mod idm;
 pub mod power;

@@ -5,6 +5,7 @@
 //! model, and tests sample the BV's actions from it while they run.
 
 pub mod adaptive;
+pub mod batch;
 pub mod case;
 pub mod descriptor;
 pub mod exposure;

@@ -70,6 +70,33 @@ fn draw_index(p: &[f64], r: f64) -> usize {
     p.iter().rposition(|&pk| pk > 0.0).unwrap_or(0)
 }
 
+/// [`draw_index`] from the running sums `cdf` of `p` (`cdf[k] = p[0] + … +
+/// p[k]`, added in that order): a binary search for the first `k` with
+/// `r < cdf[k]`, the same `k` as the scan, in five comparisons instead of
+/// up to 31.
+fn draw_from_cdf(p: &[f64], cdf: &[f64], r: f64) -> usize {
+    let k = cdf.partition_point(|&acc| acc <= r);
+    if k < cdf.len() {
+        k
+    } else {
+        p.iter().rposition(|&pk| pk > 0.0).unwrap_or(0)
+    }
+}
+
+/// The running sums of each row of `rows` (`width` entries a row), added
+/// as [`draw_index`] adds them.
+fn running_sums(rows: &[f64], width: usize) -> Vec<f64> {
+    let mut sums = Vec::with_capacity(rows.len());
+    for row in rows.chunks(width) {
+        let mut acc = 0.0;
+        for &p in row {
+            acc += p;
+            sums.push(acc);
+        }
+    }
+    sums
+}
+
 /// What tests of a campaign are drawn from.
 #[derive(Debug, Clone)]
 pub struct FollowSampler {
@@ -77,6 +104,8 @@ pub struct FollowSampler {
     grid: StateGrid,
     /// `P(u|v)` per grid speed index, `speeds × actions`.
     ndd_actions: Vec<f64>,
+    /// Their running sums, row by row ([`draw_from_cdf`]).
+    ndd_cdf: Vec<f64>,
     /// `P(s)` and the initial-state distribution `q(s)` (= `P(s)` for the NDD).
     initial: Vec<f64>,
     initial_q: Vec<f64>,
@@ -157,6 +186,7 @@ impl FollowSampler {
         library: Option<LibraryMix>,
     ) -> Self {
         let ndd_actions = exposure.actions.clone();
+        let ndd_cdf = running_sums(&ndd_actions, world.actions);
         let initial_alias = Arc::new(
             WeightedAliasIndex::new(initial_q.clone()).expect("a positive initial distribution"),
         );
@@ -164,11 +194,70 @@ impl FollowSampler {
             world,
             grid,
             ndd_actions,
+            ndd_cdf,
             initial,
             initial_q,
             initial_alias,
             library,
         }
+    }
+
+    /// Test `index`'s random stream, initial state and the logarithm of
+    /// its initial weight `P(s₁)/q(s₁)`.
+    pub(super) fn start(&self, seed: u64, index: u64) -> (rand_chacha::ChaCha8Rng, usize, f64) {
+        let mut rng = test_rng(seed, index);
+        let s1 = self.initial_alias.sample(&mut rng);
+        let log_weight = (self.initial[s1] / self.initial_q[s1]).ln();
+        (rng, s1, log_weight)
+    }
+
+    /// The BV's action at `x`: from the library's mix where it guides
+    /// (adding `ln P(u|v)/q(u|s)` to `log_weight`), else from the NDD;
+    /// `mixed` is scratch of one entry per action.
+    pub(super) fn draw_action(
+        &self,
+        x: &FollowState,
+        rng: &mut impl Rng,
+        mixed: &mut [f64],
+        log_weight: &mut f64,
+    ) -> usize {
+        let actions = self.world.actions;
+        let iv = self.grid.speed_index(x.bv_speed);
+        let ndd = &self.ndd_actions[iv * actions..(iv + 1) * actions];
+        let r: f64 = rng.random();
+        let guided = self.library.as_ref().and_then(|mix| {
+            let s = self.grid.nearest(x)?;
+            let total = mix.library.challenge[s];
+            (total > 0.0).then(|| {
+                let row = &mix.library.q[s * actions..(s + 1) * actions];
+                let uniform = 1.0 / actions as f64;
+                for ((m, q), p) in mixed.iter_mut().zip(row).zip(ndd) {
+                    let explore = match mix.outside {
+                        OutsideSpread::Ndd => *p,
+                        OutsideSpread::Uniform => uniform,
+                    };
+                    *m = (1.0 - mix.epsilon) * q / total + mix.epsilon * explore;
+                }
+            })
+        });
+        match guided {
+            Some(()) => {
+                let k = draw_index(mixed, r);
+                *log_weight += (ndd[k] / mixed[k]).ln();
+                k
+            }
+            None => draw_from_cdf(ndd, &self.ndd_cdf[iv * actions..(iv + 1) * actions], r),
+        }
+    }
+
+    /// The world the tests run in.
+    pub fn world(&self) -> &FollowWorld {
+        &self.world
+    }
+
+    /// The grid of states.
+    pub fn grid(&self) -> &StateGrid {
+        &self.grid
     }
 
     /// Runs test `index` of a campaign with seed `seed` on `vut`.
@@ -198,40 +287,12 @@ impl FollowSampler {
         index: u64,
         mut observe: impl FnMut(FollowDecision),
     ) -> Result<FollowTest, D::Error> {
-        let mut rng = test_rng(seed, index);
-        let s1 = self.initial_alias.sample(&mut rng);
-        let mut log_weight = (self.initial[s1] / self.initial_q[s1]).ln();
+        let (mut rng, s1, mut log_weight) = self.start(seed, index);
         let mut odometer = Odometer::default();
         let mut x = self.grid.state(s1);
-        let actions = self.world.actions;
-        let mut mixed = vec![0.0; actions];
+        let mut mixed = vec![0.0; self.world.actions];
         for _ in 0..self.world.decisions {
-            let iv = self.grid.speed_index(x.bv_speed);
-            let ndd = &self.ndd_actions[iv * actions..(iv + 1) * actions];
-            let r: f64 = rng.random();
-            let guided = self.library.as_ref().and_then(|mix| {
-                let s = self.grid.nearest(&x)?;
-                let total = mix.library.challenge[s];
-                (total > 0.0).then(|| {
-                    let row = &mix.library.q[s * actions..(s + 1) * actions];
-                    let uniform = 1.0 / actions as f64;
-                    for ((m, q), p) in mixed.iter_mut().zip(row).zip(ndd) {
-                        let explore = match mix.outside {
-                            OutsideSpread::Ndd => *p,
-                            OutsideSpread::Uniform => uniform,
-                        };
-                        *m = (1.0 - mix.epsilon) * q / total + mix.epsilon * explore;
-                    }
-                })
-            });
-            let k = match guided {
-                Some(()) => {
-                    let k = draw_index(&mixed, r);
-                    log_weight += (ndd[k] / mixed[k]).ln();
-                    k
-                }
-                None => draw_index(ndd, r),
-            };
+            let k = self.draw_action(&x, &mut rng, &mut mixed, &mut log_weight);
             let action = self.world.action(k);
             let next = advance_with(&self.world, x, action, driver, &mut odometer)?;
             observe(FollowDecision {
@@ -255,5 +316,38 @@ impl FollowSampler {
             log_weight,
             initial_state: s1,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cases::carfollow::FollowExposureModel;
+
+    #[test]
+    fn the_binary_search_draws_what_the_scan_draws() {
+        let world = FollowWorld::paper();
+        let grid = StateGrid::paper();
+        let exposure = FollowExposure::from_model(&FollowExposureModel::default(), &world, &grid);
+        let rows = &exposure.actions;
+        let cdf = running_sums(rows, world.actions);
+        let mut rs: Vec<f64> = (0..=4096).map(|i| i as f64 / 4096.0).collect();
+        // Every running sum itself and its neighbours: the boundaries.
+        for &acc in &cdf {
+            rs.extend([acc, acc.next_down(), acc.next_up()]);
+        }
+        // A row whose mass sums below 1: the fallback to the last action
+        // with mass.
+        let short = [0.2, 0.3, 0.0, 0.1, 0.0];
+        let short_cdf = running_sums(&short, short.len());
+        for &r in &rs {
+            for (row, sums) in rows
+                .chunks(world.actions)
+                .zip(cdf.chunks(world.actions))
+                .chain([(&short[..], &short_cdf[..])])
+            {
+                assert_eq!(draw_from_cdf(row, sums, r), draw_index(row, r), "r = {r}");
+            }
+        }
     }
 }

@@ -487,6 +487,25 @@ impl CampaignTests for FollowCampaign {
         })
     }
 
+    /// In batches of [`super::batch::LANES`] for the IDM and the FVDM.
+    fn run_span(&self, from: u64, to: u64) -> Option<Vec<TestOutcome>> {
+        let CampaignVehicle::Builtin(vut) = &self.vut else {
+            return None;
+        };
+        let follower = super::batch::BatchFollower::of(vut)?;
+        let indices: Vec<u64> = (from..to).collect();
+        Some(
+            indices
+                .chunks(super::batch::LANES)
+                .flat_map(|lanes| self.sampler.run_batch(&follower, self.seed, lanes))
+                .map(|test| TestOutcome {
+                    event: test.accident,
+                    weight: test.weight(),
+                })
+                .collect(),
+        )
+    }
+
     /// Replays a built-in vehicle's test. An external program's test
     /// cannot be replayed on the coordinator, and its weight depends on the
     /// program's trajectory: only its range is checked, `0 < w < ∞`.
