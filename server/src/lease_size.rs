@@ -7,7 +7,12 @@
 //! `size_time = target · T / c`. Near the goal the lease shrinks further:
 //! from the current prefix, `n_needed ≈ n (rₙ/β)²` tests reach `rₙ = β`
 //! (the half-width shrinks as `1/√n`), so no lease takes more than half of
-//! the tests predicted to be still unleased.
+//! the tests predicted to be still unleased. Before the prefix allows a
+//! prediction (too few events), a lease holds at most as many tests as were
+//! leased before it (and at least a first lease): the leases grow
+//! geometrically, so a campaign that turns out to need `N` tests is leased
+//! at most about `2N` plus the leases in flight when it stops, not a few
+//! seconds of work of a cheap test (millions) after a few thousand.
 
 /// Fewest tests in a lease.
 pub const MIN_LEASE: u64 = 16;
@@ -29,6 +34,8 @@ pub struct SizingInput {
     pub budget_left: u64,
     /// `n_needed − next_index`, when the prefix allows a prediction.
     pub predicted_unleased: Option<u64>,
+    /// Tests leased before this lease (`next_index`).
+    pub leased: u64,
 }
 
 pub fn lease_size(input: &SizingInput) -> u64 {
@@ -37,9 +44,10 @@ pub fn lease_size(input: &SizingInput) -> u64 {
         Some(c) if c > 0.0 => (input.target_seconds * threads / c).min(MAX_LEASE as f64) as u64,
         _ => FIRST_LEASE_PER_THREAD * u64::from(input.threads.max(1)),
     };
+    let first = FIRST_LEASE_PER_THREAD * u64::from(input.threads.max(1));
     let by_goal = input
         .predicted_unleased
-        .map_or(u64::MAX, |left| (left / 2).max(MIN_LEASE));
+        .map_or(input.leased.max(first), |left| (left / 2).max(MIN_LEASE));
     by_time
         .min(by_goal)
         .clamp(MIN_LEASE, MAX_LEASE)
@@ -87,6 +95,7 @@ mod tests {
             target_seconds: 2.0,
             budget_left: u64::MAX,
             predicted_unleased: None,
+            leased: u64::MAX,
         }
     }
 
@@ -111,6 +120,28 @@ mod tests {
             ..input()
         };
         assert_eq!(lease_size(&very_slow), MIN_LEASE);
+    }
+
+    #[test]
+    fn before_a_prediction_leases_at_most_double_what_was_leased() {
+        let cheap = SizingInput {
+            cost_per_test: Some(5e-7),
+            leased: 0,
+            ..input()
+        };
+        // The first lease: 256 a thread.
+        assert_eq!(lease_size(&cheap), 1024);
+        let grown = SizingInput {
+            leased: 50_000,
+            ..cheap
+        };
+        assert_eq!(lease_size(&grown), 50_000);
+        // A prediction decides once there is one.
+        let predicted = SizingInput {
+            predicted_unleased: Some(1_000_000),
+            ..grown
+        };
+        assert_eq!(lease_size(&predicted), 500_000);
     }
 
     #[test]

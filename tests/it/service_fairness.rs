@@ -61,3 +61,30 @@ async fn two_long_campaigns_share_the_workers_in_comparable_worker_time() {
     // cost differently per test, and both counts still grew.
     assert!(a.leased > alone.leased && b.leased > 0);
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn leases_before_a_prediction_do_not_run_far_past_the_stop() {
+    // Cheap tests (a cut-in NDD run is a few hundred nanoseconds): a lease
+    // sized by time alone would hold millions before the campaign has the
+    // events to predict its stop.
+    let dir = scratch();
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &[]);
+    let _workers = two_workers(&server.url);
+    let client = server.client();
+    for (beta, seed) in [(0.2, 1), (0.3, 2), (0.1, 3)] {
+        let mut request = campaign(Method::Ndd, 0, "idm", beta, seed);
+        request.library_id = None;
+        request.max_tests = 1 << 40;
+        let id = client.create_campaign(&request).await.unwrap().id;
+        let view = finished(&client, id, LIMIT).await;
+        assert_eq!(view.status, CampaignStatus::Converged, "{view:?}");
+        // Leased: what the workers were given; a few leases in flight at
+        // the stop are the price of not waiting for each report.
+        assert!(
+            view.leased <= 3 * view.indices + 4096,
+            "β {beta}: {} tests leased for a stop at {}",
+            view.leased,
+            view.indices
+        );
+    }
+}
