@@ -409,6 +409,10 @@ fn car_following_tests_run_in_batches_are_the_tests_run_one_by_one() {
                     "{preset}, {vut}, library: {}",
                     file.is_some()
                 );
+                // The coordinator's replay of scattered tests, in batches.
+                let picks = [7, 3_000, 12, 12, 999, 5, 40_000, 1, 2, 3];
+                let replayed: Vec<_> = picks.iter().map(|&i| tests.replay(i).unwrap()).collect();
+                assert_eq!(tests.replay_many(&picks), Some(replayed));
                 if file.is_some() || preset == "risky" {
                     assert!(span.iter().any(|o| o.event), "{preset} {vut}: no accident");
                 }

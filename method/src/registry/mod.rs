@@ -210,6 +210,14 @@ pub trait CampaignTests: Send + Sync {
         let _ = (from, to);
         None
     }
+    /// The outcomes of tests `indices` (any order) on the campaign's
+    /// built-in vehicle, in batches where the case runs tests that way
+    /// (the coordinator's replay of the tests a report adds); `None`:
+    /// replay them one by one ([`Self::replay`]).
+    fn replay_many(&self, indices: &[u64]) -> Option<Vec<TestOutcome>> {
+        let _ = indices;
+        None
+    }
     /// Checks a reported event against the campaign's own test `index`: a
     /// mismatch means the reporter samples differently (another version,
     /// another library) and its results must not enter the estimate. What

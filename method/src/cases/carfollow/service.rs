@@ -489,11 +489,14 @@ impl CampaignTests for FollowCampaign {
 
     /// In batches of [`super::batch::LANES`] for the IDM and the FVDM.
     fn run_span(&self, from: u64, to: u64) -> Option<Vec<TestOutcome>> {
+        self.replay_many(&(from..to).collect::<Vec<u64>>())
+    }
+
+    fn replay_many(&self, indices: &[u64]) -> Option<Vec<TestOutcome>> {
         let CampaignVehicle::Builtin(vut) = &self.vut else {
             return None;
         };
         let follower = super::batch::BatchFollower::of(vut)?;
-        let indices: Vec<u64> = (from..to).collect();
         Some(
             indices
                 .chunks(super::batch::LANES)
