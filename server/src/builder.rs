@@ -73,20 +73,7 @@ async fn record_build(
 ) -> anyhow::Result<()> {
     match outcome? {
         Ok((library, seconds)) => {
-            libraries::mark_ready(
-                &state.db.write,
-                id,
-                &Built {
-                    file: &library.file,
-                    media_type: library.media_type,
-                    size: library.size,
-                    sm_evaluations: library.sm_evaluations,
-                    mu_s: library.mu_s,
-                    w: library.w,
-                    seconds,
-                },
-            )
-            .await?;
+            libraries::mark_ready(&state.db.write, id, &Built::of(&library, seconds)).await?;
             tracing::info!(library = id, size = library.size, seconds, "library ready");
         }
         Err(reason) => {

@@ -262,15 +262,7 @@ pub async fn finish(state: &AppState, campaign_id: i64) -> Result<(), ApiError> 
             libraries::mark_ready(
                 &state.db.write,
                 id,
-                &Built {
-                    file: &built.file,
-                    media_type: built.media_type,
-                    size: built.size,
-                    sm_evaluations: built.sm_evaluations,
-                    mu_s: built.mu_s,
-                    w: built.w,
-                    seconds: campaign.worker_seconds,
-                },
+                &Built::of(&built, campaign.worker_seconds),
             )
             .await?;
             tracing::info!(library = id, size = built.size, "library built on workers");

@@ -199,20 +199,8 @@ pub async fn upload(state: &AppState, id: i64, upload: &LibraryUpload) -> Result
     let (campaign, library) = holder_of(&mut tx, id, upload).await?;
     let (status, detail) = match &checked {
         Ok(built) => {
-            libraries::mark_ready_in(
-                &mut tx,
-                library.id,
-                &Built {
-                    file: &built.file,
-                    media_type: built.media_type,
-                    size: built.size,
-                    sm_evaluations: built.sm_evaluations,
-                    mu_s: built.mu_s,
-                    w: built.w,
-                    seconds: upload.seconds,
-                },
-            )
-            .await?;
+            libraries::mark_ready_in(&mut tx, library.id, &Built::of(built, upload.seconds))
+                .await?;
             (CampaignStatus::Converged, None)
         }
         Err(reason) => {

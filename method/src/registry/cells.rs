@@ -210,14 +210,7 @@ where
             &request,
             progress,
         ))?;
-        Ok(BuiltLibrary {
-            file: library.to_json().into_bytes(),
-            media_type: LIBRARY_MEDIA_TYPE,
-            size: library.size(),
-            sm_evaluations: library.search.sm_evaluations,
-            mu_s: library.mu_s,
-            w: library.w,
-        })
+        Ok(grid_built(&library, library.to_json().into_bytes()))
     }
 
     fn campaign(
@@ -284,14 +277,7 @@ where
                 }
             }
         }
-        Ok(BuiltLibrary {
-            file: file.to_vec(),
-            media_type: LIBRARY_MEDIA_TYPE,
-            size: library.size(),
-            sm_evaluations: library.search.sm_evaluations,
-            mu_s: library.mu_s,
-            w: library.w,
-        })
+        Ok(grid_built(&library, file.to_vec()))
     }
 
     fn enumeration(
@@ -340,14 +326,7 @@ where
             &event_cells,
             cells.len(),
         );
-        Ok(BuiltLibrary {
-            file: library.to_json().into_bytes(),
-            media_type: LIBRARY_MEDIA_TYPE,
-            size: library.size(),
-            sm_evaluations: library.search.sm_evaluations,
-            mu_s: library.mu_s,
-            w: library.w,
-        })
+        Ok(grid_built(&library, library.to_json().into_bytes()))
     }
 
     fn library_picture(&self, file: &[u8]) -> Result<Vec<PictureMap>, CaseError> {
@@ -625,6 +604,18 @@ where
                 .case
                 .is_event(surrogate, self.distribution.draw(self.seed, index).cell)
         })
+    }
+}
+
+/// A grid library as a build's result, with its file `file`.
+fn grid_built(library: &Library, file: Vec<u8>) -> BuiltLibrary {
+    BuiltLibrary {
+        file,
+        media_type: LIBRARY_MEDIA_TYPE,
+        size: library.size(),
+        sm_evaluations: library.search.sm_evaluations,
+        mu_s: library.mu_s,
+        w: library.w,
     }
 }
 

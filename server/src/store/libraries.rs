@@ -162,6 +162,21 @@ pub struct Built<'a> {
     pub seconds: f64,
 }
 
+impl<'a> Built<'a> {
+    /// A build's result, `seconds` long.
+    pub fn of(library: &'a tslg_method::registry::BuiltLibrary, seconds: f64) -> Self {
+        Self {
+            file: &library.file,
+            media_type: library.media_type,
+            size: library.size,
+            sm_evaluations: library.sm_evaluations,
+            mu_s: library.mu_s,
+            w: library.w,
+            seconds,
+        }
+    }
+}
+
 /// Marks a library ready and lets its pending campaigns run.
 pub async fn mark_ready(pool: &SqlitePool, id: i64, built: &Built<'_>) -> Result<(), ApiError> {
     let mut tx = pool.begin().await?;
