@@ -5,10 +5,12 @@
 //! arise between them; reads use a separate pool and, in WAL mode, never
 //! block the writer or each other.
 
+use crate::group_commit::GroupCommit;
 use anyhow::Context;
 use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, SqliteSynchronous};
 use sqlx::SqlitePool;
 use std::str::FromStr;
+use std::sync::Arc;
 use std::time::Duration;
 
 /// How hard each commit is pushed to disk (SQLite's `synchronous` in WAL
@@ -25,7 +27,11 @@ pub enum Durability {
 
 #[derive(Clone)]
 pub struct Database {
+    /// The single write connection, for writes off the hot paths.
     pub write: SqlitePool,
+    /// Leases and reports: their writes share transactions and fsyncs
+    /// ([`GroupCommit`]), on the same connection.
+    pub group: Arc<GroupCommit>,
     pub read: SqlitePool,
 }
 
@@ -60,7 +66,8 @@ impl Database {
             .connect_with(options.read_only(true))
             .await
             .with_context(|| format!("cannot open the database {url} for reading"))?;
-        Ok(Self { write, read })
+        let group = GroupCommit::start(write.clone());
+        Ok(Self { write, group, read })
     }
 }
 

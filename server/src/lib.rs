@@ -11,6 +11,7 @@ mod config;
 mod db;
 mod enumeration;
 mod error;
+mod group_commit;
 mod history;
 mod latency;
 mod lease_size;

@@ -89,11 +89,10 @@ pub async fn claim(
     ask: &Claim<'_>,
 ) -> Result<Option<LeaseRow>, ApiError> {
     let Claim {
-        worker,
-        threads,
         inline,
         offers,
         max_tests,
+        ..
     } = *ask;
     let now = now_ms();
     let expires = now + ttl_ms(config);
@@ -120,9 +119,51 @@ pub async fn claim(
     let sequential = serde_json::to_string(&sequential).expect("strings serialise");
     let offered = serde_json::to_string(offers).expect("strings serialise");
     let runnable = "AND (c.requires IS NULL OR c.requires IN (SELECT value FROM json_each(?)))";
-    let mut tx = db.write.begin().await?;
+    let filters = Filters {
+        planned_only,
+        runnable,
+        sequential: inline.then_some(sequential.as_str()),
+        offered: &offered,
+        span_limit,
+    };
+    db.group
+        .run(async |tx| claim_in(tx, config, ask, &filters, now, expires).await)
+        .await
+}
+
+/// Which campaigns a claim may take, as SQL and its bound values.
+struct Filters<'a> {
+    planned_only: &'a str,
+    runnable: &'a str,
+    /// The cases whose scenarios are drawn while a test runs, as a JSON
+    /// array (only when the lease lists its tests).
+    sequential: Option<&'a str>,
+    /// The programs offered, as a JSON array.
+    offered: &'a str,
+    span_limit: i64,
+}
+
+/// [`claim`] on the writer connection, in the claim's savepoint.
+async fn claim_in(
+    tx: &mut SqliteConnection,
+    config: &Config,
+    ask: &Claim<'_>,
+    filters: &Filters<'_>,
+    now: i64,
+    expires: i64,
+) -> Result<Option<LeaseRow>, ApiError> {
+    let Filters {
+        planned_only,
+        runnable,
+        sequential,
+        offered,
+        span_limit,
+    } = *filters;
+    let Claim {
+        worker, threads, ..
+    } = *ask;
     // In the transaction: a flag set since the route's check still counts.
-    audits::refuse_flagged(&mut tx, worker).await?;
+    audits::refuse_flagged(&mut *tx, worker).await?;
     let sql = format!(
         "UPDATE leases SET attempt = attempt + 1, worker = ?, expires_at = ?, key = ?, \
              claimed_at = ?, threads = ? \
@@ -141,12 +182,11 @@ pub async fn claim(
         .bind(threads)
         .bind(now)
         .bind(span_limit);
-    if inline {
-        query = query.bind(&sequential);
+    if let Some(sequential) = sequential {
+        query = query.bind(sequential);
     }
-    let reclaimed: Option<LeaseRow> = query.bind(&offered).fetch_optional(&mut *tx).await?;
+    let reclaimed: Option<LeaseRow> = query.bind(offered).fetch_optional(&mut *tx).await?;
     if let Some(lease) = reclaimed {
-        tx.commit().await?;
         tracing::info!(
             lease = lease.id,
             attempt = lease.attempt,
@@ -155,8 +195,7 @@ pub async fn claim(
         );
         return Ok(Some(lease));
     }
-    if let Some(lease) = claim_audit(&mut tx, ask, &offered, now, expires).await? {
-        tx.commit().await?;
+    if let Some(lease) = claim_audit(&mut *tx, ask, offered, now, expires).await? {
         return Ok(Some(lease));
     }
     // A campaign with many tests waiting for their audits gets no new
@@ -172,10 +211,10 @@ pub async fn claim(
         open = audits::OPEN
     );
     let mut query = sqlx::query_as(&sql);
-    if inline {
-        query = query.bind(&sequential);
+    if let Some(sequential) = sequential {
+        query = query.bind(sequential);
     }
-    let Some(campaign): Option<CampaignRow> = query.bind(&offered).fetch_optional(&mut *tx).await?
+    let Some(campaign): Option<CampaignRow> = query.bind(offered).fetch_optional(&mut *tx).await?
     else {
         return Ok(None);
     };
@@ -212,7 +251,6 @@ pub async fn claim(
         .bind(threads)
         .fetch_one(&mut *tx)
         .await?;
-    tx.commit().await?;
     Ok(Some(lease))
 }
 
@@ -383,9 +421,10 @@ pub async fn heartbeat(
     id: i64,
     fence: &LeaseFence,
 ) -> Result<HeartbeatAck, ApiError> {
-    let mut tx = db.write.begin().await?;
-    audits::refuse_flagged(&mut tx, &fence.worker).await?;
-    let lease = get(&mut tx, id).await?;
+    db.group
+        .run(async |tx| {
+    audits::refuse_flagged(&mut *tx, &fence.worker).await?;
+    let lease = get(&mut *tx, id).await?;
     check_fence(&lease, &fence.worker, fence.attempt, fence.key.as_str())?;
     let campaign = campaigns::get(&mut *tx, lease.campaign_id).await?;
     let status = campaign.status;
@@ -405,19 +444,21 @@ pub async fn heartbeat(
     .bind(fence.attempt)
     .execute(&mut *tx)
     .await?;
-    tx.commit().await?;
     Ok(HeartbeatAck {
         proceed: updated.rows_affected() == 1,
         campaign_status: status,
         ttl_seconds: config.lease_ttl_seconds,
     })
+        })
+        .await
 }
 
 /// Gives a lease back unfinished: it expires now and is handed out again
 /// from its first unreported index.
 pub async fn release(db: &Database, id: i64, fence: &LeaseFence) -> Result<LeaseRow, ApiError> {
-    let mut tx = db.write.begin().await?;
-    let lease = get(&mut tx, id).await?;
+    db.group
+        .run(async |tx| {
+    let lease = get(&mut *tx, id).await?;
     check_fence(&lease, &fence.worker, fence.attempt, fence.key.as_str())?;
     sqlx::query(
         "UPDATE leases SET expires_at = 0 WHERE id = ? AND worker = ? AND attempt = ? AND state = 'active'",
@@ -427,7 +468,7 @@ pub async fn release(db: &Database, id: i64, fence: &LeaseFence) -> Result<Lease
     .bind(fence.attempt)
     .execute(&mut *tx)
     .await?;
-    let lease = get(&mut tx, id).await?;
-    tx.commit().await?;
-    Ok(lease)
+    get(&mut *tx, id).await
+        })
+        .await
 }

@@ -89,13 +89,26 @@ pub async fn record(
     checked: &CheckedReport,
     found: Findings<'_>,
 ) -> Result<Recorded, ApiError> {
+    db.group
+        .run(async |conn| record_in(conn, config, lease_id, report, checked, found).await)
+        .await
+}
+
+/// [`record`] on the writer connection, in the report's savepoint.
+async fn record_in(
+    tx: &mut SqliteConnection,
+    config: &Config,
+    lease_id: i64,
+    report: &ResultReport,
+    checked: &CheckedReport,
+    found: Findings<'_>,
+) -> Result<Recorded, ApiError> {
     let Findings {
         tests,
         audits: plan,
         explored: known,
     } = found;
-    let mut tx = db.write.begin().await?;
-    let (lease, campaign) = held_lease(&mut tx, lease_id, report).await?;
+    let (lease, campaign) = held_lease(tx, lease_id, report).await?;
     let span = checked.to - checked.from;
     let (start, end, resume_at) = (
         lease.start_index as u64,
@@ -124,21 +137,17 @@ pub async fn record(
     }
     let overlap_end = checked.to.min(resume_at);
     if checked.from < overlap_end {
-        compare_with_stored(&mut tx, &campaign, checked, overlap_end).await?;
+        compare_with_stored(tx, &campaign, checked, overlap_end).await?;
     }
     let new_from = checked.from.max(resume_at);
     let mut accepted = 0;
     if new_from < checked.to {
         accepted = checked.to - new_from;
         let expires_at = now_ms() + (config.lease_ttl_seconds * 1000.0) as i64;
-        store_new_part(
-            &mut tx, &campaign, &lease, report, checked, new_from, expires_at,
-        )
-        .await?;
-        store_audits(&mut tx, campaign.id, &report.worker, plan, new_from).await?;
+        store_new_part(tx, &campaign, &lease, report, checked, new_from, expires_at).await?;
+        store_audits(tx, campaign.id, &report.worker, plan, new_from).await?;
     }
-    let stopped = fold_prefix(&mut tx, &campaign, tests, known).await?;
-    tx.commit().await?;
+    let stopped = fold_prefix(tx, &campaign, tests, known).await?;
     let status = stopped.unwrap_or(CampaignStatus::Running);
     let resume_at = resume_at.max(checked.to);
     Ok(Recorded {
