@@ -26,6 +26,9 @@ struct Snapshot {
     outstanding: i64,
     expired: i64,
     reclaimed: i64,
+    /// Group commits since the coordinator started, and the requests
+    /// they answered.
+    groups: (u64, u64),
 }
 
 async fn snapshot(state: &AppState) -> Result<Snapshot, ApiError> {
@@ -61,6 +64,7 @@ async fn snapshot(state: &AppState) -> Result<Snapshot, ApiError> {
         outstanding,
         expired,
         reclaimed,
+        groups: state.db.group.counts(),
     })
 }
 
@@ -154,6 +158,20 @@ fn scrape_registry(s: &Snapshot, live: usize, known: usize) -> Registry {
         "tslg_leases_reclaimed_total",
         "Expired or released leases handed out again.",
         s.reclaimed,
+    );
+    counter(
+        &r,
+        "tslg_write_groups_total",
+        "Transactions that committed leases, reports and heartbeats together, since the \
+         coordinator started (one fsync each).",
+        s.groups.0 as i64,
+    );
+    counter(
+        &r,
+        "tslg_grouped_writes_total",
+        "Requests committed by those transactions (divided by tslg_write_groups_total: the mean \
+         group size).",
+        s.groups.1 as i64,
     );
     let workers = gauge_vec(
         &r,

@@ -32,8 +32,7 @@ pub async fn receive(
     // (The transaction that records the report checks flag and fence again.)
     let (lease, campaign) = {
         let mut conn = state.db.read.acquire().await?;
-        audits::refuse_flagged(&mut conn, &report.worker).await?;
-        let lease = leases::get(&mut conn, lease_id).await?;
+        let lease = leases::get_unless_flagged(&mut conn, lease_id, &report.worker).await?;
         leases::check_fence(&lease, &report.worker, report.attempt, report.key.as_str())?;
         let campaign = campaigns::get(&mut *conn, lease.campaign_id).await?;
         (lease, campaign)

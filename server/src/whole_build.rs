@@ -16,8 +16,8 @@
 use crate::error::ApiError;
 use crate::state::AppState;
 use crate::store::campaigns::{self, CampaignRow};
+use crate::store::leases;
 use crate::store::libraries::{self, Built, LibraryRow};
-use crate::store::{audits, leases};
 use tslg_api::{CampaignStatus, LibraryStatus, LibraryUpload, Method};
 use tslg_method::estimator::StoppingRule;
 use tslg_method::registry::BuiltLibrary;
@@ -90,8 +90,7 @@ async fn holder_of(
     id: i64,
     upload: &LibraryUpload,
 ) -> Result<(CampaignRow, LibraryRow), ApiError> {
-    audits::refuse_flagged(&mut *conn, &upload.worker).await?;
-    let lease = leases::get(&mut *conn, id).await?;
+    let lease = leases::get_unless_flagged(&mut *conn, id, &upload.worker).await?;
     leases::check_fence(&lease, &upload.worker, upload.attempt, upload.key.as_str())?;
     let campaign = campaigns::get(&mut *conn, lease.campaign_id).await?;
     if campaign.method != Method::Build {

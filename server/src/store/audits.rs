@@ -92,21 +92,6 @@ pub async fn insert(
     Ok(())
 }
 
-/// The smallest test index of the campaign's open audits: its prefix
-/// stops there until they are decided.
-pub async fn open_front(
-    conn: &mut SqliteConnection,
-    campaign: i64,
-) -> Result<Option<u64>, ApiError> {
-    let (front,): (Option<i64>,) = sqlx::query_as(&format!(
-        "SELECT MIN(test_index) FROM audits WHERE campaign_id = ? AND state IN {OPEN}"
-    ))
-    .bind(campaign)
-    .fetch_one(&mut *conn)
-    .await?;
-    Ok(front.map(|i| i as u64))
-}
-
 pub async fn get(conn: &mut SqliteConnection, id: i64) -> Result<AuditRow, ApiError> {
     sqlx::query_as(&format!("SELECT {COLUMNS} FROM audits WHERE id = ?"))
         .bind(id)
@@ -171,11 +156,16 @@ where
 pub async fn refuse_flagged(conn: &mut SqliteConnection, worker: &str) -> Result<(), ApiError> {
     match flag_of(&mut *conn, worker).await? {
         None => Ok(()),
-        Some(reason) => Err(ApiError::Forbidden(format!(
-            "worker `{worker}` is flagged and gets no work: {reason}; an operator clears the \
-             flag with DELETE /api/v1/workers/{worker}/flag"
-        ))),
+        Some(reason) => Err(flagged_problem(worker, &reason)),
     }
+}
+
+/// The 403 a flagged worker gets.
+pub fn flagged_problem(worker: &str, reason: &str) -> ApiError {
+    ApiError::Forbidden(format!(
+        "worker `{worker}` is flagged and gets no work: {reason}; an operator clears the flag \
+         with DELETE /api/v1/workers/{worker}/flag"
+    ))
 }
 
 /// Every flagged worker with why.

@@ -80,16 +80,36 @@ pub(crate) async fn frontier(
     conn: &mut SqliteConnection,
     campaign: &CampaignRow,
 ) -> Result<u64, ApiError> {
-    let (open,): (Option<i64>,) = sqlx::query_as(
-        "SELECT MIN(resume_at) FROM leases WHERE campaign_id = ? AND state = 'active' \
-         AND audit_id IS NULL",
-    )
-    .bind(campaign.id)
-    .fetch_one(&mut *conn)
-    .await?;
+    Ok(bounds(conn, campaign).await?.frontier)
+}
+
+/// Where a fold may go and where its history stands.
+struct Bounds {
+    /// See [`frontier`].
+    frontier: u64,
+    /// The campaign's last stored history point.
+    last_stored: Option<u64>,
+}
+
+/// [`Bounds`] in one read (a fold runs in every report's transaction).
+async fn bounds(conn: &mut SqliteConnection, campaign: &CampaignRow) -> Result<Bounds, ApiError> {
+    let (open, audited, last_stored): (Option<i64>, Option<i64>, Option<i64>) =
+        sqlx::query_as(&format!(
+            "SELECT (SELECT MIN(resume_at) FROM leases WHERE campaign_id = ?1 \
+                     AND state = 'active' AND audit_id IS NULL), \
+                    (SELECT MIN(test_index) FROM audits WHERE campaign_id = ?1 \
+                     AND state IN {open}), \
+                    (SELECT MAX(indices) FROM history WHERE campaign_id = ?1)",
+            open = audits::OPEN
+        ))
+        .bind(campaign.id)
+        .fetch_one(&mut *conn)
+        .await?;
     let recorded = open.map_or(campaign.next_index, |r| r.min(campaign.next_index)) as u64;
-    let audited = audits::open_front(&mut *conn, campaign.id).await?;
-    Ok(audited.map_or(recorded, |a| a.min(recorded)))
+    Ok(Bounds {
+        frontier: audited.map_or(recorded, |a| (a as u64).min(recorded)),
+        last_stored: last_stored.map(|i| i as u64),
+    })
 }
 
 /// The tests of `from..to` that draw outside the library, replayed off the
@@ -127,7 +147,10 @@ pub async fn fold_prefix(
         })?;
         return crate::store::adaptive::resolve_stages(conn, campaign, &tests).await;
     }
-    let frontier = frontier(conn, campaign).await?;
+    let Bounds {
+        frontier,
+        last_stored,
+    } = bounds(conn, campaign).await?;
     let mut fold = campaign.fold();
     if frontier <= fold.indices {
         return Ok(None);
@@ -168,21 +191,11 @@ pub async fn fold_prefix(
         mass,
         surrogate_misses: &misses,
     });
-    let (last_stored,): (Option<i64>,) =
-        sqlx::query_as("SELECT MAX(indices) FROM history WHERE campaign_id = ?")
-            .bind(campaign.id)
-            .fetch_one(&mut *conn)
-            .await?;
     let rule = campaign.rule();
-    let folded = fold_step(
-        fold,
-        &rule,
-        frontier,
-        &outcomes,
-        exploration,
-        last_stored.map(|i| i as u64),
-    )
-    .map_err(|e| anyhow::anyhow!("stored outcomes of campaign {} rejected: {e}", campaign.id))?;
+    let folded =
+        fold_step(fold, &rule, frontier, &outcomes, exploration, last_stored).map_err(|e| {
+            anyhow::anyhow!("stored outcomes of campaign {} rejected: {e}", campaign.id)
+        })?;
     let upper = mass.map(|m| {
         m.upper(
             folded.fold.outside.tests,

@@ -387,6 +387,41 @@ pub async fn get(conn: &mut SqliteConnection, id: i64) -> Result<LeaseRow, ApiEr
         .ok_or_else(|| ApiError::NotFound(format!("lease {id} does not exist")))
 }
 
+/// Lease `id` for a request of `worker`, refused when `worker` is flagged
+/// (checked first: a flagged worker learns that whatever it asks), in one
+/// read.
+pub async fn get_unless_flagged(
+    conn: &mut SqliteConnection,
+    id: i64,
+    worker: &str,
+) -> Result<LeaseRow, ApiError> {
+    #[derive(sqlx::FromRow)]
+    struct Row {
+        #[sqlx(flatten)]
+        lease: LeaseRow,
+        flag: Option<String>,
+    }
+    let sql = format!(
+        "SELECT {COLUMNS}, (SELECT reason FROM flagged_workers WHERE name = ?) AS flag \
+         FROM leases WHERE id = ?"
+    );
+    let row: Option<Row> = sqlx::query_as(&sql)
+        .bind(worker)
+        .bind(id)
+        .fetch_optional(&mut *conn)
+        .await?;
+    match row {
+        Some(Row {
+            flag: Some(reason), ..
+        }) => Err(audits::flagged_problem(worker, &reason)),
+        Some(Row { lease, flag: None }) => Ok(lease),
+        None => {
+            audits::refuse_flagged(&mut *conn, worker).await?;
+            Err(ApiError::NotFound(format!("lease {id} does not exist")))
+        }
+    }
+}
+
 /// Refuses a caller that does not hold the lease in its current attempt:
 /// 409 when the attempt or worker is not the current one (the lease expired
 /// and was handed out again; a stale holder stops), 403 when they are but
@@ -423,8 +458,7 @@ pub async fn heartbeat(
 ) -> Result<HeartbeatAck, ApiError> {
     db.group
         .run(async |tx| {
-    audits::refuse_flagged(&mut *tx, &fence.worker).await?;
-    let lease = get(&mut *tx, id).await?;
+    let lease = get_unless_flagged(&mut *tx, id, &fence.worker).await?;
     check_fence(&lease, &fence.worker, fence.attempt, fence.key.as_str())?;
     let campaign = campaigns::get(&mut *tx, lease.campaign_id).await?;
     let status = campaign.status;

@@ -58,69 +58,64 @@ pub async fn insert(conn: &mut SqliteConnection, report: &NewReport<'_>) -> Resu
     Ok(())
 }
 
-/// Stored events of `campaign` with index in `from..to`, in index order.
-pub async fn events(
-    conn: &mut SqliteConnection,
+/// The reports' rows that can reach into `from..to`, as SQL: a report
+/// covers at most MAX_REPORT_TESTS tests, so only rows starting that far
+/// before `from` can, and the key bounds the scan. Binds campaign, from,
+/// to as ?1, ?2, ?3.
+const REPORTS_REACHING: &str = "FROM reports WHERE campaign_id = ?1 \
+     AND from_index > ?2 - ?4 AND from_index < ?3 AND to_index > ?2 AND events > 0";
+
+/// Appends the events of the report row starting at `start` that fall in
+/// `range`.
+fn unpack_into(
+    events: &mut Vec<(u64, f64)>,
     campaign: i64,
-    from: u64,
-    to: u64,
-) -> Result<Vec<(u64, f64)>, ApiError> {
-    // A report covers at most MAX_REPORT_TESTS tests, so only rows starting
-    // that far before `from` can reach into the range: the key bounds the scan.
-    let rows: Vec<(i64, Vec<u8>)> = sqlx::query_as(
-        "SELECT from_index, packed FROM reports \
-         WHERE campaign_id = ? AND from_index > ? AND from_index < ? AND to_index > ? \
-           AND events > 0 ORDER BY from_index",
-    )
-    .bind(campaign)
-    .bind(from as i64 - MAX_REPORT_TESTS as i64)
-    .bind(to as i64)
-    .bind(from as i64)
-    .fetch_all(&mut *conn)
-    .await?;
-    let mut events = Vec::new();
-    for (start, bytes) in rows {
-        let unpacked = packed::unpack(start as u64, &bytes).map_err(|e| {
-            anyhow::anyhow!("stored report at {start} of campaign {campaign} is damaged: {e}")
-        })?;
-        events.extend(
-            unpacked
-                .into_iter()
-                .filter(|&(i, _)| (from..to).contains(&i)),
-        );
-    }
-    // Rows moved from the old per-event table may overlap newer reports'
-    // ranges (never their events): sort once.
-    events.sort_by_key(|&(i, _)| i);
-    Ok(events)
+    start: i64,
+    bytes: &[u8],
+    range: std::ops::Range<u64>,
+) -> Result<(), ApiError> {
+    let unpacked = packed::unpack(start as u64, bytes).map_err(|e| {
+        anyhow::anyhow!("stored report at {start} of campaign {campaign} is damaged: {e}")
+    })?;
+    events.extend(unpacked.into_iter().filter(|&(i, _)| range.contains(&i)));
+    Ok(())
 }
 
 /// Stored events and invalid tests of `campaign` in `from..to`, sorted by
-/// index.
+/// index, in one read (a fold runs in every report's transaction).
 pub async fn outcomes(
     conn: &mut SqliteConnection,
     campaign: i64,
     from: u64,
     to: u64,
 ) -> Result<Vec<(u64, SparseOutcome)>, ApiError> {
-    let events = events(conn, campaign, from, to).await?;
-    let invalid: Vec<(i64,)> = sqlx::query_as(
-        "SELECT test_index FROM invalid_tests WHERE campaign_id = ? AND test_index >= ? AND test_index < ?",
-    )
+    // A report row carries its packed events; an invalid test, none.
+    let rows: Vec<(i64, Option<Vec<u8>>)> = sqlx::query_as(&format!(
+        "SELECT from_index, packed {REPORTS_REACHING} \
+         UNION ALL SELECT test_index, NULL FROM invalid_tests \
+         WHERE campaign_id = ?1 AND test_index >= ?2 AND test_index < ?3"
+    ))
     .bind(campaign)
     .bind(from as i64)
     .bind(to as i64)
+    .bind(MAX_REPORT_TESTS as i64)
     .fetch_all(&mut *conn)
     .await?;
-    let mut outcomes: Vec<(u64, SparseOutcome)> = events
-        .into_iter()
-        .map(|(i, w)| (i, SparseOutcome::Event(w)))
-        .chain(
-            invalid
-                .into_iter()
-                .map(|(i,)| (i as u64, SparseOutcome::Invalid)),
-        )
-        .collect();
+    let mut events = Vec::new();
+    let mut outcomes = Vec::new();
+    for (start, bytes) in rows {
+        match bytes {
+            Some(bytes) => unpack_into(&mut events, campaign, start, &bytes, from..to)?,
+            None => outcomes.push((start as u64, SparseOutcome::Invalid)),
+        }
+    }
+    outcomes.extend(
+        events
+            .into_iter()
+            .map(|(i, w)| (i, SparseOutcome::Event(w))),
+    );
+    // Rows moved from the old per-event table may overlap newer reports'
+    // ranges (never their events): sort once.
     outcomes.sort_by_key(|&(i, _)| i);
     Ok(outcomes)
 }

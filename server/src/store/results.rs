@@ -173,8 +173,7 @@ pub(crate) async fn held_lease(
     lease_id: i64,
     report: &ResultReport,
 ) -> Result<(LeaseRow, CampaignRow), ApiError> {
-    audits::refuse_flagged(&mut *conn, &report.worker).await?;
-    let lease = leases::get(&mut *conn, lease_id).await?;
+    let lease = leases::get_unless_flagged(&mut *conn, lease_id, &report.worker).await?;
     check_fence(&lease, &report.worker, report.attempt, report.key.as_str())?;
     let campaign = campaigns::get(&mut *conn, lease.campaign_id).await?;
     Ok((lease, campaign))
