@@ -15,16 +15,13 @@
 //! connection until it commits, so the writes that do not go through here
 //! (`Database::write`) still never meet a second writer.
 //!
-//! Savepoints: each request opens one (`SAVEPOINT request`) and rolls back
-//! to it when it fails; one that succeeds leaves it open (the group's
-//! commit releases them all), which saves a round trip to SQLite's thread
-//! per request. A request dropped while it runs (its client went away)
-//! leaves its savepoint marked abandoned, and whoever takes the writer next
-//! (the next request or the committer) rolls it back first; the drop also
-//! wakes the committer, so the group it would have joined still commits.
+//! Cancellation: a request dropped while it runs (its client went away)
+//! drops its savepoint, which sqlx rolls back on the connection's next use
+//! (before any later statement), and wakes the committer, so the group it
+//! would have joined still commits.
 
 use crate::error::ApiError;
-use sqlx::{Sqlite, SqliteConnection, SqlitePool, Transaction};
+use sqlx::{Connection, Sqlite, SqliteConnection, SqlitePool, Transaction};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use tokio::sync::{oneshot, Mutex, Notify};
@@ -38,23 +35,6 @@ type CommitResult = Result<(), Arc<str>>;
 struct Group {
     transaction: Option<Transaction<'static, Sqlite>>,
     waiting: Vec<oneshot::Sender<CommitResult>>,
-    /// The last request's savepoint holds writes of a request that did not
-    /// finish (it failed or was cancelled): they are rolled back before
-    /// anything else runs.
-    abandoned: bool,
-}
-
-/// Rolls back the writes of an unfinished request, when there are any:
-/// its savepoint is the innermost `request`.
-async fn forget_abandoned(
-    conn: &mut SqliteConnection,
-    abandoned: &mut bool,
-) -> Result<(), sqlx::Error> {
-    if *abandoned {
-        sqlx::query("ROLLBACK TO request").execute(conn).await?;
-        *abandoned = false;
-    }
-    Ok(())
 }
 
 /// The writer requests share (see the module documentation).
@@ -108,30 +88,19 @@ impl GroupCommit {
             // Whatever happens below, the committer looks at the group
             // once this request lets go of it.
             let _wake = WakeOnDrop(&self.commit_due);
-            let Group {
-                transaction,
-                waiting,
-                abandoned,
-            } = &mut *group;
-            let conn: &mut SqliteConnection = match transaction {
-                Some(open) => open,
-                None => transaction.insert(self.pool.begin().await?),
-            };
-            forget_abandoned(conn, abandoned).await?;
-            sqlx::query("SAVEPOINT request").execute(&mut *conn).await?;
-            // Until the job is over: a cancellation leaves it so.
-            *abandoned = true;
-            let value = match job(&mut *conn).await {
-                Ok(value) => value,
-                Err(e) => {
-                    forget_abandoned(conn, abandoned).await?;
-                    return Err(e);
-                }
-            };
-            // Not released: the group's commit releases every savepoint.
-            *abandoned = false;
+            if group.transaction.is_none() {
+                group.transaction = Some(self.pool.begin().await?);
+            }
+            let transaction = group.transaction.as_mut().expect("opened above");
+            // Released when the job succeeds: leaving each request's
+            // savepoint open until the commit saves a statement but was
+            // measured slower (64 workers: 1,900-2,300 against 2,800-3,450
+            // requests/s).
+            let mut savepoint = Connection::begin(&mut **transaction).await?;
+            let value = job(&mut savepoint).await?;
+            savepoint.commit().await?;
             let (done, committed) = oneshot::channel();
-            waiting.push(done);
+            group.waiting.push(done);
             (value, committed)
         };
         let (value, committed) = committed;
@@ -157,25 +126,9 @@ impl GroupCommit {
     /// Commits the open group, if any, and answers its requests.
     async fn commit(&self) {
         let mut group = self.group.lock().await;
-        let Group {
-            transaction,
-            abandoned,
-            ..
-        } = &mut *group;
-        let Some(mut transaction) = transaction.take() else {
+        let Some(transaction) = group.transaction.take() else {
             return;
         };
-        if let Err(e) = forget_abandoned(&mut transaction, abandoned).await {
-            tracing::error!(error = %e, "a cancelled request's writes could not be rolled back");
-            // Dropped uncommitted: the whole group is rolled back.
-            let waiting = std::mem::take(&mut group.waiting);
-            let reason: Arc<str> = Arc::from(e.to_string());
-            drop(group);
-            for done in waiting {
-                let _ = done.send(Err(Arc::clone(&reason)));
-            }
-            return;
-        }
         let waiting = std::mem::take(&mut group.waiting);
         let result: CommitResult = transaction.commit().await.map_err(|e| {
             tracing::error!(error = %e, requests = waiting.len(), "a group commit failed");

@@ -5,7 +5,7 @@
 //! simulated workers, each making `--requests` rounds of: take a lease of
 //! at most `--lease-tests` tests (a worker's own cap, so a coordinator with
 //! adaptive lease sizes hands out what one round can run at once), run its
-//! tests for real (about a microsecond each), report them all. It times
+//! tests for real (a fraction of a microsecond each), report them all. It times
 //! every lease and result request, then cancels the campaign, whatever
 //! happened (also on a failure, a timeout or Ctrl-C: a campaign left running
 //! would keep real workers busy), and checks the books: the tests the

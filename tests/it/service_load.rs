@@ -2,7 +2,8 @@
 //! coordinator, for a fixed number of requests within a time limit. No
 //! request fails, the SQLite file is never "locked", and the books balance:
 //! the resolved prefix is exactly the tests acknowledged, and its estimate
-//! is bit for bit the in-process estimate of that many tests.
+//! is bit for bit the in-process estimate of that many tests. Leases and
+//! reports share commits (group commit).
 
 use crate::support::*;
 use serde_json::Value;
@@ -45,6 +46,17 @@ async fn sixty_four_concurrent_workers_lose_and_double_nothing() {
     request.library_id = None;
     request.max_tests = requests * 100;
     assert_same(&view, &in_process(None, &request));
+    // Every lease and report was committed in a group, and with 64
+    // workers at once groups held several requests (group commit).
+    let (groups, grouped) = (
+        scraped(&server.url, "tslg_write_groups_total").await,
+        scraped(&server.url, "tslg_grouped_writes_total").await,
+    );
+    assert!(grouped >= 2.0 * requests as f64, "{grouped} grouped writes");
+    assert!(
+        groups < grouped,
+        "{groups} commits for {grouped} requests: none shared a commit"
+    );
     let log = server.log();
     assert!(!log.contains("database is locked"), "{log}");
     assert!(!log.contains("panicked"), "{log}");

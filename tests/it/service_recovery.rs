@@ -82,18 +82,7 @@ async fn a_worker_killed_mid_lease_changes_neither_the_stop_index_nor_the_estima
     let view = finished(&client, id, Duration::from_secs(300)).await;
     assert_eq!(view.status, CampaignStatus::Converged);
     assert_same(&view, &in_process(None, &request));
-    let metrics = reqwest::get(format!("{}/metrics", server.url))
-        .await
-        .unwrap()
-        .text()
-        .await
-        .unwrap();
-    let reclaimed: f64 = metrics
-        .lines()
-        .find_map(|l| l.strip_prefix("tslg_leases_reclaimed_total "))
-        .expect("reclaimed counter")
-        .parse()
-        .unwrap();
+    let reclaimed = scraped(&server.url, "tslg_leases_reclaimed_total").await;
     assert!(
         reclaimed >= 1.0,
         "the killed worker's lease was handed out again"

@@ -63,10 +63,14 @@ pub async fn claim(
         offers: &req.offers,
         max_tests: req.max_tests,
     };
-    let Some(row) = leases::claim(&state.db, &state.config, &ask).await? else {
+    let Some(claimed) = leases::claim(&state.db, &state.config, &ask).await? else {
         return Ok(StatusCode::NO_CONTENT.into_response());
     };
-    let campaign = campaigns::get(&state.db.read, row.campaign_id).await?;
+    let row = claimed.lease;
+    let campaign = match claimed.campaign {
+        Some(campaign) => campaign,
+        None => campaigns::get(&state.db.read, row.campaign_id).await?,
+    };
     // An adaptive campaign's tests are planned by the coordinator stage by
     // stage: every lease names its tests' cells and weights.
     let tests = if req.include_tests || campaign.method == Method::Adaptive {

@@ -61,6 +61,13 @@ fn ttl_ms(config: &Config) -> i64 {
     (config.lease_ttl_seconds * 1000.0) as i64
 }
 
+/// A lease handed out, with its campaign when the claim read it (a new
+/// range; not a lease handed out again or an audit run).
+pub struct Claimed {
+    pub lease: LeaseRow,
+    pub campaign: Option<CampaignRow>,
+}
+
 /// Who asks for work and what it takes.
 #[derive(Debug, Clone, Copy)]
 pub struct Claim<'a> {
@@ -87,7 +94,7 @@ pub async fn claim(
     db: &Database,
     config: &Config,
     ask: &Claim<'_>,
-) -> Result<Option<LeaseRow>, ApiError> {
+) -> Result<Option<Claimed>, ApiError> {
     let Claim {
         inline,
         offers,
@@ -151,7 +158,7 @@ async fn claim_in(
     filters: &Filters<'_>,
     now: i64,
     expires: i64,
-) -> Result<Option<LeaseRow>, ApiError> {
+) -> Result<Option<Claimed>, ApiError> {
     let Filters {
         planned_only,
         runnable,
@@ -193,10 +200,16 @@ async fn claim_in(
             worker,
             "expired lease handed out again"
         );
-        return Ok(Some(lease));
+        return Ok(Some(Claimed {
+            lease,
+            campaign: None,
+        }));
     }
     if let Some(lease) = claim_audit(&mut *tx, ask, offered, now, expires).await? {
-        return Ok(Some(lease));
+        return Ok(Some(Claimed {
+            lease,
+            campaign: None,
+        }));
     }
     // A campaign with many tests waiting for their audits gets no new
     // range until workers have run them: audits come first, and the work
@@ -251,7 +264,10 @@ async fn claim_in(
         .bind(threads)
         .fetch_one(&mut *tx)
         .await?;
-    Ok(Some(lease))
+    Ok(Some(Claimed {
+        lease,
+        campaign: Some(campaign),
+    }))
 }
 
 /// A one-test lease for an open audit `ask`'s worker may run (see

@@ -188,6 +188,23 @@ pub fn two_workers(url: &str) -> [WorkerProcess; 2] {
 }
 
 /// A fresh scratch directory.
+/// The value of the unlabelled metric `name` in the coordinator's
+/// `/metrics` at `url`.
+pub async fn scraped(url: &str, name: &str) -> f64 {
+    let metrics = reqwest::get(format!("{url}/metrics"))
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    metrics
+        .lines()
+        .find_map(|l| l.strip_prefix(name)?.strip_prefix(' '))
+        .unwrap_or_else(|| panic!("{name} missing from /metrics:\n{metrics}"))
+        .parse()
+        .unwrap()
+}
+
 pub fn scratch() -> tempfile::TempDir {
     tempfile::tempdir().expect("tempdir")
 }
