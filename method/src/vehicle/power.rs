@@ -7,7 +7,7 @@
 //! the build (libraries, replays and audits compare outcomes bit for bit).
 
 /// The largest exponent taken by squaring.
-const MAX_WHOLE: f64 = 64.0;
+const MAX_WHOLE: u32 = 64;
 
 /// `x^n` by square-and-multiply (`n ≥ 1`).
 #[inline]
@@ -29,8 +29,12 @@ pub fn pow_whole(x: f64, mut n: u32) -> f64 {
 /// `x^δ`: [`pow_whole`] when δ is a whole number in `1..=64`, else `powf`.
 #[inline]
 pub fn pow(x: f64, delta: f64) -> f64 {
-    if delta.fract() == 0.0 && (1.0..=MAX_WHOLE).contains(&delta) {
-        pow_whole(x, delta as u32)
+    // Whole when the conversion is exact (`as` saturates: NaN and negative
+    // δ give 0, which is not in range). Not `delta.fract()`: without
+    // SSE4.1 that is a call to libm's `trunc` at every step.
+    let whole = delta as u32;
+    if f64::from(whole) == delta && (1..=MAX_WHOLE).contains(&whole) {
+        pow_whole(x, whole)
     } else {
         x.powf(delta)
     }
@@ -48,6 +52,13 @@ mod tests {
         assert_eq!(pow(0.9, 1.0), 0.9);
         assert_eq!(pow(1.1, 2.5), 1.1f64.powf(2.5));
         assert_eq!(pow(1.1, 100.0), 1.1f64.powf(100.0));
+        // Exponents that are not whole in 1..=64 go to powf, also those
+        // that saturate the conversion.
+        for delta in [0.0, -2.0, 0.5, 64.5, 65.0, 4294967296.0, 1e300] {
+            assert_eq!(pow(1.1, delta), 1.1f64.powf(delta), "{delta}");
+        }
+        assert_eq!(pow(1.1, 64.0), pow_whole(1.1, 64));
+        assert!(pow(1.1, f64::NAN).is_nan());
         // Within a few ulps of powf on the speeds the models meet.
         for i in 0..=4000 {
             let x = i as f64 / 1000.0;
