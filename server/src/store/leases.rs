@@ -390,7 +390,7 @@ fn new_lease_size(config: &Config, campaign: &CampaignRow, threads: u32) -> u64 
             rule.beta,
             campaign.next_index as u64,
         ),
-        leased: campaign.next_index as u64,
+        resolved: fold.indices,
     })
 }
 
