@@ -226,6 +226,30 @@ mod tests {
             .unwrap()
     }
 
+    /// A request that writes row `n`, says so, and never finishes (until
+    /// it is aborted).
+    fn write_and_hang(
+        db: &Database,
+        n: i64,
+    ) -> (
+        tokio::task::JoinHandle<Result<(), ApiError>>,
+        oneshot::Receiver<()>,
+    ) {
+        let (inside, entered) = oneshot::channel::<()>();
+        let db = db.clone();
+        let task = tokio::spawn(async move {
+            db.group
+                .run(async |conn| {
+                    insert(conn, n).await?;
+                    inside.send(()).unwrap();
+                    std::future::pending::<()>().await;
+                    Ok(())
+                })
+                .await
+        });
+        (task, entered)
+    }
+
     /// Forty concurrent requests, every third failing after its write: the
     /// others' rows are all stored, the failed ones' none, each success is
     /// readable from another connection the moment it is answered, and
@@ -298,20 +322,7 @@ mod tests {
         a_entered.await.unwrap();
         // The second request queues for the writer while the first holds
         // it, so it takes the writer before the committer does.
-        let (b_inside, b_entered) = oneshot::channel::<()>();
-        let stuck = tokio::spawn({
-            let db = db.clone();
-            async move {
-                db.group
-                    .run(async |conn| {
-                        insert(conn, 2).await?;
-                        b_inside.send(()).unwrap();
-                        std::future::pending::<()>().await;
-                        Ok(())
-                    })
-                    .await
-            }
-        });
+        let (stuck, b_entered) = write_and_hang(&db, 2);
         tokio::time::sleep(Duration::from_millis(100)).await;
         a_go.send(()).unwrap();
         b_entered.await.unwrap();
@@ -342,20 +353,7 @@ mod tests {
     #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
     async fn a_cancelled_first_request_of_a_group_leaves_nothing() {
         let (_dir, db) = database().await;
-        let (inside, entered) = oneshot::channel::<()>();
-        let opener = tokio::spawn({
-            let db = db.clone();
-            async move {
-                db.group
-                    .run(async |conn| {
-                        insert(conn, 1).await?;
-                        inside.send(()).unwrap();
-                        std::future::pending::<()>().await;
-                        Ok(())
-                    })
-                    .await
-            }
-        });
+        let (opener, entered) = write_and_hang(&db, 1);
         entered.await.unwrap();
         opener.abort();
         assert!(opener.await.unwrap_err().is_cancelled());
