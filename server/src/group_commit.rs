@@ -349,12 +349,19 @@ mod tests {
 
     /// The request that opens a group runs without a savepoint; cancelled
     /// mid-way, its writes are rolled back whole before the next request
-    /// runs, and that one is committed alone.
+    /// runs, and that one is committed alone. Meanwhile reads go on.
     #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
     async fn a_cancelled_first_request_of_a_group_leaves_nothing() {
         let (_dir, db) = database().await;
         let (opener, entered) = write_and_hang(&db, 1);
         entered.await.unwrap();
+        // Reads never wait on the writer: while a request holds it with
+        // its write uncommitted, a read answers, without that write.
+        let read = tokio::time::timeout(Duration::from_secs(1), stored(&db)).await;
+        assert_eq!(
+            read.expect("a read while the writer is held"),
+            Vec::<i64>::new()
+        );
         opener.abort();
         assert!(opener.await.unwrap_err().is_cancelled());
         tokio::time::timeout(
