@@ -188,6 +188,15 @@ impl Client {
         Ok(bytes.to_vec())
     }
 
+    /// `GET /metrics`: the Prometheus text.
+    pub async fn metrics(&self) -> Result<String, CallError> {
+        self.send(self.request(reqwest::Method::GET, "/metrics"))
+            .await?
+            .text()
+            .await
+            .map_err(|e| CallError::Transient(e.to_string()))
+    }
+
     /// `GET /healthz`.
     pub async fn health(&self) -> Result<tslg_api::Health, CallError> {
         self.json(self.request(reqwest::Method::GET, "/healthz"))

@@ -11,7 +11,9 @@
 //! would keep real workers busy), and checks the books: the tests the
 //! coordinator acknowledged as new must be exactly its resolved prefix, and
 //! the events reported exactly its events, so no test was lost or counted
-//! twice. It fails (exit 1) on any refused or failed request or a mismatch.
+//! twice. It also reports how many requests the coordinator committed per
+//! transaction meanwhile (group commit, from `/metrics`). It fails (exit 1)
+//! on any refused or failed request or a mismatch.
 
 use crate::commands::remote::client;
 use crate::ServerArgs;
@@ -72,6 +74,50 @@ pub struct LoadReport {
     pub campaign_tests: u64,
     pub reported_events: u64,
     pub campaign_events: u64,
+    /// The coordinator's group commits during the run (from `/metrics`,
+    /// so they include any other traffic it had); `None` when `/metrics`
+    /// could not be read.
+    pub commits: Option<GroupCommits>,
+}
+
+/// Transactions that committed leases and reports, and the requests they
+/// committed: their ratio is the mean group size (group commit).
+#[derive(Debug, Clone, Copy, serde::Serialize)]
+pub struct GroupCommits {
+    pub transactions: u64,
+    pub requests: u64,
+}
+
+impl GroupCommits {
+    /// The coordinator's counters in a `/metrics` text.
+    fn scraped(metrics: &str) -> Option<Self> {
+        let counter = |name: &str| -> Option<u64> {
+            metrics
+                .lines()
+                .find_map(|l| l.strip_prefix(name)?.strip_prefix(' '))?
+                .trim()
+                .parse::<f64>()
+                .ok()
+                .map(|v| v as u64)
+        };
+        Some(Self {
+            transactions: counter("tslg_write_groups_total")?,
+            requests: counter("tslg_grouped_writes_total")?,
+        })
+    }
+
+    /// What happened between two readings.
+    fn since(self, before: Self) -> Self {
+        Self {
+            transactions: self.transactions.saturating_sub(before.transactions),
+            requests: self.requests.saturating_sub(before.requests),
+        }
+    }
+}
+
+/// The coordinator's group-commit counters now, when `/metrics` answers.
+async fn group_commits(admin: &Client) -> Option<GroupCommits> {
+    GroupCommits::scraped(&admin.metrics().await.ok()?)
 }
 
 /// Nearest-rank percentiles of a sample, in milliseconds.
@@ -140,6 +186,7 @@ pub fn run(args: &LoadArgs) -> anyhow::Result<()> {
         lease_tests: args.lease_tests,
     };
     let report = runtime.block_on(async {
+        let commits_before = group_commits(&admin).await;
         let campaign = admin.create_campaign(&load_campaign()).await?;
         let outcome = tokio::select! {
             run = tokio::time::timeout(limit, load(&worker, campaign.id, shape)) => match run {
@@ -161,6 +208,10 @@ pub fn run(args: &LoadArgs) -> anyhow::Result<()> {
         })?;
         report.campaign_tests = view.indices;
         report.campaign_events = view.events;
+        report.commits = match (commits_before, group_commits(&admin).await) {
+            (Some(before), Some(after)) => Some(after.since(before)),
+            _ => None,
+        };
         anyhow::Ok(report)
     })?;
     if args.json {
@@ -200,6 +251,16 @@ fn print_table(r: &LoadReport) {
         r.campaign_events,
         r.errors.len()
     );
+    match r.commits {
+        Some(c) if c.transactions > 0 => println!(
+            "group commits: {} requests in {} transactions ({:.1} a commit)",
+            c.requests,
+            c.transactions,
+            c.requests as f64 / c.transactions as f64
+        ),
+        Some(_) => println!("group commits: none"),
+        None => println!("group commits: /metrics could not be read"),
+    }
     for e in r.errors.iter().take(10) {
         println!("  error: {e}");
     }
@@ -274,6 +335,7 @@ async fn load(worker: &Client, campaign_id: i64, shape: Shape) -> anyhow::Result
         campaign_tests: 0,
         reported_events: logs.iter().map(|l| l.events).sum(),
         campaign_events: 0,
+        commits: None,
     })
 }
 
@@ -353,7 +415,25 @@ async fn simulated_worker(
 
 #[cfg(test)]
 mod tests {
-    use super::Percentiles;
+    use super::{GroupCommits, Percentiles};
+
+    #[test]
+    fn group_commit_counters_are_read_from_the_metrics_text() {
+        let text = "# HELP tslg_write_groups_total Transactions\n\
+                    # TYPE tslg_write_groups_total counter\n\
+                    tslg_write_groups_total 12\n\
+                    tslg_write_groups_total_other 99\n\
+                    tslg_grouped_writes_total 150\n";
+        let before = GroupCommits::scraped(text).unwrap();
+        assert_eq!((before.transactions, before.requests), (12, 150));
+        let after =
+            GroupCommits::scraped("tslg_write_groups_total 20\ntslg_grouped_writes_total 250\n")
+                .unwrap();
+        let run = after.since(before);
+        assert_eq!((run.transactions, run.requests), (8, 100));
+        // A coordinator without the counters (an older release).
+        assert!(GroupCommits::scraped("tslg_events_total 3\n").is_none());
+    }
 
     #[test]
     fn nearest_rank_percentiles() {

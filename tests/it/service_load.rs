@@ -57,6 +57,16 @@ async fn sixty_four_concurrent_workers_lose_and_double_nothing() {
         groups < grouped,
         "{groups} commits for {grouped} requests: none shared a commit"
     );
+    // The load test reports the same counters over its run.
+    let commits = &report["commits"];
+    assert!(
+        commits["requests"].as_u64().unwrap() >= 2 * requests,
+        "{commits}"
+    );
+    assert!(
+        commits["transactions"].as_u64().unwrap() < commits["requests"].as_u64().unwrap(),
+        "{commits}"
+    );
     let log = server.log();
     assert!(!log.contains("database is locked"), "{log}");
     assert!(!log.contains("panicked"), "{log}");
