@@ -7,6 +7,8 @@
 //! of the NDD runs, TSLG_BENCH_HIGH_BETA the high-event campaign's β, and
 //! TSLG_BENCH_HIGH_ONLY to run only the high-event table).
 
+mod common;
+
 use std::time::{Duration, Instant};
 use tslg::service::LocalService;
 use tslg_api::{
@@ -39,17 +41,7 @@ fn request(tests: u64) -> CreateCampaign {
 }
 
 fn in_process(tests: u64) -> f64 {
-    let case = open_case("cut-in", None, &ExposureSource::Builtin).unwrap();
-    let campaign = case
-        .campaign(
-            None,
-            &serde_json::json!({"model": "idm"}),
-            0.1,
-            Default::default(),
-            Default::default(),
-            1,
-        )
-        .unwrap();
+    let campaign = common::cutin_idm_ndd(1);
     let rule = StoppingRule::new(MIN_BETA, tests);
     let started = Instant::now();
     // The in-process runner's own path: spans of tests in batches.

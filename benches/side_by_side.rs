@@ -17,6 +17,8 @@
 //! OpenTURNS is `TSLG_BENCH_PYTHON` (default `target/bench-venv/bin/python`,
 //! which `scripts/bench` installs); without it that row says why.
 
+mod common;
+
 use rand::distr::weighted::WeightedIndex;
 use rand::distr::Distribution;
 use rand::SeedableRng;
@@ -27,9 +29,7 @@ use tslg_api::{CreateCampaign, Method};
 use tslg_client::Client;
 use tslg_method::case::Case;
 use tslg_method::cases::cutin::{CutIn, CutInPreset};
-use tslg_method::cases::open_case;
 use tslg_method::estimator::StoppingRule;
-use tslg_method::registry::ExposureSource;
 
 const BETA: f64 = 0.05;
 const CONFIDENCE: f64 = 0.9;
@@ -108,17 +108,7 @@ fn rule() -> StoppingRule {
 }
 
 fn in_process(seed: u64) -> Run {
-    let case = open_case("cut-in", None, &ExposureSource::Builtin).unwrap();
-    let tests = case
-        .campaign(
-            None,
-            &serde_json::json!({"model": "idm"}),
-            0.1,
-            Default::default(),
-            Default::default(),
-            seed,
-        )
-        .unwrap();
+    let tests = common::cutin_idm_ndd(seed);
     let started = Instant::now();
     let result = tslg_method::campaign::run_campaign_tests(tests.as_ref(), &rule(), &|_| false);
     Run {
