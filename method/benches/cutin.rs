@@ -11,7 +11,9 @@ use tslg_method::case::Case;
 use tslg_method::cases::cutin::{CutIn, CutInPreset};
 use tslg_method::estimator::StoppingRule;
 use tslg_method::library::{build_library, LibraryRequest, SearchMethod, Threshold};
-use tslg_method::sampling::{LibraryDistribution, OutsideSpread, Split, TestDistribution};
+use tslg_method::sampling::{
+    LibraryDistribution, NddDistribution, OutsideSpread, Split, TestDistribution,
+};
 use tslg_method::vehicle::{VehicleModel, BUILTIN_MODELS};
 
 const REPEATS: usize = 7;
@@ -123,25 +125,19 @@ fn main() {
     )
     .unwrap();
     let draws = 1_000_000u64;
-    let secs = median_seconds(|| {
-        for i in 0..draws {
-            black_box(q.draw(black_box(9), i));
-        }
-    });
-    println!(
-        "| library draws/s per core (scenario + weight) | {:.3e} |",
-        draws as f64 / secs
+    print_draw_rates("library", &TestDistribution::library(q.clone()), draws);
+    print_draw_rates(
+        "NDD",
+        &TestDistribution::Ndd(NddDistribution::new(case.exposure())),
+        draws,
     );
     // The coordinator's replay on the result path: which reported tests
     // explored (one ChaCha8 number per test, for the outside bound).
-    let secs = median_seconds(|| {
-        for i in 0..draws {
-            black_box(q.explores(black_box(9), i));
-        }
-    });
     println!(
         "| exploring-test replay per core (coordinator, per reported test) | {:.3e} tests/s |",
-        draws as f64 / secs
+        each_per_second(draws, |i| {
+            black_box(q.explores(black_box(9), i));
+        })
     );
     let distribution = TestDistribution::library(q);
     let rule = StoppingRule::new(0.2, 10_000_000);
@@ -153,4 +149,31 @@ fn main() {
         "| library campaign, IDM tested with the FVDM library, β 0.2: {tests} tests | {:.2} ms |",
         secs * 1e3
     );
+}
+
+/// Draws per second of `distribution` on one core: one test at a time
+/// (`draw`), then several streams at a time (`draw_each`, as workers,
+/// the in-process runner and the coordinator's replay draw).
+fn print_draw_rates(label: &str, distribution: &TestDistribution, draws: u64) {
+    println!(
+        "| {label} draws/s per core (scenario + weight) | {:.3e} |",
+        each_per_second(draws, |i| {
+            black_box(distribution.draw(black_box(9), i));
+        })
+    );
+    let secs = median_seconds(|| {
+        distribution.draw_each(black_box(9), 0..draws, |_, draw| {
+            black_box(draw);
+        });
+    });
+    println!(
+        "| {label} draws/s per core, {} streams at a time (`draw_each`) | {:.3e} |",
+        tslg_method::test_stream::LANES,
+        draws as f64 / secs
+    );
+}
+
+/// Calls of `f(i)` per second over `i` in `0..n`, on one core.
+fn each_per_second(n: u64, f: impl Fn(u64)) -> f64 {
+    n as f64 / median_seconds(|| (0..n).for_each(&f))
 }

@@ -156,11 +156,25 @@ pub fn run_campaign_with(
 ) -> CampaignResult {
     let explores = |i| distribution.explores(seed, i);
     let misses = |i| surrogate_event.is_some_and(|f| !f(distribution.draw(seed, i).cell));
-    run_outcome_campaign(
-        &|i| {
-            let draw = distribution.draw(seed, i);
-            is_event(draw.cell).then_some(SparseOutcome::Event(draw.weight))
-        },
+    // Spans of tests in parallel, each drawn several streams at a time
+    // ([`TestDistribution::draw_each`]).
+    let span = |from: u64, to: u64| -> Vec<(u64, SparseOutcome)> {
+        let starts: Vec<u64> = (from..to).step_by(SPAN as usize).collect();
+        starts
+            .into_par_iter()
+            .flat_map_iter(|start| {
+                let mut events = Vec::new();
+                distribution.draw_each(seed, start..(start + SPAN).min(to), |i, draw| {
+                    if is_event(draw.cell) {
+                        events.push((i, SparseOutcome::Event(draw.weight)));
+                    }
+                });
+                events
+            })
+            .collect()
+    };
+    run_span_campaign(
+        &span,
         distribution.outside_mass().map(|mass| Explorer {
             explores: &explores,
             mass,

@@ -25,6 +25,7 @@ pub mod progress;
 pub mod registry;
 pub mod sampling;
 pub mod support_sampling;
+pub mod test_stream;
 pub mod tolerance;
 pub mod vehicle;
 pub mod warnings;

@@ -8,20 +8,13 @@
 use crate::library::Library;
 use crate::mass::GridMass;
 use crate::outside::OutsideMass;
+pub use crate::test_stream::{test_rng, TestRng, TestStreams};
 use crate::tolerance::PROBABILITY_FLOOR;
 use rand::distr::Distribution;
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
+use rand::Rng;
 use rand_distr::weighted::WeightedAliasIndex;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
-
-/// The random stream of test `index` of a campaign with seed `seed`.
-pub fn test_rng(seed: u64, index: u64) -> ChaCha8Rng {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    rng.set_stream(index);
-    rng
-}
 
 /// How the ε share of the library distribution is spread outside the library.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -348,12 +341,14 @@ impl LibraryDistribution {
     /// `(1 − ε) q_in + ε q_out` under either split: a stratum's own weight
     /// `P/q_in` or `P/q_out` is this times `1 − ε` or `ε`.
     pub fn draw(&self, seed: u64, index: u64) -> Draw {
-        let mut rng = test_rng(seed, index);
+        self.draw_from(&mut test_rng(seed, index), index)
+    }
+
+    /// [`Self::draw`] from test `index`'s stream `rng`.
+    pub fn draw_from(&self, rng: &mut TestRng, index: u64) -> Draw {
         let cell = match self.split {
-            Split::Random => self.sample(&mut rng),
-            Split::Stratified => {
-                self.sample_stratum(&mut rng, stratified_explores(self.epsilon, index))
-            }
+            Split::Random => self.sample(rng),
+            Split::Stratified => self.sample_stratum(rng, stratified_explores(self.epsilon, index)),
         };
         Draw {
             cell,
@@ -378,8 +373,13 @@ impl NddDistribution {
 
     /// Test `index` of the campaign seeded `seed`: a cell drawn from `P`, weight 1.
     pub fn draw(&self, seed: u64, index: u64) -> Draw {
+        self.draw_from(&mut test_rng(seed, index))
+    }
+
+    /// [`Self::draw`] from the test's stream `rng`.
+    pub fn draw_from(&self, rng: &mut TestRng) -> Draw {
         Draw {
-            cell: self.sample(&mut test_rng(seed, index)),
+            cell: self.sample(rng),
             weight: 1.0,
         }
     }
@@ -417,10 +417,50 @@ impl TestDistribution {
             TestDistribution::Library(d) => d.draw(seed, index),
             TestDistribution::Ndd(d) => d.draw(seed, index),
             TestDistribution::Support(d) => d.draw(seed, index),
-            TestDistribution::Enumeration(cells) => Draw {
-                cell: cells[(index as usize).min(cells.len() - 1)],
-                weight: 1.0,
-            },
+            TestDistribution::Enumeration(cells) => Self::enumerated(cells, index),
+        }
+    }
+
+    /// `f(index, draw)` for each test of `indices`, in order: the same
+    /// draws as [`Self::draw`], their streams' first blocks computed
+    /// several at a time ([`TestStreams::each`]).
+    pub fn draw_each(
+        &self,
+        seed: u64,
+        indices: impl IntoIterator<Item = u64>,
+        mut f: impl FnMut(u64, Draw),
+    ) {
+        let streams = TestStreams::new(seed);
+        match self {
+            TestDistribution::Library(d) => {
+                streams.each(indices, |i, mut rng| f(i, d.draw_from(&mut rng, i)))
+            }
+            TestDistribution::Ndd(d) => {
+                streams.each(indices, |i, mut rng| f(i, d.draw_from(&mut rng)))
+            }
+            TestDistribution::Support(d) => {
+                streams.each(indices, |i, mut rng| f(i, d.draw_from(&mut rng, i)))
+            }
+            TestDistribution::Enumeration(cells) => {
+                for i in indices {
+                    f(i, Self::enumerated(cells, i))
+                }
+            }
+        }
+    }
+
+    /// The draws of tests `from..to`, in order ([`Self::draw_each`]).
+    pub fn draws(&self, seed: u64, from: u64, to: u64) -> Vec<Draw> {
+        let mut draws = Vec::with_capacity(to.saturating_sub(from) as usize);
+        self.draw_each(seed, from..to, |_, draw| draws.push(draw));
+        draws
+    }
+
+    /// Test `index` of an enumeration: the index-th cell.
+    fn enumerated(cells: &[usize], index: u64) -> Draw {
+        Draw {
+            cell: cells[(index as usize).min(cells.len() - 1)],
+            weight: 1.0,
         }
     }
 

@@ -18,7 +18,7 @@
 //! restricted to `X∖K`, and depends on the test's random stream alone.
 
 use crate::mass::GridMass;
-use crate::sampling::{stratified_explores, test_rng, Draw, NddDistribution};
+use crate::sampling::{stratified_explores, test_rng, Draw, NddDistribution, TestRng};
 use rand::Rng;
 use std::sync::Arc;
 
@@ -102,15 +102,19 @@ impl SupportDistribution {
 
     /// Test `index` of the campaign seeded `seed`.
     pub fn draw(&self, seed: u64, index: u64) -> Draw {
-        let mut rng = test_rng(seed, index);
+        self.draw_from(&mut test_rng(seed, index), index)
+    }
+
+    /// [`Self::draw`] from test `index`'s stream `rng`.
+    pub fn draw_from(&self, rng: &mut TestRng, index: u64) -> Draw {
         if !stratified_explores(self.epsilon, index) {
             return Draw {
-                cell: self.sample_inside(&mut rng),
+                cell: self.sample_inside(rng),
                 weight: self.inside_weight,
             };
         }
         Draw {
-            cell: self.sample_outside(&mut rng),
+            cell: self.sample_outside(rng),
             weight: self.outside_weight,
         }
     }

@@ -60,6 +60,27 @@ fn replayed(tests: &dyn CampaignTests, index: u64) -> Option<Option<SparseOutcom
     }
 }
 
+/// Tests `from..to` replayed with whether each explores, in batches where
+/// the case has them; a batch that panics is replayed test by test, which
+/// finds the test that does. `None` when a test cannot be run here.
+fn replayed_explored_span(
+    tests: &dyn CampaignTests,
+    from: u64,
+    to: u64,
+) -> Option<Vec<(Option<SparseOutcome>, bool)>> {
+    let batched = catch_unwind(AssertUnwindSafe(|| tests.replay_explored_span(from, to)));
+    match batched {
+        Ok(Some(outcomes)) if outcomes.len() as u64 == to - from => Some(
+            outcomes
+                .into_iter()
+                .map(|(o, explores)| (o.event.then_some(SparseOutcome::Event(o.weight)), explores))
+                .collect(),
+        ),
+        Ok(None) => None,
+        _ => (from..to).map(|i| replayed_explored(tests, i)).collect(),
+    }
+}
+
 /// Test `index` replayed with whether it explores: `None` when it cannot be
 /// run here.
 fn replayed_explored(
@@ -112,9 +133,10 @@ enum Block {
     Unreplayable,
 }
 
-/// Replays every test of `from..to` with `replay` (outcome and whether it
-/// explores) and compares it with `outcomes`, the report's sorted
-/// non-quiet outcomes (those outside the range are ignored).
+/// Replays every test of `from..to` with `replay(start, end)` (each test's
+/// outcome and whether it explores, for a block of tests) and compares it
+/// with `outcomes`, the report's sorted non-quiet outcomes (those outside
+/// the range are ignored).
 fn replay_every_test<F>(
     outcomes: &[(u64, SparseOutcome)],
     from: u64,
@@ -122,7 +144,7 @@ fn replay_every_test<F>(
     replay: F,
 ) -> Verified
 where
-    F: Fn(u64) -> Option<(Option<SparseOutcome>, bool)> + Sync,
+    F: Fn(u64, u64) -> Option<Vec<(Option<SparseOutcome>, bool)>> + Sync,
 {
     let blocks = to.saturating_sub(from).div_ceil(REPLAY_BLOCK);
     let results: Vec<Block> = (0..blocks)
@@ -135,12 +157,13 @@ where
                 .iter()
                 .take_while(|o| o.0 < end)
                 .peekable();
+            let Some(replayed) = replay(start, end).filter(|r| r.len() as u64 == end - start)
+            else {
+                return Block::Unreplayable;
+            };
             let mut explored = Vec::new();
-            for index in start..end {
+            for (index, (own, explores)) in (start..end).zip(replayed) {
                 let reported = listed.next_if(|o| o.0 == index).map(|o| o.1);
-                let Some((own, explores)) = replay(index) else {
-                    return Block::Unreplayable;
-                };
                 if let Some(mismatch) = contradiction(index, reported, own) {
                     return Block::Contradicted(mismatch);
                 }
@@ -183,8 +206,8 @@ pub fn verify_builtin(
     chosen: &[u64],
 ) -> Verified {
     if tests.outside_mass().is_some() {
-        return replay_every_test(&report.outcomes, new_from, report.to, |index| {
-            replayed_explored(tests, index)
+        return replay_every_test(&report.outcomes, new_from, report.to, |from, to| {
+            replayed_explored_span(tests, from, to)
         });
     }
     let reported = |i: u64| {
@@ -238,6 +261,16 @@ pub fn verify_builtin(
 mod tests {
     use super::*;
 
+    /// A block replay from a replay of each test.
+    fn per_test<F>(
+        replay: F,
+    ) -> impl Fn(u64, u64) -> Option<Vec<(Option<SparseOutcome>, bool)>> + Sync
+    where
+        F: Fn(u64) -> Option<(Option<SparseOutcome>, bool)> + Sync,
+    {
+        move |from, to| (from..to).map(&replay).collect()
+    }
+
     /// A made-up campaign: test `i` is an event of weight `i` when `i % 7
     /// == 0`, invalid when `i % 11 == 0`, and explores when `i % 5 == 0`.
     fn truth(i: u64) -> (Option<SparseOutcome>, bool) {
@@ -260,14 +293,14 @@ mod tests {
     #[test]
     fn an_honest_report_over_many_blocks_gives_every_exploring_test_in_order() {
         let (from, to) = (1_000, 1_000 + 5 * REPLAY_BLOCK + 17);
-        let verified = replay_every_test(&honest(from, to), from, to, |i| Some(truth(i)));
+        let verified = replay_every_test(&honest(from, to), from, to, per_test(|i| Some(truth(i))));
         assert!(verified.mismatch.is_none());
         let explored = verified.explored.unwrap();
         let expected: Vec<u64> = (from..to).filter(|i| i % 5 == 0).collect();
         assert_eq!((explored.from, explored.to), (from, to));
         assert_eq!(explored.tests, expected);
         // Outcomes before the new part are ignored, not misread.
-        let verified = replay_every_test(&honest(0, to), from, to, |i| Some(truth(i)));
+        let verified = replay_every_test(&honest(0, to), from, to, per_test(|i| Some(truth(i))));
         assert_eq!(verified.explored.unwrap().tests, expected);
     }
 
@@ -284,7 +317,7 @@ mod tests {
         assert!(truth(forged).0.is_none());
         lies.push((forged, SparseOutcome::Event(1.0)));
         lies.sort_by_key(|o| o.0);
-        let verified = replay_every_test(&lies, from, to, |i| Some(truth(i)));
+        let verified = replay_every_test(&lies, from, to, per_test(|i| Some(truth(i))));
         let mismatch = verified.mismatch.unwrap();
         assert_eq!(mismatch.index, forged);
         assert_eq!(mismatch.replayed, "none");
@@ -297,18 +330,21 @@ mod tests {
         } else {
             off[k].1 = SparseOutcome::Event(1.0);
         }
-        let verified = replay_every_test(&off, from, to, |i| Some(truth(i)));
+        let verified = replay_every_test(&off, from, to, per_test(|i| Some(truth(i))));
         assert_eq!(verified.mismatch.unwrap().index, off[k].0);
     }
 
     #[test]
     fn a_test_that_cannot_be_replayed_checks_nothing() {
         let (from, to) = (0, 3 * REPLAY_BLOCK);
-        let verified = replay_every_test(&honest(from, to), from, to, |i| {
-            (i != 2 * REPLAY_BLOCK + 3).then(|| truth(i))
-        });
+        let verified = replay_every_test(
+            &honest(from, to),
+            from,
+            to,
+            per_test(|i| (i != 2 * REPLAY_BLOCK + 3).then(|| truth(i))),
+        );
         assert!(verified.mismatch.is_none() && verified.explored.is_none());
-        let empty = replay_every_test(&[], 10, 10, |i| Some(truth(i)));
+        let empty = replay_every_test(&[], 10, 10, per_test(|i| Some(truth(i))));
         assert_eq!(empty.explored.unwrap().tests, Vec::<u64>::new());
     }
 }

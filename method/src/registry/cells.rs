@@ -453,6 +453,33 @@ const NOT_RUN: u8 = 0;
 const NO_EVENT: u8 = 1;
 const EVENT: u8 = 2;
 
+impl<C> CellCampaign<C>
+where
+    C: Case,
+{
+    /// The built-in `vehicle`'s outcome of `draw`, each cell simulated
+    /// once and remembered.
+    fn replay_draw(&self, vehicle: &C::Vehicle, draw: &crate::sampling::Draw) -> TestOutcome {
+        let outcomes = self.outcomes.get_or_init(|| {
+            (0..self.case.grid().len())
+                .map(|_| AtomicU8::new(NOT_RUN))
+                .collect()
+        });
+        let known = outcomes[draw.cell].load(Ordering::Relaxed);
+        let event = if known == NOT_RUN {
+            let event = self.case.is_event(vehicle, draw.cell);
+            outcomes[draw.cell].store(if event { EVENT } else { NO_EVENT }, Ordering::Relaxed);
+            event
+        } else {
+            known == EVENT
+        };
+        TestOutcome {
+            event,
+            weight: draw.weight,
+        }
+    }
+}
+
 impl<C> CampaignTests for CellCampaign<C>
 where
     C: Case + Send + 'static,
@@ -488,9 +515,7 @@ where
         let CampaignVehicle::Builtin(vehicle) = &self.vehicle else {
             return None;
         };
-        let draws: Vec<_> = (from..to)
-            .map(|index| self.distribution.draw(self.seed, index))
-            .collect();
+        let draws = self.distribution.draws(self.seed, from, to);
         let cells: Vec<usize> = draws.iter().map(|d| d.cell).collect();
         let mut events = vec![false; cells.len()];
         self.case.events(vehicle, &cells, &mut events);
@@ -527,25 +552,32 @@ where
             return None;
         };
         let draw = self.distribution.draw(self.seed, index);
-        let explored = self.distribution.explored(&draw);
-        let outcomes = self.outcomes.get_or_init(|| {
-            (0..self.case.grid().len())
-                .map(|_| AtomicU8::new(NOT_RUN))
-                .collect()
+        let outcome = self.replay_draw(vehicle, &draw);
+        Some((outcome, self.distribution.explored(&draw)))
+    }
+
+    fn replay_explored_span(&self, from: u64, to: u64) -> Option<Vec<(TestOutcome, bool)>> {
+        let CampaignVehicle::Builtin(vehicle) = &self.vehicle else {
+            return None;
+        };
+        let mut outcomes = Vec::with_capacity(to.saturating_sub(from) as usize);
+        self.distribution.draw_each(self.seed, from..to, |_, draw| {
+            let outcome = self.replay_draw(vehicle, &draw);
+            outcomes.push((outcome, self.distribution.explored(&draw)));
         });
-        let known = outcomes[draw.cell].load(Ordering::Relaxed);
-        let event = if known == NOT_RUN {
-            let event = self.case.is_event(vehicle, draw.cell);
-            outcomes[draw.cell].store(if event { EVENT } else { NO_EVENT }, Ordering::Relaxed);
-            event
-        } else {
-            known == EVENT
+        Some(outcomes)
+    }
+
+    fn replay_many(&self, indices: &[u64]) -> Option<Vec<TestOutcome>> {
+        let CampaignVehicle::Builtin(vehicle) = &self.vehicle else {
+            return None;
         };
-        let outcome = TestOutcome {
-            event,
-            weight: draw.weight,
-        };
-        Some((outcome, explored))
+        let mut outcomes = Vec::with_capacity(indices.len());
+        self.distribution
+            .draw_each(self.seed, indices.iter().copied(), |_, draw| {
+                outcomes.push(self.replay_draw(vehicle, &draw));
+            });
+        Some(outcomes)
     }
 
     fn planned(&self, index: u64) -> Option<PlannedTest> {

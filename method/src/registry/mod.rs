@@ -239,6 +239,14 @@ pub trait CampaignTests: Send + Sync {
         self.replay(index)
             .map(|outcome| (outcome, self.explores(index)))
     }
+    /// [`Self::replay_explored`] of each test of `from..to`, in order, in
+    /// batches where the case draws that way; `None` when a test cannot be
+    /// replayed here.
+    fn replay_explored_span(&self, from: u64, to: u64) -> Option<Vec<(TestOutcome, bool)>> {
+        (from..to)
+            .map(|index| self.replay_explored(index))
+            .collect()
+    }
     /// Whether test `index` draws its scenario outside the library.
     fn explores(&self, _index: u64) -> bool {
         false

@@ -1,0 +1,305 @@
+//! The random stream of each test, computed cheaply and side by side.
+//!
+//! Test `i` of a campaign seeded `s` draws from ChaCha8 keyed by
+//! `seed_from_u64(s)` at stream `i`, word 0 ([`crate::sampling`]): that
+//! definition fixes every scenario a campaign has ever drawn, so it must
+//! not change. What does change is how the words are computed.
+//! `rand_chacha`'s `ChaCha8Rng` fills a buffer of four blocks (256 bytes)
+//! before its first word, while a grid test uses three or four words of
+//! the first block; and positioning a fresh generator per test costs more
+//! than the block itself. [`TestRng`] holds only the stream's first block
+//! (16 words) and hands the rest, when a test wants more (car-following
+//! draws an action per decision), to a `ChaCha8Rng` positioned at word 16:
+//! the words it yields are those of `ChaCha8Rng`, in the same order, for
+//! every mix of `next_u32`, `next_u64` and `fill_bytes` (test against
+//! `rand_chacha` below). [`TestStreams::each`] computes the first blocks of
+//! [`LANES`] tests at once, each of the sixteen state words an array over
+//! the tests, which the compiler turns into vector instructions (AVX2 or
+//! AVX-512 builds of the same function, picked at run time).
+//!
+//! The block function is ChaCha's (Bernstein 2008), with eight rounds:
+//! state `(σ, key, counter = 0, stream)`, four double rounds of quarter
+//! rounds `a += b; d ^= a; d <<<= 16; c += d; b ^= c; b <<<= 12; a += b;
+//! d ^= a; d <<<= 8; c += d; b ^= c; b <<<= 7` on columns then diagonals,
+//! and the input added back word by word.
+
+use rand::{RngCore, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+/// Tests whose first blocks are computed together.
+pub const LANES: usize = 8;
+
+/// "expand 32-byte k".
+const SIGMA: [u32; 4] = [0x6170_7865, 0x3320_646e, 0x7962_2d32, 0x6b20_6574];
+
+/// Words of one ChaCha block.
+const BLOCK_WORDS: usize = 16;
+
+/// A ChaCha8 key from a campaign seed, derived exactly as
+/// `ChaCha8Rng::seed_from_u64` derives its key: both use `rand_core`'s
+/// provided `seed_from_u64` (PCG32 output, little-endian) on a 32-byte seed.
+struct Key([u8; 32]);
+
+impl SeedableRng for Key {
+    type Seed = [u8; 32];
+    fn from_seed(seed: [u8; 32]) -> Self {
+        Key(seed)
+    }
+}
+
+/// The streams of one campaign seed: its key, ready for many tests.
+#[derive(Debug, Clone, Copy)]
+pub struct TestStreams {
+    seed: u64,
+    key: [u32; 8],
+}
+
+impl TestStreams {
+    /// The streams of the campaign seeded `seed`.
+    pub fn new(seed: u64) -> Self {
+        let Key(bytes) = Key::seed_from_u64(seed);
+        let key = std::array::from_fn(|i| {
+            u32::from_le_bytes([
+                bytes[4 * i],
+                bytes[4 * i + 1],
+                bytes[4 * i + 2],
+                bytes[4 * i + 3],
+            ])
+        });
+        Self { seed, key }
+    }
+
+    /// The stream of test `index`.
+    pub fn rng(&self, index: u64) -> TestRng {
+        TestRng::new(self.seed, index, first_block(&self.key, index))
+    }
+
+    /// Calls `f(index, stream)` for each of `indices` in order, computing
+    /// the first blocks [`LANES`] at a time.
+    pub fn each(&self, indices: impl IntoIterator<Item = u64>, mut f: impl FnMut(u64, TestRng)) {
+        let mut indices = indices.into_iter().peekable();
+        let mut streams = [0u64; LANES];
+        let mut words = [[0u32; LANES]; BLOCK_WORDS];
+        while indices.peek().is_some() {
+            let mut n = 0;
+            while n < LANES {
+                let Some(index) = indices.next() else { break };
+                streams[n] = index;
+                n += 1;
+            }
+            first_blocks(&self.key, &streams, &mut words);
+            for (lane, &index) in streams[..n].iter().enumerate() {
+                let block = std::array::from_fn(|w| words[w][lane]);
+                f(index, TestRng::new(self.seed, index, block));
+            }
+        }
+    }
+}
+
+/// The stream of test `index` of the campaign seeded `seed`.
+pub fn test_rng(seed: u64, index: u64) -> TestRng {
+    TestStreams::new(seed).rng(index)
+}
+
+/// One test's ChaCha8 stream: its first block held, the rest from
+/// `rand_chacha` once the first block is used up.
+#[derive(Debug, Clone)]
+pub struct TestRng {
+    block: [u32; BLOCK_WORDS],
+    /// The next word of `block` to hand out; `BLOCK_WORDS` once it is used up.
+    next: usize,
+    seed: u64,
+    stream: u64,
+    /// Words 16 on, made on first use.
+    rest: Option<Box<ChaCha8Rng>>,
+}
+
+impl TestRng {
+    fn new(seed: u64, stream: u64, block: [u32; BLOCK_WORDS]) -> Self {
+        Self {
+            block,
+            next: 0,
+            seed,
+            stream,
+            rest: None,
+        }
+    }
+
+    /// The stream past its first block.
+    fn rest(&mut self) -> &mut ChaCha8Rng {
+        let (seed, stream) = (self.seed, self.stream);
+        self.rest.get_or_insert_with(|| {
+            let mut rng = ChaCha8Rng::seed_from_u64(seed);
+            rng.set_stream(stream);
+            rng.set_word_pos(BLOCK_WORDS as u128);
+            Box::new(rng)
+        })
+    }
+}
+
+impl RngCore for TestRng {
+    fn next_u32(&mut self) -> u32 {
+        if self.next < BLOCK_WORDS {
+            self.next += 1;
+            return self.block[self.next - 1];
+        }
+        self.rest().next_u32()
+    }
+
+    /// Two consecutive words, the first the low half (as `rand_core`'s
+    /// block generators read them, across block boundaries too).
+    fn next_u64(&mut self) -> u64 {
+        if self.next >= BLOCK_WORDS {
+            return self.rest().next_u64();
+        }
+        let low = u64::from(self.next_u32());
+        let high = u64::from(self.next_u32());
+        (high << 32) | low
+    }
+
+    /// Whole words, little-endian; the unused bytes of a last partial word
+    /// are dropped, as `rand_core`'s block generators drop them.
+    fn fill_bytes(&mut self, dst: &mut [u8]) {
+        let mut filled = 0;
+        while filled < dst.len() && self.next < BLOCK_WORDS {
+            let bytes = self.block[self.next].to_le_bytes();
+            let take = (dst.len() - filled).min(4);
+            dst[filled..filled + take].copy_from_slice(&bytes[..take]);
+            self.next += 1;
+            filled += take;
+        }
+        if filled < dst.len() {
+            self.rest().fill_bytes(&mut dst[filled..]);
+        }
+    }
+}
+
+/// ChaCha's quarter round on words `a, b, c, d` of `x`, for each lane.
+/// (Four rows of one array, so a lane index rather than iterators.)
+#[allow(clippy::needless_range_loop)]
+#[inline(always)]
+fn quarter_round<const N: usize>(x: &mut [[u32; N]; 16], a: usize, b: usize, c: usize, d: usize) {
+    for l in 0..N {
+        x[a][l] = x[a][l].wrapping_add(x[b][l]);
+        x[d][l] = (x[d][l] ^ x[a][l]).rotate_left(16);
+        x[c][l] = x[c][l].wrapping_add(x[d][l]);
+        x[b][l] = (x[b][l] ^ x[c][l]).rotate_left(12);
+        x[a][l] = x[a][l].wrapping_add(x[b][l]);
+        x[d][l] = (x[d][l] ^ x[a][l]).rotate_left(8);
+        x[c][l] = x[c][l].wrapping_add(x[d][l]);
+        x[b][l] = (x[b][l] ^ x[c][l]).rotate_left(7);
+    }
+}
+
+/// Block 0 of `N` streams at once: `out[w][l]` is word `w` of stream
+/// `streams[l]`.
+#[inline(always)]
+fn blocks<const N: usize>(key: &[u32; 8], streams: &[u64; N], out: &mut [[u32; N]; 16]) {
+    let mut input = [[0u32; N]; 16];
+    for (w, &s) in SIGMA.iter().enumerate() {
+        input[w] = [s; N];
+    }
+    for (w, &k) in key.iter().enumerate() {
+        input[4 + w] = [k; N];
+    }
+    // Words 12 and 13 are the block counter, 0.
+    for (l, &stream) in streams.iter().enumerate() {
+        input[14][l] = stream as u32;
+        input[15][l] = (stream >> 32) as u32;
+    }
+    let mut x = input;
+    for _ in 0..4 {
+        quarter_round(&mut x, 0, 4, 8, 12);
+        quarter_round(&mut x, 1, 5, 9, 13);
+        quarter_round(&mut x, 2, 6, 10, 14);
+        quarter_round(&mut x, 3, 7, 11, 15);
+        quarter_round(&mut x, 0, 5, 10, 15);
+        quarter_round(&mut x, 1, 6, 11, 12);
+        quarter_round(&mut x, 2, 7, 8, 13);
+        quarter_round(&mut x, 3, 4, 9, 14);
+    }
+    for ((out, x), input) in out.iter_mut().zip(&x).zip(&input) {
+        for ((out, x), input) in out.iter_mut().zip(x).zip(input) {
+            *out = x.wrapping_add(*input);
+        }
+    }
+}
+
+/// The first block of one stream.
+fn first_block(key: &[u32; 8], stream: u64) -> [u32; BLOCK_WORDS] {
+    let mut out = [[0u32; 1]; 16];
+    blocks(key, &[stream], &mut out);
+    out.map(|[w]| w)
+}
+
+/// [`LANES`] first blocks side by side, compiled for AVX-512 and AVX2 as
+/// well (AVX-512 rotates in one instruction and holds the whole state in
+/// registers), picked at run time.
+#[multiversion::multiversion(targets("x86_64+avx512f+avx512vl", "x86_64+avx2"))]
+fn first_blocks(key: &[u32; 8], streams: &[u64; LANES], out: &mut [[u32; LANES]; 16]) {
+    blocks(key, streams, out);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::Rng;
+
+    /// Each test's stream, read in a random mix of calls, equals
+    /// `ChaCha8Rng::seed_from_u64(seed)` at that stream, past the first
+    /// block too, one at a time and side by side.
+    #[test]
+    fn streams_equal_rand_chacha_word_for_word() {
+        let mut calls = ChaCha8Rng::seed_from_u64(99);
+        for seed in [0, 1, 42, u64::MAX] {
+            let streams = TestStreams::new(seed);
+            let indices = [0, 1, 2, 7, 8, 1 << 32, (1 << 32) + 5, u64::MAX, 12345];
+            let mut batched = Vec::new();
+            streams.each(indices, |index, rng| batched.push((index, rng)));
+            assert_eq!(batched.len(), indices.len());
+            for ((index, mut lane), &want_index) in batched.into_iter().zip(&indices) {
+                assert_eq!(index, want_index);
+                let mut want = ChaCha8Rng::seed_from_u64(seed);
+                want.set_stream(index);
+                let mut single = streams.rng(index);
+                for _ in 0..40 {
+                    match calls.random_range(0..3) {
+                        0 => {
+                            let w = want.next_u32();
+                            assert_eq!(single.next_u32(), w, "seed {seed} test {index}");
+                            assert_eq!(lane.next_u32(), w);
+                        }
+                        1 => {
+                            let w = want.next_u64();
+                            assert_eq!(single.next_u64(), w, "seed {seed} test {index}");
+                            assert_eq!(lane.next_u64(), w);
+                        }
+                        _ => {
+                            let len = calls.random_range(0..23);
+                            let mut w = vec![0; len];
+                            let (mut s, mut l) = (vec![0; len], vec![0; len]);
+                            want.fill_bytes(&mut w);
+                            single.fill_bytes(&mut s);
+                            lane.fill_bytes(&mut l);
+                            assert_eq!((&s, &l), (&w, &w), "seed {seed} test {index}");
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// Odd counts of tests fill the last group of lanes partly.
+    #[test]
+    fn each_visits_every_index_once_in_order() {
+        let streams = TestStreams::new(5);
+        for n in [0u64, 1, 7, 8, 9, 17] {
+            let mut seen = Vec::new();
+            streams.each(100..100 + n, |index, mut rng| {
+                seen.push(index);
+                assert_eq!(rng.next_u64(), streams.rng(index).next_u64());
+            });
+            assert_eq!(seen, (100..100 + n).collect::<Vec<_>>());
+        }
+    }
+}
