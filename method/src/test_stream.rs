@@ -138,6 +138,7 @@ impl TestRng {
 }
 
 impl RngCore for TestRng {
+    #[inline]
     fn next_u32(&mut self) -> u32 {
         if self.next < BLOCK_WORDS {
             self.next += 1;
@@ -148,6 +149,7 @@ impl RngCore for TestRng {
 
     /// Two consecutive words, the first the low half (as `rand_core`'s
     /// block generators read them, across block boundaries too).
+    #[inline]
     fn next_u64(&mut self) -> u64 {
         if self.next >= BLOCK_WORDS {
             return self.rest().next_u64();
