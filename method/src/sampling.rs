@@ -8,7 +8,7 @@
 use crate::library::Library;
 use crate::mass::GridMass;
 use crate::outside::OutsideMass;
-pub use crate::test_stream::{test_rng, TestRng, TestStreams};
+pub use crate::test_stream::{long_test_rng, test_rng, TestRng, TestStreams};
 use crate::tolerance::PROBABILITY_FLOOR;
 use rand::distr::Distribution;
 use rand::Rng;

@@ -21,7 +21,7 @@ use super::exposure::FollowExposure;
 use super::library::PolicyLibrary;
 use super::states::StateGrid;
 use super::world::{advance_with, FollowState, FollowWorld, Odometer};
-use crate::sampling::{test_rng, OutsideSpread, SamplingError, TestRng};
+use crate::sampling::{long_test_rng, OutsideSpread, SamplingError};
 use crate::vehicle::{FollowDriver, VehicleModel};
 use rand::Rng;
 use rand_distr::weighted::WeightedAliasIndex;
@@ -204,8 +204,8 @@ impl FollowSampler {
 
     /// Test `index`'s random stream, initial state and the logarithm of
     /// its initial weight `P(s₁)/q(s₁)`.
-    pub(super) fn start(&self, seed: u64, index: u64) -> (TestRng, usize, f64) {
-        let mut rng = test_rng(seed, index);
+    pub(super) fn start(&self, seed: u64, index: u64) -> (rand_chacha::ChaCha8Rng, usize, f64) {
+        let mut rng = long_test_rng(seed, index);
         let s1 = self.initial_alias.sample(&mut rng);
         let log_weight = (self.initial[s1] / self.initial_q[s1]).ln();
         (rng, s1, log_weight)
