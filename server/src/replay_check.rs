@@ -210,22 +210,21 @@ pub fn verify_builtin(
             replayed_explored_span(tests, from, to)
         });
     }
-    let reported = |i: u64| {
-        report
-            .outcomes
-            .binary_search_by_key(&i, |o| o.0)
-            .ok()
-            .map(|k| report.outcomes[k].1)
-    };
     let listed = report
         .outcomes
         .iter()
         .filter(|o| o.0 >= new_from)
         .map(|&(i, o)| (i, Some(o)));
+    // The chosen tests the report lists nothing for, by walking both
+    // sorted lists together.
+    let mut reported = report.outcomes.iter().map(|o| o.0).peekable();
     let quiet = chosen
         .iter()
         .copied()
-        .filter(|&i| reported(i).is_none())
+        .filter(|&i| {
+            while reported.next_if(|&r| r < i).is_some() {}
+            reported.peek() != Some(&i)
+        })
         .map(|i| (i, None));
     let checks: Vec<(u64, Option<SparseOutcome>)> = listed.chain(quiet).collect();
     // In batches where the case has them; a batch that panics is replayed
