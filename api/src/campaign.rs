@@ -36,7 +36,6 @@ pub struct RunningStage {
 }
 
 /// How tests are drawn.
-#[cfg_attr(feature = "sqlx", derive(sqlx::Type), sqlx(rename_all = "kebab-case"))]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum Method {
@@ -83,7 +82,6 @@ impl Method {
 
 /// How a library campaign of a grid case splits its tests between the
 /// library and the scenarios outside it (docs/statistics.md, "Strata").
-#[cfg_attr(feature = "sqlx", derive(sqlx::Type), sqlx(rename_all = "kebab-case"))]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, ToSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum Split {
@@ -109,7 +107,6 @@ impl Split {
 }
 
 /// How a library campaign spreads its exploration share ε outside the library.
-#[cfg_attr(feature = "sqlx", derive(sqlx::Type), sqlx(rename_all = "kebab-case"))]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, ToSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum Outside {
@@ -204,7 +201,6 @@ fn default_confidence() -> f64 {
 pub const EXACT_MAX_SCENARIOS: usize = 100_000;
 
 /// A campaign's state.
-#[cfg_attr(feature = "sqlx", derive(sqlx::Type), sqlx(rename_all = "kebab-case"))]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum CampaignStatus {

@@ -99,7 +99,6 @@ pub struct CreateLibrary {
 }
 
 /// A library's build state.
-#[cfg_attr(feature = "sqlx", derive(sqlx::Type), sqlx(rename_all = "kebab-case"))]
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum LibraryStatus {

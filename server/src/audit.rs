@@ -23,6 +23,7 @@
 //! stopped on such results runs again. So the answer is the one honest
 //! workers give, whatever the flagged worker did.
 
+use crate::db::sql;
 use crate::db::{now_ms, Database};
 use crate::error::ApiError;
 use crate::report_check::CheckedReport;
@@ -33,7 +34,7 @@ use crate::store::leases::LeaseState;
 use crate::store::results::{check_effort, held_lease, stopped_ack, Recorded};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
-use sqlx::SqliteConnection;
+use rusqlite::{params, Connection};
 use std::sync::Arc;
 use std::sync::Mutex;
 use tslg_api::{CampaignStatus, ResultAck, ResultReport};
@@ -179,8 +180,8 @@ pub enum Verdict {
 
 /// Records the run of `worker` with `outcome` on `audit` (whose current
 /// lease it held) and decides what two or three runs say.
-pub async fn record_run(
-    conn: &mut SqliteConnection,
+pub fn record_run(
+    conn: &Connection,
     audit: &AuditRow,
     worker: &str,
     outcome: &str,
@@ -220,16 +221,14 @@ pub async fn record_run(
         }
         _ => return Ok(Verdict::Pending),
     };
-    sqlx::query(&format!(
-        "UPDATE audits SET state = ?, {column}_worker = ?, {column}_outcome = ?, lease_id = NULL \
-         WHERE id = ?"
-    ))
-    .bind(state)
-    .bind(worker)
-    .bind(outcome)
-    .bind(audit.id)
-    .execute(&mut *conn)
-    .await?;
+    sql::execute(
+        conn,
+        &format!(
+            "UPDATE audits SET state = ?, {column}_worker = ?, {column}_outcome = ?, \
+             lease_id = NULL WHERE id = ?"
+        ),
+        params![state.as_str(), worker, outcome, audit.id],
+    )?;
     match &verdict {
         Verdict::Undecided => tracing::warn!(
             campaign = audit.campaign_id,
@@ -251,52 +250,47 @@ pub async fn record_run(
 /// Flags `worker` (caught at test `index` of `campaign`, for `reason`) and
 /// takes back its results: see the module's documentation. Returns the
 /// campaigns whose results changed.
-pub async fn flag_worker(
-    conn: &mut SqliteConnection,
+pub fn flag_worker(
+    conn: &Connection,
     worker: &str,
     reason: &str,
     campaign: i64,
     index: u64,
 ) -> Result<Vec<i64>, ApiError> {
-    sqlx::query(
+    sql::execute(
+        conn,
         "INSERT OR IGNORE INTO flagged_workers (name, reason, campaign_id, test_index) \
          VALUES (?, ?, ?, ?)",
-    )
-    .bind(worker)
-    .bind(reason)
-    .bind(campaign)
-    .bind(index as i64)
-    .execute(&mut *conn)
-    .await?;
-    let touched: Vec<(i64,)> =
-        sqlx::query_as("SELECT DISTINCT campaign_id FROM reports WHERE worker = ?")
-            .bind(worker)
-            .fetch_all(&mut *conn)
-            .await?;
+        params![worker, reason, campaign, index as i64],
+    )?;
+    let touched: Vec<(i64,)> = sql::all(
+        conn,
+        "SELECT DISTINCT campaign_id FROM reports WHERE worker = ?",
+        [worker],
+    )?;
     let mut changed = Vec::new();
     for (id,) in touched {
-        if take_back(conn, id, worker).await? {
+        if take_back(conn, id, worker)? {
             changed.push(id);
         }
     }
-    sqlx::query("UPDATE leases SET expires_at = 0 WHERE worker = ? AND state = 'active'")
-        .bind(worker)
-        .execute(&mut *conn)
-        .await?;
-    sqlx::query(
+    sql::execute(
+        conn,
+        "UPDATE leases SET expires_at = 0 WHERE worker = ? AND state = 'active'",
+        [worker],
+    )?;
+    sql::execute(
+        conn,
         "UPDATE audits SET state = 'void', lease_id = NULL \
          WHERE first_worker = ? AND state IN ('replica', 'tiebreak', 'agreed')",
-    )
-    .bind(worker)
-    .execute(&mut *conn)
-    .await?;
-    sqlx::query(
+        [worker],
+    )?;
+    sql::execute(
+        conn,
         "UPDATE audits SET state = 'replica', replica_worker = NULL, replica_outcome = NULL, \
          lease_id = NULL WHERE replica_worker = ? AND state = 'tiebreak'",
-    )
-    .bind(worker)
-    .execute(&mut *conn)
-    .await?;
+        [worker],
+    )?;
     tracing::warn!(
         worker,
         campaign,
@@ -312,16 +306,14 @@ pub async fn flag_worker(
 /// ranges become leases for others, and the estimate is folded again from
 /// the start (a campaign that stopped on those results runs again). A
 /// cancelled campaign, or one that stopped before them, is left alone.
-async fn take_back(conn: &mut SqliteConnection, id: i64, worker: &str) -> Result<bool, ApiError> {
-    let campaign = campaigns::get(&mut *conn, id).await?;
-    let ranges: Vec<(i64, i64)> = sqlx::query_as(
+fn take_back(conn: &Connection, id: i64, worker: &str) -> Result<bool, ApiError> {
+    let campaign = campaigns::get(conn, id)?;
+    let ranges: Vec<(i64, i64)> = sql::all(
+        conn,
         "SELECT from_index, to_index FROM reports WHERE campaign_id = ? AND worker = ? \
          ORDER BY from_index",
-    )
-    .bind(id)
-    .bind(worker)
-    .fetch_all(&mut *conn)
-    .await?;
+        params![id, worker],
+    )?;
     let Some(first) = ranges.first().map(|r| r.0) else {
         return Ok(false);
     };
@@ -331,20 +323,18 @@ async fn take_back(conn: &mut SqliteConnection, id: i64, worker: &str) -> Result
         return Ok(false);
     }
     for &(from, to) in &ranges {
-        sqlx::query("DELETE FROM reports WHERE campaign_id = ? AND from_index = ?")
-            .bind(id)
-            .bind(from)
-            .execute(&mut *conn)
-            .await?;
-        sqlx::query(
-            "DELETE FROM invalid_tests WHERE campaign_id = ? AND test_index >= ? AND test_index < ?",
-        )
-        .bind(id)
-        .bind(from)
-        .bind(to)
-        .execute(&mut *conn)
-        .await?;
-        crate::store::leases::insert_redo(&mut *conn, id, from as u64, to as u64).await?;
+        sql::execute(
+            conn,
+            "DELETE FROM reports WHERE campaign_id = ? AND from_index = ?",
+            [id, from],
+        )?;
+        sql::execute(
+            conn,
+            "DELETE FROM invalid_tests WHERE campaign_id = ? AND test_index >= ? \
+             AND test_index < ?",
+            [id, from, to],
+        )?;
+        crate::store::leases::insert_redo(conn, id, from as u64, to as u64)?;
     }
     if campaign.method == tslg_api::Method::Adaptive && campaign.indices > first {
         // Later stages were planned from those results: they cannot be
@@ -354,17 +344,12 @@ async fn take_back(conn: &mut SqliteConnection, id: i64, worker: &str) -> Result
              reporting what others could not reproduce); the adaptive stages planned from them \
              cannot stand: start the campaign again"
         );
-        sqlx::query("UPDATE campaigns SET status = 'failed', status_detail = ? WHERE id = ?")
-            .bind(detail)
-            .bind(id)
-            .execute(&mut *conn)
-            .await?;
-        sqlx::query(
-            "UPDATE leases SET state = 'cancelled' WHERE campaign_id = ? AND state = 'active'",
-        )
-        .bind(id)
-        .execute(&mut *conn)
-        .await?;
+        sql::execute(
+            conn,
+            "UPDATE campaigns SET status = 'failed', status_detail = ? WHERE id = ?",
+            params![detail, id],
+        )?;
+        crate::store::leases::cancel_active(conn, id)?;
         return Ok(true);
     }
     if campaign.indices > first {
@@ -372,30 +357,27 @@ async fn take_back(conn: &mut SqliteConnection, id: i64, worker: &str) -> Result
             "results of worker `{worker}` from test {first} on were taken back (it was caught \
              reporting what others could not reproduce) and are being run again"
         );
-        sqlx::query(
+        sql::execute(
+            conn,
             "UPDATE campaigns SET indices = 0, tests = 0, events = 0, invalid = 0, s1 = 0, \
              s2 = 0, largest = 0, outside_tests = 0, outside_events = 0, outside_s1 = 0, \
              outside_mismatches = 0, outside_upper = NULL, status = 'running', status_detail = ? \
              WHERE id = ?",
-        )
-        .bind(detail)
-        .bind(id)
-        .execute(&mut *conn)
-        .await?;
-        sqlx::query("DELETE FROM history WHERE campaign_id = ? AND indices > ?")
-            .bind(id)
-            .bind(first)
-            .execute(&mut *conn)
-            .await?;
+            params![detail, id],
+        )?;
+        sql::execute(
+            conn,
+            "DELETE FROM history WHERE campaign_id = ? AND indices > ?",
+            [id, first],
+        )?;
         if stopped {
             // The leases the stop cancelled hold ranges not yet reported.
-            sqlx::query(
+            sql::execute(
+                conn,
                 "UPDATE leases SET state = 'active', expires_at = 0 WHERE campaign_id = ? \
                  AND state = 'cancelled' AND resume_at < end_index AND audit_id IS NULL",
-            )
-            .bind(id)
-            .execute(&mut *conn)
-            .await?;
+                [id],
+            )?;
             tracing::warn!(campaign = id, worker, "a stopped campaign runs again");
         }
     }
@@ -409,13 +391,25 @@ pub async fn record_audit_run(
     db: &Database,
     tests: Option<Arc<dyn CampaignTests>>,
     lease_id: i64,
+    report: &Arc<ResultReport>,
+    checked: &Arc<CheckedReport>,
+) -> Result<Recorded, ApiError> {
+    let (report, checked) = (Arc::clone(report), Arc::clone(checked));
+    db.write(move |conn| record_audit_run_in(conn, tests, lease_id, &report, &checked))
+        .await
+}
+
+/// [`record_audit_run`] on the writer connection.
+fn record_audit_run_in(
+    conn: &Connection,
+    tests: Option<Arc<dyn CampaignTests>>,
+    lease_id: i64,
     report: &ResultReport,
     checked: &CheckedReport,
 ) -> Result<Recorded, ApiError> {
-    let mut tx = db.write.begin().await?;
-    let (lease, campaign) = held_lease(&mut tx, lease_id, report).await?;
+    let (lease, campaign) = held_lease(conn, lease_id, report)?;
     let (start, end) = (lease.start_index as u64, lease.end_index as u64);
-    let audit = audits::get(&mut tx, lease.audit_id.unwrap_or_default()).await?;
+    let audit = audits::get(conn, lease.audit_id.unwrap_or_default())?;
     if campaign.status.is_final()
         || lease.state != LeaseState::Active
         || audit.lease_id != Some(lease.id)
@@ -433,18 +427,18 @@ pub async fn record_audit_run(
         )));
     }
     let outcome = audits::encode(checked.outcomes.first().map(|o| o.1));
-    let verdict = record_run(&mut tx, &audit, &report.worker, &outcome).await?;
-    sqlx::query("UPDATE leases SET resume_at = end_index, state = 'done' WHERE id = ?")
-        .bind(lease.id)
-        .execute(&mut *tx)
-        .await?;
+    let verdict = record_run(conn, &audit, &report.worker, &outcome)?;
+    sql::execute(
+        conn,
+        "UPDATE leases SET resume_at = end_index, state = 'done' WHERE id = ?",
+        [lease.id],
+    )?;
     if let Verdict::Liar { liar, detail } = &verdict {
-        flag_worker(&mut tx, liar, detail, campaign.id, start).await?;
+        flag_worker(conn, liar, detail, campaign.id, start)?;
     }
     // The flag may have reset the campaign: fold from what is stored now.
-    let campaign = campaigns::get(&mut *tx, campaign.id).await?;
-    let stopped = fold_prefix(&mut tx, &campaign, tests, None).await?;
-    tx.commit().await?;
+    let campaign = campaigns::get(conn, campaign.id)?;
+    let stopped = fold_prefix(conn, &campaign, tests, None, None)?;
     Ok(Recorded {
         ack: ResultAck {
             accepted: 1,
@@ -469,10 +463,10 @@ pub async fn flag_for_mismatch(
     campaign: i64,
     mismatch: &Mismatch,
 ) -> Result<(), ApiError> {
-    let mut tx = db.write.begin().await?;
     let reason = format!("campaign {campaign}: {mismatch}");
-    flag_worker(&mut tx, worker, &reason, campaign, mismatch.index).await?;
-    tx.commit().await?;
+    let (worker, index) = (worker.to_string(), mismatch.index);
+    db.write(move |conn| flag_worker(conn, &worker, &reason, campaign, index))
+        .await?;
     Ok(())
 }
 

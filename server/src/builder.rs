@@ -54,7 +54,7 @@ pub fn spawn_build(state: AppState, id: i64) {
 
 async fn run_build(state: &AppState, id: i64) -> anyhow::Result<()> {
     let _permit = state.builds.acquire().await?;
-    let row = libraries::get(&state.db.read, id).await?;
+    let row = state.db.read(move |conn| libraries::get(conn, id)).await?;
     let req: CreateLibrary = serde_json::from_str(&row.request)?;
     tracing::info!(library = id, case = %req.case, "library build started");
     let progress = state.build_progress.begin(id);
@@ -73,11 +73,19 @@ async fn record_build(
 ) -> anyhow::Result<()> {
     match outcome? {
         Ok((library, seconds)) => {
-            libraries::mark_ready(&state.db.write, id, &Built::of(&library, seconds)).await?;
-            tracing::info!(library = id, size = library.size, seconds, "library ready");
+            let size = library.size;
+            state
+                .db
+                .write(move |conn| libraries::mark_ready(conn, id, &Built::of(&library, seconds)))
+                .await?;
+            tracing::info!(library = id, size, seconds, "library ready");
         }
         Err(reason) => {
-            libraries::mark_failed(&state.db.write, id, &reason).await?;
+            let failed = reason.clone();
+            state
+                .db
+                .write(move |conn| libraries::mark_failed(conn, id, &failed))
+                .await?;
             tracing::warn!(library = id, %reason, "library build failed");
         }
     }
@@ -86,7 +94,7 @@ async fn record_build(
 
 /// Restarts the builds a stopped coordinator left unfinished.
 pub async fn resume_builds(state: &AppState) -> anyhow::Result<()> {
-    for row in libraries::building(&state.db.read).await? {
+    for row in state.db.read(libraries::building).await? {
         // A build on workers goes on as its campaign does; one whose
         // campaign stopped while the coordinator was down is recorded now.
         if let Some(campaign) = crate::enumeration::campaign_of(state, row.id)

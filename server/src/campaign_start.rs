@@ -108,7 +108,9 @@ async fn library_of(
             )))
         }
         (_, Some(id)) => Some(
-            libraries::get(&state.db.read, id)
+            state
+                .db
+                .read(move |conn| libraries::get(conn, id))
                 .await
                 .map_err(|_| bad(format!("library_id {id} does not name a library")))?,
         ),
@@ -197,14 +199,17 @@ pub async fn start(state: &AppState, req: CreateCampaign) -> Result<CampaignRow,
     });
     let preset = library.as_ref().map(|l| l.preset.clone());
     let file = match &library {
-        Some(lib) if req.method.uses_library() && lib.status == LibraryStatus::Ready => Some(
-            libraries::file(&state.db.read, lib.id)
+        Some(lib) if req.method.uses_library() && lib.status == LibraryStatus::Ready => Some({
+            let id = lib.id;
+            state
+                .db
+                .read(move |conn| libraries::file(conn, id))
                 .await?
                 .ok_or_else(|| {
                     ApiError::Internal(anyhow::anyhow!("ready library {} has no file", lib.id))
                 })?
-                .bytes,
-        ),
+                .bytes
+        }),
         _ => None,
     };
     let (request, source) = (req.clone(), exposure.clone());
@@ -224,40 +229,40 @@ pub async fn start(state: &AppState, req: CreateCampaign) -> Result<CampaignRow,
         }
         _ => CampaignStatus::Running,
     };
-    let row = campaigns::insert(
-        &state.db.write,
-        &NewCampaign {
-            case_name: opened.case.name().to_owned(),
-            preset: opened.case.preset(),
-            method: req.method,
-            library_id: req.library_id,
-            exposure_name: opened.case.exposure_name().to_owned(),
-            exposure_fingerprint: opened.case.exposure_fingerprint(),
-            exposure_table: match exposure {
-                ExposureSource::Table { text, .. } => Some(text),
-                ExposureSource::Builtin => None,
-            },
-            vut: opened.vut.to_string(),
-            requires,
-            epsilon: req.epsilon,
-            outside: wire::outside(opened.outside),
-            split: wire::wire_split(opened.split),
-            rule,
-            seed: req.seed,
-            status,
-            exact_probability: opened.exact_probability,
-            first_stage: (req.method == Method::Adaptive).then(|| {
-                (
-                    0,
-                    AdaptiveSettings::default()
-                        .library_tests
-                        .min(rule.max_tests),
-                    "library",
-                )
-            }),
+    let new = NewCampaign {
+        case_name: opened.case.name().to_owned(),
+        preset: opened.case.preset(),
+        method: req.method,
+        library_id: req.library_id,
+        exposure_name: opened.case.exposure_name().to_owned(),
+        exposure_fingerprint: opened.case.exposure_fingerprint(),
+        exposure_table: match exposure {
+            ExposureSource::Table { text, .. } => Some(text),
+            ExposureSource::Builtin => None,
         },
-    )
-    .await?;
+        vut: opened.vut.to_string(),
+        requires,
+        epsilon: req.epsilon,
+        outside: wire::outside(opened.outside),
+        split: wire::wire_split(opened.split),
+        rule,
+        seed: req.seed,
+        status,
+        exact_probability: opened.exact_probability,
+        first_stage: (req.method == Method::Adaptive).then(|| {
+            (
+                0,
+                AdaptiveSettings::default()
+                    .library_tests
+                    .min(rule.max_tests),
+                "library",
+            )
+        }),
+    };
+    let row = state
+        .db
+        .write(move |conn| campaigns::insert(conn, &new))
+        .await?;
     if let Some(tests) = opened.tests {
         state.samplers.insert(row.id, tests);
     }

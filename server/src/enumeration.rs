@@ -149,29 +149,29 @@ pub async fn insert_build(
     let requires = ExternalVut::from_spec(surrogate)
         .and_then(Result::ok)
         .map(|e| e.requirement(&library.case_name));
-    campaigns::insert(
-        &state.db.write,
-        &NewCampaign {
-            case_name: library.case_name.clone(),
-            preset: library.preset.clone(),
-            method,
-            library_id: Some(library.id),
-            exposure_name: library.exposure_name.clone(),
-            exposure_fingerprint: library.exposure_fingerprint.clone(),
-            exposure_table: library.exposure_table.clone(),
-            vut: surrogate.to_string(),
-            requires,
-            epsilon: 0.0,
-            outside: Outside::Uniform,
-            split: Split::Random,
-            rule,
-            seed: 0,
-            status: CampaignStatus::Running,
-            exact_probability: None,
-            first_stage: None,
-        },
-    )
-    .await
+    let new = NewCampaign {
+        case_name: library.case_name.clone(),
+        preset: library.preset.clone(),
+        method,
+        library_id: Some(library.id),
+        exposure_name: library.exposure_name.clone(),
+        exposure_fingerprint: library.exposure_fingerprint.clone(),
+        exposure_table: library.exposure_table.clone(),
+        vut: surrogate.to_string(),
+        requires,
+        epsilon: 0.0,
+        outside: Outside::Uniform,
+        split: Split::Random,
+        rule,
+        seed: 0,
+        status: CampaignStatus::Running,
+        exact_probability: None,
+        first_stage: None,
+    };
+    state
+        .db
+        .write(move |conn| campaigns::insert(conn, &new))
+        .await
 }
 
 /// The enumeration campaign of library `id`, if it is built on workers.
@@ -181,24 +181,27 @@ pub async fn campaign_of(state: &AppState, id: i64) -> Result<Option<CampaignRow
          ORDER BY id DESC LIMIT 1",
         campaigns::COLUMNS
     );
-    Ok(sqlx::query_as(&sql)
-        .bind(id)
-        .fetch_optional(&state.db.read)
-        .await?)
+    state
+        .db
+        .read(move |conn| crate::db::sql::optional(conn, &sql, [id]))
+        .await
 }
 
 /// Records the library of a stopped enumeration campaign: ready from its
 /// events, or failed with the reason (a cell without a valid outcome, a
 /// cancelled build). Harmless when the library is done already.
 pub async fn finish(state: &AppState, campaign_id: i64) -> Result<(), ApiError> {
-    let campaign = campaigns::get(&state.db.read, campaign_id).await?;
+    let campaign = state
+        .db
+        .read(move |conn| campaigns::get(conn, campaign_id))
+        .await?;
     let Some(id) = campaign
         .library_id
         .filter(|_| matches!(campaign.method, Method::Enumerate | Method::Build))
     else {
         return Ok(());
     };
-    let library = libraries::get(&state.db.read, id).await?;
+    let library = state.db.read(move |conn| libraries::get(conn, id)).await?;
     if library.status != LibraryStatus::Building || !campaign.status.is_final() {
         return Ok(());
     }
@@ -214,33 +217,39 @@ pub async fn finish(state: &AppState, campaign_id: i64) -> Result<(), ApiError> 
                 .as_deref()
                 .unwrap_or("no reason given")
         );
-        return libraries::mark_failed(&state.db.write, id, &reason).await;
+        return mark_failed(state, id, reason).await;
     }
     if campaign.method == Method::Build {
         // Its upload recorded the library with the campaign's end.
         return Ok(());
     }
-    let mut conn = state.db.read.acquire().await?;
-    let outcomes = reports::outcomes(&mut conn, campaign_id, 0, campaign.indices as u64).await?;
-    if let Some(&(index, _)) = outcomes
-        .iter()
-        .find(|(_, o)| matches!(o, SparseOutcome::Invalid))
-    {
-        let reason: Option<(String,)> = sqlx::query_as(
-            "SELECT reason FROM invalid_tests WHERE campaign_id = ? AND test_index = ?",
-        )
-        .bind(campaign_id)
-        .bind(index as i64)
-        .fetch_optional(&mut *conn)
+    let indices = campaign.indices as u64;
+    let (outcomes, invalid) = state
+        .db
+        .read(move |conn| {
+            let outcomes = reports::outcomes(conn, campaign_id, 0, indices)?;
+            let Some(&(index, _)) = outcomes
+                .iter()
+                .find(|(_, o)| matches!(o, SparseOutcome::Invalid))
+            else {
+                return Ok((outcomes, None));
+            };
+            let reason: Option<(String,)> = crate::db::sql::optional(
+                conn,
+                "SELECT reason FROM invalid_tests WHERE campaign_id = ? AND test_index = ?",
+                [campaign_id, index as i64],
+            )?;
+            Ok((outcomes, Some((index, reason))))
+        })
         .await?;
+    if let Some((index, reason)) = invalid {
         let reason = format!(
             "the surrogate gave no valid outcome at test {index} of its build (campaign \
              {campaign_id}): {}",
             reason.map_or_else(|| "no reason recorded".into(), |r| r.0)
         );
-        return libraries::mark_failed(&state.db.write, id, &reason).await;
+        return mark_failed(state, id, reason).await;
     }
-    drop(conn);
     let events: Vec<u64> = outcomes.into_iter().map(|(i, _)| i).collect();
     let request: CreateLibrary =
         serde_json::from_str(&library.request).map_err(|e| ApiError::Internal(e.into()))?;
@@ -259,17 +268,24 @@ pub async fn finish(state: &AppState, campaign_id: i64) -> Result<(), ApiError> 
     .map_err(|e| ApiError::Internal(e.into()))?;
     match built {
         Ok(built) => {
-            libraries::mark_ready(
-                &state.db.write,
-                id,
-                &Built::of(&built, campaign.worker_seconds),
-            )
-            .await?;
-            tracing::info!(library = id, size = built.size, "library built on workers");
+            let (size, seconds) = (built.size, campaign.worker_seconds);
+            state
+                .db
+                .write(move |conn| libraries::mark_ready(conn, id, &Built::of(&built, seconds)))
+                .await?;
+            tracing::info!(library = id, size, "library built on workers");
             Ok(())
         }
-        Err(e) => libraries::mark_failed(&state.db.write, id, &e.to_string()).await,
+        Err(e) => mark_failed(state, id, e.to_string()).await,
     }
+}
+
+/// Marks library `id` failed for `reason`.
+async fn mark_failed(state: &AppState, id: i64, reason: String) -> Result<(), ApiError> {
+    state
+        .db
+        .write(move |conn| libraries::mark_failed(conn, id, &reason))
+        .await
 }
 
 /// What a library built on workers shows while it builds: its cells done

@@ -40,8 +40,14 @@ pub enum ApiError {
     Internal(#[from] anyhow::Error),
 }
 
-impl From<sqlx::Error> for ApiError {
-    fn from(e: sqlx::Error) -> Self {
+impl From<rusqlite::Error> for ApiError {
+    fn from(e: rusqlite::Error) -> Self {
+        ApiError::Internal(e.into())
+    }
+}
+
+impl From<serde_rusqlite::Error> for ApiError {
+    fn from(e: serde_rusqlite::Error) -> Self {
         ApiError::Internal(e.into())
     }
 }

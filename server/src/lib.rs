@@ -11,7 +11,6 @@ mod config;
 mod db;
 mod enumeration;
 mod error;
-mod group_commit;
 mod history;
 mod latency;
 mod lease_size;
@@ -57,7 +56,7 @@ pub async fn serve(
     }
     let db = db::Database::open(&config.database_url, config.durability).await?;
     store::reports::move_legacy_events(&db).await?;
-    store::user_cases::register_stored(&db.read)
+    db.read(store::user_cases::register_stored)
         .await
         .map_err(|e| anyhow::anyhow!("user-defined cases: {e}"))?;
     let state = state::AppState::new(db, config);

@@ -7,6 +7,7 @@
 //! counters (`_total`: they only grow, as campaigns are never deleted), the
 //! state of things now are gauges.
 
+use crate::db::sql;
 use crate::error::ApiError;
 use crate::state::AppState;
 use axum::extract::State;
@@ -32,29 +33,35 @@ struct Snapshot {
 }
 
 async fn snapshot(state: &AppState) -> Result<Snapshot, ApiError> {
-    let pool = &state.db.read;
-    let campaigns = sqlx::query_as("SELECT status, COUNT(*) FROM campaigns GROUP BY status")
-        .fetch_all(pool)
-        .await?;
-    let libraries = sqlx::query_as("SELECT status, COUNT(*) FROM libraries GROUP BY status")
-        .fetch_all(pool)
-        .await?;
-    let (resolved, events, invalid): (i64, i64, i64) = sqlx::query_as(
+    let groups = state.db.group_counts();
+    state.db.read(move |conn| read_snapshot(conn, groups)).await
+}
+
+fn read_snapshot(conn: &rusqlite::Connection, groups: (u64, u64)) -> Result<Snapshot, ApiError> {
+    let campaigns = sql::all(
+        conn,
+        "SELECT status, COUNT(*) FROM campaigns GROUP BY status",
+        [],
+    )?;
+    let libraries = sql::all(
+        conn,
+        "SELECT status, COUNT(*) FROM libraries GROUP BY status",
+        [],
+    )?;
+    let (resolved, events, invalid): (i64, i64, i64) = sql::one(
+        conn,
         "SELECT COALESCE(SUM(indices), 0), COALESCE(SUM(events), 0), COALESCE(SUM(invalid), 0) \
          FROM campaigns",
-    )
-    .fetch_one(pool)
-    .await?;
+        [],
+    )?;
     let now = crate::db::now_ms();
-    let (outstanding, expired, reclaimed): (i64, i64, i64) = sqlx::query_as(
-        "SELECT COALESCE(SUM(state = 'active' AND expires_at >= ?), 0), \
-                COALESCE(SUM(state = 'active' AND expires_at < ?), 0), \
+    let (outstanding, expired, reclaimed): (i64, i64, i64) = sql::one(
+        conn,
+        "SELECT COALESCE(SUM(state = 'active' AND expires_at >= ?1), 0), \
+                COALESCE(SUM(state = 'active' AND expires_at < ?1), 0), \
                 COALESCE(SUM(attempt - 1), 0) FROM leases",
-    )
-    .bind(now)
-    .bind(now)
-    .fetch_one(pool)
-    .await?;
+        [now],
+    )?;
     Ok(Snapshot {
         campaigns,
         libraries,
@@ -64,7 +71,7 @@ async fn snapshot(state: &AppState) -> Result<Snapshot, ApiError> {
         outstanding,
         expired,
         reclaimed,
-        groups: state.db.group.counts(),
+        groups,
     })
 }
 

@@ -147,33 +147,35 @@ where
     F: Fn(u64, u64) -> Option<Vec<(Option<SparseOutcome>, bool)>> + Sync,
 {
     let blocks = to.saturating_sub(from).div_ceil(REPLAY_BLOCK);
-    let results: Vec<Block> = (0..blocks)
-        .into_par_iter()
-        .map(|b| {
-            let start = from + b * REPLAY_BLOCK;
-            let end = (start + REPLAY_BLOCK).min(to);
-            let first = outcomes.partition_point(|o| o.0 < start);
-            let mut listed = outcomes[first..]
-                .iter()
-                .take_while(|o| o.0 < end)
-                .peekable();
-            let Some(replayed) = replay(start, end).filter(|r| r.len() as u64 == end - start)
-            else {
-                return Block::Unreplayable;
-            };
-            let mut explored = Vec::new();
-            for (index, (own, explores)) in (start..end).zip(replayed) {
-                let reported = listed.next_if(|o| o.0 == index).map(|o| o.1);
-                if let Some(mismatch) = contradiction(index, reported, own) {
-                    return Block::Contradicted(mismatch);
-                }
-                if explores {
-                    explored.push(index);
-                }
+    let run_block = |b: u64| {
+        let start = from + b * REPLAY_BLOCK;
+        let end = (start + REPLAY_BLOCK).min(to);
+        let first = outcomes.partition_point(|o| o.0 < start);
+        let mut listed = outcomes[first..]
+            .iter()
+            .take_while(|o| o.0 < end)
+            .peekable();
+        let Some(replayed) = replay(start, end).filter(|r| r.len() as u64 == end - start) else {
+            return Block::Unreplayable;
+        };
+        let mut explored = Vec::new();
+        for (index, (own, explores)) in (start..end).zip(replayed) {
+            let reported = listed.next_if(|o| o.0 == index).map(|o| o.1);
+            if let Some(mismatch) = contradiction(index, reported, own) {
+                return Block::Contradicted(mismatch);
             }
-            Block::Agreed(explored)
-        })
-        .collect();
+            if explores {
+                explored.push(index);
+            }
+        }
+        Block::Agreed(explored)
+    };
+    // One block runs here: handing it to the pool would cost more.
+    let results: Vec<Block> = if blocks <= 1 {
+        (0..blocks).map(run_block).collect()
+    } else {
+        (0..blocks).into_par_iter().map(run_block).collect()
+    };
     let mut tests = Vec::new();
     for block in results {
         match block {

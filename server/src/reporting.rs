@@ -19,23 +19,47 @@ use tslg_method::registry::CampaignTests;
 /// more go to the blocking pool.
 const INLINE_REPLAYS: u64 = 256;
 
+/// Replays a report may take on the writer itself (see [`at_once`]).
+const WRITER_REPLAYS: usize = 64;
+
 /// Checks, records and accounts a report on lease `lease_id`.
 pub async fn receive(
     state: &AppState,
     lease_id: i64,
-    report: &ResultReport,
+    report: &Arc<ResultReport>,
     checked: &Arc<CheckedReport>,
 ) -> Result<ResultAck, ApiError> {
-    // One read connection for what decides the checks. Only the lease's
-    // holder may report on it, and only what it reports is checked: a
-    // report in another worker's name must not get that worker flagged.
-    // (The transaction that records the report checks flag and fence again.)
+    match at_once(state, lease_id, report, checked).await {
+        Ok(AtOnce::Recorded(recorded)) => {
+            account(state, report, &recorded);
+            return Ok(recorded.ack);
+        }
+        Ok(AtOnce::Contradicted(mismatch)) => {
+            return Err(contradicted(&mismatch, &report.worker));
+        }
+        Ok(AtOnce::Declined) => {}
+        Err(e) => {
+            // The writer may have resolved adaptive stages it did not
+            // persist; the copy is rebuilt from what is stored.
+            forget_adaptive(state, lease_id);
+            return Err(e);
+        }
+    }
+    // One read for what decides the checks. Only the lease's holder may
+    // report on it, and only what it reports is checked: a report in
+    // another worker's name must not get that worker flagged. (The
+    // transaction that records the report checks flag and fence again.)
     let (lease, campaign) = {
-        let mut conn = state.db.read.acquire().await?;
-        let lease = leases::get_unless_flagged(&mut conn, lease_id, &report.worker).await?;
-        leases::check_fence(&lease, &report.worker, report.attempt, report.key.as_str())?;
-        let campaign = campaigns::get(&mut *conn, lease.campaign_id).await?;
-        (lease, campaign)
+        let report = Arc::clone(report);
+        state
+            .db
+            .read(move |conn| {
+                let lease = leases::get_unless_flagged(conn, lease_id, &report.worker)?;
+                leases::check_fence(&lease, &report.worker, report.attempt, report.key.as_str())?;
+                let campaign = campaigns::get(conn, lease.campaign_id)?;
+                Ok((lease, campaign))
+            })
+            .await?
     };
     if campaign.method == Method::Build {
         return Err(ApiError::Conflict(format!(
@@ -66,13 +90,12 @@ pub async fn receive(
                 plan = audit_plan(state, &campaign, &report.worker, checked).await?;
             }
         }
-        let config = &state.config;
         let found = Findings {
             tests: library_tests(),
-            audits: &plan,
-            explored: explored.as_ref(),
+            audits: plan,
+            explored,
         };
-        results::record(&state.db, config, lease_id, report, checked, found).await
+        results::record(&state.db, &state.config, lease_id, report, checked, found).await
     };
     // An adaptive campaign's stages live in memory with its tests: a
     // report that failed may have resolved a stage it did not persist, so
@@ -84,6 +107,114 @@ pub async fn receive(
     })?;
     account(state, report, &recorded);
     Ok(recorded.ack)
+}
+
+/// What the writer made of a report it was asked to check and record in
+/// one go.
+enum AtOnce {
+    Recorded(Recorded),
+    /// The coordinator's own run contradicts it: the worker is flagged.
+    Contradicted(audit::Mismatch),
+    /// It needs more than the writer should do: the general path.
+    Declined,
+}
+
+/// The common report in one trip to the writer, without a read before it:
+/// a report of a built-in vehicle whose campaign's tests the coordinator
+/// holds, with at most [`WRITER_REPLAYS`] tests to run again (a draw and a
+/// look-up each on a grid case, microseconds in all). The writer reads the
+/// lease and its campaign (the holder checked, as always), runs the
+/// checks, and flags the worker or records the report. Anything else (an
+/// external program's audits, a campaign whose tests are not built yet,
+/// a large replay, an audit run, a build) is declined and goes the general
+/// way.
+async fn at_once(
+    state: &AppState,
+    lease_id: i64,
+    report: &Arc<ResultReport>,
+    checked: &Arc<CheckedReport>,
+) -> Result<AtOnce, ApiError> {
+    let (samplers, sampler, config) = (
+        Arc::clone(&state.samplers),
+        Arc::clone(&state.sampler),
+        Arc::clone(&state.config),
+    );
+    let (report, checked) = (Arc::clone(report), Arc::clone(checked));
+    state
+        .db
+        .write(move |conn| {
+            let (lease, campaign) = results::held_lease(conn, lease_id, &report)?;
+            let tests = samplers.cached(campaign.id);
+            let Some(tests) = tests.filter(|t| t.external().is_none()) else {
+                return Ok(AtOnce::Declined);
+            };
+            if lease.audit_id.is_some()
+                || campaign.method == Method::Build
+                || campaign.status.is_final()
+            {
+                return Ok(AtOnce::Declined);
+            }
+            let new = checked.from.max(lease.resume_at as u64);
+            let mut explored = None;
+            if new < checked.to {
+                if tests.planned(new).is_none() {
+                    return Ok(AtOnce::Declined);
+                }
+                let chosen = sampler.pick(config.replay_share, new, checked.to);
+                let work = if tests.outside_mass().is_some() {
+                    (checked.to - new) as usize
+                } else {
+                    chosen.len() + checked.outcomes.len()
+                };
+                if work > WRITER_REPLAYS {
+                    return Ok(AtOnce::Declined);
+                }
+                let verified = replay_check::verify_builtin(tests.as_ref(), &checked, new, &chosen);
+                if let Some(mismatch) = verified.mismatch {
+                    let reason = format!("campaign {}: {mismatch}", campaign.id);
+                    audit::flag_worker(conn, &report.worker, &reason, campaign.id, mismatch.index)?;
+                    return Ok(AtOnce::Contradicted(mismatch));
+                }
+                explored = verified.explored;
+            }
+            let found = Findings {
+                tests: Some(tests).filter(|_| campaign.method.uses_library()),
+                audits: AuditPlan::default(),
+                explored,
+            };
+            let recorded =
+                results::record_held(conn, &config, &lease, &campaign, &report, &checked, found)?;
+            Ok(AtOnce::Recorded(recorded))
+        })
+        .await
+}
+
+/// Drops the coordinator's copy of lease `lease_id`'s campaign when it is
+/// adaptive (its stages are rebuilt from what is stored).
+fn forget_adaptive(state: &AppState, lease_id: i64) {
+    let (state, samplers) = (state.clone(), Arc::clone(&state.samplers));
+    tokio::spawn(async move {
+        let campaign = state
+            .db
+            .read(move |conn| {
+                let lease = leases::get(conn, lease_id)?;
+                campaigns::get(conn, lease.campaign_id)
+            })
+            .await;
+        if let Ok(campaign) = campaign {
+            if campaign.method == Method::Adaptive {
+                samplers.forget(campaign.id);
+            }
+        }
+    });
+}
+
+/// The 422 of a report the coordinator's own run contradicts.
+fn contradicted(mismatch: &audit::Mismatch, worker: &str) -> ApiError {
+    ApiError::Unprocessable(format!(
+        "{mismatch}: the report is refused and worker `{worker}` is flagged; its results are \
+         taken back"
+    ))
 }
 
 /// The workers' counts, the rates and the caches after a report.
@@ -153,10 +284,7 @@ async fn verify_builtin(
         return Ok(verified.explored);
     };
     audit::flag_for_mismatch(&state.db, worker, campaign, &mismatch).await?;
-    Err(ApiError::Unprocessable(format!(
-        "{mismatch}: the report is refused and worker `{worker}` is flagged; its results are \
-         taken back"
-    )))
+    Err(contradicted(&mismatch, worker))
 }
 
 /// An external program's events: the weight must be the campaign's draw
@@ -211,7 +339,14 @@ async fn audit_plan(
     let requirement = campaign.requires.as_deref().unwrap_or_default();
     let mut others = false;
     for name in state.workers.live_offering(requirement) {
-        if name != worker && audits::flag_of(&state.db.read, &name).await?.is_none() {
+        if name == worker {
+            continue;
+        }
+        let flag = state
+            .db
+            .read(move |conn| audits::flag_of(conn, &name))
+            .await?;
+        if flag.is_none() {
             others = true;
             break;
         }

@@ -30,7 +30,7 @@ impl SamplerCache {
         }
         let file = match row.library_id {
             Some(id) if row.method.uses_library() => Some(
-                libraries::file(&db.read, id)
+                db.read(move |conn| libraries::file(conn, id))
                     .await?
                     .with_context(|| format!("library {id} of campaign {} has no file", row.id))?
                     .bytes,
@@ -45,10 +45,16 @@ impl SamplerCache {
             .context("campaign build task failed")??;
         // An adaptive campaign's copy resolves again the stages its stored
         // state has passed.
-        let mut conn = db.read.acquire().await?;
-        crate::store::adaptive::catch_up(&mut conn, &row, &tests).await?;
+        let caught_up = Arc::clone(&tests);
+        db.read(move |conn| crate::store::adaptive::catch_up(conn, &row, &caught_up))
+            .await?;
         self.lock().insert(id, Arc::clone(&tests));
         Ok(tests)
+    }
+
+    /// The tests of campaign `id` when they are built already.
+    pub fn cached(&self, id: i64) -> Option<Arc<dyn CampaignTests>> {
+        self.lock().get(&id).cloned()
     }
 
     /// Keeps tests already built for a campaign (at its creation).

@@ -13,11 +13,13 @@
 //! runs the surrogate again on a sample of the library's cells: each must
 //! be a failure of it.
 
+use crate::db::sql;
 use crate::error::ApiError;
 use crate::state::AppState;
 use crate::store::campaigns::{self, CampaignRow};
 use crate::store::leases;
 use crate::store::libraries::{self, Built, LibraryRow};
+use rusqlite::params;
 use tslg_api::{CampaignStatus, LibraryStatus, LibraryUpload, Method};
 use tslg_method::estimator::StoppingRule;
 use tslg_method::registry::BuiltLibrary;
@@ -85,14 +87,14 @@ fn parse(upload: &LibraryUpload) -> Result<Uploaded, ApiError> {
 /// The lease's campaign and library, when `upload` may be recorded on
 /// lease `id`: its holder's, of a running campaign of method `build`
 /// whose library is building.
-async fn holder_of(
-    conn: &mut sqlx::SqliteConnection,
+fn holder_of(
+    conn: &rusqlite::Connection,
     id: i64,
-    upload: &LibraryUpload,
+    upload: &Holder,
 ) -> Result<(CampaignRow, LibraryRow), ApiError> {
-    let lease = leases::get_unless_flagged(&mut *conn, id, &upload.worker).await?;
+    let lease = leases::get_unless_flagged(conn, id, &upload.worker)?;
     leases::check_fence(&lease, &upload.worker, upload.attempt, upload.key.as_str())?;
-    let campaign = campaigns::get(&mut *conn, lease.campaign_id).await?;
+    let campaign = campaigns::get(conn, lease.campaign_id)?;
     if campaign.method != Method::Build {
         return Err(ApiError::Conflict(format!(
             "lease {id} is of campaign {} of method {}: its results go to POST \
@@ -111,7 +113,7 @@ async fn holder_of(
     let library_id = campaign
         .library_id
         .ok_or_else(|| ApiError::Internal(anyhow::anyhow!("build without a library")))?;
-    let library = libraries::get(&mut *conn, library_id).await?;
+    let library = libraries::get(conn, library_id)?;
     if library.status != LibraryStatus::Building {
         return Err(ApiError::Conflict(format!(
             "library {library_id} is {}: the build is no longer wanted",
@@ -168,15 +170,31 @@ fn check_file(
         .map_err(|e| e.to_string())
 }
 
+/// Who sends an upload: the lease's fence.
+#[derive(Clone)]
+struct Holder {
+    worker: String,
+    attempt: i64,
+    key: String,
+}
+
 /// Records a worker's upload on lease `id`: the library ready (and its
 /// campaign converged), or failed with the worker's reason. A file that is
 /// not the library asked for is a 422 and changes nothing: the lease
 /// expires and another worker builds it.
 pub async fn upload(state: &AppState, id: i64, upload: &LibraryUpload) -> Result<(), ApiError> {
     let uploaded = parse(upload)?;
+    let holder = Holder {
+        worker: upload.worker.clone(),
+        attempt: upload.attempt,
+        key: upload.key.as_str().to_owned(),
+    };
     let (campaign, library) = {
-        let mut conn = state.db.read.acquire().await?;
-        holder_of(&mut conn, id, upload).await?
+        let holder = holder.clone();
+        state
+            .db
+            .read(move |conn| holder_of(conn, id, &holder))
+            .await?
     };
     let checked = match uploaded {
         Uploaded::Failed(reason) => Err(reason),
@@ -193,42 +211,45 @@ pub async fn upload(state: &AppState, id: i64, upload: &LibraryUpload) -> Result
             })?)
         }
     };
-    let mut tx = state.db.write.begin().await?;
-    // Again in the transaction: only the first upload of the holder counts.
-    let (campaign, library) = holder_of(&mut tx, id, upload).await?;
-    let (status, detail) = match &checked {
-        Ok(built) => {
-            libraries::mark_ready_in(&mut tx, library.id, &Built::of(built, upload.seconds))
-                .await?;
-            (CampaignStatus::Converged, None)
-        }
-        Err(reason) => {
-            let reason = format!("worker `{}` could not build it: {reason}", upload.worker);
-            libraries::mark_failed_in(&mut tx, library.id, &reason).await?;
-            (CampaignStatus::Failed, Some(reason))
-        }
-    };
-    sqlx::query(
-        "UPDATE campaigns SET status = ?, status_detail = ?, next_index = 1, indices = 1, \
-         tests = 1, worker_seconds = worker_seconds + ?, \
-         updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now') WHERE id = ?",
-    )
-    .bind(status.as_str())
-    .bind(&detail)
-    .bind(upload.seconds)
-    .bind(campaign.id)
-    .execute(&mut *tx)
-    .await?;
-    sqlx::query("UPDATE leases SET state = 'done', resume_at = end_index WHERE id = ?")
-        .bind(id)
-        .execute(&mut *tx)
+    let ok = checked.is_ok();
+    let seconds = upload.seconds;
+    let (campaign, library) = state
+        .db
+        .write(move |conn| {
+            // Again in the transaction: only the first upload of the holder
+            // counts.
+            let (campaign, library) = holder_of(conn, id, &holder)?;
+            let (status, detail) = match &checked {
+                Ok(built) => {
+                    libraries::mark_ready(conn, library.id, &Built::of(built, seconds))?;
+                    (CampaignStatus::Converged, None)
+                }
+                Err(reason) => {
+                    let reason = format!("worker `{}` could not build it: {reason}", holder.worker);
+                    libraries::mark_failed(conn, library.id, &reason)?;
+                    (CampaignStatus::Failed, Some(reason))
+                }
+            };
+            sql::execute(
+                conn,
+                "UPDATE campaigns SET status = ?, status_detail = ?, next_index = 1, indices = 1, \
+                 tests = 1, worker_seconds = worker_seconds + ?, \
+                 updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now') WHERE id = ?",
+                params![status.as_str(), detail, seconds, campaign.id],
+            )?;
+            sql::execute(
+                conn,
+                "UPDATE leases SET state = 'done', resume_at = end_index WHERE id = ?",
+                [id],
+            )?;
+            Ok((campaign, library))
+        })
         .await?;
-    tx.commit().await?;
     tracing::info!(
         library = library.id,
         campaign = campaign.id,
         worker = %upload.worker,
-        ok = checked.is_ok(),
+        ok,
         "library built whole on a worker"
     );
     Ok(())

@@ -34,7 +34,7 @@ pub async fn create(
 /// Every campaign, newest first.
 #[utoipa::path(get, path = "/api/v1/campaigns", responses((status = 200, body = CampaignList)))]
 pub async fn list(State(state): State<AppState>) -> Result<Json<CampaignList>, ApiError> {
-    let rows = campaigns::list(&state.db.read).await?;
+    let rows = state.db.read(campaigns::list).await?;
     let mut views = Vec::with_capacity(rows.len());
     for row in &rows {
         views.push(live_view(&state, row).await?);
@@ -50,8 +50,13 @@ pub async fn get_one(
     ApiPath(id): ApiPath<i64>,
 ) -> Result<Json<CampaignView>, ApiError> {
     Ok(Json(
-        live_view(&state, &campaigns::get(&state.db.read, id).await?).await?,
+        live_view(&state, &read_campaign(&state, id).await?).await?,
     ))
+}
+
+/// Campaign `id` as stored.
+pub async fn read_campaign(state: &AppState, id: i64) -> Result<campaigns::CampaignRow, ApiError> {
+    state.db.read(move |conn| campaigns::get(conn, id)).await
 }
 
 /// A campaign's view with its current rate, the time left and, for an
@@ -63,7 +68,8 @@ pub async fn live_view(
     let mut view = row.view();
     state.throughput.fill(&mut view);
     if row.requires.is_some() {
-        let states = audits::counts(&state.db.read, row.id).await?;
+        let id = row.id;
+        let states = state.db.read(move |conn| audits::counts(conn, id)).await?;
         let (counts, warnings) = campaigns::audit_counts(row, &states);
         view.audits = Some(counts);
         view.warnings.extend(warnings);
@@ -98,10 +104,16 @@ pub async fn history(
             history::MAX_POINTS
         )));
     }
-    let row = campaigns::get(&state.db.read, id).await?;
+    let points = state
+        .db
+        .read(move |conn| {
+            let row = campaigns::get(conn, id)?;
+            campaigns::history(conn, &row, max)
+        })
+        .await?;
     Ok(Json(History {
         campaign_id: id,
-        points: campaigns::history(&state.db.read, &row, max).await?,
+        points,
     }))
 }
 
@@ -112,10 +124,22 @@ pub async fn plan(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
 ) -> Result<Json<CampaignPlan>, ApiError> {
-    let row = campaigns::get(&state.db.read, id).await?;
-    let (build_search, build_threshold) = match (row.method, row.library_id) {
-        (Method::Build, Some(library)) => {
-            let library = crate::store::libraries::get(&state.db.read, library).await?;
+    let (row, library, user_case) = state
+        .db
+        .read(move |conn| {
+            let row = campaigns::get(conn, id)?;
+            let library = match (row.method, row.library_id) {
+                (Method::Build, Some(library)) => {
+                    Some(crate::store::libraries::get(conn, library)?)
+                }
+                _ => None,
+            };
+            let user_case = crate::store::user_cases::get(conn, &row.case_name)?;
+            Ok((row, library, user_case))
+        })
+        .await?;
+    let (build_search, build_threshold) = match library {
+        Some(library) => {
             let request: tslg_api::CreateLibrary =
                 serde_json::from_str(&library.request).map_err(|e| ApiError::Internal(e.into()))?;
             (request.search, request.threshold)
@@ -141,13 +165,11 @@ pub async fn plan(
         vut: serde_json::from_str(&row.vut).map_err(|e| ApiError::Internal(e.into()))?,
         near_miss: (row.method == Method::Adaptive)
             .then(|| tslg_method::adaptive::AdaptiveSettings::default().near_miss),
-        user_case: crate::store::user_cases::get(&state.db.read, &row.case_name)
-            .await?
-            .map(|d| tslg_api::UserCaseDefinition {
-                file: d.file,
-                table_name: d.table_name,
-                table: d.table,
-            }),
+        user_case: user_case.map(|d| tslg_api::UserCaseDefinition {
+            file: d.file,
+            table_name: d.table_name,
+            table: d.table,
+        }),
         build_search,
         build_threshold,
     }))
@@ -160,7 +182,10 @@ pub async fn cancel(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
 ) -> Result<Json<CampaignView>, ApiError> {
-    let row = campaigns::cancel(&state.db.write, id).await?;
+    let row = state
+        .db
+        .write(move |conn| campaigns::cancel(conn, id))
+        .await?;
     state.samplers.forget(id);
     state.throughput.forget(id);
     // Cancelling a library build's enumeration fails the build.
@@ -177,7 +202,10 @@ pub async fn delete(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
 ) -> Result<axum::http::StatusCode, ApiError> {
-    crate::store::deletion::delete_campaign(&state.db.write, id).await?;
+    state
+        .db
+        .write(move |conn| crate::store::deletion::delete_campaign(conn, id))
+        .await?;
     state.samplers.forget(id);
     state.throughput.forget(id);
     tracing::info!(campaign = id, "campaign deleted");

@@ -55,7 +55,11 @@ pub async fn create(
             CaseError::AlreadyDefined(_) => ApiError::Conflict(e.to_string()),
             e => ApiError::Unprocessable(e.to_string()),
         })?;
-    user_cases::insert(&state.db.write, &name, &definition).await?;
+    let stored = name.clone();
+    state
+        .db
+        .write(move |conn| user_cases::insert(conn, &stored, &definition))
+        .await?;
     let view = case_view(
         &tslg_method::cases::descriptor(&name)
             .map_err(|e| ApiError::Internal(anyhow::anyhow!("a case just registered: {e}")))?,

@@ -26,7 +26,7 @@ pub async fn campaign(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
 ) -> Result<Html<String>, ApiError> {
-    campaigns::get(&state.db.read, id).await?;
+    state.db.read(move |conn| campaigns::get(conn, id)).await?;
     Ok(Html(CAMPAIGN.replace("{{ID}}", &id.to_string())))
 }
 
@@ -35,7 +35,7 @@ pub async fn library(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
 ) -> Result<Html<String>, ApiError> {
-    libraries::get(&state.db.read, id).await?;
+    state.db.read(move |conn| libraries::get(conn, id)).await?;
     Ok(Html(LIBRARY.replace("{{ID}}", &id.to_string())))
 }
 

@@ -31,8 +31,14 @@ async fn campaign(
     state: &AppState,
     id: i64,
 ) -> Result<(tslg_api::CampaignView, Vec<tslg_api::HistoryPoint>), ApiError> {
-    let row = campaigns::get(&state.db.read, id).await?;
-    let points = campaigns::history(&state.db.read, &row, crate::history::DEFAULT_POINTS).await?;
+    let (row, points) = state
+        .db
+        .read(move |conn| {
+            let row = campaigns::get(conn, id)?;
+            let points = campaigns::history(conn, &row, crate::history::DEFAULT_POINTS)?;
+            Ok((row, points))
+        })
+        .await?;
     Ok((super::campaigns::live_view(state, &row).await?, points))
 }
 
@@ -80,7 +86,10 @@ pub async fn library_picture(
 }
 
 async fn draw_picture(state: &AppState, id: i64) -> Result<String, ApiError> {
-    let (row, file) = libraries::ready_file(&state.db.read, id).await?;
+    let (row, file) = state
+        .db
+        .read(move |conn| libraries::ready_file(conn, id))
+        .await?;
     let surrogate: serde_json::Value = serde_json::from_str(&row.surrogate).unwrap_or_default();
     let title = format!(
         "Library {id}: {}, surrogate {}, {} of {} scenarios",

@@ -8,7 +8,13 @@ use tslg_api::{Health, Problem};
 #[utoipa::path(get, path = "/healthz", responses(
     (status = 200, body = Health), (status = 500, body = Problem)))]
 pub async fn healthz(State(state): State<AppState>) -> Result<Json<Health>, ApiError> {
-    sqlx::query("SELECT 1").execute(&state.db.read).await?;
+    state
+        .db
+        .read(|conn| {
+            conn.query_row("SELECT 1", [], |_| Ok(()))?;
+            Ok(())
+        })
+        .await?;
     Ok(Json(Health {
         status: "ok".into(),
         version: env!("CARGO_PKG_VERSION").into(),

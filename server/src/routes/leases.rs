@@ -69,7 +69,10 @@ pub async fn claim(
     let row = claimed.lease;
     let campaign = match claimed.campaign {
         Some(campaign) => campaign,
-        None => campaigns::get(&state.db.read, row.campaign_id).await?,
+        None => {
+            let id = row.campaign_id;
+            state.db.read(move |conn| campaigns::get(conn, id)).await?
+        }
     };
     // An adaptive campaign's tests are planned by the coordinator stage by
     // stage: every lease names its tests' cells and weights.
@@ -165,7 +168,7 @@ fn check_programs(req: &LeaseRequest) -> Result<(), ApiError> {
 /// unhealthy.
 #[utoipa::path(get, path = "/api/v1/workers", responses((status = 200, body = WorkerList)))]
 pub async fn workers(State(state): State<AppState>) -> Result<Json<WorkerList>, ApiError> {
-    let flagged = audits::flagged(&state.db.read).await?;
+    let flagged = state.db.read(audits::flagged).await?;
     Ok(Json(WorkerList {
         workers: state.workers.list(&flagged),
     }))
@@ -183,7 +186,12 @@ pub async fn unflag(
     if let Some(message) = worker_name_problem(&name) {
         return Err(ApiError::BadRequest(message));
     }
-    if !audits::unflag(&state.db.write, &name).await? {
+    let worker = name.clone();
+    if !state
+        .db
+        .write(move |conn| audits::unflag(conn, &worker))
+        .await?
+    {
         return Err(ApiError::NotFound(format!(
             "worker `{name}` is not flagged"
         )));
@@ -268,6 +276,7 @@ pub async fn results(
 ) -> Result<Json<ResultAck>, ApiError> {
     check_worker(&report.worker)?;
     let checked = std::sync::Arc::new(check_report(&report)?);
+    let report = std::sync::Arc::new(report);
     Ok(Json(
         reporting::receive(&state, id, &report, &checked).await?,
     ))

@@ -54,26 +54,40 @@ pub async fn create(
     .map_err(|e| ApiError::Unprocessable(e.to_string()))?;
     let table = match &req.exposure {
         ExposureRequest::Builtin => None,
-        ExposureRequest::Table { text, .. } => Some(text.as_str()),
+        ExposureRequest::Table { text, .. } => Some(text.clone()),
     };
     let request = serde_json::to_string(&req).map_err(|e| ApiError::Internal(e.into()))?;
     let surrogate_spec = surrogate.clone();
     let surrogate = surrogate.to_string();
-    let row = libraries::insert(
-        &state.db.write,
-        &NewLibrary {
-            case_name: case.name(),
-            preset: &case.preset(),
-            request: &request,
-            surrogate: &surrogate,
-            exposure_name: case.exposure_name(),
-            exposure_fingerprint: &case.exposure_fingerprint(),
-            exposure_table: table,
-            exposure_note: case.exposure_note().as_deref(),
-            total_scenarios: case.total_scenarios(),
-        },
-    )
-    .await?;
+    let (name, preset, exposure_name) = (
+        case.name().to_owned(),
+        case.preset(),
+        case.exposure_name().to_owned(),
+    );
+    let (fingerprint, note, total) = (
+        case.exposure_fingerprint(),
+        case.exposure_note(),
+        case.total_scenarios(),
+    );
+    let row = state
+        .db
+        .write(move |conn| {
+            libraries::insert(
+                conn,
+                &NewLibrary {
+                    case_name: &name,
+                    preset: &preset,
+                    request: &request,
+                    surrogate: &surrogate,
+                    exposure_name: &exposure_name,
+                    exposure_fingerprint: &fingerprint,
+                    exposure_table: table.as_deref(),
+                    exposure_note: note.as_deref(),
+                    total_scenarios: total,
+                },
+            )
+        })
+        .await?;
     match placement {
         Placement::Coordinator => spawn_build(state.clone(), row.id),
         // Its surrogate runs are the workers' tests.
@@ -95,7 +109,7 @@ pub async fn create(
 /// Every library, newest first.
 #[utoipa::path(get, path = "/api/v1/libraries", responses((status = 200, body = Vec<LibraryView>)))]
 pub async fn list(State(state): State<AppState>) -> Result<Json<Vec<LibraryView>>, ApiError> {
-    let rows = libraries::list(&state.db.read).await?;
+    let rows = state.db.read(libraries::list).await?;
     let mut views = Vec::with_capacity(rows.len());
     for row in &rows {
         views.push(live_view(&state, row).await?);
@@ -111,7 +125,11 @@ pub async fn get_one(
     ApiPath(id): ApiPath<i64>,
 ) -> Result<Json<LibraryView>, ApiError> {
     Ok(Json(
-        live_view(&state, &libraries::get(&state.db.read, id).await?).await?,
+        live_view(
+            &state,
+            &state.db.read(move |conn| libraries::get(conn, id)).await?,
+        )
+        .await?,
     ))
 }
 
@@ -127,7 +145,10 @@ pub async fn file(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
 ) -> Result<impl IntoResponse, ApiError> {
-    let (_, file) = libraries::ready_file(&state.db.read, id).await?;
+    let (_, file) = state
+        .db
+        .read(move |conn| libraries::ready_file(conn, id))
+        .await?;
     Ok(([(header::CONTENT_TYPE, file.media_type)], file.bytes))
 }
 
@@ -148,7 +169,10 @@ pub async fn delete(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
 ) -> Result<StatusCode, ApiError> {
-    crate::store::deletion::delete_library(&state.db.write, id).await?;
+    state
+        .db
+        .write(move |conn| crate::store::deletion::delete_library(conn, id))
+        .await?;
     state.pictures.lock().await.remove(&id);
     tracing::info!(library = id, "library deleted");
     Ok(StatusCode::NO_CONTENT)

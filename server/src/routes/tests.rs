@@ -145,8 +145,10 @@ async fn reports_beyond_the_limits_or_damaged_are_refused_precisely() {
         )
         .await;
     assert_eq!(status, StatusCode::OK, "{ack}");
-    let (rows, events): (i64, i64) = sqlx::query_as("SELECT COUNT(*), SUM(events) FROM reports")
-        .fetch_one(&app.state.db.read)
+    let (rows, events): (i64, i64) = app
+        .state
+        .db
+        .read(|conn| crate::db::sql::one(conn, "SELECT COUNT(*), SUM(events) FROM reports", []))
         .await
         .unwrap();
     assert_eq!((rows, events), (1, 2));
@@ -156,8 +158,15 @@ async fn reports_beyond_the_limits_or_damaged_are_refused_precisely() {
 async fn a_flagged_worker_gets_nothing_until_an_operator_clears_it() {
     let app = app(|_| {}).await;
     app.external_campaign().await;
-    sqlx::query("INSERT INTO flagged_workers (name, reason) VALUES ('bad', 'lied about test 7')")
-        .execute(&app.state.db.write)
+    app.state
+        .db
+        .write(|conn| {
+            crate::db::sql::execute(
+                conn,
+                "INSERT INTO flagged_workers (name, reason) VALUES ('bad', 'lied about test 7')",
+                [],
+            )
+        })
         .await
         .unwrap();
     let (status, problem) = app.claim("bad", 10).await;

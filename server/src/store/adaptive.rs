@@ -11,11 +11,12 @@
 //! coordinator's copy rebuilt after a restart resolves the same stages
 //! again ([`catch_up`]) and the campaign is the in-process one.
 
+use crate::db::sql;
 use crate::error::ApiError;
 use crate::store::campaigns::CampaignRow;
 use crate::store::fold::{close_stopped, frontier};
 use crate::store::reports;
-use sqlx::SqliteConnection;
+use rusqlite::{params, Connection};
 use std::sync::Arc;
 use tslg_api::{CampaignStatus, NearMiss};
 use tslg_method::adaptive::TestResult;
@@ -24,38 +25,25 @@ use tslg_method::prefix::SparseOutcome;
 use tslg_method::registry::{AdaptiveStages, CampaignTests};
 
 /// The results of the running stage's tests `from..to`, in index order.
-async fn stage_results(
-    conn: &mut SqliteConnection,
+fn stage_results(
+    conn: &Connection,
     campaign: i64,
     tests: &Arc<dyn CampaignTests>,
     from: u64,
     to: u64,
 ) -> Result<Vec<TestResult>, ApiError> {
     let stages = tests.adaptive().expect("an adaptive campaign's tests");
-    let outcomes = reports::outcomes(&mut *conn, campaign, from, to).await?;
-    let replayed = {
-        let tests = Arc::clone(tests);
-        tokio::task::spawn_blocking(move || {
-            tests
-                .adaptive()
-                .expect("an adaptive campaign's tests")
-                .replay_stage(from, to)
-        })
-        .await
-        .map_err(|e| ApiError::Internal(e.into()))?
-    };
+    let outcomes = reports::outcomes(conn, campaign, from, to)?;
+    let replayed = stages.replay_stage(from, to);
     let near_misses: Vec<(i64, f64)> = if replayed.is_some() {
         Vec::new()
     } else {
-        sqlx::query_as(
+        sql::all(
+            conn,
             "SELECT test_index, criticality FROM near_misses \
              WHERE campaign_id = ? AND test_index >= ? AND test_index < ? ORDER BY test_index",
-        )
-        .bind(campaign)
-        .bind(from as i64)
-        .bind(to as i64)
-        .fetch_all(&mut *conn)
-        .await?
+            params![campaign, from as i64, to as i64],
+        )?
     };
     // A test that did not come within `near_miss` is "far": only whether a
     // criticality is within it matters to the plan.
@@ -86,8 +74,8 @@ async fn stage_results(
 
 /// Resolves the stages of `tests` that `campaign`'s stored state has
 /// already passed: the coordinator's copy, rebuilt, catches up with it.
-pub async fn catch_up(
-    conn: &mut SqliteConnection,
+pub fn catch_up(
+    conn: &Connection,
     campaign: &CampaignRow,
     tests: &Arc<dyn CampaignTests>,
 ) -> Result<(), ApiError> {
@@ -103,7 +91,7 @@ pub async fn catch_up(
         if to > resolved_to {
             break;
         }
-        let results = stage_results(conn, campaign.id, tests, from, to).await?;
+        let results = stage_results(conn, campaign.id, tests, from, to)?;
         stages.resolve(&results);
     }
     Ok(())
@@ -111,8 +99,8 @@ pub async fn catch_up(
 
 /// Resolves every stage of `campaign` whose tests all have results, and
 /// persists where it stands; the final status when it stopped.
-pub async fn resolve_stages(
-    conn: &mut SqliteConnection,
+pub fn resolve_stages(
+    conn: &Connection,
     campaign: &CampaignRow,
     tests: &Arc<dyn CampaignTests>,
 ) -> Result<Option<CampaignStatus>, ApiError> {
@@ -129,25 +117,25 @@ pub async fn resolve_stages(
             campaign.id
         )));
     }
-    let frontier = frontier(&mut *conn, campaign).await?;
+    let frontier = frontier(conn, campaign)?;
     let mut resolved = false;
     while let Some((from, to)) = stages.running() {
         if frontier < to {
             break;
         }
-        let results = stage_results(&mut *conn, campaign.id, tests, from, to).await?;
+        let results = stage_results(conn, campaign.id, tests, from, to)?;
         stages.resolve(&results);
         resolved = true;
     }
     if !resolved {
         return Ok(None);
     }
-    write(conn, campaign, stages).await
+    write(conn, campaign, stages)
 }
 
 /// Persists the campaign's state after resolving stages.
-async fn write(
-    conn: &mut SqliteConnection,
+fn write(
+    conn: &Connection,
     campaign: &CampaignRow,
     stages: &dyn AdaptiveStages,
 ) -> Result<Option<CampaignStatus>, ApiError> {
@@ -182,50 +170,52 @@ async fn write(
         }
     };
     let running = p.running;
-    sqlx::query(
+    sql::execute(
+        conn,
         "UPDATE campaigns SET indices = ?, tests = ?, events = ?, invalid = ?, s1 = ?, s2 = ?, \
          largest = ?, stage_start = ?, stage_end = ?, stage_kind = ?, library_tests = ?, \
          search_tests = ?, stages = ?, support = ?, status = ?, \
          status_detail = COALESCE(?, status_detail), \
          updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now') WHERE id = ?",
-    )
-    .bind(indices as i64)
-    .bind(fold.estimator.tests() as i64)
-    .bind(fold.estimator.events() as i64)
-    .bind(fold.invalid as i64)
-    .bind(s1)
-    .bind(s2)
-    .bind(fold.estimator.largest_term())
-    .bind(running.map(|r| r.0 as i64))
-    .bind(running.map(|r| r.1 as i64))
-    .bind(running.map(|r| r.2))
-    .bind(p.library_tests as i64)
-    .bind(p.search_tests as i64)
-    .bind(p.stages as i64)
-    .bind(p.support as i64)
-    .bind(status.as_str())
-    .bind(detail)
-    .bind(campaign.id)
-    .execute(&mut *conn)
-    .await?;
+        params![
+            indices as i64,
+            fold.estimator.tests() as i64,
+            fold.estimator.events() as i64,
+            fold.invalid as i64,
+            s1,
+            s2,
+            fold.estimator.largest_term(),
+            running.map(|r| r.0 as i64),
+            running.map(|r| r.1 as i64),
+            running.map(|r| r.2),
+            p.library_tests as i64,
+            p.search_tests as i64,
+            p.stages as i64,
+            p.support as i64,
+            status.as_str(),
+            detail,
+            campaign.id
+        ],
+    )?;
     if fold.estimator.tests() > 0 {
-        sqlx::query(
+        sql::execute(
+            conn,
             "INSERT OR REPLACE INTO history (campaign_id, indices, tests, events, s1, s2, \
              outside_tests, outside_s1) VALUES (?, ?, ?, ?, ?, ?, 0, 0)",
-        )
-        .bind(campaign.id)
-        .bind(indices as i64)
-        .bind(fold.estimator.tests() as i64)
-        .bind(fold.estimator.events() as i64)
-        .bind(s1)
-        .bind(s2)
-        .execute(&mut *conn)
-        .await?;
+            params![
+                campaign.id,
+                indices as i64,
+                fold.estimator.tests() as i64,
+                fold.estimator.events() as i64,
+                s1,
+                s2
+            ],
+        )?;
     }
     if p.finished.is_none() {
         return Ok(None);
     }
-    close_stopped(conn, campaign.id, indices).await?;
+    close_stopped(conn, campaign.id, indices)?;
     tracing::info!(
         campaign = campaign.id,
         status = status.as_str(),
@@ -237,22 +227,19 @@ async fn write(
 
 /// Stores a report's near misses of the part `new_from..` (a program's;
 /// a built-in vehicle's are run again here).
-pub async fn store_near_misses(
-    conn: &mut SqliteConnection,
+pub fn store_near_misses(
+    conn: &Connection,
     campaign: i64,
     near_misses: &[NearMiss],
     new_from: u64,
 ) -> Result<(), ApiError> {
     for m in near_misses.iter().filter(|m| m.index >= new_from) {
-        sqlx::query(
+        sql::execute(
+            conn,
             "INSERT OR REPLACE INTO near_misses (campaign_id, test_index, criticality) \
              VALUES (?, ?, ?)",
-        )
-        .bind(campaign)
-        .bind(m.index as i64)
-        .bind(m.criticality)
-        .execute(&mut *conn)
-        .await?;
+            params![campaign, m.index as i64, m.criticality],
+        )?;
     }
     Ok(())
 }

@@ -1,8 +1,9 @@
 //! The `audits` and `flagged_workers` tables: tests run again by other
 //! workers, and the workers caught disagreeing with two others.
 
+use crate::db::sql;
 use crate::error::ApiError;
-use sqlx::{SqliteConnection, SqlitePool};
+use rusqlite::{params, Connection};
 use tslg_method::prefix::SparseOutcome;
 
 /// A test's outcome as the audits compare and store it: `none`,
@@ -25,8 +26,8 @@ pub struct NewAudit {
 }
 
 /// Where an audit stands (see [`crate::audit`] and the `audits` table).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, sqlx::Type)]
-#[sqlx(rename_all = "lowercase")]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum AuditState {
     /// Waits for a second run.
     Replica,
@@ -43,7 +44,22 @@ pub enum AuditState {
     Past,
 }
 
-#[derive(Debug, Clone, sqlx::FromRow)]
+impl AuditState {
+    /// The state as the `audits` table stores it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            AuditState::Replica => "replica",
+            AuditState::Tiebreak => "tiebreak",
+            AuditState::Agreed => "agreed",
+            AuditState::Settled => "settled",
+            AuditState::Void => "void",
+            AuditState::Undecided => "undecided",
+            AuditState::Past => "past",
+        }
+    }
+}
+
+#[derive(Debug, Clone, serde::Deserialize)]
 pub struct AuditRow {
     pub id: i64,
     pub campaign_id: i64,
@@ -65,14 +81,15 @@ pub const OPEN: &str = "('replica', 'tiebreak')";
 
 /// Stores the audits of a report of `worker` on `campaign`. A test whose
 /// earlier audit was voided (its first run taken back) is audited afresh.
-pub async fn insert(
-    conn: &mut SqliteConnection,
+pub fn insert(
+    conn: &Connection,
     campaign: i64,
     worker: &str,
     audits: &[NewAudit],
 ) -> Result<(), ApiError> {
     for audit in audits {
-        sqlx::query(
+        sql::execute(
+            conn,
             "INSERT INTO audits (campaign_id, test_index, reason, state, first_worker, first_outcome) \
              VALUES (?, ?, ?, 'replica', ?, ?) \
              ON CONFLICT (campaign_id, test_index) DO UPDATE SET reason = excluded.reason, \
@@ -80,30 +97,31 @@ pub async fn insert(
                first_outcome = excluded.first_outcome, replica_worker = NULL, \
                replica_outcome = NULL, third_worker = NULL, third_outcome = NULL, lease_id = NULL \
              WHERE audits.state IN ('void', 'past')",
-        )
-        .bind(campaign)
-        .bind(audit.test_index as i64)
-        .bind(audit.reason)
-        .bind(worker)
-        .bind(&audit.first_outcome)
-        .execute(&mut *conn)
-        .await?;
+            params![
+                campaign,
+                audit.test_index as i64,
+                audit.reason,
+                worker,
+                audit.first_outcome
+            ],
+        )?;
     }
     Ok(())
 }
 
-pub async fn get(conn: &mut SqliteConnection, id: i64) -> Result<AuditRow, ApiError> {
-    sqlx::query_as(&format!("SELECT {COLUMNS} FROM audits WHERE id = ?"))
-        .bind(id)
-        .fetch_optional(&mut *conn)
-        .await?
-        .ok_or_else(|| ApiError::Internal(anyhow::anyhow!("audit {id} is missing")))
+pub fn get(conn: &Connection, id: i64) -> Result<AuditRow, ApiError> {
+    sql::optional(
+        conn,
+        &format!("SELECT {COLUMNS} FROM audits WHERE id = ?"),
+        [id],
+    )?
+    .ok_or_else(|| ApiError::Internal(anyhow::anyhow!("audit {id} is missing")))
 }
 
 /// An open audit that `worker` may run: of a running campaign whose program
 /// it offers, not run by it before, and without a live lease.
-pub async fn runnable(
-    conn: &mut SqliteConnection,
+pub fn runnable(
+    conn: &Connection,
     worker: &str,
     offered: &str,
     now_ms: i64,
@@ -119,42 +137,32 @@ pub async fn runnable(
          ORDER BY a.campaign_id, a.test_index LIMIT 1",
         columns.join(", ")
     );
-    Ok(sqlx::query_as(&sql)
-        .bind(offered)
-        .bind(worker)
-        .bind(worker)
-        .bind(now_ms)
-        .fetch_optional(&mut *conn)
-        .await?)
+    sql::optional(conn, &sql, params![offered, worker, worker, now_ms])
 }
 
 /// Counts of a campaign's audits by state, for its view.
-pub async fn counts(pool: &SqlitePool, campaign: i64) -> Result<Vec<(AuditState, i64)>, ApiError> {
-    Ok(
-        sqlx::query_as("SELECT state, COUNT(*) FROM audits WHERE campaign_id = ? GROUP BY state")
-            .bind(campaign)
-            .fetch_all(pool)
-            .await?,
+pub fn counts(conn: &Connection, campaign: i64) -> Result<Vec<(AuditState, i64)>, ApiError> {
+    sql::all(
+        conn,
+        "SELECT state, COUNT(*) FROM audits WHERE campaign_id = ? GROUP BY state",
+        [campaign],
     )
 }
 
 /// Why `worker` is flagged, if it is.
-pub async fn flag_of<'e, E>(executor: E, worker: &str) -> Result<Option<String>, ApiError>
-where
-    E: sqlx::Executor<'e, Database = sqlx::Sqlite>,
-{
-    let row: Option<(String,)> =
-        sqlx::query_as("SELECT reason FROM flagged_workers WHERE name = ?")
-            .bind(worker)
-            .fetch_optional(executor)
-            .await?;
+pub fn flag_of(conn: &Connection, worker: &str) -> Result<Option<String>, ApiError> {
+    let row: Option<(String,)> = sql::optional(
+        conn,
+        "SELECT reason FROM flagged_workers WHERE name = ?",
+        [worker],
+    )?;
     Ok(row.map(|(reason,)| reason))
 }
 
 /// Refuses a flagged worker (403), inside the transaction that would give
 /// it work or take its results, so a flag set meanwhile cannot be missed.
-pub async fn refuse_flagged(conn: &mut SqliteConnection, worker: &str) -> Result<(), ApiError> {
-    match flag_of(&mut *conn, worker).await? {
+pub fn refuse_flagged(conn: &Connection, worker: &str) -> Result<(), ApiError> {
+    match flag_of(conn, worker)? {
         None => Ok(()),
         Some(reason) => Err(flagged_problem(worker, &reason)),
     }
@@ -169,19 +177,15 @@ pub fn flagged_problem(worker: &str, reason: &str) -> ApiError {
 }
 
 /// Every flagged worker with why.
-pub async fn flagged(pool: &SqlitePool) -> Result<Vec<(String, String)>, ApiError> {
-    Ok(
-        sqlx::query_as("SELECT name, reason FROM flagged_workers ORDER BY flagged_at")
-            .fetch_all(pool)
-            .await?,
+pub fn flagged(conn: &Connection) -> Result<Vec<(String, String)>, ApiError> {
+    sql::all(
+        conn,
+        "SELECT name, reason FROM flagged_workers ORDER BY flagged_at",
+        [],
     )
 }
 
-/// Clears a flag; false when the worker was not flagged.
-pub async fn unflag(pool: &SqlitePool, worker: &str) -> Result<bool, ApiError> {
-    let done = sqlx::query("DELETE FROM flagged_workers WHERE name = ?")
-        .bind(worker)
-        .execute(pool)
-        .await?;
-    Ok(done.rows_affected() == 1)
+/// Clears a flag (a write); false when the worker was not flagged.
+pub fn unflag(conn: &Connection, worker: &str) -> Result<bool, ApiError> {
+    Ok(sql::execute(conn, "DELETE FROM flagged_workers WHERE name = ?", [worker])? == 1)
 }

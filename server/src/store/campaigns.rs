@@ -1,9 +1,10 @@
 //! The `campaigns` and `history` tables.
 
+use crate::db::sql;
 use crate::error::ApiError;
 use crate::lease_size::predicted_unleased;
 use crate::store::audits::AuditState;
-use sqlx::SqlitePool;
+use rusqlite::{params, Connection};
 use tslg_api::{
     AdaptiveView, AuditCounts, CampaignStatus, CampaignView, ExposureRequest, HistoryPoint, Method,
     Outside, RunningStage, Split,
@@ -15,7 +16,7 @@ use tslg_method::prefix::PrefixFold;
 use tslg_method::registry::ExposureSource;
 use tslg_method::warnings::{warnings, Dialect, WarningContext};
 
-#[derive(Debug, Clone, sqlx::FromRow)]
+#[derive(Debug, Clone, serde::Deserialize)]
 pub struct CampaignRow {
     pub id: i64,
     pub case_name: String,
@@ -332,7 +333,7 @@ pub struct NewCampaign {
     pub first_stage: Option<(u64, u64, &'static str)>,
 }
 
-pub async fn insert(pool: &SqlitePool, new: &NewCampaign) -> Result<CampaignRow, ApiError> {
+pub fn insert(conn: &Connection, new: &NewCampaign) -> Result<CampaignRow, ApiError> {
     let sql = format!(
         "INSERT INTO campaigns (case_name, preset, method, library_id, exposure_name, \
          exposure_fingerprint, exposure_table, vut, requires, epsilon, outside, beta, confidence, \
@@ -353,95 +354,90 @@ pub async fn insert(pool: &SqlitePool, new: &NewCampaign) -> Result<CampaignRow,
         other => other,
     };
     let first_stage = new.first_stage.as_ref();
-    Ok(sqlx::query_as(&sql)
-        .bind(&new.case_name)
-        .bind(&new.preset)
-        .bind(stored_method.as_str())
-        .bind(new.library_id)
-        .bind(&new.exposure_name)
-        .bind(&new.exposure_fingerprint)
-        .bind(&new.exposure_table)
-        .bind(&new.vut)
-        .bind(&new.requires)
-        .bind(new.epsilon)
-        .bind(new.outside.as_str())
-        .bind(new.rule.beta)
-        .bind(new.rule.confidence)
-        .bind(new.rule.n_min as i64)
-        .bind(new.rule.min_events as i64)
-        .bind(new.rule.max_tests as i64)
-        .bind(new.seed as i64)
-        .bind(new.status.as_str())
-        .bind(new.rule.guard_outside)
-        .bind(new.exact_probability)
-        .bind(new.split.as_str())
-        .bind(adaptive)
-        .bind(first_stage.map(|s| s.0 as i64))
-        .bind(first_stage.map(|s| s.1 as i64))
-        .bind(first_stage.map(|s| s.2))
-        .bind(enumerate)
-        .fetch_one(pool)
-        .await?)
+    sql::one(
+        conn,
+        &sql,
+        params![
+            new.case_name,
+            new.preset,
+            stored_method.as_str(),
+            new.library_id,
+            new.exposure_name,
+            new.exposure_fingerprint,
+            new.exposure_table,
+            new.vut,
+            new.requires,
+            new.epsilon,
+            new.outside.as_str(),
+            new.rule.beta,
+            new.rule.confidence,
+            new.rule.n_min as i64,
+            new.rule.min_events as i64,
+            new.rule.max_tests as i64,
+            new.seed as i64,
+            new.status.as_str(),
+            new.rule.guard_outside,
+            new.exact_probability,
+            new.split.as_str(),
+            adaptive,
+            first_stage.map(|s| s.0 as i64),
+            first_stage.map(|s| s.1 as i64),
+            first_stage.map(|s| s.2),
+            enumerate,
+        ],
+    )
 }
 
-pub async fn get<'e, E>(executor: E, id: i64) -> Result<CampaignRow, ApiError>
-where
-    E: sqlx::Executor<'e, Database = sqlx::Sqlite>,
-{
-    let sql = format!("SELECT {COLUMNS} FROM campaigns WHERE id = ?");
-    sqlx::query_as(&sql)
-        .bind(id)
-        .fetch_optional(executor)
-        .await?
-        .ok_or_else(|| ApiError::NotFound(format!("campaign {id} does not exist")))
+pub fn get(conn: &Connection, id: i64) -> Result<CampaignRow, ApiError> {
+    sql::optional(
+        conn,
+        &format!("SELECT {COLUMNS} FROM campaigns WHERE id = ?"),
+        [id],
+    )?
+    .ok_or_else(|| ApiError::NotFound(format!("campaign {id} does not exist")))
 }
 
-pub async fn list(pool: &SqlitePool) -> Result<Vec<CampaignRow>, ApiError> {
-    let sql = format!("SELECT {COLUMNS} FROM campaigns ORDER BY id DESC");
-    Ok(sqlx::query_as(&sql).fetch_all(pool).await?)
+pub fn list(conn: &Connection) -> Result<Vec<CampaignRow>, ApiError> {
+    sql::all(
+        conn,
+        &format!("SELECT {COLUMNS} FROM campaigns ORDER BY id DESC"),
+        [],
+    )
 }
 
-/// Cancels a pending or running campaign and its leases.
-pub async fn cancel(pool: &SqlitePool, id: i64) -> Result<CampaignRow, ApiError> {
-    let mut tx = pool.begin().await?;
-    let row = get(&mut *tx, id).await?;
+/// Cancels a pending or running campaign and its leases (a write).
+pub fn cancel(conn: &Connection, id: i64) -> Result<CampaignRow, ApiError> {
+    let row = get(conn, id)?;
     if row.status.is_final() {
         return Err(ApiError::Conflict(format!(
             "campaign {id} has already stopped ({})",
             row.status.as_str()
         )));
     }
-    sqlx::query(
+    sql::execute(
+        conn,
         "UPDATE campaigns SET status = 'cancelled', status_detail = 'cancelled on request', \
          updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now') WHERE id = ?",
-    )
-    .bind(id)
-    .execute(&mut *tx)
-    .await?;
-    sqlx::query("UPDATE leases SET state = 'cancelled' WHERE campaign_id = ? AND state = 'active'")
-        .bind(id)
-        .execute(&mut *tx)
-        .await?;
-    let row = get(&mut *tx, id).await?;
-    tx.commit().await?;
-    Ok(row)
+        [id],
+    )?;
+    crate::store::leases::cancel_active(conn, id)?;
+    get(conn, id)
 }
 
 /// The persisted history of a campaign's prefix estimate (thinned as
 /// [`crate::history`] says), ending at the campaign's current prefix: at
 /// most `max` points, logarithmically spaced in tests.
-pub async fn history(
-    pool: &SqlitePool,
+pub fn history(
+    conn: &Connection,
     row: &CampaignRow,
     max: usize,
 ) -> Result<Vec<HistoryPoint>, ApiError> {
-    let rows: Vec<(i64, i64, i64, f64, f64, i64, f64)> = sqlx::query_as(
+    let rows: Vec<(i64, i64, i64, f64, f64, i64, f64)> = sql::all(
+        conn,
         "SELECT indices, tests, events, s1, s2, outside_tests, outside_s1 FROM history \
          WHERE campaign_id = ? ORDER BY indices",
-    )
-    .bind(row.id)
-    .fetch_all(pool)
-    .await?;
+        [row.id],
+    )?;
     let z = row.rule().z();
     let mut points: Vec<HistoryPoint> = rows
         .into_iter()

@@ -3,8 +3,9 @@
 //! built it on workers, if any). Running work is never deleted: a running
 //! campaign is cancelled first, a building library waits for its build.
 
+use crate::db::sql;
 use crate::error::ApiError;
-use sqlx::{SqliteConnection, SqlitePool};
+use rusqlite::Connection;
 use tslg_api::LibraryStatus;
 
 /// The tables holding a campaign's records, children before parents
@@ -18,24 +19,22 @@ const CAMPAIGN_TABLES: [&str; 6] = [
     "history",
 ];
 
-async fn delete_campaign_rows(conn: &mut SqliteConnection, id: i64) -> Result<(), ApiError> {
+fn delete_campaign_rows(conn: &Connection, id: i64) -> Result<(), ApiError> {
     for table in CAMPAIGN_TABLES {
-        sqlx::query(&format!("DELETE FROM {table} WHERE campaign_id = ?"))
-            .bind(id)
-            .execute(&mut *conn)
-            .await?;
+        sql::execute(
+            conn,
+            &format!("DELETE FROM {table} WHERE campaign_id = ?"),
+            [id],
+        )?;
     }
-    sqlx::query("DELETE FROM campaigns WHERE id = ?")
-        .bind(id)
-        .execute(&mut *conn)
-        .await?;
+    sql::execute(conn, "DELETE FROM campaigns WHERE id = ?", [id])?;
     Ok(())
 }
 
-/// Deletes stopped campaign `id` and its records; 409 while it runs.
-pub async fn delete_campaign(pool: &SqlitePool, id: i64) -> Result<(), ApiError> {
-    let mut tx = pool.begin().await?;
-    let row = crate::store::campaigns::get(&mut *tx, id).await?;
+/// Deletes stopped campaign `id` and its records (a write); 409 while it
+/// runs.
+pub fn delete_campaign(conn: &Connection, id: i64) -> Result<(), ApiError> {
+    let row = crate::store::campaigns::get(conn, id)?;
     if !row.status.is_final() {
         return Err(ApiError::Conflict(format!(
             "campaign {id} is {}: cancel it first (POST /api/v1/campaigns/{id}/cancel)",
@@ -53,27 +52,23 @@ pub async fn delete_campaign(pool: &SqlitePool, id: i64) -> Result<(), ApiError>
             )));
         }
     }
-    delete_campaign_rows(&mut tx, id).await?;
-    tx.commit().await?;
-    Ok(())
+    delete_campaign_rows(conn, id)
 }
 
 /// Deletes library `id` and its file, with the campaign that built it on
-/// workers; 409 while it builds or while campaigns use it.
-pub async fn delete_library(pool: &SqlitePool, id: i64) -> Result<(), ApiError> {
-    let mut tx = pool.begin().await?;
-    let library = crate::store::libraries::get(&mut *tx, id).await?;
+/// workers (a write); 409 while it builds or while campaigns use it.
+pub fn delete_library(conn: &Connection, id: i64) -> Result<(), ApiError> {
+    let library = crate::store::libraries::get(conn, id)?;
     if library.status == LibraryStatus::Building {
         return Err(ApiError::Conflict(format!(
             "library {id} is building: delete it once its build has ended"
         )));
     }
-    let users: Vec<(i64,)> = sqlx::query_as(
+    let users: Vec<(i64,)> = sql::all(
+        conn,
         "SELECT id FROM campaigns WHERE library_id = ? AND enumerate = 0 ORDER BY id",
-    )
-    .bind(id)
-    .fetch_all(&mut *tx)
-    .await?;
+        [id],
+    )?;
     if !users.is_empty() {
         let ids: Vec<String> = users.iter().map(|(c,)| c.to_string()).collect();
         return Err(ApiError::Conflict(format!(
@@ -82,18 +77,14 @@ pub async fn delete_library(pool: &SqlitePool, id: i64) -> Result<(), ApiError> 
             ids.join(", ")
         )));
     }
-    let builds: Vec<(i64,)> =
-        sqlx::query_as("SELECT id FROM campaigns WHERE library_id = ? AND enumerate >= 1")
-            .bind(id)
-            .fetch_all(&mut *tx)
-            .await?;
+    let builds: Vec<(i64,)> = sql::all(
+        conn,
+        "SELECT id FROM campaigns WHERE library_id = ? AND enumerate >= 1",
+        [id],
+    )?;
     for (campaign,) in builds {
-        delete_campaign_rows(&mut tx, campaign).await?;
+        delete_campaign_rows(conn, campaign)?;
     }
-    sqlx::query("DELETE FROM libraries WHERE id = ?")
-        .bind(id)
-        .execute(&mut *tx)
-        .await?;
-    tx.commit().await?;
+    sql::execute(conn, "DELETE FROM libraries WHERE id = ?", [id])?;
     Ok(())
 }

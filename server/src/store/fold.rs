@@ -8,22 +8,21 @@
 //! outcomes in index order and checks the stopping rule at every index
 //! (SPEC §7), so the stop index does not depend on who reported what when.
 
+use crate::db::sql;
 use crate::error::ApiError;
 use crate::history;
 use crate::replay_check::Explored;
+use crate::report_check::CheckedReport;
 use crate::store::audits;
 use crate::store::campaigns::CampaignRow;
 use crate::store::reports;
-use sqlx::{QueryBuilder, Sqlite, SqliteConnection};
+use rusqlite::{params, Connection};
 use std::sync::Arc;
 use tslg_api::{CampaignStatus, Method};
 use tslg_method::estimator::{Decision, StoppingRule};
 use tslg_method::outside::OutsideMass;
 use tslg_method::prefix::{outside_tally, Exploration, FoldError, PrefixFold, SparseOutcome};
 use tslg_method::registry::CampaignTests;
-
-/// History rows per multi-row `INSERT`.
-const INSERT_BATCH: usize = 1000;
 
 /// What one fold gave.
 pub struct Folded {
@@ -76,11 +75,8 @@ pub fn fold_step(
 /// the campaign's active leases (below it every outcome is recorded), its
 /// `next_index`, and its first open audit (a test two workers have not yet
 /// agreed on, [`crate::audit`]).
-pub(crate) async fn frontier(
-    conn: &mut SqliteConnection,
-    campaign: &CampaignRow,
-) -> Result<u64, ApiError> {
-    Ok(bounds(conn, campaign).await?.frontier)
+pub(crate) fn frontier(conn: &Connection, campaign: &CampaignRow) -> Result<u64, ApiError> {
+    Ok(bounds(conn, campaign)?.frontier)
 }
 
 /// Where a fold may go and where its history stands.
@@ -92,19 +88,19 @@ struct Bounds {
 }
 
 /// [`Bounds`] in one read (a fold runs in every report's transaction).
-async fn bounds(conn: &mut SqliteConnection, campaign: &CampaignRow) -> Result<Bounds, ApiError> {
-    let (open, audited, last_stored): (Option<i64>, Option<i64>, Option<i64>) =
-        sqlx::query_as(&format!(
+fn bounds(conn: &Connection, campaign: &CampaignRow) -> Result<Bounds, ApiError> {
+    let (open, audited, last_stored): (Option<i64>, Option<i64>, Option<i64>) = sql::one(
+        conn,
+        &format!(
             "SELECT (SELECT MIN(resume_at) FROM leases WHERE campaign_id = ?1 \
                      AND state = 'active' AND audit_id IS NULL), \
                     (SELECT MIN(test_index) FROM audits WHERE campaign_id = ?1 \
                      AND state IN {open}), \
                     (SELECT MAX(indices) FROM history WHERE campaign_id = ?1)",
             open = audits::OPEN
-        ))
-        .bind(campaign.id)
-        .fetch_one(&mut *conn)
-        .await?;
+        ),
+        [campaign.id],
+    )?;
     let recorded = open.map_or(campaign.next_index, |r| r.min(campaign.next_index)) as u64;
     Ok(Bounds {
         frontier: audited.map_or(recorded, |a| (a as u64).min(recorded)),
@@ -112,17 +108,21 @@ async fn bounds(conn: &mut SqliteConnection, campaign: &CampaignRow) -> Result<B
     })
 }
 
-/// The tests of `from..to` that draw outside the library, replayed off the
-/// async runtime (one random number each).
-async fn explored_tests(
-    tests: &Arc<dyn CampaignTests>,
-    from: u64,
-    to: u64,
-) -> Result<Vec<u64>, ApiError> {
-    let tests = Arc::clone(tests);
-    tokio::task::spawn_blocking(move || (from..to).filter(|&i| tests.explores(i)).collect())
-        .await
-        .map_err(|e| ApiError::Internal(e.into()))
+/// Draws below which [`explored_tests`] runs on the writer's own thread.
+const SERIAL_DRAWS: u64 = 1 << 16;
+
+/// The tests of `from..to` that draw outside the library (one random
+/// number each, about 0.1 µs), on rayon's threads when there are many:
+/// the writer waits for them, as for any of its statements.
+fn explored_tests(tests: &Arc<dyn CampaignTests>, from: u64, to: u64) -> Vec<u64> {
+    use rayon::prelude::*;
+    if to.saturating_sub(from) <= SERIAL_DRAWS {
+        return (from..to).filter(|&i| tests.explores(i)).collect();
+    }
+    (from..to)
+        .into_par_iter()
+        .filter(|&i| tests.explores(i))
+        .collect()
 }
 
 /// Folds the newly resolved prefix of `campaign` and persists the
@@ -131,12 +131,15 @@ async fn explored_tests(
 /// estimate, its history points and, when the rule stops the campaign, its
 /// final status. `tests` are a library campaign's tests, which say which
 /// tests explored outside the library; `None` for the NDD. `known` are the
-/// exploring tests of a range the coordinator just ran itself.
-pub async fn fold_prefix(
-    conn: &mut SqliteConnection,
+/// exploring tests of a range the coordinator just ran itself; `fresh` the
+/// report just recorded in this transaction, whose outcomes the fold takes
+/// as they are instead of reading them back.
+pub fn fold_prefix(
+    conn: &Connection,
     campaign: &CampaignRow,
     tests: Option<Arc<dyn CampaignTests>>,
     known: Option<&Explored>,
+    fresh: Option<&CheckedReport>,
 ) -> Result<Option<CampaignStatus>, ApiError> {
     if campaign.method == Method::Adaptive {
         let tests = tests.ok_or_else(|| {
@@ -145,18 +148,18 @@ pub async fn fold_prefix(
                 campaign.id
             )
         })?;
-        return crate::store::adaptive::resolve_stages(conn, campaign, &tests).await;
+        return crate::store::adaptive::resolve_stages(conn, campaign, &tests);
     }
     let Bounds {
         frontier,
         last_stored,
-    } = bounds(conn, campaign).await?;
+    } = bounds(conn, campaign)?;
     let mut fold = campaign.fold();
     if frontier <= fold.indices {
         return Ok(None);
     }
     let from = fold.indices;
-    let outcomes = reports::outcomes(conn, campaign.id, from, frontier).await?;
+    let outcomes = outcomes_to_fold(conn, campaign.id, from, frontier, fresh)?;
     let tests = tests.filter(|t| t.outside_mass().is_some());
     // A library campaign's tests say whether its estimate stratifies (ε in
     // force under the stratified split); persisted with the sums.
@@ -168,8 +171,8 @@ pub async fn fold_prefix(
         if campaign.outside_upper.is_none() && from > 0 {
             // Started before the outside bound existed: count its exploring
             // tests from the start, as the fold would have.
-            let earlier = reports::outcomes(conn, campaign.id, 0, from).await?;
-            let before = explored_tests(tests, 0, from).await?;
+            let earlier = reports::outcomes(conn, campaign.id, 0, from)?;
+            let before = explored_tests(tests, 0, from);
             fold.outside = outside_tally(&before, &earlier, &|i| tests.surrogate_misses(i));
         }
         explored = match known {
@@ -181,7 +184,7 @@ pub async fn fold_prefix(
                 .copied()
                 .filter(|i| (from..frontier).contains(i))
                 .collect(),
-            _ => explored_tests(tests, from, frontier).await?,
+            _ => explored_tests(tests, from, frontier),
         };
     }
     let mass: Option<&OutsideMass> = tests.as_ref().and_then(|t| t.outside_mass());
@@ -203,7 +206,32 @@ pub async fn fold_prefix(
             campaign.confidence,
         )
     });
-    write(conn, campaign, &rule, &folded, upper).await
+    write(conn, campaign, &rule, &folded, upper)
+}
+
+/// The outcomes of `from..to`: those of the report just recorded, `fresh`
+/// (its range was checked against what was stored, and its new part stored
+/// as it is), and the stored ones of the rest of the range, in index order.
+fn outcomes_to_fold(
+    conn: &Connection,
+    campaign: i64,
+    from: u64,
+    to: u64,
+    fresh: Option<&CheckedReport>,
+) -> Result<Vec<(u64, SparseOutcome)>, ApiError> {
+    let Some(fresh) = fresh.filter(|f| f.from < to && f.to > from) else {
+        return reports::outcomes(conn, campaign, from, to);
+    };
+    let mut outcomes = if from < fresh.from {
+        reports::outcomes(conn, campaign, from, fresh.from)?
+    } else {
+        Vec::new()
+    };
+    outcomes.extend(fresh.outcomes.iter().filter(|o| (from..to).contains(&o.0)));
+    if fresh.to < to {
+        outcomes.extend(reports::outcomes(conn, campaign, fresh.to, to)?);
+    }
+    Ok(outcomes)
 }
 
 /// The status a decision gives, with the sentence that explains it.
@@ -239,8 +267,8 @@ fn outcome(
 
 /// Writes a fold's state, history and, on a stop, the final status (its
 /// active leases cancelled).
-async fn write(
-    conn: &mut SqliteConnection,
+fn write(
+    conn: &Connection,
     campaign: &CampaignRow,
     rule: &StoppingRule,
     folded: &Folded,
@@ -249,55 +277,55 @@ async fn write(
     let fold = &folded.fold;
     let (status, detail) = outcome(folded.decision, rule, fold);
     let (s1, s2) = fold.estimator.sums();
-    sqlx::query(
+    sql::execute(
+        conn,
         "UPDATE campaigns SET indices = ?, tests = ?, events = ?, invalid = ?, s1 = ?, s2 = ?, \
          largest = ?, outside_tests = ?, outside_events = ?, outside_s1 = ?, outside_upper = ?, \
          outside_mismatches = ?, strata_epsilon = ?, \
          status = ?, status_detail = COALESCE(?, status_detail), \
          updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now') WHERE id = ?",
-    )
-    .bind(fold.indices as i64)
-    .bind(fold.estimator.tests() as i64)
-    .bind(fold.estimator.events() as i64)
-    .bind(fold.invalid as i64)
-    .bind(s1)
-    .bind(s2)
-    .bind(fold.estimator.largest_term())
-    .bind(fold.outside.tests as i64)
-    .bind(fold.outside.events as i64)
-    .bind(fold.outside.s1)
-    .bind(upper)
-    .bind(fold.outside.mismatches as i64)
-    .bind(fold.strata)
-    .bind(status.as_str())
-    .bind(detail)
-    .bind(campaign.id)
-    .execute(&mut *conn)
-    .await?;
-    for batch in folded.course.chunks(INSERT_BATCH) {
-        QueryBuilder::<Sqlite>::new(
+        params![
+            fold.indices as i64,
+            fold.estimator.tests() as i64,
+            fold.estimator.events() as i64,
+            fold.invalid as i64,
+            s1,
+            s2,
+            fold.estimator.largest_term(),
+            fold.outside.tests as i64,
+            fold.outside.events as i64,
+            fold.outside.s1,
+            upper,
+            fold.outside.mismatches as i64,
+            fold.strata,
+            status.as_str(),
+            detail,
+            campaign.id
+        ],
+    )?;
+    if !folded.course.is_empty() {
+        let mut statement = conn.prepare_cached(
             "INSERT OR REPLACE INTO history (campaign_id, indices, tests, events, s1, s2, \
-             outside_tests, outside_s1) ",
-        )
-        .push_values(batch, |mut row, state| {
+             outside_tests, outside_s1) VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+        )?;
+        for state in &folded.course {
             let (s1, s2) = state.estimator.sums();
-            row.push_bind(campaign.id)
-                .push_bind(state.indices as i64)
-                .push_bind(state.estimator.tests() as i64)
-                .push_bind(state.estimator.events() as i64)
-                .push_bind(s1)
-                .push_bind(s2)
-                .push_bind(state.outside.tests as i64)
-                .push_bind(state.outside.s1);
-        })
-        .build()
-        .execute(&mut *conn)
-        .await?;
+            statement.execute(params![
+                campaign.id,
+                state.indices as i64,
+                state.estimator.tests() as i64,
+                state.estimator.events() as i64,
+                s1,
+                s2,
+                state.outside.tests as i64,
+                state.outside.s1
+            ])?;
+        }
     }
     if folded.decision.is_none() {
         return Ok(None);
     }
-    close_stopped(conn, campaign.id, fold.indices).await?;
+    close_stopped(conn, campaign.id, fold.indices)?;
     tracing::info!(
         campaign = campaign.id,
         status = status.as_str(),
@@ -309,23 +337,16 @@ async fn write(
 
 /// A stopped campaign's leases cancelled, and its audits of tests past the
 /// stop index `stop` set aside (they check tests that no longer count).
-pub(crate) async fn close_stopped(
-    conn: &mut SqliteConnection,
-    campaign: i64,
-    stop: u64,
-) -> Result<(), ApiError> {
-    sqlx::query("UPDATE leases SET state = 'cancelled' WHERE campaign_id = ? AND state = 'active'")
-        .bind(campaign)
-        .execute(&mut *conn)
-        .await?;
-    sqlx::query(&format!(
-        "UPDATE audits SET state = 'past' WHERE campaign_id = ? AND test_index >= ? \
-         AND state IN {}",
-        audits::OPEN
-    ))
-    .bind(campaign)
-    .bind(stop as i64)
-    .execute(&mut *conn)
-    .await?;
+pub(crate) fn close_stopped(conn: &Connection, campaign: i64, stop: u64) -> Result<(), ApiError> {
+    crate::store::leases::cancel_active(conn, campaign)?;
+    sql::execute(
+        conn,
+        &format!(
+            "UPDATE audits SET state = 'past' WHERE campaign_id = ? AND test_index >= ? \
+             AND state IN {}",
+            audits::OPEN
+        ),
+        [campaign, stop as i64],
+    )?;
     Ok(())
 }

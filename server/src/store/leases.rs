@@ -2,26 +2,39 @@
 //! on (lease id, worker, attempt) and the attempt's secret key.
 
 use crate::config::Config;
+use crate::db::sql;
 use crate::db::{now_ms, Database};
 use crate::error::ApiError;
 use crate::lease_size::{lease_size, predicted_unleased, SizingInput, MAX_INLINE_LEASE};
 use crate::store::audits;
 use crate::store::campaigns::{self, CampaignRow, COLUMNS as CAMPAIGN_COLUMNS};
-use sqlx::SqliteConnection;
+use rusqlite::{params, Connection};
+use std::sync::Arc;
 use subtle::ConstantTimeEq;
 use tslg_api::{CampaignStatus, HeartbeatAck, LeaseFence};
 
 /// Where a lease stands: being worked on (or expired, waiting for another
 /// worker), fully reported, or cancelled with its campaign.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, sqlx::Type)]
-#[sqlx(rename_all = "lowercase")]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum LeaseState {
     Active,
     Done,
     Cancelled,
 }
 
-#[derive(Debug, Clone, sqlx::FromRow)]
+impl LeaseState {
+    /// The state as the `leases` table stores it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            LeaseState::Active => "active",
+            LeaseState::Done => "done",
+            LeaseState::Cancelled => "cancelled",
+        }
+    }
+}
+
+#[derive(Debug, Clone, serde::Deserialize)]
 pub struct LeaseRow {
     pub id: i64,
     pub campaign_id: i64,
@@ -92,7 +105,7 @@ pub struct Claim<'a> {
 /// when there is nothing to do.
 pub async fn claim(
     db: &Database,
-    config: &Config,
+    config: &Arc<Config>,
     ask: &Claim<'_>,
 ) -> Result<Option<Claimed>, ApiError> {
     let Claim {
@@ -108,14 +121,6 @@ pub async fn claim(
         span_limit = span_limit.min(most);
     }
     let span_limit = span_limit.min(i64::MAX as u64) as i64;
-    // A client that needs each test's scenario in the lease can only take
-    // campaigns whose scenarios are fixed before the test runs, and no
-    // whole library build (`enumerate = 2`).
-    let planned_only = if inline {
-        "AND c.case_name NOT IN (SELECT value FROM json_each(?)) AND c.enumerate != 2"
-    } else {
-        ""
-    };
     // The cases whose scenarios are drawn while a test runs, as a JSON
     // array bound to the query (only when `inline`).
     let sequential: Vec<&str> = tslg_method::cases::descriptors()
@@ -124,75 +129,96 @@ pub async fn claim(
         .map(|d| d.name)
         .collect();
     let sequential = serde_json::to_string(&sequential).expect("strings serialise");
-    let offered = serde_json::to_string(offers).expect("strings serialise");
-    let runnable = "AND (c.requires IS NULL OR c.requires IN (SELECT value FROM json_each(?)))";
-    let filters = Filters {
-        planned_only,
-        runnable,
-        sequential: inline.then_some(sequential.as_str()),
-        offered: &offered,
+    let job = ClaimJob {
+        worker: ask.worker.to_string(),
+        threads: ask.threads,
+        audits: !(inline || offers.is_empty()),
+        sequential: inline.then_some(sequential),
+        offered: serde_json::to_string(offers).expect("strings serialise"),
         span_limit,
+        now,
+        expires,
     };
-    db.group
-        .run(async |tx| claim_in(tx, config, ask, &filters, now, expires).await)
-        .await
+    let config = Arc::clone(config);
+    db.write(move |conn| claim_in(conn, &config, &job)).await
 }
 
-/// Which campaigns a claim may take, as SQL and its bound values.
-struct Filters<'a> {
-    planned_only: &'a str,
-    runnable: &'a str,
+/// A claim as the writer runs it.
+struct ClaimJob {
+    worker: String,
+    threads: u32,
+    /// Whether the worker may run audits (it offers programs and takes
+    /// leases without their tests listed).
+    audits: bool,
     /// The cases whose scenarios are drawn while a test runs, as a JSON
-    /// array (only when the lease lists its tests).
-    sequential: Option<&'a str>,
+    /// array, when the lease lists its tests: a client that needs each
+    /// test's scenario in the lease can only take campaigns whose
+    /// scenarios are fixed before the test runs, and no whole library
+    /// build (`enumerate = 2`).
+    sequential: Option<String>,
     /// The programs offered, as a JSON array.
-    offered: &'a str,
+    offered: String,
     span_limit: i64,
+    now: i64,
+    expires: i64,
+}
+
+impl ClaimJob {
+    /// The SQL that keeps campaigns a lease that lists its tests cannot
+    /// take, and those whose program the worker does not offer; binds the
+    /// sequential cases (when listed) and the offered programs, in order.
+    fn filters(&self) -> &'static str {
+        if self.sequential.is_some() {
+            "AND c.case_name NOT IN (SELECT value FROM json_each(?)) AND c.enumerate != 2 \
+             AND (c.requires IS NULL OR c.requires IN (SELECT value FROM json_each(?)))"
+        } else {
+            "AND (c.requires IS NULL OR c.requires IN (SELECT value FROM json_each(?)))"
+        }
+    }
+
+    /// The filters' bound values.
+    fn filter_values(&self) -> Vec<&str> {
+        self.sequential
+            .as_deref()
+            .into_iter()
+            .chain([self.offered.as_str()])
+            .collect()
+    }
 }
 
 /// [`claim`] on the writer connection, in the claim's savepoint.
-async fn claim_in(
-    tx: &mut SqliteConnection,
+fn claim_in(
+    conn: &Connection,
     config: &Config,
-    ask: &Claim<'_>,
-    filters: &Filters<'_>,
-    now: i64,
-    expires: i64,
+    job: &ClaimJob,
 ) -> Result<Option<Claimed>, ApiError> {
-    let Filters {
-        planned_only,
-        runnable,
-        sequential,
-        offered,
-        span_limit,
-    } = *filters;
-    let Claim {
-        worker, threads, ..
-    } = *ask;
+    let worker = job.worker.as_str();
     // In the transaction: a flag set since the route's check still counts.
-    audits::refuse_flagged(&mut *tx, worker).await?;
+    audits::refuse_flagged(conn, worker)?;
+    let filters = job.filters();
     let sql = format!(
         "UPDATE leases SET attempt = attempt + 1, worker = ?, expires_at = ?, key = ?, \
              claimed_at = ?, threads = ? \
          WHERE id = (SELECT l.id FROM leases l JOIN campaigns c ON c.id = l.campaign_id \
                      WHERE l.state = 'active' AND l.expires_at < ? AND c.status = 'running' \
                        AND l.audit_id IS NULL \
-                       AND l.end_index - l.resume_at <= ? {planned_only} {runnable} \
+                       AND l.end_index - l.resume_at <= ? {filters} \
                      ORDER BY l.campaign_id, l.resume_at LIMIT 1) \
          RETURNING {COLUMNS}"
     );
-    let mut query = sqlx::query_as(&sql)
-        .bind(worker)
-        .bind(expires)
-        .bind(new_key())
-        .bind(now)
-        .bind(threads)
-        .bind(now)
-        .bind(span_limit);
-    if let Some(sequential) = sequential {
-        query = query.bind(sequential);
-    }
-    let reclaimed: Option<LeaseRow> = query.bind(offered).fetch_optional(&mut *tx).await?;
+    let key = new_key();
+    let mut values: Vec<&dyn rusqlite::ToSql> = vec![
+        &worker,
+        &job.expires,
+        &key,
+        &job.now,
+        &job.threads,
+        &job.now,
+        &job.span_limit,
+    ];
+    let filter_values = job.filter_values();
+    values.extend(filter_values.iter().map(|v| v as &dyn rusqlite::ToSql));
+    let reclaimed: Option<LeaseRow> = sql::optional(conn, &sql, values.as_slice())?;
     if let Some(lease) = reclaimed {
         tracing::info!(
             lease = lease.id,
@@ -205,46 +231,49 @@ async fn claim_in(
             campaign: None,
         }));
     }
-    if let Some(lease) = claim_audit(&mut *tx, ask, offered, now, expires).await? {
-        return Ok(Some(Claimed {
-            lease,
-            campaign: None,
-        }));
+    if job.audits {
+        if let Some(lease) = claim_audit(conn, job)? {
+            return Ok(Some(Claimed {
+                lease,
+                campaign: None,
+            }));
+        }
     }
     // A campaign with many tests waiting for their audits gets no new
     // range until workers have run them: audits come first, and the work
     // behind them cannot count before they are done.
     let sql = format!(
         "SELECT {CAMPAIGN_COLUMNS} FROM campaigns c WHERE status = 'running' \
-         AND next_index < max_tests {planned_only} {runnable} \
+         AND next_index < max_tests {filters} \
          AND (stage_end IS NULL OR next_index < stage_end) \
          AND (SELECT COUNT(*) FROM audits a WHERE a.campaign_id = c.id \
               AND a.state IN {open}) < {MAX_OPEN_AUDITS} \
          ORDER BY next_turn_at, id LIMIT 1",
         open = audits::OPEN
     );
-    let mut query = sqlx::query_as(&sql);
-    if let Some(sequential) = sequential {
-        query = query.bind(sequential);
-    }
-    let Some(campaign): Option<CampaignRow> = query.bind(offered).fetch_optional(&mut *tx).await?
-    else {
+    let values: Vec<&dyn rusqlite::ToSql> = filter_values
+        .iter()
+        .map(|v| v as &dyn rusqlite::ToSql)
+        .collect();
+    let Some(campaign): Option<CampaignRow> = sql::optional(conn, &sql, values.as_slice())? else {
         return Ok(None);
     };
-    let size = new_lease_size(config, &campaign, threads).min(span_limit as u64);
+    let size = new_lease_size(config, &campaign, job.threads).min(job.span_limit as u64);
     let start = campaign.next_index;
     let end = start + size as i64;
-    let moved = sqlx::query(
+    let moved = sql::execute(
+        conn,
         "UPDATE campaigns SET next_index = ?, next_turn_at = ? \
          WHERE id = ? AND next_index = ? AND status = 'running'",
-    )
-    .bind(end)
-    .bind(now.saturating_add(expected_ms(&campaign, size, threads)))
-    .bind(campaign.id)
-    .bind(start)
-    .execute(&mut *tx)
-    .await?;
-    if moved.rows_affected() != 1 {
+        params![
+            end,
+            job.now
+                .saturating_add(expected_ms(&campaign, size, job.threads)),
+            campaign.id,
+            start
+        ],
+    )?;
+    if moved != 1 {
         return Ok(None);
     }
     let sql = format!(
@@ -252,73 +281,71 @@ async fn claim_in(
          expires_at, state, key, claimed_at, threads) \
          VALUES (?, ?, ?, ?, 1, ?, ?, 'active', ?, ?, ?) RETURNING {COLUMNS}"
     );
-    let lease: LeaseRow = sqlx::query_as(&sql)
-        .bind(campaign.id)
-        .bind(start)
-        .bind(end)
-        .bind(start)
-        .bind(worker)
-        .bind(expires)
-        .bind(new_key())
-        .bind(now)
-        .bind(threads)
-        .fetch_one(&mut *tx)
-        .await?;
+    let lease: LeaseRow = sql::one(
+        conn,
+        &sql,
+        params![
+            campaign.id,
+            start,
+            end,
+            start,
+            worker,
+            job.expires,
+            new_key(),
+            job.now,
+            job.threads
+        ],
+    )?;
     Ok(Some(Claimed {
         lease,
         campaign: Some(campaign),
     }))
 }
 
-/// A one-test lease for an open audit `ask`'s worker may run (see
+/// A one-test lease for an open audit `job`'s worker may run (see
 /// [`crate::audit`]): a new lease, or the audit's expired one taken over.
-async fn claim_audit(
-    conn: &mut SqliteConnection,
-    ask: &Claim<'_>,
-    offered: &str,
-    now: i64,
-    expires: i64,
-) -> Result<Option<LeaseRow>, ApiError> {
-    if ask.inline || ask.offers.is_empty() {
-        return Ok(None);
-    }
-    let Some(audit) = audits::runnable(&mut *conn, ask.worker, offered, now).await? else {
+fn claim_audit(conn: &Connection, job: &ClaimJob) -> Result<Option<LeaseRow>, ApiError> {
+    let Some(audit) = audits::runnable(conn, &job.worker, &job.offered, job.now)? else {
         return Ok(None);
     };
     if let Some(old) = audit.lease_id {
-        sqlx::query("UPDATE leases SET state = 'cancelled' WHERE id = ? AND state = 'active'")
-            .bind(old)
-            .execute(&mut *conn)
-            .await?;
+        sql::execute(
+            conn,
+            "UPDATE leases SET state = 'cancelled' WHERE id = ? AND state = 'active'",
+            [old],
+        )?;
     }
     let sql = format!(
         "INSERT INTO leases (campaign_id, start_index, end_index, resume_at, attempt, worker, \
          expires_at, state, key, claimed_at, threads, audit_id) \
          VALUES (?, ?, ?, ?, 1, ?, ?, 'active', ?, ?, ?, ?) RETURNING {COLUMNS}"
     );
-    let lease: LeaseRow = sqlx::query_as(&sql)
-        .bind(audit.campaign_id)
-        .bind(audit.test_index)
-        .bind(audit.test_index + 1)
-        .bind(audit.test_index)
-        .bind(ask.worker)
-        .bind(expires)
-        .bind(new_key())
-        .bind(now)
-        .bind(ask.threads)
-        .bind(audit.id)
-        .fetch_one(&mut *conn)
-        .await?;
-    sqlx::query("UPDATE audits SET lease_id = ? WHERE id = ?")
-        .bind(lease.id)
-        .bind(audit.id)
-        .execute(&mut *conn)
-        .await?;
+    let lease: LeaseRow = sql::one(
+        conn,
+        &sql,
+        params![
+            audit.campaign_id,
+            audit.test_index,
+            audit.test_index + 1,
+            audit.test_index,
+            job.worker,
+            job.expires,
+            new_key(),
+            job.now,
+            job.threads,
+            audit.id
+        ],
+    )?;
+    sql::execute(
+        conn,
+        "UPDATE audits SET lease_id = ? WHERE id = ?",
+        [lease.id, audit.id],
+    )?;
     tracing::info!(
         audit = audit.id,
         campaign = audit.campaign_id,
         test = audit.test_index,
-        worker = ask.worker,
+        worker = job.worker,
         "audit run leased"
     );
     Ok(Some(lease))
@@ -326,24 +353,25 @@ async fn claim_audit(
 
 /// A lease of `from..to` for any worker, expired at once so the next
 /// claim takes it: the range of results taken back from a flagged worker.
-pub async fn insert_redo(
-    conn: &mut SqliteConnection,
-    campaign: i64,
-    from: u64,
-    to: u64,
-) -> Result<(), ApiError> {
-    sqlx::query(
+pub fn insert_redo(conn: &Connection, campaign: i64, from: u64, to: u64) -> Result<(), ApiError> {
+    sql::execute(
+        conn,
         "INSERT INTO leases (campaign_id, start_index, end_index, resume_at, attempt, worker, \
          expires_at, state, key, claimed_at, threads) \
          VALUES (?, ?, ?, ?, 0, '', 0, 'active', ?, 0, 1)",
-    )
-    .bind(campaign)
-    .bind(from as i64)
-    .bind(to as i64)
-    .bind(from as i64)
-    .bind(new_key())
-    .execute(&mut *conn)
-    .await?;
+        params![campaign, from as i64, to as i64, from as i64, new_key()],
+    )?;
+    Ok(())
+}
+
+/// Cancels the active leases of `campaign` (it stopped): their workers
+/// are told to stop at their next heartbeat or report.
+pub fn cancel_active(conn: &Connection, campaign: i64) -> Result<(), ApiError> {
+    sql::execute(
+        conn,
+        "UPDATE leases SET state = 'cancelled' WHERE campaign_id = ? AND state = 'active'",
+        [campaign],
+    )?;
     Ok(())
 }
 
@@ -394,48 +422,20 @@ fn new_lease_size(config: &Config, campaign: &CampaignRow, threads: u32) -> u64 
     })
 }
 
-pub async fn get(conn: &mut SqliteConnection, id: i64) -> Result<LeaseRow, ApiError> {
-    let sql = format!("SELECT {COLUMNS} FROM leases WHERE id = ?");
-    sqlx::query_as(&sql)
-        .bind(id)
-        .fetch_optional(conn)
-        .await?
-        .ok_or_else(|| ApiError::NotFound(format!("lease {id} does not exist")))
+pub fn get(conn: &Connection, id: i64) -> Result<LeaseRow, ApiError> {
+    sql::optional(
+        conn,
+        &format!("SELECT {COLUMNS} FROM leases WHERE id = ?"),
+        [id],
+    )?
+    .ok_or_else(|| ApiError::NotFound(format!("lease {id} does not exist")))
 }
 
 /// Lease `id` for a request of `worker`, refused when `worker` is flagged
-/// (checked first: a flagged worker learns that whatever it asks), in one
-/// read.
-pub async fn get_unless_flagged(
-    conn: &mut SqliteConnection,
-    id: i64,
-    worker: &str,
-) -> Result<LeaseRow, ApiError> {
-    #[derive(sqlx::FromRow)]
-    struct Row {
-        #[sqlx(flatten)]
-        lease: LeaseRow,
-        flag: Option<String>,
-    }
-    let sql = format!(
-        "SELECT {COLUMNS}, (SELECT reason FROM flagged_workers WHERE name = ?) AS flag \
-         FROM leases WHERE id = ?"
-    );
-    let row: Option<Row> = sqlx::query_as(&sql)
-        .bind(worker)
-        .bind(id)
-        .fetch_optional(&mut *conn)
-        .await?;
-    match row {
-        Some(Row {
-            flag: Some(reason), ..
-        }) => Err(audits::flagged_problem(worker, &reason)),
-        Some(Row { lease, flag: None }) => Ok(lease),
-        None => {
-            audits::refuse_flagged(&mut *conn, worker).await?;
-            Err(ApiError::NotFound(format!("lease {id} does not exist")))
-        }
-    }
+/// (checked first: a flagged worker learns that whatever it asks).
+pub fn get_unless_flagged(conn: &Connection, id: i64, worker: &str) -> Result<LeaseRow, ApiError> {
+    audits::refuse_flagged(conn, worker)?;
+    get(conn, id)
 }
 
 /// Refuses a caller that does not hold the lease in its current attempt:
@@ -472,53 +472,50 @@ pub async fn heartbeat(
     id: i64,
     fence: &LeaseFence,
 ) -> Result<HeartbeatAck, ApiError> {
-    db.group
-        .run(async |tx| {
-    let lease = get_unless_flagged(&mut *tx, id, &fence.worker).await?;
-    check_fence(&lease, &fence.worker, fence.attempt, fence.key.as_str())?;
-    let campaign = campaigns::get(&mut *tx, lease.campaign_id).await?;
-    let status = campaign.status;
-    if lease.state != LeaseState::Active || status != CampaignStatus::Running {
-        return Ok(HeartbeatAck {
-            proceed: false,
+    let fence = fence.clone();
+    let ttl_seconds = config.lease_ttl_seconds;
+    let ttl = ttl_ms(config);
+    db.write(move |conn| {
+        let lease = get_unless_flagged(conn, id, &fence.worker)?;
+        check_fence(&lease, &fence.worker, fence.attempt, fence.key.as_str())?;
+        let campaign = campaigns::get(conn, lease.campaign_id)?;
+        let status = campaign.status;
+        if lease.state != LeaseState::Active || status != CampaignStatus::Running {
+            return Ok(HeartbeatAck {
+                proceed: false,
+                campaign_status: status,
+                ttl_seconds: 0.0,
+            });
+        }
+        let updated = sql::execute(
+            conn,
+            "UPDATE leases SET expires_at = ? WHERE id = ? AND worker = ? AND attempt = ? \
+             AND state = 'active'",
+            params![now_ms() + ttl, id, fence.worker, fence.attempt],
+        )?;
+        Ok(HeartbeatAck {
+            proceed: updated == 1,
             campaign_status: status,
-            ttl_seconds: 0.0,
-        });
-    }
-    let updated = sqlx::query(
-        "UPDATE leases SET expires_at = ? WHERE id = ? AND worker = ? AND attempt = ? AND state = 'active'",
-    )
-    .bind(now_ms() + ttl_ms(config))
-    .bind(id)
-    .bind(&fence.worker)
-    .bind(fence.attempt)
-    .execute(&mut *tx)
-    .await?;
-    Ok(HeartbeatAck {
-        proceed: updated.rows_affected() == 1,
-        campaign_status: status,
-        ttl_seconds: config.lease_ttl_seconds,
-    })
+            ttl_seconds,
         })
-        .await
+    })
+    .await
 }
 
 /// Gives a lease back unfinished: it expires now and is handed out again
 /// from its first unreported index.
 pub async fn release(db: &Database, id: i64, fence: &LeaseFence) -> Result<LeaseRow, ApiError> {
-    db.group
-        .run(async |tx| {
-    let lease = get(&mut *tx, id).await?;
-    check_fence(&lease, &fence.worker, fence.attempt, fence.key.as_str())?;
-    sqlx::query(
-        "UPDATE leases SET expires_at = 0 WHERE id = ? AND worker = ? AND attempt = ? AND state = 'active'",
-    )
-    .bind(id)
-    .bind(&fence.worker)
-    .bind(fence.attempt)
-    .execute(&mut *tx)
-    .await?;
-    get(&mut *tx, id).await
-        })
-        .await
+    let fence = fence.clone();
+    db.write(move |conn| {
+        let lease = get(conn, id)?;
+        check_fence(&lease, &fence.worker, fence.attempt, fence.key.as_str())?;
+        sql::execute(
+            conn,
+            "UPDATE leases SET expires_at = 0 WHERE id = ? AND worker = ? AND attempt = ? \
+             AND state = 'active'",
+            params![id, fence.worker, fence.attempt],
+        )?;
+        get(conn, id)
+    })
+    .await
 }

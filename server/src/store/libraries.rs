@@ -1,10 +1,11 @@
 //! The `libraries` table.
 
+use crate::db::sql;
 use crate::error::ApiError;
-use sqlx::SqlitePool;
+use rusqlite::{params, Connection};
 use tslg_api::{LibraryStatus, LibraryView};
 
-#[derive(Debug, Clone, sqlx::FromRow)]
+#[derive(Debug, Clone, serde::Deserialize)]
 pub struct LibraryRow {
     pub id: i64,
     pub case_name: String,
@@ -72,46 +73,52 @@ pub struct NewLibrary<'a> {
     pub total_scenarios: usize,
 }
 
-pub async fn insert(pool: &SqlitePool, new: &NewLibrary<'_>) -> Result<LibraryRow, ApiError> {
+pub fn insert(conn: &Connection, new: &NewLibrary<'_>) -> Result<LibraryRow, ApiError> {
     let sql = format!(
         "INSERT INTO libraries (case_name, preset, status, request, surrogate, exposure_name, \
          exposure_fingerprint, exposure_table, exposure_note, total_scenarios) \
          VALUES (?, ?, 'building', ?, ?, ?, ?, ?, ?, ?) RETURNING {COLUMNS}"
     );
-    Ok(sqlx::query_as(&sql)
-        .bind(new.case_name)
-        .bind(new.preset)
-        .bind(new.request)
-        .bind(new.surrogate)
-        .bind(new.exposure_name)
-        .bind(new.exposure_fingerprint)
-        .bind(new.exposure_table)
-        .bind(new.exposure_note)
-        .bind(new.total_scenarios as i64)
-        .fetch_one(pool)
-        .await?)
+    sql::one(
+        conn,
+        &sql,
+        params![
+            new.case_name,
+            new.preset,
+            new.request,
+            new.surrogate,
+            new.exposure_name,
+            new.exposure_fingerprint,
+            new.exposure_table,
+            new.exposure_note,
+            new.total_scenarios as i64
+        ],
+    )
 }
 
-pub async fn get<'e, E>(executor: E, id: i64) -> Result<LibraryRow, ApiError>
-where
-    E: sqlx::Executor<'e, Database = sqlx::Sqlite>,
-{
-    let sql = format!("SELECT {COLUMNS} FROM libraries WHERE id = ?");
-    sqlx::query_as(&sql)
-        .bind(id)
-        .fetch_optional(executor)
-        .await?
-        .ok_or_else(|| ApiError::NotFound(format!("library {id} does not exist")))
+pub fn get(conn: &Connection, id: i64) -> Result<LibraryRow, ApiError> {
+    sql::optional(
+        conn,
+        &format!("SELECT {COLUMNS} FROM libraries WHERE id = ?"),
+        [id],
+    )?
+    .ok_or_else(|| ApiError::NotFound(format!("library {id} does not exist")))
 }
 
-pub async fn list(pool: &SqlitePool) -> Result<Vec<LibraryRow>, ApiError> {
-    let sql = format!("SELECT {COLUMNS} FROM libraries ORDER BY id DESC");
-    Ok(sqlx::query_as(&sql).fetch_all(pool).await?)
+pub fn list(conn: &Connection) -> Result<Vec<LibraryRow>, ApiError> {
+    sql::all(
+        conn,
+        &format!("SELECT {COLUMNS} FROM libraries ORDER BY id DESC"),
+        [],
+    )
 }
 
-pub async fn building(pool: &SqlitePool) -> Result<Vec<LibraryRow>, ApiError> {
-    let sql = format!("SELECT {COLUMNS} FROM libraries WHERE status = 'building' ORDER BY id");
-    Ok(sqlx::query_as(&sql).fetch_all(pool).await?)
+pub fn building(conn: &Connection) -> Result<Vec<LibraryRow>, ApiError> {
+    sql::all(
+        conn,
+        &format!("SELECT {COLUMNS} FROM libraries WHERE status = 'building' ORDER BY id"),
+        [],
+    )
 }
 
 /// A library file and its media type.
@@ -121,12 +128,12 @@ pub struct LibraryFile {
 }
 
 /// The library file, once ready.
-pub async fn file(pool: &SqlitePool, id: i64) -> Result<Option<LibraryFile>, ApiError> {
-    let row: Option<(Option<Vec<u8>>, Option<String>)> =
-        sqlx::query_as("SELECT file, media_type FROM libraries WHERE id = ?")
-            .bind(id)
-            .fetch_optional(pool)
-            .await?;
+pub fn file(conn: &Connection, id: i64) -> Result<Option<LibraryFile>, ApiError> {
+    let row: Option<(Option<Vec<u8>>, Option<String>)> = sql::optional(
+        conn,
+        "SELECT file, media_type FROM libraries WHERE id = ?",
+        [id],
+    )?;
     Ok(match row {
         Some((Some(bytes), media_type)) => Some(LibraryFile {
             bytes,
@@ -137,16 +144,15 @@ pub async fn file(pool: &SqlitePool, id: i64) -> Result<Option<LibraryFile>, Api
 }
 
 /// A ready library and its file; 404 if unknown, 409 if not ready (yet).
-pub async fn ready_file(pool: &SqlitePool, id: i64) -> Result<(LibraryRow, LibraryFile), ApiError> {
-    let row = get(pool, id).await?;
+pub fn ready_file(conn: &Connection, id: i64) -> Result<(LibraryRow, LibraryFile), ApiError> {
+    let row = get(conn, id)?;
     if row.status != LibraryStatus::Ready {
         return Err(ApiError::Conflict(format!(
             "library {id} is {}, not ready",
             row.status.as_str()
         )));
     }
-    let file = file(pool, id)
-        .await?
+    let file = file(conn, id)?
         .ok_or_else(|| ApiError::Internal(anyhow::anyhow!("ready library {id} has no file")))?;
     Ok((row, file))
 }
@@ -177,72 +183,46 @@ impl<'a> Built<'a> {
     }
 }
 
-/// Marks a library ready and lets its pending campaigns run.
-pub async fn mark_ready(pool: &SqlitePool, id: i64, built: &Built<'_>) -> Result<(), ApiError> {
-    let mut tx = pool.begin().await?;
-    mark_ready_in(&mut tx, id, built).await?;
-    tx.commit().await?;
-    Ok(())
-}
-
-/// [`mark_ready`] inside the caller's transaction.
-pub async fn mark_ready_in(
-    tx: &mut sqlx::SqliteConnection,
-    id: i64,
-    built: &Built<'_>,
-) -> Result<(), ApiError> {
-    sqlx::query(
+/// Marks a library ready and lets its pending campaigns run (a write).
+pub fn mark_ready(conn: &Connection, id: i64, built: &Built<'_>) -> Result<(), ApiError> {
+    sql::execute(
+        conn,
         "UPDATE libraries SET status = 'ready', file = ?, media_type = ?, size = ?, \
          sm_evaluations = ?, mu_s = ?, w = ?, build_seconds = ? WHERE id = ?",
-    )
-    .bind(built.file)
-    .bind(built.media_type)
-    .bind(built.size as i64)
-    .bind(built.sm_evaluations as i64)
-    .bind(built.mu_s)
-    .bind(built.w)
-    .bind(built.seconds)
-    .bind(id)
-    .execute(&mut *tx)
-    .await?;
-    sqlx::query(
+        params![
+            built.file,
+            built.media_type,
+            built.size as i64,
+            built.sm_evaluations as i64,
+            built.mu_s,
+            built.w,
+            built.seconds,
+            id
+        ],
+    )?;
+    sql::execute(
+        conn,
         "UPDATE campaigns SET status = 'running', \
          updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now') \
          WHERE library_id = ? AND status = 'pending'",
-    )
-    .bind(id)
-    .execute(&mut *tx)
-    .await?;
+        [id],
+    )?;
     Ok(())
 }
 
-/// Marks a library failed, and its pending campaigns with it.
-pub async fn mark_failed(pool: &SqlitePool, id: i64, error: &str) -> Result<(), ApiError> {
-    let mut tx = pool.begin().await?;
-    mark_failed_in(&mut tx, id, error).await?;
-    tx.commit().await?;
-    Ok(())
-}
-
-/// [`mark_failed`] inside the caller's transaction.
-pub async fn mark_failed_in(
-    tx: &mut sqlx::SqliteConnection,
-    id: i64,
-    error: &str,
-) -> Result<(), ApiError> {
-    sqlx::query("UPDATE libraries SET status = 'failed', error = ? WHERE id = ?")
-        .bind(error)
-        .bind(id)
-        .execute(&mut *tx)
-        .await?;
-    sqlx::query(
+/// Marks a library failed, and its pending campaigns with it (a write).
+pub fn mark_failed(conn: &Connection, id: i64, error: &str) -> Result<(), ApiError> {
+    sql::execute(
+        conn,
+        "UPDATE libraries SET status = 'failed', error = ? WHERE id = ?",
+        params![error, id],
+    )?;
+    sql::execute(
+        conn,
         "UPDATE campaigns SET status = 'failed', status_detail = ?, \
          updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now') \
          WHERE library_id = ? AND status = 'pending'",
-    )
-    .bind(format!("library {id} failed to build: {error}"))
-    .bind(id)
-    .execute(&mut *tx)
-    .await?;
+        params![format!("library {id} failed to build: {error}"), id],
+    )?;
     Ok(())
 }

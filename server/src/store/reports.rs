@@ -9,14 +9,11 @@
 //! with 4 million events keeps about 12 MB of them, read back in tens of
 //! milliseconds.
 
+use crate::db::sql;
 use crate::error::ApiError;
-use sqlx::{QueryBuilder, Sqlite, SqliteConnection};
+use rusqlite::{params, Connection};
 use tslg_api::{packed, MAX_REPORT_TESTS};
 use tslg_method::prefix::SparseOutcome;
-
-/// Rows per multi-row `INSERT` of invalid tests: 3 bound values each, far
-/// below SQLite's limit of 32 766 variables.
-const INSERT_BATCH: usize = 1000;
 
 /// A report to store: the range, who sent it, its events (index order)
 /// and invalid tests with their reasons (index order).
@@ -30,40 +27,49 @@ pub struct NewReport<'a> {
     pub invalid: &'a [(u64, &'a str)],
 }
 
-pub async fn insert(conn: &mut SqliteConnection, report: &NewReport<'_>) -> Result<(), ApiError> {
-    sqlx::query(
+pub fn insert(conn: &Connection, report: &NewReport<'_>) -> Result<(), ApiError> {
+    sql::execute(
+        conn,
         "INSERT INTO reports (campaign_id, from_index, to_index, lease_id, worker, events, packed) \
          VALUES (?, ?, ?, ?, ?, ?, ?)",
-    )
-    .bind(report.campaign_id)
-    .bind(report.from as i64)
-    .bind(report.to as i64)
-    .bind(report.lease_id)
-    .bind(report.worker)
-    .bind(report.events.len() as i64)
-    .bind(packed::pack(report.from, report.events))
-    .execute(&mut *conn)
-    .await?;
-    for batch in report.invalid.chunks(INSERT_BATCH) {
-        QueryBuilder::<Sqlite>::new("INSERT INTO invalid_tests (campaign_id, test_index, reason) ")
-            .push_values(batch, |mut row, &(index, reason)| {
-                row.push_bind(report.campaign_id)
-                    .push_bind(index as i64)
-                    .push_bind(reason);
-            })
-            .build()
-            .execute(&mut *conn)
-            .await?;
+        params![
+            report.campaign_id,
+            report.from as i64,
+            report.to as i64,
+            report.lease_id,
+            report.worker,
+            report.events.len() as i64,
+            packed::pack(report.from, report.events)
+        ],
+    )?;
+    if report.invalid.is_empty() {
+        return Ok(());
+    }
+    let mut statement = conn.prepare_cached(
+        "INSERT INTO invalid_tests (campaign_id, test_index, reason) VALUES (?, ?, ?)",
+    )?;
+    for &(index, reason) in report.invalid {
+        statement.execute(params![report.campaign_id, index as i64, reason])?;
     }
     Ok(())
 }
 
-/// The reports' rows that can reach into `from..to`, as SQL: a report
-/// covers at most MAX_REPORT_TESTS tests, so only rows starting that far
-/// before `from` can, and the key bounds the scan. Binds campaign, from,
-/// to as ?1, ?2, ?3.
-const REPORTS_REACHING: &str = "FROM reports WHERE campaign_id = ?1 \
-     AND from_index > ?2 - ?4 AND from_index < ?3 AND to_index > ?2 AND events > 0";
+/// The packed events of the reports' rows that reach into `from..to`, as
+/// SQL binding campaign, from, to as ?1, ?2, ?3. Workers' report rows
+/// never overlap (each covers the new part of one lease's range), so of
+/// those starting at or before `from` only the last can reach into the
+/// range: the scan starts there, and costs the rows in the range, not the
+/// campaign's history. Rows moved from the old per-event table (worker
+/// `''`) may overlap others and are few: they are looked up apart, by the
+/// index on the worker (the planner would otherwise walk the key from the
+/// campaign's first row).
+const REPORTS_REACHING: &str = "\
+    WITH start AS (SELECT COALESCE((SELECT MAX(from_index) FROM reports \
+                   WHERE campaign_id = ?1 AND from_index <= ?2), ?2) AS at) \
+    SELECT from_index, packed FROM reports, start WHERE campaign_id = ?1 \
+      AND from_index >= start.at AND from_index < ?3 AND to_index > ?2 AND events > 0 \
+    UNION ALL SELECT from_index, packed FROM reports INDEXED BY reports_by_worker, start \
+      WHERE worker = '' AND campaign_id = ?1 AND from_index < start.at AND to_index > ?2 AND events > 0";
 
 /// Appends the events of the report row starting at `start` that fall in
 /// `range`.
@@ -83,24 +89,22 @@ fn unpack_into(
 
 /// Stored events and invalid tests of `campaign` in `from..to`, sorted by
 /// index, in one read (a fold runs in every report's transaction).
-pub async fn outcomes(
-    conn: &mut SqliteConnection,
+pub fn outcomes(
+    conn: &Connection,
     campaign: i64,
     from: u64,
     to: u64,
 ) -> Result<Vec<(u64, SparseOutcome)>, ApiError> {
     // A report row carries its packed events; an invalid test, none.
-    let rows: Vec<(i64, Option<Vec<u8>>)> = sqlx::query_as(&format!(
-        "SELECT from_index, packed {REPORTS_REACHING} \
-         UNION ALL SELECT test_index, NULL FROM invalid_tests \
-         WHERE campaign_id = ?1 AND test_index >= ?2 AND test_index < ?3"
-    ))
-    .bind(campaign)
-    .bind(from as i64)
-    .bind(to as i64)
-    .bind(MAX_REPORT_TESTS as i64)
-    .fetch_all(&mut *conn)
-    .await?;
+    let rows: Vec<(i64, Option<Vec<u8>>)> = sql::all(
+        conn,
+        &format!(
+            "{REPORTS_REACHING} \
+             UNION ALL SELECT test_index, NULL FROM invalid_tests \
+             WHERE campaign_id = ?1 AND test_index >= ?2 AND test_index < ?3"
+        ),
+        params![campaign, from as i64, to as i64],
+    )?;
     let mut events = Vec::new();
     let mut outcomes = Vec::new();
     for (start, bytes) in rows {
@@ -128,32 +132,30 @@ const LEGACY_CHUNK: usize = 65_536;
 /// the `reports` table) into report rows without a worker, and drops it.
 /// Runs at start-up, after the migrations, in one transaction.
 pub async fn move_legacy_events(db: &crate::db::Database) -> anyhow::Result<()> {
-    use anyhow::Context;
-    let mut tx = db.write.begin().await?;
-    let moved = move_legacy_rows(&mut tx)
+    let moved = db
+        .write(|conn| move_legacy_rows(conn).map_err(ApiError::Internal))
         .await
-        .context("cannot move the old event rows into report rows")?;
-    tx.commit().await?;
+        .map_err(|e| anyhow::anyhow!("cannot move the old event rows into report rows: {e}"))?;
     if moved > 0 {
         tracing::info!(events = moved, "old event rows packed into report rows");
     }
     Ok(())
 }
 
-async fn move_legacy_rows(conn: &mut SqliteConnection) -> Result<u64, anyhow::Error> {
-    let (exists,): (i64,) = sqlx::query_as(
+fn move_legacy_rows(conn: &Connection) -> Result<u64, anyhow::Error> {
+    let (exists,): (i64,) = sql::one(
+        conn,
         "SELECT COUNT(*) FROM sqlite_master WHERE type = 'table' AND name = 'legacy_events'",
-    )
-    .fetch_one(&mut *conn)
-    .await?;
+        [],
+    )?;
     if exists == 0 {
         return Ok(0);
     }
-    let rows: Vec<(i64, i64, f64)> = sqlx::query_as(
+    let rows: Vec<(i64, i64, f64)> = sql::all(
+        conn,
         "SELECT campaign_id, test_index, weight FROM legacy_events ORDER BY campaign_id, test_index",
-    )
-    .fetch_all(&mut *conn)
-    .await?;
+        [],
+    )?;
     let moved = rows.len() as u64;
     let mut at = 0;
     while at < rows.len() {
@@ -171,21 +173,20 @@ async fn move_legacy_rows(conn: &mut SqliteConnection) -> Result<u64, anyhow::Er
             .map(|&(_, i, w)| (i as u64, w))
             .collect();
         let (from, to) = (events[0].0, events[events.len() - 1].0 + 1);
-        sqlx::query(
+        sql::execute(
+            conn,
             "INSERT INTO reports (campaign_id, from_index, to_index, lease_id, worker, events, packed) \
              VALUES (?, ?, ?, NULL, '', ?, ?)",
-        )
-        .bind(campaign)
-        .bind(from as i64)
-        .bind(to as i64)
-        .bind(events.len() as i64)
-        .bind(packed::pack(from, &events))
-        .execute(&mut *conn)
-        .await?;
+            params![
+                campaign,
+                from as i64,
+                to as i64,
+                events.len() as i64,
+                packed::pack(from, &events)
+            ],
+        )?;
         at = end;
     }
-    sqlx::query("DROP TABLE legacy_events")
-        .execute(&mut *conn)
-        .await?;
+    conn.execute_batch("DROP TABLE legacy_events")?;
     Ok(moved)
 }

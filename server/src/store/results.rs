@@ -9,6 +9,7 @@
 //! one transaction, so an acknowledged result is always on disk.
 
 use crate::config::Config;
+use crate::db::sql;
 use crate::db::{now_ms, Database};
 use crate::error::ApiError;
 use crate::lease_size::update_cost;
@@ -19,7 +20,7 @@ use crate::store::campaigns::{self, CampaignRow};
 use crate::store::fold::fold_prefix;
 use crate::store::leases::{self, check_fence, LeaseRow, LeaseState};
 use crate::store::reports::{self, NewReport};
-use sqlx::SqliteConnection;
+use rusqlite::{params, Connection};
 use std::sync::Arc;
 use tslg_api::{CampaignStatus, Method, ResultAck, ResultReport};
 use tslg_method::number::Num;
@@ -70,45 +71,60 @@ pub struct AuditPlan {
 }
 
 /// What the coordinator found out about a report before recording it.
-pub struct Findings<'a> {
+pub struct Findings {
     /// The campaign's tests when it is a library campaign (they say which
     /// tests explored outside the library).
     pub tests: Option<Arc<dyn CampaignTests>>,
     /// The audits the report asks for.
-    pub audits: &'a AuditPlan,
+    pub audits: AuditPlan,
     /// The report's exploring tests, when the coordinator ran them all.
-    pub explored: Option<&'a Explored>,
+    pub explored: Option<Explored>,
 }
 
 /// Records a checked report on lease `lease_id` and folds the prefix.
 pub async fn record(
     db: &Database,
-    config: &Config,
+    config: &Arc<Config>,
     lease_id: i64,
-    report: &ResultReport,
-    checked: &CheckedReport,
-    found: Findings<'_>,
+    report: &Arc<ResultReport>,
+    checked: &Arc<CheckedReport>,
+    found: Findings,
 ) -> Result<Recorded, ApiError> {
-    db.group
-        .run(async |conn| record_in(conn, config, lease_id, report, checked, found).await)
+    let (config, report, checked) = (Arc::clone(config), Arc::clone(report), Arc::clone(checked));
+    db.write(move |conn| record_in(conn, &config, lease_id, &report, &checked, found))
         .await
 }
 
 /// [`record`] on the writer connection, in the report's savepoint.
-async fn record_in(
-    tx: &mut SqliteConnection,
+fn record_in(
+    tx: &Connection,
     config: &Config,
     lease_id: i64,
     report: &ResultReport,
     checked: &CheckedReport,
-    found: Findings<'_>,
+    found: Findings,
+) -> Result<Recorded, ApiError> {
+    let (lease, campaign) = held_lease(tx, lease_id, report)?;
+    record_held(tx, config, &lease, &campaign, report, checked, found)
+}
+
+/// Records a checked report on `lease` of `campaign`, read in this
+/// transaction by [`held_lease`], and folds the prefix.
+pub(crate) fn record_held(
+    tx: &Connection,
+    config: &Config,
+    lease: &LeaseRow,
+    campaign: &CampaignRow,
+    report: &ResultReport,
+    checked: &CheckedReport,
+    found: Findings,
 ) -> Result<Recorded, ApiError> {
     let Findings {
         tests,
         audits: plan,
         explored: known,
     } = found;
-    let (lease, campaign) = held_lease(tx, lease_id, report).await?;
+    let lease_id = lease.id;
     let span = checked.to - checked.from;
     let (start, end, resume_at) = (
         lease.start_index as u64,
@@ -122,7 +138,7 @@ async fn record_in(
             campaign_id: campaign.id,
         });
     }
-    check_effort(&lease, report, now_ms())?;
+    check_effort(lease, report, now_ms())?;
     if checked.from < start || checked.to > end {
         return Err(ApiError::Unprocessable(format!(
             "range {}..{} is not inside lease {lease_id}'s range {start}..{end}",
@@ -137,17 +153,17 @@ async fn record_in(
     }
     let overlap_end = checked.to.min(resume_at);
     if checked.from < overlap_end {
-        compare_with_stored(tx, &campaign, checked, overlap_end).await?;
+        compare_with_stored(tx, campaign, checked, overlap_end)?;
     }
     let new_from = checked.from.max(resume_at);
     let mut accepted = 0;
     if new_from < checked.to {
         accepted = checked.to - new_from;
         let expires_at = now_ms() + (config.lease_ttl_seconds * 1000.0) as i64;
-        store_new_part(tx, &campaign, &lease, report, checked, new_from, expires_at).await?;
-        store_audits(tx, campaign.id, &report.worker, plan, new_from).await?;
+        store_new_part(tx, campaign, lease, report, checked, new_from, expires_at)?;
+        store_audits(tx, campaign.id, &report.worker, &plan, new_from)?;
     }
-    let stopped = fold_prefix(tx, &campaign, tests, known).await?;
+    let stopped = fold_prefix(tx, campaign, tests, known.as_ref(), Some(checked))?;
     let status = stopped.unwrap_or(CampaignStatus::Running);
     let resume_at = resume_at.max(checked.to);
     Ok(Recorded {
@@ -168,14 +184,14 @@ async fn record_in(
 /// The lease a report is on, checked to be held by its sender in this
 /// attempt (a sender that is not flagged), and its campaign, read in the
 /// report's transaction.
-pub(crate) async fn held_lease(
-    conn: &mut SqliteConnection,
+pub(crate) fn held_lease(
+    conn: &Connection,
     lease_id: i64,
     report: &ResultReport,
 ) -> Result<(LeaseRow, CampaignRow), ApiError> {
-    let lease = leases::get_unless_flagged(&mut *conn, lease_id, &report.worker).await?;
+    let lease = leases::get_unless_flagged(conn, lease_id, &report.worker)?;
     check_fence(&lease, &report.worker, report.attempt, report.key.as_str())?;
-    let campaign = campaigns::get(&mut *conn, lease.campaign_id).await?;
+    let campaign = campaigns::get(conn, lease.campaign_id)?;
     Ok((lease, campaign))
 }
 
@@ -183,8 +199,8 @@ pub(crate) async fn held_lease(
 /// before, moves the lease's `resume_at` past it, and charges the work to
 /// the campaign's cost and worker time. A report keeps its lease alive
 /// until `expires_at`, like a heartbeat.
-async fn store_new_part(
-    conn: &mut SqliteConnection,
+fn store_new_part(
+    conn: &Connection,
     campaign: &CampaignRow,
     lease: &LeaseRow,
     report: &ResultReport,
@@ -210,36 +226,36 @@ async fn store_new_part(
             events: &checked.events[first_new..],
             invalid: &invalid,
         },
-    )
-    .await?;
+    )?;
     if campaign.method == Method::Adaptive {
         crate::store::adaptive::store_near_misses(
-            &mut *conn,
+            conn,
             campaign.id,
             &report.near_misses,
             new_from,
-        )
-        .await?;
+        )?;
     }
     let done = checked.to == lease.end_index as u64;
-    let moved = sqlx::query(
-        "UPDATE leases SET resume_at = ?, expires_at = ?, state = ? \
-         WHERE id = ? AND worker = ? AND attempt = ? AND resume_at = ? AND state = 'active'",
-    )
-    .bind(checked.to as i64)
-    .bind(expires_at)
-    .bind(if done {
+    let state = if done {
         LeaseState::Done
     } else {
         LeaseState::Active
-    })
-    .bind(lease.id)
-    .bind(&report.worker)
-    .bind(report.attempt)
-    .bind(lease.resume_at)
-    .execute(&mut *conn)
-    .await?;
-    if moved.rows_affected() != 1 {
+    };
+    let moved = sql::execute(
+        conn,
+        "UPDATE leases SET resume_at = ?, expires_at = ?, state = ? \
+         WHERE id = ? AND worker = ? AND attempt = ? AND resume_at = ? AND state = 'active'",
+        params![
+            checked.to as i64,
+            expires_at,
+            state.as_str(),
+            lease.id,
+            report.worker,
+            report.attempt,
+            lease.resume_at
+        ],
+    )?;
+    if moved != 1 {
         return Err(ApiError::Conflict(format!(
             "lease {} changed during this report; send it again",
             lease.id
@@ -255,23 +271,19 @@ async fn store_new_part(
     );
     let worker_seconds = spent_thread_seconds(report, accepted, span);
     let weights: f64 = checked.events[first_new..].iter().map(|e| e.1).sum();
-    sqlx::query(
+    sql::execute(
+        conn,
         "UPDATE campaigns SET cost_per_test = ?, worker_seconds = worker_seconds + ?, \
          reported_s1 = reported_s1 + ? WHERE id = ?",
-    )
-    .bind(cost)
-    .bind(worker_seconds)
-    .bind(weights)
-    .bind(campaign.id)
-    .execute(&mut *conn)
-    .await?;
+        params![cost, worker_seconds, weights, campaign.id],
+    )?;
     Ok(())
 }
 
 /// Stores the planned audits of the part from `new_from`, or counts them
 /// waived.
-async fn store_audits(
-    conn: &mut SqliteConnection,
+fn store_audits(
+    conn: &Connection,
     campaign: i64,
     worker: &str,
     plan: &AuditPlan,
@@ -287,14 +299,14 @@ async fn store_audits(
         return Ok(());
     }
     if plan.waived {
-        sqlx::query("UPDATE campaigns SET audits_waived = audits_waived + ? WHERE id = ?")
-            .bind(new.len() as i64)
-            .bind(campaign)
-            .execute(&mut *conn)
-            .await?;
+        sql::execute(
+            conn,
+            "UPDATE campaigns SET audits_waived = audits_waived + ? WHERE id = ?",
+            [new.len() as i64, campaign],
+        )?;
         return Ok(());
     }
-    audits::insert(conn, campaign, worker, &new).await
+    audits::insert(conn, campaign, worker, &new)
 }
 
 /// What recording a report did.
@@ -344,13 +356,13 @@ fn describe(outcome: Option<SparseOutcome>) -> String {
 /// Compares the part `from..overlap_end` of a report with what is stored:
 /// the same outcomes make it a duplicate (acknowledged, not counted
 /// again); any difference is a conflict (409), logged.
-async fn compare_with_stored(
-    conn: &mut SqliteConnection,
+fn compare_with_stored(
+    conn: &Connection,
     campaign: &CampaignRow,
     checked: &CheckedReport,
     overlap_end: u64,
 ) -> Result<(), ApiError> {
-    let stored = reports::outcomes(conn, campaign.id, checked.from, overlap_end).await?;
+    let stored = reports::outcomes(conn, campaign.id, checked.from, overlap_end)?;
     let reported: Vec<(u64, SparseOutcome)> = checked
         .outcomes
         .iter()

@@ -1,17 +1,19 @@
 //! The `user_cases` table: the definitions of user-defined cases, registered
 //! in this process at start-up and when a client adds one.
 
+use crate::db::sql;
 use crate::error::ApiError;
-use sqlx::SqlitePool;
+use rusqlite::{params, Connection};
 use tslg_method::cases::user::registry::{register, UserCaseDefinition};
 
 /// Registers every stored case; one that no longer reads (a newer build
 /// refusing it) is logged and left out.
-pub async fn register_stored(pool: &SqlitePool) -> Result<(), ApiError> {
-    let rows: Vec<(String, String, String, String)> =
-        sqlx::query_as("SELECT name, file, table_name, table_text FROM user_cases ORDER BY name")
-            .fetch_all(pool)
-            .await?;
+pub fn register_stored(conn: &Connection) -> Result<(), ApiError> {
+    let rows: Vec<(String, String, String, String)> = sql::all(
+        conn,
+        "SELECT name, file, table_name, table_text FROM user_cases ORDER BY name",
+        [],
+    )?;
     for (name, file, table_name, table) in rows {
         let definition = UserCaseDefinition {
             file,
@@ -25,32 +27,34 @@ pub async fn register_stored(pool: &SqlitePool) -> Result<(), ApiError> {
     Ok(())
 }
 
-/// Stores a registered case's definition (again, harmlessly, when the same).
-pub async fn insert(
-    pool: &SqlitePool,
+/// Stores a registered case's definition (again, harmlessly, when the
+/// same; a write).
+pub fn insert(
+    conn: &Connection,
     name: &str,
     definition: &UserCaseDefinition,
 ) -> Result<(), ApiError> {
-    sqlx::query(
+    sql::execute(
+        conn,
         "INSERT OR IGNORE INTO user_cases (name, file, table_name, table_text) \
          VALUES (?, ?, ?, ?)",
-    )
-    .bind(name)
-    .bind(&definition.file)
-    .bind(&definition.table_name)
-    .bind(&definition.table)
-    .execute(pool)
-    .await?;
+        params![
+            name,
+            definition.file,
+            definition.table_name,
+            definition.table
+        ],
+    )?;
     Ok(())
 }
 
 /// The stored definition of case `name`, for the plans workers read.
-pub async fn get(pool: &SqlitePool, name: &str) -> Result<Option<UserCaseDefinition>, ApiError> {
-    let row: Option<(String, String, String)> =
-        sqlx::query_as("SELECT file, table_name, table_text FROM user_cases WHERE name = ?")
-            .bind(name)
-            .fetch_optional(pool)
-            .await?;
+pub fn get(conn: &Connection, name: &str) -> Result<Option<UserCaseDefinition>, ApiError> {
+    let row: Option<(String, String, String)> = sql::optional(
+        conn,
+        "SELECT file, table_name, table_text FROM user_cases WHERE name = ?",
+        [name],
+    )?;
     Ok(row.map(|(file, table_name, table)| UserCaseDefinition {
         file,
         table_name,

@@ -1,0 +1,59 @@
+//! The store's few ways of running a statement: rows into `serde` types by
+//! column name (a struct's fields) or by position (a tuple), through each
+//! connection's cache of prepared statements, errors as [`ApiError`]
+//! (an opaque 500 with the cause logged).
+
+use crate::error::ApiError;
+use rusqlite::{Connection, Params};
+use serde::de::DeserializeOwned;
+
+/// Every row of `sql`.
+pub fn all<T: DeserializeOwned>(
+    conn: &Connection,
+    sql: &str,
+    params: impl Params,
+) -> Result<Vec<T>, ApiError> {
+    rows(conn, sql, params, usize::MAX)
+}
+
+/// The first row of `sql`, if any.
+pub fn optional<T: DeserializeOwned>(
+    conn: &Connection,
+    sql: &str,
+    params: impl Params,
+) -> Result<Option<T>, ApiError> {
+    Ok(rows(conn, sql, params, 1)?.pop())
+}
+
+/// The first `most` rows of `sql`.
+fn rows<T: DeserializeOwned>(
+    conn: &Connection,
+    sql: &str,
+    params: impl Params,
+    most: usize,
+) -> Result<Vec<T>, ApiError> {
+    let mut statement = conn.prepare_cached(sql)?;
+    let columns = serde_rusqlite::columns_from_statement(&statement);
+    let mut rows = statement.query(params)?;
+    let mut out = Vec::new();
+    while out.len() < most {
+        let Some(row) = rows.next()? else { break };
+        out.push(serde_rusqlite::from_row_with_columns(row, &columns)?);
+    }
+    Ok(out)
+}
+
+/// The first row of `sql`, which must have one.
+pub fn one<T: DeserializeOwned>(
+    conn: &Connection,
+    sql: &str,
+    params: impl Params,
+) -> Result<T, ApiError> {
+    optional(conn, sql, params)?
+        .ok_or_else(|| ApiError::Internal(anyhow::anyhow!("a statement returned no row: {sql}")))
+}
+
+/// Runs `sql`; the rows it changed.
+pub fn execute(conn: &Connection, sql: &str, params: impl Params) -> Result<usize, ApiError> {
+    Ok(conn.prepare_cached(sql)?.execute(params)?)
+}

@@ -1,0 +1,402 @@
+//! The single writer: one thread owns the only write connection and
+//! commits concurrent requests together (group commit).
+//!
+//! With `durability` full every commit fsyncs the write-ahead log, so a
+//! coordinator that committed once per lease and once per report would be
+//! bound by the disk's fsync rate, and one whose every statement crossed
+//! threads (an async driver runs each statement on the connection's own
+//! thread and wakes the caller after it) by thread switches. Here a request
+//! hands its whole write, a synchronous closure, to the writer thread. The
+//! thread takes the first waiting job, opens a transaction
+//! (`BEGIN IMMEDIATE`), runs it in a savepoint, then every job that queued
+//! meanwhile, each in its own savepoint, and commits them all at once;
+//! only then does each request get its answer. So a result is still
+//! acknowledged only once it is on disk, a request's failure rolls back its
+//! own savepoint only, and no two writers ever meet ("database is locked"
+//! cannot arise between ours).
+//!
+//! A group is cut at [`MAX_GROUP`] jobs or [`MAX_GROUP_TIME`], so a steady
+//! stream of requests cannot hold back the first one's answer.
+//!
+//! Cancellation: a request whose client goes away stops waiting, but its
+//! job, once queued, still runs and commits whole (a lease then expires
+//! unused; a report's worker sends it again and it is a duplicate). Nothing
+//! is half-written either way.
+
+use crate::error::ApiError;
+use rusqlite::Connection;
+use std::panic::AssertUnwindSafe;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::mpsc;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+use tokio::sync::oneshot;
+
+/// The most jobs one transaction carries.
+const MAX_GROUP: usize = 256;
+
+/// The longest a group keeps taking jobs after its first started.
+const MAX_GROUP_TIME: Duration = Duration::from_millis(20);
+
+/// The answer a job's requester waits for.
+type Answer<T> = Result<T, ApiError>;
+
+/// A write waiting for the writer thread.
+trait Job: Send {
+    /// Runs the write on `conn`, inside the job's savepoint; whether it
+    /// succeeded (a failed job's savepoint is rolled back).
+    fn run(&mut self, conn: &Connection) -> bool;
+    /// The job failed around its write (its savepoint could not be set).
+    fn fail(&mut self, error: ApiError);
+    /// Answers the requester once the group's commit is known.
+    fn answer(self: Box<Self>, commit: &Result<(), Arc<str>>);
+}
+
+/// A job and where its answer goes.
+struct Pending<T, F> {
+    work: Option<F>,
+    outcome: Option<Answer<T>>,
+    reply: oneshot::Sender<Answer<T>>,
+}
+
+impl<T, F> Job for Pending<T, F>
+where
+    T: Send,
+    F: FnOnce(&Connection) -> Answer<T> + Send,
+{
+    fn run(&mut self, conn: &Connection) -> bool {
+        let Some(work) = self.work.take() else {
+            return false;
+        };
+        // A panicking write is a failed request, not a dead writer.
+        let outcome = std::panic::catch_unwind(AssertUnwindSafe(|| work(conn)))
+            .unwrap_or_else(|panic| Err(panicked("a write", &*panic)));
+        let ok = outcome.is_ok();
+        self.outcome = Some(outcome);
+        ok
+    }
+
+    fn fail(&mut self, error: ApiError) {
+        self.work = None;
+        self.outcome = Some(Err(error));
+    }
+
+    fn answer(self: Box<Self>, commit: &Result<(), Arc<str>>) {
+        let outcome = match (self.outcome, commit) {
+            (Some(Ok(value)), Ok(())) => Ok(value),
+            (Some(Ok(_)), Err(reason)) => Err(ApiError::Internal(anyhow::anyhow!(
+                "the group commit failed: {reason}"
+            ))),
+            (Some(Err(e)), _) => Err(e),
+            (None, _) => Err(ApiError::Internal(anyhow::anyhow!(
+                "a write was answered without running"
+            ))),
+        };
+        // A request whose client went away no longer listens.
+        let _ = self.reply.send(outcome);
+    }
+}
+
+/// A 500 for a panic in `what`, with its message.
+pub(crate) fn panicked(what: &str, panic: &(dyn std::any::Any + Send)) -> ApiError {
+    let message = panic
+        .downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| panic.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "no message".into());
+    ApiError::Internal(anyhow::anyhow!("{what} panicked: {message}"))
+}
+
+/// Groups committed and the jobs they carried (for `/metrics`: their ratio
+/// is the mean group size).
+#[derive(Default)]
+struct Counters {
+    groups: AtomicU64,
+    grouped: AtomicU64,
+}
+
+/// The handle requests hand their writes to.
+pub struct Writer {
+    jobs: mpsc::Sender<Box<dyn Job>>,
+    counters: Arc<Counters>,
+}
+
+impl Writer {
+    /// Starts the writer thread on `conn`; it ends when the last handle is
+    /// dropped, after the jobs already queued.
+    pub fn start(conn: Connection) -> std::io::Result<Self> {
+        let (jobs, queue) = mpsc::channel();
+        let counters = Arc::new(Counters::default());
+        let counted = Arc::clone(&counters);
+        std::thread::Builder::new()
+            .name("tslg-writer".into())
+            .spawn(move || serve(&conn, &queue, &counted))?;
+        Ok(Self { jobs, counters })
+    }
+
+    /// Runs `work` on the write connection in a savepoint of the group's
+    /// transaction, and answers once the group is committed: the work's
+    /// value when both succeeded, the work's error (its writes rolled
+    /// back, the others' kept) or the commit's.
+    pub async fn run<T, F>(&self, work: F) -> Answer<T>
+    where
+        T: Send + 'static,
+        F: FnOnce(&Connection) -> Answer<T> + Send + 'static,
+    {
+        let (reply, answer) = oneshot::channel();
+        let job = Box::new(Pending {
+            work: Some(work),
+            outcome: None,
+            reply,
+        });
+        self.jobs
+            .send(job)
+            .map_err(|_| ApiError::Internal(anyhow::anyhow!("the database writer has stopped")))?;
+        answer.await.map_err(|_| {
+            ApiError::Internal(anyhow::anyhow!(
+                "the database writer stopped before answering"
+            ))
+        })?
+    }
+
+    /// Groups committed so far, and the jobs they answered.
+    pub fn counts(&self) -> (u64, u64) {
+        (
+            self.counters.groups.load(Ordering::Relaxed),
+            self.counters.grouped.load(Ordering::Relaxed),
+        )
+    }
+}
+
+/// The writer thread: a group per transaction until every handle is gone.
+fn serve(conn: &Connection, queue: &mpsc::Receiver<Box<dyn Job>>, counters: &Counters) {
+    while let Ok(first) = queue.recv() {
+        let started = Instant::now();
+        let begun = run_statement(conn, "BEGIN IMMEDIATE");
+        let mut group: Vec<Box<dyn Job>> = Vec::new();
+        let mut next = Some(first);
+        while let Some(mut job) = next {
+            match &begun {
+                Ok(()) => run_in_savepoint(conn, job.as_mut()),
+                Err(e) => job.fail(ApiError::Internal(anyhow::anyhow!(
+                    "cannot begin a write transaction: {e}"
+                ))),
+            }
+            group.push(job);
+            next = if group.len() < MAX_GROUP && started.elapsed() < MAX_GROUP_TIME {
+                queue.try_recv().ok()
+            } else {
+                None
+            };
+        }
+        let commit: Result<(), Arc<str>> = match &begun {
+            Ok(()) => run_statement(conn, "COMMIT").map_err(|e| {
+                tracing::error!(error = %e, requests = group.len(), "a group commit failed");
+                let _ = run_statement(conn, "ROLLBACK");
+                Arc::from(e.to_string())
+            }),
+            Err(e) => Err(Arc::from(e.to_string())),
+        };
+        if commit.is_ok() {
+            counters.groups.fetch_add(1, Ordering::Relaxed);
+            counters
+                .grouped
+                .fetch_add(group.len() as u64, Ordering::Relaxed);
+        }
+        for job in group {
+            job.answer(&commit);
+        }
+    }
+}
+
+/// Runs one of the writer's own statements, prepared once.
+fn run_statement(conn: &Connection, sql: &str) -> rusqlite::Result<()> {
+    conn.prepare_cached(sql)?.execute([])?;
+    Ok(())
+}
+
+/// Runs `job` in a savepoint of the open transaction: released when it
+/// succeeds, rolled back (and released) when it fails.
+fn run_in_savepoint(conn: &Connection, job: &mut dyn Job) {
+    if let Err(e) = run_statement(conn, "SAVEPOINT job") {
+        job.fail(ApiError::Internal(anyhow::anyhow!(
+            "cannot open a savepoint: {e}"
+        )));
+        return;
+    }
+    let ended = if job.run(conn) {
+        run_statement(conn, "RELEASE job")
+    } else {
+        run_statement(conn, "ROLLBACK TO job").and_then(|()| run_statement(conn, "RELEASE job"))
+    };
+    if let Err(e) = ended {
+        job.fail(ApiError::Internal(anyhow::anyhow!(
+            "cannot close a savepoint: {e}"
+        )));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::db::{sql, Database, Durability};
+    use crate::error::ApiError;
+    use std::sync::mpsc;
+    use std::time::Duration;
+
+    async fn database() -> (tempfile::TempDir, Database) {
+        let dir = tempfile::tempdir().unwrap();
+        let url = format!("sqlite://{}/db.sqlite", dir.path().display());
+        let db = Database::open(&url, Durability::Full).await.unwrap();
+        db.write(|conn| sql::execute(conn, "CREATE TABLE rows (n INTEGER PRIMARY KEY)", []))
+            .await
+            .unwrap();
+        (dir, db)
+    }
+
+    fn insert(conn: &rusqlite::Connection, n: i64) -> Result<(), ApiError> {
+        sql::execute(conn, "INSERT INTO rows (n) VALUES (?)", [n])?;
+        Ok(())
+    }
+
+    async fn stored(db: &Database) -> Vec<i64> {
+        let rows: Vec<(i64,)> = db
+            .read(|conn| sql::all(conn, "SELECT n FROM rows ORDER BY n", []))
+            .await
+            .unwrap();
+        rows.into_iter().map(|(n,)| n).collect()
+    }
+
+    /// Holds the writer thread inside a job that wrote row `n` until
+    /// `release` is sent; `entered` says it is inside.
+    fn write_and_wait(
+        db: &Database,
+        n: i64,
+    ) -> (
+        tokio::task::JoinHandle<Result<(), ApiError>>,
+        tokio::sync::oneshot::Receiver<()>,
+        mpsc::Sender<()>,
+    ) {
+        let (inside, entered) = tokio::sync::oneshot::channel::<()>();
+        let (release, released) = mpsc::channel::<()>();
+        let db = db.clone();
+        let task = tokio::spawn(async move {
+            db.write(move |conn| {
+                insert(conn, n)?;
+                inside.send(()).unwrap();
+                released.recv().unwrap();
+                Ok(())
+            })
+            .await
+        });
+        (task, entered, release)
+    }
+
+    /// Forty concurrent writes, every third failing after its insert, and
+    /// one panicking: the others' rows are all stored, the failed ones'
+    /// none, each success is readable from another connection the moment
+    /// it is answered, and they shared fewer commits than there were
+    /// writes.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_failed_write_rolls_back_only_its_own_rows() {
+        let (_dir, db) = database().await;
+        let (groups_before, grouped_before) = db.group_counts();
+        // Held, so the writes below queue and share transactions.
+        let (held, entered, release) = write_and_wait(&db, 1000);
+        entered.await.unwrap();
+        let tasks: Vec<_> = (0..40)
+            .map(|n| {
+                let db = db.clone();
+                tokio::spawn(async move {
+                    let answer = db
+                        .write(move |conn| {
+                            insert(conn, n)?;
+                            if n == 20 {
+                                panic!("write {n} panics");
+                            }
+                            if n % 3 == 0 {
+                                return Err(ApiError::Conflict(format!("write {n} fails")));
+                            }
+                            Ok(n)
+                        })
+                        .await;
+                    if answer.is_ok() {
+                        // Answered only once committed: another connection
+                        // sees the row.
+                        assert!(stored(&db).await.contains(&n), "row {n} not committed");
+                    }
+                    answer
+                })
+            })
+            .collect();
+        tokio::time::sleep(Duration::from_millis(200)).await;
+        release.send(()).unwrap();
+        held.await.unwrap().unwrap();
+        let mut succeeded = Vec::new();
+        for (n, task) in tasks.into_iter().enumerate() {
+            match task.await.unwrap() {
+                Ok(value) => succeeded.push(value),
+                Err(e) if n == 20 => {
+                    assert!(e.to_string().contains("write 20 panics"), "{e}")
+                }
+                Err(e) => {
+                    assert_eq!(n % 3, 0);
+                    assert_eq!(e.to_string(), format!("write {n} fails"));
+                }
+            }
+        }
+        let expected: Vec<i64> = (0..40).filter(|n| n % 3 != 0 && *n != 20).collect();
+        assert_eq!(succeeded, expected);
+        let mut all = expected.clone();
+        all.push(1000);
+        assert_eq!(stored(&db).await, all);
+        let (groups, grouped) = db.group_counts();
+        let (groups, grouped) = (groups - groups_before, grouped - grouped_before);
+        assert_eq!(grouped, 41, "every write was answered after a commit");
+        assert!(groups < 10, "{groups} commits for {grouped} writes");
+    }
+
+    /// A write whose requester stops waiting (its client went away) still
+    /// runs and commits whole, and the writes queued behind it too.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_write_whose_requester_left_commits_whole() {
+        let (_dir, db) = database().await;
+        let (held, entered, release) = write_and_wait(&db, 1);
+        entered.await.unwrap();
+        let gone = tokio::spawn({
+            let db = db.clone();
+            async move {
+                db.write(|conn| {
+                    insert(conn, 2)?;
+                    insert(conn, 3)
+                })
+                .await
+            }
+        });
+        tokio::time::sleep(Duration::from_millis(50)).await;
+        gone.abort();
+        let behind = tokio::spawn({
+            let db = db.clone();
+            async move { db.write(|conn| insert(conn, 4)).await }
+        });
+        tokio::time::sleep(Duration::from_millis(50)).await;
+        release.send(()).unwrap();
+        held.await.unwrap().unwrap();
+        behind.await.unwrap().unwrap();
+        assert_eq!(stored(&db).await, vec![1, 2, 3, 4]);
+    }
+
+    /// Reads never wait on the writer: while a write holds it with its
+    /// rows uncommitted, a read answers, without them.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn reads_answer_while_a_write_is_uncommitted() {
+        let (_dir, db) = database().await;
+        db.write(|conn| insert(conn, 1)).await.unwrap();
+        let (held, entered, release) = write_and_wait(&db, 2);
+        entered.await.unwrap();
+        let read = tokio::time::timeout(Duration::from_secs(2), stored(&db)).await;
+        assert_eq!(read.expect("a read while the writer is held"), vec![1]);
+        release.send(()).unwrap();
+        held.await.unwrap().unwrap();
+        assert_eq!(stored(&db).await, vec![1, 2]);
+    }
+}
