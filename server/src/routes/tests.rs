@@ -255,3 +255,79 @@ async fn an_overlong_target_is_a_414_problem() {
     assert_eq!(status, StatusCode::URI_TOO_LONG);
     assert!(problem["detail"].as_str().unwrap().contains("at most 8192"));
 }
+
+/// A small report of a built-in vehicle, which the writer checks and
+/// records in one trip (`reporting::at_once`): an honest one is recorded;
+/// a forged one (an event where the coordinator's run gives none) is
+/// refused, its worker flagged and its earlier report taken back, and the
+/// flag holds (it commits although the report is refused).
+#[tokio::test]
+async fn a_small_forged_report_is_refused_and_its_worker_flagged() {
+    let app = app(|_| {}).await;
+    let (status, view) = app
+        .call(
+            "POST",
+            "/api/v1/campaigns",
+            Some(
+                json!({"case": "cut-in", "method": "ndd", "vut": {"model": "idm"},
+                        "beta": 0.01, "max_tests": 1_000_000, "seed": 3}),
+            ),
+        )
+        .await;
+    assert_eq!(status, StatusCode::CREATED, "{view}");
+    let id = view["id"].as_i64().unwrap();
+    let tests = app.state.samplers.cached(id).expect("built at creation");
+    let events = |lease: &Value| -> Vec<u64> {
+        let (from, to) = (
+            lease["start"].as_u64().unwrap(),
+            lease["end"].as_u64().unwrap(),
+        );
+        (from..to).filter(|&i| tests.run(i).event).collect()
+    };
+    let claim = |worker: &'static str| {
+        let ask = json!({"worker": worker, "threads": 1, "max_tests": 40});
+        app.call("POST", "/api/v1/leases", Some(ask))
+    };
+    let (_, first) = claim("forger").await;
+    let mut honest = quiet_report("forger", &first);
+    honest["events"] = json!(events(&first)
+        .iter()
+        .map(|i| json!({"index": i, "weight": 1.0}))
+        .collect::<Vec<_>>());
+    let results = |lease: &Value| format!("/api/v1/leases/{}/results", lease["id"]);
+    let (status, ack) = app.call("POST", &results(&first), Some(honest)).await;
+    assert_eq!(
+        (status, ack["accepted"].as_u64()),
+        (StatusCode::OK, Some(40)),
+        "{ack}"
+    );
+    let (_, view) = app
+        .call("GET", &format!("/api/v1/campaigns/{id}"), None)
+        .await;
+    assert_eq!(view["indices"], 40);
+
+    let (_, second) = claim("forger").await;
+    let real = events(&second);
+    let start = second["start"].as_u64().unwrap();
+    let fake = (start..start + 40).find(|i| !real.contains(i)).unwrap();
+    let caught = real.first().map_or(fake, |&r| r.min(fake));
+    let mut forged = quiet_report("forger", &second);
+    forged["events"] = json!([{"index": fake, "weight": 1.0}]);
+    let (status, problem) = app.call("POST", &results(&second), Some(forged)).await;
+    assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY, "{problem}");
+    let detail = problem["detail"].as_str().unwrap();
+    assert!(
+        detail.contains(&format!("test {caught} was reported as")),
+        "{detail}"
+    );
+    assert!(detail.contains("worker `forger` is flagged"), "{detail}");
+    let (status, _) = claim("forger").await;
+    assert_eq!(status, StatusCode::FORBIDDEN);
+    let (_, view) = app
+        .call("GET", &format!("/api/v1/campaigns/{id}"), None)
+        .await;
+    assert_eq!(
+        view["indices"], 0,
+        "the forger's honest report is taken back"
+    );
+}
