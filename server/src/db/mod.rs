@@ -128,11 +128,14 @@ fn file_of(options: &SqliteConnectOptions, url: &str) -> anyhow::Result<PathBuf>
     Ok(path.to_path_buf())
 }
 
-/// Settings every connection shares.
+/// Settings every connection shares. Temporary storage in memory: the
+/// writer's savepoints keep the pages they change in a statement journal,
+/// and sorting and `RETURNING` use scratch tables, which would otherwise
+/// be files.
 fn configure(conn: &Connection) -> rusqlite::Result<()> {
     conn.busy_timeout(BUSY_TIMEOUT)?;
     conn.set_prepared_statement_cache_capacity(STATEMENT_CACHE);
-    Ok(())
+    conn.execute_batch("PRAGMA temp_store = MEMORY;")
 }
 
 fn open_writer(path: &Path, durability: Durability) -> rusqlite::Result<Connection> {

@@ -4,8 +4,11 @@
 //! (an opaque 500 with the cause logged).
 
 use crate::error::ApiError;
-use rusqlite::{Connection, Params};
+use rusqlite::{Connection, Params, Statement};
 use serde::de::DeserializeOwned;
+use std::cell::RefCell;
+use std::collections::HashMap;
+use std::rc::Rc;
 
 /// Every row of `sql`.
 pub fn all<T: DeserializeOwned>(
@@ -33,7 +36,7 @@ fn rows<T: DeserializeOwned>(
     most: usize,
 ) -> Result<Vec<T>, ApiError> {
     let mut statement = conn.prepare_cached(sql)?;
-    let columns = serde_rusqlite::columns_from_statement(&statement);
+    let columns = columns_of(sql, &statement);
     let mut rows = statement.query(params)?;
     let mut out = Vec::new();
     while out.len() < most {
@@ -41,6 +44,27 @@ fn rows<T: DeserializeOwned>(
         out.push(serde_rusqlite::from_row_with_columns(row, &columns)?);
     }
     Ok(out)
+}
+
+thread_local! {
+    /// The column names of each statement this thread ran, by its SQL: a
+    /// campaign's row has 53 columns, whose names would otherwise be
+    /// copied into new strings at every read.
+    static COLUMNS: RefCell<HashMap<String, Rc<[String]>>> = RefCell::default();
+}
+
+/// The column names of `statement`, prepared from `sql`.
+fn columns_of(sql: &str, statement: &Statement<'_>) -> Rc<[String]> {
+    COLUMNS.with(|known| {
+        if let Some(columns) = known.borrow().get(sql) {
+            return Rc::clone(columns);
+        }
+        let columns: Rc<[String]> = serde_rusqlite::columns_from_statement(statement).into();
+        known
+            .borrow_mut()
+            .insert(sql.to_owned(), Rc::clone(&columns));
+        columns
+    })
 }
 
 /// The first row of `sql`, which must have one.

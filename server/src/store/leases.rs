@@ -196,30 +196,26 @@ fn claim_in(
     // In the transaction: a flag set since the route's check still counts.
     audits::refuse_flagged(conn, worker)?;
     let filters = job.filters();
-    let sql = format!(
-        "UPDATE leases SET attempt = attempt + 1, worker = ?, expires_at = ?, key = ?, \
-             claimed_at = ?, threads = ? \
-         WHERE id = (SELECT l.id FROM leases l JOIN campaigns c ON c.id = l.campaign_id \
-                     WHERE l.state = 'active' AND l.expires_at < ? AND c.status = 'running' \
-                       AND l.audit_id IS NULL \
-                       AND l.end_index - l.resume_at <= ? {filters} \
-                     ORDER BY l.campaign_id, l.resume_at LIMIT 1) \
-         RETURNING {COLUMNS}"
-    );
-    let key = new_key();
-    let mut values: Vec<&dyn rusqlite::ToSql> = vec![
-        &worker,
-        &job.expires,
-        &key,
-        &job.now,
-        &job.threads,
-        &job.now,
-        &job.span_limit,
-    ];
     let filter_values = job.filter_values();
+    // Found first, then taken: usually no lease has expired, and a read
+    // that finds nothing costs less than an update that changes nothing.
+    let sql = format!(
+        "SELECT l.id FROM leases l JOIN campaigns c ON c.id = l.campaign_id \
+         WHERE l.state = 'active' AND l.expires_at < ? AND c.status = 'running' \
+           AND l.audit_id IS NULL AND l.end_index - l.resume_at <= ? {filters} \
+         ORDER BY l.campaign_id, l.resume_at LIMIT 1"
+    );
+    let mut values: Vec<&dyn rusqlite::ToSql> = vec![&job.now, &job.span_limit];
     values.extend(filter_values.iter().map(|v| v as &dyn rusqlite::ToSql));
-    let reclaimed: Option<LeaseRow> = sql::optional(conn, &sql, values.as_slice())?;
-    if let Some(lease) = reclaimed {
+    let expired: Option<(i64,)> = sql::optional(conn, &sql, values.as_slice())?;
+    if let Some((id,)) = expired {
+        sql::execute(
+            conn,
+            "UPDATE leases SET attempt = attempt + 1, worker = ?, expires_at = ?, key = ?, \
+             claimed_at = ?, threads = ? WHERE id = ?",
+            params![worker, job.expires, new_key(), job.now, job.threads, id],
+        )?;
+        let lease = get(conn, id)?;
         tracing::info!(
             lease = lease.id,
             attempt = lease.attempt,
@@ -276,14 +272,14 @@ fn claim_in(
     if moved != 1 {
         return Ok(None);
     }
-    let sql = format!(
+    // Without `RETURNING` (SQLite buffers its rows in a table of their
+    // own): every value of the row is known here but its id.
+    let key = new_key();
+    sql::execute(
+        conn,
         "INSERT INTO leases (campaign_id, start_index, end_index, resume_at, attempt, worker, \
          expires_at, state, key, claimed_at, threads) \
-         VALUES (?, ?, ?, ?, 1, ?, ?, 'active', ?, ?, ?) RETURNING {COLUMNS}"
-    );
-    let lease: LeaseRow = sql::one(
-        conn,
-        &sql,
+         VALUES (?, ?, ?, ?, 1, ?, ?, 'active', ?, ?, ?)",
         params![
             campaign.id,
             start,
@@ -291,11 +287,25 @@ fn claim_in(
             start,
             worker,
             job.expires,
-            new_key(),
+            key,
             job.now,
             job.threads
         ],
     )?;
+    let lease = LeaseRow {
+        id: conn.last_insert_rowid(),
+        campaign_id: campaign.id,
+        start_index: start,
+        end_index: end,
+        resume_at: start,
+        attempt: 1,
+        worker: worker.to_owned(),
+        state: LeaseState::Active,
+        key,
+        claimed_at: job.now,
+        threads: i64::from(job.threads),
+        audit_id: None,
+    };
     Ok(Some(Claimed {
         lease,
         campaign: Some(campaign),
