@@ -502,6 +502,21 @@ mod tests {
         let mine = sampler.pick(0.5, 0, 1000);
         assert_ne!(other, mine, "two coordinators draw alike");
         assert!(sampler.pick(0.0, 0, 100).is_empty());
+        // A tiny share: gaps of a million.
+        let rare = sampler.pick(1e-6, 0, 100_000_000);
+        assert!((50..=150).contains(&rare.len()), "{}", rare.len());
+        // Gaps are geometric: P(gap = k) = share (1 − share)^k.
+        let picked = sampler.pick(0.3, 0, 3_000_000);
+        let mut counts = [0u64; 4];
+        for w in picked.windows(2) {
+            counts[((w[1] - w[0] - 1) as usize).min(3)] += 1;
+        }
+        let n = (picked.len() - 1) as f64;
+        for (k, &c) in counts.iter().enumerate().take(3) {
+            let p = 0.3 * 0.7f64.powi(k as i32);
+            let sd = (n * p * (1.0 - p)).sqrt();
+            assert!((c as f64 - n * p).abs() < 5.0 * sd, "gap {k}: {c} of {n}");
+        }
         assert_eq!(sampler.pick(1.0, 5, 8), [5, 6, 7]);
         assert!(sampler.pick(0.5, 8, 8).is_empty());
     }

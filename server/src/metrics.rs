@@ -169,14 +169,14 @@ fn scrape_registry(s: &Snapshot, live: usize, known: usize) -> Registry {
     counter(
         &r,
         "tslg_write_groups_total",
-        "Transactions that committed leases, reports and heartbeats together, since the \
-         coordinator started (one fsync each).",
+        "Transactions that committed the coordinator's writes together, since it started \
+         (one fsync each).",
         s.groups.0 as i64,
     );
     counter(
         &r,
         "tslg_grouped_writes_total",
-        "Requests committed by those transactions (divided by tslg_write_groups_total: the mean \
+        "Writes committed by those transactions (divided by tslg_write_groups_total: the mean \
          group size).",
         s.groups.1 as i64,
     );
