@@ -5,6 +5,7 @@
 //! [`crate::vehicle::FvdmParams::acceleration`]), so a lane's acceleration is
 //! the scalar one bit for bit. Used by the cut-in and car-following batches.
 
+use super::tanh::tanh;
 use super::{VehicleModel, VehicleSpec};
 
 /// Scenarios per batch: four SSE2 registers of two `f64`.
@@ -90,7 +91,7 @@ impl BatchFollower {
             }
             Follower::Fvdm(p) => {
                 for i in 0..LANES {
-                    let optimal = p.v1 + p.v2 * (p.c1 * (gap[i] - p.length) - p.c2).tanh();
+                    let optimal = p.v1 + p.v2 * tanh(p.c1 * (gap[i] - p.length) - p.c2);
                     a[i] = p.k * (optimal - speed[i]);
                 }
             }

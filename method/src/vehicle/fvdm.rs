@@ -2,6 +2,7 @@
 //! specification gives (Jiang et al. 2001 without the velocity-difference
 //! term): the vehicle relaxes toward an optimal speed that depends on the gap.
 
+use super::tanh::tanh;
 use super::{check, FollowerObservation, ParamError};
 use serde::{Deserialize, Serialize};
 
@@ -47,10 +48,10 @@ impl FvdmParams {
         check("fvdm", "length", self.length, |x| x >= 0.0, "must be ≥ 0")
     }
 
-    /// `a = k(V₁ + V₂ tanh(C₁(R − L) − C₂) − v)` (m/s²), before clipping.
+    /// `a = k(V₁ + V₂ tanh(C₁(R − L) − C₂) − v)` (m/s²), before clipping;
+    /// `tanh` is [`super::tanh::tanh`], the batch's too.
     pub fn acceleration(&self, obs: &FollowerObservation) -> f64 {
-        let optimal_speed =
-            self.v1 + self.v2 * (self.c1 * (obs.gap - self.length) - self.c2).tanh();
+        let optimal_speed = self.v1 + self.v2 * tanh(self.c1 * (obs.gap - self.length) - self.c2);
         self.k * (optimal_speed - obs.speed)
     }
 }

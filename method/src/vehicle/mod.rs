@@ -13,6 +13,7 @@ mod fvdm;
 mod idm;
 pub mod power;
 mod switching_acc;
+pub mod tanh;
 
 pub use acc_aeb::AccAebParams;
 pub use fvdm::FvdmParams;
