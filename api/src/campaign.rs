@@ -142,7 +142,9 @@ pub struct CreateCampaign {
     /// optional and names the exposure to sample (the built-in one otherwise).
     #[serde(default)]
     pub library_id: Option<i64>,
-    /// The vehicle under test, e.g. `{"model": "fvdm"}`.
+    /// The vehicle under test: `{"model": "fvdm"}` (a built-in model, any
+    /// parameter may be given), its name alone (`"fvdm"`), or `{"external":
+    /// "NAME"}` (a program workers offer).
     #[schema(value_type = Object)]
     pub vut: serde_json::Value,
     /// Share ε of tests drawn outside the library, in [0, 1).
@@ -163,7 +165,9 @@ pub struct CreateCampaign {
     /// Confidence level of the interval, in (0, 1).
     #[serde(default = "default_confidence")]
     pub confidence: f64,
-    /// Budget of test indices; the campaign is `exhausted` when it is used up.
+    /// Budget of test indices; the campaign is `exhausted` when it is used
+    /// up (default 10,000,000, as `tslg campaign start`).
+    #[serde(default = "default_max_tests")]
     pub max_tests: u64,
     /// Seed of the campaign's counter-based random streams.
     #[serde(default)]
@@ -193,6 +197,21 @@ fn default_beta() -> f64 {
 }
 fn default_confidence() -> f64 {
     0.9
+}
+/// The test budget of a campaign that does not name one.
+pub const DEFAULT_MAX_TESTS: u64 = 10_000_000;
+fn default_max_tests() -> u64 {
+    DEFAULT_MAX_TESTS
+}
+
+/// A vehicle as the API takes it: a JSON object (`{"model": …}`,
+/// `{"external": …}`), or a built-in model's name alone, which stands for
+/// `{"model": NAME}`.
+pub fn vehicle_spec(value: &serde_json::Value) -> serde_json::Value {
+    match value {
+        serde_json::Value::String(name) => serde_json::json!({ "model": name }),
+        other => other.clone(),
+    }
 }
 
 /// The largest grid on which the coordinator computes a campaign's exact

@@ -83,7 +83,8 @@ pub struct CreateLibrary {
     /// The case's simulation preset; the case's default when absent.
     #[serde(default)]
     pub preset: Option<String>,
-    /// The surrogate model, e.g. `{"model": "idm"}`.
+    /// The surrogate model, e.g. `{"model": "idm"}` or its name alone
+    /// (`"idm"`).
     #[schema(value_type = Object)]
     pub surrogate: serde_json::Value,
     /// The exposure `P(x)` the library is built for (the built-in model when absent).

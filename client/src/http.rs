@@ -238,8 +238,31 @@ impl Client {
 
     /// Every campaign, newest first.
     pub async fn campaigns(&self) -> Result<tslg_api::CampaignList, CallError> {
-        self.json(self.request(reqwest::Method::GET, "/api/v1/campaigns"))
-            .await
+        self.campaigns_in(None).await
+    }
+
+    /// Every campaign, or those in `status` (`?status=`), newest first.
+    pub async fn campaigns_in(
+        &self,
+        status: Option<tslg_api::CampaignStatus>,
+    ) -> Result<tslg_api::CampaignList, CallError> {
+        let path = match status {
+            Some(s) => format!("/api/v1/campaigns?status={}", s.as_str()),
+            None => "/api/v1/campaigns".to_owned(),
+        };
+        self.json(self.request(reqwest::Method::GET, &path)).await
+    }
+
+    /// Every library, or those in `status` (`?status=`), newest first.
+    pub async fn libraries(
+        &self,
+        status: Option<tslg_api::LibraryStatus>,
+    ) -> Result<Vec<LibraryView>, CallError> {
+        let path = match status {
+            Some(s) => format!("/api/v1/libraries?status={}", s.as_str()),
+            None => "/api/v1/libraries".to_owned(),
+        };
+        self.json(self.request(reqwest::Method::GET, &path)).await
     }
 
     /// `GET /api/v1/campaigns/{id}`.

@@ -154,7 +154,7 @@ fn open(
     file: Option<&[u8]>,
 ) -> Result<Opened, CaseError> {
     let case = open_case(&req.case, preset, exposure)?;
-    let vut = case.normalise_vehicle(&req.vut)?;
+    let vut = case.normalise_vehicle(&tslg_api::vehicle_spec(&req.vut))?;
     let outside = match req.outside {
         Some(o) => wire::outside_spread(o),
         None => case.default_outside(),

@@ -31,10 +31,28 @@ pub async fn create(
     ))
 }
 
-/// Every campaign, newest first.
-#[utoipa::path(get, path = "/api/v1/campaigns", responses((status = 200, body = CampaignList)))]
-pub async fn list(State(state): State<AppState>) -> Result<Json<CampaignList>, ApiError> {
-    let rows = state.db.read(campaigns::list).await?;
+/// `?status=` of the campaign list.
+#[derive(Debug, serde::Deserialize, utoipa::IntoParams)]
+#[serde(deny_unknown_fields)]
+#[into_params(parameter_in = Query)]
+pub struct ListQuery {
+    /// Only the campaigns in this state.
+    #[param(value_type = Option<String>)]
+    status: Option<tslg_api::CampaignStatus>,
+}
+
+/// Every campaign, or those in one state (`?status=running`), newest first.
+#[utoipa::path(get, path = "/api/v1/campaigns", params(ListQuery),
+    responses((status = 200, body = CampaignList), (status = 400, body = Problem)))]
+pub async fn list(
+    State(state): State<AppState>,
+    ApiQuery(query): ApiQuery<ListQuery>,
+) -> Result<Json<CampaignList>, ApiError> {
+    let status = query.status;
+    let rows = state
+        .db
+        .read(move |conn| campaigns::list(conn, status))
+        .await?;
     let mut views = Vec::with_capacity(rows.len());
     for row in &rows {
         views.push(live_view(&state, row).await?);
@@ -67,6 +85,9 @@ pub async fn live_view(
 ) -> Result<CampaignView, ApiError> {
     let mut view = row.view();
     state.throughput.fill(&mut view);
+    if let Some(waiting) = waiting_for_workers(state, row) {
+        view.warnings.push(waiting);
+    }
     if row.requires.is_some() {
         let id = row.id;
         let states = state.db.read(move |conn| audits::counts(conn, id)).await?;
@@ -75,6 +96,28 @@ pub async fn live_view(
         view.warnings.extend(warnings);
     }
     Ok(view)
+}
+
+/// Why a running campaign gets no tests, when no live worker (one seen
+/// within a minute) can run them: none at all, or none offering its
+/// external program.
+fn waiting_for_workers(state: &AppState, row: &campaigns::CampaignRow) -> Option<String> {
+    if row.status != tslg_api::CampaignStatus::Running {
+        return None;
+    }
+    match &row.requires {
+        Some(requirement) if state.workers.live_offering(requirement).is_empty() => Some(format!(
+            "no worker: no live worker offers the program `{requirement}` this campaign's \
+             tests need (start one with `tslg-worker --vut-exec NAME=COMMAND`; GET \
+             /api/v1/workers lists what each offers); its tests wait"
+        )),
+        None if state.workers.counts().0 == 0 => Some(
+            "no worker: no worker has asked for work in the last minute; the campaign's tests \
+             wait for one (`tslg-worker --server URL`)"
+                .to_owned(),
+        ),
+        _ => None,
+    }
 }
 
 /// `?points=N` of the history read.

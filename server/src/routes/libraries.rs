@@ -3,7 +3,7 @@
 use crate::builder::{build_request, spawn_build};
 use crate::enumeration::{placement, Placement};
 use crate::error::{ApiError, ApiJson};
-use crate::routes::ApiPath;
+use crate::routes::{ApiPath, ApiQuery};
 use crate::state::AppState;
 use crate::store::libraries::{self, NewLibrary};
 use crate::validate::check_name;
@@ -44,7 +44,7 @@ pub async fn create(
             &tslg_client::wire::exposure_source(&checked.exposure),
         )?;
         case.check_request(&request)?;
-        let surrogate = case.normalise_vehicle(&checked.surrogate)?;
+        let surrogate = case.normalise_vehicle(&tslg_api::vehicle_spec(&checked.surrogate))?;
         let placement = placement(place, case.as_ref(), &request, &surrogate)
             .map_err(tslg_method::registry::CaseError::Unsupported)?;
         Ok::<_, tslg_method::registry::CaseError>((case, surrogate, placement))
@@ -106,10 +106,28 @@ pub async fn create(
     ))
 }
 
-/// Every library, newest first.
-#[utoipa::path(get, path = "/api/v1/libraries", responses((status = 200, body = Vec<LibraryView>)))]
-pub async fn list(State(state): State<AppState>) -> Result<Json<Vec<LibraryView>>, ApiError> {
-    let rows = state.db.read(libraries::list).await?;
+/// `?status=` of the library list.
+#[derive(Debug, serde::Deserialize, utoipa::IntoParams)]
+#[serde(deny_unknown_fields)]
+#[into_params(parameter_in = Query)]
+pub struct ListQuery {
+    /// Only the libraries in this state.
+    #[param(value_type = Option<String>)]
+    status: Option<tslg_api::LibraryStatus>,
+}
+
+/// Every library, or those in one state (`?status=ready`), newest first.
+#[utoipa::path(get, path = "/api/v1/libraries", params(ListQuery),
+    responses((status = 200, body = Vec<LibraryView>), (status = 400, body = Problem)))]
+pub async fn list(
+    State(state): State<AppState>,
+    ApiQuery(query): ApiQuery<ListQuery>,
+) -> Result<Json<Vec<LibraryView>>, ApiError> {
+    let status = query.status;
+    let rows = state
+        .db
+        .read(move |conn| libraries::list(conn, status))
+        .await?;
     let mut views = Vec::with_capacity(rows.len());
     for row in &rows {
         views.push(live_view(&state, row).await?);

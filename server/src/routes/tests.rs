@@ -331,3 +331,87 @@ async fn a_small_forged_report_is_refused_and_its_worker_flagged() {
         "the forger's honest report is taken back"
     );
 }
+
+/// A campaign may name a built-in vehicle by its name alone and leave out
+/// its budget (the command line's default); a list filters by state and
+/// refuses an unknown one; a running campaign no live worker can serve
+/// says so.
+#[tokio::test]
+async fn campaigns_take_a_vehicle_name_and_the_default_budget_and_list_by_state() {
+    let app = app(|_| {}).await;
+    let (status, view) = app
+        .call(
+            "POST",
+            "/api/v1/campaigns",
+            Some(json!({"case": "cut-in", "method": "ndd", "vut": "fvdm"})),
+        )
+        .await;
+    assert_eq!(status, StatusCode::CREATED, "{view}");
+    assert_eq!(view["vut"]["model"], "fvdm");
+    assert_eq!(view["max_tests"], tslg_api::DEFAULT_MAX_TESTS);
+    let waiting = |view: &Value| {
+        view["warnings"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter_map(|w| w.as_str())
+            .filter(|w| w.starts_with("no worker"))
+            .map(str::to_owned)
+            .collect::<Vec<_>>()
+    };
+    let (_, view) = app.call("GET", "/api/v1/campaigns/1", None).await;
+    assert!(
+        waiting(&view)[0].contains("no worker has asked for work"),
+        "{view}"
+    );
+    // A worker asks: the built-in vehicle's campaign has one; the external
+    // program's, which it does not offer, has none.
+    let ask = json!({"worker": "w", "threads": 1, "max_tests": 10});
+    app.call("POST", "/api/v1/leases", Some(ask)).await;
+    let (_, view) = app.call("GET", "/api/v1/campaigns/1", None).await;
+    assert!(waiting(&view).is_empty(), "{view}");
+    let id = app.external_campaign().await;
+    let (_, view) = app
+        .call("GET", &format!("/api/v1/campaigns/{id}"), None)
+        .await;
+    assert!(waiting(&view)[0].contains("`x:cut-in:step`"), "{view}");
+    app.call("POST", &format!("/api/v1/campaigns/{id}/cancel"), None)
+        .await;
+    let (_, view) = app
+        .call("GET", &format!("/api/v1/campaigns/{id}"), None)
+        .await;
+    assert!(
+        waiting(&view).is_empty(),
+        "a stopped campaign waits for nothing: {view}"
+    );
+
+    let ids = |list: &Value| -> Vec<i64> {
+        list["campaigns"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|c| c["id"].as_i64().unwrap())
+            .collect()
+    };
+    let (status, list) = app.call("GET", "/api/v1/campaigns", None).await;
+    assert_eq!((status, ids(&list)), (StatusCode::OK, vec![id, 1]));
+    let (_, list) = app
+        .call("GET", "/api/v1/campaigns?status=running", None)
+        .await;
+    assert_eq!(ids(&list), vec![1]);
+    let (_, list) = app
+        .call("GET", "/api/v1/campaigns?status=cancelled", None)
+        .await;
+    assert_eq!(ids(&list), vec![id]);
+    for bad in ["status=runing", "state=running"] {
+        let (status, problem) = app
+            .call("GET", &format!("/api/v1/campaigns?{bad}"), None)
+            .await;
+        assert_eq!(status, StatusCode::BAD_REQUEST, "{bad}");
+        let field = bad.split(['=', 'n']).next().unwrap();
+        assert!(
+            problem["detail"].as_str().unwrap().contains(field),
+            "{problem}"
+        );
+    }
+}

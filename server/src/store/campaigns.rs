@@ -397,11 +397,17 @@ pub fn get(conn: &Connection, id: i64) -> Result<CampaignRow, ApiError> {
     .ok_or_else(|| ApiError::NotFound(format!("campaign {id} does not exist")))
 }
 
-pub fn list(conn: &Connection) -> Result<Vec<CampaignRow>, ApiError> {
+/// Every campaign, or those in `status`, newest first.
+pub fn list(
+    conn: &Connection,
+    status: Option<CampaignStatus>,
+) -> Result<Vec<CampaignRow>, ApiError> {
     sql::all(
         conn,
-        &format!("SELECT {COLUMNS} FROM campaigns ORDER BY id DESC"),
-        [],
+        &format!(
+            "SELECT {COLUMNS} FROM campaigns WHERE ?1 IS NULL OR status = ?1 ORDER BY id DESC"
+        ),
+        [status.map(CampaignStatus::as_str)],
     )
 }
 

@@ -105,11 +105,14 @@ pub fn get(conn: &Connection, id: i64) -> Result<LibraryRow, ApiError> {
     .ok_or_else(|| ApiError::NotFound(format!("library {id} does not exist")))
 }
 
-pub fn list(conn: &Connection) -> Result<Vec<LibraryRow>, ApiError> {
+/// Every library, or those in `status`, newest first.
+pub fn list(conn: &Connection, status: Option<LibraryStatus>) -> Result<Vec<LibraryRow>, ApiError> {
     sql::all(
         conn,
-        &format!("SELECT {COLUMNS} FROM libraries ORDER BY id DESC"),
-        [],
+        &format!(
+            "SELECT {COLUMNS} FROM libraries WHERE ?1 IS NULL OR status = ?1 ORDER BY id DESC"
+        ),
+        [status.map(LibraryStatus::as_str)],
     )
 }
 
