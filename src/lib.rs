@@ -5,6 +5,8 @@
 //! argument types. `service` runs the coordinator and workers, for the two
 //! service binaries and the demo.
 
+#[macro_use]
+mod output;
 mod commands;
 mod inputs;
 pub mod service;
@@ -194,6 +196,23 @@ pub enum CampaignCommand {
         #[command(flatten)]
         server: ServerArgs,
     },
+    /// List the coordinator's campaigns, newest first, a line each.
+    List {
+        #[command(flatten)]
+        server: ServerArgs,
+        /// Only those in this state: pending, running, converged,
+        /// exhausted, cancelled or failed.
+        #[arg(long, value_parser = wire_name::<tslg_api::CampaignStatus>)]
+        status: Option<tslg_api::CampaignStatus>,
+        /// Print JSON (as `GET /api/v1/campaigns` answers).
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+/// A value given by its name on the wire (`running`, `ready`).
+fn wire_name<T: serde::de::DeserializeOwned>(text: &str) -> Result<T, String> {
+    serde_json::from_value(serde_json::Value::String(text.to_owned())).map_err(|e| e.to_string())
 }
 
 #[derive(Debug, Args)]
@@ -243,6 +262,9 @@ pub struct LibraryCreateArgs {
     /// Wait until the build is done.
     #[arg(long)]
     pub wait: bool,
+    /// Print JSON (as `GET /api/v1/libraries/{id}` answers).
+    #[arg(long)]
+    pub json: bool,
 }
 
 #[derive(Debug, Subcommand)]
@@ -262,6 +284,17 @@ pub enum LibraryCommand {
         id: i64,
         #[command(flatten)]
         server: ServerArgs,
+    },
+    /// List the coordinator's libraries, newest first, a line each.
+    List {
+        #[command(flatten)]
+        server: ServerArgs,
+        /// Only those in this state: building, ready or failed.
+        #[arg(long, value_parser = wire_name::<tslg_api::LibraryStatus>)]
+        status: Option<tslg_api::LibraryStatus>,
+        /// Print JSON (as `GET /api/v1/libraries` answers).
+        #[arg(long)]
+        json: bool,
     },
 }
 
@@ -511,7 +544,7 @@ pub struct RuleArgs {
     #[arg(long, default_value_t = tslg_method::estimator::DEFAULT_MIN_EVENTS)]
     pub min_events: u64,
     /// Give up after this many tests (status `exhausted`).
-    #[arg(long, default_value_t = 10_000_000)]
+    #[arg(long, default_value_t = tslg_api::DEFAULT_MAX_TESTS)]
     pub max_tests: u64,
     /// Also require the failure mass outside the library to be bounded:
     /// its upper confidence bound may exceed the outside part of the
@@ -609,7 +642,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         }
         Command::Case(CaseCommand::List { server, json }) => commands::cases::list(&server, json),
         Command::Table { case, preset } => {
-            print!(
+            out!(
                 "{}",
                 tslg_method::cases::builtin_table(&case, preset.as_deref())?
             );
@@ -626,6 +659,16 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Campaign(CampaignCommand::Delete { id, server }) => {
             commands::campaign::delete_campaign(&server, id)
         }
+        Command::Campaign(CampaignCommand::List {
+            server,
+            status,
+            json,
+        }) => commands::listing::campaigns(&server, status, json),
+        Command::Library(LibraryCommand::List {
+            server,
+            status,
+            json,
+        }) => commands::listing::libraries(&server, status, json),
         Command::Demo(args) => commands::demo::run(&args),
         Command::Campaign(CampaignCommand::Start(args)) => commands::campaign::start(&args),
         Command::Campaign(CampaignCommand::Status { id, server, json }) => {
@@ -650,7 +693,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Reproduce(args) => commands::reproduce::run(&args),
         Command::Backup(args) => commands::remote::block_on(async {
             let bytes = tslg_server::backup(&args.database_url, &args.out).await?;
-            println!(
+            outln!(
                 "backed up {} to {} ({bytes} bytes)",
                 args.database_url,
                 args.out.display()

@@ -91,16 +91,16 @@ pub fn report(server: &ServerArgs, id: i64, out: &Path, points: usize) -> anyhow
         let path = out.join(name);
         std::fs::write(&path, content)
             .with_context(|| format!("cannot write {}", path.display()))?;
-        println!("{}", path.display());
+        outln!("{}", path.display());
     }
     Ok(())
 }
 
 fn print(view: &tslg_api::CampaignView, json: bool) -> anyhow::Result<()> {
     if json {
-        println!("{}", serde_json::to_string_pretty(view)?);
+        outln!("{}", serde_json::to_string_pretty(view)?);
     } else {
-        println!("{}", describe(view));
+        outln!("{}", describe(view));
     }
     Ok(())
 }
@@ -114,7 +114,7 @@ pub fn health(server: &ServerArgs) -> anyhow::Result<()> {
     let client = client(server)?;
     block_on(async {
         let health = client.health().await?;
-        println!("{} (tslg {})", health.status, health.version);
+        outln!("{} (tslg {})", health.status, health.version);
         Ok(())
     })
 }
@@ -152,7 +152,11 @@ pub fn create_library(args: &LibraryCreateArgs) -> anyhow::Result<()> {
         } else {
             view
         };
-        println!("{}", serde_json::to_string_pretty(&view)?);
+        if args.json {
+            outln!("{}", serde_json::to_string_pretty(&view)?);
+        } else {
+            outln!("{}", crate::commands::listing::describe_library(&view));
+        }
         if view.status == LibraryStatus::Failed {
             anyhow::bail!(
                 "library {} failed: {}",
@@ -182,13 +186,13 @@ pub async fn wait_for_library(
 pub fn delete_campaign(server: &ServerArgs, id: i64) -> anyhow::Result<()> {
     let client = client(server)?;
     block_on(async { Ok(client.delete_campaign(id).await?) })?;
-    println!("campaign {id} deleted");
+    outln!("campaign {id} deleted");
     Ok(())
 }
 
 pub fn delete_library(server: &ServerArgs, id: i64) -> anyhow::Result<()> {
     let client = client(server)?;
     block_on(async { Ok(client.delete_library(id).await?) })?;
-    println!("library {id} deleted");
+    outln!("library {id} deleted");
     Ok(())
 }

@@ -31,7 +31,7 @@ pub fn create(path: &Path, server: &ServerArgs) -> anyhow::Result<()> {
     let client = client(server)?;
     block_on(async {
         let view = client.create_case(&request).await?;
-        println!(
+        outln!(
             "case {} defined on {}: {} (program {}, {})",
             view.name,
             server.server,
@@ -52,31 +52,31 @@ pub fn list(server: &ServerArgs, json: bool) -> anyhow::Result<()> {
 
 fn print_views(cases: &[CaseView], json: bool) -> anyhow::Result<()> {
     if json {
-        println!("{}", serde_json::to_string_pretty(cases)?);
+        outln!("{}", serde_json::to_string_pretty(cases)?);
         return Ok(());
     }
     for (k, case) in cases.iter().enumerate() {
         if k > 0 {
-            println!();
+            outln!();
         }
         let user = if case.user_defined {
             " (user-defined)"
         } else {
             ""
         };
-        println!("{}{user}", case.name);
-        println!("  {}", case.summary);
+        outln!("{}{user}", case.name);
+        outln!("  {}", case.summary);
         for (i, preset) in case.presets.iter().enumerate() {
             let default = if i == 0 { " (default)" } else { "" };
-            println!("  preset {}{default}: {}", preset.name, preset.summary);
+            outln!("  preset {}{default}: {}", preset.name, preset.summary);
         }
-        println!("  vehicles: {}", case.vehicles.join(", "));
-        println!(
+        outln!("  vehicles: {}", case.vehicles.join(", "));
+        outln!(
             "  library: surrogate {} by default, search {}",
             case.default_surrogate,
             serde_json::to_string(&case.default_search)?
         );
-        println!(
+        outln!(
             "  scenarios: {} ({})",
             if case.scenarios == ScenarioKind::Grid {
                 "grid cells drawn before each test; exact answers and adaptive campaigns"
@@ -86,12 +86,13 @@ fn print_views(cases: &[CaseView], json: bool) -> anyhow::Result<()> {
             case.scenario_unit
         );
         match case.tables.as_slice() {
-            [] => println!("  exposure: its built-in model only"),
+            [] => outln!("  exposure: its built-in model only"),
             tables => {
                 for t in tables {
-                    println!(
+                    outln!(
                         "  exposure: built-in, or a table of {} ({})",
-                        t.holds, t.doc
+                        t.holds,
+                        t.doc
                     );
                 }
             }

@@ -28,7 +28,7 @@ async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
     let exposure = exposure_request(&args.case)?;
     let vut = vehicle_json(&demo_vut(args)?)?;
     let local = Local::start(args.database.as_deref(), args.workers, "demo").await?;
-    println!(
+    outln!(
         "coordinator {} on {}, {} workers × {} threads",
         local.service.url,
         local.database.display(),
@@ -62,7 +62,7 @@ async fn drive(
         },
     )
     .await?;
-    println!(
+    outln!(
         "{} library {} of {surrogate}: {} of {} {} ({} surrogate runs, {:.2} s), exposure {}",
         library.case,
         library.id,
@@ -154,14 +154,14 @@ fn print_table(args: &DemoArgs, views: &[CampaignView], report: Option<&ExactRep
     let by_ndd = &views[views.len() - 1];
     let exact = report.map(|r| r.probability);
     let interval = |v: &CampaignView| (v.ci_low.unwrap_or(f64::NAN), v.ci_high.unwrap_or(f64::NAN));
-    println!(
+    outln!(
         "\nvehicle under test {}, β {}, confidence 0.9, ε {}, seed {}\n",
         demo_vut(args).unwrap_or_default(),
         args.beta,
         args.exploration.epsilon,
         args.seed
     );
-    println!(
+    outln!(
         "{:<8} {:>10} {:>7} {:>11} {:>25} {:>8} {:>10}",
         "method",
         "tests",
@@ -179,7 +179,7 @@ fn print_table(args: &DemoArgs, views: &[CampaignView], report: Option<&ExactRep
             Some(_) => "no",
             None => "",
         };
-        println!(
+        outln!(
             "{:<8} {:>10} {:>7} {:>11.3e} {:>25} {:>8} {:>10}",
             name,
             v.indices,
@@ -190,28 +190,31 @@ fn print_table(args: &DemoArgs, views: &[CampaignView], report: Option<&ExactRep
             v.status.as_str()
         );
     }
-    println!();
+    outln!();
     for v in views {
-        println!("{:<8} assumes {}", v.method.as_str(), assumes(v.method));
+        outln!("{:<8} assumes {}", v.method.as_str(), assumes(v.method));
         if let Some(a) = &v.adaptive {
-            println!(
+            outln!(
                 "{:<8}   ({} library and {} search tests found where the vehicle fails; {} \
                  estimation tests)",
-                "", a.library_tests, a.search_tests, v.tests
+                "",
+                a.library_tests,
+                a.search_tests,
+                v.tests
             );
         }
     }
     print_outside(by_library, exact);
     let measured = by_ndd.tests as f64 / by_library.indices.max(1) as f64;
     if let Some(adaptive) = views.iter().find(|v| v.method == Method::Adaptive) {
-        println!(
+        outln!(
             "\nNDD tests / adaptive tests: {:.0} measured",
             by_ndd.tests as f64 / adaptive.indices.max(1) as f64
         );
     }
     let Some(report) = report else {
         let ((a, b), (c, d)) = (interval(by_library), interval(by_ndd));
-        println!(
+        outln!(
             "\nno exact P(A) for this case (its scenarios are sequences); the intervals {}",
             if a <= d && c <= b {
                 "overlap"
@@ -224,34 +227,33 @@ fn print_table(args: &DemoArgs, views: &[CampaignView], report: Option<&ExactRep
         } else {
             "at least "
         };
-        println!(
-            "acceleration ratio (NDD tests / library tests): {at_least}{measured:.0} measured"
-        );
+        outln!("acceleration ratio (NDD tests / library tests): {at_least}{measured:.0} measured");
         return;
     };
     let exact = report.probability;
-    println!("\nexact P(A) by enumeration: {exact:.4e}");
+    outln!("\nexact P(A) by enumeration: {exact:.4e}");
     let misses = views.iter().any(|v| {
         let (lo, hi) = interval(v);
         !(lo <= exact && exact <= hi)
     });
     if misses {
-        println!(
+        outln!(
             "note: a 90% interval misses the exact value in about one run in ten by design, \
              more often when a campaign stops at n_min; see docs/statistics.md"
         );
     }
     if report.library_tests > 10.0 * by_library.tests as f64 {
-        println!(
+        outln!(
             "warning: the library's analytic variance needs about {:.0} tests and the campaign \
              stopped after {}: this vehicle fails mostly outside the surrogate's library, and \
              the heavy-weight tests that would correct the estimate have not come up yet. \
              Trust the adaptive campaign or the NDD baseline (see docs/models.md on the \
              surrogate's coverage).",
-            report.library_tests, by_library.tests
+            report.library_tests,
+            by_library.tests
         );
     }
-    println!(
+    outln!(
         "acceleration ratio (NDD tests / library tests): {measured:.0} measured, {:.0} analytic ({:.0} / {:.0} expected tests)",
         report.ratio(),
         report.ndd_tests,
@@ -272,13 +274,14 @@ fn print_outside(by_library: &CampaignView, exact: Option<f64>) {
             Some(_) => ", misses the exact value",
             None => "",
         };
-        println!(
+        outln!(
             "\nlibrary: failure mass outside the library ≤ {upper:.3e} ({} exploring tests, {} \
              events); guarded interval [{lo:.3e}, {high:.3e}]{covers}",
-            by_library.outside_tests, by_library.outside_events
+            by_library.outside_tests,
+            by_library.outside_events
         );
     }
     for warning in &by_library.warnings {
-        println!("warning: {}", Dialect::Cli.translate(warning));
+        outln!("warning: {}", Dialect::Cli.translate(warning));
     }
 }

@@ -154,7 +154,7 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
         ),
     };
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        outln!("{}", serde_json::to_string_pretty(&report)?);
         return Ok(());
     }
     print(&report, &rule);
@@ -172,16 +172,16 @@ fn exact_answer(case: &dyn ScenarioCase, vut: &serde_json::Value) -> Option<f64>
 
 fn print(report: &Report, rule: &StoppingRule) {
     let result = &report.result;
-    println!("case               {} ({})", report.case, report.preset);
-    println!("method             {}", report.method);
-    println!(
+    outln!("case               {} ({})", report.case, report.preset);
+    outln!("method             {}", report.method);
+    outln!(
         "vehicle under test {}",
         crate::inputs::vehicle_name(&report.vut)
     );
-    println!("status             {}", result.status.as_str());
+    outln!("status             {}", result.status.as_str());
     match &report.search {
         Some(search) => {
-            println!(
+            outln!(
                 "tests              {} ({} library, {} {}, {} estimating; {} stages)",
                 result.indices,
                 search.library_tests,
@@ -191,18 +191,18 @@ fn print(report: &Report, rule: &StoppingRule) {
                 search.stages
             );
             if search.driving != result.indices as f64 {
-                println!(
+                outln!(
                     "driving            {:.0} tests' worth (the probes' decisions counted)",
                     search.driving
                 );
             }
-            println!("assumes            {}", search.assumes);
+            outln!("assumes            {}", search.assumes);
         }
-        None => println!("tests              {}", result.tests),
+        None => outln!("tests              {}", result.tests),
     }
     print_estimate(result, rule);
     match (report.exact, report.covers_exact) {
-        (Some(exact), Some(covers)) => println!(
+        (Some(exact), Some(covers)) => outln!(
             "exact P(A)         {exact:.4e} ({})",
             if covers {
                 "inside the interval"
@@ -210,16 +210,17 @@ fn print(report: &Report, rule: &StoppingRule) {
                 "OUTSIDE the interval"
             }
         ),
-        _ if report.grid => println!(
+        _ if report.grid => outln!(
             "exact P(A)         not computed: enumeration here stops at {} scenarios",
             tslg_api::EXACT_MAX_SCENARIOS
         ),
-        _ => println!("exact P(A)         none: no enumeration reaches this case's scenarios"),
+        _ => outln!("exact P(A)         none: no enumeration reaches this case's scenarios"),
     }
     if let (Some(upper), Some(high)) = (result.outside_upper, result.guarded_ci_high) {
-        println!(
+        outln!(
             "outside library    {} exploring tests, {} events; failure mass there ≤ {upper:.4e}",
-            result.outside_tests, result.outside_events
+            result.outside_tests,
+            result.outside_events
         );
         let covers = report
             .exact
@@ -234,28 +235,29 @@ fn print(report: &Report, rule: &StoppingRule) {
                 )
             })
             .unwrap_or_default();
-        println!(
+        outln!(
             "guarded interval   [{:.4e}, {high:.4e}]{covers}",
             result.ci_low
         );
     }
     for warning in &report.warnings {
-        println!("warning: {warning}");
+        outln!("warning: {warning}");
     }
 }
 
 /// The events, estimate, interval and relative half-width of `result`.
 fn print_estimate(result: &CampaignResult, rule: &StoppingRule) {
-    println!("events             {}", result.events);
-    println!("estimate           {:.4e}", result.estimate);
-    println!(
+    outln!("events             {}", result.events);
+    outln!("estimate           {:.4e}", result.estimate);
+    outln!(
         "{:.0}% interval       [{:.4e}, {:.4e}]",
         100.0 * rule.confidence,
         result.ci_low,
         result.ci_high
     );
-    println!(
+    outln!(
         "relative half-width {:.4} (beta {})",
-        result.relative_half_width, rule.beta
+        result.relative_half_width,
+        rule.beta
     );
 }

@@ -33,7 +33,7 @@ pub fn run(args: &ExactArgs) -> anyhow::Result<()> {
     })?;
     print_table(builtin.as_ref(), args)?;
     if args.case.ndd_table.is_some() {
-        println!();
+        outln!();
         print_table(open(&args.case)?.as_ref(), args)?;
     }
     Ok(())
@@ -53,7 +53,7 @@ fn print_table(case: &dyn ScenarioCase, args: &ExactArgs) -> anyhow::Result<()> 
             search: Some(LibrarySearch::Cells(SearchMethod::Exhaustive)),
         },
     )?;
-    println!(
+    outln!(
         "case {} | exposure {} | preset {} | library of {} ({} cells), epsilon {}, beta {}, \
          confidence {}",
         descriptor.name,
@@ -65,9 +65,13 @@ fn print_table(case: &dyn ScenarioCase, args: &ExactArgs) -> anyhow::Result<()> 
         args.beta,
         args.confidence
     );
-    println!(
+    outln!(
         "{:<14} {:>12} {:>14} {:>14} {:>10}",
-        "vehicle", "exact P(A)", "library tests", "NDD tests", "ratio"
+        "vehicle",
+        "exact P(A)",
+        "library tests",
+        "NDD tests",
+        "ratio"
     );
     // A user-defined case's vehicles are its programs: its own, and those
     // of --vut-exec.
@@ -90,7 +94,7 @@ fn print_table(case: &dyn ScenarioCase, args: &ExactArgs) -> anyhow::Result<()> 
                 args.confidence,
             )
             .with_context(|| format!("the exact answer of {name}"))?;
-        println!(
+        outln!(
             "{:<14} {:>12.4e} {:>14.1} {:>14.0} {:>10.1}",
             name,
             r.probability,

@@ -54,8 +54,8 @@ pub fn build(args: &BuildArgs) -> anyhow::Result<()> {
     std::fs::write(&args.out, &file)
         .with_context(|| format!("cannot write {}", args.out.display()))?;
     print_summary(&case.library_summary(&file)?, descriptor.scenario_unit);
-    println!("build time         {:.3} s", elapsed.as_secs_f64());
-    println!("written to         {}", args.out.display());
+    outln!("build time         {:.3} s", elapsed.as_secs_f64());
+    outln!("written to         {}", args.out.display());
     Ok(())
 }
 
@@ -99,31 +99,32 @@ pub fn show(path: &Path) -> anyhow::Result<()> {
 
 fn print_summary(library: &LibrarySummary, unit: &str) {
     let n = library.total;
-    println!("case               {} ({})", library.case, library.preset);
-    println!("surrogate          {}", vehicle_name(&library.surrogate));
-    println!(
+    outln!("case               {} ({})", library.case, library.preset);
+    outln!("surrogate          {}", vehicle_name(&library.surrogate));
+    outln!(
         "exposure           {} (fingerprint {})",
-        library.exposure.name, library.exposure.fingerprint
+        library.exposure.name,
+        library.exposure.fingerprint
     );
-    println!(
+    outln!(
         "library size       {} of {} {unit} ({:.2}%)",
         library.size,
         n,
         100.0 * library.size as f64 / n as f64
     );
-    println!("mu_S               {:.6e}", library.mu_s);
-    println!(
+    outln!("mu_S               {:.6e}", library.mu_s);
+    outln!(
         "W                  {:.6e} ({:.2}% of mu_S)",
         library.w,
         100.0 * library.w / library.mu_s
     );
     if let Some(gamma) = library.gamma {
-        println!("gamma              {gamma:.6e}");
+        outln!("gamma              {gamma:.6e}");
     }
-    println!("search             {}", library.search);
-    println!("SM evaluations     {}", library.sm_evaluations);
+    outln!("search             {}", library.search);
+    outln!("SM evaluations     {}", library.sm_evaluations);
     if let Some(recall) = library.recall {
-        println!(
+        outln!(
             "recall             {:.2}% of the exhaustive library's criticality",
             100.0 * recall
         );

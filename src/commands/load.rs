@@ -215,7 +215,7 @@ pub fn run(args: &LoadArgs) -> anyhow::Result<()> {
         anyhow::Ok(report)
     })?;
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        outln!("{}", serde_json::to_string_pretty(&report)?);
     } else {
         print_table(&report);
     }
@@ -228,22 +228,26 @@ pub fn run(args: &LoadArgs) -> anyhow::Result<()> {
 }
 
 fn print_table(r: &LoadReport) {
-    println!(
+    outln!(
         "{} workers × {} rounds in {:.1} s ({:.0} requests/s)",
         r.workers,
         r.requests,
         r.seconds,
         (r.lease_ms.count + r.result_ms.count) as f64 / r.seconds
     );
-    println!("| request | count | p50 ms | p90 ms | p99 ms | max ms |");
-    println!("|---|---|---|---|---|---|");
+    outln!("| request | count | p50 ms | p90 ms | p99 ms | max ms |");
+    outln!("|---|---|---|---|---|---|");
     for (name, p) in [("lease", &r.lease_ms), ("result", &r.result_ms)] {
-        println!(
+        outln!(
             "| {name} | {} | {:.2} | {:.2} | {:.2} | {:.2} |",
-            p.count, p.p50, p.p90, p.p99, p.max
+            p.count,
+            p.p50,
+            p.p90,
+            p.p99,
+            p.max
         );
     }
-    println!(
+    outln!(
         "tests acknowledged {} / resolved by the coordinator {}; events reported {} / counted {}; errors {}",
         r.accepted_tests,
         r.campaign_tests,
@@ -252,17 +256,17 @@ fn print_table(r: &LoadReport) {
         r.errors.len()
     );
     match r.commits {
-        Some(c) if c.transactions > 0 => println!(
+        Some(c) if c.transactions > 0 => outln!(
             "group commits: {} requests in {} transactions ({:.1} a commit)",
             c.requests,
             c.transactions,
             c.requests as f64 / c.transactions as f64
         ),
-        Some(_) => println!("group commits: none"),
-        None => println!("group commits: /metrics could not be read"),
+        Some(_) => outln!("group commits: none"),
+        None => outln!("group commits: /metrics could not be read"),
     }
     for e in r.errors.iter().take(10) {
-        println!("  error: {e}");
+        outln!("  error: {e}");
     }
 }
 

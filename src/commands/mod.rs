@@ -7,6 +7,7 @@ pub mod evaluate;
 pub mod exact;
 pub mod held_out;
 pub mod library;
+pub mod listing;
 pub mod load;
 pub mod local;
 pub mod policy;

@@ -55,31 +55,40 @@ pub fn run(args: &PolicyArgs) -> anyhow::Result<()> {
         let exposure = FollowExposure::from_model(&exposure, &world, &grid);
         Transitions::compute_observed(&world, grid, &exposure, &surrogate, progress)
     });
-    let library = match args.solver {
-        SolverArg::Dp => dynamic_programming(&transitions, 1e-12),
-        SolverArg::Td => temporal_difference(&transitions, 0.1, 1e-10, 0),
+    let (library, solver) = match args.solver {
+        SolverArg::Dp => (
+            dynamic_programming(&transitions, 1e-12),
+            "dynamic programming",
+        ),
+        SolverArg::Td => (
+            temporal_difference(&transitions, 0.1, 1e-10, 0),
+            "TD(0) learning",
+        ),
     };
     let at = grid.state(s);
-    println!(
-        "library of {} by {:?} in {:.2} s; state (v {}, R {}, Ṙ {}), zone {:?}, P(S|s) = {:.4e}",
+    let zone = match transitions.zones[s] {
+        Zone::Collision => "collision",
+        Zone::Safe => "safe",
+        Zone::Dangerous => "dangerous",
+    };
+    outln!(
+        "library of {} by {solver} in {:.2} s; state (v {}, R {}, Ṙ {}), zone {zone}, P(S|s) = {:.4e}",
         args.surrogate,
-        args.solver,
         started.elapsed().as_secs_f64(),
         at.bv_speed,
         at.range,
         at.range_rate,
-        transitions.zones[s],
         library.challenge[s]
     );
     let ndd = exposure.actions(&world, at.bv_speed);
     let guided = library.action_distribution(s);
     if transitions.zones[s] != Zone::Dangerous || guided.is_none() {
-        println!("not a dangerous state: library tests act by the NDD here");
+        outln!("not a dangerous state: library tests act by the NDD here");
     }
-    println!("\n{:>6} {:>12} {:>12}", "u", "NDD P(u|v)", "P(u|s, S)");
+    outln!("\n{:>6} {:>12} {:>12}", "u", "NDD P(u|v)", "P(u|s, S)");
     for k in 0..world.actions {
         let library_p = guided.as_ref().map_or(f64::NAN, |g| g[k]);
-        println!(
+        outln!(
             "{:>6.1} {:>12.4e} {:>12.4e}",
             world.action(k),
             ndd[k],
@@ -90,7 +99,7 @@ pub fn run(args: &PolicyArgs) -> anyhow::Result<()> {
         let peak = (0..world.actions)
             .max_by(|&a, &b| g[a].total_cmp(&g[b]))
             .expect("actions");
-        println!(
+        outln!(
             "\nthe library's distribution peaks at u = {:.1} m/s²",
             world.action(peak)
         );

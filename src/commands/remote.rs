@@ -119,7 +119,7 @@ pub fn describe(view: &CampaignView) -> String {
         view.id,
         view.case,
         view.method.as_str(),
-        view.vut.get("model").and_then(|m| m.as_str()).unwrap_or("?"),
+        crate::inputs::vehicle_name(&view.vut),
         view.status.as_str(),
         view.status_detail.as_ref().map_or(String::new(), |d| format!(" — {d}")),
         view.tests,

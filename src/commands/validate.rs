@@ -273,17 +273,30 @@ pub fn run(args: &ValidateArgs) -> anyhow::Result<()> {
     if let Some(to) = args.curve_to {
         return curves(args, replicates, to);
     }
-    let mut rows = Vec::new();
+    let mut setups_all = Vec::new();
     for case_name in &cases(args) {
-        for setup in setups(case_name, args)? {
-            let row = replicate(&setup, replicates)?;
-            eprintln!("{}", markdown_line(&row));
-            rows.push(row);
-        }
+        setups_all.extend(setups(case_name, args)?);
+    }
+    let mut rows = Vec::new();
+    for (k, setup) in setups_all.iter().enumerate() {
+        let row = replicate(setup, replicates)?;
+        // Progress only: the table comes whole on stdout at the end.
+        eprintln!(
+            "[{}/{}] {} {} → {} ({}): coverage {:.3}, median {} tests",
+            k + 1,
+            setups_all.len(),
+            row.case,
+            row.surrogate,
+            row.vut,
+            row.method.name(),
+            row.answer_coverage(),
+            row.tests_quantile(0.5)
+        );
+        rows.push(row);
     }
     let table = markdown(&rows);
-    println!("{table}");
-    println!("{}", methods_markdown(&rows, args));
+    outln!("{table}");
+    outln!("{}", methods_markdown(&rows, args));
     if let Some(dir) = &args.out {
         std::fs::create_dir_all(dir)?;
         std::fs::write(dir.join("validation.md"), &table)?;
@@ -461,7 +474,13 @@ fn curves(args: &ValidateArgs, replicates: u64, to: u64) -> anyhow::Result<()> {
                 stoppable.iter().filter(|&&c| c < floor).count(),
                 stoppable.len()
             );
-            eprintln!("{line}");
+            eprintln!(
+                "{} {} → {} ({}): worst coverage {worst:.3} at {at} tests",
+                setup.case_name,
+                setup.surrogate,
+                setup.vut,
+                setup.split.name()
+            );
             let _ = writeln!(table, "{line}");
         }
     }
@@ -471,7 +490,7 @@ fn curves(args: &ValidateArgs, replicates: u64, to: u64) -> anyhow::Result<()> {
          the floor is c − 2.33 √(c(1 − c)/R).",
         args.confidence
     );
-    println!("{table}");
+    outln!("{table}");
     if let Some(dir) = &args.out {
         std::fs::create_dir_all(dir)?;
         std::fs::write(dir.join("curve.md"), &table)?;

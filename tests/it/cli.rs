@@ -864,7 +864,8 @@ fn policy_prints_the_car_following_librarys_action_distribution_at_the_papers_st
     let o = tslg(&["policy", "--state", "38,6,-2"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let text = stdout(&o);
-    assert!(text.contains("zone Dangerous"), "{text}");
+    assert!(text.contains("zone dangerous"), "{text}");
+    assert!(text.contains("by dynamic programming"), "{text}");
     // The learned distribution peaks at a hard but not the hardest braking.
     assert!(text.contains("peaks at u = -3.6 m/s²"), "{text}");
     // Row of u = −3.6: the NDD gives it well under 0.1%, the library most of its mass.

@@ -28,11 +28,30 @@ fn library_create_and_campaign_start_status_cancel_drive_a_coordinator() {
         "--search",
         "exhaustive",
         "--wait",
+        "--json",
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let library: LibraryView = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!((library.size, library.total_scenarios), (Some(329), 3420));
     let id = library.id.to_string();
+    // Without --json, the summary `tslg library build` prints of a file.
+    let o = tslg(&[
+        "library",
+        "create",
+        "--server",
+        url,
+        "--surrogate",
+        "fvdm",
+        "--wait",
+    ]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        text.contains("surrogate          fvdm")
+            && text.contains("of 3420 scenarios")
+            && text.contains("mu_S               ")
+            && !text.contains("\"mu_s\""),
+        "{text}"
+    );
     let o = tslg(&[
         "campaign",
         "start",
@@ -73,6 +92,33 @@ fn library_create_and_campaign_start_status_cancel_drive_a_coordinator() {
         "--json",
     ]);
     let ndd: CampaignView = serde_json::from_slice(&o.stdout).unwrap();
+    // Listed, a line each, and by state.
+    let o = tslg(&["campaign", "list", "--server", url, "--status", "running"]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    let lines: Vec<&str> = text.lines().skip(1).collect();
+    assert_eq!(lines.len(), 1, "{text}");
+    assert!(
+        lines[0].trim_start().starts_with(&format!("{} ", ndd.id)) && lines[0].contains("ndd"),
+        "{text}"
+    );
+    let o = tslg(&["campaign", "list", "--server", url]);
+    assert_eq!(String::from_utf8_lossy(&o.stdout).lines().count(), 3);
+    let o = tslg(&["campaign", "list", "--server", url, "--status", "runing"]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("unknown variant `runing`"));
+    let o = tslg(&["library", "list", "--server", url, "--status", "ready"]);
+    assert_eq!(String::from_utf8_lossy(&o.stdout).lines().count(), 3);
+    // A reader that stops early ends the command quietly, not in a panic.
+    let mut head = Command::new(env!("CARGO_BIN_EXE_tslg"))
+        .args(["campaign", "list", "--server", url])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(head.stdout.take());
+    let o = head.wait_with_output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(!String::from_utf8_lossy(&o.stderr).contains("panicked"));
     let o = tslg(&["campaign", "cancel", &ndd.id.to_string(), "--server", url]);
     assert!(String::from_utf8_lossy(&o.stdout).contains("cancelled"));
     let o = tslg(&["campaign", "cancel", &ndd.id.to_string(), "--server", url]);

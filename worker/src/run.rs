@@ -184,7 +184,12 @@ pub async fn run(
     if let Some(tail) = worker.tail.take() {
         worker.summary.tests += tail.settle().await;
     }
-    tracing::info!(worker = %worker.name, ?worker.summary, "worker stopped");
+    let WorkerSummary {
+        leases,
+        tests,
+        events,
+    } = worker.summary;
+    tracing::info!(worker = %worker.name, leases, tests, events, "worker stopped");
     Ok(worker.summary)
 }
 

@@ -185,7 +185,7 @@ pub fn run(args: &ReproduceArgs) -> anyhow::Result<()> {
             outcome.map(|()| rows)
         })?;
     let markdown = table::markdown(&rows, replicates, budget);
-    println!("{markdown}");
+    outln!("{markdown}");
     std::fs::create_dir_all(&args.out)?;
     std::fs::write(args.out.join("reproduction.md"), &markdown)?;
     std::fs::write(args.out.join("reproduction.csv"), table::csv(&rows))?;
