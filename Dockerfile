@@ -6,13 +6,16 @@ WORKDIR /src
 COPY . .
 RUN cargo build --release --locked --bins
 
+# python3: the documented external vehicles (examples/python) and user
+# cases' programs run in the worker's container.
 FROM debian:bookworm-slim
 RUN apt-get update \
-    && apt-get install -y --no-install-recommends ca-certificates \
+    && apt-get install -y --no-install-recommends ca-certificates python3 \
     && rm -rf /var/lib/apt/lists/* \
     && useradd --system --create-home --home-dir /var/lib/tslg tslg \
     && mkdir -p /var/lib/tslg/data && chown tslg /var/lib/tslg/data
 COPY --from=build /src/target/release/tslg /src/target/release/tslg-server /src/target/release/tslg-worker /usr/local/bin/
+COPY --from=build /src/examples /usr/local/share/tslg/examples
 USER tslg
 WORKDIR /var/lib/tslg
 ENV TSLG_BIND=0.0.0.0:8080 \

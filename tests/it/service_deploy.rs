@@ -179,3 +179,54 @@ fn a_worker_refuses_a_coordinator_of_another_release() {
         "{stderr}"
     );
 }
+
+/// Both services run the image the Dockerfile builds (each can build it:
+/// `docker compose up --build` of either service alone works), and that
+/// image's runtime stage carries what the documented external vehicles
+/// need: python3 and the examples, at the path the compose file's worker
+/// comment names. (The image itself is not built here: no engine.)
+#[test]
+fn both_services_build_the_image_and_it_runs_the_python_examples() {
+    let root = env!("CARGO_MANIFEST_DIR");
+    let compose = std::fs::read_to_string(format!("{root}/docker-compose.yml")).unwrap();
+    let mut services = Vec::new();
+    let mut current: Option<(String, bool, bool)> = None;
+    for line in compose.lines() {
+        let indent = line.len() - line.trim_start().len();
+        let text = line.trim();
+        if indent == 2 && text.ends_with(':') && !text.starts_with('#') {
+            services.extend(current.take());
+            current = Some((text.trim_end_matches(':').to_owned(), false, false));
+        } else if indent == 0 && !text.is_empty() && !text.starts_with('#') {
+            services.extend(current.take());
+        } else if let Some((_, image, build)) = &mut current {
+            *image |= text == "image: tslg:latest";
+            *build |= text == "build: .";
+        }
+    }
+    services.extend(current);
+    let names: Vec<&str> = services.iter().map(|s| s.0.as_str()).collect();
+    assert!(
+        names.contains(&"coordinator") && names.contains(&"worker"),
+        "{names:?}"
+    );
+    for (name, image, build) in &services {
+        if name == "coordinator" || name == "worker" {
+            assert!(
+                *image && *build,
+                "service {name}: image {image}, build {build}"
+            );
+        }
+    }
+    let dockerfile = std::fs::read_to_string(format!("{root}/Dockerfile")).unwrap();
+    let runtime = dockerfile.rsplit("FROM ").next().unwrap();
+    assert!(runtime.contains("python3"), "{runtime}");
+    assert!(
+        runtime.contains("COPY --from=build /src/examples /usr/local/share/tslg/examples"),
+        "{runtime}"
+    );
+    let named = "/usr/local/share/tslg/examples/python/idm_vut.py";
+    assert!(compose.contains(named));
+    let local = named.replace("/usr/local/share/tslg/", &format!("{root}/"));
+    assert!(std::path::Path::new(&local).exists(), "{local}");
+}
