@@ -88,7 +88,18 @@ fn library_create_and_campaign_start_status_cancel_drive_a_coordinator() {
     assert!(text.contains(&health), "{text}");
     // A long NDD baseline, cancelled; cancelling again is refused.
     let o = tslg(&[
-        "campaign", "start", "--server", url, "--method", "ndd", "--vut", "idm", "--beta", "0.001",
+        "campaign",
+        "start",
+        "--server",
+        url,
+        "--method",
+        "ndd",
+        "--vut",
+        "idm",
+        "--beta",
+        "0.001",
+        "--max-tests",
+        "1000000000",
         "--json",
     ]);
     let ndd: CampaignView = serde_json::from_slice(&o.stdout).unwrap();
