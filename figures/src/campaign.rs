@@ -4,7 +4,7 @@
 //! Points with `n = 0` have no place on a log axis and are left out.
 
 use crate::axis::{linear_top, log_range};
-use crate::style::{count, number, BAND, ESTIMATE, FONT, LIMIT, SIZE};
+use crate::style::{axis_format, count, number, BAND, ESTIMATE, FONT, GUARD, LIMIT, SIZE};
 use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
 use plotters::prelude::*;
 use std::fmt::Write;
@@ -31,23 +31,34 @@ fn test_range(points: &[HistoryPoint]) -> (f64, f64) {
     log_range(plotted(points).map(|p| p.tests as f64), 1.0, 1.0)
 }
 
-/// The estimate with its interval band against tests, and the exact
-/// `P(A)` as a dashed line where the campaign knows it. The y axis runs
-/// from 0 to a little above the largest estimate, the last interval's
-/// upper end and the exact value; the band is clipped to it (early
-/// intervals are wide).
+/// The estimate with its interval band against tests, the exact `P(A)` as
+/// a dashed line where the campaign knows it, and for a library campaign
+/// the guarded interval's upper end now (the bound that does not assume
+/// the library covers the vehicle's failures) as a dotted line. The y
+/// axis runs from 0 to a little above the largest estimate, the last
+/// interval's upper end and the exact value; the band is clipped to it
+/// (early intervals are wide). A guarded end more than three times that
+/// top would flatten everything else: it is drawn at the top, its value
+/// in the legend marked "above".
 pub fn estimate_svg(view: &CampaignView, points: &[HistoryPoint]) -> Result<String, FigureError> {
     let (x0, x1) = test_range(points);
     let exact = view
         .exact_probability
         .filter(|p| p.is_finite() && *p >= 0.0);
-    let y1 = linear_top(
+    let top = linear_top(
         plotted(points)
             .map(|p| p.estimate)
             .chain(plotted(points).last().map(|p| p.ci_high))
             .chain(exact),
         1.15,
     );
+    let guarded = view
+        .guarded_ci_high
+        .filter(|g| g.is_finite() && *g >= 0.0 && plotted(points).next().is_some());
+    let y1 = match guarded {
+        Some(g) if g <= 3.0 * top => top.max(g * 1.05),
+        _ => top,
+    };
     let clip = |y: f64| if y.is_nan() { 0.0 } else { y.clamp(0.0, y1) };
     let mut band: Vec<(f64, f64)> = plotted(points)
         .map(|p| (p.tests as f64, clip(p.ci_high)))
@@ -66,34 +77,62 @@ pub fn estimate_svg(view: &CampaignView, points: &[HistoryPoint]) -> Result<Stri
         view.status.as_str(),
         count(view.tests as f64)
     );
-    draw(&title, (x0..x1).log_scale(), 0.0..y1, "P(A)", |chart| {
-        let interval = format!("{:.0}% interval", view.confidence * 100.0);
-        chart
-            .draw_series(std::iter::once(Polygon::new(band, BAND.filled())))
-            .map_err(fail)?
-            .label(interval)
-            .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 18, y + 5)], BAND.filled()));
-        chart
-            .draw_series(LineSeries::new(line, ESTIMATE.stroke_width(2)))
-            .map_err(fail)?
-            .label("estimate")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], ESTIMATE.stroke_width(2)));
-        if let Some(p) = exact {
+    draw(
+        &title,
+        (x0..x1).log_scale(),
+        0.0..y1,
+        (0.0, y1),
+        "P(A)",
+        |chart| {
+            let interval = format!("{:.0}% interval", view.confidence * 100.0);
             chart
-                .draw_series(DashedLineSeries::new(
-                    [(x0, p), (x1, p)],
-                    6,
-                    4,
-                    LIMIT.stroke_width(2),
-                ))
+                .draw_series(std::iter::once(Polygon::new(band, BAND.filled())))
                 .map_err(fail)?
-                .label(format!("exact P(A) = {}", number(p)))
+                .label(interval)
+                .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 18, y + 5)], BAND.filled()));
+            chart
+                .draw_series(LineSeries::new(line, ESTIMATE.stroke_width(2)))
+                .map_err(fail)?
+                .label("estimate")
                 .legend(|(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 18, y)], LIMIT.stroke_width(2))
+                    PathElement::new(vec![(x, y), (x + 18, y)], ESTIMATE.stroke_width(2))
                 });
-        }
-        Ok(())
-    })
+            if let Some(g) = guarded {
+                let (height, label) = if g <= y1 {
+                    (g, format!("guarded upper end = {}", number(g)))
+                } else {
+                    (y1, format!("guarded upper end = {} (above)", number(g)))
+                };
+                chart
+                    .draw_series(DashedLineSeries::new(
+                        [(x0, height), (x1, height)],
+                        2,
+                        3,
+                        GUARD.stroke_width(2),
+                    ))
+                    .map_err(fail)?
+                    .label(label)
+                    .legend(|(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 18, y)], GUARD.stroke_width(2))
+                    });
+            }
+            if let Some(p) = exact {
+                chart
+                    .draw_series(DashedLineSeries::new(
+                        [(x0, p), (x1, p)],
+                        6,
+                        4,
+                        LIMIT.stroke_width(2),
+                    ))
+                    .map_err(fail)?
+                    .label(format!("exact P(A) = {}", number(p)))
+                    .legend(|(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 18, y)], LIMIT.stroke_width(2))
+                    });
+            }
+            Ok(())
+        },
+    )
 }
 
 /// The relative half-width against tests, both on log axes, with the line
@@ -117,11 +156,11 @@ pub fn relative_half_width_svg(
         view.id, view.beta
     );
     let beta = view.beta;
-    let y = (low..high).log_scale();
     draw(
         &title,
         (x0..x1).log_scale(),
-        y,
+        (low..high).log_scale(),
+        (low, high),
         "relative half-width",
         |chart| {
             chart
@@ -151,11 +190,13 @@ pub fn relative_half_width_svg(
 type Chart<'a, X, Y> = ChartContext<'a, SVGBackend<'a>, Cartesian2d<X, Y>>;
 
 /// One plot of `title` with tests on x, the series drawn by `series`, and
-/// a legend.
+/// a legend; `y` runs from `low` to `high`, whose ticks are written alike
+/// ([`axis_format`]).
 fn draw<XR, YR, X, Y>(
     title: &str,
     x: XR,
     y: YR,
+    (low, high): (f64, f64),
     y_label: &str,
     series: impl for<'a> FnOnce(&mut Chart<'a, X, Y>) -> Result<(), FigureError>,
 ) -> Result<String, FigureError>
@@ -165,6 +206,7 @@ where
     X: Ranged<ValueType = f64> + ValueFormatter<f64>,
     Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
 {
+    let y_format = axis_format(low, high);
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();
@@ -185,7 +227,7 @@ where
             .bold_line_style(BLACK.mix(0.15))
             .light_line_style(BLACK.mix(0.03))
             .x_label_formatter(&|v| count(*v))
-            .y_label_formatter(&|v| number(*v))
+            .y_label_formatter(&y_format)
             .label_style((FONT, 13))
             .draw()
             .map_err(fail)?;

@@ -1,6 +1,7 @@
 //! Values over a two-dimensional grid as coloured cells on a log colour
-//! scale (probabilities span many orders of magnitude); cells at 0 stay
-//! white. Several maps side by side share nothing but the title.
+//! scale (probabilities span many orders of magnitude), with the scale
+//! beside each map (a colour bar); cells at 0 stay white. Several maps side
+//! by side share nothing but the title.
 
 use crate::campaign::{fail, FigureError};
 use crate::style::{number, FONT};
@@ -53,6 +54,9 @@ impl HeatmapAxis {
     }
 }
 
+/// Steps of a colour bar.
+pub const COLOUR_STEPS: usize = 48;
+
 /// A colour on a white → blue → dark red ramp for `t ∈ [0, 1]`.
 fn ramp(t: f64) -> RGBColor {
     let stops = [
@@ -90,7 +94,7 @@ pub fn heatmaps_svg(title: &str, maps: &[Heatmap]) -> Result<String, FigureError
     }
     let mut svg = String::new();
     {
-        let size = (440 * maps.len() as u32, 460);
+        let size = (520 * maps.len() as u32, 460);
         let root = SVGBackend::with_string(&mut svg, size).into_drawing_area();
         root.fill(&WHITE).map_err(fail)?;
         let root = root.titled(title, (FONT, 18)).map_err(fail)?;
@@ -119,7 +123,12 @@ fn draw_map(
     } else {
         format!("{} (all 0)", map.title)
     };
-    let mut chart = ChartBuilder::on(area)
+    let width = area.dim_in_pixel().0;
+    let (area, bar) = area.split_horizontally(width * 84 / 100);
+    if high > 0.0 {
+        colour_bar(&bar, low, high)?;
+    }
+    let mut chart = ChartBuilder::on(&area)
         .caption(caption, (FONT, 13))
         .margin(10)
         .x_label_area_size(40)
@@ -154,5 +163,42 @@ fn draw_map(
             Rectangle::new([(x0, y0), (x1, y1)], ramp(t).filled())
         });
     chart.draw_series(cells).map_err(fail)?;
+    Ok(())
+}
+
+/// The colour scale of a map whose positive values run from `low` to
+/// `high`: the ramp bottom to top with the values it stands for (log
+/// scale) as ticks.
+fn colour_bar(
+    area: &DrawingArea<SVGBackend<'_>, plotters::coord::Shift>,
+    low: f64,
+    high: f64,
+) -> Result<(), FigureError> {
+    let span = (high / low).ln();
+    let value = |t: f64| low * (t * span).exp();
+    let mut chart = ChartBuilder::on(area)
+        .margin_top(40)
+        .margin_bottom(50)
+        .margin_right(6)
+        .y_label_area_size(46)
+        .build_cartesian_2d(0.0..1.0, 0.0..1.0)
+        .map_err(fail)?;
+    let labels = if span > 0.0 { 5 } else { 1 };
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .disable_x_axis()
+        .y_labels(labels)
+        .y_label_formatter(&|t| number(value(*t)))
+        .label_style((FONT, 11))
+        .draw()
+        .map_err(fail)?;
+    let step = 1.0 / COLOUR_STEPS as f64;
+    chart
+        .draw_series((0..COLOUR_STEPS).map(|k| {
+            let t = k as f64 * step;
+            Rectangle::new([(0.0, t), (1.0, t + step)], ramp(t + step / 2.0).filled())
+        }))
+        .map_err(fail)?;
     Ok(())
 }

@@ -14,4 +14,4 @@ mod style;
 
 pub use campaign::FigureError;
 pub use campaign::{estimate_svg, history_csv, relative_half_width_svg};
-pub use heatmap::{heatmaps_svg, Heatmap, HeatmapAxis};
+pub use heatmap::{heatmaps_svg, Heatmap, HeatmapAxis, COLOUR_STEPS};

@@ -255,7 +255,16 @@ fn a_heatmap_draws_one_cell_per_positive_value_and_rejects_a_wrong_shape() {
         .descendants()
         .filter(|n| n.has_tag_name("rect") && n.attribute("fill") != Some("#FFFFFF"))
         .count();
-    assert_eq!(cells, 2 * 8, "8 positive cells per map");
+    assert_eq!(
+        cells,
+        2 * (8 + tslg_figures::COLOUR_STEPS),
+        "8 positive cells and a colour bar per map"
+    );
+    // The bar's ticks run from the smallest positive value to the largest.
+    let texts = texts(&doc);
+    for end in ["1.00e-11", "0.1"] {
+        assert!(texts.iter().any(|t| t == end), "{end} in {texts:?}");
+    }
     let wrong = Heatmap {
         values: vec![1.0; 5],
         ..map
@@ -323,4 +332,59 @@ fn degenerate_numbers_never_hang_a_figure() {
         Document::parse(&estimate).expect("the estimate figure is XML");
         Document::parse(&width).expect("the half-width figure is XML");
     }
+}
+
+/// The guarded interval's upper end is drawn when the campaign has one: at
+/// its height when it fits, at the top and marked "above" when it would
+/// flatten the estimate (it can be hundreds of times the estimate).
+#[test]
+fn the_guarded_upper_end_is_drawn_at_its_height_or_marked_above() {
+    let plain = estimate_svg(&view(), &history()).unwrap();
+    let doc = Document::parse(&plain).unwrap();
+    assert!(lines(&doc, "#A15C00").is_empty());
+    let near = CampaignView {
+        guarded_ci_high: Some(2.0e-4),
+        ..view()
+    };
+    let svg = estimate_svg(&near, &history()).unwrap();
+    let doc = Document::parse(&svg).unwrap();
+    assert!(
+        texts(&doc)
+            .iter()
+            .any(|t| t == "guarded upper end = 2.00e-4"),
+        "{:?}",
+        texts(&doc)
+    );
+    let dots = lines(&doc, "#A15C00");
+    assert!(dots.len() > 10, "{dots:?}");
+    let far = CampaignView {
+        guarded_ci_high: Some(0.5),
+        ..view()
+    };
+    let svg = estimate_svg(&far, &history()).unwrap();
+    let doc = Document::parse(&svg).unwrap();
+    assert!(
+        texts(&doc)
+            .iter()
+            .any(|t| t == "guarded upper end = 0.5 (above)"),
+        "{:?}",
+        texts(&doc)
+    );
+    // The estimate is not flattened: its line spans most of the height it
+    // spans without the guard.
+    let span = |svg: &str| {
+        let doc = Document::parse(svg).unwrap();
+        let line = lines(&doc, "#1F5DA6")
+            .into_iter()
+            .max_by_key(|l| l.len())
+            .unwrap();
+        let ys: Vec<f64> = line.iter().map(|p| p.1).collect();
+        ys.iter().cloned().fold(f64::MIN, f64::max) - ys.iter().cloned().fold(f64::MAX, f64::min)
+    };
+    assert!(
+        span(&svg) > 0.9 * span(&plain),
+        "{} vs {}",
+        span(&svg),
+        span(&plain)
+    );
 }

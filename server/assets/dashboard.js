@@ -150,6 +150,11 @@ async function indexPage() {
   const [campaigns, workers, libraries] = await Promise.all([
     json('/api/v1/campaigns'), json('/api/v1/workers'), json('/api/v1/libraries')]);
   fill('campaigns', campaigns.campaigns.map(campaignRow), 'no campaigns yet');
+  // Every campaign's warnings in words, above the list: the mark on a
+  // status is easy to miss and its hover text unreachable on a touch screen.
+  document.getElementById('warnings').replaceChildren(...campaigns.campaigns.flatMap((c) =>
+    (c.warnings ?? []).map((w) => el('li', { 'data-campaign': c.id },
+      el('a', { href: `/campaigns/${c.id}` }, `campaign ${c.id}`), `: ${w}`))));
   fill('workers', workers.workers.map(workerRow), 'no workers seen yet');
   fill('libraries', libraries.map(libraryRow), 'no libraries yet');
   return true;

@@ -125,6 +125,21 @@ fn save(name: &str, png: &[u8]) {
     eprintln!("screenshot: {}", path.display());
 }
 
+/// Whether every row of figures on the page spans at least 90% of the
+/// figures' section (they grow to the page's width, side by side or one per
+/// row) and every drawing fills its figure's width.
+const FIGURES_FILL_THE_PAGE: &str = "(() => {
+    const section = document.querySelector('.figures').getBoundingClientRect().width;
+    const rows = {};
+    for (const f of document.querySelectorAll('.figures > .figure')) {
+        const r = f.getBoundingClientRect();
+        rows[Math.round(r.top)] = (rows[Math.round(r.top)] ?? 0) + r.width;
+        const svg = f.querySelector('svg').getBoundingClientRect().width;
+        if (svg < 0.98 * r.width - 2) return false;
+    }
+    return Object.values(rows).every((w) => w >= 0.9 * section);
+})()";
+
 /// Points of the longest estimate-coloured line in the figure `figure`.
 fn line_points(figure: &str) -> String {
     format!(
@@ -200,6 +215,16 @@ async fn the_dashboard_follows_a_running_campaign_and_agrees_with_the_api() {
         "the half-width is drawn",
     )
     .await;
+    // On a wide screen and a narrow one (720 px drawings left 45% of a
+    // 1920 px page empty, and overflowed a phone's).
+    for width in [2400, 640, 1560] {
+        browser.set_window_size(width, 900).await.unwrap();
+        assert_eq!(
+            eval(&browser, FIGURES_FILL_THE_PAGE).await,
+            json!(true),
+            "at {width} px each row of figures spans the page and each drawing its figure"
+        );
+    }
     let legend = eval(&browser, "[...document.querySelectorAll('#half-width-figure svg text')].some(t => t.textContent.trim() === 'β = 0.005')").await;
     assert_eq!(legend, json!(true));
     // Redrawn as results arrive: its title counts the tests (the number of
@@ -319,6 +344,18 @@ async fn the_dashboard_follows_a_running_campaign_and_agrees_with_the_api() {
     assert_eq!(number(&count), view.warnings.len() as u64);
     let title = eval(&browser, &format!("{mark}.title")).await;
     assert_eq!(title, json!(view.warnings.join("\n\n")));
+    // … and lists them in words above the campaigns, each naming its campaign.
+    let listed = eval(
+        &browser,
+        &format!("[...document.querySelectorAll('#warnings li[data-campaign=\"{id}\"]')].map(li => li.textContent)"),
+    )
+    .await;
+    let worded: Vec<String> = view
+        .warnings
+        .iter()
+        .map(|w| format!("campaign {id}: {w}"))
+        .collect();
+    assert_eq!(listed, json!(worded));
     let unmarked = eval(
         &browser,
         &format!("document.querySelector('#campaign-{ndd} [data-field=warnings]') === null"),

@@ -384,8 +384,16 @@ async fn library_pictures_and_pages_are_served_and_unknown_ids_are_404() {
         .filter(|n| n.has_tag_name("rect") && n.attribute("fill") != Some("#FFFFFF"))
         .count();
     let exposed = 45 * 76; // the built-in exposure is positive everywhere
-    assert_eq!(cells, exposed + 286, "{cells}");
+    assert_eq!(
+        cells,
+        exposed + 286 + 2 * tslg_figures::COLOUR_STEPS,
+        "{cells}: the cells and a colour bar per map"
+    );
     let words = texts(&doc);
+    // The axes with their units.
+    for axis in ["range R (m)", "range rate Ṙ (m/s)"] {
+        assert!(words.iter().any(|t| t == axis), "{axis} in {words:?}");
+    }
     assert!(
         words.iter().any(|t| t.starts_with("exposure P(x)")),
         "{words:?}"

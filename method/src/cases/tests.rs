@@ -50,7 +50,7 @@ fn the_registered_cut_in_case_answers_like_the_typed_one() {
     let (exposure, q) = (&picture[0], &picture[1]);
     assert_eq!(
         (exposure.x_label.as_str(), exposure.y_label.as_str()),
-        ("range", "range_rate")
+        ("range R (m)", "range rate Ṙ (m/s)")
     );
     assert_eq!(exposure.values.len(), 45 * 76);
     assert!((exposure.values.iter().sum::<f64>() - 1.0).abs() < 1e-12);

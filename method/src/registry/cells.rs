@@ -339,9 +339,22 @@ where
         for c in &library.cells {
             q[c.cell] = c.criticality / library.w;
         }
+        // The axes' titles with their units, as the case names them.
+        let [x_label, y_label] = self.descriptor.picture_axes;
+        let labelled = |map: PictureMap| PictureMap {
+            x_label: x_label.to_owned(),
+            y_label: y_label.to_owned(),
+            ..map
+        };
         Ok(vec![
-            project(grid, |cell| exposure.p(cell), x, y, "exposure P(x)"),
-            project(grid, |cell| q[cell], x, y, "library q(x) = V(x)/W"),
+            labelled(project(
+                grid,
+                |cell| exposure.p(cell),
+                x,
+                y,
+                "exposure P(x)",
+            )),
+            labelled(project(grid, |cell| q[cell], x, y, "library q(x) = V(x)/W")),
         ])
     }
 

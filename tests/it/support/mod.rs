@@ -473,7 +473,8 @@ pub fn exact(vut: &str) -> f64 {
 
 /// A library's picture from the coordinator, parsed: its texts, and the
 /// coloured cells of the left map (exposure) and of the right map (the
-/// library's distribution), told apart by position.
+/// library's distribution), told apart by position (each map's colour
+/// bar, `COLOUR_STEPS` rectangles, left out).
 pub async fn library_picture(url: &str, id: i64) -> (Vec<String>, usize, usize) {
     let response = reqwest::get(format!("{url}/api/v1/libraries/{id}/figures/picture.svg"))
         .await
@@ -505,7 +506,8 @@ pub async fn library_picture(url: &str, id: i64) -> (Vec<String>, usize, usize) 
             right += 1;
         }
     }
-    (texts, left, right)
+    let bar = tslg_figures::COLOUR_STEPS;
+    (texts, left - bar, right - bar)
 }
 
 /// A coordinator on `database` started with `options`, one worker `w1`,
