@@ -53,6 +53,42 @@ pub fn log_range(values: impl IntoIterator<Item = f64>, margin: f64, fallback: f
     (low, high)
 }
 
+/// The labelled ticks of a log axis `[low, high]`: the powers of ten in it
+/// when there are at least three, else 1, 2 and 5 times them, else every
+/// multiple 1…9 of them. plotters labels powers of ten only, so a relative
+/// half-width falling from 0.3 to β = 0.05 had the single tick 0.1.
+pub fn log_ticks(low: f64, high: f64) -> Vec<f64> {
+    let within = |v: &f64| *v >= low * (1.0 - 1e-9) && *v <= high * (1.0 + 1e-9);
+    if !(low > 0.0 && high >= low && low.is_finite() && high.is_finite()) {
+        return Vec::new();
+    }
+    let first = low.log10().floor() as i32;
+    let last = high.log10().ceil() as i32;
+    let multiples = |steps: &[f64]| -> Vec<f64> {
+        (first..=last)
+            .flat_map(|e| {
+                // Divide for negative exponents: 3 / 10 is 0.3, 3 · 0.1 is not.
+                let scale = 10f64.powi(e.abs());
+                steps
+                    .iter()
+                    .map(move |s| if e >= 0 { s * scale } else { s / scale })
+            })
+            .filter(within)
+            .collect()
+    };
+    for steps in [
+        &[1.0][..],
+        &[1.0, 2.0, 5.0],
+        &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0],
+    ] {
+        let ticks = multiples(steps);
+        if ticks.len() >= 3 {
+            return ticks;
+        }
+    }
+    multiples(&[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0])
+}
+
 /// The top of a linear axis from 0 that shows every usable (finite, ≥ 0)
 /// value with `headroom` (e.g. 1.15) above the largest.
 pub fn linear_top(values: impl IntoIterator<Item = f64>, headroom: f64) -> f64 {
@@ -76,6 +112,22 @@ pub fn linear_top(values: impl IntoIterator<Item = f64>, headroom: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn log_axes_get_at_least_three_ticks() {
+        assert_eq!(log_ticks(1e-3, 2.0), [1e-3, 1e-2, 1e-1, 1.0]);
+        assert_eq!(log_ticks(0.033, 0.45), [0.05, 0.1, 0.2]);
+        assert_eq!(log_ticks(0.12, 0.35), [0.2, 0.3]);
+        assert_eq!(log_ticks(0.0, 1.0), Vec::<f64>::new());
+        // Every log range the figures draw (at least a factor 2 wide).
+        for (low, high) in [(0.1, 0.2), (0.33, 0.99), (7e-5, 1.4e-4), (1e-300, 1e-298)] {
+            let ticks = log_ticks(low, high);
+            assert!(ticks.len() >= 2, "{low}..{high}: {ticks:?}");
+            assert!(ticks
+                .iter()
+                .all(|t| (low * 0.999..=high * 1.001).contains(t)));
+        }
+    }
 
     fn drawable(range: (f64, f64)) -> bool {
         let (lo, hi) = range;

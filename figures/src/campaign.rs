@@ -3,7 +3,7 @@
 //! number of valid tests `n` on a log axis, as in the paper's result figures.
 //! Points with `n = 0` have no place on a log axis and are left out.
 
-use crate::axis::{linear_top, log_range};
+use crate::axis::{linear_top, log_range, log_ticks};
 use crate::style::{axis_format, count, number, BAND, ESTIMATE, FONT, GUARD, LIMIT, SIZE};
 use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
 use plotters::prelude::*;
@@ -159,7 +159,9 @@ pub fn relative_half_width_svg(
     draw(
         &title,
         (x0..x1).log_scale(),
-        (low..high).log_scale(),
+        (low..high)
+            .log_scale()
+            .with_key_points(log_ticks(low, high)),
         (low, high),
         "relative half-width",
         |chart| {

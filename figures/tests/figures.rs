@@ -388,3 +388,36 @@ fn the_guarded_upper_end_is_drawn_at_its_height_or_marked_above() {
         span(&plain)
     );
 }
+
+/// The numbers written along the y axis: texts left of the plot area that
+/// parse as numbers (the x ticks sit below it, the titles are words).
+fn y_ticks(doc: &Document) -> Vec<String> {
+    doc.descendants()
+        .filter(|n| n.has_tag_name("text"))
+        .filter(|n| {
+            n.attribute("x")
+                .and_then(|x| x.parse::<f64>().ok())
+                .is_some_and(|x| x < 90.0)
+        })
+        .filter_map(|n| n.text().map(|t| t.trim().to_owned()))
+        .filter(|t| t.parse::<f64>().is_ok())
+        .collect()
+}
+
+#[test]
+fn a_half_width_within_a_decade_still_has_ticks_to_read_it_by() {
+    // A typical β = 0.05 campaign: the half-width falls from 0.3 to 0.05.
+    let mut v = view();
+    v.beta = 0.05;
+    let points: Vec<HistoryPoint> = history()
+        .into_iter()
+        .map(|mut p| {
+            p.relative_half_width = p.relative_half_width.map(|r| 0.05 + r * 0.1);
+            p
+        })
+        .collect();
+    let svg = relative_half_width_svg(&v, &points).unwrap();
+    let doc = Document::parse(&svg).unwrap();
+    let ticks = y_ticks(&doc);
+    assert_eq!(ticks, ["0.050", "0.100", "0.200"]);
+}
