@@ -11,6 +11,8 @@ mod commands;
 mod inputs;
 pub mod service;
 
+pub use commands::gate::GateFailed;
+
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
 
@@ -163,6 +165,11 @@ pub enum CampaignCommand {
         id: i64,
         #[command(flatten)]
         server: ServerArgs,
+        /// The gate of `campaign start --wait --fail-above P`: exit 3 when
+        /// the campaign converged with its upper bound above P, 4 when it
+        /// stopped without converging.
+        #[arg(long, value_name = "P")]
+        fail_above: Option<f64>,
         /// Print JSON.
         #[arg(long)]
         json: bool,
@@ -242,6 +249,12 @@ pub struct CampaignStartArgs {
     /// Wait until the campaign stops, showing progress.
     #[arg(long)]
     pub wait: bool,
+    /// With --wait, a gate for continuous integration: exit 3 when the
+    /// campaign converged with its upper bound (the guarded one where the
+    /// campaign has it) above this probability, 4 when it stopped without
+    /// converging, 0 when it converged at or below it.
+    #[arg(long, value_name = "P", requires = "wait")]
+    pub fail_above: Option<f64>,
     /// Print JSON.
     #[arg(long)]
     pub json: bool,
@@ -674,9 +687,12 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Campaign(CampaignCommand::Status { id, server, json }) => {
             commands::campaign::status(&server, id, json)
         }
-        Command::Campaign(CampaignCommand::Watch { id, server, json }) => {
-            commands::campaign::watch_command(&server, id, json)
-        }
+        Command::Campaign(CampaignCommand::Watch {
+            id,
+            server,
+            fail_above,
+            json,
+        }) => commands::campaign::watch_command(&server, id, fail_above, json),
         Command::Campaign(CampaignCommand::Report {
             id,
             server,

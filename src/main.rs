@@ -5,9 +5,16 @@ fn main() -> ExitCode {
     let cli = tslg::Cli::parse();
     match tslg::run(cli) {
         Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {e:#}");
-            ExitCode::FAILURE
-        }
+        // A gate's verdict (`--fail-above`) has its own exit status.
+        Err(e) => match e.downcast_ref::<tslg::GateFailed>() {
+            Some(gate) => {
+                eprintln!("{gate}");
+                ExitCode::from(gate.code)
+            }
+            None => {
+                eprintln!("error: {e:#}");
+                ExitCode::FAILURE
+            }
+        },
     }
 }

@@ -1,6 +1,7 @@
 //! `tslg campaign start|status|cancel` and `tslg library create`: clients
 //! of a running coordinator.
 
+use crate::commands::gate;
 use crate::commands::progress::{BuildBar, CampaignBars};
 use crate::commands::remote::{block_on, client, describe, exposure_request, vehicle_json};
 use crate::{CampaignStartArgs, LibraryCreateArgs, MethodArg, OutsideArg, ServerArgs};
@@ -32,6 +33,9 @@ pub fn start(args: &CampaignStartArgs) -> anyhow::Result<()> {
         min_events: Some(args.rule.min_events),
         guard_outside: args.rule.guard_outside,
     };
+    if let Some(limit) = args.fail_above {
+        gate::check_limit(limit)?;
+    }
     block_on(async {
         let view = client.create_campaign(&request).await?;
         if !args.wait {
@@ -39,8 +43,17 @@ pub fn start(args: &CampaignStartArgs) -> anyhow::Result<()> {
         }
         eprintln!("campaign {} started; waiting for it to stop", view.id);
         let view = watch(&client, view.id).await?;
-        print(&view, args.json)
+        print(&view, args.json)?;
+        judge(&view, args.fail_above)
     })
+}
+
+/// The gate's verdict when a limit is given (`--fail-above`).
+fn judge(view: &tslg_api::CampaignView, limit: Option<f64>) -> anyhow::Result<()> {
+    if let Some(limit) = limit {
+        eprintln!("{}", gate::judge(view, limit)?);
+    }
+    Ok(())
 }
 
 /// Polls a campaign until it stops, showing a progress bar on stderr.
@@ -58,9 +71,21 @@ pub async fn watch(client: &Client, id: i64) -> anyhow::Result<tslg_api::Campaig
 
 /// `tslg campaign watch ID`: a progress bar until the campaign stops, then
 /// its state.
-pub fn watch_command(server: &ServerArgs, id: i64, json: bool) -> anyhow::Result<()> {
+pub fn watch_command(
+    server: &ServerArgs,
+    id: i64,
+    fail_above: Option<f64>,
+    json: bool,
+) -> anyhow::Result<()> {
+    if let Some(limit) = fail_above {
+        gate::check_limit(limit)?;
+    }
     let client = client(server)?;
-    block_on(async { print(&watch(&client, id).await?, json) })
+    block_on(async {
+        let view = watch(&client, id).await?;
+        print(&view, json)?;
+        judge(&view, fail_above)
+    })
 }
 
 /// `tslg campaign report ID --out DIR`: the dashboard's figures as SVG

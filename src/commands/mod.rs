@@ -5,6 +5,7 @@ pub mod cases;
 pub mod demo;
 pub mod evaluate;
 pub mod exact;
+pub mod gate;
 pub mod held_out;
 pub mod library;
 pub mod listing;

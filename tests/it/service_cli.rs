@@ -213,3 +213,107 @@ async fn invalid_tests_use_indices_but_are_not_counted_as_tests() {
         "{err}"
     );
 }
+
+/// `campaign start --wait --fail-above P` as a pipeline's gate: 0 below,
+/// 3 above (on the guarded bound where the campaign has one), 4 when the
+/// campaign did not converge, 1 for a limit that is not a probability.
+#[test]
+fn a_campaign_gates_a_pipeline_on_its_upper_bound() {
+    let dir = scratch();
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &[]);
+    let _worker = WorkerProcess::start(&server.url, 1, "w1");
+    let url = server.url.as_str();
+    let o = tslg(&[
+        "library",
+        "create",
+        "--server",
+        url,
+        "--surrogate",
+        "idm",
+        "--wait",
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let library: LibraryView = serde_json::from_slice(&o.stdout).unwrap();
+    let id = library.id.to_string();
+    let gate = |limit: &str, extra: &[&str]| {
+        let mut args = vec![
+            "campaign",
+            "start",
+            "--server",
+            url,
+            "--library-id",
+            &id,
+            "--vut",
+            "fvdm",
+            "--seed",
+            "3",
+            "--wait",
+            "--json",
+            "--fail-above",
+            limit,
+        ];
+        args.extend_from_slice(extra);
+        tslg(&args)
+    };
+    let o = gate("1", &[]);
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let view: CampaignView = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(view.status.as_str(), "converged");
+    let (high, guarded) = (view.ci_high.unwrap(), view.guarded_ci_high.unwrap());
+    assert!(
+        guarded > high,
+        "the FVDM fails where the IDM's library does not look"
+    );
+    assert!(String::from_utf8_lossy(&o.stderr).contains("gate passed"));
+    // Between the plain and the guarded upper end: the plain interval would
+    // pass, but it rests on the library covering the FVDM's failures.
+    let between = format!("{:e}", (high + guarded) / 2.0);
+    let o = gate(&between, &[]);
+    assert_eq!(
+        o.status.code(),
+        Some(3),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let said = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        said.contains("gate failed") && said.contains("guarded upper bound"),
+        "{said}"
+    );
+    // The same campaign again (same seed): the state is printed as usual.
+    let again: CampaignView = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(again.guarded_ci_high, view.guarded_ci_high);
+    let above = format!("{:e}", guarded * 1.000001);
+    assert_eq!(gate(&above, &[]).status.code(), Some(0));
+    // A budget too small to converge: no verdict either way.
+    let o = gate("1", &["--beta", "0.01", "--max-tests", "200"]);
+    assert_eq!(
+        o.status.code(),
+        Some(4),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(String::from_utf8_lossy(&o.stderr).contains("without converging"));
+    // Not a probability; and a gate needs --wait.
+    let o = gate("1.5", &[]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--fail-above must be a probability"));
+    let o = tslg(&[
+        "campaign",
+        "start",
+        "--server",
+        url,
+        "--vut",
+        "fvdm",
+        "--fail-above",
+        "0.1",
+    ]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--wait"));
+}

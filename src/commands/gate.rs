@@ -1,0 +1,87 @@
+//! `--fail-above P`: a campaign as a gate in a continuous-integration
+//! pipeline. After the campaign stops, the command exits
+//!
+//! - 0 when it converged and its upper bound is at most `P`,
+//! - [`ABOVE`] (3) when it converged and its upper bound is above `P`,
+//! - [`NOT_CONVERGED`] (4) when it stopped without converging (its budget
+//!   spent, cancelled, failed): no claim either way,
+//! - 1 on any other error (the coordinator unreachable, a bad request).
+//!
+//! The upper bound is the guarded one where the campaign has it (a library
+//! campaign of a grid case: `guarded_ci_high`, which also bounds what the
+//! library's surrogate may have missed; docs/statistics.md), else the
+//! interval's `ci_high`: a gate must not pass a vehicle on an interval that
+//! rests on the library covering its failures.
+
+use tslg_api::{CampaignStatus, CampaignView};
+
+/// The exit status of a converged campaign whose upper bound is above the
+/// limit.
+pub const ABOVE: u8 = 3;
+/// The exit status of a campaign that stopped without converging.
+pub const NOT_CONVERGED: u8 = 4;
+
+/// An outcome that ends the command with its own exit status and message
+/// (the message on stderr; the campaign's state is printed as usual).
+#[derive(Debug)]
+pub struct GateFailed {
+    pub code: u8,
+    pub message: String,
+}
+
+impl std::fmt::Display for GateFailed {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.message)
+    }
+}
+
+impl std::error::Error for GateFailed {}
+
+/// The upper bound the gate compares: the guarded one where it exists.
+pub fn upper_bound(view: &CampaignView) -> Option<f64> {
+    view.guarded_ci_high.or(view.ci_high)
+}
+
+/// Whether `view`, a stopped campaign, passes the gate at `limit`: `Ok`
+/// with the sentence saying why, or the failure with its exit status.
+pub fn judge(view: &CampaignView, limit: f64) -> Result<String, GateFailed> {
+    let which = if view.guarded_ci_high.is_some() {
+        "guarded upper bound"
+    } else {
+        "upper bound"
+    };
+    match (view.status, upper_bound(view)) {
+        (CampaignStatus::Converged, Some(upper)) if upper <= limit => Ok(format!(
+            "gate passed: campaign {} converged with {which} {upper:.3e} <= {limit:e}",
+            view.id
+        )),
+        (CampaignStatus::Converged, Some(upper)) => Err(GateFailed {
+            code: ABOVE,
+            message: format!(
+                "gate failed: campaign {} converged with {which} {upper:.3e} > {limit:e}",
+                view.id
+            ),
+        }),
+        (status, _) => Err(GateFailed {
+            code: NOT_CONVERGED,
+            message: format!(
+                "gate undecided: campaign {} stopped {} without converging{}",
+                view.id,
+                status.as_str(),
+                view.status_detail
+                    .as_deref()
+                    .map(|d| format!(" ({d})"))
+                    .unwrap_or_default()
+            ),
+        }),
+    }
+}
+
+/// Checks that `limit` is a probability a gate can compare against.
+pub fn check_limit(limit: f64) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        limit.is_finite() && (0.0..=1.0).contains(&limit),
+        "--fail-above must be a probability in [0, 1], got {limit}"
+    );
+    Ok(())
+}
