@@ -6,6 +6,7 @@
 mod audit;
 mod build_progress;
 mod builder;
+mod campaign_metrics;
 mod campaign_start;
 mod config;
 mod db;

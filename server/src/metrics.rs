@@ -4,7 +4,8 @@
 //! route template and status). Everything about campaigns, leases and
 //! libraries is read from the database at scrape time, so the numbers
 //! survive a restart and agree with the API: totals over all campaigns are
-//! counters (`_total`: they only grow, as campaigns are never deleted), the
+//! counters (`_total`: they only grow; a deleted campaign's share is kept in
+//! `deleted_totals`), the
 //! state of things now are gauges.
 
 use crate::db::sql;
@@ -48,10 +49,11 @@ fn read_snapshot(conn: &rusqlite::Connection, groups: (u64, u64)) -> Result<Snap
         "SELECT status, COUNT(*) FROM libraries GROUP BY status",
         [],
     )?;
+    // With what deleted campaigns had: the counters never fall.
     let (resolved, events, invalid): (i64, i64, i64) = sql::one(
         conn,
-        "SELECT COALESCE(SUM(indices), 0), COALESCE(SUM(events), 0), COALESCE(SUM(invalid), 0) \
-         FROM campaigns",
+        "SELECT d.indices + COALESCE(SUM(c.indices), 0), d.events + COALESCE(SUM(c.events), 0), \
+         d.invalid + COALESCE(SUM(c.invalid), 0) FROM deleted_totals AS d LEFT JOIN campaigns AS c",
         [],
     )?;
     let now = crate::db::now_ms();
@@ -197,8 +199,25 @@ fn scrape_registry(s: &Snapshot, live: usize, known: usize) -> Registry {
 pub async fn scrape(State(state): State<AppState>) -> Result<Response, ApiError> {
     let snapshot = snapshot(&state).await?;
     let (live, known) = state.workers.counts();
+    let running = state
+        .db
+        .read(|conn| crate::store::campaigns::list(conn, Some(CampaignStatus::Running)))
+        .await?;
+    let views: Vec<_> = running
+        .iter()
+        .take(crate::campaign_metrics::MAX_CAMPAIGN_SERIES)
+        .map(|row| {
+            let mut view = row.view();
+            state.throughput.fill(&mut view);
+            view
+        })
+        .collect();
+    let registry = scrape_registry(&snapshot, live, known);
+    // Every running campaign counts toward the omitted ones; only the
+    // newest have views built.
+    crate::campaign_metrics::register(&registry, &views, running.len());
     let mut families = state.metrics.gather();
-    families.extend(scrape_registry(&snapshot, live, known).gather());
+    families.extend(registry.gather());
     let mut body = Vec::new();
     TextEncoder::new()
         .encode(&families, &mut body)

@@ -171,6 +171,68 @@ async fn metrics_parse_as_prometheus_exposition_and_agree_with_the_api() {
         })
         .count();
     assert_eq!(ids, 0, "ids do not become labels");
+    // A running campaign has series of its own, labelled by its id, case
+    // and method; the stopped ones have none (bounded cardinality).
+    assert!(!text.contains("tslg_campaign_tests{"), "{text}");
+    let running = client
+        .create_campaign(&campaign(Method::Ndd, library.id, "idm", 0.001, 5))
+        .await
+        .unwrap();
+    let labels = [
+        ("campaign", running.id.to_string()),
+        ("case", "cut-in".to_owned()),
+        ("method", "ndd".to_owned()),
+    ];
+    let labels: Vec<(&str, &str)> = labels.iter().map(|(k, v)| (*k, v.as_str())).collect();
+    let deadline = std::time::Instant::now() + Duration::from_secs(60);
+    let (before, families, after) = loop {
+        let before = client.campaign(running.id).await.unwrap();
+        let families = parse_metrics(&get(&url).await.text().await.unwrap());
+        let after = client.campaign(running.id).await.unwrap();
+        if before.events > 0 || std::time::Instant::now() > deadline {
+            break (before, families, after);
+        }
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    };
+    assert!(before.events > 0, "the campaign ran");
+    let tests = sample(&families, "tslg_campaign_tests", &labels).expect("its tests");
+    assert!((before.tests as f64..=after.tests as f64).contains(&tests));
+    let events = sample(&families, "tslg_campaign_events", &labels).expect("its events");
+    assert!((before.events as f64..=after.events as f64).contains(&events));
+    assert_eq!(
+        sample(&families, "tslg_campaign_beta", &labels),
+        Some(0.001)
+    );
+    let estimate = sample(&families, "tslg_campaign_estimate", &labels).expect("its estimate");
+    // An NDD estimate is events / tests (every weight 1), both taken between
+    // the two reads.
+    let low = before.events as f64 / after.tests as f64;
+    let high = after.events as f64 / before.tests as f64;
+    assert!(
+        (low * (1.0 - 1e-12)..=high * (1.0 + 1e-12)).contains(&estimate),
+        "{estimate} between {low} and {high}"
+    );
+    assert!(sample(&families, "tslg_campaign_relative_half_width", &labels).unwrap() > 0.001);
+    assert_eq!(
+        sample(&families, "tslg_campaign_series_omitted", &[]),
+        Some(0.0)
+    );
+    client.cancel_campaign(running.id).await.unwrap();
+    let text = get(&url).await.text().await.unwrap();
+    assert!(!text.contains("tslg_campaign_tests{"), "gone when it stops");
+    // Deleting a stopped campaign does not take back what the counters
+    // counted (a falling counter reads as a reset).
+    let totals = |text: &str| {
+        let families = parse_metrics(text);
+        ["tslg_tests_resolved_total", "tslg_events_total"]
+            .map(|name| sample(&families, name, &[]).unwrap())
+    };
+    let counted = totals(&text);
+    let gone = client.campaign(running.id).await.unwrap();
+    assert!(gone.indices > 0);
+    client.delete_campaign(running.id).await.unwrap();
+    let text = get(&url).await.text().await.unwrap();
+    assert_eq!(totals(&text), counted);
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

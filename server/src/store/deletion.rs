@@ -27,6 +27,15 @@ fn delete_campaign_rows(conn: &Connection, id: i64) -> Result<(), ApiError> {
             [id],
         )?;
     }
+    // The counters on /metrics keep what it resolved (deleted_totals).
+    sql::execute(
+        conn,
+        "UPDATE deleted_totals SET \
+         indices = indices + (SELECT indices FROM campaigns WHERE id = ?1), \
+         events = events + (SELECT events FROM campaigns WHERE id = ?1), \
+         invalid = invalid + (SELECT invalid FROM campaigns WHERE id = ?1) WHERE id = 1",
+        [id],
+    )?;
     sql::execute(conn, "DELETE FROM campaigns WHERE id = ?", [id])?;
     Ok(())
 }
