@@ -189,6 +189,26 @@ pub enum CampaignCommand {
         #[arg(long, default_value_t = 300)]
         points: usize,
     },
+    /// Export the campaign's events (its resolved prefix): test index,
+    /// weight, the library's criticality and the scenario by dimension, as
+    /// CSV or JSON on stdout, or one OpenSCENARIO file per event (grid
+    /// cases) in a directory.
+    Events {
+        /// The campaign's id.
+        id: i64,
+        #[command(flatten)]
+        server: ServerArgs,
+        /// `csv`, `json` or `xosc` (OpenSCENARIO 1.0, needs --out).
+        #[arg(long, value_enum, default_value = "csv")]
+        format: EventFormat,
+        /// The directory for the xosc files and their road
+        /// (tslg_straight_road.xodr); created if missing.
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Export at most this many events (the first by test index).
+        #[arg(long)]
+        max: Option<u64>,
+    },
     /// Cancel a pending or running campaign.
     Cancel {
         /// The campaign's id.
@@ -465,6 +485,14 @@ pub struct BuildArgs {
     pub out: PathBuf,
 }
 
+/// How `tslg campaign events` writes the events.
+#[derive(Debug, Clone, Copy, ValueEnum, PartialEq, Eq)]
+pub enum EventFormat {
+    Csv,
+    Json,
+    Xosc,
+}
+
 #[derive(Debug, Clone, Copy, ValueEnum, PartialEq, Eq)]
 pub enum MethodArg {
     Library,
@@ -699,6 +727,13 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
             out,
             points,
         }) => commands::campaign::report(&server, id, &out, points),
+        Command::Campaign(CampaignCommand::Events {
+            id,
+            server,
+            format,
+            out,
+            max,
+        }) => commands::events::export(&server, id, format, out.as_deref(), max),
         Command::Campaign(CampaignCommand::Cancel { id, server }) => {
             commands::campaign::cancel(&server, id)
         }

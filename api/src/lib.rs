@@ -8,12 +8,14 @@
 
 mod campaign;
 mod case;
+mod events;
 mod lease;
 mod library;
 pub mod packed;
 
 pub use campaign::*;
 pub use case::*;
+pub use events::*;
 pub use lease::*;
 pub use library::*;
 

@@ -289,6 +289,34 @@ impl Client {
         .await
     }
 
+    /// A page of the campaign's events: those after test index `after`
+    /// (from the first when `None`), at most `limit`.
+    pub async fn events(
+        &self,
+        id: i64,
+        after: Option<u64>,
+        limit: usize,
+    ) -> Result<tslg_api::EventPage, CallError> {
+        let after = after.map_or(String::new(), |a| format!("&after={a}"));
+        self.json(self.request(
+            reqwest::Method::GET,
+            &format!("/api/v1/campaigns/{id}/events?limit={limit}{after}"),
+        ))
+        .await
+    }
+
+    /// Test `index` of the campaign as an OpenSCENARIO file.
+    pub async fn openscenario(&self, id: i64, index: u64) -> Result<String, CallError> {
+        self.send(self.request(
+            reqwest::Method::GET,
+            &format!("/api/v1/campaigns/{id}/tests/{index}/openscenario"),
+        ))
+        .await?
+        .text()
+        .await
+        .map_err(|e| CallError::Transient(format!("unreadable answer: {e}")))
+    }
+
     /// The workers the coordinator has seen.
     pub async fn workers(&self) -> Result<tslg_api::WorkerList, CallError> {
         self.json(self.request(reqwest::Method::GET, "/api/v1/workers"))

@@ -163,6 +163,12 @@ pub trait Case: Sync {
         None
     }
 
+    /// Scenario `cell` as an OpenSCENARIO scene another simulator can
+    /// replay ([`crate::openscenario`]); `None` for cases that have none.
+    fn openscenario(&self, _cell: usize) -> Option<crate::openscenario::Scene> {
+        None
+    }
+
     /// Why a vehicle this process ran failed (a program that crashed, hung
     /// or answered garbage), if one did: what was computed since is void.
     fn failure(&self) -> Option<String> {

@@ -19,6 +19,7 @@ pub mod mass;
 pub mod ndd_table;
 pub mod number;
 pub mod objective;
+pub mod openscenario;
 pub mod outside;
 pub mod prefix;
 pub mod progress;

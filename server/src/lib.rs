@@ -12,6 +12,7 @@ mod config;
 mod db;
 mod enumeration;
 mod error;
+mod event_export;
 mod history;
 mod latency;
 mod lease_size;

@@ -28,28 +28,22 @@ impl SamplerCache {
         if let Some(sampler) = self.lock().get(&row.id) {
             return Ok(Arc::clone(sampler));
         }
-        let file = match row.library_id {
-            Some(id) if row.method.uses_library() => Some(
-                db.read(move |conn| libraries::file(conn, id))
-                    .await?
-                    .with_context(|| format!("library {id} of campaign {} has no file", row.id))?
-                    .bytes,
-            ),
-            _ => None,
-        };
-        let row = row.clone();
-        let id = row.id;
-        let built = row.clone();
-        let tests = tokio::task::spawn_blocking(move || build(&built, file.as_deref()))
-            .await
-            .context("campaign build task failed")??;
-        // An adaptive campaign's copy resolves again the stages its stored
-        // state has passed.
-        let caught_up = Arc::clone(&tests);
-        db.read(move |conn| crate::store::adaptive::catch_up(conn, &row, &caught_up))
-            .await?;
-        self.lock().insert(id, Arc::clone(&tests));
+        let tests = load(db, row).await?;
+        self.lock().insert(row.id, Arc::clone(&tests));
         Ok(tests)
+    }
+
+    /// The campaign's tests, from the cache or built for this caller alone
+    /// (a stopped campaign's are not kept: [`Self::forget`]).
+    pub async fn peek(
+        &self,
+        db: &Database,
+        row: &CampaignRow,
+    ) -> Result<Arc<dyn CampaignTests>, ApiError> {
+        match self.cached(row.id) {
+            Some(tests) => Ok(tests),
+            None => load(db, row).await,
+        }
     }
 
     /// The tests of campaign `id` when they are built already.
@@ -72,6 +66,31 @@ impl SamplerCache {
             .lock()
             .unwrap_or_else(|poisoned| poisoned.into_inner())
     }
+}
+
+/// Builds campaign `row`'s tests off the async runtime, caught up with its
+/// stored state.
+async fn load(db: &Database, row: &CampaignRow) -> Result<Arc<dyn CampaignTests>, ApiError> {
+    let file = match row.library_id {
+        Some(id) if row.method.uses_library() => Some(
+            db.read(move |conn| libraries::file(conn, id))
+                .await?
+                .with_context(|| format!("library {id} of campaign {} has no file", row.id))?
+                .bytes,
+        ),
+        _ => None,
+    };
+    let row = row.clone();
+    let built = row.clone();
+    let tests = tokio::task::spawn_blocking(move || build(&built, file.as_deref()))
+        .await
+        .context("campaign build task failed")??;
+    // An adaptive campaign's copy resolves again the stages its stored
+    // state has passed.
+    let caught_up = Arc::clone(&tests);
+    db.read(move |conn| crate::store::adaptive::catch_up(conn, &row, &caught_up))
+        .await?;
+    Ok(tests)
 }
 
 fn build(row: &CampaignRow, file: Option<&[u8]>) -> anyhow::Result<Arc<dyn CampaignTests>> {

@@ -4,6 +4,7 @@ pub mod campaign;
 pub mod cases;
 pub mod demo;
 pub mod evaluate;
+pub mod events;
 pub mod exact;
 pub mod gate;
 pub mod held_out;

@@ -1,15 +1,8 @@
 //! The `tslg` command, run as a user runs it.
 
+use crate::support::tslg;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn tslg(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_tslg"))
-        .args(args)
-        .env_remove("TSLG_NDD_TABLE")
-        .output()
-        .expect("tslg runs")
-}
+use std::process::Output;
 
 fn stdout(o: &Output) -> String {
     String::from_utf8_lossy(&o.stdout).into_owned()

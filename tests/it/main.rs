@@ -17,6 +17,7 @@ mod service_cli;
 mod service_dashboard;
 mod service_deploy;
 mod service_e2e;
+mod service_events;
 mod service_external;
 mod service_fairness;
 mod service_highway;

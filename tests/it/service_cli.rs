@@ -5,13 +5,6 @@ use crate::support::*;
 use std::process::Command;
 use tslg_api::{CampaignView, InvalidResult, LibraryView, Method, ResultReport};
 
-fn tslg(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_tslg"))
-        .args(args)
-        .output()
-        .expect("run tslg")
-}
-
 #[test]
 fn library_create_and_campaign_start_status_cancel_drive_a_coordinator() {
     let dir = scratch();

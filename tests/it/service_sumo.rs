@@ -18,13 +18,6 @@ fn repo(path: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(path)
 }
 
-fn tslg(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_tslg"))
-        .args(args)
-        .output()
-        .expect("tslg runs")
-}
-
 /// The interpreter that has SUMO, or why the test cannot run.
 fn sumo_python() -> Result<PathBuf, String> {
     let python = repo("target/sumo-venv/bin/python");

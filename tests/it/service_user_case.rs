@@ -6,7 +6,6 @@
 
 use crate::support::*;
 use std::path::Path;
-use std::process::Command;
 use std::time::Duration;
 use tslg_api::{CampaignStatus, CreateCampaign, CreateCase, Method};
 
@@ -15,13 +14,6 @@ fn repo(path: &str) -> String {
         .join(path)
         .display()
         .to_string()
-}
-
-fn tslg(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_tslg"))
-        .args(args)
-        .output()
-        .expect("tslg runs")
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -7,15 +7,7 @@
 
 use crate::support::*;
 use std::path::Path;
-use std::process::Output;
 use tslg_api::{CreateLibrary, ExposureRequest};
-
-fn tslg(args: &[&str]) -> Output {
-    std::process::Command::new(env!("CARGO_BIN_EXE_tslg"))
-        .args(args)
-        .output()
-        .expect("tslg runs")
-}
 
 fn text(bytes: &[u8]) -> String {
     String::from_utf8_lossy(bytes).into_owned()

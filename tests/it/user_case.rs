@@ -6,15 +6,8 @@
 //! exact P(A), on the built-in exposure and on the authors' table. A case
 //! file or program that is wrong fails with the reason.
 
+use crate::support::tslg;
 use std::path::{Path, PathBuf};
-use std::process::Output;
-
-fn tslg(args: &[&str]) -> Output {
-    std::process::Command::new(env!("CARGO_BIN_EXE_tslg"))
-        .args(args)
-        .output()
-        .expect("tslg runs")
-}
 
 fn text(bytes: &[u8]) -> String {
     String::from_utf8_lossy(bytes).into_owned()

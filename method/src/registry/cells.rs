@@ -406,6 +406,35 @@ where
         Ok((0..self.case.grid().len()).map(|c| exposure.p(c)).collect())
     }
 
+    fn dimension_names(&self) -> Vec<String> {
+        let axes = self.case.grid().axes();
+        axes.iter().map(|a| a.name().to_owned()).collect()
+    }
+
+    fn cell_values(&self, cell: usize) -> Option<Vec<f64>> {
+        let grid = self.case.grid();
+        (cell < grid.len()).then(|| grid.values(cell))
+    }
+
+    fn library_criticalities(
+        &self,
+        file: &[u8],
+    ) -> Result<std::collections::HashMap<usize, f64>, CaseError> {
+        let library = self.library(file)?;
+        Ok(library
+            .cells
+            .iter()
+            .map(|c| (c.cell, c.criticality))
+            .collect())
+    }
+
+    fn openscenario(&self, cell: usize) -> Option<String> {
+        (cell < self.case.grid().len())
+            .then(|| self.case.openscenario(cell))
+            .flatten()
+            .map(|scene| scene.to_xosc())
+    }
+
     fn exact_event_probability(&self, spec: &serde_json::Value) -> Result<f64, CaseError> {
         let vehicle = self.builtin(spec, "an exact answer")?;
         self.unfailed(event_probability(

@@ -521,6 +521,33 @@ pub trait ScenarioCase: Send + Sync {
     /// on every cell (an external program's, run once per cell) it gives
     /// the exact `P(A)`. Grid cases only.
     fn cell_exposures(&self) -> Result<Vec<f64>, CaseError>;
+    /// The names of a scenario's parameters, in the order
+    /// [`PlannedTest::scenario`] lists them (a grid case's axes); empty for
+    /// sequential cases, whose scenarios are drawn while they run.
+    fn dimension_names(&self) -> Vec<String> {
+        Vec::new()
+    }
+    /// Grid cell `cell`'s parameters, in [`Self::dimension_names`]' order;
+    /// `None` past the grid or for sequential cases.
+    fn cell_values(&self, cell: usize) -> Option<Vec<f64>> {
+        let _ = cell;
+        None
+    }
+    /// The criticality `V(x)` of every cell of library `file`, by cell
+    /// (grid cases; empty for others).
+    fn library_criticalities(
+        &self,
+        file: &[u8],
+    ) -> Result<std::collections::HashMap<usize, f64>, CaseError> {
+        let _ = file;
+        Ok(Default::default())
+    }
+    /// Grid cell `cell` as an OpenSCENARIO 1.0 file another simulator can
+    /// replay ([`crate::openscenario`]); `None` for cases without one.
+    fn openscenario(&self, cell: usize) -> Option<String> {
+        let _ = cell;
+        None
+    }
     /// `P(A)` with the expected tests of a library campaign and of the NDD
     /// baseline to relative half-width `beta` at `confidence`: the analytic
     /// acceleration ratio (SPEC §3).

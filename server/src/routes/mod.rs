@@ -9,6 +9,7 @@ mod auth;
 mod campaigns;
 mod cases;
 mod dashboard;
+mod events;
 mod extract;
 mod figures;
 mod health;
@@ -58,6 +59,11 @@ pub fn router(state: AppState) -> Router {
         .route("/api/v1/campaigns", get(campaigns::list))
         .route("/api/v1/campaigns/{id}", get(campaigns::get_one))
         .route("/api/v1/campaigns/{id}/history", get(campaigns::history))
+        .route("/api/v1/campaigns/{id}/events", get(events::list))
+        .route(
+            "/api/v1/campaigns/{id}/tests/{index}/openscenario",
+            get(events::openscenario),
+        )
         .route("/api/v1/workers", get(leases::workers))
         .route(
             "/api/v1/campaigns/{id}/figures/estimate.svg",

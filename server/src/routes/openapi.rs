@@ -28,6 +28,8 @@ use utoipa::OpenApi;
         super::campaigns::list,
         super::campaigns::get_one,
         super::campaigns::history,
+        super::events::list,
+        super::events::openscenario,
         super::campaigns::plan,
         super::campaigns::cancel,
         super::campaigns::delete,

@@ -87,6 +87,51 @@ fn unpack_into(
     Ok(())
 }
 
+/// The first `limit` events of `campaign` in `from..to`, by test index
+/// (a page of `GET /api/v1/campaigns/{id}/events`): reads report rows in
+/// order from the one reaching `from` until `limit` events are found.
+pub fn events_page(
+    conn: &Connection,
+    campaign: i64,
+    from: u64,
+    to: u64,
+    limit: usize,
+) -> Result<Vec<(u64, f64)>, ApiError> {
+    // Rows are read in batches; the first may hold events before `from`,
+    // each later one at least one event in range (`events > 0`).
+    let batch = limit.clamp(1, 4096) + 1;
+    let mut events = Vec::new();
+    let mut at = from;
+    while events.len() < limit && at < to {
+        let rows: Vec<(i64, Vec<u8>)> = sql::all(
+            conn,
+            &format!("{REPORTS_REACHING} ORDER BY from_index LIMIT ?4"),
+            params![campaign, at as i64, to as i64, batch as i64],
+        )?;
+        let mut found = Vec::new();
+        for (start, bytes) in &rows {
+            unpack_into(&mut found, campaign, *start, bytes, at..to)?;
+        }
+        found.sort_by_key(|&(i, _)| i);
+        found.dedup_by_key(|e| e.0);
+        events.extend(found);
+        if rows.len() < batch {
+            break;
+        }
+        // Past the last row read: its events are in.
+        let (last, _) = rows.last().expect("a full batch");
+        let next = sql::one::<(i64,)>(
+            conn,
+            "SELECT to_index FROM reports WHERE campaign_id = ?1 AND from_index = ?2",
+            params![campaign, last],
+        )?
+        .0 as u64;
+        at = next.max(at + 1);
+    }
+    events.truncate(limit);
+    Ok(events)
+}
+
 /// Stored events and invalid tests of `campaign` in `from..to`, sorted by
 /// index, in one read (a fold runs in every report's transaction).
 pub fn outcomes(

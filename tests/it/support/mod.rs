@@ -205,6 +205,16 @@ pub async fn scraped(url: &str, name: &str) -> f64 {
         .unwrap()
 }
 
+/// Runs the `tslg` command with `args` (without an exposure table from the
+/// environment) and waits for it.
+pub fn tslg(args: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_tslg"))
+        .args(args)
+        .env_remove("TSLG_NDD_TABLE")
+        .output()
+        .expect("tslg runs")
+}
+
 pub fn scratch() -> tempfile::TempDir {
     tempfile::tempdir().expect("tempdir")
 }

@@ -193,6 +193,50 @@ impl Case for CutIn {
         world
     }
 
+    /// The vehicle under test (`Ego`, right lane) at its initial speed `v`
+    /// and the background vehicle (`CutIn`) in the left lane, its rear end
+    /// `R` ahead of the ego's front at speed `v + Ṙ`, changing into the
+    /// ego's lane at once at `t = 0`: the cut-in the simulation starts from
+    /// (SPEC §3). The run lasts the preset's `steps · dt`.
+    fn openscenario(&self, cell: usize) -> Option<crate::openscenario::Scene> {
+        use crate::openscenario::{LaneChange, PlacedVehicle, Scene, LEFT_LANE, RIGHT_LANE};
+        let grid = self.exposure.grid();
+        let (range, rate) = (grid.value(cell, 0), grid.value(cell, 1));
+        let speed = self.settings.initial_speed;
+        // The ego's rear end 100 m into the road.
+        let ego = 100.0;
+        Some(Scene {
+            description: format!(
+                "tslg cut-in ({}): range R = {range} m, range rate R' = {rate} m/s, \
+                 initial speed {speed} m/s",
+                self.preset.name()
+            ),
+            vehicles: vec![
+                PlacedVehicle {
+                    name: "Ego",
+                    lane: RIGHT_LANE,
+                    s: ego,
+                    speed,
+                    length: NOMINAL_LENGTH,
+                },
+                PlacedVehicle {
+                    name: "CutIn",
+                    lane: LEFT_LANE,
+                    s: ego + NOMINAL_LENGTH + range,
+                    speed: (speed + rate).max(0.0),
+                    length: NOMINAL_LENGTH,
+                },
+            ],
+            lane_change: Some(LaneChange {
+                actor: "CutIn",
+                target_lane: RIGHT_LANE,
+                duration: 0.0,
+            }),
+            max_time: self.settings.dt * self.settings.steps as f64,
+            goal: None,
+        })
+    }
+
     /// The case's loop measures mnpETTC as it drives the program.
     fn external_step_event_and_criticality(
         &self,

@@ -224,6 +224,52 @@ impl Case for HighwayExit {
         world
     }
 
+    /// The vehicle under test (`Ego`) in the left lane with its front
+    /// bumper at `p = 0` and speed `v₀`, the two background vehicles in the
+    /// right lane with their fronts at `p1`, `p2` and speeds `v1`, `v2`
+    /// (SPEC §5; `p` measured from 200 m into the road). The exit lane
+    /// change is the ego's task: written as a lane change to the right lane
+    /// starting at `t = 0` over 3 s, which a simulator driving the ego by
+    /// its own controller replaces by that controller's decision. The run
+    /// ends when the ego reaches the off-ramp at `p = L` or after the
+    /// world's time cap.
+    fn openscenario(&self, cell: usize) -> Option<crate::openscenario::Scene> {
+        use crate::openscenario::{LaneChange, PlacedVehicle, Scene, LEFT_LANE, RIGHT_LANE};
+        let [p1, v1, p2, v2] = self.scenario(cell);
+        let w = &self.world;
+        let origin = 200.0;
+        let rear = |front: f64| origin + front - w.length;
+        let placed = |name, lane, front, speed| PlacedVehicle {
+            name,
+            lane,
+            s: rear(front),
+            speed,
+            length: w.length,
+        };
+        Some(Scene {
+            description: format!(
+                "tslg highway exit ({}): BV1 at p1 = {p1} m, v1 = {v1} m/s; BV2 at p2 = {p2} m, \
+                 v2 = {v2} m/s; the vehicle under test at p = 0, {} m/s, must reach the right \
+                 lane before the off-ramp at p = {} m",
+                self.preset.name(),
+                w.start_speed,
+                w.exit
+            ),
+            vehicles: vec![
+                placed("Ego", LEFT_LANE, 0.0, w.start_speed),
+                placed("BV1", RIGHT_LANE, p1, v1),
+                placed("BV2", RIGHT_LANE, p2, v2),
+            ],
+            lane_change: Some(LaneChange {
+                actor: "Ego",
+                target_lane: RIGHT_LANE,
+                duration: 3.0,
+            }),
+            max_time: w.max_time,
+            goal: Some(("Ego", rear(w.exit))),
+        })
+    }
+
     /// The case's loop sees where the program changes lanes.
     fn external_step_event_and_criticality(
         &self,
