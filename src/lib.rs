@@ -422,11 +422,20 @@ impl SearchArgs {
         &self,
         case: &tslg_method::cases::CaseDescriptor,
     ) -> Option<tslg_method::library::LibrarySearch> {
+        self.search_with(case.multistart_starts)
+    }
+
+    /// The search asked for, `default_starts` starting points for a
+    /// multistart search that does not say; `None` for the case's default.
+    pub fn search_with(
+        &self,
+        default_starts: usize,
+    ) -> Option<tslg_method::library::LibrarySearch> {
         use tslg_method::library::{LibrarySearch, PolicySolver, SearchMethod};
         self.search.map(|search| match search {
             SearchArg::Exhaustive => LibrarySearch::Cells(SearchMethod::Exhaustive),
             SearchArg::Multistart => LibrarySearch::Cells(SearchMethod::Multistart {
-                starts: self.starts.unwrap_or(case.multistart_starts),
+                starts: self.starts.unwrap_or(default_starts),
                 seed: self.seed,
             }),
             SearchArg::DynamicProgramming => {

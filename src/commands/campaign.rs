@@ -149,21 +149,54 @@ pub fn cancel(server: &ServerArgs, id: i64) -> anyhow::Result<()> {
     block_on(async { print(&client.cancel_campaign(id).await?, false) })
 }
 
+/// The case's name, default surrogate and multistart starts: from this
+/// build's cases, else from the coordinator's (a case defined there with
+/// `tslg case create`).
+async fn case_defaults(
+    client: &Client,
+    case: &crate::CaseArgs,
+) -> anyhow::Result<(String, String, usize)> {
+    let unknown = match case.descriptor() {
+        Ok(d) => {
+            return Ok((
+                d.name.into(),
+                d.default_surrogate.into(),
+                d.multistart_starts,
+            ))
+        }
+        Err(e) => e,
+    };
+    let defined = client.cases().await?;
+    let view = defined
+        .into_iter()
+        .find(|c| c.name == case.name())
+        .ok_or(unknown)?;
+    let starts = match view.default_search {
+        tslg_api::SearchRequest::Multistart { starts, .. } => starts,
+        _ => DEFAULT_STARTS,
+    };
+    Ok((view.name, view.default_surrogate, starts))
+}
+
+/// Multistart starting points for a coordinator's case whose default search
+/// is not multistart (the built-in cut-in's number).
+const DEFAULT_STARTS: usize = 50;
+
 pub fn create_library(args: &LibraryCreateArgs) -> anyhow::Result<()> {
     let client = client(&args.server)?;
     let exposure = exposure_request(&args.case)?;
-    let descriptor = args.case.descriptor()?;
     if args.search.starts == Some(0) {
         anyhow::bail!("--starts must be at least 1");
     }
+    let (case, default_surrogate, starts) = block_on(case_defaults(&client, &args.case))?;
     let request = CreateLibrary {
-        case: descriptor.name.to_owned(),
+        case,
         preset: args.case.preset.clone(),
-        surrogate: vehicle_json(args.case.vehicle_or_default(&args.surrogate)?)?,
+        surrogate: vehicle_json(args.surrogate.as_deref().unwrap_or(&default_surrogate))?,
         exposure,
         search: args
             .search
-            .search(&descriptor)
+            .search_with(starts)
             .map(tslg_client::wire::search_request),
         threshold: args
             .search

@@ -6,6 +6,7 @@ mod support;
 
 mod browser_dashboard;
 mod cli;
+mod docs_commands;
 mod reproduce;
 mod service_access;
 mod service_adaptive;
