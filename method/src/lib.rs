@@ -21,6 +21,7 @@ pub mod number;
 pub mod objective;
 pub mod openscenario;
 pub mod outside;
+pub mod paired;
 pub mod prefix;
 pub mod progress;
 pub mod registry;

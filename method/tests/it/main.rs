@@ -10,5 +10,6 @@ mod carfollow_library;
 mod cutin_paper;
 mod external_protocol;
 mod highway_geometry;
+mod paired;
 mod readers_fuzz;
 mod sampling_exact;
