@@ -628,6 +628,12 @@ pub struct EvaluateArgs {
     /// Campaign seed: test i is determined by (seed, i).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// A paired regression campaign: test this vehicle too (a built-in name
+    /// or a JSON specification) on the same tests, and estimate the
+    /// difference of the two rates (--vut's minus this one's) from the
+    /// same draws (methods library and ndd; docs/statistics.md).
+    #[arg(long, value_name = "VUT")]
+    pub paired_with: Option<String>,
     /// Print the result as JSON.
     #[arg(long)]
     pub json: bool,

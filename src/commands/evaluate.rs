@@ -55,6 +55,11 @@ struct Search {
 
 pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
     check_epsilon(args.exploration.epsilon)?;
+    anyhow::ensure!(
+        args.paired_with.is_none() || args.method != MethodArg::Adaptive,
+        "--paired-with runs library and ndd campaigns: an adaptive campaign's stages follow \
+         one vehicle's failures"
+    );
     let library = match (args.method, &args.library) {
         (MethodArg::Library | MethodArg::Adaptive, None) => {
             anyhow::bail!("--library is required with --method library and adaptive")
@@ -85,6 +90,18 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
         .outside
         .map_or(descriptor.default_outside, OutsideArg::spread);
     let file = library.as_ref().map(|(bytes, _)| bytes.as_slice());
+    if let Some(other) = &args.paired_with {
+        let file = file.filter(|_| args.method == MethodArg::Library);
+        let plan = crate::commands::paired::Plan {
+            case: case.as_ref(),
+            file,
+            epsilon: args.exploration.epsilon,
+            outside,
+            split: args.exploration.split.split(),
+            seed: args.seed,
+        };
+        return crate::commands::paired::run(&plan, &vut, other, &rule, args.json);
+    }
     let (result, search) = match (args.method, file) {
         (MethodArg::Adaptive, Some(file)) => {
             let run = case.adaptive_campaign(
@@ -163,7 +180,7 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
 
 /// P(A) by enumeration of the grid, where the case has one and it is
 /// small enough to run here in a few seconds.
-fn exact_answer(case: &dyn ScenarioCase, vut: &serde_json::Value) -> Option<f64> {
+pub fn exact_answer(case: &dyn ScenarioCase, vut: &serde_json::Value) -> Option<f64> {
     let small = case.total_scenarios() <= tslg_api::EXACT_MAX_SCENARIOS;
     (case.descriptor().is_grid() && small)
         .then(|| case.exact_event_probability(vut).ok())

@@ -12,6 +12,7 @@ pub mod library;
 pub mod listing;
 pub mod load;
 pub mod local;
+pub mod paired;
 pub mod policy;
 pub mod progress;
 pub mod remote;

@@ -1039,3 +1039,64 @@ fn validate_flags_the_mismatched_pair_and_the_guard_restores_coverage() {
         stderr(&unknown)
     );
 }
+
+/// `tslg evaluate --paired-with`: a 5-cell regression of the IDM measured
+/// on the same NDD tests, the difference of the rates beside the exact one.
+#[test]
+fn a_paired_evaluation_estimates_the_difference_of_two_builds_on_the_same_tests() {
+    let o = tslg(&[
+        "evaluate",
+        "--method",
+        "ndd",
+        "--vut",
+        r#"{"model": "idm", "s0": 0.5}"#,
+        "--paired-with",
+        "idm",
+        "--seed",
+        "1",
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let r: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let f = |v: &serde_json::Value| v.as_f64().unwrap();
+    let (a, b, d) = (&r["rate_a"], &r["rate_b"], &r["difference"]);
+    assert!((f(&d[0]) - (f(&a[0]) - f(&b[0]))).abs() < 1e-15);
+    assert!(r["events"][2].as_u64().unwrap() >= 10, "{r}");
+    // The exact rates by enumeration: the IDM's 9.3260e-4, and the
+    // difference inside the paired interval on this seed.
+    let exact = &r["exact"];
+    assert!((f(&exact[1]) - 9.3260e-4).abs() < 5e-9, "{exact}");
+    assert!(f(&d[1]) <= f(&exact[2]) && f(&exact[2]) <= f(&d[2]), "{r}");
+    // Pairing: two separate NDD campaigns would need many times more.
+    assert!(f(&r["independent_tests"]) > 10.0 * r["tests"].as_u64().unwrap() as f64);
+    // The same vehicle twice never differs: it runs to its budget.
+    let o = tslg(&[
+        "evaluate",
+        "--method",
+        "ndd",
+        "--vut",
+        "idm",
+        "--paired-with",
+        "idm",
+        "--max-tests",
+        "20000",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stdout(&o).contains("max tests reached")
+            && stdout(&o).contains("discordant (one failed) 0")
+    );
+    let o = tslg(&[
+        "evaluate",
+        "--method",
+        "adaptive",
+        "--library",
+        "x.json",
+        "--vut",
+        "fvdm",
+        "--paired-with",
+        "idm",
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--paired-with runs library and ndd campaigns"));
+}
