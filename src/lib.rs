@@ -168,7 +168,7 @@ pub enum CampaignCommand {
         /// The gate of `campaign start --wait --fail-above P`: exit 3 when
         /// the campaign converged with its upper bound above P, 4 when it
         /// stopped without converging.
-        #[arg(long, value_name = "P")]
+        #[arg(long, value_name = "P", allow_negative_numbers = true)]
         fail_above: Option<f64>,
         /// Print JSON.
         #[arg(long)]
@@ -273,7 +273,12 @@ pub struct CampaignStartArgs {
     /// campaign converged with its upper bound (the guarded one where the
     /// campaign has it) above this probability, 4 when it stopped without
     /// converging, 0 when it converged at or below it.
-    #[arg(long, value_name = "P", requires = "wait")]
+    #[arg(
+        long,
+        value_name = "P",
+        requires = "wait",
+        allow_negative_numbers = true
+    )]
     pub fail_above: Option<f64>,
     /// Print JSON.
     #[arg(long)]

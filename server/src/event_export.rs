@@ -40,11 +40,29 @@ pub async fn page(
     }
     let row = campaign(state, id).await?;
     let resolved = row.indices.max(0) as u64;
-    let from = after.map_or(0, |a| a.saturating_add(1));
-    let mut found = state
-        .db
-        .read(move |conn| reports::events_page(conn, id, from, resolved, limit + 1))
-        .await?;
+    let tests = state.samplers.peek(&state.db, &row).await?;
+    // An adaptive campaign's estimate counts its estimation stages' tests
+    // only: its library and search stages' events (where it looked for
+    // the vehicle's failures) are not listed.
+    let counted = |index: u64| {
+        tests
+            .adaptive()
+            .is_none_or(|stages| stages.stage_kind(index) == Some("estimate"))
+    };
+    let mut from = after.map_or(0, |a| a.saturating_add(1));
+    let mut found = Vec::new();
+    while found.len() <= limit && from < resolved {
+        let batch = state
+            .db
+            .read(move |conn| reports::events_page(conn, id, from, resolved, limit + 1))
+            .await?;
+        let last = batch.len() <= limit;
+        from = batch.last().map_or(resolved, |&(i, _)| i + 1);
+        found.extend(batch.into_iter().filter(|&(i, _)| counted(i)));
+        if last {
+            break;
+        }
+    }
     let more = found.len() > limit;
     found.truncate(limit);
     let library = match row.library_id {
@@ -55,7 +73,6 @@ pub async fn page(
             .map(|f| f.bytes),
         _ => None,
     };
-    let tests = state.samplers.peek(&state.db, &row).await?;
     let case_row = row.clone();
     let (dimensions, events) = tokio::task::spawn_blocking(move || {
         let case = case_of(&case_row)?;
@@ -125,7 +142,15 @@ pub async fn openscenario(state: &AppState, id: i64, index: u64) -> Result<Strin
                 row.case_name
             ))
         };
-        let planned = tests.planned(index).ok_or_else(no_file)?;
+        if !case.descriptor().is_grid() {
+            return Err(no_file());
+        }
+        let planned = tests.planned(index).ok_or_else(|| {
+            ApiError::NotFound(format!(
+                "test {index} of campaign {id} is not planned yet: an adaptive campaign plans \
+                 each stage's tests when the stage before it is resolved"
+            ))
+        })?;
         case.openscenario(planned.cell).ok_or_else(no_file)
     })
     .await

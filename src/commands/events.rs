@@ -56,8 +56,14 @@ pub fn export(
     max: Option<u64>,
 ) -> anyhow::Result<()> {
     let client = client(server)?;
-    if format == EventFormat::Xosc && out.is_none() {
-        anyhow::bail!("--format xosc writes a file per event: give the directory with --out DIR");
+    match (format, out) {
+        (EventFormat::Xosc, None) => {
+            anyhow::bail!("--format xosc writes a file per event: give the directory with --out DIR")
+        }
+        (EventFormat::Csv | EventFormat::Json, Some(_)) => anyhow::bail!(
+            "--out DIR is for --format xosc; csv and json go to stdout (redirect them: > events.csv)"
+        ),
+        _ => {}
     }
     block_on(async {
         let page = all_events(&client, id, max).await?;
@@ -75,6 +81,12 @@ pub fn export(
             }
             EventFormat::Json => outln!("{}", serde_json::to_string_pretty(&page)?),
             EventFormat::Xosc => {
+                anyhow::ensure!(
+                    !page.dimensions.is_empty(),
+                    "campaign {id} is of case {}, whose scenarios have no OpenSCENARIO form \
+                     (they are drawn decision by decision while a test runs)",
+                    page.case
+                );
                 let dir = out.expect("checked above");
                 std::fs::create_dir_all(dir)
                     .with_context(|| format!("cannot create {}", dir.display()))?;

@@ -52,13 +52,13 @@ pub fn judge(view: &CampaignView, limit: f64) -> Result<String, GateFailed> {
     };
     match (view.status, upper_bound(view)) {
         (CampaignStatus::Converged, Some(upper)) if upper <= limit => Ok(format!(
-            "gate passed: campaign {} converged with {which} {upper:.3e} <= {limit:e}",
+            "gate passed: campaign {} converged with {which} {upper:.3e} <= {limit}",
             view.id
         )),
         (CampaignStatus::Converged, Some(upper)) => Err(GateFailed {
             code: ABOVE,
             message: format!(
-                "gate failed: campaign {} converged with {which} {upper:.3e} > {limit:e}",
+                "gate failed: campaign {} converged with {which} {upper:.3e} > {limit}",
                 view.id
             ),
         }),

@@ -294,9 +294,15 @@ fn a_campaign_gates_a_pipeline_on_its_upper_bound() {
     );
     assert!(String::from_utf8_lossy(&o.stderr).contains("without converging"));
     // Not a probability; and a gate needs --wait.
-    let o = gate("1.5", &[]);
-    assert_eq!(o.status.code(), Some(1));
-    assert!(String::from_utf8_lossy(&o.stderr).contains("--fail-above must be a probability"));
+    for limit in ["1.5", "-1", "NaN"] {
+        let o = gate(limit, &[]);
+        assert_eq!(o.status.code(), Some(1), "{limit}");
+        let said = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            said.contains("--fail-above must be a probability"),
+            "{said}"
+        );
+    }
     let o = tslg(&[
         "campaign",
         "start",

@@ -202,6 +202,31 @@ async fn events_leave_the_service_as_pages_tables_and_openscenario_files() {
     ]);
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("--out DIR"));
+    let o = tslg(&["campaign", "events", &ids, "--server", url, "--out", "x"]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--out DIR is for --format xosc"));
+    // An adaptive campaign lists its estimation stages' events only: the
+    // ones its estimate counts (its library and search stages looked for
+    // the vehicle's failures).
+    let adaptive = tslg_api::CreateCampaign {
+        method: Method::Adaptive,
+        ..request.clone()
+    };
+    let adaptive = client.create_campaign(&adaptive).await.unwrap().id;
+    let view = finished(&client, adaptive, Duration::from_secs(120)).await;
+    let page = client.events(adaptive, None, 10_000).await.unwrap();
+    assert_eq!(page.events.len() as u64, view.events);
+    let sum: f64 = page.events.iter().map(|e| e.weight).sum();
+    let estimate = view.estimate.unwrap();
+    assert!(
+        (sum / view.tests as f64 - estimate).abs() <= 1e-12 * estimate,
+        "{sum}"
+    );
+    // Its tests past the last planned stage have no scenario yet.
+    let unplanned = format!("{url}/api/v1/campaigns/{adaptive}/tests/9000000/openscenario");
+    let answer = reqwest::get(&unplanned).await.unwrap();
+    assert_eq!(answer.status().as_u16(), 404);
+    assert!(answer.text().await.unwrap().contains("not planned yet"));
     // Past the last event: an empty last page.
     let last = events.last().unwrap().test_index;
     let page = client.events(id, Some(last), 10).await.unwrap();

@@ -170,6 +170,10 @@ where
         self.planner.resolve(&mut state, &self.rule, results);
     }
 
+    fn stage_kind(&self, index: u64) -> Option<&'static str> {
+        self.state().stage_of(index).map(|stage| stage.kind())
+    }
+
     fn progress(&self) -> AdaptiveProgress {
         let state = self.state();
         let (library_tests, search_tests, stages) = state.spent();

@@ -307,6 +307,10 @@ pub trait AdaptiveStages: Send + Sync {
     fn resolve(&self, results: &[TestResult]);
     /// Where the campaign stands.
     fn progress(&self) -> AdaptiveProgress;
+    /// The kind of the stage test `index` belongs to (`"library"`,
+    /// `"search"`, `"estimate"`), once planned: only estimation tests enter
+    /// the estimate.
+    fn stage_kind(&self, index: u64) -> Option<&'static str>;
 }
 
 /// What an adaptive campaign run in this process did, whatever the case

@@ -22,7 +22,7 @@ pub fn descriptor() -> CaseDescriptor {
         presets: vec![
             Preset {
                 name: "paper-code",
-                summary: "the authors' code: 10 steps of 0.1 s, their speed update",
+                summary: "the authors' code: 10 steps of 1 s, their speed update",
             },
             Preset {
                 name: "paper-table",
