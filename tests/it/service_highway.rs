@@ -70,7 +70,8 @@ async fn highway_exit_library_and_ndd_campaigns_cover_the_exact_failure_rate() {
     assert_eq!(exposure, 120);
     assert!((1..=120).contains(&sampled), "{sampled}");
     assert!(
-        texts.iter().any(|t| t == "p1") && texts.iter().any(|t| t == "p2"),
+        texts.iter().any(|t| t.ends_with("position p₁ (m)"))
+            && texts.iter().any(|t| t.ends_with("position p₂ (m)")),
         "{texts:?}"
     );
 
