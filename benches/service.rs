@@ -11,10 +11,7 @@ mod common;
 
 use std::time::{Duration, Instant};
 use tslg::service::LocalService;
-use tslg_api::{
-    CreateCampaign, CreateLibrary, ExposureRequest, LeaseRequest, LibraryStatus, Method,
-    ResultReport, SearchRequest,
-};
+use tslg_api::{CreateCampaign, LeaseRequest, Method, ResultReport};
 use tslg_client::Client;
 use tslg_method::cases::open_case;
 use tslg_method::estimator::{default_n_min, StoppingRule, MIN_BETA};
@@ -35,6 +32,7 @@ fn request(tests: u64) -> CreateCampaign {
         n_min: None,
         min_events: None,
         guard_outside: false,
+        paired_with: None,
         outside: None,
         split: None,
     }
@@ -70,25 +68,6 @@ async fn through_service(tests: u64, workers: usize, threads: usize) -> anyhow::
     Ok(seconds)
 }
 
-/// The IDM's exhaustive cut-in library built through the service: its id.
-async fn idm_library(client: &Client) -> anyhow::Result<i64> {
-    let mut view = client
-        .create_library(&CreateLibrary {
-            case: "cut-in".into(),
-            preset: None,
-            surrogate: serde_json::json!({"model": "idm"}),
-            exposure: ExposureRequest::Builtin,
-            search: Some(SearchRequest::Exhaustive),
-            threshold: None,
-        })
-        .await?;
-    while view.status == LibraryStatus::Building {
-        tokio::time::sleep(Duration::from_millis(20)).await;
-        view = client.library(view.id).await?;
-    }
-    Ok(view.id)
-}
-
 /// Claim-and-report round trips with no worker running, of an NDD campaign
 /// or (`library`) of a library campaign of the IDM's cut-in library, whose
 /// reports the coordinator checks against its own runs (every event, a
@@ -102,7 +81,7 @@ async fn round_trips(count: usize, library: bool) -> anyhow::Result<(Vec<f64>, f
     let mut campaign = request(u64::MAX >> 20);
     if library {
         campaign.method = Method::Library;
-        campaign.library_id = Some(idm_library(&client).await?);
+        campaign.library_id = Some(common::idm_library(&client).await?);
     }
     let id = client.create_campaign(&campaign).await?.id;
     // The coordinator checks reports against its own runs: report the real
@@ -217,7 +196,7 @@ async fn high_event_service(beta: f64, threads: usize) -> anyhow::Result<Service
     let client = Client::new(&service.url, None)?;
     let request = CreateCampaign {
         method: Method::Library,
-        library_id: Some(idm_library(&client).await?),
+        library_id: Some(common::idm_library(&client).await?),
         vut: serde_json::json!({"model": "fvdm"}),
         beta,
         max_tests: 1 << 40,

@@ -266,6 +266,12 @@ pub struct CampaignStartArgs {
     /// Campaign seed: test i is determined by (seed, i).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// A paired regression campaign: test this vehicle too (a built-in name
+    /// or a JSON specification, as --vut) on the same tests, and estimate
+    /// the difference of the rates (--vut's minus this one's) from the same
+    /// draws; methods library and ndd (docs/statistics.md).
+    #[arg(long, value_name = "VUT")]
+    pub paired_with: Option<String>,
     /// Wait until the campaign stops, showing progress.
     #[arg(long)]
     pub wait: bool,

@@ -187,6 +187,15 @@ pub struct CreateCampaign {
     /// about `2.3/(ε β P(A))` tests with `outside: ndd` at 90 %.
     #[serde(default)]
     pub guard_outside: bool,
+    /// A paired regression campaign: a second vehicle (as `vut`) tested on
+    /// the same tests, and the difference of the rates (`vut`'s minus this
+    /// one's) estimated from the same draws. It stops when the difference
+    /// is known to within β of the larger rate or its interval excludes
+    /// zero (docs/statistics.md). Methods `library` and `ndd`; not with
+    /// `guard_outside`. The answer is vehicle a's campaign, with `pair`.
+    #[serde(default)]
+    #[schema(value_type = Option<Object>)]
+    pub paired_with: Option<serde_json::Value>,
 }
 
 fn default_epsilon() -> f64 {
@@ -394,6 +403,10 @@ pub struct CampaignView {
     /// built-in vehicles (which the coordinator runs again itself).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub audits: Option<AuditCounts>,
+    /// For a campaign of a paired regression campaign: the pair, and the
+    /// difference of the two vehicles' rates.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pair: Option<crate::PairView>,
     /// When the campaign was created (UTC, RFC 3339 with milliseconds).
     pub created_at: String,
     /// When the campaign's row last changed (UTC, RFC 3339 with milliseconds).

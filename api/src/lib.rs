@@ -12,12 +12,14 @@ mod events;
 mod lease;
 mod library;
 pub mod packed;
+mod pair;
 
 pub use campaign::*;
 pub use case::*;
 pub use events::*;
 pub use lease::*;
 pub use library::*;
+pub use pair::*;
 
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;

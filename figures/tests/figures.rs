@@ -52,6 +52,7 @@ fn view() -> CampaignView {
         tests_per_second: Some(1000.0),
         seconds_left: Some(5.0),
         audits: None,
+        pair: None,
         created_at: String::new(),
         updated_at: String::new(),
     }

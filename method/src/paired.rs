@@ -114,6 +114,28 @@ pub enum PairedStop {
     Exhausted,
 }
 
+impl PairedStop {
+    /// The stop's name on the wire and in the database.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            PairedStop::Precision => "precision",
+            PairedStop::Significant => "significant",
+            PairedStop::Exhausted => "exhausted",
+        }
+    }
+
+    /// The stop named `s`, if it is one.
+    pub fn parse(s: &str) -> Option<Self> {
+        [
+            PairedStop::Precision,
+            PairedStop::Significant,
+            PairedStop::Exhausted,
+        ]
+        .into_iter()
+        .find(|stop| stop.as_str() == s)
+    }
+}
+
 /// A paired campaign's result.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct PairedResult {
@@ -170,8 +192,10 @@ impl PairedSums {
         }
     }
 
-    /// The stop after the current test, if any.
-    fn decide(&self, rule: &StoppingRule, z: f64) -> Option<PairedResult> {
+    /// The stop after the current test, if any; `indices` counts the tests
+    /// resolved, valid or not (`max_tests` bounds them, as a single
+    /// campaign's).
+    fn decide(&self, rule: &StoppingRule, z: f64, indices: u64) -> Option<PairedResult> {
         // The difference's interval rests on the discordant tests (where only
         // one vehicle failed): at least `min_events` of them, as a single
         // campaign's interval rests on its events. Vehicles that never
@@ -191,8 +215,63 @@ impl PairedSums {
                 }
             }
         }
-        (self.n >= rule.max_tests).then(|| self.result(rule, PairedStop::Exhausted, None))
+        (indices >= rule.max_tests).then(|| self.result(rule, PairedStop::Exhausted, None))
     }
+
+    /// Folds the tests `*indices..to` in index order, checking the rule
+    /// after each valid one: `outcomes` lists, in index order, the tests of
+    /// that range where either vehicle had the event or could not run
+    /// (every other test is valid with no event for both). A test either
+    /// vehicle could not run does not count in `n`. Returns the stop, with
+    /// `*indices` one past its test; the same outcomes give the same stop
+    /// however they are cut into calls.
+    pub fn advance(
+        &mut self,
+        rule: &StoppingRule,
+        z: f64,
+        indices: &mut u64,
+        to: u64,
+        outcomes: &[(u64, PairedOutcome)],
+    ) -> Option<PairedResult> {
+        let mut listed = outcomes.iter().peekable();
+        while *indices < to {
+            let i = *indices;
+            *indices += 1;
+            match listed.next_if(|(j, _)| *j == i).map(|(_, o)| *o) {
+                Some(PairedOutcome::Invalid) => {}
+                Some(PairedOutcome::Weighted(a, b)) => {
+                    self.n += 1;
+                    self.add(a, b);
+                }
+                None => self.n += 1,
+            }
+            if let Some(result) = self.decide(rule, z, *indices) {
+                return Some(result);
+            }
+        }
+        None
+    }
+
+    /// The result of a campaign that stopped for `stop` (as stored: the
+    /// look's confidence where the stop was a significance look).
+    pub fn stopped(
+        &self,
+        rule: &StoppingRule,
+        stop: PairedStop,
+        look_confidence: Option<f64>,
+    ) -> PairedResult {
+        self.result(rule, stop, look_confidence)
+    }
+}
+
+/// A test of a paired campaign that the fold must see: either vehicle had
+/// the event (the weighted outcomes `aᵢ`, `bᵢ`), or either could not run.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum PairedOutcome {
+    /// `(aᵢ, bᵢ)`, at least one of them non-zero.
+    Weighted(f64, f64),
+    /// One of the vehicles could not run the test: it counts for neither.
+    Invalid,
 }
 
 /// Tests per parallel span.
@@ -251,19 +330,16 @@ pub fn run_paired_outcomes(
 ) -> PairedResult {
     let z = rule.z();
     let mut sums = PairedSums::default();
+    let mut indices = 0;
     let mut batch = FIRST_BATCH;
     loop {
-        let from = sums.n;
-        let to = (from + batch).min(rule.max_tests);
-        let mut events = outcomes(from, to).into_iter().peekable();
-        for i in from..to {
-            sums.n += 1;
-            if let Some((_, x, y)) = events.next_if(|&(j, _, _)| j == i) {
-                sums.add(x, y);
-            }
-            if let Some(result) = sums.decide(rule, z) {
-                return result;
-            }
+        let to = (indices + batch).min(rule.max_tests);
+        let listed: Vec<(u64, PairedOutcome)> = outcomes(indices, to)
+            .into_iter()
+            .map(|(i, a, b)| (i, PairedOutcome::Weighted(a, b)))
+            .collect();
+        if let Some(result) = sums.advance(rule, z, &mut indices, to, &listed) {
+            return result;
         }
         batch = (batch * 2).min(MAX_BATCH);
     }
@@ -284,6 +360,56 @@ mod tests {
         // d = 0, −1, 3, 0: mean 0.5, sample variance (10 − 4·0.25)/3 = 3.
         assert!((vd - 3.0 / 4.0).abs() < 1e-15);
         assert_eq!(s.events, (2, 2, 2));
+    }
+
+    #[test]
+    fn advance_gives_the_same_stop_however_the_tests_are_cut() {
+        let rule = StoppingRule {
+            beta: 0.2,
+            confidence: 0.9,
+            n_min: 30,
+            min_events: 10,
+            max_tests: 100_000,
+            guard_outside: false,
+        };
+        // Vehicle a fails on every 7th test, b on every 11th; test 5 of
+        // each 50 could not run.
+        let outcome = |i: u64| match (i % 50 == 5, i % 7 == 0, i % 11 == 0) {
+            (true, _, _) => Some(PairedOutcome::Invalid),
+            (_, false, false) => None,
+            (_, a, b) => Some(PairedOutcome::Weighted(
+                f64::from(u8::from(a)),
+                f64::from(u8::from(b)),
+            )),
+        };
+        let listed = |from: u64, to: u64| -> Vec<(u64, PairedOutcome)> {
+            (from..to)
+                .filter_map(|i| outcome(i).map(|o| (i, o)))
+                .collect()
+        };
+        let whole = {
+            let (mut sums, mut indices) = (PairedSums::default(), 0);
+            let r = sums.advance(&rule, rule.z(), &mut indices, 100_000, &listed(0, 100_000));
+            (r.expect("stops"), indices)
+        };
+        let mut sums = PairedSums::default();
+        let mut indices = 0;
+        let mut cut = None;
+        for to in (7..100_000).step_by(13) {
+            let from = indices;
+            if let Some(r) = sums.advance(&rule, rule.z(), &mut indices, to, &listed(from, to)) {
+                cut = Some((r, indices));
+                break;
+            }
+        }
+        assert_eq!(cut, Some(whole.clone()));
+        // Invalid tests count for neither vehicle: n < indices.
+        assert!(
+            whole.0.tests < whole.1,
+            "{} tests of {} indices",
+            whole.0.tests,
+            whole.1
+        );
     }
 
     #[test]

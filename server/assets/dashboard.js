@@ -185,6 +185,7 @@ async function campaignPage() {
     : `[${fmt.sci(c.ci_low)}, ${fmt.sci(c.guarded_ci_high)}]`, c.guarded_ci_high);
   document.getElementById('warnings').replaceChildren(
     ...(c.warnings ?? []).map((w) => el('li', {}, w)));
+  await pairSection(c);
   const share = progress(c);
   document.getElementById('progress').style.width = `${(share * 100).toFixed(1)}%`;
   const [estimate, halfWidth] = await Promise.all([
@@ -193,6 +194,40 @@ async function campaignPage() {
   document.getElementById('estimate-figure').innerHTML = estimate;
   document.getElementById('half-width-figure').innerHTML = halfWidth;
   return !['converged', 'exhausted', 'cancelled', 'failed'].includes(c.status);
+}
+
+// A paired regression campaign: both vehicles' rates over the pair's tests
+// and the difference with its paired interval (docs/statistics.md).
+async function pairSection(c) {
+  const p = c.pair;
+  const section = document.getElementById('pair');
+  section.hidden = !p;
+  if (!p) return;
+  const other = p.campaign_a === c.id ? p.campaign_b : p.campaign_a;
+  const b = await json(`/api/v1/campaigns/${other}`);
+  const [va, vb] = p.campaign_a === c.id ? [c.vut, b.vut] : [b.vut, c.vut];
+  set('pair-status', p.stop ? `${p.status} (${p.stop})` : p.status);
+  document.getElementById('pair-status').className = `status-${p.status}`;
+  const zero = p.difference && (p.difference.ci_low > 0 || p.difference.ci_high < 0)
+    ? 'its interval excludes zero' : 'its interval holds zero';
+  set('pair-detail', `${fmt.count(p.tests)} tests drawn the same for both vehicles, `
+    + `${fmt.count(p.discordant)} where only one failed; the difference a − b: ${zero}`
+    + (p.look_confidence ? ` (at confidence ${p.look_confidence.toFixed(4)})` : '')
+    + (p.independent_tests ? `; two separate campaigns would need about `
+      + `${fmt.count(Math.round(p.independent_tests))} tests each for this half-width` : '')
+    + (p.exact_difference != null ? `; exact difference ${fmt.sci(p.exact_difference)}` : ''));
+  const interval = (i) => (i ? `[${fmt.sci(i.ci_low)}, ${fmt.sci(i.ci_high)}]` : '–');
+  const row = (name, id, vehicle, events, rate) => el('tr', { 'data-row': name },
+    el('td', {}, name),
+    el('td', {}, id == null ? '' : el('a', { href: `/campaigns/${id}` }, `campaign ${id}`)),
+    el('td', {}, vehicle == null ? '' : JSON.stringify(vehicle)),
+    events == null ? el('td') : num('events', events, fmt.count(events)),
+    num('estimate', rate?.estimate, fmt.sci(rate?.estimate)),
+    el('td', { 'data-field': 'interval' }, interval(rate)));
+  fill('pair-rates', [
+    row('a', p.campaign_a, va, p.events_a, p.rate_a),
+    row('b', p.campaign_b, vb, p.events_b, p.rate_b),
+    row('a − b', null, null, null, p.difference)], 'no tests yet');
 }
 
 async function libraryPage() {

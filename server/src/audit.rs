@@ -31,6 +31,7 @@ use crate::store::audits::{self, AuditRow, AuditState, NewAudit};
 use crate::store::campaigns;
 use crate::store::fold::fold_prefix;
 use crate::store::leases::LeaseState;
+use crate::store::pairs;
 use crate::store::results::{check_effort, held_lease, stopped_ack, Recorded};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
@@ -319,7 +320,9 @@ fn take_back(conn: &Connection, id: i64, worker: &str) -> Result<bool, ApiError>
     };
     let status = campaign.status;
     let stopped = status.is_final();
-    if matches!(status.as_str(), "cancelled" | "failed") || (stopped && campaign.indices <= first) {
+    // A campaign its pair stopped was decided at the pair's index.
+    let decided = pairs::decided_at(conn, &campaign)?.unwrap_or(campaign.indices as u64);
+    if matches!(status.as_str(), "cancelled" | "failed") || (stopped && decided <= first as u64) {
         return Ok(false);
     }
     for &(from, to) in &ranges {
@@ -372,14 +375,10 @@ fn take_back(conn: &Connection, id: i64, worker: &str) -> Result<bool, ApiError>
         )?;
         if stopped {
             // The leases the stop cancelled hold ranges not yet reported.
-            sql::execute(
-                conn,
-                "UPDATE leases SET state = 'active', expires_at = 0 WHERE campaign_id = ? \
-                 AND state = 'cancelled' AND resume_at < end_index AND audit_id IS NULL",
-                [id],
-            )?;
+            crate::store::leases::reactivate_cancelled(conn, id)?;
             tracing::warn!(campaign = id, worker, "a stopped campaign runs again");
         }
+        pairs::reopen(conn, &campaign)?;
     }
     Ok(true)
 }
@@ -418,6 +417,7 @@ fn record_audit_run_in(
             ack: stopped_ack(1, lease.resume_at as u64, end, campaign.status),
             stopped: None,
             campaign_id: campaign.id,
+            partner_stopped: None,
         });
     }
     check_effort(&lease, report, now_ms())?;
@@ -438,7 +438,8 @@ fn record_audit_run_in(
     }
     // The flag may have reset the campaign: fold from what is stored now.
     let campaign = campaigns::get(conn, campaign.id)?;
-    let stopped = fold_prefix(conn, &campaign, tests, None, None)?;
+    let own = fold_prefix(conn, &campaign, tests, None, None)?;
+    let (stopped, partner_stopped) = pairs::fold_after(conn, &campaign, own)?;
     Ok(Recorded {
         ack: ResultAck {
             accepted: 1,
@@ -451,6 +452,7 @@ fn record_audit_run_in(
         },
         stopped,
         campaign_id: campaign.id,
+        partner_stopped,
     })
 }
 

@@ -7,6 +7,7 @@ use crate::error::ApiError;
 use crate::state::AppState;
 use crate::store::campaigns::{self, CampaignRow, NewCampaign};
 use crate::store::libraries::{self, LibraryRow};
+use crate::store::pairs;
 use crate::validate::check_name;
 use std::sync::Arc;
 use tslg_api::{CampaignStatus, CreateCampaign, LibraryStatus, Method, EXACT_MAX_SCENARIOS};
@@ -83,6 +84,20 @@ pub fn rule_of(req: &CreateCampaign) -> Result<StoppingRule, ApiError> {
             req.case,
             req.case
         )));
+    }
+    if req.paired_with.is_some() && !matches!(req.method, Method::Library | Method::Ndd) {
+        return Err(bad(format!(
+            "paired_with runs methods `library` and `ndd`: an {} campaign's stages follow \
+             one vehicle's failures, so two vehicles would not draw the same tests",
+            req.method.as_str()
+        )));
+    }
+    if req.paired_with.is_some() && req.guard_outside {
+        return Err(bad(
+            "paired_with estimates the difference of two rates; guard_outside bounds one \
+             campaign's outside mass, and no guard is defined for a difference: run the \
+             guarded campaigns separately",
+        ));
     }
     if req.guard_outside && !case.is_grid() {
         return Err(bad(format!(
@@ -190,7 +205,8 @@ fn open(
     })
 }
 
-/// Starts the campaign `req` asks for.
+/// Starts the campaign `req` asks for; for a paired regression campaign
+/// (`paired_with`), both of its campaigns, linked, and answers vehicle a's.
 pub async fn start(state: &AppState, req: CreateCampaign) -> Result<CampaignRow, ApiError> {
     let rule = rule_of(&req)?;
     let library = library_of(state, &req).await?;
@@ -212,34 +228,88 @@ pub async fn start(state: &AppState, req: CreateCampaign) -> Result<CampaignRow,
         }),
         _ => None,
     };
-    let (request, source) = (req.clone(), exposure.clone());
+    // Vehicle b of a pair: the same request with its vehicle.
+    let requests: Vec<CreateCampaign> = std::iter::once(req.clone())
+        .chain(
+            req.paired_with
+                .clone()
+                .map(|vut| CreateCampaign { vut, ..req.clone() }),
+        )
+        .collect();
+    let (source, requested) = (exposure.clone(), requests.clone());
     let opened = tokio::task::spawn_blocking(move || {
-        open(&request, &rule, preset.as_deref(), &source, file.as_deref())
+        requested
+            .iter()
+            .map(|request| open(request, &rule, preset.as_deref(), &source, file.as_deref()))
+            .collect::<Result<Vec<Opened>, CaseError>>()
     })
     .await
     .map_err(|e| ApiError::Internal(e.into()))?
-    .map_err(|e| bad(e.to_string()))?;
-    // Only workers offering an external program get its tests.
-    let requires = ExternalVut::from_spec(&opened.vut)
-        .and_then(Result::ok)
-        .map(|e| e.requirement(opened.case.name()));
+    .map_err(|e| {
+        bad(match &req.paired_with {
+            Some(_) => format!("{e} (vut or paired_with)"),
+            None => e.to_string(),
+        })
+    })?;
     let status = match &library {
         Some(lib) if req.method.uses_library() && lib.status == LibraryStatus::Building => {
             CampaignStatus::Pending
         }
         _ => CampaignStatus::Running,
     };
-    let new = NewCampaign {
+    let table = match exposure {
+        ExposureSource::Table { text, .. } => Some(text),
+        ExposureSource::Builtin => None,
+    };
+    let news: Vec<NewCampaign> = opened
+        .iter()
+        .map(|o| new_campaign(&req, o, rule, status, table.clone()))
+        .collect();
+    let rows = state
+        .db
+        .write(move |conn| {
+            let rows = news
+                .iter()
+                .map(|new| campaigns::insert(conn, new))
+                .collect::<Result<Vec<_>, _>>()?;
+            if let [a, b] = rows.as_slice() {
+                pairs::link(conn, a.id, b.id)?;
+                return Ok(vec![
+                    campaigns::get(conn, a.id)?,
+                    campaigns::get(conn, b.id)?,
+                ]);
+            }
+            Ok(rows)
+        })
+        .await?;
+    for (row, opened) in rows.iter().zip(opened) {
+        if let Some(tests) = opened.tests {
+            state.samplers.insert(row.id, tests);
+        }
+    }
+    Ok(rows.into_iter().next().expect("a campaign was inserted"))
+}
+
+/// The row to insert for `req`'s vehicle as `opened`.
+fn new_campaign(
+    req: &CreateCampaign,
+    opened: &Opened,
+    rule: StoppingRule,
+    status: CampaignStatus,
+    exposure_table: Option<String>,
+) -> NewCampaign {
+    // Only workers offering an external program get its tests.
+    let requires = ExternalVut::from_spec(&opened.vut)
+        .and_then(Result::ok)
+        .map(|e| e.requirement(opened.case.name()));
+    NewCampaign {
         case_name: opened.case.name().to_owned(),
         preset: opened.case.preset(),
         method: req.method,
         library_id: req.library_id,
         exposure_name: opened.case.exposure_name().to_owned(),
         exposure_fingerprint: opened.case.exposure_fingerprint(),
-        exposure_table: match exposure {
-            ExposureSource::Table { text, .. } => Some(text),
-            ExposureSource::Builtin => None,
-        },
+        exposure_table,
         vut: opened.vut.to_string(),
         requires,
         epsilon: req.epsilon,
@@ -258,13 +328,5 @@ pub async fn start(state: &AppState, req: CreateCampaign) -> Result<CampaignRow,
                 "library",
             )
         }),
-    };
-    let row = state
-        .db
-        .write(move |conn| campaigns::insert(conn, &new))
-        .await?;
-    if let Some(tests) = opened.tests {
-        state.samplers.insert(row.id, tests);
     }
-    Ok(row)
 }

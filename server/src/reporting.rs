@@ -230,6 +230,10 @@ fn account(state: &AppState, report: &ResultReport, recorded: &Recorded) {
     if accepted > 0 && recorded.ack.proceed {
         state.throughput.accepted(recorded.campaign_id, accepted);
     }
+    if let Some(partner) = recorded.partner_stopped {
+        state.samplers.forget(partner);
+        state.throughput.forget(partner);
+    }
     if recorded.stopped.is_some() {
         state.samplers.forget(recorded.campaign_id);
         state.throughput.forget(recorded.campaign_id);

@@ -32,6 +32,7 @@ pub fn start(args: &CampaignStartArgs) -> anyhow::Result<()> {
         n_min: args.rule.n_min,
         min_events: Some(args.rule.min_events),
         guard_outside: args.rule.guard_outside,
+        paired_with: args.paired_with.as_deref().map(vehicle_json).transpose()?,
     };
     if let Some(limit) = args.fail_above {
         gate::check_limit(limit)?;

@@ -88,6 +88,7 @@ async fn drive(
         n_min: None,
         min_events: None,
         guard_outside: false,
+        paired_with: None,
     };
     // The service runs adaptive campaigns of grid cases; a sequential
     // case's probes the vehicle from grid states, which it cannot lease

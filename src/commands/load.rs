@@ -298,6 +298,7 @@ pub fn load_campaign() -> CreateCampaign {
         n_min: None,
         min_events: None,
         guard_outside: false,
+        paired_with: None,
         outside: None,
         split: None,
     }

@@ -54,6 +54,56 @@ pub fn progress_line(label: &str, view: &CampaignView) -> String {
     )
 }
 
+/// A paired regression campaign's difference, several lines (as `tslg
+/// evaluate --paired-with` prints it).
+fn describe_pair(pair: &tslg_api::PairView) -> String {
+    let interval = |i: Option<tslg_api::PairedInterval>| {
+        i.map_or("-".into(), |i| {
+            format!("{:.4e}  [{:.4e}, {:.4e}]", i.estimate, i.ci_low, i.ci_high)
+        })
+    };
+    let mut lines = vec![
+        format!(
+            "\n  paired: a = campaign {}, b = campaign {}; {} over {} tests{}",
+            pair.campaign_a,
+            pair.campaign_b,
+            pair.status.as_str(),
+            pair.tests,
+            match pair.stop {
+                Some(tslg_api::PairStop::Precision) =>
+                    " (the difference is within beta of the larger rate)",
+                Some(tslg_api::PairStop::Significant) =>
+                    " (the difference's interval excludes zero)",
+                Some(tslg_api::PairStop::Exhausted) => " (max tests reached)",
+                Some(tslg_api::PairStop::Cancelled) => " (cancelled)",
+                None => "",
+            }
+        ),
+        format!(
+            "    events a {}, b {}, discordant (one failed) {}",
+            pair.events_a, pair.events_b, pair.discordant
+        ),
+        format!("    P(A) of a          {}", interval(pair.rate_a)),
+        format!("    P(A) of b          {}", interval(pair.rate_b)),
+        format!("    difference a - b   {}", interval(pair.difference)),
+    ];
+    if let Some(level) = pair.look_confidence {
+        lines.push(format!("    (zero excluded at confidence {level:.4})"));
+    }
+    if let Some(t) = pair.independent_tests {
+        lines.push(format!(
+            "    two separate campaigns: about {t:.0} tests each for this half-width ({:.1} x)",
+            t / pair.tests.max(1) as f64
+        ));
+    }
+    if let Some(d) = pair.exact_difference {
+        lines.push(format!(
+            "    exact difference   {d:.4e} (by enumeration of the grid)"
+        ));
+    }
+    lines.join("\n")
+}
+
 /// The campaign's state, several lines.
 pub fn describe(view: &CampaignView) -> String {
     let health = match (view.effective_events, view.largest_weight_share) {
@@ -108,6 +158,7 @@ pub fn describe(view: &CampaignView) -> String {
         ),
         None => String::new(),
     };
+    let pair = view.pair.as_ref().map_or(String::new(), describe_pair);
     let warnings: String = view
         .warnings
         .iter()
@@ -115,7 +166,7 @@ pub fn describe(view: &CampaignView) -> String {
         .collect();
     format!(
         "campaign {} ({} {}, vehicle {}): {}{}\n  tests {} (events {}, invalid {}), stop index {}\n  \
-         estimate {}  interval [{}, {}]  relative half-width {} (β {}, confidence {}){exact}{health}{outside}{adaptive}{warnings}",
+         estimate {}  interval [{}, {}]  relative half-width {} (β {}, confidence {}){exact}{health}{outside}{adaptive}{pair}{warnings}",
         view.id,
         view.case,
         view.method.as_str(),

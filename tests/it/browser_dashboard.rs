@@ -331,7 +331,64 @@ async fn the_dashboard_follows_a_running_campaign_and_agrees_with_the_api() {
         "every warning, as the API words it"
     );
     assert!(!view.warnings.is_empty());
+    let unpaired = eval(&browser, "document.getElementById('pair').hidden").await;
+    assert_eq!(
+        unpaired,
+        json!(true),
+        "a campaign without a pair shows none"
+    );
     save("campaign-library.png", &browser.screenshot().await.unwrap());
+
+    // A paired regression campaign: the FVDM against the IDM on the IDM's
+    // library. Its page shows both rates and the difference with the
+    // paired interval, as the API gives them.
+    let paired = CreateCampaign {
+        paired_with: Some(json!("idm")),
+        ..campaign(Method::Library, library.id, "fvdm", 0.2, 5)
+    };
+    let pair_id = client.create_campaign(&paired).await.unwrap().id;
+    let pair = finished(&client, pair_id, Duration::from_secs(120))
+        .await
+        .pair
+        .unwrap();
+    browser
+        .goto(&format!(
+            "{}/campaigns/{}?refresh=300",
+            server.url, pair.campaign_b
+        ))
+        .await
+        .unwrap();
+    until(
+        &browser,
+        "!document.getElementById('pair').hidden && document.querySelector('#pair-rates [data-row=\"b\"]')",
+        "the pair section",
+    )
+    .await;
+    let cell = |row: &str, field: &str| {
+        format!("document.querySelector('#pair-rates [data-row=\"{row}\"] [data-field={field}]').dataset.value")
+    };
+    for (row, rate) in [
+        ("a", pair.rate_a),
+        ("b", pair.rate_b),
+        ("a − b", pair.difference),
+    ] {
+        let shown: f64 = eval(&browser, &cell(row, "estimate"))
+            .await
+            .as_str()
+            .unwrap()
+            .parse()
+            .unwrap();
+        assert_eq!(shown, rate.unwrap().estimate, "row {row}");
+    }
+    let events = eval(&browser, &cell("a", "events")).await;
+    assert_eq!(number(&events), pair.events_a);
+    let link = eval(
+        &browser,
+        "document.querySelector('#pair-rates [data-row=\"a\"] a').getAttribute('href')",
+    )
+    .await;
+    assert_eq!(link, json!(format!("/campaigns/{}", pair.campaign_a)));
+    save("campaign-paired.png", &browser.screenshot().await.unwrap());
 
     // The overview marks the campaign with its warnings (their number, the
     // texts on hover); the NDD campaign, which has none, is not marked.

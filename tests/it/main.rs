@@ -24,6 +24,7 @@ mod service_fairness;
 mod service_highway;
 mod service_load;
 mod service_outside;
+mod service_paired;
 mod service_protocol;
 mod service_recovery;
 mod service_sumo;

@@ -5,7 +5,7 @@ use crate::error::{ApiError, ApiJson};
 use crate::history;
 use crate::routes::{ApiPath, ApiQuery};
 use crate::state::AppState;
-use crate::store::{audits, campaigns};
+use crate::store::{audits, campaigns, pairs};
 use axum::extract::State;
 use axum::http::{header, StatusCode};
 use axum::response::IntoResponse;
@@ -24,10 +24,11 @@ pub async fn create(
 ) -> Result<impl IntoResponse, ApiError> {
     let row = campaign_start::start(&state, req).await?;
     let location = format!("/api/v1/campaigns/{}", row.id);
+    let view = live_view(&state, &row).await?;
     Ok((
         StatusCode::CREATED,
         [(header::LOCATION, location)],
-        Json(row.view()),
+        Json(view),
     ))
 }
 
@@ -94,6 +95,13 @@ pub async fn live_view(
         let (counts, warnings) = campaigns::audit_counts(row, &states);
         view.audits = Some(counts);
         view.warnings.extend(warnings);
+    }
+    if row.paired_with.is_some() {
+        let row = row.clone();
+        view.pair = state
+            .db
+            .read(move |conn| pairs::view_of(conn, &row))
+            .await?;
     }
     Ok(view)
 }
@@ -218,22 +226,22 @@ pub async fn plan(
     }))
 }
 
-/// Cancels a pending or running campaign; its leases are told to stop.
+/// Cancels a pending or running campaign (with the other campaign of its
+/// pair, if it has one); its leases are told to stop.
 #[utoipa::path(post, path = "/api/v1/campaigns/{id}/cancel", params(("id" = i64, Path)), responses(
     (status = 200, body = CampaignView), (status = 404, body = Problem), (status = 409, body = Problem)))]
 pub async fn cancel(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
 ) -> Result<Json<CampaignView>, ApiError> {
-    let row = state
-        .db
-        .write(move |conn| campaigns::cancel(conn, id))
-        .await?;
-    state.samplers.forget(id);
-    state.throughput.forget(id);
+    let row = state.db.write(move |conn| pairs::cancel(conn, id)).await?;
+    for id in std::iter::once(id).chain(row.paired_with) {
+        state.samplers.forget(id);
+        state.throughput.forget(id);
+    }
     // Cancelling a library build's enumeration fails the build.
     crate::enumeration::finish(&state, id).await?;
-    Ok(Json(row.view()))
+    Ok(Json(live_view(&state, &row).await?))
 }
 
 /// Deletes a stopped campaign and everything recorded for it; 409 while it

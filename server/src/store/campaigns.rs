@@ -78,6 +78,9 @@ pub struct CampaignRow {
     pub search_tests: i64,
     pub stages: i64,
     pub support: i64,
+    /// The other campaign of a paired regression campaign
+    /// ([`crate::store::pairs`]).
+    pub paired_with: Option<i64>,
     pub created_at: String,
     pub updated_at: String,
 }
@@ -95,7 +98,7 @@ pub const COLUMNS: &str = "id, case_name, preset, \
     largest, guard_outside, outside_tests, outside_events, outside_s1, outside_upper, \
     outside_mismatches, \
     cost_per_test, worker_seconds, audits_waived, reported_s1, exact_probability, \
-    stage_start, stage_end, stage_kind, library_tests, search_tests, stages, support, created_at, \
+    stage_start, stage_end, stage_kind, library_tests, search_tests, stages, support, paired_with, created_at, \
     updated_at";
 
 impl CampaignRow {
@@ -111,6 +114,21 @@ impl CampaignRow {
             min_events: self.min_events as u64,
             max_tests: self.max_tests as u64,
             guard_outside: self.guard_outside,
+        }
+    }
+
+    /// The rule the campaign's own fold applies: its rule, except that a
+    /// campaign of a pair never stops on its own precision (`min_events`
+    /// is never reached): the pair's rule on the difference stops it
+    /// ([`crate::store::pairs::fold`]), or `max_tests`.
+    pub fn fold_rule(&self) -> StoppingRule {
+        let rule = self.rule();
+        match self.paired_with {
+            Some(_) => StoppingRule {
+                min_events: u64::MAX,
+                ..rule
+            },
+            None => rule,
         }
     }
 
@@ -193,7 +211,8 @@ impl CampaignRow {
             relative_half_width: point.relative_half_width,
             ci_low: (self.tests > 1).then_some(point.ci_low),
             ci_high: (self.tests > 1).then_some(point.ci_high),
-            predicted_tests: self.predicted_tests(&rule, &point),
+            // A campaign of a pair stops with its pair, not at its own β.
+            predicted_tests: self.predicted_tests(&self.fold_rule(), &point),
             effective_events: has_events.then(|| fold.estimator.effective_events()),
             largest_weight_share: fold.estimator.largest_share(),
             guard_outside: self.guard_outside,
@@ -235,6 +254,7 @@ impl CampaignRow {
             tests_per_second: None,
             seconds_left: None,
             audits: None,
+            pair: None,
             created_at: self.created_at.clone(),
             updated_at: self.updated_at.clone(),
         }

@@ -40,8 +40,8 @@ fn delete_campaign_rows(conn: &Connection, id: i64) -> Result<(), ApiError> {
     Ok(())
 }
 
-/// Deletes stopped campaign `id` and its records (a write); 409 while it
-/// runs.
+/// Deletes stopped campaign `id` and its records, with the other campaign
+/// of its pair if it has one (a write); 409 while either runs.
 pub fn delete_campaign(conn: &Connection, id: i64) -> Result<(), ApiError> {
     let row = crate::store::campaigns::get(conn, id)?;
     if !row.status.is_final() {
@@ -60,6 +60,19 @@ pub fn delete_campaign(conn: &Connection, id: i64) -> Result<(), ApiError> {
                  (DELETE /api/v1/libraries/{library})"
             )));
         }
+    }
+    // A paired campaign goes with its pair: both campaigns and the pair.
+    if let Some(partner) = row.paired_with {
+        let other = crate::store::campaigns::get(conn, partner)?;
+        if !other.status.is_final() {
+            return Err(ApiError::Conflict(format!(
+                "campaign {id} is paired with campaign {partner}, which is {}: cancel it first \
+                 (POST /api/v1/campaigns/{partner}/cancel)",
+                other.status.as_str()
+            )));
+        }
+        crate::store::pairs::unlink(conn, &row)?;
+        delete_campaign_rows(conn, partner)?;
     }
     delete_campaign_rows(conn, id)
 }

@@ -194,7 +194,7 @@ pub fn fold_prefix(
         mass,
         surrogate_misses: &misses,
     });
-    let rule = campaign.rule();
+    let rule = campaign.fold_rule();
     let folded =
         fold_step(fold, &rule, frontier, &outcomes, exploration, last_stored).map_err(|e| {
             anyhow::anyhow!("stored outcomes of campaign {} rejected: {e}", campaign.id)

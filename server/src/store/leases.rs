@@ -385,6 +385,19 @@ pub fn cancel_active(conn: &Connection, campaign: i64) -> Result<(), ApiError> {
     Ok(())
 }
 
+/// The leases a stop cancelled with ranges not yet reported, active again
+/// and expired, so that they are leased again first (a stopped campaign
+/// that runs again).
+pub fn reactivate_cancelled(conn: &Connection, campaign: i64) -> Result<(), ApiError> {
+    sql::execute(
+        conn,
+        "UPDATE leases SET state = 'active', expires_at = 0 WHERE campaign_id = ? \
+         AND state = 'cancelled' AND resume_at < end_index AND audit_id IS NULL",
+        [campaign],
+    )?;
+    Ok(())
+}
+
 /// Milliseconds of work a lease of `size` tests is expected to take on
 /// `threads` threads, `size · cost / threads`, at most a day; 0 while the
 /// campaign's cost is unknown (or not a finite positive number, which the
@@ -412,7 +425,10 @@ fn new_lease_size(config: &Config, campaign: &CampaignRow, threads: u32) -> u64 
     if let Some(fixed) = config.lease_size {
         return fixed.min(budget_left);
     }
-    let rule = campaign.rule();
+    // A campaign of a pair has no stop of its own to aim at (its fold's
+    // rule never converges): its leases grow with its prefix, as before a
+    // prediction.
+    let rule = campaign.fold_rule();
     let fold = campaign.fold();
     let r = fold.estimator.relative_half_width(rule.z());
     lease_size(&SizingInput {

@@ -8,6 +8,7 @@ pub mod deletion;
 pub mod fold;
 pub mod leases;
 pub mod libraries;
+pub mod pairs;
 pub mod reports;
 pub mod results;
 pub mod user_cases;

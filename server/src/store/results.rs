@@ -19,6 +19,7 @@ use crate::store::audits::{self, NewAudit};
 use crate::store::campaigns::{self, CampaignRow};
 use crate::store::fold::fold_prefix;
 use crate::store::leases::{self, check_fence, LeaseRow, LeaseState};
+use crate::store::pairs;
 use crate::store::reports::{self, NewReport};
 use rusqlite::{params, Connection};
 use std::sync::Arc;
@@ -136,6 +137,7 @@ pub(crate) fn record_held(
             ack: stopped_ack(span, resume_at, end, campaign.status),
             stopped: None,
             campaign_id: campaign.id,
+            partner_stopped: None,
         });
     }
     check_effort(lease, report, now_ms())?;
@@ -163,7 +165,9 @@ pub(crate) fn record_held(
         store_new_part(tx, campaign, lease, report, checked, new_from, expires_at)?;
         store_audits(tx, campaign.id, &report.worker, &plan, new_from)?;
     }
-    let stopped = fold_prefix(tx, campaign, tests, known.as_ref(), Some(checked))?;
+    let own = fold_prefix(tx, campaign, tests, known.as_ref(), Some(checked))?;
+    // A campaign of a pair: the pair folds over what both resolved.
+    let (stopped, partner_stopped) = pairs::fold_after(tx, campaign, own)?;
     let status = stopped.unwrap_or(CampaignStatus::Running);
     let resume_at = resume_at.max(checked.to);
     Ok(Recorded {
@@ -178,6 +182,7 @@ pub(crate) fn record_held(
         },
         stopped,
         campaign_id: campaign.id,
+        partner_stopped,
     })
 }
 
@@ -315,6 +320,8 @@ pub struct Recorded {
     /// The campaign's final status, when this report stopped it.
     pub stopped: Option<CampaignStatus>,
     pub campaign_id: i64,
+    /// The other campaign of the pair, when this report's pair stopped both.
+    pub partner_stopped: Option<i64>,
 }
 
 /// Thread-seconds a report cost, prorated to the tests it newly resolved:

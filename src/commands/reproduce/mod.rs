@@ -245,6 +245,7 @@ async fn run_case(
             n_min: None,
             min_events: None,
             guard_outside: false,
+            paired_with: None,
         };
         let mut ids = Vec::new();
         for k in 0..replicates {

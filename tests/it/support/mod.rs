@@ -274,6 +274,7 @@ pub fn campaign(
         outside: Default::default(),
         split: None,
         guard_outside: false,
+        paired_with: None,
     }
 }
 
@@ -397,7 +398,12 @@ pub fn in_process_with_invalid(
             request.seed,
         )
         .unwrap();
-    let rule = StoppingRule {
+    run_campaign_tests(tests.as_ref(), &rule_of(request), invalid)
+}
+
+/// The stopping rule of `request` with the coordinator's defaults.
+pub fn rule_of(request: &CreateCampaign) -> StoppingRule {
+    StoppingRule {
         beta: request.beta,
         confidence: request.confidence,
         n_min: request.n_min.unwrap_or_else(|| {
@@ -411,8 +417,7 @@ pub fn in_process_with_invalid(
         min_events: request.min_events.unwrap_or(10),
         max_tests: request.max_tests,
         guard_outside: request.guard_outside,
-    };
-    run_campaign_tests(tests.as_ref(), &rule, invalid)
+    }
 }
 
 /// Asserts that a service campaign ended exactly where the in-process run did.

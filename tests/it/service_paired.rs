@@ -1,0 +1,265 @@
+//! Paired regression campaigns through the service: two campaigns drawing
+//! the same tests, folded by the coordinator into the difference of the
+//! two vehicles' rates. The pair must stop exactly where the same paired
+//! campaign run in this process stops, with the same sums, whichever
+//! worker reported which campaign's tests first; cancelling or deleting
+//! either campaign takes the other with it.
+
+use crate::support::*;
+use serde_json::{json, Value};
+use std::time::Duration;
+use tslg_api::{CampaignStatus, CampaignView, CreateCampaign, Method, PairStop, PairView};
+use tslg_method::cases::open_case;
+use tslg_method::paired::{run_paired, PairedResult, PairedStop};
+use tslg_method::registry::ExposureSource;
+
+/// The paired campaign `request` asks for, run in this process on the
+/// library `file` (the NDD when `None`).
+fn paired_in_process(file: Option<&[u8]>, request: &CreateCampaign) -> PairedResult {
+    let case = open_case(&request.case, None, &ExposureSource::Builtin).unwrap();
+    let tests = |vut: &Value| {
+        let vut = case
+            .normalise_vehicle(&tslg_api::vehicle_spec(vut))
+            .unwrap();
+        case.campaign(
+            file,
+            &vut,
+            request.epsilon,
+            case.default_outside(),
+            Default::default(),
+            request.seed,
+        )
+        .unwrap()
+    };
+    let a = tests(&request.vut);
+    let b = tests(request.paired_with.as_ref().unwrap());
+    run_paired(a.as_ref(), b.as_ref(), &rule_of(request))
+}
+
+/// The pair's numbers equal the in-process run's, bit for bit: both fold
+/// the same outcomes in index order.
+fn assert_same_pair(pair: &PairView, reference: &PairedResult) {
+    let triple = |i: Option<tslg_api::PairedInterval>| {
+        let i = i.expect("an interval");
+        (i.estimate, i.ci_low, i.ci_high)
+    };
+    assert_eq!(pair.tests, reference.tests, "{pair:?}\n{reference:?}");
+    assert_eq!(
+        (pair.events_a, pair.events_b, pair.discordant),
+        reference.events
+    );
+    assert_eq!(triple(pair.rate_a), reference.rate_a);
+    assert_eq!(triple(pair.rate_b), reference.rate_b);
+    assert_eq!(triple(pair.difference), reference.difference);
+    assert_eq!(pair.look_confidence, reference.look_confidence);
+    let stop = match reference.stop {
+        PairedStop::Precision => PairStop::Precision,
+        PairedStop::Significant => PairStop::Significant,
+        PairedStop::Exhausted => PairStop::Exhausted,
+    };
+    assert_eq!(pair.stop, Some(stop));
+}
+
+fn ndd_regression() -> CreateCampaign {
+    CreateCampaign {
+        method: Method::Ndd,
+        library_id: None,
+        vut: json!({"model": "idm", "s0": 0.5}),
+        paired_with: Some(json!("idm")),
+        ..campaign(Method::Ndd, 0, "idm", 0.2, 1)
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_paired_campaign_stops_where_the_same_pair_in_process_stops_and_stops_both() {
+    let dir = scratch();
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &[]);
+    let _workers = two_workers(&server.url);
+    let client = server.client();
+
+    // A regression under the NDD, started with the command line as a user
+    // would: today's IDM with a 0.5 m jam distance against yesterday's.
+    let o = tslg(&[
+        "campaign",
+        "start",
+        "--server",
+        &server.url,
+        "--method",
+        "ndd",
+        "--vut",
+        r#"{"model": "idm", "s0": 0.5}"#,
+        "--paired-with",
+        "idm",
+        "--seed",
+        "1",
+        "--wait",
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let a: CampaignView = serde_json::from_slice(&o.stdout).unwrap();
+    let pair = a.pair.clone().expect("a paired campaign shows its pair");
+    assert_eq!(pair.campaign_a, a.id);
+    assert_eq!(pair.status, CampaignStatus::Converged);
+    assert_same_pair(&pair, &paired_in_process(None, &ndd_regression()));
+    // Both campaigns stopped with the pair, and each says why.
+    let b = client.campaign(pair.campaign_b).await.unwrap();
+    for view in [&a, &b] {
+        assert_eq!(view.status, CampaignStatus::Converged, "{view:?}");
+        let detail = view.status_detail.as_deref().unwrap();
+        assert!(detail.starts_with("paired with campaign"), "{detail}");
+        assert!(view.indices >= pair.indices, "{view:?}");
+    }
+    assert_eq!(b.pair.as_ref(), Some(&pair));
+    assert_eq!(b.vut["s0"], json!(2.0));
+    // The grid enumerates: the exact difference is shown beside it.
+    let exact = a.exact_probability.unwrap() - b.exact_probability.unwrap();
+    assert_eq!(pair.exact_difference, Some(exact));
+    // Far fewer tests than two separate campaigns would need.
+    assert!(
+        pair.independent_tests.unwrap() > 10.0 * pair.tests as f64,
+        "{pair:?}"
+    );
+    // The text form says the same.
+    let o = tslg(&[
+        "campaign",
+        "status",
+        &b.id.to_string(),
+        "--server",
+        &server.url,
+    ]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        text.contains(&format!("paired: a = campaign {}", a.id)),
+        "{text}"
+    );
+    assert!(text.contains("difference a - b"), "{text}");
+
+    // The same vehicle twice never differs: both campaigns reach max_tests,
+    // each stopping on its own first, and the pair's last fold comes with
+    // the later one.
+    let same = CreateCampaign {
+        vut: json!("idm"),
+        paired_with: Some(json!("idm")),
+        max_tests: 20_000,
+        ..ndd_regression()
+    };
+    let id = client.create_campaign(&same).await.unwrap().id;
+    let view = finished(&client, id, Duration::from_secs(120)).await;
+    let pair = wait_for(&client, id, Duration::from_secs(60), |v| {
+        v.pair.as_ref().is_some_and(|p| p.stop.is_some())
+    })
+    .await
+    .pair
+    .unwrap();
+    assert_eq!(view.status, CampaignStatus::Exhausted, "{view:?}");
+    assert_eq!(pair.stop, Some(PairStop::Exhausted));
+    assert_eq!((pair.tests, pair.discordant), (20_000, 0));
+    assert_eq!(pair.events_a, pair.events_b);
+    assert_eq!(pair.difference.unwrap().estimate, 0.0);
+    let partner = client.campaign(pair.campaign_b).await.unwrap();
+    assert_eq!(partner.status, CampaignStatus::Exhausted);
+    assert!(partner
+        .status_detail
+        .unwrap()
+        .starts_with("paired with campaign"));
+
+    // Under a library: the FVDM against the IDM on the IDM's library.
+    let library = ready_library(&client, "idm", true).await;
+    let request = CreateCampaign {
+        paired_with: Some(json!({"model": "idm"})),
+        ..campaign(Method::Library, library.id, "fvdm", 0.2, 5)
+    };
+    let id = client.create_campaign(&request).await.unwrap().id;
+    let view = finished(&client, id, Duration::from_secs(120)).await;
+    let file = client.library_file(library.id).await.unwrap();
+    assert_same_pair(
+        view.pair.as_ref().unwrap(),
+        &paired_in_process(Some(&file), &request),
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_pair_is_cancelled_and_deleted_whole_and_refuses_what_it_cannot_pair() {
+    let dir = scratch();
+    // No worker: the pair waits.
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &[]);
+    let client = server.client();
+    let a = client.create_campaign(&ndd_regression()).await.unwrap();
+    let pair = a.pair.expect("the answer shows the pair");
+    assert_eq!(pair.status, CampaignStatus::Running);
+    assert_eq!((pair.tests, pair.difference), (0, None));
+    let b = pair.campaign_b;
+    assert_eq!(
+        client.campaign(b).await.unwrap().pair.unwrap().campaign_a,
+        a.id
+    );
+
+    // Deleting one while the other runs is refused; cancelling one cancels
+    // both.
+    let http = reqwest::Client::new();
+    let url = |path: String| format!("{}/api/v1/campaigns/{path}", server.url);
+    let cancelled: CampaignView = http
+        .post(url(format!("{b}/cancel")))
+        .send()
+        .await
+        .unwrap()
+        .json()
+        .await
+        .unwrap();
+    assert_eq!(cancelled.status, CampaignStatus::Cancelled);
+    assert_eq!(cancelled.pair.unwrap().stop, Some(PairStop::Cancelled));
+    assert_eq!(
+        client.campaign(a.id).await.unwrap().status,
+        CampaignStatus::Cancelled
+    );
+    let r = http.delete(url(a.id.to_string())).send().await.unwrap();
+    assert_eq!(r.status().as_u16(), 204);
+    for id in [a.id, b] {
+        let r = http.get(url(id.to_string())).send().await.unwrap();
+        assert_eq!(r.status().as_u16(), 404, "campaign {id} went with its pair");
+    }
+
+    // A campaign of a running pair cannot be deleted.
+    let a = client.create_campaign(&ndd_regression()).await.unwrap();
+    let r = http.delete(url(a.id.to_string())).send().await.unwrap();
+    assert_eq!(r.status().as_u16(), 409);
+
+    // What cannot be paired is refused with the reason.
+    let library = ready_library(&client, "idm", true).await;
+    let refused = [
+        (
+            CreateCampaign {
+                paired_with: Some(json!("idm")),
+                ..campaign(Method::Adaptive, library.id, "fvdm", 0.2, 1)
+            },
+            "paired_with runs methods `library` and `ndd`",
+        ),
+        (
+            CreateCampaign {
+                paired_with: Some(json!("idm")),
+                guard_outside: true,
+                ..campaign(Method::Library, library.id, "fvdm", 0.2, 1)
+            },
+            "no guard is defined for a difference",
+        ),
+        (
+            CreateCampaign {
+                paired_with: Some(json!({"model": "nope"})),
+                ..campaign(Method::Library, library.id, "fvdm", 0.2, 1)
+            },
+            "paired_with",
+        ),
+    ];
+    for (request, reason) in refused {
+        let r = http
+            .post(format!("{}/api/v1/campaigns", server.url))
+            .json(&request)
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status().as_u16(), 422);
+        let problem: Value = r.json().await.unwrap();
+        let detail = problem["detail"].as_str().unwrap();
+        assert!(detail.contains(reason), "{detail}");
+    }
+}
