@@ -629,7 +629,8 @@ pub struct EvaluateArgs {
     #[arg(long, value_enum, default_value = "library")]
     pub method: EvaluateMethodArg,
     /// The library file (methods `library` and `adaptive`), as `tslg
-    /// library build` writes it: the campaign runs on its case and preset.
+    /// library build` writes it: the campaign runs on its case and preset
+    /// (with `ndd`, the baseline runs on them too).
     #[arg(long)]
     pub library: Option<PathBuf>,
     #[command(flatten)]

@@ -237,20 +237,25 @@ pub async fn start(state: &AppState, req: CreateCampaign) -> Result<CampaignRow,
         )
         .collect();
     let (source, requested) = (exposure.clone(), requests.clone());
+    let paired = req.paired_with.is_some();
     let opened = tokio::task::spawn_blocking(move || {
         requested
             .iter()
-            .map(|request| open(request, &rule, preset.as_deref(), &source, file.as_deref()))
-            .collect::<Result<Vec<Opened>, CaseError>>()
+            .enumerate()
+            .map(|(k, request)| {
+                open(request, &rule, preset.as_deref(), &source, file.as_deref()).map_err(
+                    |e| match (paired, k) {
+                        (false, _) => e.to_string(),
+                        (true, 0) => format!("vut: {e}"),
+                        (true, _) => format!("paired_with: {e}"),
+                    },
+                )
+            })
+            .collect::<Result<Vec<Opened>, String>>()
     })
     .await
     .map_err(|e| ApiError::Internal(e.into()))?
-    .map_err(|e| {
-        bad(match &req.paired_with {
-            Some(_) => format!("{e} (vut or paired_with)"),
-            None => e.to_string(),
-        })
-    })?;
+    .map_err(bad)?;
     let status = match &library {
         Some(lib) if req.method.uses_library() && lib.status == LibraryStatus::Building => {
             CampaignStatus::Pending

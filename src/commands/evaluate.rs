@@ -64,8 +64,10 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
         (MethodArg::Library | MethodArg::Adaptive, None) => {
             anyhow::bail!("--library is required with --method library and adaptive")
         }
-        (MethodArg::Library | MethodArg::Adaptive, Some(path)) => Some(read_library_file(path)?),
-        (MethodArg::Ndd, _) => None,
+        // An NDD baseline beside a library runs on the library's case and
+        // preset (it samples the exposure, not the library).
+        (_, Some(path)) => Some(read_library_file(path)?),
+        (MethodArg::Ndd, None) => None,
     };
     // The tests run on the case and simulation the library was built on.
     let case_args = match &library {
@@ -89,7 +91,10 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
         .exploration
         .outside
         .map_or(descriptor.default_outside, OutsideArg::spread);
-    let file = library.as_ref().map(|(bytes, _)| bytes.as_slice());
+    let file = library
+        .as_ref()
+        .filter(|_| args.method != MethodArg::Ndd)
+        .map(|(bytes, _)| bytes.as_slice());
     if let Some(other) = &args.paired_with {
         let file = file.filter(|_| args.method == MethodArg::Library);
         let plan = crate::commands::paired::Plan {

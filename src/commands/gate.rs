@@ -11,7 +11,10 @@
 //! campaign of a grid case: `guarded_ci_high`, which also bounds what the
 //! library's surrogate may have missed; docs/statistics.md), else the
 //! interval's `ci_high`: a gate must not pass a vehicle on an interval that
-//! rests on the library covering its failures.
+//! rests on the library covering its failures. For a paired regression
+//! campaign it is the upper end of the difference `P(A)_a − P(A)_b`, and
+//! the status is the pair's: the gate fails when today's build (a) may be
+//! worse than yesterday's (b) by more than `P`.
 
 use tslg_api::{CampaignStatus, CampaignView};
 
@@ -37,20 +40,24 @@ impl std::fmt::Display for GateFailed {
 
 impl std::error::Error for GateFailed {}
 
-/// The upper bound the gate compares: the guarded one where it exists.
+/// The upper bound the gate compares: the paired difference's for a pair,
+/// else the guarded one where it exists.
 pub fn upper_bound(view: &CampaignView) -> Option<f64> {
-    view.guarded_ci_high.or(view.ci_high)
+    match &view.pair {
+        Some(pair) => pair.difference.map(|d| d.ci_high),
+        None => view.guarded_ci_high.or(view.ci_high),
+    }
 }
 
 /// Whether `view`, a stopped campaign, passes the gate at `limit`: `Ok`
 /// with the sentence saying why, or the failure with its exit status.
 pub fn judge(view: &CampaignView, limit: f64) -> Result<String, GateFailed> {
-    let which = if view.guarded_ci_high.is_some() {
-        "guarded upper bound"
-    } else {
-        "upper bound"
+    let (which, status) = match &view.pair {
+        Some(pair) => ("the difference a - b's upper bound", pair.status),
+        None if view.guarded_ci_high.is_some() => ("guarded upper bound", view.status),
+        None => ("upper bound", view.status),
     };
-    match (view.status, upper_bound(view)) {
+    match (status, upper_bound(view)) {
         (CampaignStatus::Converged, Some(upper)) if upper <= limit => Ok(format!(
             "gate passed: campaign {} converged with {which} {upper:.3e} <= {limit}",
             view.id

@@ -413,6 +413,15 @@ fn evaluate_runs_on_the_preset_the_library_was_built_on() {
         "{}",
         stderr(&other)
     );
+    // The NDD baseline beside the library runs on its preset too (it ran
+    // on the case's default, paper-code, before).
+    let ndd = run(&["--method", "ndd", "--max-tests", "1000"]);
+    assert!(ndd.status.success(), "{}", stderr(&ndd));
+    let r: serde_json::Value = serde_json::from_slice(&ndd.stdout).unwrap();
+    assert_eq!(
+        (&r["preset"], &r["method"]),
+        (&serde_json::json!("paper-table"), &serde_json::json!("ndd"))
+    );
 }
 
 #[test]

@@ -134,6 +134,62 @@ async fn a_paired_campaign_stops_where_the_same_pair_in_process_stops_and_stops_
     );
     assert!(text.contains("difference a - b"), "{text}");
 
+    // As a pipeline's gate the pair is judged on the difference's upper end.
+    let gate = |limit: &str| {
+        tslg(&[
+            "campaign",
+            "watch",
+            &a.id.to_string(),
+            "--server",
+            &server.url,
+            "--fail-above",
+            limit,
+        ])
+    };
+    let above = gate("0.00005");
+    assert_eq!(
+        above.status.code(),
+        Some(3),
+        "{}",
+        String::from_utf8_lossy(&above.stderr)
+    );
+    let passed = gate("0.001");
+    assert_eq!(passed.status.code(), Some(0));
+    let said = String::from_utf8_lossy(&passed.stderr);
+    assert!(
+        said.contains("the difference a - b's upper bound"),
+        "{said}"
+    );
+
+    // A pair whose other vehicle no worker offers: the campaign workers can
+    // run takes at most a lease ahead of it (the pair uses only the tests
+    // both resolved), stays running, and says what the pair waits for.
+    let waiting = CreateCampaign {
+        paired_with: Some(json!({"external": "nobody"})),
+        max_tests: 1_000_000,
+        ..ndd_regression()
+    };
+    let a = client.create_campaign(&waiting).await.unwrap();
+    wait_for(&client, a.id, Duration::from_secs(30), |v| v.indices > 0).await;
+    tokio::time::sleep(Duration::from_secs(1)).await;
+    let ahead = client.campaign(a.id).await.unwrap();
+    assert_eq!(ahead.status, CampaignStatus::Running);
+    assert!(ahead.leased <= 4096, "{ahead:?}");
+    assert!(
+        ahead
+            .warnings
+            .iter()
+            .any(|w| w.starts_with("its pair's campaign") && w.contains("nobody")),
+        "{:?}",
+        ahead.warnings
+    );
+    let r = reqwest::Client::new()
+        .post(format!("{}/api/v1/campaigns/{}/cancel", server.url, a.id))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status().as_u16(), 200);
+
     // The same vehicle twice never differs: both campaigns reach max_tests,
     // each stopping on its own first, and the pair's last fold comes with
     // the later one.
@@ -144,13 +200,10 @@ async fn a_paired_campaign_stops_where_the_same_pair_in_process_stops_and_stops_
         ..ndd_regression()
     };
     let id = client.create_campaign(&same).await.unwrap().id;
+    // Neither campaign stops before the pair: the first to reach max_tests
+    // waits, running, for the other.
     let view = finished(&client, id, Duration::from_secs(120)).await;
-    let pair = wait_for(&client, id, Duration::from_secs(60), |v| {
-        v.pair.as_ref().is_some_and(|p| p.stop.is_some())
-    })
-    .await
-    .pair
-    .unwrap();
+    let pair = view.pair.clone().unwrap();
     assert_eq!(view.status, CampaignStatus::Exhausted, "{view:?}");
     assert_eq!(pair.stop, Some(PairStop::Exhausted));
     assert_eq!((pair.tests, pair.discordant), (20_000, 0));
@@ -247,7 +300,7 @@ async fn a_pair_is_cancelled_and_deleted_whole_and_refuses_what_it_cannot_pair()
                 paired_with: Some(json!({"model": "nope"})),
                 ..campaign(Method::Library, library.id, "fvdm", 0.2, 1)
             },
-            "paired_with",
+            "paired_with: ",
         ),
     ];
     for (request, reason) in refused {

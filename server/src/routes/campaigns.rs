@@ -96,12 +96,17 @@ pub async fn live_view(
         view.audits = Some(counts);
         view.warnings.extend(warnings);
     }
-    if row.paired_with.is_some() {
-        let row = row.clone();
+    if let Some(partner) = row.paired_with {
+        let (row, other) = (row.clone(), read_campaign(state, partner).await?);
         view.pair = state
             .db
             .read(move |conn| pairs::view_of(conn, &row))
             .await?;
+        // The pair waits for the slower campaign: say why it waits.
+        if let Some(waiting) = waiting_for_workers(state, &other) {
+            view.warnings
+                .push(format!("its pair's campaign {partner}: {waiting}"));
+        }
     }
     Ok(view)
 }

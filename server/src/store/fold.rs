@@ -195,10 +195,16 @@ pub fn fold_prefix(
         surrogate_misses: &misses,
     });
     let rule = campaign.fold_rule();
-    let folded =
-        fold_step(fold, &rule, frontier, &outcomes, exploration, last_stored).map_err(|e| {
+    let mut folded = fold_step(fold, &rule, frontier, &outcomes, exploration, last_stored)
+        .map_err(|e| {
             anyhow::anyhow!("stored outcomes of campaign {} rejected: {e}", campaign.id)
         })?;
+    if campaign.paired_with.is_some() {
+        // A campaign of a pair stops with its pair (`store/pairs.rs`), even
+        // at max_tests: until the other campaign has resolved as many
+        // tests it stays running, and gets no more leases.
+        folded.decision = None;
+    }
     let upper = mass.map(|m| {
         m.upper(
             folded.fold.outside.tests,

@@ -237,11 +237,17 @@ fn claim_in(
     }
     // A campaign with many tests waiting for their audits gets no new
     // range until workers have run them: audits come first, and the work
-    // behind them cannot count before they are done.
+    // behind them cannot count before they are done. A campaign of a pair
+    // gets a new range only when it is not ahead of the other campaign's:
+    // the pair uses only the tests both resolved, so one running ahead
+    // (the other's program slow, or offered by no worker) would waste
+    // its tests; it is at most a lease ahead.
     let sql = format!(
         "SELECT {CAMPAIGN_COLUMNS} FROM campaigns c WHERE status = 'running' \
          AND next_index < max_tests {filters} \
          AND (stage_end IS NULL OR next_index < stage_end) \
+         AND (paired_with IS NULL OR next_index <= \
+              (SELECT p.next_index FROM campaigns p WHERE p.id = c.paired_with)) \
          AND (SELECT COUNT(*) FROM audits a WHERE a.campaign_id = c.id \
               AND a.state IN {open}) < {MAX_OPEN_AUDITS} \
          ORDER BY next_turn_at, id LIMIT 1",

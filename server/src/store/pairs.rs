@@ -98,6 +98,15 @@ impl PairRow {
             campaign_a: self.campaign_a,
             campaign_b: self.campaign_b,
             status: match stop {
+                // Before its rule holds the pair stands as its campaigns:
+                // waiting for its library, or failed with it.
+                None if [a.status, b.status].contains(&CampaignStatus::Failed) => {
+                    CampaignStatus::Failed
+                }
+                None if [a.status, b.status].contains(&CampaignStatus::Cancelled) => {
+                    CampaignStatus::Cancelled
+                }
+                None if a.status == CampaignStatus::Pending => CampaignStatus::Pending,
                 None => CampaignStatus::Running,
                 Some(PairStop::Precision | PairStop::Significant) => CampaignStatus::Converged,
                 Some(PairStop::Exhausted) => CampaignStatus::Exhausted,
