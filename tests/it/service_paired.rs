@@ -225,10 +225,28 @@ async fn a_paired_campaign_stops_where_the_same_pair_in_process_stops_and_stops_
     let id = client.create_campaign(&request).await.unwrap().id;
     let view = finished(&client, id, Duration::from_secs(120)).await;
     let file = client.library_file(library.id).await.unwrap();
-    assert_same_pair(
-        view.pair.as_ref().unwrap(),
-        &paired_in_process(Some(&file), &request),
+    let pair = view.pair.clone().unwrap();
+    assert_same_pair(&pair, &paired_in_process(Some(&file), &request));
+    // The warnings' advice is the guard, which a pair takes only as two
+    // campaigns of their own.
+    let partner = client.campaign(pair.campaign_b).await.unwrap();
+    let reruns: Vec<&String> = [&view, &partner]
+        .into_iter()
+        .flat_map(|v| &v.warnings)
+        .filter(|w| w.contains("Rerun"))
+        .collect();
+    assert!(
+        !reruns.is_empty(),
+        "{:?} {:?}",
+        view.warnings,
+        partner.warnings
     );
+    for w in reruns {
+        assert!(
+            w.contains("Rerun each vehicle as a campaign of its own"),
+            "{w}"
+        );
+    }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

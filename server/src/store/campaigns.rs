@@ -101,6 +101,11 @@ pub const COLUMNS: &str = "id, case_name, preset, \
     stage_start, stage_end, stage_kind, library_tests, search_tests, stages, support, paired_with, created_at, \
     updated_at";
 
+/// How the warnings' advice to rerun with the guard reads for a campaign of
+/// a pair.
+const PAIRED_RERUN: &str =
+    "Rerun each vehicle as a campaign of its own (a pair takes no guard) with ";
+
 impl CampaignRow {
     pub fn seed(&self) -> u64 {
         self.seed as u64
@@ -240,14 +245,23 @@ impl CampaignRow {
                 support: self.support as u64,
             }),
             warnings: if self.tests > 1 {
-                warnings(
+                let found = warnings(
                     &summary,
                     WarningContext {
                         beta: self.beta,
                         guard_outside: self.guard_outside,
                         dialect: Dialect::Api,
                     },
-                )
+                );
+                match self.paired_with {
+                    // The guard is the remedy the warnings give, and a
+                    // pair takes none.
+                    Some(_) => found
+                        .into_iter()
+                        .map(|w| w.replace("Rerun with ", PAIRED_RERUN))
+                        .collect(),
+                    None => found,
+                }
             } else {
                 Vec::new()
             },
