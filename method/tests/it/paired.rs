@@ -1,35 +1,60 @@
-//! Paired regression campaigns against the exact answers on the cut-in
-//! grid: the FVDM (today's build) against the IDM (yesterday's) on the
-//! IDM's library, both on the same tests. The exact difference of their
-//! P(A) and the exact variances of the paired and the independent
-//! estimators come from enumerating the grid under the library's q(x).
+//! Paired regression campaigns against the exact answers on the grid
+//! cases: two builds of a vehicle (today's and yesterday's) on the same
+//! tests, under the NDD and under a library, on cut-in and on
+//! highway-exit's coarse grid. The exact difference of their P(A) and the
+//! exact variances of the paired and the independent estimators come from
+//! enumerating the grid under the sampling distribution q(x).
 
 use crate::common::{library, paper_q, vehicle};
 use rayon::prelude::*;
 use tslg_method::case::Case;
 use tslg_method::cases::cutin::{CutIn, CutInPreset};
+use tslg_method::cases::highway::{HighwayExit, HighwayPreset};
 use tslg_method::estimator::StoppingRule;
 use tslg_method::library::SearchMethod;
 use tslg_method::paired::{run_paired_outcomes, PairedResult, PairedStop};
 use tslg_method::sampling::TestDistribution;
 use tslg_method::vehicle::VehicleModel;
 
+/// Whether each vehicle fails in each cell of the grid: the paired
+/// campaigns below draw thousands of tests per cell, so each cell is
+/// simulated once.
+struct Outcomes {
+    a: Vec<bool>,
+    b: Vec<bool>,
+}
+
+impl Outcomes {
+    fn of<C: Case + Sync>(case: &C, a: &C::Vehicle, b: &C::Vehicle) -> Self
+    where
+        C::Vehicle: Sync,
+    {
+        let cells = case.grid().len();
+        let run = |v: &C::Vehicle| {
+            (0..cells)
+                .into_par_iter()
+                .map(|c| case.is_event(v, c))
+                .collect()
+        };
+        Self {
+            a: run(a),
+            b: run(b),
+        }
+    }
+}
+
 /// Exact `(Δ, Var a, Var b, Var d)` of one test drawn from `q(x)`, and
 /// the exposure of the cells where the vehicles differ and `q` is 0
 /// (which no paired campaign can see).
 fn exact(
-    case: &CutIn,
+    exposure: &dyn Fn(usize) -> f64,
     q: &dyn Fn(usize) -> f64,
-    a: &VehicleModel,
-    b: &VehicleModel,
+    o: &Outcomes,
 ) -> ([f64; 4], f64) {
     let (mut mu, mut sq, mut unseen) = ([0.0; 3], [0.0; 3], 0.0);
-    for cell in 0..case.grid().len() {
-        let p = case.exposure().p(cell);
-        let (ya, yb) = (
-            case.is_event(a, cell) as u8 as f64,
-            case.is_event(b, cell) as u8 as f64,
-        );
+    for cell in 0..o.a.len() {
+        let p = exposure(cell);
+        let (ya, yb) = (o.a[cell] as u8 as f64, o.b[cell] as u8 as f64);
         if p == 0.0 || (ya == 0.0 && yb == 0.0) {
             continue;
         }
@@ -55,17 +80,15 @@ fn exact(
 }
 
 fn paired_run(
-    case: &CutIn,
     distribution: &TestDistribution,
-    a: &VehicleModel,
-    b: &VehicleModel,
+    o: &Outcomes,
     rule: &StoppingRule,
     seed: u64,
 ) -> PairedResult {
     let outcomes = |from: u64, to: u64| {
         let mut out = Vec::new();
         distribution.draw_each(seed, from..to, |i, draw| {
-            let (ya, yb) = (case.is_event(a, draw.cell), case.is_event(b, draw.cell));
+            let (ya, yb) = (o.a[draw.cell], o.b[draw.cell]);
             if ya || yb {
                 let w = |y: bool| if y { draw.weight } else { 0.0 };
                 out.push((i, w(ya), w(yb)));
@@ -86,19 +109,18 @@ struct Study {
 }
 
 fn study(
-    case: &CutIn,
+    exposure: &dyn Fn(usize) -> f64,
     distribution: &TestDistribution,
     q: &dyn Fn(usize) -> f64,
-    a: &VehicleModel,
-    b: &VehicleModel,
+    o: &Outcomes,
     beta: f64,
 ) -> Study {
-    let ([delta, va, vb, vd], unseen) = exact(case, q, a, b);
+    let ([delta, va, vb, vd], unseen) = exact(exposure, q, o);
     assert_eq!(unseen, 0.0, "every difference can be drawn");
     let rule = StoppingRule::new(beta, 10_000_000);
     let runs: Vec<PairedResult> = (0..120u64)
         .into_par_iter()
-        .map(|seed| paired_run(case, distribution, a, b, &rule, seed))
+        .map(|seed| paired_run(distribution, o, &rule, seed))
         .collect();
     assert!(runs.iter().all(|r| r.stop != PairedStop::Exhausted));
     let covered = runs
@@ -138,7 +160,9 @@ fn paired_intervals_cover_the_exact_difference_and_need_far_fewer_tests() {
     let q = paper_q(&case, &lib, 0.1);
     let qf = |cell| q.q(cell);
     let distribution = TestDistribution::library(q.clone());
-    let s = study(&case, &distribution, &qf, &today, &yesterday, 0.2);
+    let p = |cell| case.exposure().p(cell);
+    let regression = Outcomes::of(&case, &today, &yesterday);
+    let s = study(&p, &distribution, &qf, &regression, 0.2);
     assert!(s.coverage >= 0.81, "coverage {}", s.coverage);
     // Under the library both rates are known almost without variance (it
     // samples their failures): the difference's variance is that of the
@@ -148,16 +172,38 @@ fn paired_intervals_cover_the_exact_difference_and_need_far_fewer_tests() {
     // difference's the discordant cells' mass: the regression is measured
     // with (Var a + Var b)/Var d times fewer tests than two campaigns.
     let ndd = TestDistribution::Ndd(tslg_method::sampling::NddDistribution::new(case.exposure()));
-    let p = |cell| case.exposure().p(cell);
-    let s = study(&case, &ndd, &p, &today, &yesterday, 0.2);
+    let s = study(&p, &ndd, &p, &regression, 0.2);
     assert!(s.coverage >= 0.81, "coverage {}", s.coverage);
     assert!(s.exact_gain > 10.0, "{}", s.exact_gain);
     let agree = |s: &Study| (s.measured_gain / s.exact_gain - 1.0).abs() < 0.3;
     assert!(agree(&s), "{} against {}", s.measured_gain, s.exact_gain);
     // FVDM against IDM: they differ on most of the FVDM's failures.
-    let s = study(&case, &ndd, &p, &vehicle("fvdm"), &vehicle("idm"), 0.2);
+    let fvdm_idm = Outcomes::of(&case, &vehicle("fvdm"), &vehicle("idm"));
+    let s = study(&p, &ndd, &p, &fvdm_idm, 0.2);
     assert!(s.coverage >= 0.81, "coverage {}", s.coverage);
     assert!(agree(&s), "{} against {}", s.measured_gain, s.exact_gain);
+}
+
+#[test]
+fn paired_intervals_cover_the_exact_difference_on_highway_exit() {
+    let case = HighwayExit::builtin(HighwayPreset::Coarse);
+    // A regression: today's MOBIL accepts a lane change that makes the
+    // follower brake at up to 3.5 m/s² (yesterday's: 4).
+    let vehicle = |spec| serde_json::from_value(spec).unwrap();
+    let today = vehicle(serde_json::json!({"model": "mobil", "b_safe": 3.5}));
+    let yesterday = vehicle(serde_json::json!({"model": "mobil"}));
+    let o = Outcomes::of(&case, &today, &yesterday);
+    let p = |cell| case.exposure().p(cell);
+    let ndd = TestDistribution::Ndd(tslg_method::sampling::NddDistribution::new(case.exposure()));
+    let s = study(&p, &ndd, &p, &o, 0.2);
+    assert!(s.delta != 0.0, "the two builds differ");
+    assert!(s.coverage >= 0.81, "coverage {}", s.coverage);
+    assert!(
+        (s.measured_gain / s.exact_gain - 1.0).abs() < 0.3,
+        "{} against {}",
+        s.measured_gain,
+        s.exact_gain
+    );
 }
 
 #[test]
@@ -166,9 +212,10 @@ fn the_same_vehicle_twice_differs_by_nothing_and_is_never_called_different() {
     let lib = library(&case, "idm", SearchMethod::Exhaustive);
     let distribution = TestDistribution::library(paper_q(&case, &lib, 0.1));
     let a = vehicle("fvdm");
+    let o = Outcomes::of(&case, &a, &a);
     let rule = StoppingRule::new(0.2, 100_000);
     for seed in 0..20 {
-        let r = paired_run(&case, &distribution, &a, &a, &rule, seed);
+        let r = paired_run(&distribution, &o, &rule, seed);
         assert_eq!(r.stop, PairedStop::Exhausted);
         assert_eq!(r.difference, (0.0, 0.0, 0.0));
         assert_eq!(r.events.2, 0);
