@@ -13,18 +13,6 @@ use std::time::{Duration, Instant};
 use tslg_api::{CampaignStatus, CreateCampaign, CreateLibrary, LeaseRequest, Method};
 use tslg_client::Client;
 
-fn repo(path: &str) -> String {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join(path)
-        .display()
-        .to_string()
-}
-
-/// `NAME=python3 FILE ARGS` for `--vut-exec`.
-fn python(name: &str, file: &str, args: &str) -> String {
-    format!("{name}=python3 {} {args}", repo(file))
-}
-
 /// The Rust example's binary, built by `cargo test` with the examples.
 fn rust_example() -> PathBuf {
     let bin = Path::new(env!("CARGO_BIN_EXE_tslg"))

@@ -334,3 +334,37 @@ async fn a_pair_is_cancelled_and_deleted_whole_and_refuses_what_it_cannot_pair()
         assert!(detail.contains(reason), "{detail}");
     }
 }
+
+/// A pair of a built-in vehicle and an external program: today's build is
+/// a program workers offer (the Python IDM, examples/python/idm_vut.py),
+/// yesterday's the built-in FVDM. The Python IDM is the built-in IDM test
+/// for test, so the pair is the in-process pair of the FVDM and the IDM.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_pair_with_an_external_program_is_the_same_pair_in_process() {
+    let dir = scratch();
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &[]);
+    let exec = python("py-idm", "examples/python/idm_vut.py", "");
+    let _workers = [
+        WorkerProcess::start_with(&server.url, 1, "py1", &["--vut-exec", &exec]),
+        WorkerProcess::start_with(&server.url, 1, "py2", &["--vut-exec", &exec]),
+    ];
+    let client = server.client();
+    let library = ready_library(&client, "idm", true).await;
+    let request = CreateCampaign {
+        vut: json!({"external": "py-idm"}),
+        paired_with: Some(json!("fvdm")),
+        ..campaign(Method::Library, library.id, "idm", 0.2, 11)
+    };
+    let id = client.create_campaign(&request).await.unwrap().id;
+    let view = finished(&client, id, Duration::from_secs(240)).await;
+    let pair = view.pair.clone().unwrap();
+    let file = client.library_file(library.id).await.unwrap();
+    let reference = CreateCampaign {
+        vut: json!("idm"),
+        ..request
+    };
+    assert_same_pair(&pair, &paired_in_process(Some(&file), &reference));
+    // The program's campaign has no exact answer (the coordinator does not
+    // run programs), so neither has the difference.
+    assert_eq!(pair.exact_difference, None);
+}

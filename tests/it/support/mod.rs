@@ -563,3 +563,16 @@ impl MidCampaign {
         }
     }
 }
+
+/// `path` in the repository, as a string.
+pub fn repo_path(path: &str) -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join(path)
+        .display()
+        .to_string()
+}
+
+/// `NAME=python3 FILE ARGS` for `--vut-exec`.
+pub fn python(name: &str, file: &str, args: &str) -> String {
+    format!("{name}=python3 {} {args}", repo_path(file))
+}
