@@ -190,8 +190,8 @@ pub struct CreateCampaign {
     /// A paired regression campaign: a second vehicle (as `vut`) tested on
     /// the same tests, and the difference of the rates (`vut`'s minus this
     /// one's) estimated from the same draws. It stops when the difference
-    /// is known to within β of the larger rate or its interval excludes
-    /// zero (docs/statistics.md). Methods `library` and `ndd`; not with
+    /// is known to within β of the larger rate, or when its interval
+    /// excludes zero at a look (`n_min·2ᵏ` tests; docs/statistics.md). Methods `library` and `ndd`; not with
     /// `guard_outside`. The answer is vehicle a's campaign, with `pair`.
     #[serde(default)]
     #[schema(value_type = Option<Object>)]

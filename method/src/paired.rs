@@ -6,8 +6,10 @@
 //! `aᵢ = w_{a,i} 1{A_a,i}` and `bᵢ = w_{b,i} 1{A_b,i}` (for a grid case the
 //! scenario and weight are drawn before the vehicle runs, so `w_a = w_b = w`
 //! and `dᵢ = w (y_a − y_b)`; for car-following each vehicle's trajectory
-//! gives its own weight, and the pairing is common random numbers). Both
-//! `ā` and `b̄` are the single-vehicle campaigns' estimators, and
+//! gives its own weight, and the pairing is common random numbers). `ā` and
+//! `b̄` are the plain means `S₁/n` of the pair's tests (a library campaign
+//! under the stratified split weights its two strata by their shares
+//! instead, so its own estimate differs slightly), and
 //!
 //! ```text
 //! Δ̂ = d̄ = ā − b̄,   s²_d = (Σ dᵢ² − n d̄²)/(n − 1),   h = z s_d / √n.
@@ -33,7 +35,10 @@
 //!   interval that excludes zero, checked at every test, would call a
 //!   difference between equal vehicles far more often than α.
 //!
-//! or at `max_tests` (exhausted).
+//! or at `max_tests` (exhausted). The α-spending bounds the `significant`
+//! stops between equal vehicles; a `precision` stop's interval is at the
+//! nominal level, so between equal vehicles an interval that excludes zero
+//! at a stop of either kind happens with probability up to about 2α.
 
 use crate::estimator::{z_for_confidence, StoppingRule};
 use crate::registry::CampaignTests;
@@ -219,9 +224,10 @@ impl PairedSums {
     }
 
     /// Folds the tests `*indices..to` in index order, checking the rule
-    /// after each valid one: `outcomes` lists, in index order, the tests of
-    /// that range where either vehicle had the event or could not run
-    /// (every other test is valid with no event for both). A test either
+    /// after each index (a test either vehicle could not run changes only
+    /// the count against `max_tests`): `outcomes` lists, in index order and
+    /// inside the range, the tests where either vehicle had the event or
+    /// could not run (every other test is valid with no event for both). A test either
     /// vehicle could not run does not count in `n`. Returns the stop, with
     /// `*indices` one past its test; the same outcomes give the same stop
     /// however they are cut into calls.
@@ -233,6 +239,12 @@ impl PairedSums {
         to: u64,
         outcomes: &[(u64, PairedOutcome)],
     ) -> Option<PairedResult> {
+        debug_assert!(
+            outcomes.windows(2).all(|w| w[0].0 < w[1].0)
+                && outcomes.iter().all(|o| (*indices..to).contains(&o.0)),
+            "outcomes out of order or outside {}..{to}",
+            *indices
+        );
         let mut listed = outcomes.iter().peekable();
         while *indices < to {
             let i = *indices;

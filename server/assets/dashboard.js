@@ -208,8 +208,9 @@ async function pairSection(c) {
   const [va, vb] = p.campaign_a === c.id ? [c.vut, b.vut] : [b.vut, c.vut];
   set('pair-status', p.stop ? `${p.status} (${p.stop})` : p.status);
   document.getElementById('pair-status').className = `status-${p.status}`;
-  const zero = p.difference && (p.difference.ci_low > 0 || p.difference.ci_high < 0)
-    ? 'its interval excludes zero' : 'its interval holds zero';
+  const zero = !p.difference ? 'no interval yet'
+    : p.difference.ci_low > 0 || p.difference.ci_high < 0
+      ? 'its interval excludes zero' : 'its interval holds zero';
   set('pair-detail', `${fmt.count(p.tests)} tests drawn the same for both vehicles, `
     + `${fmt.count(p.discordant)} where only one failed; the difference a − b: ${zero}`
     + (p.look_confidence ? ` (at confidence ${p.look_confidence.toFixed(4)})` : '')

@@ -191,8 +191,8 @@ async fn a_paired_campaign_stops_where_the_same_pair_in_process_stops_and_stops_
     assert_eq!(r.status().as_u16(), 200);
 
     // The same vehicle twice never differs: both campaigns reach max_tests,
-    // each stopping on its own first, and the pair's last fold comes with
-    // the later one.
+    // the first waits (running) for the other, and the pair's last fold
+    // comes with the later one.
     let same = CreateCampaign {
         vut: json!("idm"),
         paired_with: Some(json!("idm")),
@@ -367,4 +367,77 @@ async fn a_pair_with_an_external_program_is_the_same_pair_in_process() {
     // The program's campaign has no exact answer (the coordinator does not
     // run programs), so neither has the difference.
     assert_eq!(pair.exact_difference, None);
+}
+
+/// A worker caught forging after its honest results helped stop a pair:
+/// its results are taken back, the pair runs again (both campaigns), and
+/// honest workers take it to exactly the stop the in-process pair makes.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_pair_stopped_on_a_flagged_workers_results_runs_again_to_the_honest_stop() {
+    let dir = scratch();
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &["--lease-size", "300"]);
+    let client = server.client();
+    let library = ready_library(&client, "idm", true).await;
+    let file = client.library_file(library.id).await.unwrap();
+    let request = CreateCampaign {
+        paired_with: Some(json!("idm")),
+        ..campaign(Method::Library, library.id, "fvdm", 0.2, 5)
+    };
+    let a = client.create_campaign(&request).await.unwrap().id;
+    let case = open_case("cut-in", None, &ExposureSource::Builtin).unwrap();
+    let tests_of = |vut: &Value, seed| {
+        case.campaign(
+            Some(&file),
+            vut,
+            0.1,
+            Default::default(),
+            Default::default(),
+            seed,
+        )
+        .unwrap()
+    };
+
+    // The worker reports its first lease, of campaign a, honestly.
+    let first = client.claim(&ask("forger", &[])).await.unwrap().unwrap();
+    assert_eq!(first.campaign_id, a);
+    let events = honest_events(tests_of(&request.vut, 5).as_ref(), &first);
+    client
+        .report(first.id, &whole(&first, "forger", events))
+        .await
+        .unwrap();
+    // Honest workers take the pair to its stop.
+    let workers = two_workers(&server.url);
+    let stopped = wait_for(&client, a, Duration::from_secs(120), |v| {
+        v.pair.as_ref().is_some_and(|p| p.stop.is_some())
+    })
+    .await;
+    let reference = paired_in_process(Some(&file), &request);
+    assert_same_pair(stopped.pair.as_ref().unwrap(), &reference);
+    drop(workers);
+
+    // Then it forges a report of another campaign: refused, flagged, and
+    // its results taken back everywhere, the pair's first lease too.
+    let other = campaign(Method::Library, library.id, "fvdm", 0.2, 77);
+    let c = client.create_campaign(&other).await.unwrap().id;
+    let lease = client.claim(&ask("forger", &[])).await.unwrap().unwrap();
+    assert_eq!(lease.campaign_id, c);
+    let refused = client
+        .report(lease.id, &whole(&lease, "forger", Vec::new()))
+        .await;
+    assert!(refused.is_err(), "a report hiding every event is refused");
+    let reopened = client.campaign(a).await.unwrap();
+    let pair = reopened.pair.clone().unwrap();
+    assert_eq!(pair.stop, None, "the pair runs again: {pair:?}");
+    assert_eq!(reopened.status, CampaignStatus::Running);
+    assert_eq!(
+        client.campaign(pair.campaign_b).await.unwrap().status,
+        CampaignStatus::Running
+    );
+
+    // Honest workers run the taken-back tests again: the same stop.
+    let _workers = two_workers(&server.url);
+    let view = finished(&client, a, Duration::from_secs(120)).await;
+    assert_same_pair(view.pair.as_ref().unwrap(), &reference);
+    let b = client.campaign(pair.campaign_b).await.unwrap();
+    assert!(b.status.is_final(), "{b:?}");
 }

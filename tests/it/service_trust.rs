@@ -9,51 +9,10 @@
 use crate::support::*;
 use std::path::Path;
 use std::time::{Duration, Instant};
-use tslg_api::{CampaignStatus, EventResult, Lease, LeaseRequest, Method, ResultReport};
+use tslg_api::{CampaignStatus, EventResult, Method};
 use tslg_client::{CallError, Client};
 use tslg_method::cases::open_case;
-use tslg_method::registry::{CampaignTests, ExposureSource};
-
-fn ask(worker: &str, offers: &[&str]) -> LeaseRequest {
-    LeaseRequest {
-        worker: worker.into(),
-        threads: 1,
-        include_tests: false,
-        offers: offers.iter().map(|o| o.to_string()).collect(),
-        unhealthy: Vec::new(),
-        max_tests: None,
-    }
-}
-
-/// A report of `lease` whole, with `events`.
-fn whole(lease: &Lease, worker: &str, events: Vec<EventResult>) -> ResultReport {
-    ResultReport {
-        near_misses: Vec::new(),
-        worker: worker.into(),
-        attempt: lease.attempt,
-        key: lease.key.clone(),
-        from: lease.resume_at,
-        to: lease.end,
-        events,
-        packed_events: None,
-        invalid: Vec::new(),
-        compute_seconds: 0.0,
-        threads: 1,
-    }
-}
-
-/// The events of `lease` as the campaign's tests really give them.
-fn honest_events(tests: &dyn CampaignTests, lease: &Lease) -> Vec<EventResult> {
-    (lease.resume_at..lease.end)
-        .filter_map(|index| {
-            let outcome = tests.run(index);
-            outcome.event.then_some(EventResult {
-                index,
-                weight: outcome.weight,
-            })
-        })
-        .collect()
-}
+use tslg_method::registry::ExposureSource;
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_forged_report_on_a_builtin_vehicle_is_refused_and_its_worker_undone() {

@@ -97,11 +97,13 @@ pub async fn live_view(
         view.warnings.extend(warnings);
     }
     if let Some(partner) = row.paired_with {
-        let (row, other) = (row.clone(), read_campaign(state, partner).await?);
-        view.pair = state
+        // The pair and the other campaign as one read sees them.
+        let row = row.clone();
+        let (pair, other) = state
             .db
-            .read(move |conn| pairs::view_of(conn, &row))
+            .read(move |conn| Ok((pairs::view_of(conn, &row)?, campaigns::get(conn, partner)?)))
             .await?;
+        view.pair = pair;
         // The pair waits for the slower campaign: say why it waits.
         if let Some(waiting) = waiting_for_workers(state, &other) {
             view.warnings
@@ -258,12 +260,14 @@ pub async fn delete(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
 ) -> Result<axum::http::StatusCode, ApiError> {
-    state
+    let partner = state
         .db
         .write(move |conn| crate::store::deletion::delete_campaign(conn, id))
         .await?;
-    state.samplers.forget(id);
-    state.throughput.forget(id);
+    for id in std::iter::once(id).chain(partner) {
+        state.samplers.forget(id);
+        state.throughput.forget(id);
+    }
     tracing::info!(campaign = id, "campaign deleted");
     Ok(axum::http::StatusCode::NO_CONTENT)
 }

@@ -41,8 +41,9 @@ fn delete_campaign_rows(conn: &Connection, id: i64) -> Result<(), ApiError> {
 }
 
 /// Deletes stopped campaign `id` and its records, with the other campaign
-/// of its pair if it has one (a write); 409 while either runs.
-pub fn delete_campaign(conn: &Connection, id: i64) -> Result<(), ApiError> {
+/// of its pair if it has one (a write), and returns that one's id; 409
+/// while either runs.
+pub fn delete_campaign(conn: &Connection, id: i64) -> Result<Option<i64>, ApiError> {
     let row = crate::store::campaigns::get(conn, id)?;
     if !row.status.is_final() {
         return Err(ApiError::Conflict(format!(
@@ -74,7 +75,8 @@ pub fn delete_campaign(conn: &Connection, id: i64) -> Result<(), ApiError> {
         crate::store::pairs::unlink(conn, &row)?;
         delete_campaign_rows(conn, partner)?;
     }
-    delete_campaign_rows(conn, id)
+    delete_campaign_rows(conn, id)?;
+    Ok(row.paired_with)
 }
 
 /// Deletes library `id` and its file, with the campaign that built it on

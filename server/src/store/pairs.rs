@@ -13,7 +13,6 @@
 use crate::db::sql;
 use crate::error::ApiError;
 use crate::store::campaigns::{self, CampaignRow};
-use crate::store::fold::close_stopped;
 use crate::store::reports;
 use rusqlite::{params, Connection};
 use tslg_api::{CampaignStatus, PairStop, PairView, PairedInterval};
@@ -268,7 +267,9 @@ fn fold(conn: &Connection, campaign: &CampaignRow) -> Result<Option<CampaignStat
                 id
             ],
         )?;
-        close_stopped(conn, id, indices)?;
+        // Its leases stop; its open audits wait (they run only for a
+        // running campaign) in case the pair runs again ([`reopen`]).
+        crate::store::leases::cancel_active(conn, id)?;
     }
     tracing::info!(
         pair = a.id,
@@ -370,11 +371,13 @@ pub fn reopen(conn: &Connection, campaign: &CampaignRow) -> Result<(), ApiError>
         [pair.campaign_a],
     )?;
     let partner = campaigns::get(conn, pair.partner(campaign.id))?;
+    // Stopped by the pair (a campaign of a pair stops on its own only when
+    // cancelled or failed): it runs again with the pair, if only to be
+    // stopped again by the pair's next fold.
     if matches!(
         partner.status,
         CampaignStatus::Converged | CampaignStatus::Exhausted
-    ) && partner.indices < partner.max_tests
-    {
+    ) {
         sql::execute(
             conn,
             "UPDATE campaigns SET status = 'running', status_detail = ? WHERE id = ?",

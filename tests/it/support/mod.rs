@@ -576,3 +576,52 @@ pub fn repo_path(path: &str) -> String {
 pub fn python(name: &str, file: &str, args: &str) -> String {
     format!("{name}=python3 {} {args}", repo_path(file))
 }
+
+/// A worker's lease request: one thread, offering `offers`.
+pub fn ask(worker: &str, offers: &[&str]) -> tslg_api::LeaseRequest {
+    tslg_api::LeaseRequest {
+        worker: worker.into(),
+        threads: 1,
+        include_tests: false,
+        offers: offers.iter().map(|o| o.to_string()).collect(),
+        unhealthy: Vec::new(),
+        max_tests: None,
+    }
+}
+
+/// A report of `lease` whole, with `events`.
+pub fn whole(
+    lease: &tslg_api::Lease,
+    worker: &str,
+    events: Vec<tslg_api::EventResult>,
+) -> tslg_api::ResultReport {
+    tslg_api::ResultReport {
+        near_misses: Vec::new(),
+        worker: worker.into(),
+        attempt: lease.attempt,
+        key: lease.key.clone(),
+        from: lease.resume_at,
+        to: lease.end,
+        events,
+        packed_events: None,
+        invalid: Vec::new(),
+        compute_seconds: 0.0,
+        threads: 1,
+    }
+}
+
+/// The events of `lease` as the campaign's tests really give them.
+pub fn honest_events(
+    tests: &dyn tslg_method::registry::CampaignTests,
+    lease: &tslg_api::Lease,
+) -> Vec<tslg_api::EventResult> {
+    (lease.resume_at..lease.end)
+        .filter_map(|index| {
+            let outcome = tests.run(index);
+            outcome.event.then_some(tslg_api::EventResult {
+                index,
+                weight: outcome.weight,
+            })
+        })
+        .collect()
+}
