@@ -8,7 +8,7 @@
 use crate::support::*;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
-use tslg_api::{CampaignStatus, Lease, LeaseRequest, Method, ResultReport};
+use tslg_api::{CampaignStatus, Lease, Method, ResultReport};
 use tslg_client::Client;
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -95,36 +95,11 @@ async fn claim_and_report(
     tests: &dyn tslg_method::registry::CampaignTests,
     worker: &str,
 ) -> Option<(Lease, ResultReport)> {
-    let ask = LeaseRequest {
-        worker: worker.into(),
-        threads: 1,
-        include_tests: false,
-        offers: Vec::new(),
-        unhealthy: Vec::new(),
-        max_tests: None,
-    };
     // Errors (the coordinator is gone) end the simulated worker.
-    let lease = client.claim(&ask).await.ok()??;
+    let lease = client.claim(&ask(worker, &[])).await.ok()??;
     let report = ResultReport {
-        near_misses: Vec::new(),
-        worker: worker.into(),
-        attempt: lease.attempt,
-        key: lease.key.clone(),
-        from: lease.resume_at,
-        to: lease.end,
-        events: (lease.resume_at..lease.end)
-            .filter_map(|index| {
-                let outcome = tests.run(index);
-                outcome.event.then_some(tslg_api::EventResult {
-                    index,
-                    weight: outcome.weight,
-                })
-            })
-            .collect(),
-        packed_events: None,
-        invalid: Vec::new(),
         compute_seconds: 0.01,
-        threads: 1,
+        ..whole(&lease, worker, honest_events(tests, &lease))
     };
     client.report(lease.id, &report).await.ok()?;
     Some((lease, report))
