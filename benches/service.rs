@@ -115,6 +115,7 @@ async fn round_trips(count: usize, library: bool) -> anyhow::Result<(Vec<f64>, f
             })
             .collect();
         let mut report = ResultReport {
+            next_lease: None,
             near_misses: Vec::new(),
             worker: "bench".into(),
             attempt: lease.attempt,

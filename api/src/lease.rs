@@ -293,6 +293,14 @@ pub struct ResultReport {
     /// increasing index.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub near_misses: Vec<NearMiss>,
+    /// Asks for the worker's next lease in the same request (its `worker`
+    /// must be the reporting worker): the answer's `next_lease` holds it,
+    /// as `POST /api/v1/leases` would have answered. One request instead
+    /// of two per lease, as BOINC's scheduler RPC reports results and asks
+    /// for work at once; the report is recorded first, and a report that
+    /// is refused takes no lease.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub next_lease: Option<LeaseRequest>,
 }
 
 /// A test that came close to the event.
@@ -358,6 +366,11 @@ pub struct ResultAck {
     pub proceed: bool,
     /// The campaign's status now.
     pub campaign_status: CampaignStatus,
+    /// The next lease, when the report asked for one (`next_lease`) and
+    /// there was work; absent otherwise (no work right now, or the lease
+    /// could not be taken: the worker asks `POST /api/v1/leases`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub next_lease: Option<Lease>,
 }
 
 /// `POST /api/v1/leases/{id}/library`: the library a worker built whole

@@ -449,6 +449,7 @@ fn record_audit_run_in(
             lease_done: true,
             proceed: stopped.is_none(),
             campaign_status: stopped.unwrap_or(CampaignStatus::Running),
+            next_lease: None,
         },
         stopped,
         campaign_id: campaign.id,

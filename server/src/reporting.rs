@@ -4,9 +4,11 @@
 //! it, and the bookkeeping that follows. The route only parses.
 
 use crate::audit;
+use crate::config::Config;
 use crate::error::ApiError;
 use crate::replay_check;
 use crate::report_check::CheckedReport;
+use crate::sampler_cache::SamplerCache;
 use crate::state::AppState;
 use crate::store::results::{self, AuditPlan, Findings, Recorded};
 use crate::store::{audits, campaigns, leases};
@@ -22,29 +24,55 @@ const INLINE_REPLAYS: u64 = 256;
 /// Replays a report may take on the writer itself (see [`at_once`]).
 const WRITER_REPLAYS: usize = 64;
 
-/// Checks, records and accounts a report on lease `lease_id`.
+/// Checks, records and accounts a report on lease `lease_id`; then runs
+/// `next`, the claim of the worker's next lease that the report carries
+/// (in the same trip to the writer where the report takes one), and
+/// returns what it took.
 pub async fn receive(
     state: &AppState,
     lease_id: i64,
     report: &Arc<ResultReport>,
     checked: &Arc<CheckedReport>,
-) -> Result<ResultAck, ApiError> {
-    match at_once(state, lease_id, report, checked).await {
-        Ok(AtOnce::Recorded(recorded)) => {
+    next: Option<leases::ClaimJob>,
+) -> Result<(ResultAck, Option<leases::Claimed>), ApiError> {
+    let next = match at_once(state, lease_id, report, checked, next).await {
+        Ok(AtOnce::Recorded(recorded, claimed)) => {
             account(state, report, &recorded);
-            return Ok(recorded.ack);
+            return Ok((recorded.ack, claimed.map(|c| *c)));
         }
         Ok(AtOnce::Contradicted(mismatch)) => {
             return Err(contradicted(&mismatch, &report.worker));
         }
-        Ok(AtOnce::Declined) => {}
+        Ok(AtOnce::Declined(next)) => next,
         Err(e) => {
             // The writer may have resolved adaptive stages it did not
             // persist; the copy is rebuilt from what is stored.
             forget_adaptive(state, lease_id);
             return Err(e);
         }
-    }
+    };
+    let ack = receive_in_parts(state, lease_id, report, checked).await?;
+    let claimed = match next {
+        Some(job) => {
+            let config = Arc::clone(&state.config);
+            state
+                .db
+                .write(move |conn| Ok(leases::claim_after(conn, &config, &job)))
+                .await?
+        }
+        None => None,
+    };
+    Ok((ack, claimed))
+}
+
+/// [`receive`] for a report the writer declined to take at once: read,
+/// checked, then recorded.
+async fn receive_in_parts(
+    state: &AppState,
+    lease_id: i64,
+    report: &Arc<ResultReport>,
+    checked: &Arc<CheckedReport>,
+) -> Result<ResultAck, ApiError> {
     // One read for what decides the checks. Only the lease's holder may
     // report on it, and only what it reports is checked: a report in
     // another worker's name must not get that worker flagged. (The
@@ -112,10 +140,20 @@ pub async fn receive(
 /// What the writer made of a report it was asked to check and record in
 /// one go.
 enum AtOnce {
-    Recorded(Recorded),
+    /// Recorded, with the next lease when the report asked for one and
+    /// one was taken.
+    Recorded(Box<Recorded>, Option<Box<leases::Claimed>>),
     /// The coordinator's own run contradicts it: the worker is flagged.
     Contradicted(audit::Mismatch),
-    /// It needs more than the writer should do: the general path.
+    /// It needs more than the writer should do: the general path, which
+    /// also runs the claim of the next lease, handed back.
+    Declined(Option<leases::ClaimJob>),
+}
+
+/// [`AtOnce`] before the next lease is claimed.
+enum Decided {
+    Recorded(Box<Recorded>),
+    Contradicted(audit::Mismatch),
     Declined,
 }
 
@@ -124,7 +162,8 @@ enum AtOnce {
 /// holds, with at most [`WRITER_REPLAYS`] tests to run again (a draw and a
 /// look-up each on a grid case, microseconds in all). The writer reads the
 /// lease and its campaign (the holder checked, as always), runs the
-/// checks, and flags the worker or records the report. Anything else (an
+/// checks, and flags the worker or records the report, then claims the
+/// worker's next lease when the report asks for one. Anything else (an
 /// external program's audits, a campaign whose tests are not built yet,
 /// a large replay, an audit run, a build) is declined and goes the general
 /// way.
@@ -133,6 +172,7 @@ async fn at_once(
     lease_id: i64,
     report: &Arc<ResultReport>,
     checked: &Arc<CheckedReport>,
+    next: Option<leases::ClaimJob>,
 ) -> Result<AtOnce, ApiError> {
     let (samplers, sampler, config) = (
         Arc::clone(&state.samplers),
@@ -143,50 +183,84 @@ async fn at_once(
     state
         .db
         .write(move |conn| {
-            let (lease, campaign) = results::held_lease(conn, lease_id, &report)?;
-            let tests = samplers.cached(campaign.id);
-            let Some(tests) = tests.filter(|t| t.external().is_none()) else {
-                return Ok(AtOnce::Declined);
+            let shared = Shared {
+                samplers: &samplers,
+                sampler: &sampler,
+                config: &config,
             };
-            if lease.audit_id.is_some()
-                || campaign.method == Method::Build
-                || campaign.status.is_final()
-            {
-                return Ok(AtOnce::Declined);
-            }
-            let new = checked.from.max(lease.resume_at as u64);
-            let mut explored = None;
-            if new < checked.to {
-                if tests.planned(new).is_none() {
-                    return Ok(AtOnce::Declined);
+            Ok(match decide(conn, &shared, lease_id, &report, &checked)? {
+                Decided::Recorded(recorded) => {
+                    let claimed = next
+                        .and_then(|job| leases::claim_after(conn, &config, &job))
+                        .map(Box::new);
+                    AtOnce::Recorded(recorded, claimed)
                 }
-                let chosen = sampler.pick(config.replay_share, new, checked.to);
-                let work = if tests.outside_mass().is_some() {
-                    (checked.to - new) as usize
-                } else {
-                    chosen.len() + checked.outcomes.len()
-                };
-                if work > WRITER_REPLAYS {
-                    return Ok(AtOnce::Declined);
-                }
-                let verified = replay_check::verify_builtin(tests.as_ref(), &checked, new, &chosen);
-                if let Some(mismatch) = verified.mismatch {
-                    let reason = format!("campaign {}: {mismatch}", campaign.id);
-                    audit::flag_worker(conn, &report.worker, &reason, campaign.id, mismatch.index)?;
-                    return Ok(AtOnce::Contradicted(mismatch));
-                }
-                explored = verified.explored;
-            }
-            let found = Findings {
-                tests: Some(tests).filter(|_| campaign.method.uses_library()),
-                audits: AuditPlan::default(),
-                explored,
-            };
-            let recorded =
-                results::record_held(conn, &config, &lease, &campaign, &report, &checked, found)?;
-            Ok(AtOnce::Recorded(recorded))
+                Decided::Contradicted(mismatch) => AtOnce::Contradicted(mismatch),
+                Decided::Declined => AtOnce::Declined(next),
+            })
         })
         .await
+}
+
+/// What [`decide`] needs of the coordinator's state.
+struct Shared<'a> {
+    samplers: &'a SamplerCache,
+    sampler: &'a audit::Sampler,
+    config: &'a Config,
+}
+
+/// [`at_once`]'s decision on the writer: declined, contradicted (the
+/// worker flagged) or recorded.
+fn decide(
+    conn: &rusqlite::Connection,
+    shared: &Shared<'_>,
+    lease_id: i64,
+    report: &ResultReport,
+    checked: &CheckedReport,
+) -> Result<Decided, ApiError> {
+    let Shared {
+        samplers,
+        sampler,
+        config,
+    } = *shared;
+    let (lease, campaign) = results::held_lease(conn, lease_id, report)?;
+    let tests = samplers.cached(campaign.id);
+    let Some(tests) = tests.filter(|t| t.external().is_none()) else {
+        return Ok(Decided::Declined);
+    };
+    if lease.audit_id.is_some() || campaign.method == Method::Build || campaign.status.is_final() {
+        return Ok(Decided::Declined);
+    }
+    let new = checked.from.max(lease.resume_at as u64);
+    let mut explored = None;
+    if new < checked.to {
+        if tests.planned(new).is_none() {
+            return Ok(Decided::Declined);
+        }
+        let chosen = sampler.pick(config.replay_share, new, checked.to);
+        let work = if tests.outside_mass().is_some() {
+            (checked.to - new) as usize
+        } else {
+            chosen.len() + checked.outcomes.len()
+        };
+        if work > WRITER_REPLAYS {
+            return Ok(Decided::Declined);
+        }
+        let verified = replay_check::verify_builtin(tests.as_ref(), checked, new, &chosen);
+        if let Some(mismatch) = verified.mismatch {
+            let reason = format!("campaign {}: {mismatch}", campaign.id);
+            audit::flag_worker(conn, &report.worker, &reason, campaign.id, mismatch.index)?;
+            return Ok(Decided::Contradicted(mismatch));
+        }
+        explored = verified.explored;
+    }
+    let found = Findings {
+        tests: Some(tests).filter(|_| campaign.method.uses_library()),
+        audits: AuditPlan::default(),
+        explored,
+    };
+    let recorded = results::record_held(conn, config, &lease, &campaign, report, checked, found)?;
+    Ok(Decided::Recorded(Box::new(recorded)))
 }
 
 /// Drops the coordinator's copy of lease `lease_id`'s campaign when it is

@@ -42,6 +42,11 @@ pub struct LoadArgs {
     /// may give fewer: `--lease-size`, the campaign's budget).
     #[arg(long, default_value_t = 100)]
     pub lease_tests: u64,
+    /// Take every lease with its own request (`POST /api/v1/leases`), as
+    /// coordinators before the combined request did; by default a report
+    /// asks for the next lease (`next_lease`), so a round is one request.
+    #[arg(long)]
+    pub separate_claims: bool,
     /// Give up (exit 1) after this many seconds.
     #[arg(long, default_value_t = 300.0)]
     pub time_limit: f64,
@@ -67,6 +72,10 @@ pub struct LoadReport {
     pub workers: usize,
     pub requests: usize,
     pub seconds: f64,
+    /// Whether each lease was taken with its own request.
+    pub separate_claims: bool,
+    /// Rounds (a lease taken and reported) per second.
+    pub round_trips_per_second: f64,
     pub lease_ms: Percentiles,
     pub result_ms: Percentiles,
     pub errors: Vec<String>,
@@ -184,6 +193,7 @@ pub fn run(args: &LoadArgs) -> anyhow::Result<()> {
         workers: args.workers,
         requests: args.requests,
         lease_tests: args.lease_tests,
+        separate_claims: args.separate_claims,
     };
     let report = runtime.block_on(async {
         let commits_before = group_commits(&admin).await;
@@ -229,11 +239,17 @@ pub fn run(args: &LoadArgs) -> anyhow::Result<()> {
 
 fn print_table(r: &LoadReport) {
     outln!(
-        "{} workers × {} rounds in {:.1} s ({:.0} requests/s)",
+        "{} workers × {} rounds in {:.1} s ({:.0} round trips/s, {:.0} requests/s; {})",
         r.workers,
         r.requests,
         r.seconds,
-        (r.lease_ms.count + r.result_ms.count) as f64 / r.seconds
+        r.round_trips_per_second,
+        (r.lease_ms.count + r.result_ms.count) as f64 / r.seconds,
+        if r.separate_claims {
+            "a request per lease and per report"
+        } else {
+            "reports take the next lease"
+        }
     );
     outln!("| request | count | p50 ms | p90 ms | p99 ms | max ms |");
     outln!("|---|---|---|---|---|---|");
@@ -279,6 +295,7 @@ struct Shape {
     workers: usize,
     requests: usize,
     lease_tests: u64,
+    separate_claims: bool,
 }
 
 /// The campaign the load runs on: cut-in NDD of the IDM at the smallest β
@@ -333,6 +350,8 @@ async fn load(worker: &Client, campaign_id: i64, shape: Shape) -> anyhow::Result
         workers: shape.workers,
         requests: shape.requests,
         seconds,
+        separate_claims: shape.separate_claims,
+        round_trips_per_second: (shape.workers * shape.requests) as f64 / seconds,
         lease_ms: Percentiles::of(all(|l| &l.lease_ms)),
         result_ms: Percentiles::of(all(|l| &l.result_ms)),
         errors: logs.iter().flat_map(|l| l.errors.clone()).collect(),
@@ -361,7 +380,9 @@ fn run_tests(prepared: &PreparedCampaign, from: u64, to: u64) -> Vec<(u64, f64)>
         .collect()
 }
 
-/// One simulated worker: `rounds` leases, each run and reported whole.
+/// One simulated worker: `rounds` leases, each run and reported whole;
+/// unless `separate_claims`, each report but the last asks for the next
+/// lease, and a lease is claimed on its own only when none came with it.
 async fn simulated_worker(
     client: Client,
     prepared: Arc<PreparedCampaign>,
@@ -377,20 +398,28 @@ async fn simulated_worker(
         unhealthy: Vec::new(),
         max_tests: Some(shape.lease_tests),
     };
-    for _ in 0..shape.requests {
-        let asked = Instant::now();
-        let lease = match client.claim(&ask).await {
-            Ok(Some(lease)) => lease,
-            Ok(None) => {
-                log.errors.push(format!("{name}: no work offered"));
-                continue;
-            }
-            Err(e) => {
-                log.errors.push(format!("{name}: lease: {e}"));
-                continue;
+    let mut given = None;
+    for round in 0..shape.requests {
+        let lease = match given.take() {
+            Some(lease) => lease,
+            None => {
+                let asked = Instant::now();
+                match client.claim(&ask).await {
+                    Ok(Some(lease)) => {
+                        log.lease_ms.push(asked.elapsed().as_secs_f64() * 1e3);
+                        lease
+                    }
+                    Ok(None) => {
+                        log.errors.push(format!("{name}: no work offered"));
+                        continue;
+                    }
+                    Err(e) => {
+                        log.errors.push(format!("{name}: lease: {e}"));
+                        continue;
+                    }
+                }
             }
         };
-        log.lease_ms.push(asked.elapsed().as_secs_f64() * 1e3);
         let ran = Instant::now();
         let (from, to) = (lease.resume_at, lease.end);
         let events = if to - from <= INLINE_TESTS {
@@ -416,6 +445,7 @@ async fn simulated_worker(
             events: Vec::new(),
             packed_events: None,
             near_misses: Vec::new(),
+            next_lease: (!shape.separate_claims && round + 1 < shape.requests).then(|| ask.clone()),
         };
         let found = events.len() as u64;
         report.pack_events(&events);
@@ -425,6 +455,7 @@ async fn simulated_worker(
                 log.result_ms.push(sent.elapsed().as_secs_f64() * 1e3);
                 log.accepted += ack.accepted;
                 log.events += found;
+                given = ack.next_lease;
             }
             Err(e) => log.errors.push(format!("{name}: result: {e}")),
         }

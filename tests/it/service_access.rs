@@ -182,6 +182,7 @@ async fn tokens_open_only_their_part_of_the_api_and_never_reach_the_logs() {
         "Debug hides the key"
     );
     let report = ResultReport {
+        next_lease: None,
         near_misses: Vec::new(),
         worker: "honest".into(),
         attempt: lease.attempt,

@@ -261,6 +261,7 @@ async fn raw(address: &str, bytes: &[u8]) -> String {
 
 fn effort(lease: &tslg_api::Lease, worker: &str, seconds: f64, threads: u32) -> ResultReport {
     ResultReport {
+        next_lease: None,
         near_misses: Vec::new(),
         worker: worker.into(),
         attempt: lease.attempt,

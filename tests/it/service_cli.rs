@@ -174,6 +174,7 @@ async fn invalid_tests_use_indices_but_are_not_counted_as_tests() {
         reason: "simulator crashed".into(),
     };
     let report = ResultReport {
+        next_lease: None,
         near_misses: Vec::new(),
         worker: "w".into(),
         attempt: 1,

@@ -10,63 +10,90 @@ use serde_json::Value;
 use std::process::Command;
 use tslg_api::{CampaignStatus, Method};
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn sixty_four_concurrent_workers_lose_and_double_nothing() {
-    let dir = scratch();
-    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &["--lease-size", "100"]);
-    let (workers, rounds) = (64, 10);
-    let output = Command::new(env!("CARGO_BIN_EXE_tslg"))
-        .args(["load-test", "--server", &server.url, "--json"])
-        .args(["--workers", &workers.to_string()])
-        .args(["--requests", &rounds.to_string()])
-        .args(["--time-limit", "120"])
+/// Runs `tslg load-test --json` against `url` with `extra` arguments.
+fn load_test(url: &str, extra: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_tslg"))
+        .args(["load-test", "--server", url, "--json"])
+        .args(extra)
         .output()
-        .unwrap();
+        .unwrap()
+}
+
+/// The report of a load test that must succeed.
+fn successful(output: &std::process::Output) -> Value {
     let stdout = String::from_utf8_lossy(&output.stdout);
     assert!(
         output.status.success(),
         "{stdout}\n{}",
         String::from_utf8_lossy(&output.stderr)
     );
-    let report: Value = serde_json::from_str(&stdout).unwrap();
-    let requests = (workers * rounds) as u64;
-    assert_eq!(report["lease_ms"]["count"], requests);
-    assert_eq!(report["result_ms"]["count"], requests);
-    assert_eq!(report["errors"].as_array().unwrap().len(), 0);
-    assert_eq!(report["accepted_tests"], requests * 100);
-    assert_eq!(report["campaign_tests"], requests * 100);
-    assert_eq!(report["reported_events"], report["campaign_events"]);
-    assert!(report["lease_ms"]["p99"].as_f64().unwrap() > 0.0);
+    serde_json::from_str(&stdout).unwrap()
+}
 
-    let client = server.client();
-    let id = report["campaign_id"].as_i64().unwrap();
-    let view = client.campaign(id).await.unwrap();
-    assert_eq!(view.status, CampaignStatus::Cancelled);
-    let mut request = campaign(Method::Ndd, 0, "idm", tslg_method::estimator::MIN_BETA, 1);
-    request.library_id = None;
-    request.max_tests = requests * 100;
-    assert_same(&view, &in_process(None, &request));
-    // Every lease and report was committed in a group, and with 64
-    // workers at once groups held several requests (group commit).
-    let (groups, grouped) = (
-        scraped(&server.url, "tslg_write_groups_total").await,
-        scraped(&server.url, "tslg_grouped_writes_total").await,
-    );
-    assert!(grouped >= 2.0 * requests as f64, "{grouped} grouped writes");
-    assert!(
-        groups < grouped,
-        "{groups} commits for {grouped} requests: none shared a commit"
-    );
-    // The load test reports the same counters over its run.
-    let commits = &report["commits"];
-    assert!(
-        commits["requests"].as_u64().unwrap() >= 2 * requests,
-        "{commits}"
-    );
-    assert!(
-        commits["transactions"].as_u64().unwrap() < commits["requests"].as_u64().unwrap(),
-        "{commits}"
-    );
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sixty_four_concurrent_workers_lose_and_double_nothing() {
+    let dir = scratch();
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &["--lease-size", "100"]);
+    let (workers, rounds) = (64, 10);
+    let requests = (workers * rounds) as u64;
+    // Reports that take the next lease (the default), then a request per
+    // lease and per report.
+    for (extra, claims) in [
+        (None, workers as u64),
+        (Some("--separate-claims"), requests),
+    ] {
+        let (groups_before, grouped_before) = (
+            scraped(&server.url, "tslg_write_groups_total").await,
+            scraped(&server.url, "tslg_grouped_writes_total").await,
+        );
+        let (workers_arg, rounds_arg) = (workers.to_string(), rounds.to_string());
+        let mut args = vec!["--workers", &workers_arg, "--requests", &rounds_arg];
+        args.extend(["--time-limit", "120"]);
+        args.extend(extra);
+        let report = successful(&load_test(&server.url, &args));
+        assert_eq!(report["separate_claims"], extra.is_some());
+        assert_eq!(report["lease_ms"]["count"], claims);
+        assert_eq!(report["result_ms"]["count"], requests);
+        assert_eq!(report["errors"].as_array().unwrap().len(), 0);
+        assert_eq!(report["accepted_tests"], requests * 100);
+        assert_eq!(report["campaign_tests"], requests * 100);
+        assert_eq!(report["reported_events"], report["campaign_events"]);
+        assert!(report["lease_ms"]["p99"].as_f64().unwrap() > 0.0);
+        assert!(report["round_trips_per_second"].as_f64().unwrap() > 0.0);
+
+        let client = server.client();
+        let id = report["campaign_id"].as_i64().unwrap();
+        let view = client.campaign(id).await.unwrap();
+        assert_eq!(view.status, CampaignStatus::Cancelled);
+        let mut request = campaign(Method::Ndd, 0, "idm", tslg_method::estimator::MIN_BETA, 1);
+        request.library_id = None;
+        request.max_tests = requests * 100;
+        assert_same(&view, &in_process(None, &request));
+        // Every lease and report was committed in a group, and with 64
+        // workers at once groups held several requests (group commit).
+        let (groups, grouped) = (
+            scraped(&server.url, "tslg_write_groups_total").await - groups_before,
+            scraped(&server.url, "tslg_grouped_writes_total").await - grouped_before,
+        );
+        assert!(
+            grouped >= (claims + requests) as f64,
+            "{grouped} grouped writes"
+        );
+        assert!(
+            groups < grouped,
+            "{groups} commits for {grouped} requests: none shared a commit"
+        );
+        // The load test reports the same counters over its run.
+        let commits = &report["commits"];
+        assert!(
+            commits["requests"].as_u64().unwrap() >= claims + requests,
+            "{commits}"
+        );
+        assert!(
+            commits["transactions"].as_u64().unwrap() < commits["requests"].as_u64().unwrap(),
+            "{commits}"
+        );
+    }
     let log = server.log();
     assert!(!log.contains("database is locked"), "{log}");
     assert!(!log.contains("panicked"), "{log}");
@@ -77,21 +104,8 @@ async fn the_load_test_works_against_a_default_coordinator_and_always_cleans_up(
     let dir = scratch();
     // Adaptive lease sizes, as an operator runs the coordinator.
     let server = ServerProcess::start(&dir.path().join("db.sqlite"), &[]);
-    let run = |extra: &[&str]| {
-        Command::new(env!("CARGO_BIN_EXE_tslg"))
-            .args(["load-test", "--server", &server.url, "--json"])
-            .args(extra)
-            .output()
-            .unwrap()
-    };
-    let output = run(&["--workers", "16", "--requests", "10"]);
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    assert!(
-        output.status.success(),
-        "{stdout}\n{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    let report: Value = serde_json::from_str(&stdout).unwrap();
+    let run = |extra: &[&str]| load_test(&server.url, extra);
+    let report = successful(&run(&["--workers", "16", "--requests", "10"]));
     assert_eq!(report["errors"].as_array().unwrap().len(), 0);
     assert_eq!(
         report["accepted_tests"],

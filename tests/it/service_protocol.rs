@@ -17,6 +17,7 @@ use tslg_method::registry::{BuildRequest, ExposureSource, LibrarySearch};
 /// `worker`'s report on `lease` (its attempt and key) of `from..to`.
 fn report(worker: &str, lease: &Lease, from: u64, to: u64, events: &[EventResult]) -> ResultReport {
     ResultReport {
+        next_lease: None,
         near_misses: Vec::new(),
         worker: worker.into(),
         attempt: lease.attempt,

@@ -119,6 +119,7 @@ async fn a_database_of_the_previous_release_is_migrated_and_one_of_a_newer_is_re
     // void) and filled the largest term from the stored events, which the
     // final comparison checks bit for bit.
     let report = ResultReport {
+        next_lease: None,
         near_misses: Vec::new(),
         worker: "old".into(),
         attempt: held.attempt,

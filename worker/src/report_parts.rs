@@ -82,6 +82,7 @@ pub fn report_parts(
             compute_seconds: seconds * (end - start) as f64 / (to - from) as f64,
             threads: who.threads,
             near_misses: Vec::new(),
+            next_lease: None,
         };
         let list: Vec<(u64, f64)> = events[e..e_end]
             .iter()

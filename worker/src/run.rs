@@ -53,6 +53,9 @@ struct Worker {
     summary: WorkerSummary,
     /// The last lease's final reports, still being sent.
     tail: Option<Tail>,
+    /// The next lease, taken with the report of a lease's last chunk but
+    /// one (`next_lease`): the worker asks no separate request for it.
+    next_lease: Option<Lease>,
 }
 
 /// Runs a worker until `shutdown` completes (or, with
@@ -98,6 +101,7 @@ pub async fn run(
         stop,
         summary: WorkerSummary::default(),
         tail: None,
+        next_lease: None,
     };
     tracing::info!(worker = %worker.name, threads, server = %config.server, "worker started");
     let mut idle = Backoff::new(0.05, config.max_backoff_seconds);
@@ -132,15 +136,11 @@ pub async fn run(
             let programs = Arc::clone(&worker.programs);
             tokio::task::spawn_blocking(move || programs.probe_rested()).await?;
         }
-        let request = LeaseRequest {
-            worker: worker.name.clone(),
-            threads: threads as u32,
-            include_tests: false,
-            offers: worker.programs.offers(),
-            unhealthy: worker.programs.unhealthy(),
-            max_tests: None,
+        let claimed = match worker.next_lease.take() {
+            Some(lease) => Ok(Some(lease)),
+            None => worker.client.claim(&worker.lease_request()).await,
         };
-        match worker.client.claim(&request).await {
+        match claimed {
             Ok(Some(lease)) => {
                 idle.reset();
                 trouble.reset();
@@ -184,6 +184,18 @@ pub async fn run(
     if let Some(tail) = worker.tail.take() {
         worker.summary.tests += tail.settle().await;
     }
+    if let Some(lease) = worker.next_lease.take() {
+        // Taken with a report but never started: another worker gets it
+        // at once rather than when it expires.
+        LeaseLink {
+            client: worker.client.clone(),
+            lease: lease.id,
+            fence: fence_of(&lease, &worker.name),
+            stop: worker.stop.clone(),
+        }
+        .give_back("the worker is shutting down")
+        .await;
+    }
     let WorkerSummary {
         leases,
         tests,
@@ -196,6 +208,18 @@ pub async fn run(
 impl Worker {
     fn stopping(&self) -> bool {
         *self.stop.borrow()
+    }
+
+    /// What the worker asks for when it asks for work.
+    fn lease_request(&self) -> LeaseRequest {
+        LeaseRequest {
+            worker: self.name.clone(),
+            threads: self.threads as u32,
+            include_tests: false,
+            offers: self.programs.offers(),
+            unhealthy: self.programs.unhealthy(),
+            max_tests: None,
+        }
     }
 
     /// Sleeps, waking early on shutdown.
@@ -344,6 +368,15 @@ impl Worker {
             );
             attach_near_misses(&mut parts, &ran.near_misses);
             self.summary.events += found;
+            // The chunk started meanwhile is the lease's last: this report
+            // asks for the next lease, which is then in hand when that
+            // chunk ends (one request per lease fewer).
+            let last_started = running.as_ref().is_some_and(|r| r.1 == lease.end);
+            if last_started && !self.stopping() {
+                if let Some(part) = parts.last_mut() {
+                    part.next_lease = Some(self.lease_request());
+                }
+            }
             if running.is_none() && ran.end == lease.end && !self.stopping() {
                 // The lease's last chunk: its reports go while the threads
                 // start the next lease (one tail at a time).
@@ -363,6 +396,9 @@ impl Worker {
             };
             self.summary.tests += sent.accepted;
             at = sent.reported_to;
+            if let Some(next) = sent.next_lease {
+                self.next_lease = Some(next);
+            }
             if !sent.proceed || at < to {
                 // A chunk started meanwhile is left to finish unreported.
                 break;

@@ -27,7 +27,7 @@ pub struct LeaseLink {
 }
 
 /// What the coordinator acknowledged of a chunk's reports.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Sent {
     /// Tests the coordinator counted (a repeated report counts once).
     pub accepted: u64,
@@ -36,6 +36,8 @@ pub struct Sent {
     /// `false` once the coordinator says to stop (the campaign converged or
     /// was cancelled, or the lease moved on).
     pub proceed: bool,
+    /// The worker's next lease, when a report asked for it and got one.
+    pub next_lease: Option<Lease>,
 }
 
 impl LeaseLink {
@@ -47,13 +49,18 @@ impl LeaseLink {
             accepted: 0,
             reported_to: from,
             proceed: true,
+            next_lease: None,
         };
         for part in parts {
             match self.report(part).await {
                 Ok(ResultAck {
-                    accepted, proceed, ..
+                    accepted,
+                    proceed,
+                    next_lease,
+                    ..
                 }) => {
                     sent.accepted += accepted;
+                    sent.next_lease = next_lease.or(sent.next_lease.take());
                     sent.reported_to = part.to;
                     if !proceed {
                         sent.proceed = false;

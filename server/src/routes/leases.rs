@@ -41,6 +41,15 @@ pub async fn claim(
     State(state): State<AppState>,
     ApiJson(req): ApiJson<LeaseRequest>,
 ) -> Result<Response, ApiError> {
+    check_lease_request(&req)?;
+    Ok(match grant(&state, &req).await? {
+        Some(lease) => Json(lease).into_response(),
+        None => StatusCode::NO_CONTENT.into_response(),
+    })
+}
+
+/// What a lease request must be before anything is taken (422 otherwise).
+fn check_lease_request(req: &LeaseRequest) -> Result<(), ApiError> {
     check_worker(&req.worker)?;
     if !(1..=leases::MAX_THREADS).contains(&req.threads) {
         return Err(ApiError::Unprocessable(format!(
@@ -54,18 +63,37 @@ pub async fn claim(
             "max_tests = 0: a lease holds at least one test".into(),
         ));
     }
-    check_programs(&req)?;
-    state.workers.seen(&req);
-    let ask = leases::Claim {
+    check_programs(req)
+}
+
+/// Hands a checked lease request a range of tests, `None` when there is
+/// no work right now.
+async fn grant(state: &AppState, req: &LeaseRequest) -> Result<Option<Lease>, ApiError> {
+    state.workers.seen(req);
+    match leases::claim(&state.db, &state.config, &claim_of(req)).await? {
+        Some(claimed) => lease_of(state, req, claimed).await.map(Some),
+        None => Ok(None),
+    }
+}
+
+/// The store's claim of a lease request.
+fn claim_of(req: &LeaseRequest) -> leases::Claim<'_> {
+    leases::Claim {
         worker: &req.worker,
         threads: req.threads,
         inline: req.include_tests,
         offers: &req.offers,
         max_tests: req.max_tests,
-    };
-    let Some(claimed) = leases::claim(&state.db, &state.config, &ask).await? else {
-        return Ok(StatusCode::NO_CONTENT.into_response());
-    };
+    }
+}
+
+/// The lease a claim took, as the worker gets it (an adaptive campaign's,
+/// or one asked for with `include_tests`, lists its tests).
+async fn lease_of(
+    state: &AppState,
+    req: &LeaseRequest,
+    claimed: leases::Claimed,
+) -> Result<Lease, ApiError> {
     let row = claimed.lease;
     let campaign = match claimed.campaign {
         Some(campaign) => campaign,
@@ -105,7 +133,7 @@ pub async fn claim(
         None
     };
     let ttl = state.config.lease_ttl_seconds;
-    Ok(Json(Lease {
+    Ok(Lease {
         id: row.id,
         attempt: row.attempt,
         key: LeaseKey(row.key),
@@ -117,7 +145,6 @@ pub async fn claim(
         heartbeat_seconds: ttl / 3.0,
         tests,
     })
-    .into_response())
 }
 
 /// Checks the external programs a lease request offers (`NAME:case:mode`)
@@ -275,9 +302,35 @@ pub async fn results(
     ApiJson(report): ApiJson<ResultReport>,
 ) -> Result<Json<ResultAck>, ApiError> {
     check_worker(&report.worker)?;
+    if let Some(next) = &report.next_lease {
+        if next.worker != report.worker {
+            return Err(ApiError::Unprocessable(format!(
+                "next_lease.worker `{}` is not the reporting worker `{}`",
+                next.worker, report.worker
+            )));
+        }
+        check_lease_request(next).map_err(|e| match e {
+            ApiError::Unprocessable(m) => ApiError::Unprocessable(format!("next_lease: {m}")),
+            other => other,
+        })?;
+    }
     let checked = std::sync::Arc::new(check_report(&report)?);
     let report = std::sync::Arc::new(report);
-    Ok(Json(
-        reporting::receive(&state, id, &report, &checked).await?,
-    ))
+    let next = report.next_lease.as_ref().map(|next| {
+        state.workers.seen(next);
+        leases::ClaimJob::new(&state.config, &claim_of(next))
+    });
+    let (mut ack, claimed) = reporting::receive(&state, id, &report, &checked, next).await?;
+    if let (Some(next), Some(claimed)) = (&report.next_lease, claimed) {
+        // The report is recorded: a lease that cannot be finished now must
+        // not turn its acknowledgement into an error (the worker would
+        // report again); it expires, and the worker asks for work as usual.
+        ack.next_lease = lease_of(&state, next, claimed)
+            .await
+            .inspect_err(|e| {
+                tracing::warn!(worker = %report.worker, error = %e, "no next lease with a report");
+            })
+            .ok();
+    }
+    Ok(Json(ack))
 }

@@ -108,43 +108,78 @@ pub async fn claim(
     config: &Arc<Config>,
     ask: &Claim<'_>,
 ) -> Result<Option<Claimed>, ApiError> {
-    let Claim {
-        inline,
-        offers,
-        max_tests,
-        ..
-    } = *ask;
-    let now = now_ms();
-    let expires = now + ttl_ms(config);
-    let mut span_limit = if inline { MAX_INLINE_LEASE } else { u64::MAX };
-    if let Some(most) = max_tests {
-        span_limit = span_limit.min(most);
-    }
-    let span_limit = span_limit.min(i64::MAX as u64) as i64;
-    // The cases whose scenarios are drawn while a test runs, as a JSON
-    // array bound to the query (only when `inline`).
-    let sequential: Vec<&str> = tslg_method::cases::descriptors()
-        .iter()
-        .filter(|d| !d.is_grid())
-        .map(|d| d.name)
-        .collect();
-    let sequential = serde_json::to_string(&sequential).expect("strings serialise");
-    let job = ClaimJob {
-        worker: ask.worker.to_string(),
-        threads: ask.threads,
-        audits: !(inline || offers.is_empty()),
-        sequential: inline.then_some(sequential),
-        offered: serde_json::to_string(offers).expect("strings serialise"),
-        span_limit,
-        now,
-        expires,
-    };
+    let job = ClaimJob::new(config, ask);
     let config = Arc::clone(config);
     db.write(move |conn| claim_in(conn, &config, &job)).await
 }
 
+impl ClaimJob {
+    /// The claim `ask` as the writer runs it, timed now.
+    pub fn new(config: &Config, ask: &Claim<'_>) -> Self {
+        let Claim {
+            inline,
+            offers,
+            max_tests,
+            ..
+        } = *ask;
+        let now = now_ms();
+        let expires = now + ttl_ms(config);
+        let mut span_limit = if inline { MAX_INLINE_LEASE } else { u64::MAX };
+        if let Some(most) = max_tests {
+            span_limit = span_limit.min(most);
+        }
+        let span_limit = span_limit.min(i64::MAX as u64) as i64;
+        // The cases whose scenarios are drawn while a test runs, as a JSON
+        // array bound to the query (only when `inline`).
+        let sequential: Vec<&str> = tslg_method::cases::descriptors()
+            .iter()
+            .filter(|d| !d.is_grid())
+            .map(|d| d.name)
+            .collect();
+        let sequential = serde_json::to_string(&sequential).expect("strings serialise");
+        ClaimJob {
+            worker: ask.worker.to_string(),
+            threads: ask.threads,
+            audits: !(inline || offers.is_empty()),
+            sequential: inline.then_some(sequential),
+            offered: serde_json::to_string(offers).expect("strings serialise"),
+            span_limit,
+            now,
+            expires,
+        }
+    }
+}
+
+/// Runs `job` after another write of the same request (a report that asks
+/// for the next lease), in a savepoint of its own: a claim that fails is
+/// rolled back alone and logged, and the worker gets no lease with the
+/// write (it asks for one on its own).
+pub fn claim_after(conn: &Connection, config: &Config, job: &ClaimJob) -> Option<Claimed> {
+    let nested = |sql: &str| conn.execute_batch(sql);
+    if let Err(e) = nested("SAVEPOINT next_lease") {
+        tracing::warn!(error = %e, "cannot open the next lease's savepoint");
+        return None;
+    }
+    match claim_in(conn, config, job) {
+        Ok(claimed) => match nested("RELEASE next_lease") {
+            Ok(()) => claimed,
+            Err(e) => {
+                tracing::warn!(error = %e, "cannot close the next lease's savepoint");
+                None
+            }
+        },
+        Err(e) => {
+            tracing::warn!(worker = %job.worker, error = %e, "no next lease with a report");
+            if let Err(e) = nested("ROLLBACK TO next_lease; RELEASE next_lease") {
+                tracing::warn!(error = %e, "cannot roll the next lease's savepoint back");
+            }
+            None
+        }
+    }
+}
+
 /// A claim as the writer runs it.
-struct ClaimJob {
+pub struct ClaimJob {
     worker: String,
     threads: u32,
     /// Whether the worker may run audits (it offers programs and takes

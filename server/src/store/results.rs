@@ -179,6 +179,7 @@ pub(crate) fn record_held(
             lease_done: resume_at == end,
             proceed: stopped.is_none(),
             campaign_status: status,
+            next_lease: None,
         },
         stopped,
         campaign_id: campaign.id,
@@ -349,6 +350,7 @@ pub(crate) fn stopped_ack(
         lease_done: resume_at == end,
         proceed: false,
         campaign_status: status,
+        next_lease: None,
     }
 }
 

@@ -596,6 +596,7 @@ pub fn whole(
     events: Vec<tslg_api::EventResult>,
 ) -> tslg_api::ResultReport {
     tslg_api::ResultReport {
+        next_lease: None,
         near_misses: Vec::new(),
         worker: worker.into(),
         attempt: lease.attempt,
