@@ -55,14 +55,28 @@ pub async fn receive(
     let claimed = match next {
         Some(job) => {
             let config = Arc::clone(&state.config);
+            let retried = retried_on(lease_id, &ack);
+            // The report is recorded: a claim that fails now must not turn
+            // its acknowledgement into an error (the worker would send it
+            // again); the worker asks for work as usual.
             state
                 .db
-                .write(move |conn| Ok(leases::claim_after(conn, &config, &job)))
-                .await?
+                .write(move |conn| leases::claim_after(conn, &config, &job, retried))
+                .await
+                .unwrap_or_else(|e| {
+                    tracing::warn!(worker = %report.worker, error = %e, "no next lease with a report");
+                    None
+                })
         }
         None => None,
     };
     Ok((ack, claimed))
+}
+
+/// `lease_id` when its report was all duplicate (sent again: see
+/// [`leases::claim_after`]).
+fn retried_on(lease_id: i64, ack: &ResultAck) -> Option<i64> {
+    (ack.accepted == 0 && ack.duplicate > 0).then_some(lease_id)
 }
 
 /// [`receive`] for a report the writer declined to take at once: read,
@@ -190,10 +204,12 @@ async fn at_once(
             };
             Ok(match decide(conn, &shared, lease_id, &report, &checked)? {
                 Decided::Recorded(recorded) => {
-                    let claimed = next
-                        .and_then(|job| leases::claim_after(conn, &config, &job))
-                        .map(Box::new);
-                    AtOnce::Recorded(recorded, claimed)
+                    let retried = retried_on(lease_id, &recorded.ack);
+                    let claimed = match next {
+                        Some(job) => leases::claim_after(conn, &config, &job, retried)?,
+                        None => None,
+                    };
+                    AtOnce::Recorded(recorded, claimed.map(Box::new))
                 }
                 Decided::Contradicted(mismatch) => AtOnce::Contradicted(mismatch),
                 Decided::Declined => AtOnce::Declined(next),

@@ -102,8 +102,9 @@ async fn a_report_brings_the_next_lease_and_a_bad_request_for_one_records_nothin
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_worker_takes_its_next_lease_with_a_report() {
     let dir = scratch();
-    // Leases of 200,000 tests: a worker runs each in two chunks (its first
-    // chunk is small), and the first chunk's report asks for the next lease.
+    // Leases of 200,000 tests: a worker runs each in two chunks or more (its
+    // first chunk is small), and the report of the last but one asks for
+    // the next lease.
     let server = ServerProcess::start(&dir.path().join("db.sqlite"), &["--lease-size", "200000"]);
     let client = server.client();
     let id = client.create_campaign(&ndd_to(1_000_000)).await.unwrap().id;
@@ -123,4 +124,65 @@ async fn the_worker_takes_its_next_lease_with_a_report() {
         claims, 1.0,
         "leases taken with a request of their own, of 5"
     );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_report_sent_again_brings_the_same_lease_and_a_refused_one_takes_none() {
+    let dir = scratch();
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &["--lease-size", "100"]);
+    let client = server.client();
+    let id = client.create_campaign(&ndd_to(10_000)).await.unwrap().id;
+
+    // The answer of a report that took a lease is lost; the worker sends
+    // the report again and gets the same lease, not a second one that
+    // nobody would hold.
+    let first = client.claim(&ask("w1", &[])).await.unwrap().unwrap();
+    let report = tslg_api::ResultReport {
+        next_lease: Some(ask("w1", &[])),
+        ..whole(&first, "w1", real_events(&client, id, 0, 100).await)
+    };
+    let taken = client.report(first.id, &report).await.unwrap();
+    let next = taken.next_lease.expect("work left");
+    assert_eq!((next.start, next.end), (100, 200));
+    let again = client.report(first.id, &report).await.unwrap();
+    assert_eq!((again.accepted, again.duplicate), (0, 100));
+    assert_eq!(again.next_lease.as_ref(), Some(&next));
+    assert_eq!(client.campaign(id).await.unwrap().leased, 200);
+    // Once it has started, a repeated report on the first lease takes a
+    // new range.
+    let part = tslg_api::ResultReport {
+        to: 150,
+        ..whole(&next, "w1", real_events(&client, id, 100, 150).await)
+    };
+    client.report(next.id, &part).await.unwrap();
+    let third = client.report(first.id, &report).await.unwrap();
+    let third = third.next_lease.expect("work left");
+    assert_eq!((third.start, third.end), (200, 300));
+
+    // A report the coordinator's own run contradicts is refused, its worker
+    // flagged, and the next lease it asked for is not taken.
+    let liar = client.claim(&ask("liar", &[])).await.unwrap().unwrap();
+    let honest = real_events(&client, id, liar.start, liar.end).await;
+    let quiet = (liar.start..liar.end)
+        .find(|i| honest.iter().all(|e| e.index != *i))
+        .unwrap();
+    let mut forged = honest.clone();
+    forged.push(tslg_api::EventResult {
+        index: quiet,
+        weight: 1.0,
+    });
+    forged.sort_by_key(|e| e.index);
+    let leased = client.campaign(id).await.unwrap().leased;
+    let lie = tslg_api::ResultReport {
+        next_lease: Some(ask("liar", &[])),
+        ..whole(&liar, "liar", forged)
+    };
+    match client.report(liar.id, &lie).await {
+        Err(CallError::Refused { status, detail }) => {
+            assert_eq!(status, 422, "{detail}");
+            assert!(detail.contains("flagged"), "{detail}");
+        }
+        other => panic!("a forged report must be refused: {other:?}"),
+    }
+    assert_eq!(client.campaign(id).await.unwrap().leased, leased);
 }

@@ -54,8 +54,9 @@ struct Worker {
     /// The last lease's final reports, still being sent.
     tail: Option<Tail>,
     /// The next lease, taken with the report of a lease's last chunk but
-    /// one (`next_lease`): the worker asks no separate request for it.
-    next_lease: Option<Lease>,
+    /// one (`next_lease`), and when: the worker asks no separate request
+    /// for it.
+    next_lease: Option<(Lease, Instant)>,
 }
 
 /// Runs a worker until `shutdown` completes (or, with
@@ -136,7 +137,7 @@ pub async fn run(
             let programs = Arc::clone(&worker.programs);
             tokio::task::spawn_blocking(move || programs.probe_rested()).await?;
         }
-        let claimed = match worker.next_lease.take() {
+        let claimed = match worker.held_lease().await {
             Some(lease) => Ok(Some(lease)),
             None => worker.client.claim(&worker.lease_request()).await,
         };
@@ -184,7 +185,7 @@ pub async fn run(
     if let Some(tail) = worker.tail.take() {
         worker.summary.tests += tail.settle().await;
     }
-    if let Some(lease) = worker.next_lease.take() {
+    if let Some((lease, _)) = worker.next_lease.take() {
         // Taken with a report but never started: another worker gets it
         // at once rather than when it expires.
         LeaseLink {
@@ -208,6 +209,26 @@ pub async fn run(
 impl Worker {
     fn stopping(&self) -> bool {
         *self.stop.borrow()
+    }
+
+    /// The next lease taken with a report, still the worker's: one held
+    /// longer than its heartbeat period (a long last chunk, a slow
+    /// coordinator) is kept alive first, and dropped if the coordinator
+    /// says it is gone or its campaign stopped.
+    async fn held_lease(&mut self) -> Option<Lease> {
+        let (lease, since) = self.next_lease.take()?;
+        if since.elapsed().as_secs_f64() < lease.heartbeat_seconds {
+            return Some(lease);
+        }
+        let fence = fence_of(&lease, &self.name);
+        match self.client.heartbeat(lease.id, &fence).await {
+            Ok(ack) if ack.proceed => Some(lease),
+            Ok(_) => None,
+            Err(e) => {
+                tracing::warn!(lease = lease.id, error = %e, "the next lease is gone");
+                None
+            }
+        }
     }
 
     /// What the worker asks for when it asks for work.
@@ -397,7 +418,7 @@ impl Worker {
             self.summary.tests += sent.accepted;
             at = sent.reported_to;
             if let Some(next) = sent.next_lease {
-                self.next_lease = Some(next);
+                self.next_lease = Some((next, Instant::now()));
             }
             if !sent.proceed || at < to {
                 // A chunk started meanwhile is left to finish unreported.

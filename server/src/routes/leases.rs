@@ -88,8 +88,32 @@ fn claim_of(req: &LeaseRequest) -> leases::Claim<'_> {
 }
 
 /// The lease a claim took, as the worker gets it (an adaptive campaign's,
-/// or one asked for with `include_tests`, lists its tests).
+/// or one asked for with `include_tests`, lists its tests). A lease that
+/// cannot be made (its tests not listed) is given back at once, so it
+/// does not hold its campaign's prefix until it expires.
 async fn lease_of(
+    state: &AppState,
+    req: &LeaseRequest,
+    claimed: leases::Claimed,
+) -> Result<Lease, ApiError> {
+    let fence = LeaseFence {
+        worker: claimed.lease.worker.clone(),
+        attempt: claimed.lease.attempt,
+        key: LeaseKey(claimed.lease.key.clone()),
+    };
+    let id = claimed.lease.id;
+    let made = make_lease(state, req, claimed).await;
+    if let Err(e) = &made {
+        tracing::warn!(lease = id, error = %e, "a lease taken could not be handed out; given back");
+        if let Err(e) = leases::release(&state.db, id, &fence).await {
+            tracing::warn!(lease = id, error = %e, "the lease could not be given back either");
+        }
+    }
+    made
+}
+
+/// [`lease_of`] before its error is handled.
+async fn make_lease(
     state: &AppState,
     req: &LeaseRequest,
     claimed: leases::Claimed,
@@ -316,21 +340,20 @@ pub async fn results(
     }
     let checked = std::sync::Arc::new(check_report(&report)?);
     let report = std::sync::Arc::new(report);
-    let next = report.next_lease.as_ref().map(|next| {
-        state.workers.seen(next);
-        leases::ClaimJob::new(&state.config, &claim_of(next))
-    });
+    let next = report
+        .next_lease
+        .as_ref()
+        .map(|next| leases::ClaimJob::new(&state.config, &claim_of(next)));
     let (mut ack, claimed) = reporting::receive(&state, id, &report, &checked, next).await?;
-    if let (Some(next), Some(claimed)) = (&report.next_lease, claimed) {
-        // The report is recorded: a lease that cannot be finished now must
-        // not turn its acknowledgement into an error (the worker would
-        // report again); it expires, and the worker asks for work as usual.
-        ack.next_lease = lease_of(&state, next, claimed)
-            .await
-            .inspect_err(|e| {
-                tracing::warn!(worker = %report.worker, error = %e, "no next lease with a report");
-            })
-            .ok();
+    if let Some(next) = &report.next_lease {
+        state.workers.seen(next);
+        if let Some(claimed) = claimed {
+            // The report is recorded: a lease that cannot be finished now
+            // must not turn its acknowledgement into an error (the worker
+            // would report again); it is given back, and the worker asks
+            // for work as usual.
+            ack.next_lease = lease_of(&state, next, claimed).await.ok();
+        }
     }
     Ok(Json(ack))
 }

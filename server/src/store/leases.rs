@@ -151,34 +151,68 @@ impl ClaimJob {
 }
 
 /// Runs `job` after another write of the same request (a report that asks
-/// for the next lease), in a savepoint of its own: a claim that fails is
-/// rolled back alone and logged, and the worker gets no lease with the
-/// write (it asks for one on its own).
-pub fn claim_after(conn: &Connection, config: &Config, job: &ClaimJob) -> Option<Claimed> {
-    let nested = |sql: &str| conn.execute_batch(sql);
-    if let Err(e) = nested("SAVEPOINT next_lease") {
-        tracing::warn!(error = %e, "cannot open the next lease's savepoint");
-        return None;
+/// for the next lease), timed now, in a savepoint of its own: a claim that
+/// fails is rolled back alone and logged, and the worker gets no lease
+/// with the write (it asks for one on its own). `retried_on` is the lease
+/// of a report that was all duplicate, a report sent again because its
+/// answer was lost: the unstarted lease the first sending took is handed
+/// out again rather than a second one (which nobody would hold, blocking
+/// its campaign's prefix until it expired). An error (a savepoint that
+/// cannot be opened or closed) fails the whole request.
+pub fn claim_after(
+    conn: &Connection,
+    config: &Config,
+    job: &ClaimJob,
+    retried_on: Option<i64>,
+) -> Result<Option<Claimed>, ApiError> {
+    let now = now_ms();
+    let job = ClaimJob {
+        now,
+        expires: now + ttl_ms(config),
+        ..job.clone()
+    };
+    if let Some(reported) = retried_on {
+        if let Some(lease) = unstarted(conn, &job.worker, reported, now)? {
+            return Ok(Some(Claimed {
+                lease,
+                campaign: None,
+            }));
+        }
     }
-    match claim_in(conn, config, job) {
-        Ok(claimed) => match nested("RELEASE next_lease") {
-            Ok(()) => claimed,
-            Err(e) => {
-                tracing::warn!(error = %e, "cannot close the next lease's savepoint");
-                None
-            }
-        },
+    conn.execute_batch("SAVEPOINT next_lease")?;
+    match claim_in(conn, config, &job) {
+        Ok(claimed) => {
+            conn.execute_batch("RELEASE next_lease")?;
+            Ok(claimed)
+        }
         Err(e) => {
             tracing::warn!(worker = %job.worker, error = %e, "no next lease with a report");
-            if let Err(e) = nested("ROLLBACK TO next_lease; RELEASE next_lease") {
-                tracing::warn!(error = %e, "cannot roll the next lease's savepoint back");
-            }
-            None
+            conn.execute_batch("ROLLBACK TO next_lease; RELEASE next_lease")?;
+            Ok(None)
         }
     }
 }
 
+/// A live lease of `worker` other than `besides` with nothing reported
+/// yet, the newest.
+fn unstarted(
+    conn: &Connection,
+    worker: &str,
+    besides: i64,
+    now: i64,
+) -> Result<Option<LeaseRow>, ApiError> {
+    sql::optional(
+        conn,
+        &format!(
+            "SELECT {COLUMNS} FROM leases WHERE state = 'active' AND expires_at > ? \
+             AND worker = ? AND id != ? AND resume_at = start_index ORDER BY id DESC LIMIT 1"
+        ),
+        params![now, worker, besides],
+    )
+}
+
 /// A claim as the writer runs it.
+#[derive(Clone)]
 pub struct ClaimJob {
     worker: String,
     threads: u32,
