@@ -35,6 +35,14 @@ pub async fn receive(
     checked: &Arc<CheckedReport>,
     next: Option<leases::ClaimJob>,
 ) -> Result<(ResultAck, Option<leases::Claimed>), ApiError> {
+    // A report whose replay surely exceeds what the writer takes (a real
+    // worker's chunk of half a second holds millions of tests, a tenth of
+    // them replayed) goes the general way at once, without a trip to the
+    // writer that could only decline it.
+    let expected = state.config.replay_share * (checked.to - checked.from) as f64;
+    if checked.outcomes.len() > WRITER_REPLAYS || expected > 2.0 * WRITER_REPLAYS as f64 {
+        return in_parts_then_claim(state, lease_id, report, checked, next).await;
+    }
     let next = match at_once(state, lease_id, report, checked, next).await {
         Ok(AtOnce::Recorded(recorded, claimed)) => {
             account(state, report, &recorded);
@@ -51,11 +59,23 @@ pub async fn receive(
             return Err(e);
         }
     };
-    let ack = receive_in_parts(state, lease_id, report, checked).await?;
-    let claimed = match next {
-        Some(job) => {
+    in_parts_then_claim(state, lease_id, report, checked, next).await
+}
+
+/// [`receive_in_parts`], then the claim of the next lease in a write of its
+/// own when the report's write could not take it (an audit run's).
+async fn in_parts_then_claim(
+    state: &AppState,
+    lease_id: i64,
+    report: &Arc<ResultReport>,
+    checked: &Arc<CheckedReport>,
+    mut next: Option<leases::ClaimJob>,
+) -> Result<(ResultAck, Option<leases::Claimed>), ApiError> {
+    let (ack, mut claimed) = receive_in_parts(state, lease_id, report, checked, &mut next).await?;
+    if let Some(job) = next {
+        claimed = {
             let config = Arc::clone(&state.config);
-            let retried = retried_on(lease_id, &ack);
+            let retried = leases::retried_on(lease_id, &ack);
             // The report is recorded: a claim that fails now must not turn
             // its acknowledgement into an error (the worker would send it
             // again); the worker asks for work as usual.
@@ -67,26 +87,21 @@ pub async fn receive(
                     tracing::warn!(worker = %report.worker, error = %e, "no next lease with a report");
                     None
                 })
-        }
-        None => None,
-    };
+        };
+    }
     Ok((ack, claimed))
 }
 
-/// `lease_id` when its report was all duplicate (sent again: see
-/// [`leases::claim_after`]).
-fn retried_on(lease_id: i64, ack: &ResultAck) -> Option<i64> {
-    (ack.accepted == 0 && ack.duplicate > 0).then_some(lease_id)
-}
-
 /// [`receive`] for a report the writer declined to take at once: read,
-/// checked, then recorded.
+/// checked, then recorded, with the next lease claimed in the same write
+/// (`next` taken) unless the report is an audit run's.
 async fn receive_in_parts(
     state: &AppState,
     lease_id: i64,
     report: &Arc<ResultReport>,
     checked: &Arc<CheckedReport>,
-) -> Result<ResultAck, ApiError> {
+    next: &mut Option<leases::ClaimJob>,
+) -> Result<(ResultAck, Option<leases::Claimed>), ApiError> {
     // One read for what decides the checks. Only the lease's holder may
     // report on it, and only what it reports is checked: a report in
     // another worker's name must not get that worker flagged. (The
@@ -116,7 +131,9 @@ async fn receive_in_parts(
     };
     let library_tests = || tests.clone().filter(|_| campaign.method.uses_library());
     let recorded = if lease.audit_id.is_some() {
-        audit::record_audit_run(&state.db, library_tests(), lease_id, report, checked).await
+        audit::record_audit_run(&state.db, library_tests(), lease_id, report, checked)
+            .await
+            .map(|recorded| (recorded, None))
     } else {
         let mut plan = AuditPlan::default();
         let mut explored = None;
@@ -137,18 +154,28 @@ async fn receive_in_parts(
             audits: plan,
             explored,
         };
-        results::record(&state.db, &state.config, lease_id, report, checked, found).await
+        let config = &state.config;
+        results::record(
+            &state.db,
+            config,
+            lease_id,
+            report,
+            checked,
+            found,
+            next.take(),
+        )
+        .await
     };
     // An adaptive campaign's stages live in memory with its tests: a
     // report that failed may have resolved a stage it did not persist, so
     // the copy is rebuilt from what is stored.
-    let recorded = recorded.inspect_err(|_| {
+    let (recorded, claimed) = recorded.inspect_err(|_| {
         if campaign.method == Method::Adaptive {
             state.samplers.forget(campaign.id);
         }
     })?;
     account(state, report, &recorded);
-    Ok(recorded.ack)
+    Ok((recorded.ack, claimed))
 }
 
 /// What the writer made of a report it was asked to check and record in
@@ -204,7 +231,7 @@ async fn at_once(
             };
             Ok(match decide(conn, &shared, lease_id, &report, &checked)? {
                 Decided::Recorded(recorded) => {
-                    let retried = retried_on(lease_id, &recorded.ack);
+                    let retried = leases::retried_on(lease_id, &recorded.ack);
                     let claimed = match next {
                         Some(job) => leases::claim_after(conn, &config, &job, retried)?,
                         None => None,

@@ -423,12 +423,11 @@ pub fn insert(conn: &Connection, new: &NewCampaign) -> Result<CampaignRow, ApiEr
 }
 
 pub fn get(conn: &Connection, id: i64) -> Result<CampaignRow, ApiError> {
-    sql::optional(
-        conn,
-        &format!("SELECT {COLUMNS} FROM campaigns WHERE id = ?"),
-        [id],
-    )?
-    .ok_or_else(|| ApiError::NotFound(format!("campaign {id} does not exist")))
+    thread_local! {
+        static SQL: String = format!("SELECT {COLUMNS} FROM campaigns WHERE id = ?");
+    }
+    SQL.with(|sql| super::campaign_row::first(conn, sql, [id]))?
+        .ok_or_else(|| ApiError::NotFound(format!("campaign {id} does not exist")))
 }
 
 /// Every campaign, or those in `status`, newest first.

@@ -6,8 +6,8 @@ use crate::db::sql;
 use crate::db::{now_ms, Database};
 use crate::error::ApiError;
 use crate::lease_size::{lease_size, predicted_unleased, SizingInput, MAX_INLINE_LEASE};
-use crate::store::audits;
 use crate::store::campaigns::{self, CampaignRow, COLUMNS as CAMPAIGN_COLUMNS};
+use crate::store::{audits, campaign_row};
 use rusqlite::{params, Connection};
 use std::sync::Arc;
 use subtle::ConstantTimeEq;
@@ -193,6 +193,12 @@ pub fn claim_after(
     }
 }
 
+/// `lease_id` when its report's acknowledgement `ack` is all duplicate:
+/// the report was sent again (see [`claim_after`]).
+pub fn retried_on(lease_id: i64, ack: &tslg_api::ResultAck) -> Option<i64> {
+    (ack.accepted == 0 && ack.duplicate > 0).then_some(lease_id)
+}
+
 /// A live lease of `worker` other than `besides` with nothing reported
 /// yet, the newest.
 fn unstarted(
@@ -326,7 +332,7 @@ fn claim_in(
         .iter()
         .map(|v| v as &dyn rusqlite::ToSql)
         .collect();
-    let Some(campaign): Option<CampaignRow> = sql::optional(conn, &sql, values.as_slice())? else {
+    let Some(campaign) = campaign_row::first(conn, &sql, values.as_slice())? else {
         return Ok(None);
     };
     let size = new_lease_size(config, &campaign, job.threads).min(job.span_limit as u64);

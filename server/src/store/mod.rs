@@ -3,6 +3,7 @@
 
 pub mod adaptive;
 pub mod audits;
+pub mod campaign_row;
 pub mod campaigns;
 pub mod deletion;
 pub mod fold;

@@ -82,7 +82,9 @@ pub struct Findings {
     pub explored: Option<Explored>,
 }
 
-/// Records a checked report on lease `lease_id` and folds the prefix.
+/// Records a checked report on lease `lease_id` and folds the prefix;
+/// then, in the same write, claims the worker's next lease when the
+/// report asks for one (`next`, [`leases::claim_after`]).
 pub async fn record(
     db: &Database,
     config: &Arc<Config>,
@@ -90,10 +92,21 @@ pub async fn record(
     report: &Arc<ResultReport>,
     checked: &Arc<CheckedReport>,
     found: Findings,
-) -> Result<Recorded, ApiError> {
+    next: Option<leases::ClaimJob>,
+) -> Result<(Recorded, Option<leases::Claimed>), ApiError> {
     let (config, report, checked) = (Arc::clone(config), Arc::clone(report), Arc::clone(checked));
-    db.write(move |conn| record_in(conn, &config, lease_id, &report, &checked, found))
-        .await
+    db.write(move |conn| {
+        let recorded = record_in(conn, &config, lease_id, &report, &checked, found)?;
+        let claimed = match next {
+            Some(job) => {
+                let retried = leases::retried_on(lease_id, &recorded.ack);
+                leases::claim_after(conn, &config, &job, retried)?
+            }
+            None => None,
+        };
+        Ok((recorded, claimed))
+    })
+    .await
 }
 
 /// [`record`] on the writer connection, in the report's savepoint.
