@@ -438,7 +438,7 @@ fn record_audit_run_in(
     }
     // The flag may have reset the campaign: fold from what is stored now.
     let campaign = campaigns::get(conn, campaign.id)?;
-    let own = fold_prefix(conn, &campaign, tests, None, None)?;
+    let own = fold_prefix(conn, &campaign, tests, None, None, None)?;
     let (stopped, partner_stopped) = pairs::fold_after(conn, &campaign, own)?;
     Ok(Recorded {
         ack: ResultAck {

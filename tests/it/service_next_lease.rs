@@ -186,3 +186,31 @@ async fn a_report_sent_again_brings_the_same_lease_and_a_refused_one_takes_none(
     }
     assert_eq!(client.campaign(id).await.unwrap().leased, leased);
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn work_is_charged_whether_or_not_the_report_moves_the_prefix() {
+    let dir = scratch();
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &["--lease-size", "100"]);
+    let client = server.client();
+    let id = client.create_campaign(&ndd_to(10_000)).await.unwrap().id;
+    let a = client.claim(&ask("w1", &[])).await.unwrap().unwrap();
+    let b = client.claim(&ask("w2", &[])).await.unwrap().unwrap();
+    let charged = |lease: &tslg_api::Lease, worker: &str, seconds: f64| {
+        let (client, lease, worker) = (client.clone(), lease.clone(), worker.to_owned());
+        async move {
+            let events = real_events(&client, id, lease.start, lease.end).await;
+            let report = tslg_api::ResultReport {
+                compute_seconds: seconds,
+                ..whole(&lease, &worker, events)
+            };
+            client.report(lease.id, &report).await.unwrap();
+            client.campaign(id).await.unwrap()
+        }
+    };
+    // The second range first: the prefix cannot move, the work counts.
+    let view = charged(&b, "w2", 0.5).await;
+    assert_eq!((view.indices, view.worker_seconds), (0, 0.5));
+    // The first range: the prefix moves over both, the work adds up.
+    let view = charged(&a, "w1", 0.25).await;
+    assert_eq!((view.indices, view.worker_seconds), (200, 0.75));
+}

@@ -134,14 +134,70 @@ fn explored_tests(tests: &Arc<dyn CampaignTests>, from: u64, to: u64) -> Vec<u64
 /// exploring tests of a range the coordinator just ran itself; `fresh` the
 /// report just recorded in this transaction, whose outcomes the fold takes
 /// as they are instead of reading them back.
+///
+/// `charge` is what the report just recorded adds to the campaign's row
+/// ([`Charge`]): written with the fold's update of the row, or on its own
+/// where the fold writes none.
 pub fn fold_prefix(
     conn: &Connection,
     campaign: &CampaignRow,
     tests: Option<Arc<dyn CampaignTests>>,
     known: Option<&Explored>,
     fresh: Option<&CheckedReport>,
+    charge: Option<Charge>,
+) -> Result<Option<CampaignStatus>, ApiError> {
+    let mut pending = charge;
+    let folded = fold_charging(conn, campaign, tests, known, fresh, &mut pending)?;
+    if let Some(charge) = pending {
+        charge.apply(conn, campaign.id)?;
+    }
+    Ok(folded)
+}
+
+/// A report's charge to its campaign's row: the smoothed cost per test
+/// (which sizes leases), the worker time and the weights of its events.
+/// The fold updates the same row: one update for both instead of two (the
+/// row has 51 columns, and the writer updates it for every report).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Charge {
+    pub cost_per_test: Option<f64>,
+    pub worker_seconds: f64,
+    pub reported_s1: f64,
+}
+
+impl Charge {
+    /// The charge on its own.
+    fn apply(&self, conn: &Connection, campaign: i64) -> Result<(), ApiError> {
+        sql::execute(
+            conn,
+            "UPDATE campaigns SET cost_per_test = ?, worker_seconds = worker_seconds + ?, \
+             reported_s1 = reported_s1 + ? WHERE id = ?",
+            params![
+                self.cost_per_test,
+                self.worker_seconds,
+                self.reported_s1,
+                campaign
+            ],
+        )?;
+        Ok(())
+    }
+}
+
+/// [`fold_prefix`], leaving `charge` for the caller where it does not
+/// write it.
+fn fold_charging(
+    conn: &Connection,
+    campaign: &CampaignRow,
+    tests: Option<Arc<dyn CampaignTests>>,
+    known: Option<&Explored>,
+    fresh: Option<&CheckedReport>,
+    charge: &mut Option<Charge>,
 ) -> Result<Option<CampaignStatus>, ApiError> {
     if campaign.method == Method::Adaptive {
+        // Resolving stages reads the campaign's row: charged first.
+        if let Some(charge) = charge.take() {
+            charge.apply(conn, campaign.id)?;
+        }
         let tests = tests.ok_or_else(|| {
             anyhow::anyhow!(
                 "adaptive campaign {} folded without its stages",
@@ -212,7 +268,7 @@ pub fn fold_prefix(
             campaign.confidence,
         )
     });
-    write(conn, campaign, &rule, &folded, upper)
+    write(conn, campaign, &rule, &folded, upper, charge.take())
 }
 
 /// The outcomes of `from..to`: those of the report just recorded, `fresh`
@@ -279,16 +335,25 @@ fn write(
     rule: &StoppingRule,
     folded: &Folded,
     upper: Option<f64>,
+    charge: Option<Charge>,
 ) -> Result<Option<CampaignStatus>, ApiError> {
     let fold = &folded.fold;
     let (status, detail) = outcome(folded.decision, rule, fold);
     let (s1, s2) = fold.estimator.sums();
+    let charged = charge.is_some();
+    let charge = charge.unwrap_or(Charge {
+        cost_per_test: None,
+        worker_seconds: 0.0,
+        reported_s1: 0.0,
+    });
     sql::execute(
         conn,
         "UPDATE campaigns SET indices = ?, tests = ?, events = ?, invalid = ?, s1 = ?, s2 = ?, \
          largest = ?, outside_tests = ?, outside_events = ?, outside_s1 = ?, outside_upper = ?, \
          outside_mismatches = ?, strata_epsilon = ?, \
          status = ?, status_detail = COALESCE(?, status_detail), \
+         cost_per_test = CASE WHEN ? THEN ? ELSE cost_per_test END, \
+         worker_seconds = worker_seconds + ?, reported_s1 = reported_s1 + ?, \
          updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now') WHERE id = ?",
         params![
             fold.indices as i64,
@@ -306,6 +371,10 @@ fn write(
             fold.strata,
             status.as_str(),
             detail,
+            charged,
+            charge.cost_per_test,
+            charge.worker_seconds,
+            charge.reported_s1,
             campaign.id
         ],
     )?;

@@ -17,7 +17,7 @@ use crate::replay_check::Explored;
 use crate::report_check::CheckedReport;
 use crate::store::audits::{self, NewAudit};
 use crate::store::campaigns::{self, CampaignRow};
-use crate::store::fold::fold_prefix;
+use crate::store::fold::{fold_prefix, Charge};
 use crate::store::leases::{self, check_fence, LeaseRow, LeaseState};
 use crate::store::pairs;
 use crate::store::reports::{self, NewReport};
@@ -172,13 +172,16 @@ pub(crate) fn record_held(
     }
     let new_from = checked.from.max(resume_at);
     let mut accepted = 0;
+    let mut charge = None;
     if new_from < checked.to {
         accepted = checked.to - new_from;
         let expires_at = now_ms() + (config.lease_ttl_seconds * 1000.0) as i64;
-        store_new_part(tx, campaign, lease, report, checked, new_from, expires_at)?;
+        charge = Some(store_new_part(
+            tx, campaign, lease, report, checked, new_from, expires_at,
+        )?);
         store_audits(tx, campaign.id, &report.worker, &plan, new_from)?;
     }
-    let own = fold_prefix(tx, campaign, tests, known.as_ref(), Some(checked))?;
+    let own = fold_prefix(tx, campaign, tests, known.as_ref(), Some(checked), charge)?;
     // A campaign of a pair: the pair folds over what both resolved.
     let (stopped, partner_stopped) = pairs::fold_after(tx, campaign, own)?;
     let status = stopped.unwrap_or(CampaignStatus::Running);
@@ -215,9 +218,9 @@ pub(crate) fn held_lease(
 }
 
 /// Stores the part `new_from..to` of a report that was not reported
-/// before, moves the lease's `resume_at` past it, and charges the work to
-/// the campaign's cost and worker time. A report keeps its lease alive
-/// until `expires_at`, like a heartbeat.
+/// before and moves the lease's `resume_at` past it; returns the work's
+/// charge to the campaign's cost and worker time, which the fold writes.
+/// A report keeps its lease alive until `expires_at`, like a heartbeat.
 fn store_new_part(
     conn: &Connection,
     campaign: &CampaignRow,
@@ -226,7 +229,7 @@ fn store_new_part(
     checked: &CheckedReport,
     new_from: u64,
     expires_at: i64,
-) -> Result<(), ApiError> {
+) -> Result<Charge, ApiError> {
     let first_new = checked.events.partition_point(|&(i, _)| i < new_from);
     let invalid: Vec<(u64, &str)> = checked
         .reasons
@@ -288,15 +291,11 @@ fn store_new_part(
         report.compute_seconds,
         report.threads,
     );
-    let worker_seconds = spent_thread_seconds(report, accepted, span);
-    let weights: f64 = checked.events[first_new..].iter().map(|e| e.1).sum();
-    sql::execute(
-        conn,
-        "UPDATE campaigns SET cost_per_test = ?, worker_seconds = worker_seconds + ?, \
-         reported_s1 = reported_s1 + ? WHERE id = ?",
-        params![cost, worker_seconds, weights, campaign.id],
-    )?;
-    Ok(())
+    Ok(Charge {
+        cost_per_test: cost,
+        worker_seconds: spent_thread_seconds(report, accepted, span),
+        reported_s1: checked.events[first_new..].iter().map(|e| e.1).sum(),
+    })
 }
 
 /// Stores the planned audits of the part from `new_from`, or counts them
