@@ -68,9 +68,33 @@ fn main() {
                 black_box(case.is_event(&v, black_box(c)));
             }
         });
+        let mut events = vec![false; sample.len()];
+        let (batched, _) = median_seconds(|| case.events(&v, black_box(&sample), &mut events));
         println!(
-            "| simulations/s per core, {name} | {:.3e} |",
-            sample.len() as f64 / secs
+            "| simulations/s per core, {name}: one by one; batched (right-lane steps side by side) | {:.3e} ({:.2} µs); {:.3e} ({:.2} µs) |",
+            sample.len() as f64 / secs,
+            secs * 1e6 / sample.len() as f64,
+            sample.len() as f64 / batched,
+            batched * 1e6 / sample.len() as f64,
+        );
+    }
+    // The batched records are the scalar ones on every cell of the grid.
+    let all: Vec<usize> = (0..case.grid().len()).collect();
+    for name in ["mobil", "gap-seeker"] {
+        let v = ExitVehicle::builtin(name).expect("built-in");
+        let batched = case.runs(&v, &all);
+        let differing = all
+            .iter()
+            .zip(&batched)
+            .filter(|&(&c, run)| case.run(&v, c) != *run)
+            .count();
+        assert_eq!(
+            differing, 0,
+            "{name}: batched runs differ from the scalar ones"
+        );
+        println!(
+            "| {name}: batched records equal to one by one, all {} cells | yes |",
+            all.len()
         );
     }
     let (secs, exhaustive) = median_seconds(|| library(&case, &mobil, SearchMethod::Exhaustive));

@@ -14,13 +14,29 @@ use rayon::prelude::*;
 
 /// The cells where a deterministic `vehicle` has the event, among cells of
 /// positive exposure (the others contribute nothing), in increasing order.
+/// Chunks of cells run in parallel, each in the case's batches
+/// ([`Case::events`]).
 pub fn event_cells<C: Case>(case: &C, vehicle: &C::Vehicle) -> Vec<usize> {
     let exposure = case.exposure();
-    (0..case.grid().len())
-        .into_par_iter()
-        .filter(|&cell| exposure.p(cell) > 0.0 && case.is_event(vehicle, cell))
+    let cells: Vec<usize> = (0..case.grid().len())
+        .filter(|&cell| exposure.p(cell) > 0.0)
+        .collect();
+    cells
+        .par_chunks(CHUNK)
+        .flat_map_iter(|chunk| {
+            let mut events = vec![false; chunk.len()];
+            case.events(vehicle, chunk, &mut events);
+            chunk
+                .iter()
+                .zip(events)
+                .filter_map(|(&cell, event)| event.then_some(cell))
+                .collect::<Vec<_>>()
+        })
         .collect()
 }
+
+/// Cells per parallel chunk of [`event_cells`].
+const CHUNK: usize = 4096;
 
 /// `P(A)` from the event cells.
 pub fn event_probability<C: Case>(case: &C, events: &[usize]) -> f64 {

@@ -102,7 +102,7 @@ impl BatchFollower {
 /// `(v/v₀)^n` per lane by square-and-multiply, the operations of
 /// [`crate::vehicle::power::pow_whole`] lane by lane.
 #[inline(always)]
-fn whole_powers(speed: &Lanes, v0: f64, mut n: u32, out: &mut Lanes) {
+pub fn whole_powers(speed: &Lanes, v0: f64, mut n: u32, out: &mut Lanes) {
     let mut base = [0.0; LANES];
     for i in 0..LANES {
         base[i] = speed[i] / v0;

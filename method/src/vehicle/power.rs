@@ -29,15 +29,20 @@ pub fn pow_whole(x: f64, mut n: u32) -> f64 {
 /// `x^δ`: [`pow_whole`] when δ is a whole number in `1..=64`, else `powf`.
 #[inline]
 pub fn pow(x: f64, delta: f64) -> f64 {
+    match whole(delta) {
+        Some(n) => pow_whole(x, n),
+        None => x.powf(delta),
+    }
+}
+
+/// δ as the whole exponent [`pow`] squares by, if it is one (`1..=64`).
+#[inline]
+pub fn whole(delta: f64) -> Option<u32> {
     // Whole when the conversion is exact (`as` saturates: NaN and negative
     // δ give 0, which is not in range). Not `delta.fract()`: without
     // SSE4.1 that is a call to libm's `trunc` at every step.
     let whole = delta as u32;
-    if f64::from(whole) == delta && (1..=MAX_WHOLE).contains(&whole) {
-        pow_whole(x, whole)
-    } else {
-        x.powf(delta)
-    }
+    (f64::from(whole) == delta && (1..=MAX_WHOLE).contains(&whole)).then_some(whole)
 }
 
 #[cfg(test)]

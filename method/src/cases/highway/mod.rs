@@ -5,10 +5,12 @@
 //! the VUT did not reach the off-ramp in the right lane (it stayed in the
 //! left lane, or collided).
 
+pub mod batch;
 pub mod descriptor;
 pub mod drivers;
 mod exposure_model;
 pub mod external;
+mod right_lane;
 pub mod simulation;
 pub mod table;
 pub mod world;
@@ -159,6 +161,21 @@ impl HighwayExit {
         simulation::run(&self.world, vehicle, self.scenario(cell))
     }
 
+    /// [`Self::run`] on each of `cells`, in batches ([`batch::run_all`]):
+    /// the same records.
+    pub fn runs(&self, vehicle: &ExitVehicle, cells: &[usize]) -> Vec<ExitRun> {
+        let mut runs = vec![None; cells.len()];
+        batch::run_all(
+            &self.world,
+            vehicle,
+            cells.iter().map(|&cell| self.scenario(cell)),
+            |i, run| runs[i] = Some(run),
+        );
+        runs.into_iter()
+            .map(|run| run.expect("every scenario's run ends"))
+            .collect()
+    }
+
     /// A run's criticality ([`Case::criticality`]): 0 for a failure, the
     /// share of the road to the exit still ahead at the lane change
     /// otherwise (1 without one).
@@ -204,6 +221,16 @@ impl Case for HighwayExit {
 
     fn is_event(&self, vehicle: &ExitVehicle, cell: usize) -> bool {
         self.run(vehicle, cell).outcome.is_failure()
+    }
+
+    /// In batches: the right-lane steps side by side ([`batch::run_all`]).
+    fn events(&self, vehicle: &ExitVehicle, cells: &[usize], events: &mut [bool]) {
+        batch::run_all(
+            &self.world,
+            vehicle,
+            cells.iter().map(|&cell| self.scenario(cell)),
+            |i, run| events[i] = run.outcome.is_failure(),
+        );
     }
 
     /// The share of the road to the exit still ahead when the vehicle

@@ -57,53 +57,112 @@ pub fn run_with<D: ExitDriver>(
     driver: &mut D,
     x: [f64; 4],
 ) -> Result<ExitRun, D::Error> {
-    let mut traffic = Traffic::new(x);
-    let (mut p, mut v) = (0.0, world.start_speed);
-    let mut lane = Lane::Left;
-    let mut lane_change = None;
-    let steps = (world.max_time / world.dt).round() as usize;
-    let end = |outcome, k: usize, lane_change| ExitRun {
-        outcome,
-        time: k as f64 * world.dt,
-        lane_change,
-    };
-    for k in 0..steps {
+    let mut run = RunInProgress::new(world, x);
+    loop {
+        if let Some(done) = run.step(world, driver)? {
+            return Ok(done);
+        }
+    }
+}
+
+/// A run between steps: what [`run_with`] keeps from one step to the next,
+/// so that a batch ([`super::batch`]) can advance several runs side by side
+/// with exactly the scalar run's operations.
+#[derive(Debug, Clone, Copy)]
+pub struct RunInProgress {
+    pub(super) traffic: Traffic,
+    /// The VUT's position (m) and speed (m/s).
+    pub(super) p: f64,
+    pub(super) v: f64,
+    lane: Lane,
+    pub(super) lane_change: Option<(f64, f64)>,
+    /// Steps taken, and the time cap in steps.
+    pub(super) k: usize,
+    pub(super) steps: usize,
+}
+
+impl RunInProgress {
+    /// The VUT at `p = 0`, `v₀`, in the left lane, and the BVs of scenario `x`.
+    pub fn new(world: &ExitWorld, x: [f64; 4]) -> Self {
+        Self {
+            traffic: Traffic::new(x),
+            p: 0.0,
+            v: world.start_speed,
+            lane: Lane::Left,
+            lane_change: None,
+            k: 0,
+            steps: (world.max_time / world.dt).round() as usize,
+        }
+    }
+
+    fn end(&self, outcome: ExitOutcome, k: usize, world: &ExitWorld) -> ExitRun {
+        ExitRun {
+            outcome,
+            time: k as f64 * world.dt,
+            lane_change: self.lane_change,
+        }
+    }
+
+    /// Whether the VUT is in the right lane.
+    pub fn in_right_lane(&self) -> bool {
+        self.lane == Lane::Right
+    }
+
+    /// The VUT's and the BVs' motion over one step, the VUT with `accel`
+    /// cut to the physical bounds and to speeds in `[0, v_max]`.
+    #[inline]
+    fn advance(&mut self, world: &ExitWorld, accel: f64) {
+        let v = self.v;
+        let a = accel
+            .clamp(world.emergency_brake, world.accel.1)
+            .clamp(-v / world.dt, (world.speed.1 - v) / world.dt);
+        self.p += v * world.dt + 0.5 * a * world.dt * world.dt;
+        self.v = v + a * world.dt;
+        self.traffic.step(world);
+        self.k += 1;
+    }
+
+    /// One step of Δt; the run's record once it has ended.
+    #[inline]
+    pub fn step<D: ExitDriver>(
+        &mut self,
+        world: &ExitWorld,
+        driver: &mut D,
+    ) -> Result<Option<ExitRun>, D::Error> {
+        let k = self.k;
+        if k >= self.steps {
+            return Ok(Some(self.end(ExitOutcome::FailedToExit, self.steps, world)));
+        }
         let time = k as f64 * world.dt;
         let action = driver.decide(&DriverView {
             world,
             time,
-            position: p,
-            speed: v,
-            lane,
-            traffic: &traffic,
+            position: self.p,
+            speed: self.v,
+            lane: self.lane,
+            traffic: &self.traffic,
         })?;
-        if lane == Lane::Left && action.change_lane {
-            lane = Lane::Right;
-            lane_change = Some((time, p));
-            if overlaps(world, &traffic.bvs, p) {
-                return Ok(end(ExitOutcome::Collision, k, lane_change));
+        if self.lane == Lane::Left && action.change_lane {
+            self.lane = Lane::Right;
+            self.lane_change = Some((time, self.p));
+            if overlaps(world, &self.traffic.bvs, self.p) {
+                return Ok(Some(self.end(ExitOutcome::Collision, k, world)));
             }
-            if !safe_gaps(world, &traffic.bvs, p) {
-                return Ok(end(ExitOutcome::FailedToExit, k, lane_change));
+            if !safe_gaps(world, &self.traffic.bvs, self.p) {
+                return Ok(Some(self.end(ExitOutcome::FailedToExit, k, world)));
             }
         }
-        let a = action
-            .accel
-            .clamp(world.emergency_brake, world.accel.1)
-            .clamp(-v / world.dt, (world.speed.1 - v) / world.dt);
-        p += v * world.dt + 0.5 * a * world.dt * world.dt;
-        v += a * world.dt;
-        traffic.step(world);
-        if lane == Lane::Right && overlaps(world, &traffic.bvs, p) {
-            return Ok(end(ExitOutcome::Collision, k + 1, lane_change));
+        self.advance(world, action.accel);
+        if self.lane == Lane::Right && overlaps(world, &self.traffic.bvs, self.p) {
+            return Ok(Some(self.end(ExitOutcome::Collision, k + 1, world)));
         }
-        if p >= world.exit {
-            let outcome = match lane {
+        if self.p >= world.exit {
+            let outcome = match self.lane {
                 Lane::Right => ExitOutcome::Exited,
                 Lane::Left => ExitOutcome::FailedToExit,
             };
-            return Ok(end(outcome, k + 1, lane_change));
+            return Ok(Some(self.end(outcome, k + 1, world)));
         }
+        Ok(None)
     }
-    Ok(end(ExitOutcome::FailedToExit, steps, lane_change))
 }

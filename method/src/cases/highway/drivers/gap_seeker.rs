@@ -30,7 +30,8 @@
 //! speed and headway.
 
 use super::{
-    follow_in_right_lane, neighbours, safe_gaps, within_speed_bounds, Action, DriverView, Idm, Lane,
+    follow_in_right_lane, neighbours, safe_gaps, within_speed_bounds, Action, DriverView, Idm,
+    IdmSteps, Lane,
 };
 use crate::cases::highway::world::{Bv, ExitWorld};
 use crate::vehicle::{check, ParamError};
@@ -115,15 +116,20 @@ impl GapSeekerParams {
 #[derive(Debug, Clone)]
 pub struct GapSeekerDriver {
     params: GapSeekerParams,
-    idm: Idm,
+    idm: IdmSteps,
 }
 
 impl GapSeekerDriver {
     pub fn new(params: GapSeekerParams) -> Self {
         Self {
-            idm: params.idm(),
+            idm: IdmSteps::new(params.idm()),
             params,
         }
+    }
+
+    /// The IDM it follows with in the right lane ([`follow_in_right_lane`]).
+    pub fn right_lane_idm(&self) -> &IdmSteps {
+        &self.idm
     }
 
     pub fn act(&mut self, view: &DriverView) -> Action {

@@ -26,9 +26,9 @@
 //! react, so a merge in front of a faster BV that MOBIL judged safe (it
 //! assumes the follower brakes up to `b_safe`) can still end in a collision.
 
-use super::{neighbours, safe_gaps, within_speed_bounds, Action, DriverView, Idm, Lane};
+use super::merge::{advance, Criterion, Predicted};
+use super::{safe_gaps, within_speed_bounds, Action, DriverView, Idm, IdmSteps, Lane};
 use crate::cases::highway::world::{Bv, ExitWorld};
-use crate::cases::highway::zone::blocked;
 use crate::vehicle::{check, ParamError};
 use serde::{Deserialize, Serialize};
 
@@ -139,7 +139,7 @@ impl MobilParams {
 #[derive(Debug, Clone)]
 pub struct MobilDriver {
     params: MobilParams,
-    idm: Idm,
+    criterion: Criterion,
     /// The plan's acceleration and when it is renewed.
     plan: Option<f64>,
     replan_at: f64,
@@ -151,29 +151,15 @@ pub struct MobilDriver {
     predicted: Vec<Predicted>,
 }
 
-/// The BVs at one prediction instant and the open intervals of positions
-/// where a lane change would break their safe time gaps
-/// ([`blocked`]).
-#[derive(Debug, Clone, Copy)]
-struct Predicted {
-    bvs: [Bv; 2],
-    blocked: [(f64, f64); 2],
-}
-
-impl Predicted {
-    /// [`super::safe_gaps`] at `position`, on the stored intervals.
-    fn safe(&self, position: f64) -> bool {
-        self.blocked
-            .iter()
-            .all(|&(low, high)| !(low < position && position < high))
-    }
-}
-
 impl MobilDriver {
     pub fn new(params: MobilParams) -> Self {
         let points = (params.plan_horizon / params.plan_step).floor() as usize;
         Self {
-            idm: params.idm(),
+            criterion: Criterion {
+                idm: IdmSteps::new(params.idm()),
+                b_safe: params.b_safe,
+                politeness: params.politeness,
+            },
             params,
             plan: None,
             replan_at: 0.0,
@@ -182,10 +168,16 @@ impl MobilDriver {
         }
     }
 
+    /// The IDM it follows with in the right lane ([`super::follow_in_right_lane`]).
+    pub fn right_lane_idm(&self) -> &IdmSteps {
+        &self.criterion.idm
+    }
+
     pub fn act(&mut self, view: &DriverView) -> Action {
+        let idm = &self.criterion.idm;
         if view.lane == Lane::Right {
             return Action {
-                accel: super::follow_in_right_lane(&self.idm, view),
+                accel: super::follow_in_right_lane(idm, view),
                 change_lane: false,
             };
         }
@@ -195,9 +187,8 @@ impl MobilDriver {
             .is_some()
         {
             return Action {
-                accel: self
-                    .idm
-                    .accel(view.speed, None)
+                accel: idm
+                    .free(view.speed)
                     .clamp(view.world.accel.0, view.world.accel.1),
                 change_lane: true,
             };
@@ -208,7 +199,7 @@ impl MobilDriver {
         }
         let accel = self
             .plan
-            .unwrap_or_else(|| self.idm.accel(view.speed, None))
+            .unwrap_or_else(|| self.criterion.idm.free(view.speed))
             .clamp(view.world.accel.0, view.world.accel.1);
         let accel = within_speed_bounds(view.world, view.speed, accel);
         Action {
@@ -223,49 +214,27 @@ impl MobilDriver {
         if !safe_gaps(world, bvs, p) {
             return None;
         }
-        self.utility_within_gaps(world, p, v, bvs)
-    }
-
-    /// [`Self::merge_utility`] where the safe time gaps are known to hold:
-    /// MOBIL's safety criterion and the utility.
-    fn utility_within_gaps(&self, world: &ExitWorld, p: f64, v: f64, bvs: &[Bv; 2]) -> Option<f64> {
-        let n = neighbours(bvs, p);
-        let lead = n.ahead.map(|l| (l.position - p - world.length, l.speed));
-        let own_after = self.idm.accel(v, lead);
-        if own_after < -self.params.b_safe {
-            return None;
-        }
-        let mut follower_gain = 0.0;
-        if let Some(f) = n.behind {
-            let after = self
-                .idm
-                .accel(f.speed, Some((p - f.position - world.length, v)));
-            if after < -self.params.b_safe {
-                return None;
-            }
-            // The follower's leader before the change: the other BV, if ahead of it.
-            let before_lead = bvs
-                .iter()
-                .filter(|o| o.position > f.position)
-                .map(|o| (o.position - f.position - world.length, o.speed))
-                .next();
-            follower_gain = after - self.idm.accel(f.speed, before_lead);
-        }
-        let own_before = self.idm.accel(v, None);
-        Some(own_after - own_before + self.params.politeness * follower_gain)
+        let c = &self.criterion;
+        c.utility(world, p, v, bvs, |i| {
+            let free = c.idm.free(bvs[i].speed);
+            (free, c.before(world, bvs, i, free))
+        })
     }
 
     /// The best constant-acceleration plan toward a safe merge, if any.
     ///
     /// The BVs' predicted positions and the positions they block depend on
     /// the instant only, so they are computed once for all plan
-    /// accelerations; each plan then tests its own position against them,
-    /// and runs MOBIL's criterion only where the gaps hold (the same
-    /// arithmetic as [`Self::merge_utility`] at every point, so the same
-    /// plan, bit for bit).
+    /// accelerations, and so is a BV's acceleration before the change
+    /// (once a plan needs it) and its free-road term (its speed is
+    /// constant over the prediction); each plan then tests its own position
+    /// against them, and runs MOBIL's criterion only where the gaps hold
+    /// (the same arithmetic as [`Self::merge_utility`] at every point, so
+    /// the same plan, bit for bit).
     fn best_plan(&mut self, view: &DriverView) -> Option<f64> {
         let world = view.world;
         let h = self.params.plan_step;
+        let c = self.criterion;
         self.predicted.clear();
         for k in 1..=self.points {
             let tau = k as f64 * h;
@@ -273,9 +242,9 @@ impl MobilDriver {
                 position: bv.position + bv.speed * tau,
                 speed: bv.speed,
             });
-            let blocked = bvs.map(|bv| blocked(world, bv.position, bv.speed));
-            self.predicted.push(Predicted { bvs, blocked });
+            self.predicted.push(Predicted::new(world, bvs));
         }
+        let free = view.traffic.bvs.map(|bv| c.idm.free(bv.speed));
         let mut best: Option<(f64, f64)> = None;
         let (low, high) = (
             self.params.brake.max(world.accel.0),
@@ -283,7 +252,7 @@ impl MobilDriver {
         );
         for a in PLAN_ACCELS.map(|a| a.clamp(low, high)) {
             let (mut p, mut v) = (view.position, view.speed);
-            for (k, at) in (1..).zip(&self.predicted) {
+            for (k, at) in (1..).zip(&mut self.predicted) {
                 (p, v) = advance(world, p, v, a, h);
                 if p >= world.exit {
                     break;
@@ -291,7 +260,14 @@ impl MobilDriver {
                 if !at.safe(p) {
                     continue;
                 }
-                if let Some(u) = self.utility_within_gaps(world, p, v, &at.bvs) {
+                let bvs = at.bvs;
+                let before = &mut at.before;
+                let follower = |i: usize| {
+                    let before =
+                        *before[i].get_or_insert_with(|| c.before(world, &bvs, i, free[i]));
+                    (free[i], before)
+                };
+                if let Some(u) = c.utility(world, p, v, &bvs, follower) {
                     let tau = k as f64 * h;
                     let value = u - self.params.wait_cost * tau;
                     if best.is_none_or(|(_, b)| value > b) {
@@ -302,22 +278,6 @@ impl MobilDriver {
             }
         }
         best.map(|(a, _)| a)
-    }
-}
-
-/// Constant acceleration `a` for `h` seconds with the speed kept in the
-/// world's `[v_min, v_max]`.
-fn advance(world: &ExitWorld, p: f64, v: f64, a: f64, h: f64) -> (f64, f64) {
-    let target = if a >= 0.0 {
-        world.speed.1
-    } else {
-        world.speed.0
-    };
-    if a == 0.0 || (target - v) / a >= h {
-        (p + v * h + 0.5 * a * h * h, v + a * h)
-    } else {
-        let t1 = ((target - v) / a).max(0.0);
-        (p + v * t1 + 0.5 * a * t1 * t1 + target * (h - t1), target)
     }
 }
 

@@ -8,6 +8,7 @@
 //! an [`Action`] at every step.
 
 mod gap_seeker;
+mod merge;
 mod mobil;
 
 pub use gap_seeker::GapSeekerParams;
@@ -131,6 +132,16 @@ pub enum Driver {
 }
 
 impl Driver {
+    /// The IDM both built-in drivers follow with once in the right lane:
+    /// there a run's steps no longer depend on the driver's memory, only
+    /// on this ([`follow_in_right_lane`]).
+    pub fn right_lane_idm(&self) -> &IdmSteps {
+        match self {
+            Driver::Mobil(d) => d.right_lane_idm(),
+            Driver::GapSeeker(d) => d.right_lane_idm(),
+        }
+    }
+
     /// The driver's action at one step.
     pub fn act(&mut self, view: &DriverView) -> Action {
         match self {
@@ -203,17 +214,69 @@ impl Idm {
     /// The acceleration at `speed` behind `leader` (bumper gap, speed), or on
     /// a free road. A gap ≤ 0 gives `−∞` (the caller's braking bound).
     pub fn accel(&self, speed: f64, leader: Option<(f64, f64)>) -> f64 {
-        let free = self.alpha * (1.0 - crate::vehicle::power::pow(speed / self.v0, self.delta));
-        let Some((gap, lead_speed)) = leader else {
-            return free;
-        };
+        IdmSteps::new(*self).accel(speed, leader)
+    }
+}
+
+/// An [`Idm`] prepared for the many evaluations of a run: `2√(αb)` and the
+/// exponent's kind computed once, and the free-road term `α (1 − (v/v₀)^δ)`
+/// separate from the interaction term `α (s*/s)²`, so that a caller that
+/// needs both `ã` and `a` at one speed (MOBIL) or the free term of a BV's
+/// constant speed at every instant computes it once. The operations are
+/// [`Idm::accel`]'s in its order, so the values are its values, bit for bit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct IdmSteps {
+    idm: Idm,
+    two_sqrt_ab: f64,
+}
+
+impl IdmSteps {
+    /// `idm` with `2√(αb)` computed.
+    pub fn new(idm: Idm) -> Self {
+        Self {
+            idm,
+            two_sqrt_ab: 2.0 * (idm.alpha * idm.b).sqrt(),
+        }
+    }
+
+    /// The model's parameters.
+    pub fn idm(&self) -> &Idm {
+        &self.idm
+    }
+
+    /// `2√(αb)`, the divisor of the IDM's dynamic term.
+    pub fn two_sqrt_ab(&self) -> f64 {
+        self.two_sqrt_ab
+    }
+
+    /// The free-road term `α (1 − (v/v₀)^δ)`: the acceleration with no leader.
+    #[inline]
+    pub fn free(&self, speed: f64) -> f64 {
+        self.idm.alpha * (1.0 - crate::vehicle::power::pow(speed / self.idm.v0, self.idm.delta))
+    }
+
+    /// The acceleration at `speed` behind a leader `(gap, lead_speed)`,
+    /// given `free = self.free(speed)`:
+    /// `free − α (s*/s)²`, `s* = s₀ + max(0, vT + v (v − v_lead) / (2 √(α b)))`;
+    /// `−∞` for a gap ≤ 0.
+    #[inline]
+    pub fn behind(&self, free: f64, speed: f64, (gap, lead_speed): (f64, f64)) -> f64 {
         if gap <= 0.0 {
             return f64::NEG_INFINITY;
         }
-        let dynamic = speed * self.headway
-            + speed * (speed - lead_speed) / (2.0 * (self.alpha * self.b).sqrt());
-        let desired = self.s0 + dynamic.max(0.0);
-        free - self.alpha * (desired / gap).powi(2)
+        let dynamic = speed * self.idm.headway + speed * (speed - lead_speed) / self.two_sqrt_ab;
+        let desired = self.idm.s0 + dynamic.max(0.0);
+        free - self.idm.alpha * (desired / gap).powi(2)
+    }
+
+    /// [`Idm::accel`].
+    #[inline]
+    pub fn accel(&self, speed: f64, leader: Option<(f64, f64)>) -> f64 {
+        let free = self.free(speed);
+        match leader {
+            None => free,
+            Some(leader) => self.behind(free, speed, leader),
+        }
     }
 }
 
@@ -231,25 +294,27 @@ pub struct Neighbours {
 
 /// The right-lane neighbours of `position` among `bvs` (see [`Neighbours`]).
 pub fn neighbours(bvs: &[Bv; 2], position: f64) -> Neighbours {
-    let mut n = Neighbours {
-        ahead: None,
-        behind: None,
-    };
-    for &bv in bvs {
+    let (ahead, behind) = neighbour_indices(bvs, position);
+    Neighbours {
+        ahead: ahead.map(|i| bvs[i]),
+        behind: behind.map(|i| bvs[i]),
+    }
+}
+
+/// [`neighbours`] as indices into `bvs`: `(ahead, behind)`.
+#[inline]
+pub fn neighbour_indices(bvs: &[Bv; 2], position: f64) -> (Option<usize>, Option<usize>) {
+    let (mut ahead, mut behind): (Option<usize>, Option<usize>) = (None, None);
+    for (i, bv) in bvs.iter().enumerate() {
         if bv.position >= position {
-            if n.ahead
-                .is_none_or(|a| (bv.position, bv.speed) < (a.position, a.speed))
-            {
-                n.ahead = Some(bv);
+            if ahead.is_none_or(|a| (bv.position, bv.speed) < (bvs[a].position, bvs[a].speed)) {
+                ahead = Some(i);
             }
-        } else if n
-            .behind
-            .is_none_or(|b| (bv.position, bv.speed) > (b.position, b.speed))
-        {
-            n.behind = Some(bv);
+        } else if behind.is_none_or(|b| (bv.position, bv.speed) > (bvs[b].position, bvs[b].speed)) {
+            behind = Some(i);
         }
     }
-    n
+    (ahead, behind)
 }
 
 /// Whether a lane change at `position` keeps every BV at least its safe
@@ -270,7 +335,7 @@ pub fn overlaps(world: &ExitWorld, bvs: &[Bv; 2], position: f64) -> bool {
 
 /// Right-lane car following: IDM behind the nearest BV ahead, within the
 /// physical acceleration bounds.
-pub fn follow_in_right_lane(idm: &Idm, view: &DriverView) -> f64 {
+pub fn follow_in_right_lane(idm: &IdmSteps, view: &DriverView) -> f64 {
     let ahead = neighbours(&view.traffic.bvs, view.position)
         .ahead
         .map(|bv| (bv.position - view.position - view.world.length, bv.speed));

@@ -1,0 +1,120 @@
+//! Highway-exit runs of a built-in vehicle in batches: each run's steps in
+//! the left lane one by one (the drivers' plan search and MOBIL's
+//! criterion branch too much for vector lanes), then the runs that reached
+//! the right lane side by side in vector lanes ([`right_lane::finish`]),
+//! where about four fifths of the steps are.
+//!
+//! The left lane runs [`RunInProgress::step`], the very code of the scalar
+//! [`super::simulation::run_with`], and the right lane its operations lane
+//! by lane, so every record is the scalar one bit for bit (tested on every
+//! cell of every preset).
+
+use super::drivers::ExitVehicle;
+use super::right_lane::{self, Tail};
+use super::simulation::{ExitRun, RunInProgress};
+use super::world::ExitWorld;
+
+/// Scenarios whose right-lane tails are gathered before they run: enough
+/// to keep the lanes full, few enough to stay in cache.
+const GATHER: usize = 512;
+
+/// Runs `vehicle` on every scenario of `scenarios`, calling
+/// `record(i, run)` once for scenario `i` when its run ends (in the order
+/// runs end, not the order of `scenarios`).
+pub fn run_all(
+    world: &ExitWorld,
+    vehicle: &ExitVehicle,
+    scenarios: impl Iterator<Item = [f64; 4]>,
+    mut record: impl FnMut(usize, ExitRun),
+) {
+    let mut tails = Vec::with_capacity(GATHER);
+    let mut driver = vehicle.driver();
+    let idm = *driver.right_lane_idm();
+    let mut scenarios = scenarios.enumerate().peekable();
+    while scenarios.peek().is_some() {
+        tails.clear();
+        for (index, x) in scenarios.by_ref().take(GATHER) {
+            driver = vehicle.driver();
+            let mut run = RunInProgress::new(world, x);
+            loop {
+                let Ok(step) = run.step(world, &mut driver);
+                if let Some(done) = step {
+                    record(index, done);
+                    break;
+                }
+                if run.in_right_lane() {
+                    tails.push(Tail { index, run });
+                    break;
+                }
+            }
+        }
+        right_lane::finish(world, &idm, &tails, &mut record);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::case::Case;
+    use crate::cases::highway::{ExitVehicle, HighwayExit, HighwayPreset};
+
+    /// Each of `cells` in a batch against one by one: outcome, time and
+    /// lane-change point, bit for bit. Returns the failures.
+    fn batched_equals_scalar(case: &HighwayExit, vehicle: &ExitVehicle, cells: &[usize]) -> usize {
+        let batched = case.runs(vehicle, cells);
+        let mut events = vec![false; cells.len()];
+        case.events(vehicle, cells, &mut events);
+        let mut failures = 0;
+        for ((&cell, run), event) in cells.iter().zip(&batched).zip(events) {
+            let scalar = case.run(vehicle, cell);
+            let bits = |r: &crate::cases::highway::ExitRun| {
+                (
+                    r.outcome,
+                    r.time.to_bits(),
+                    r.lane_change.map(|(t, p)| (t.to_bits(), p.to_bits())),
+                )
+            };
+            assert_eq!(bits(run), bits(&scalar), "cell {cell}, {vehicle:?}");
+            assert_eq!(event, scalar.outcome.is_failure(), "cell {cell}");
+            failures += usize::from(event);
+        }
+        failures
+    }
+
+    /// Every cell of the coarse preset for each vehicle; on the paper's
+    /// grid (1,640,961 cells) an eighth of the cells per vehicle, a
+    /// different eighth for each (the highway benchmark checks every cell
+    /// of it for the built-in vehicles in the release build).
+    #[test]
+    fn batched_runs_are_the_scalar_ones_on_every_cell_of_every_preset() {
+        let vehicles: Vec<ExitVehicle> = [
+            r#"{"model": "mobil"}"#,
+            r#"{"model": "gap-seeker"}"#,
+            // A real exponent (powf) and other parameters.
+            r#"{"model": "mobil", "delta": 3.5, "politeness": 0.5, "b_safe": 3}"#,
+            r#"{"model": "gap-seeker", "v0": 30, "headway": 1.5, "front_gap": 1.2}"#,
+        ]
+        .iter()
+        .map(|s| serde_json::from_str(s).expect("valid vehicle"))
+        .collect();
+        let coarse = HighwayExit::builtin(HighwayPreset::Coarse);
+        let every: Vec<usize> = (0..coarse.grid().len()).collect();
+        let paper = HighwayExit::builtin(HighwayPreset::Paper);
+        for (j, vehicle) in vehicles.iter().enumerate() {
+            let failures = batched_equals_scalar(&coarse, vehicle, &every);
+            assert!(
+                failures > 0 && failures < every.len(),
+                "{failures} failures"
+            );
+            let eighth: Vec<usize> = (j..paper.grid().len()).step_by(8).collect();
+            let failures = batched_equals_scalar(&paper, vehicle, &eighth);
+            assert!(
+                failures > 0 && failures < eighth.len(),
+                "{failures} failures"
+            );
+        }
+        // Out of order, repeated, and fewer scenarios than lanes.
+        let odd = [9_000, 3, 9_000, 17, 4_444];
+        batched_equals_scalar(&coarse, &vehicles[0], &odd);
+        batched_equals_scalar(&coarse, &vehicles[0], &[]);
+    }
+}
