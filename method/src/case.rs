@@ -150,6 +150,19 @@ pub trait Case: Sync {
         self.evaluate_surrogate(surrogate, cell).challenge
     }
 
+    /// [`Case::surrogate_challenge`] for many cells: `challenges[i]` for
+    /// `cells[i]`. Cases with a batched simulation override it.
+    fn surrogate_challenges(
+        &self,
+        surrogate: &Self::Vehicle,
+        cells: &[usize],
+        challenges: &mut [f64],
+    ) {
+        for (challenge, &cell) in challenges.iter_mut().zip(cells) {
+            *challenge = self.surrogate_challenge(surrogate, cell);
+        }
+    }
+
     /// The modes an external program can drive this case in, the default
     /// first (the mode a specification that names none gets).
     fn external_modes(&self) -> &'static [ExternalMode] {

@@ -9,21 +9,29 @@ use rayon::prelude::*;
 pub(crate) fn search<C: Case>(case: &C, surrogate: &C::Vehicle, progress: &Progress) -> Evaluated {
     let exposure = case.exposure();
     progress.start(exposure.grid().len() as u64);
-    let (critical, evaluations) = (0..exposure.grid().len())
-        .into_par_iter()
-        .inspect(|_| progress.add(1))
-        .filter(|&cell| exposure.p(cell) > 0.0)
-        .map(|cell| {
-            let v = case.surrogate_challenge(surrogate, cell) * exposure.p(cell);
-            (v > 0.0).then_some((cell, v))
+    let all: Vec<usize> = (0..exposure.grid().len()).collect();
+    // Chunks of cells in parallel, each in the case's batches.
+    let (critical, evaluations) = all
+        .par_chunks(CHUNK)
+        .map(|chunk| {
+            let cells: Vec<usize> = chunk
+                .iter()
+                .copied()
+                .filter(|&cell| exposure.p(cell) > 0.0)
+                .collect();
+            let mut challenges = vec![0.0; cells.len()];
+            case.surrogate_challenges(surrogate, &cells, &mut challenges);
+            progress.add(chunk.len() as u64);
+            let found: Vec<(usize, f64)> = cells
+                .iter()
+                .zip(challenges)
+                .filter_map(|(&cell, challenge)| {
+                    let v = challenge * exposure.p(cell);
+                    (v > 0.0).then_some((cell, v))
+                })
+                .collect();
+            (found, cells.len())
         })
-        .fold(
-            || (Vec::new(), 0usize),
-            |(mut found, n), hit| {
-                found.extend(hit);
-                (found, n + 1)
-            },
-        )
         .reduce(
             || (Vec::new(), 0),
             |(mut a, n), (b, m)| {
@@ -36,3 +44,7 @@ pub(crate) fn search<C: Case>(case: &C, surrogate: &C::Vehicle, progress: &Progr
         sm_evaluations: evaluations,
     }
 }
+
+/// Cells per parallel chunk: enough for the batches, small enough to
+/// share out among threads and to report progress.
+const CHUNK: usize = 4096;

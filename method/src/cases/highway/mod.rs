@@ -325,4 +325,19 @@ impl Case for HighwayExit {
             0.0
         }
     }
+
+    /// The runs' failures, in batches ([`Case::events`]).
+    fn surrogate_challenges(
+        &self,
+        surrogate: &ExitVehicle,
+        cells: &[usize],
+        challenges: &mut [f64],
+    ) {
+        batch::run_all(
+            &self.world,
+            surrogate,
+            cells.iter().map(|&cell| self.scenario(cell)),
+            |i, run| challenges[i] = if run.outcome.is_failure() { 1.0 } else { 0.0 },
+        );
+    }
 }
