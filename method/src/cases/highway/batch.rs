@@ -54,8 +54,9 @@ pub fn run_all(
 
 #[cfg(test)]
 mod tests {
+    use super::run_all;
     use crate::case::Case;
-    use crate::cases::highway::{ExitVehicle, HighwayExit, HighwayPreset};
+    use crate::cases::highway::{simulation, ExitVehicle, ExitWorld, HighwayExit, HighwayPreset};
 
     /// Each of `cells` in a batch against one by one: outcome, time and
     /// lane-change point, bit for bit. Returns the failures.
@@ -111,6 +112,38 @@ mod tests {
                 failures > 0 && failures < eighth.len(),
                 "{failures} failures"
             );
+        }
+        // Other worlds: a time cap reached in the right lane, a farther
+        // exit with a wider car-following threshold.
+        let worlds = [
+            ExitWorld {
+                max_time: 3.0,
+                ..ExitWorld::paper()
+            },
+            ExitWorld {
+                exit: 400.0,
+                d_cf: 6.0,
+                ..ExitWorld::paper()
+            },
+        ];
+        for world in &worlds {
+            let scenarios: Vec<[f64; 4]> = every.iter().map(|&c| coarse.scenario(c)).collect();
+            for vehicle in &vehicles[..2] {
+                let mut batched = vec![None; scenarios.len()];
+                run_all(world, vehicle, scenarios.iter().copied(), |i, run| {
+                    batched[i] = Some(run)
+                });
+                let mut capped = 0;
+                for (x, run) in scenarios.iter().zip(batched) {
+                    let scalar = simulation::run(world, vehicle, *x);
+                    assert_eq!(run, Some(scalar), "{x:?} {vehicle:?} {world:?}");
+                    capped +=
+                        usize::from(scalar.time == world.max_time && scalar.lane_change.is_some());
+                }
+                if world.max_time == 3.0 {
+                    assert!(capped > 0, "no run reached the time cap in the right lane");
+                }
+            }
         }
         // Out of order, repeated, and fewer scenarios than lanes.
         let odd = [9_000, 3, 9_000, 17, 4_444];
