@@ -9,7 +9,7 @@ use crate::lease_size::{lease_size, predicted_unleased, SizingInput, MAX_INLINE_
 use crate::store::campaigns::{self, CampaignRow, COLUMNS as CAMPAIGN_COLUMNS};
 use crate::store::{audits, campaign_row};
 use rusqlite::{params, Connection};
-use std::sync::Arc;
+use std::sync::{Arc, LazyLock};
 use subtle::ConstantTimeEq;
 use tslg_api::{CampaignStatus, HeartbeatAck, LeaseFence};
 
@@ -113,6 +113,17 @@ pub async fn claim(
     db.write(move |conn| claim_in(conn, &config, &job)).await
 }
 
+/// The cases whose scenarios are drawn while a test runs, as the JSON
+/// array bound to a claim's query when its lease lists its tests.
+static SEQUENTIAL: LazyLock<String> = LazyLock::new(|| {
+    let sequential: Vec<&str> = tslg_method::cases::descriptors()
+        .iter()
+        .filter(|d| !d.is_grid())
+        .map(|d| d.name)
+        .collect();
+    serde_json::to_string(&sequential).expect("strings serialise")
+});
+
 impl ClaimJob {
     /// The claim `ask` as the writer runs it, timed now.
     pub fn new(config: &Config, ask: &Claim<'_>) -> Self {
@@ -129,19 +140,11 @@ impl ClaimJob {
             span_limit = span_limit.min(most);
         }
         let span_limit = span_limit.min(i64::MAX as u64) as i64;
-        // The cases whose scenarios are drawn while a test runs, as a JSON
-        // array bound to the query (only when `inline`).
-        let sequential: Vec<&str> = tslg_method::cases::descriptors()
-            .iter()
-            .filter(|d| !d.is_grid())
-            .map(|d| d.name)
-            .collect();
-        let sequential = serde_json::to_string(&sequential).expect("strings serialise");
         ClaimJob {
             worker: ask.worker.to_string(),
             threads: ask.threads,
             audits: !(inline || offers.is_empty()),
-            sequential: inline.then_some(sequential),
+            sequential: inline.then(|| SEQUENTIAL.as_str()),
             offered: serde_json::to_string(offers).expect("strings serialise"),
             span_limit,
             now,
@@ -230,7 +233,7 @@ pub struct ClaimJob {
     /// test's scenario in the lease can only take campaigns whose
     /// scenarios are fixed before the test runs, and no whole library
     /// build (`enumerate = 2`).
-    sequential: Option<String>,
+    sequential: Option<&'static str>,
     /// The programs offered, as a JSON array.
     offered: String,
     span_limit: i64,
@@ -254,7 +257,6 @@ impl ClaimJob {
     /// The filters' bound values.
     fn filter_values(&self) -> Vec<&str> {
         self.sequential
-            .as_deref()
             .into_iter()
             .chain([self.offered.as_str()])
             .collect()

@@ -68,11 +68,14 @@ impl Criterion {
         }
     }
 
-    /// MOBIL where the safe time gaps are known to
-    /// hold: MOBIL's safety criterion and the utility
-    /// `ã − a + p (ã_new − a_new)`. `follower(i)` gives BV `i`'s free-road
-    /// term and its acceleration before the change, asked only when BV
-    /// `i` would be the new follower and the VUT's own criterion holds.
+    /// MOBIL where the safe time gaps are known to hold: MOBIL's safety
+    /// criterion and the utility `ã − a + p (ã_new − a_new)`.
+    /// `follower(i)` gives BV `i`'s free-road term and its acceleration
+    /// before the change, asked only when BV `i` would be the new follower.
+    /// Either criterion failing is `None`, so their order changes no
+    /// result; the follower's goes first, which measured faster
+    /// (alternating runs of the two orders: about 8% less time per MOBIL
+    /// simulation).
     #[inline]
     pub fn utility(
         &self,
@@ -83,6 +86,19 @@ impl Criterion {
         follower: impl FnOnce(usize) -> (f64, f64),
     ) -> Option<f64> {
         let (ahead, behind) = neighbour_indices(bvs, p);
+        // Both criteria must hold; the new follower's is tested first.
+        let mut follower_gain = 0.0;
+        if let Some(i) = behind {
+            let f = bvs[i];
+            let (free, before) = follower(i);
+            let after = self
+                .idm
+                .behind(free, f.speed, (p - f.position - world.length, v));
+            if after < -self.b_safe {
+                return None;
+            }
+            follower_gain = after - before;
+        }
         // `a` and `ã` share the free-road term at the VUT's speed.
         let own_before = self.idm.free(v);
         let own_after = match ahead {
@@ -95,18 +111,6 @@ impl Criterion {
         };
         if own_after < -self.b_safe {
             return None;
-        }
-        let mut follower_gain = 0.0;
-        if let Some(i) = behind {
-            let f = bvs[i];
-            let (free, before) = follower(i);
-            let after = self
-                .idm
-                .behind(free, f.speed, (p - f.position - world.length, v));
-            if after < -self.b_safe {
-                return None;
-            }
-            follower_gain = after - before;
         }
         Some(own_after - own_before + self.politeness * follower_gain)
     }
