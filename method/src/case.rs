@@ -188,3 +188,14 @@ pub trait Case: Sync {
         None
     }
 }
+
+/// Cells per parallel chunk when `len` cells run in the case's batches
+/// ([`Case::events`], [`Case::surrogate_challenges`]): up to 4,096, large
+/// enough for the batches, but at least 16 chunks per thread, so that a
+/// small grid (a user case's 3,420 cells, each a conversation with a
+/// program) still spreads over the threads and reports progress as it
+/// goes.
+pub(crate) fn parallel_chunk(len: usize) -> usize {
+    len.div_ceil(16 * rayon::current_num_threads())
+        .clamp(1, 4096)
+}

@@ -7,7 +7,7 @@
 //!   `n ≈ z² σ² / (β² μ²)`, and for the NDD baseline (`q = P`, Bernoulli
 //!   outcomes) `n ≈ z² (1 − μ) / (β² μ)`.
 
-use crate::case::Case;
+use crate::case::{parallel_chunk, Case};
 use crate::sampling::LibraryDistribution;
 use crate::tolerance::PROBABILITY_FLOOR;
 use rayon::prelude::*;
@@ -22,7 +22,7 @@ pub fn event_cells<C: Case>(case: &C, vehicle: &C::Vehicle) -> Vec<usize> {
         .filter(|&cell| exposure.p(cell) > 0.0)
         .collect();
     cells
-        .par_chunks(CHUNK)
+        .par_chunks(parallel_chunk(cells.len()))
         .flat_map_iter(|chunk| {
             let mut events = vec![false; chunk.len()];
             case.events(vehicle, chunk, &mut events);
@@ -34,9 +34,6 @@ pub fn event_cells<C: Case>(case: &C, vehicle: &C::Vehicle) -> Vec<usize> {
         })
         .collect()
 }
-
-/// Cells per parallel chunk of [`event_cells`].
-const CHUNK: usize = 4096;
 
 /// `P(A)` from the event cells.
 pub fn event_probability<C: Case>(case: &C, events: &[usize]) -> f64 {

@@ -2,7 +2,7 @@
 //! Cells with `P(x) = 0` have `V(x) = 0` without a simulation.
 
 use super::Evaluated;
-use crate::case::Case;
+use crate::case::{parallel_chunk, Case};
 use crate::progress::Progress;
 use rayon::prelude::*;
 
@@ -12,7 +12,7 @@ pub(crate) fn search<C: Case>(case: &C, surrogate: &C::Vehicle, progress: &Progr
     let all: Vec<usize> = (0..exposure.grid().len()).collect();
     // Chunks of cells in parallel, each in the case's batches.
     let (critical, evaluations) = all
-        .par_chunks(CHUNK)
+        .par_chunks(parallel_chunk(all.len()))
         .map(|chunk| {
             let cells: Vec<usize> = chunk
                 .iter()
@@ -44,7 +44,3 @@ pub(crate) fn search<C: Case>(case: &C, surrogate: &C::Vehicle, progress: &Progr
         sm_evaluations: evaluations,
     }
 }
-
-/// Cells per parallel chunk: enough for the batches, small enough to
-/// share out among threads and to report progress.
-const CHUNK: usize = 4096;

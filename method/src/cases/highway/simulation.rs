@@ -109,7 +109,10 @@ impl RunInProgress {
     }
 
     /// The VUT's and the BVs' motion over one step, the VUT with `accel`
-    /// cut to the physical bounds and to speeds in `[0, v_max]`.
+    /// cut to the physical bounds and to speeds in `[0, v_max]`. (A
+    /// braking cut at `−v/Δt` can leave `v + a Δt` a rounding error below
+    /// 0, e.g. −1.1 × 10⁻¹⁶; the speed is then 0, since the IDM's
+    /// `(v/v₀)^δ` of a negative speed is NaN for a fractional δ.)
     #[inline]
     fn advance(&mut self, world: &ExitWorld, accel: f64) {
         let v = self.v;
@@ -117,7 +120,7 @@ impl RunInProgress {
             .clamp(world.emergency_brake, world.accel.1)
             .clamp(-v / world.dt, (world.speed.1 - v) / world.dt);
         self.p += v * world.dt + 0.5 * a * world.dt * world.dt;
-        self.v = v + a * world.dt;
+        self.v = (v + a * world.dt).max(0.0);
         self.traffic.step(world);
         self.k += 1;
     }

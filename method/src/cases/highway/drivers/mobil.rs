@@ -120,6 +120,16 @@ impl MobilParams {
             "must be in [0, 60]",
         )?;
         check(m, "wait_cost", self.wait_cost, |x| x >= 0.0, "must be ≥ 0")?;
+        // The plan's accelerations are those of a fixed set (which holds 0)
+        // within [brake, accelerate] and the world's bounds (which hold 0).
+        check(m, "brake", self.brake, |x| x <= 0.0, "must be ≤ 0")?;
+        check(
+            m,
+            "accelerate",
+            self.accelerate,
+            |x| x >= 0.0,
+            "must be ≥ 0",
+        )?;
         self.idm().validate(m)
     }
 
@@ -250,6 +260,11 @@ impl MobilDriver {
             self.params.brake.max(world.accel.0),
             self.params.accelerate.min(world.accel.1),
         );
+        if !(low <= high) {
+            // A world whose bounds miss the plan's: no plan (validated
+            // parameters and the built-in world always overlap).
+            return None;
+        }
         for a in PLAN_ACCELS.map(|a| a.clamp(low, high)) {
             let (mut p, mut v) = (view.position, view.speed);
             for (k, at) in (1..).zip(&mut self.predicted) {
@@ -325,6 +340,31 @@ mod tests {
     /// accelerations picks the same plan, to the bit, as the plain search,
     /// over random states for three parameter sets; and it finds a plan in
     /// a good share of them, so the comparison is not only of `None`s.
+    /// The plan's bounds must hold 0: `brake` above 0 or `accelerate`
+    /// below it left no plan acceleration and panicked.
+    #[test]
+    fn plan_bounds_that_miss_zero_are_refused() {
+        for (spec, name) in [
+            (r#"{"model": "mobil", "brake": 3}"#, "brake"),
+            (r#"{"model": "mobil", "accelerate": -5}"#, "accelerate"),
+            (
+                r#"{"model": "mobil", "brake": -1, "accelerate": -2}"#,
+                "accelerate",
+            ),
+        ] {
+            let err = serde_json::from_str::<super::super::ExitVehicle>(spec)
+                .expect_err(spec)
+                .to_string();
+            assert!(err.contains(name), "{spec}: {err}");
+        }
+        let ok: super::super::ExitVehicle =
+            serde_json::from_str(r#"{"model": "mobil", "brake": 0, "accelerate": 0}"#)
+                .expect("a plan of 0 only");
+        let world = ExitWorld::paper();
+        let run = crate::cases::highway::simulation::run(&world, &ok, [100.0, 25.0, 20.0, 30.0]);
+        assert!(run.time > 0.0);
+    }
+
     #[test]
     fn the_shared_predictions_give_the_plain_search_s_plan() {
         let world = ExitWorld::paper();

@@ -218,8 +218,8 @@ impl Idm {
     }
 }
 
-/// An [`Idm`] prepared for the many evaluations of a run: `2√(αb)` and the
-/// exponent's kind computed once, and the free-road term `α (1 − (v/v₀)^δ)`
+/// An [`Idm`] prepared for the many evaluations of a run: `2√(αb)`
+/// computed once, and the free-road term `α (1 − (v/v₀)^δ)`
 /// separate from the interaction term `α (s*/s)²`, so that a caller that
 /// needs both `ã` and `a` at one speed (MOBIL) or the free term of a BV's
 /// constant speed at every instant computes it once. The operations are
