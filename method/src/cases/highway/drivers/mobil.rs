@@ -260,7 +260,7 @@ impl MobilDriver {
             self.params.brake.max(world.accel.0),
             self.params.accelerate.min(world.accel.1),
         );
-        if !(low <= high) {
+        if low > high || low.is_nan() || high.is_nan() {
             // A world whose bounds miss the plan's: no plan (validated
             // parameters and the built-in world always overlap).
             return None;
