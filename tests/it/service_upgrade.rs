@@ -13,6 +13,26 @@ use std::time::Duration;
 use tslg_api::{CampaignStatus, ResultReport};
 use tslg_client::CallError;
 
+/// Undoes the active-lease indexes (migration 20): the leases table as
+/// it was before, with its `IN` check and its indexes over every lease,
+/// so the migration rebuilds a table that holds a campaign's leases.
+const UNDO_ACTIVE_LEASE_INDEXES: [&str; 7] = [
+    "CREATE TABLE leases_before (id INTEGER PRIMARY KEY AUTOINCREMENT, \
+     campaign_id INTEGER NOT NULL REFERENCES campaigns (id), start_index INTEGER NOT NULL, \
+     end_index INTEGER NOT NULL CHECK (end_index > start_index), resume_at INTEGER NOT NULL, \
+     attempt INTEGER NOT NULL, worker TEXT NOT NULL, expires_at INTEGER NOT NULL, \
+     state TEXT NOT NULL CHECK (state IN ('active', 'done', 'cancelled')), \
+     created_at TEXT NOT NULL DEFAULT (strftime('%Y-%m-%dT%H:%M:%fZ', 'now')), \
+     key TEXT NOT NULL DEFAULT '', claimed_at INTEGER NOT NULL DEFAULT 0, \
+     threads INTEGER NOT NULL DEFAULT 4096, audit_id INTEGER REFERENCES audits (id))",
+    "INSERT INTO leases_before SELECT * FROM leases",
+    "DROP TABLE leases",
+    "ALTER TABLE leases_before RENAME TO leases",
+    "CREATE INDEX leases_active ON leases (state, expires_at)",
+    "CREATE INDEX leases_by_campaign ON leases (campaign_id, state, resume_at)",
+    "DELETE FROM _sqlx_migrations WHERE version = 20261130000020",
+];
+
 /// Undoes the packed report rows (migration 10): unpacks every report's
 /// events into the per-event `events` table of earlier releases, then drops
 /// the `reports` table and the leases' attempt columns. What remains is
@@ -107,6 +127,7 @@ async fn a_database_of_the_previous_release_is_migrated_and_one_of_a_newer_is_re
     server.kill();
 
     // Back to two releases' schemas before, data and held leases kept.
+    sql(&database, &UNDO_ACTIVE_LEASE_INDEXES).await;
     undo_report_rows(&database).await;
     sql(&database, &UNDO).await;
 
