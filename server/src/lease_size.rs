@@ -20,8 +20,12 @@
 
 /// Fewest tests in a lease.
 pub const MIN_LEASE: u64 = 16;
-/// Most tests in a lease.
-pub const MAX_LEASE: u64 = 1 << 22;
+/// Most tests in a lease: far above what the time target gives a test of
+/// the fastest kernels (2 s on 2 threads at 40 ns a test is 10⁸), so the
+/// target decides; the cap only bounds a cost measured absurdly low.
+/// (It was 2²², which at today's 40–80 ns a cut-in test cut leases to a
+/// fifth of a second, every lease a round trip and a ramp of chunks.)
+pub const MAX_LEASE: u64 = 1 << 27;
 /// Tests per thread of a campaign's first leases, before any cost is known.
 pub const FIRST_LEASE_PER_THREAD: u64 = 256;
 /// Leases carrying their tests inline are capped (response size).
@@ -109,12 +113,25 @@ mod tests {
     #[test]
     fn cheap_tests_get_large_leases_and_slow_tests_small_ones() {
         assert_eq!(lease_size(&input()), 1024);
-        // 0.5 µs per test: 2 s on 4 threads is 16 million, capped.
+        // 0.5 µs per test: 2 s on 4 threads is 16 million.
         let cheap = SizingInput {
             cost_per_test: Some(5e-7),
             ..input()
         };
-        assert_eq!(lease_size(&cheap), MAX_LEASE);
+        assert_eq!(lease_size(&cheap), 16_000_000);
+        // 40 ns per test on 2 threads: 10⁸, under the cap.
+        let cheapest = SizingInput {
+            threads: 2,
+            cost_per_test: Some(4e-8),
+            ..input()
+        };
+        assert_eq!(lease_size(&cheapest), 100_000_000);
+        // A cost measured absurdly low: the cap.
+        let absurd = SizingInput {
+            cost_per_test: Some(1e-12),
+            ..input()
+        };
+        assert_eq!(lease_size(&absurd), MAX_LEASE);
         // 1 ms per test: 8000 tests.
         let slow = SizingInput {
             cost_per_test: Some(1e-3),

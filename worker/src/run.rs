@@ -30,6 +30,27 @@ const INVALID_TRIES: usize = 2;
 /// stopped campaign is noticed quickly.
 const CHUNK_SECONDS: f64 = 0.5;
 const FIRST_CHUNK_PER_THREAD: u64 = 64;
+/// Most tests in a chunk (the coordinator's largest lease).
+const MAX_CHUNK: u64 = 1 << 27;
+
+/// The first chunk of a lease of `left` tests of `campaign`. Of a
+/// campaign the worker ran the last chunk of (`last`), the size measured
+/// there, but at most half the lease: so the lease runs in two chunks or
+/// more, the report of the last but one asks for the next lease, and the
+/// threads start the second chunk while the first is reported. Else a
+/// small first chunk, whose time sizes the next.
+///
+/// A first chunk of 64 tests per thread at every lease, as before, cost a
+/// cheap campaign a tenth of the threads' time: a chunk of a few ms ran
+/// while the last lease's final reports were checked and folded, and the
+/// threads waited for that acknowledgement (measured: 1.8 of 2 cores busy
+/// through the service, 1.9 after).
+fn first_chunk(last: Option<(i64, u64)>, campaign: i64, threads: usize, left: u64) -> u64 {
+    match last {
+        Some((c, size)) if c == campaign => size.min(left.div_ceil(2)).max(1),
+        _ => FIRST_CHUNK_PER_THREAD * threads as u64,
+    }
+}
 
 /// What a worker did.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -57,6 +78,9 @@ struct Worker {
     /// one (`next_lease`), and when: the worker asks no separate request
     /// for it.
     next_lease: Option<(Lease, Instant)>,
+    /// The last chunk's campaign and size, which the next lease of that
+    /// campaign starts from ([`first_chunk`]).
+    chunk: Option<(i64, u64)>,
 }
 
 /// Runs a worker until `shutdown` completes (or, with
@@ -103,6 +127,7 @@ pub async fn run(
         summary: WorkerSummary::default(),
         tail: None,
         next_lease: None,
+        chunk: None,
     };
     tracing::info!(worker = %worker.name, threads, server = %config.server, "worker started");
     let mut idle = Backoff::new(0.05, config.max_backoff_seconds);
@@ -331,7 +356,12 @@ impl Worker {
             }
         }
         let mut at = lease.resume_at;
-        let mut chunk = FIRST_CHUNK_PER_THREAD * self.threads as u64;
+        let mut chunk = first_chunk(
+            self.chunk,
+            lease.campaign_id,
+            self.threads,
+            lease.end.saturating_sub(at),
+        );
         let pool = Arc::clone(&self.pool);
         let start = |from: u64, chunk: u64| {
             let to = (from + chunk).min(lease.end);
@@ -368,7 +398,8 @@ impl Worker {
                 && !self.stopping()
             {
                 let rate = (ran.end - from) as f64 / seconds.max(1e-6);
-                chunk = ((rate * CHUNK_SECONDS) as u64).clamp(16, 1 << 22);
+                chunk = ((rate * CHUNK_SECONDS) as u64).clamp(16, MAX_CHUNK);
+                self.chunk = Some((lease.campaign_id, chunk));
                 running = Some(start(to, chunk));
             }
             let found = ran.events.len() as u64;
@@ -610,4 +641,22 @@ fn run_builtin(
     Err(format!(
         "the simulation failed {INVALID_TRIES} times: {last}"
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::first_chunk;
+
+    #[test]
+    fn a_lease_of_a_known_campaign_starts_at_the_measured_chunk_but_in_two_parts() {
+        // A new campaign, or another one: a small first chunk.
+        assert_eq!(first_chunk(None, 7, 2, 1 << 20), 128);
+        assert_eq!(first_chunk(Some((6, 1 << 24)), 7, 2, 1 << 20), 128);
+        // The same campaign: the measured size, if the lease is twice that.
+        assert_eq!(first_chunk(Some((7, 5_000)), 7, 2, 1 << 20), 5_000);
+        // A lease smaller than two chunks: its first half (rounded up).
+        assert_eq!(first_chunk(Some((7, 1 << 24)), 7, 2, 1_001), 501);
+        assert_eq!(first_chunk(Some((7, 1 << 24)), 7, 2, 1), 1);
+        assert_eq!(first_chunk(Some((7, 1 << 24)), 7, 2, 0), 1);
+    }
 }
