@@ -224,7 +224,7 @@ impl<'a, C: Case> Planner<'a, C> {
                     .into(),
             ));
         }
-        if s.stage_tests % s.explore_every != 0 {
+        if !s.stage_tests.is_multiple_of(s.explore_every) {
             return Err(AdaptiveError::Settings(format!(
                 "stage_tests = {} must be a multiple of explore_every = {}",
                 s.stage_tests, s.explore_every

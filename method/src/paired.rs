@@ -167,7 +167,7 @@ pub struct PairedResult {
 /// Whether `n` is a significance look (`n_min · 2ᵏ`), and its `k`.
 fn look(n: u64, n_min: u64) -> Option<u32> {
     let first = n_min.max(1);
-    (n >= first && n % first == 0 && (n / first).is_power_of_two())
+    (n >= first && n.is_multiple_of(first) && (n / first).is_power_of_two())
         .then(|| (n / first).trailing_zeros())
 }
 
@@ -386,7 +386,7 @@ mod tests {
         };
         // Vehicle a fails on every 7th test, b on every 11th; test 5 of
         // each 50 could not run.
-        let outcome = |i: u64| match (i % 50 == 5, i % 7 == 0, i % 11 == 0) {
+        let outcome = |i: u64| match (i % 50 == 5, i.is_multiple_of(7), i.is_multiple_of(11)) {
             (true, _, _) => Some(PairedOutcome::Invalid),
             (_, false, false) => None,
             (_, a, b) => Some(PairedOutcome::Weighted(

@@ -58,6 +58,7 @@ macro_rules! double_round {
         $quarter_round($x, 3, 4, 9, 14);
     };
 }
+#[cfg(target_arch = "x86_64")]
 use double_round;
 
 /// A ChaCha8 key from a campaign seed, derived exactly as

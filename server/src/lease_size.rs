@@ -26,6 +26,12 @@ pub const MIN_LEASE: u64 = 16;
 /// (It was 2²², which at today's 40–80 ns a cut-in test cut leases to a
 /// fifth of a second, every lease a round trip and a ramp of chunks.)
 pub const MAX_LEASE: u64 = 1 << 27;
+/// Most tests in a lease of a library campaign: the old bound, kept where
+/// the fold may draw again every test between its prefix and the frontier
+/// to find the exploring ones (`store/fold.rs`, when a lagging lease's
+/// last report clears the frontier: about one lease per other worker, at
+/// about 10⁷ draws a second while the writer waits).
+pub const LIBRARY_MAX_LEASE: u64 = 1 << 22;
 /// Tests per thread of a campaign's first leases, before any cost is known.
 pub const FIRST_LEASE_PER_THREAD: u64 = 256;
 /// Leases carrying their tests inline are capped (response size).
@@ -45,12 +51,17 @@ pub struct SizingInput {
     /// Tests of the campaign's resolved prefix (every outcome below is
     /// recorded and folded).
     pub resolved: u64,
+    /// The bound of the campaign's kind: [`MAX_LEASE`], or
+    /// [`LIBRARY_MAX_LEASE`].
+    pub max_lease: u64,
 }
 
 pub fn lease_size(input: &SizingInput) -> u64 {
     let threads = f64::from(input.threads.max(1));
     let by_time = match input.cost_per_test {
-        Some(c) if c > 0.0 => (input.target_seconds * threads / c).min(MAX_LEASE as f64) as u64,
+        Some(c) if c > 0.0 => {
+            (input.target_seconds * threads / c).min(input.max_lease as f64) as u64
+        }
         _ => FIRST_LEASE_PER_THREAD * u64::from(input.threads.max(1)),
     };
     let first = FIRST_LEASE_PER_THREAD * u64::from(input.threads.max(1));
@@ -61,7 +72,7 @@ pub fn lease_size(input: &SizingInput) -> u64 {
         });
     by_time
         .min(by_goal)
-        .clamp(MIN_LEASE, MAX_LEASE)
+        .clamp(MIN_LEASE, input.max_lease.max(MIN_LEASE))
         .min(input.budget_left)
 }
 
@@ -107,6 +118,7 @@ mod tests {
             budget_left: u64::MAX,
             predicted_unleased: None,
             resolved: u64::MAX,
+            max_lease: MAX_LEASE,
         }
     }
 
@@ -132,6 +144,12 @@ mod tests {
             ..input()
         };
         assert_eq!(lease_size(&absurd), MAX_LEASE);
+        // A library campaign's bound.
+        let library = SizingInput {
+            max_lease: LIBRARY_MAX_LEASE,
+            ..cheap
+        };
+        assert_eq!(lease_size(&library), LIBRARY_MAX_LEASE);
         // 1 ms per test: 8000 tests.
         let slow = SizingInput {
             cost_per_test: Some(1e-3),

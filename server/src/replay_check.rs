@@ -275,14 +275,14 @@ mod tests {
     /// A made-up campaign: test `i` is an event of weight `i` when `i % 7
     /// == 0`, invalid when `i % 11 == 0`, and explores when `i % 5 == 0`.
     fn truth(i: u64) -> (Option<SparseOutcome>, bool) {
-        let outcome = if i % 11 == 0 {
+        let outcome = if i.is_multiple_of(11) {
             Some(SparseOutcome::Invalid)
-        } else if i % 7 == 0 {
+        } else if i.is_multiple_of(7) {
             Some(SparseOutcome::Event(i as f64))
         } else {
             None
         };
-        (outcome, i % 5 == 0)
+        (outcome, i.is_multiple_of(5))
     }
 
     fn honest(from: u64, to: u64) -> Vec<(u64, SparseOutcome)> {

@@ -30,8 +30,11 @@ const INVALID_TRIES: usize = 2;
 /// stopped campaign is noticed quickly.
 const CHUNK_SECONDS: f64 = 0.5;
 const FIRST_CHUNK_PER_THREAD: u64 = 64;
-/// Most tests in a chunk (the coordinator's largest lease).
-const MAX_CHUNK: u64 = 1 << 27;
+/// Most tests in a chunk: a chunk's events are held until it is
+/// reported, so this bounds the worker's memory on a campaign whose tests
+/// are mostly events (2²² tests, at most 64 MB of events), whatever its
+/// threads' rate. A lease longer than that runs in several chunks.
+const MAX_CHUNK: u64 = 1 << 22;
 
 /// The first chunk of a lease of `left` tests of `campaign`. Of a
 /// campaign the worker ran the last chunk of (`last`), the size measured

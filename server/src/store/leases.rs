@@ -5,7 +5,9 @@ use crate::config::Config;
 use crate::db::sql;
 use crate::db::{now_ms, Database};
 use crate::error::ApiError;
-use crate::lease_size::{lease_size, predicted_unleased, SizingInput, MAX_INLINE_LEASE};
+use crate::lease_size::{
+    lease_size, predicted_unleased, SizingInput, LIBRARY_MAX_LEASE, MAX_INLINE_LEASE, MAX_LEASE,
+};
 use crate::store::campaigns::{self, CampaignRow, COLUMNS as CAMPAIGN_COLUMNS};
 use crate::store::{audits, campaign_row};
 use rusqlite::{params, Connection};
@@ -533,6 +535,10 @@ fn new_lease_size(config: &Config, campaign: &CampaignRow, threads: u32) -> u64 
             campaign.next_index as u64,
         ),
         resolved: fold.indices,
+        max_lease: match campaign.method {
+            tslg_api::Method::Library => LIBRARY_MAX_LEASE,
+            _ => MAX_LEASE,
+        },
     })
 }
 
