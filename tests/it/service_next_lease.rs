@@ -148,6 +148,37 @@ async fn a_report_sent_again_brings_the_same_lease_and_a_refused_one_takes_none(
     assert_eq!((again.accepted, again.duplicate), (0, 100));
     assert_eq!(again.next_lease.as_ref(), Some(&next));
     assert_eq!(client.campaign(id).await.unwrap().leased, 200);
+    // Sent again asking for fewer tests than the unstarted lease holds: a
+    // new lease within what it asks, not the unstarted one (which expires
+    // unused). The lease a report sent again may take is limited as a new
+    // claim is, by the tests asked for and by the cap on listed tests.
+    let smaller = tslg_api::ResultReport {
+        next_lease: Some(tslg_api::LeaseRequest {
+            max_tests: Some(40),
+            ..ask("w1", &[])
+        }),
+        ..report.clone()
+    };
+    let cut = client.report(first.id, &smaller).await.unwrap();
+    let cut = cut.next_lease.expect("work left");
+    assert_eq!((cut.start, cut.end), (200, 240), "{cut:?}");
+    // That one fits a request for its tests listed: handed out again, listed.
+    let listed = tslg_api::ResultReport {
+        next_lease: Some(tslg_api::LeaseRequest {
+            include_tests: true,
+            ..ask("w1", &[])
+        }),
+        ..report.clone()
+    };
+    let listed = client.report(first.id, &listed).await.unwrap();
+    let listed = listed.next_lease.expect("work left");
+    assert_eq!(listed.id, cut.id);
+    assert_eq!(listed.tests.as_ref().map(Vec::len), Some(40), "{listed:?}");
+    let part = tslg_api::ResultReport {
+        to: 220,
+        ..whole(&cut, "w1", real_events(&client, id, 200, 220).await)
+    };
+    client.report(cut.id, &part).await.unwrap();
     // Once it has started, a repeated report on the first lease takes a
     // new range.
     let part = tslg_api::ResultReport {
@@ -157,7 +188,7 @@ async fn a_report_sent_again_brings_the_same_lease_and_a_refused_one_takes_none(
     client.report(next.id, &part).await.unwrap();
     let third = client.report(first.id, &report).await.unwrap();
     let third = third.next_lease.expect("work left");
-    assert_eq!((third.start, third.end), (200, 300));
+    assert_eq!((third.start, third.end), (240, 340));
 
     // A report the coordinator's own run contradicts is refused, its worker
     // flagged, and the next lease it asked for is not taken.

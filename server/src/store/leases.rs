@@ -191,7 +191,7 @@ pub fn claim_after(
         return Ok(None);
     }
     if let Some(reported) = retried_on {
-        if let Some(lease) = unstarted(conn, &job.worker, reported, now)? {
+        if let Some(lease) = unstarted(conn, &job, reported)? {
             return Ok(Some(Claimed {
                 lease,
                 campaign: None,
@@ -207,22 +207,34 @@ pub fn retried_on(lease_id: i64, ack: &tslg_api::ResultAck) -> Option<i64> {
     (ack.accepted == 0 && ack.duplicate > 0).then_some(lease_id)
 }
 
-/// A live lease of `worker` other than `besides` with nothing reported
-/// yet, the newest.
+/// A live lease of `job`'s worker other than `besides` with nothing
+/// reported yet, the newest, if the request `job` could have been given it:
+/// a request sent again may ask for less than the first sending did (fewer
+/// tests, or the tests listed, which caps the lease and keeps the cases
+/// whose scenarios are drawn while a test runs), and then gets a new lease
+/// as any claim would (the unstarted one expires unused).
 fn unstarted(
     conn: &Connection,
-    worker: &str,
+    job: &ClaimJob,
     besides: i64,
-    now: i64,
 ) -> Result<Option<LeaseRow>, ApiError> {
-    sql::optional(
-        conn,
-        &format!(
-            "SELECT {COLUMNS} FROM leases WHERE state = 'active' AND expires_at > ? \
-             AND worker = ? AND id != ? AND resume_at = start_index ORDER BY id DESC LIMIT 1"
-        ),
-        params![now, worker, besides],
-    )
+    let columns = COLUMNS
+        .split(", ")
+        .map(|column| format!("l.{column} AS {column}", column = column.trim()))
+        .collect::<Vec<_>>()
+        .join(", ");
+    let filters = job.filters();
+    let sql = format!(
+        "SELECT {columns} FROM leases l JOIN campaigns c ON c.id = l.campaign_id \
+         WHERE l.state = 'active' AND l.expires_at > ? AND l.worker = ? AND l.id != ? \
+           AND l.resume_at = l.start_index AND l.end_index - l.resume_at <= ? {filters} \
+         ORDER BY l.id DESC LIMIT 1"
+    );
+    let filter_values = job.filter_values();
+    let mut values: Vec<&dyn rusqlite::ToSql> =
+        vec![&job.now, &job.worker, &besides, &job.span_limit];
+    values.extend(filter_values.iter().map(|v| v as &dyn rusqlite::ToSql));
+    sql::optional(conn, &sql, values.as_slice())
 }
 
 /// A claim as the writer runs it.
