@@ -15,8 +15,13 @@
 //! own savepoint only, and no two writers ever meet ("database is locked"
 //! cannot arise between ours).
 //!
-//! A group is cut at [`MAX_GROUP`] jobs or [`MAX_GROUP_TIME`], so a steady
-//! stream of requests cannot hold back the first one's answer.
+//! A group is cut at [`MAX_GROUP_TIME`], so a steady stream of requests
+//! cannot hold back the first one's answer, and at a number of jobs that
+//! follows the commit's cost ([`GroupCap`]): about as many jobs as the
+//! commit takes time, so that the writer spends at most about half its time
+//! committing, while the answers leave in groups small enough that the
+//! request threads send one group's answers and take in new requests while
+//! the writer runs the next (docs/benchmarks.md, "Coordinator under load").
 //!
 //! Cancellation: a request whose client goes away stops waiting, but its
 //! job, once queued, still runs and commits whole (a lease then expires
@@ -34,6 +39,11 @@ use tokio::sync::oneshot;
 
 /// The most jobs one transaction carries.
 const MAX_GROUP: usize = 256;
+
+/// The fewest jobs a group is cut at: below it the commits' own work
+/// (their statements and the log's sync) grew faster than the overlap
+/// gained (measured with 8).
+const MIN_GROUP_CAP: usize = 16;
 
 /// The longest a group keeps taking jobs after its first started.
 const MAX_GROUP_TIME: Duration = Duration::from_millis(20);
@@ -168,10 +178,57 @@ impl Writer {
     }
 }
 
+/// How many jobs a group takes: the commit's time over a job's, both
+/// smoothed over the groups so far (exponential averages, weight 0.2),
+/// within [`MIN_GROUP_CAP`, `MAX_GROUP`]. On a disk whose sync is quick
+/// the commit costs a few jobs and groups stay at the floor; on a slow one
+/// (a sync of several milliseconds) groups grow so that each sync is
+/// shared by about as many jobs as it takes time for.
+#[derive(Debug, Clone, Copy, Default)]
+struct GroupCap {
+    /// Seconds of one job, and of one commit.
+    job: Option<f64>,
+    commit: Option<f64>,
+}
+
+impl GroupCap {
+    const WEIGHT: f64 = 0.2;
+
+    fn smooth(previous: Option<f64>, sample: f64) -> Option<f64> {
+        Some(match previous {
+            Some(p) => p + Self::WEIGHT * (sample - p),
+            None => sample,
+        })
+    }
+
+    /// A group of `jobs` that ran for `work` and committed in `commit`.
+    fn record(&mut self, jobs: usize, work: Duration, commit: Duration) {
+        if jobs > 0 {
+            self.job = Self::smooth(self.job, work.as_secs_f64() / jobs as f64);
+        }
+        self.commit = Self::smooth(self.commit, commit.as_secs_f64());
+    }
+
+    /// The jobs the next group takes at most.
+    fn jobs(&self) -> usize {
+        let (Some(job), Some(commit)) = (self.job, self.commit) else {
+            return MIN_GROUP_CAP;
+        };
+        // A job measured as taking no time gives ∞: the most.
+        let jobs = commit / job;
+        if jobs.is_nan() {
+            return MIN_GROUP_CAP;
+        }
+        jobs.ceil().clamp(MIN_GROUP_CAP as f64, MAX_GROUP as f64) as usize
+    }
+}
+
 /// The writer thread: a group per transaction until every handle is gone.
 fn serve(conn: &Connection, queue: &mpsc::Receiver<Box<dyn Job>>, counters: &Counters) {
+    let mut cap = GroupCap::default();
     while let Ok(first) = queue.recv() {
         let started = Instant::now();
+        let most = cap.jobs();
         let begun = run_statement(conn, "BEGIN IMMEDIATE");
         let mut group: Vec<Box<dyn Job>> = Vec::new();
         let mut next = Some(first);
@@ -183,12 +240,13 @@ fn serve(conn: &Connection, queue: &mpsc::Receiver<Box<dyn Job>>, counters: &Cou
                 ))),
             }
             group.push(job);
-            next = if group.len() < MAX_GROUP && started.elapsed() < MAX_GROUP_TIME {
+            next = if group.len() < most && started.elapsed() < MAX_GROUP_TIME {
                 queue.try_recv().ok()
             } else {
                 None
             };
         }
+        let committing = Instant::now();
         let commit: Result<(), Arc<str>> = match &begun {
             Ok(()) => run_statement(conn, "COMMIT").map_err(|e| {
                 tracing::error!(error = %e, requests = group.len(), "a group commit failed");
@@ -197,6 +255,7 @@ fn serve(conn: &Connection, queue: &mpsc::Receiver<Box<dyn Job>>, counters: &Cou
             }),
             Err(e) => Err(Arc::from(e.to_string())),
         };
+        cap.record(group.len(), committing - started, committing.elapsed());
         if commit.is_ok() {
             counters.groups.fetch_add(1, Ordering::Relaxed);
             counters
@@ -383,6 +442,36 @@ mod tests {
         held.await.unwrap().unwrap();
         behind.await.unwrap().unwrap();
         assert_eq!(stored(&db).await, vec![1, 2, 3, 4]);
+    }
+
+    /// A group takes about as many jobs as its commit takes time, within
+    /// its bounds: a quick sync keeps groups at the floor, a slow one lets
+    /// them grow, a start with nothing measured takes the floor, and
+    /// nonsense (a job measured as taking no time) the most.
+    #[test]
+    fn groups_grow_with_the_commit_s_cost() {
+        use super::{GroupCap, MAX_GROUP, MIN_GROUP_CAP};
+        let ms = Duration::from_secs_f64;
+        assert_eq!(GroupCap::default().jobs(), MIN_GROUP_CAP);
+        let mut quick = GroupCap::default();
+        quick.record(30, ms(0.003), ms(0.000_5));
+        assert_eq!(quick.jobs(), MIN_GROUP_CAP);
+        // Jobs of 100 µs, a sync of 4 ms: 40 jobs.
+        let mut slow = GroupCap::default();
+        slow.record(30, ms(0.003), ms(0.004));
+        assert_eq!(slow.jobs(), 40);
+        // Smoothed: one group with a sync of 14 ms moves the commit's
+        // estimate a fifth of the way, 4 → 6 ms: 60 jobs.
+        slow.record(30, ms(0.003), ms(0.014));
+        assert_eq!(slow.jobs(), 60);
+        let mut stalled = GroupCap::default();
+        stalled.record(10, ms(0.001), ms(1.0));
+        assert_eq!(stalled.jobs(), MAX_GROUP);
+        let mut instant = GroupCap::default();
+        instant.record(10, Duration::ZERO, ms(0.001));
+        assert_eq!(instant.jobs(), MAX_GROUP);
+        instant.record(0, Duration::ZERO, ms(0.001));
+        assert_eq!(instant.jobs(), MAX_GROUP);
     }
 
     /// Reads never wait on the writer: while a write holds it with its
