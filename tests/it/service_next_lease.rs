@@ -162,7 +162,9 @@ async fn a_report_sent_again_brings_the_same_lease_and_a_refused_one_takes_none(
     let cut = client.report(first.id, &smaller).await.unwrap();
     let cut = cut.next_lease.expect("work left");
     assert_eq!((cut.start, cut.end), (200, 240), "{cut:?}");
-    // That one fits a request for its tests listed: handed out again, listed.
+    // That one fits a request for its tests listed: handed out again,
+    // listed (one that does not fit the cap on listed tests is the next
+    // test's).
     let listed = tslg_api::ResultReport {
         next_lease: Some(tslg_api::LeaseRequest {
             include_tests: true,
@@ -216,6 +218,40 @@ async fn a_report_sent_again_brings_the_same_lease_and_a_refused_one_takes_none(
         other => panic!("a forged report must be refused: {other:?}"),
     }
     assert_eq!(client.campaign(id).await.unwrap().leased, leased);
+}
+
+/// A report sent again asking for its next lease's tests listed does not
+/// take the unstarted lease of the first sending when that one is larger
+/// than a listed lease may be (10,000 tests): it takes a new one, within
+/// the cap.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_report_sent_again_for_listed_tests_takes_a_lease_within_their_cap() {
+    let dir = scratch();
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &["--lease-size", "20000"]);
+    let client = server.client();
+    let id = client.create_campaign(&ndd_to(100_000)).await.unwrap().id;
+    let first = client.claim(&ask("w1", &[])).await.unwrap().unwrap();
+    assert_eq!((first.start, first.end), (0, 20_000));
+    let report = tslg_api::ResultReport {
+        next_lease: Some(ask("w1", &[])),
+        ..whole(&first, "w1", real_events(&client, id, 0, 20_000).await)
+    };
+    let taken = client.report(first.id, &report).await.unwrap();
+    let next = taken.next_lease.expect("work left");
+    assert_eq!((next.start, next.end), (20_000, 40_000));
+    let listed = tslg_api::ResultReport {
+        next_lease: Some(tslg_api::LeaseRequest {
+            include_tests: true,
+            ..ask("w1", &[])
+        }),
+        ..report.clone()
+    };
+    let again = client.report(first.id, &listed).await.unwrap();
+    assert_eq!((again.accepted, again.duplicate), (0, 20_000));
+    let listed = again.next_lease.expect("work left");
+    assert_ne!(listed.id, next.id, "the unstarted lease of 20,000 tests");
+    assert_eq!((listed.start, listed.end), (40_000, 50_000));
+    assert_eq!(listed.tests.as_ref().map(Vec::len), Some(10_000));
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

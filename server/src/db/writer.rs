@@ -18,8 +18,9 @@
 //! A group is cut at [`MAX_GROUP_TIME`], so a steady stream of requests
 //! cannot hold back the first one's answer, and at a number of jobs that
 //! follows the commit's cost ([`GroupCap`]): about as many jobs as the
-//! commit takes time, so that the writer spends at most about half its time
-//! committing, while the answers leave in groups small enough that the
+//! commit takes time, so that a group that fills to its cap spends about as
+//! long on its jobs as on its commit, while the answers leave in groups
+//! small enough that the
 //! request threads send one group's answers and take in new requests while
 //! the writer runs the next (docs/benchmarks.md, "Coordinator under load").
 //!
@@ -255,7 +256,10 @@ fn serve(conn: &Connection, queue: &mpsc::Receiver<Box<dyn Job>>, counters: &Cou
             }),
             Err(e) => Err(Arc::from(e.to_string())),
         };
-        cap.record(group.len(), committing - started, committing.elapsed());
+        // Only a group that began and committed measures the two costs.
+        if begun.is_ok() && commit.is_ok() {
+            cap.record(group.len(), committing - started, committing.elapsed());
+        }
         if commit.is_ok() {
             counters.groups.fetch_add(1, Ordering::Relaxed);
             counters

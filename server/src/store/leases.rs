@@ -210,9 +210,10 @@ pub fn retried_on(lease_id: i64, ack: &tslg_api::ResultAck) -> Option<i64> {
 /// A live lease of `job`'s worker other than `besides` with nothing
 /// reported yet, the newest, if the request `job` could have been given it:
 /// a request sent again may ask for less than the first sending did (fewer
-/// tests, or the tests listed, which caps the lease and keeps the cases
-/// whose scenarios are drawn while a test runs), and then gets a new lease
-/// as any claim would (the unstarted one expires unused).
+/// tests; the tests listed, which caps the lease and keeps the cases whose
+/// scenarios are drawn while a test runs, and audits; programs no longer
+/// offered), and then gets a new lease as any claim would (the unstarted
+/// one expires unused).
 fn unstarted(
     conn: &Connection,
     job: &ClaimJob,
@@ -224,10 +225,17 @@ fn unstarted(
         .collect::<Vec<_>>()
         .join(", ");
     let filters = job.filters();
+    // An audit's run goes only to a request that may run audits.
+    let audits = if job.audits {
+        ""
+    } else {
+        "AND l.audit_id IS NULL"
+    };
     let sql = format!(
         "SELECT {columns} FROM leases l JOIN campaigns c ON c.id = l.campaign_id \
          WHERE l.state = 'active' AND l.expires_at > ? AND l.worker = ? AND l.id != ? \
-           AND l.resume_at = l.start_index AND l.end_index - l.resume_at <= ? {filters} \
+           AND l.resume_at = l.start_index AND l.end_index - l.resume_at <= ? {audits} \
+           {filters} \
          ORDER BY l.id DESC LIMIT 1"
     );
     let filter_values = job.filter_values();
