@@ -20,9 +20,9 @@
 //! follows the commit's cost ([`GroupCap`]): about as many jobs as the
 //! commit takes time, so that a group that fills to its cap spends about as
 //! long on its jobs as on its commit, while the answers leave in groups
-//! small enough that the
-//! request threads send one group's answers and take in new requests while
-//! the writer runs the next (docs/benchmarks.md, "Coordinator under load").
+//! small enough that the request threads send one group's answers and take
+//! in new requests while the writer runs the next (docs/benchmarks.md,
+//! "Coordinator under load").
 //!
 //! Cancellation: a request whose client goes away stops waiting, but its
 //! job, once queued, still runs and commits whole (a lease then expires

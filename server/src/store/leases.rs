@@ -219,11 +219,6 @@ fn unstarted(
     job: &ClaimJob,
     besides: i64,
 ) -> Result<Option<LeaseRow>, ApiError> {
-    let columns = COLUMNS
-        .split(", ")
-        .map(|column| format!("l.{column} AS {column}", column = column.trim()))
-        .collect::<Vec<_>>()
-        .join(", ");
     let filters = job.filters();
     // An audit's run goes only to a request that may run audits.
     let audits = if job.audits {
@@ -232,11 +227,12 @@ fn unstarted(
         "AND l.audit_id IS NULL"
     };
     let sql = format!(
-        "SELECT {columns} FROM leases l JOIN campaigns c ON c.id = l.campaign_id \
+        "SELECT {COLUMNS} FROM leases WHERE id = (SELECT l.id FROM leases l \
+         JOIN campaigns c ON c.id = l.campaign_id \
          WHERE l.state = 'active' AND l.expires_at > ? AND l.worker = ? AND l.id != ? \
            AND l.resume_at = l.start_index AND l.end_index - l.resume_at <= ? {audits} \
            {filters} \
-         ORDER BY l.id DESC LIMIT 1"
+         ORDER BY l.id DESC LIMIT 1)"
     );
     let filter_values = job.filter_values();
     let mut values: Vec<&dyn rusqlite::ToSql> =
