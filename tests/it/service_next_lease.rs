@@ -281,3 +281,56 @@ async fn work_is_charged_whether_or_not_the_report_moves_the_prefix() {
     let view = charged(&a, "w1", 0.25).await;
     assert_eq!((view.indices, view.worker_seconds), (200, 0.75));
 }
+
+/// An audit's one-test run goes only to a request that may run audits
+/// (one that offers programs and takes its tests unlisted): a report sent
+/// again whose next lease asks for listed tests does not take the audit
+/// run its first sending took.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_report_sent_again_for_listed_tests_leaves_the_audit_run_it_took() {
+    let dir = scratch();
+    let server = ServerProcess::start(
+        &dir.path().join("db.sqlite"),
+        &["--lease-size", "5", "--audit-share", "1"],
+    );
+    let client = server.client();
+    let request = CreateCampaign {
+        vut: serde_json::json!({"external": "py-idm"}),
+        ..ndd_to(1_000)
+    };
+    client.create_campaign(&request).await.unwrap();
+    let offer = "py-idm:cut-in:step";
+    let first = client.claim(&ask("w1", &[offer])).await.unwrap().unwrap();
+    let second = client.claim(&ask("w2", &[offer])).await.unwrap().unwrap();
+    assert_eq!((first.start, second.start), (0, 5));
+    // Every test w1 reports is to be run again by another worker.
+    client
+        .report(first.id, &whole(&first, "w1", Vec::new()))
+        .await
+        .unwrap();
+    let report = tslg_api::ResultReport {
+        next_lease: Some(ask("w2", &[offer])),
+        ..whole(&second, "w2", Vec::new())
+    };
+    let audit = client
+        .report(second.id, &report)
+        .await
+        .unwrap()
+        .next_lease
+        .expect("an audit's run");
+    assert_eq!(audit.end - audit.start, 1, "{audit:?}");
+    assert!(audit.start < 5, "one of w1's tests: {audit:?}");
+    let listed = tslg_api::ResultReport {
+        next_lease: Some(tslg_api::LeaseRequest {
+            include_tests: true,
+            ..ask("w2", &[offer])
+        }),
+        ..report.clone()
+    };
+    let again = client.report(second.id, &listed).await.unwrap();
+    assert_eq!((again.accepted, again.duplicate), (0, 5));
+    let lease = again.next_lease.expect("work left");
+    assert_ne!(lease.id, audit.id, "the audit's run went to listed tests");
+    assert_eq!((lease.start, lease.end), (10, 15), "a new range");
+    assert_eq!(lease.tests.as_ref().map(Vec::len), Some(5));
+}
