@@ -29,7 +29,7 @@ use crate::error::ApiError;
 use crate::report_check::CheckedReport;
 use crate::store::audits::{self, AuditRow, AuditState, NewAudit};
 use crate::store::campaigns;
-use crate::store::fold::fold_prefix;
+use crate::store::fold::{fold_prefix, KnownExplored};
 use crate::store::leases::LeaseState;
 use crate::store::pairs;
 use crate::store::results::{check_effort, held_lease, stopped_ack, Recorded};
@@ -438,7 +438,7 @@ fn record_audit_run_in(
     }
     // The flag may have reset the campaign: fold from what is stored now.
     let campaign = campaigns::get(conn, campaign.id)?;
-    let own = fold_prefix(conn, &campaign, tests, None, None, None)?;
+    let own = fold_prefix(conn, &campaign, tests, KnownExplored::default(), None, None)?;
     let (stopped, partner_stopped) = pairs::fold_after(conn, &campaign, own)?;
     Ok(Recorded {
         ack: ResultAck {

@@ -30,7 +30,9 @@ pub const MAX_LEASE: u64 = 1 << 27;
 /// the fold may draw again every test between its prefix and the frontier
 /// to find the exploring ones (`store/fold.rs`, when a lagging lease's
 /// last report clears the frontier: about one lease per other worker, at
-/// about 10⁷ draws a second while the writer waits).
+/// about 10⁷ draws a second while the writer waits). For a built-in
+/// vehicle the sets the coordinator's replay found are kept for that fold
+/// (`explored_ranges.rs`); an external program's tests are always drawn.
 pub const LIBRARY_MAX_LEASE: u64 = 1 << 22;
 /// Tests per thread of a campaign's first leases, before any cost is known.
 pub const FIRST_LEASE_PER_THREAD: u64 = 256;

@@ -13,6 +13,7 @@ mod db;
 mod enumeration;
 mod error;
 mod event_export;
+mod explored_ranges;
 mod history;
 mod latency;
 mod lease_size;

@@ -31,11 +31,21 @@ struct Snapshot {
     /// Group commits since the coordinator started, and the requests
     /// they answered.
     groups: (u64, u64),
+    /// Tests library campaigns' folds drew again since it started.
+    fold_drawn: u64,
 }
 
 async fn snapshot(state: &AppState) -> Result<Snapshot, ApiError> {
     let groups = state.db.group_counts();
-    state.db.read(move |conn| read_snapshot(conn, groups)).await
+    let fold_drawn = state.samplers.explored().drawn();
+    let snapshot = state
+        .db
+        .read(move |conn| read_snapshot(conn, groups))
+        .await?;
+    Ok(Snapshot {
+        fold_drawn,
+        ..snapshot
+    })
 }
 
 fn read_snapshot(conn: &rusqlite::Connection, groups: (u64, u64)) -> Result<Snapshot, ApiError> {
@@ -74,6 +84,7 @@ fn read_snapshot(conn: &rusqlite::Connection, groups: (u64, u64)) -> Result<Snap
         expired,
         reclaimed,
         groups,
+        fold_drawn: 0,
     })
 }
 
@@ -181,6 +192,14 @@ fn scrape_registry(s: &Snapshot, live: usize, known: usize) -> Registry {
         "Writes committed by those transactions (divided by tslg_write_groups_total: the mean \
          group size).",
         s.groups.1 as i64,
+    );
+    counter(
+        &r,
+        "tslg_fold_drawn_tests_total",
+        "Tests whose draws a library campaign's fold made again to find which explored outside \
+         the library, since the coordinator started (0 while its own runs of the reports cover \
+         them).",
+        s.fold_drawn as i64,
     );
     let workers = gauge_vec(
         &r,

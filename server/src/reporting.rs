@@ -153,6 +153,7 @@ async fn receive_in_parts(
             tests: library_tests(),
             audits: plan,
             explored,
+            kept: Some(state.samplers.explored()),
         };
         let config = &state.config;
         results::record(
@@ -301,6 +302,7 @@ fn decide(
         tests: Some(tests).filter(|_| campaign.method.uses_library()),
         audits: AuditPlan::default(),
         explored,
+        kept: Some(samplers.explored()),
     };
     let recorded = results::record_held(conn, config, &lease, &campaign, report, checked, found)?;
     Ok(Decided::Recorded(Box::new(recorded)))

@@ -4,6 +4,7 @@
 
 use crate::db::Database;
 use crate::error::ApiError;
+use crate::explored_ranges::ExploredRanges;
 use crate::store::campaigns::CampaignRow;
 use crate::store::libraries;
 use anyhow::Context;
@@ -17,6 +18,8 @@ use tslg_method::registry::CampaignTests;
 #[derive(Default)]
 pub struct SamplerCache {
     samplers: Mutex<HashMap<i64, Arc<dyn CampaignTests>>>,
+    /// Which tests of reported ranges explore, until the fold passes them.
+    explored: Arc<ExploredRanges>,
 }
 
 impl SamplerCache {
@@ -56,9 +59,17 @@ impl SamplerCache {
         self.lock().insert(campaign_id, tests);
     }
 
-    /// Drops the sampler of a campaign that has stopped.
+    /// Drops the sampler of a campaign that has stopped, and the
+    /// exploring tests kept for its fold.
     pub fn forget(&self, campaign_id: i64) {
         self.lock().remove(&campaign_id);
+        self.explored.forget(campaign_id);
+    }
+
+    /// The exploring tests the coordinator found in reports it ran whole,
+    /// kept for the folds that pass them.
+    pub fn explored(&self) -> Arc<ExploredRanges> {
+        Arc::clone(&self.explored)
     }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<i64, Arc<dyn CampaignTests>>> {

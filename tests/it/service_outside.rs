@@ -170,3 +170,48 @@ async fn a_campaign_started_before_the_outside_bound_is_counted_again_from_its_f
     assert_eq!(view.status, CampaignStatus::Converged);
     assert_same(&view, &in_process(Some("idm"), &request));
 }
+
+/// Reports that arrive out of order: the last range first, held behind
+/// the others; then the first, whose fold passes only its own; then the
+/// middle one, whose fold passes it and the last. Each fold takes the
+/// exploring tests of the ranges it passes from the coordinator's own runs
+/// of their reports, kept until then: it draws none again
+/// (`tslg_fold_drawn_tests_total`), and the exploring tests counted, and
+/// everything else, are the in-process campaign's.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn ranges_folded_after_later_ones_count_the_same_exploring_tests_without_drawing_them_again()
+{
+    let dir = scratch();
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &["--lease-size", "4000"]);
+    let client = server.client();
+    let library = ready_library(&client, "idm", true).await;
+    let request = CreateCampaign {
+        max_tests: 12_000,
+        ..guarded(library.id, tslg_method::estimator::MIN_BETA)
+    };
+    let id = client.create_campaign(&request).await.unwrap().id;
+    let mut leases = Vec::new();
+    for worker in ["w1", "w2", "w3"] {
+        let lease = client.claim(&ask(worker, &[])).await.unwrap().unwrap();
+        leases.push((lease, worker));
+    }
+    let ranges: Vec<(u64, u64)> = leases.iter().map(|(l, _)| (l.start, l.end)).collect();
+    assert_eq!(ranges, [(0, 4_000), (4_000, 8_000), (8_000, 12_000)]);
+    for (k, prefix) in [(2, 0), (0, 4_000), (1, 12_000)] {
+        let (lease, worker) = &leases[k];
+        let events = real_events(&client, id, lease.start, lease.end).await;
+        client
+            .report(lease.id, &whole(lease, worker, events))
+            .await
+            .unwrap();
+        let view = client.campaign(id).await.unwrap();
+        assert_eq!(view.indices, prefix, "after range {k}: {view:?}");
+    }
+    let view = finished(&client, id, Duration::from_secs(60)).await;
+    assert!(view.outside_tests > 1_000, "{view:?}");
+    assert_same(&view, &in_process(Some("idm"), &request));
+    assert_eq!(
+        scraped(&server.url, "tslg_fold_drawn_tests_total").await,
+        0.0
+    );
+}

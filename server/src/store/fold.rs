@@ -10,6 +10,7 @@
 
 use crate::db::sql;
 use crate::error::ApiError;
+use crate::explored_ranges::{exploring_in, ExploredRanges};
 use crate::history;
 use crate::replay_check::Explored;
 use crate::report_check::CheckedReport;
@@ -125,13 +126,48 @@ fn explored_tests(tests: &Arc<dyn CampaignTests>, from: u64, to: u64) -> Vec<u64
         .collect()
 }
 
+/// What the coordinator knows already of which tests explore, so that a
+/// fold does not draw them again: the report just replayed whole
+/// (`replayed`), and the sets kept from earlier reports (`kept`).
+#[derive(Clone, Copy, Default)]
+pub struct KnownExplored<'a> {
+    pub replayed: Option<&'a Explored>,
+    pub kept: Option<&'a ExploredRanges>,
+}
+
+impl KnownExplored<'_> {
+    /// The exploring tests of campaign `campaign`'s `from..to`: the known
+    /// sets where they cover it, drawn again (`explored_tests`) between
+    /// them.
+    fn exploring(
+        &self,
+        campaign: i64,
+        tests: &Arc<dyn CampaignTests>,
+        from: u64,
+        to: u64,
+    ) -> Vec<u64> {
+        let kept = self
+            .kept
+            .map(|k| k.meeting(campaign, from, to))
+            .unwrap_or_default();
+        let mut known: Vec<&Explored> = kept.iter().map(Arc::as_ref).collect();
+        known.extend(self.replayed);
+        exploring_in(from, to, &known, |a, b| {
+            if let Some(kept) = self.kept {
+                kept.note_drawn(b - a);
+            }
+            explored_tests(tests, a, b)
+        })
+    }
+}
+
 /// Folds the newly resolved prefix of `campaign` and persists the
 /// estimate (an adaptive campaign resolves its stages instead,
 /// [`crate::store::adaptive`]), and
 /// estimate, its history points and, when the rule stops the campaign, its
 /// final status. `tests` are a library campaign's tests, which say which
 /// tests explored outside the library; `None` for the NDD. `known` are the
-/// exploring tests of a range the coordinator just ran itself; `fresh` the
+/// exploring tests the coordinator found itself ([`KnownExplored`]); `fresh` the
 /// report just recorded in this transaction, whose outcomes the fold takes
 /// as they are instead of reading them back.
 ///
@@ -142,7 +178,7 @@ pub fn fold_prefix(
     conn: &Connection,
     campaign: &CampaignRow,
     tests: Option<Arc<dyn CampaignTests>>,
-    known: Option<&Explored>,
+    known: KnownExplored<'_>,
     fresh: Option<&CheckedReport>,
     charge: Option<Charge>,
 ) -> Result<Option<CampaignStatus>, ApiError> {
@@ -189,7 +225,7 @@ fn fold_charging(
     conn: &Connection,
     campaign: &CampaignRow,
     tests: Option<Arc<dyn CampaignTests>>,
-    known: Option<&Explored>,
+    known: KnownExplored<'_>,
     fresh: Option<&CheckedReport>,
     charge: &mut Option<Charge>,
 ) -> Result<Option<CampaignStatus>, ApiError> {
@@ -231,17 +267,7 @@ fn fold_charging(
             let before = explored_tests(tests, 0, from);
             fold.outside = outside_tally(&before, &earlier, &|i| tests.surrogate_misses(i));
         }
-        explored = match known {
-            // The report just checked covered the whole fold: its draws say
-            // which tests explored.
-            Some(k) if k.from <= from && frontier <= k.to => k
-                .tests
-                .iter()
-                .copied()
-                .filter(|i| (from..frontier).contains(i))
-                .collect(),
-            _ => explored_tests(tests, from, frontier),
-        };
+        explored = known.exploring(campaign.id, tests, from, frontier);
     }
     let mass: Option<&OutsideMass> = tests.as_ref().and_then(|t| t.outside_mass());
     let misses = |i| tests.as_ref().is_some_and(|t| t.surrogate_misses(i));
@@ -260,6 +286,15 @@ fn fold_charging(
         // at max_tests: until the other campaign has resolved as many
         // tests it stays running, and gets no more leases.
         folded.decision = None;
+    }
+    if let Some(kept) = known.kept {
+        // The kept sets the fold passed, or all of a campaign it stops
+        // (here, in case the request that stopped it goes no further).
+        if folded.decision.is_some() {
+            kept.forget(campaign.id);
+        } else {
+            kept.passed(campaign.id, folded.fold.indices);
+        }
     }
     let upper = mass.map(|m| {
         m.upper(

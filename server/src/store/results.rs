@@ -12,12 +12,13 @@ use crate::config::Config;
 use crate::db::sql;
 use crate::db::{now_ms, Database};
 use crate::error::ApiError;
+use crate::explored_ranges::ExploredRanges;
 use crate::lease_size::update_cost;
 use crate::replay_check::Explored;
 use crate::report_check::CheckedReport;
 use crate::store::audits::{self, NewAudit};
 use crate::store::campaigns::{self, CampaignRow};
-use crate::store::fold::{fold_prefix, Charge};
+use crate::store::fold::{fold_prefix, Charge, KnownExplored};
 use crate::store::leases::{self, check_fence, LeaseRow, LeaseState};
 use crate::store::pairs;
 use crate::store::reports::{self, NewReport};
@@ -80,6 +81,9 @@ pub struct Findings {
     pub audits: AuditPlan,
     /// The report's exploring tests, when the coordinator ran them all.
     pub explored: Option<Explored>,
+    /// Where exploring tests are kept for later folds (the report's own,
+    /// when it is ahead of the prefix, and earlier reports').
+    pub kept: Option<Arc<ExploredRanges>>,
 }
 
 /// Records a checked report on lease `lease_id` and folds the prefix;
@@ -137,6 +141,7 @@ pub(crate) fn record_held(
         tests,
         audits: plan,
         explored: known,
+        kept,
     } = found;
     let lease_id = lease.id;
     let span = checked.to - checked.from;
@@ -170,6 +175,14 @@ pub(crate) fn record_held(
     if checked.from < overlap_end {
         compare_with_stored(tx, campaign, checked, overlap_end)?;
     }
+    let known = known.map(Arc::new);
+    if let (Some(kept), Some(known)) = (&kept, &known) {
+        // For the fold that passes this range, if not this one (an
+        // adaptive campaign resolves stages instead of folding).
+        if campaign.method != Method::Adaptive {
+            kept.remember(campaign.id, Arc::clone(known));
+        }
+    }
     let new_from = checked.from.max(resume_at);
     let mut accepted = 0;
     let mut charge = None;
@@ -181,7 +194,11 @@ pub(crate) fn record_held(
         )?);
         store_audits(tx, campaign.id, &report.worker, &plan, new_from)?;
     }
-    let own = fold_prefix(tx, campaign, tests, known.as_ref(), Some(checked), charge)?;
+    let known = KnownExplored {
+        replayed: known.as_deref(),
+        kept: kept.as_deref(),
+    };
+    let own = fold_prefix(tx, campaign, tests, known, Some(checked), charge)?;
     // A campaign of a pair: the pair folds over what both resolved.
     let (stopped, partner_stopped) = pairs::fold_after(tx, campaign, own)?;
     let status = stopped.unwrap_or(CampaignStatus::Running);
