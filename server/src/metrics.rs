@@ -38,17 +38,17 @@ struct Snapshot {
 async fn snapshot(state: &AppState) -> Result<Snapshot, ApiError> {
     let groups = state.db.group_counts();
     let fold_drawn = state.samplers.explored().drawn();
-    let snapshot = state
+    state
         .db
-        .read(move |conn| read_snapshot(conn, groups))
-        .await?;
-    Ok(Snapshot {
-        fold_drawn,
-        ..snapshot
-    })
+        .read(move |conn| read_snapshot(conn, groups, fold_drawn))
+        .await
 }
 
-fn read_snapshot(conn: &rusqlite::Connection, groups: (u64, u64)) -> Result<Snapshot, ApiError> {
+fn read_snapshot(
+    conn: &rusqlite::Connection,
+    groups: (u64, u64),
+    fold_drawn: u64,
+) -> Result<Snapshot, ApiError> {
     let campaigns = sql::all(
         conn,
         "SELECT status, COUNT(*) FROM campaigns GROUP BY status",
@@ -84,7 +84,7 @@ fn read_snapshot(conn: &rusqlite::Connection, groups: (u64, u64)) -> Result<Snap
         expired,
         reclaimed,
         groups,
-        fold_drawn: 0,
+        fold_drawn,
     })
 }
 

@@ -129,9 +129,9 @@ fn explored_tests(tests: &Arc<dyn CampaignTests>, from: u64, to: u64) -> Vec<u64
 /// What the coordinator knows already of which tests explore, so that a
 /// fold does not draw them again: the report just replayed whole
 /// (`replayed`), and the sets kept from earlier reports (`kept`).
-#[derive(Clone, Copy, Default)]
+#[derive(Clone, Default)]
 pub struct KnownExplored<'a> {
-    pub replayed: Option<&'a Explored>,
+    pub replayed: Option<Arc<Explored>>,
     pub kept: Option<&'a ExploredRanges>,
 }
 
@@ -151,13 +151,26 @@ impl KnownExplored<'_> {
             .map(|k| k.meeting(campaign, from, to))
             .unwrap_or_default();
         let mut known: Vec<&Explored> = kept.iter().map(Arc::as_ref).collect();
-        known.extend(self.replayed);
+        known.extend(self.replayed.as_deref());
         exploring_in(from, to, &known, |a, b| {
             if let Some(kept) = self.kept {
                 kept.note_drawn(b - a);
             }
             explored_tests(tests, a, b)
         })
+    }
+
+    /// After a fold that left campaign `campaign`'s prefix at `prefix`:
+    /// the kept sets it passed go, and the report's own set is kept when
+    /// it reaches past the prefix (a later fold passes it).
+    fn settle(&self, campaign: i64, prefix: u64) {
+        let Some(kept) = self.kept else {
+            return;
+        };
+        kept.passed(campaign, prefix);
+        if let Some(replayed) = self.replayed.as_ref().filter(|r| r.to > prefix) {
+            kept.remember(campaign, Arc::clone(replayed));
+        }
     }
 }
 
@@ -248,6 +261,7 @@ fn fold_charging(
     } = bounds(conn, campaign)?;
     let mut fold = campaign.fold();
     if frontier <= fold.indices {
+        known.settle(campaign.id, fold.indices);
         return Ok(None);
     }
     let from = fold.indices;
@@ -287,14 +301,11 @@ fn fold_charging(
         // tests it stays running, and gets no more leases.
         folded.decision = None;
     }
-    if let Some(kept) = known.kept {
-        // The kept sets the fold passed, or all of a campaign it stops
-        // (here, in case the request that stopped it goes no further).
-        if folded.decision.is_some() {
-            kept.forget(campaign.id);
-        } else {
-            kept.passed(campaign.id, folded.fold.indices);
-        }
+    match (known.kept, folded.decision) {
+        // All of a campaign the fold stops (here, in case the request that
+        // stopped it goes no further).
+        (Some(kept), Some(_)) => kept.forget(campaign.id),
+        _ => known.settle(campaign.id, folded.fold.indices),
     }
     let upper = mass.map(|m| {
         m.upper(

@@ -175,14 +175,6 @@ pub(crate) fn record_held(
     if checked.from < overlap_end {
         compare_with_stored(tx, campaign, checked, overlap_end)?;
     }
-    let known = known.map(Arc::new);
-    if let (Some(kept), Some(known)) = (&kept, &known) {
-        // For the fold that passes this range, if not this one (an
-        // adaptive campaign resolves stages instead of folding).
-        if campaign.method != Method::Adaptive {
-            kept.remember(campaign.id, Arc::clone(known));
-        }
-    }
     let new_from = checked.from.max(resume_at);
     let mut accepted = 0;
     let mut charge = None;
@@ -195,7 +187,7 @@ pub(crate) fn record_held(
         store_audits(tx, campaign.id, &report.worker, &plan, new_from)?;
     }
     let known = KnownExplored {
-        replayed: known.as_deref(),
+        replayed: known.map(Arc::new),
         kept: kept.as_deref(),
     };
     let own = fold_prefix(tx, campaign, tests, known, Some(checked), charge)?;
