@@ -281,7 +281,7 @@ fn decide(
         if tests.planned(new).is_none() {
             return Ok(Decided::Declined);
         }
-        let chosen = sampler.pick(config.replay_share, new, checked.to);
+        let chosen = sampler.pick_groups(config.replay_share, new, checked.to, audit::REPLAY_GROUP);
         let work = if tests.outside_mass().is_some() {
             (checked.to - new) as usize
         } else {
@@ -381,9 +381,12 @@ async fn verify_builtin(
         return Ok(None);
     }
     let (tests, report) = (Arc::clone(tests), Arc::clone(checked));
-    let chosen = state
-        .sampler
-        .pick(state.config.replay_share, new_from, checked.to);
+    let chosen = state.sampler.pick_groups(
+        state.config.replay_share,
+        new_from,
+        checked.to,
+        audit::REPLAY_GROUP,
+    );
     let everything = tests.outside_mass().is_some();
     let work = if everything {
         checked.to - new_from

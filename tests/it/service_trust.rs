@@ -243,3 +243,69 @@ async fn a_lying_worker_is_caught_by_replication_and_the_answer_is_the_honest_on
         .collect();
     assert_eq!(flagged, ["liar"]);
 }
+
+/// The coordinator's sample of the quiet tests of a built-in vehicle's
+/// NDD campaign: a worker that hides one event of each report is caught
+/// when the hidden test is in the sample, each time with the replay share
+/// (here 0.5), and the refusal names the hidden test. Forty reports with an
+/// event hidden: Binomial(40, 0.5), caught between 8 and 32 times unless
+/// the sample is wired wrong (a share of 0 or 1 gives 0 or 40).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_ndd_worker_hiding_events_is_caught_at_the_replay_share() {
+    let dir = scratch();
+    let server = ServerProcess::start(
+        &dir.path().join("db.sqlite"),
+        &["--lease-size", "20000", "--replay-share", "0.5"],
+    );
+    let client = server.client();
+    let library = ready_library(&client, "idm", true).await;
+    let request = tslg_api::CreateCampaign {
+        beta: tslg_method::estimator::MIN_BETA,
+        max_tests: 1 << 40,
+        ..campaign(Method::Ndd, library.id, "fvdm", 0.1, 5)
+    };
+    client.create_campaign(&request).await.unwrap();
+    let tests = open_case("cut-in", None, &ExposureSource::Builtin)
+        .unwrap()
+        .campaign(
+            None,
+            &request.vut,
+            0.1,
+            Default::default(),
+            Default::default(),
+            request.seed,
+        )
+        .unwrap();
+    let (mut trials, mut caught, mut leases) = (0, 0, 0);
+    while trials < 40 {
+        let name = format!("hider-{caught}");
+        let lease = client.claim(&ask(&name, &[])).await.unwrap().unwrap();
+        leases += 1;
+        assert!(leases < 2_000, "{trials} events hidden in {leases} leases");
+        let mut events = honest_events(tests.as_ref(), &lease);
+        if events.is_empty() {
+            client
+                .report(lease.id, &whole(&lease, &name, events))
+                .await
+                .unwrap();
+            continue;
+        }
+        let hidden = events.remove(events.len() / 2).index;
+        trials += 1;
+        match client.report(lease.id, &whole(&lease, &name, events)).await {
+            Ok(ack) => assert_eq!(ack.accepted, lease.end - lease.resume_at),
+            Err(CallError::Refused {
+                status: 422,
+                detail,
+            }) => {
+                assert!(
+                    detail.contains(&format!("test {hidden} was reported as no event")),
+                    "{detail}"
+                );
+                caught += 1;
+            }
+            Err(e) => panic!("{e}"),
+        }
+    }
+    assert!((8..=32).contains(&caught), "caught {caught} of 40");
+}
