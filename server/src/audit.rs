@@ -5,10 +5,8 @@
 //! - **Built-in vehicles** are run again by the coordinator
 //!   ([`crate::replay_check`]): every reported event and invalid test, and a share
 //!   (`--replay-share`, default 0.1) of the tests reported without an
-//!   event, in aligned groups of [`REPLAY_GROUP`] consecutive tests, each
-//!   group chosen with that probability by a generator only this
-//!   coordinator process knows, so a worker cannot tell which of its tests
-//!   are checked. A grid case runs each
+//!   event, drawn with a key only this coordinator process knows, so a
+//!   worker cannot tell which of its tests are checked. A grid case runs each
 //!   cell once and remembers it, so a check costs a draw and a look-up.
 //! - **External programs** run only on workers, so a share of their tests
 //!   (`--audit-share`, default 0.01, by the same secret key) and every event
@@ -86,34 +84,6 @@ impl Sampler {
             at += 1;
         }
         picked
-    }
-}
-
-/// Consecutive tests the coordinator's replay checks together
-/// ([`Sampler::pick_groups`]): as many as a test stream batch computes at
-/// once (`tslg_method::test_stream::LANES`).
-pub const REPLAY_GROUP: u64 = 8;
-
-impl Sampler {
-    /// The tests of `from..to` in the aligned groups `[g·size, (g+1)·size)`
-    /// chosen each with probability `share`, independently ([`Self::pick`]
-    /// over the groups), in increasing order. Every test is still chosen
-    /// with probability `share` and a worker still cannot tell which; only
-    /// the tests of one group are chosen together. Drawing a gap per group
-    /// rather than per test divides the choice's cost by `size` (a uniform
-    /// and a logarithm, about 14 ns, per chosen group instead of per
-    /// chosen test), and the replay of a group is one batch of streams.
-    pub fn pick_groups(&self, share: f64, from: u64, to: u64, size: u64) -> Vec<u64> {
-        if size == 0 || from >= to {
-            return Vec::new();
-        }
-        self.pick(share, from / size, to.div_ceil(size))
-            .into_iter()
-            .flat_map(|g| {
-                let start = g.saturating_mul(size);
-                start.max(from)..start.saturating_add(size).min(to)
-            })
-            .collect()
     }
 }
 
@@ -552,60 +522,6 @@ mod tests {
         }
         assert_eq!(sampler.pick(1.0, 5, 8), [5, 6, 7]);
         assert!(sampler.pick(0.5, 8, 8).is_empty());
-    }
-
-    /// Groups: each test of a range is chosen with the share, the tests of
-    /// an aligned group all together, the groups independently; a range
-    /// that cuts a group keeps only its own tests of it.
-    #[test]
-    fn groups_of_tests_are_chosen_whole_each_test_with_its_share() {
-        let sampler = Sampler::default();
-        let (from, n, share, size) = (1_003u64, 400_000u64, 0.1, REPLAY_GROUP);
-        let picked = sampler.pick_groups(share, from, from + n, size);
-        assert!(picked.windows(2).all(|w| w[0] < w[1]));
-        assert!(picked.first() >= Some(&from) && picked.last() < Some(&(from + n)));
-        // Whole groups: a chosen test's group is chosen entirely (within
-        // the range), so the count of chosen tests per group is 0 or its
-        // size in the range.
-        let mut per_group = std::collections::BTreeMap::<u64, u64>::new();
-        for &i in &picked {
-            *per_group.entry(i / size).or_default() += 1;
-        }
-        for (&g, &count) in &per_group {
-            let whole = ((g + 1) * size).min(from + n) - (g * size).max(from);
-            assert_eq!(count, whole, "group {g}");
-        }
-        // Each position in a group is chosen with the share: Binomial(50 000,
-        // 0.1) per position, sd ≈ 67; 5 sd either side.
-        let groups = n / size;
-        for position in 0..size {
-            let chosen = picked.iter().filter(|&&i| i % size == position).count() as f64;
-            assert!(
-                (chosen - groups as f64 * share).abs() < 5.0 * (groups as f64 * 0.09).sqrt(),
-                "position {position}: {chosen}"
-            );
-        }
-        // Groups independently: neighbouring groups both chosen about
-        // share² of the time (50 000 pairs: 500 expected, sd ≈ 22).
-        let both = per_group
-            .keys()
-            .filter(|g| per_group.contains_key(&(*g + 1)))
-            .count() as f64;
-        assert!(
-            (both - groups as f64 * share * share).abs() < 150.0,
-            "{both}"
-        );
-        // A range inside one group, and the edges of a range cutting two.
-        assert_eq!(sampler.pick_groups(1.0, 9, 11, 8), [9, 10]);
-        assert_eq!(sampler.pick_groups(1.0, 6, 10, 8), [6, 7, 8, 9]);
-        assert!(sampler.pick_groups(0.0, 0, 1_000, 8).is_empty());
-        assert!(sampler.pick_groups(0.5, 8, 8, 8).is_empty());
-        assert!(sampler.pick_groups(0.5, 0, 8, 0).is_empty());
-        // Small reports: the same share of their tests.
-        let small: usize = (0..20_000u64)
-            .map(|k| sampler.pick_groups(share, k * 10, k * 10 + 10, size).len())
-            .sum();
-        assert!((small as f64 - 20_000.0).abs() < 2_000.0, "{small}");
     }
 
     fn report(from: u64, to: u64, outcomes: Vec<(u64, SparseOutcome)>) -> CheckedReport {

@@ -84,8 +84,7 @@ pub struct Config {
     pub max_body_bytes: usize,
 
     /// Built-in vehicles: the share of reported tests without an event that
-    /// the coordinator runs again to check them (aligned groups of eight
-    /// consecutive tests, drawn by a secret generator);
+    /// the coordinator runs again to check them (drawn by a secret generator);
     /// every reported event is run again. A mismatch refuses the report and
     /// flags the worker (docs/operations.md, "Results are checked").
     #[arg(long, env = "TSLG_REPLAY_SHARE", default_value_t = 0.1)]

@@ -5,8 +5,11 @@
 //! run any reported test itself and compare. A grid case runs each cell
 //! once and remembers it, so a check costs a draw and a look-up.
 //!
-//! On a library campaign whose exploring tests the fold counts, every test
-//! of the new part is replayed (the fold needs each test's draw anyway).
+//! Else the report's events and invalid tests and a secret sample of the
+//! rest are replayed, walked together in index order, block by block
+//! ([`check_sampled`]). On a library campaign whose exploring tests the
+//! fold counts, every test of the new part is replayed (the fold needs
+//! each test's draw anyway).
 //! That is the coordinator's largest cost on a high-event campaign, so the
 //! range is split into blocks run on rayon's pool, each walking the
 //! report's sorted outcomes with a cursor (no search per test); the blocks
@@ -212,7 +215,7 @@ pub fn verify_builtin(
             replayed_explored_span(tests, from, to)
         });
     }
-    check_sampled(&report.outcomes, new_from, chosen, |indices| {
+    check_sampled(&report.outcomes, new_from..report.to, chosen, |indices| {
         replayed_block(tests, indices)
     })
 }
@@ -246,23 +249,28 @@ fn replayed_block(
     }
 }
 
-/// Checks every test of `outcomes` (the report's sorted non-quiet
-/// outcomes) from `new_from` on and every test of `chosen` (sorted) the
-/// report lists nothing for, which it says are quiet, against
-/// `replay(indices)`, block by block in index order: the first
-/// contradiction is the lowest-indexed one.
+/// Checks the tests of `range` that `outcomes` (the report's sorted
+/// non-quiet outcomes) lists, and those of `chosen` (sorted) it lists
+/// nothing for, which it says are quiet, against `replay(indices)`, block
+/// by block in index order: the first contradiction is the lowest-indexed
+/// one. (Outside `range` the report's outcomes are not at hand, so a chosen
+/// test there could not be checked.)
 fn check_sampled<F>(
     outcomes: &[(u64, SparseOutcome)],
-    new_from: u64,
+    range: std::ops::Range<u64>,
     chosen: &[u64],
     replay: F,
 ) -> Verified
 where
     F: Fn(&[u64]) -> Option<Vec<Option<SparseOutcome>>>,
 {
-    let first = outcomes.partition_point(|o| o.0 < new_from);
-    let mut listed = outcomes[first..].iter().peekable();
-    let mut chosen = chosen.iter().copied().peekable();
+    let within = |items: &[u64]| {
+        items.partition_point(|&i| i < range.start)..items.partition_point(|&i| i < range.end)
+    };
+    let first = outcomes.partition_point(|o| o.0 < range.start);
+    let last = outcomes.partition_point(|o| o.0 < range.end);
+    let mut listed = outcomes[first..last].iter().peekable();
+    let mut chosen = chosen[within(chosen)].iter().copied().peekable();
     let mut indices = Vec::with_capacity(CHECK_BLOCK);
     let mut reported = Vec::with_capacity(CHECK_BLOCK);
     loop {
@@ -390,8 +398,10 @@ mod tests {
             asked.lock().unwrap().extend_from_slice(indices);
             sampled_truth(indices)
         };
-        // Outcomes before `from` are not checked.
-        let verified = check_sampled(&honest(0, to), from, &chosen, replay);
+        // Outcomes outside the range are not checked, nor chosen tests
+        // outside it.
+        let wide: Vec<u64> = (0..to + 50).filter(|i| i % 3 == 0).collect();
+        let verified = check_sampled(&honest(0, to + 50), from..to, &wide, replay);
         assert!(verified.mismatch.is_none() && verified.explored.is_none());
         let expected: Vec<u64> = (from..to)
             .filter(|&i| i % 3 == 0 || truth(i).0.is_some())
@@ -408,7 +418,7 @@ mod tests {
         let forged = (hidden + 1..to).find(|i| truth(*i).0.is_none()).unwrap();
         lies.push((forged, SparseOutcome::Event(1.0)));
         lies.sort_by_key(|o| o.0);
-        let mismatch = check_sampled(&lies, from, &chosen, sampled_truth)
+        let mismatch = check_sampled(&lies, from..to, &chosen, sampled_truth)
             .mismatch
             .unwrap();
         assert_eq!(
@@ -422,7 +432,7 @@ mod tests {
             .unwrap();
         let mut lies = honest(from, to);
         lies.retain(|o| o.0 != unseen);
-        assert!(check_sampled(&lies, from, &chosen, sampled_truth)
+        assert!(check_sampled(&lies, from..to, &chosen, sampled_truth)
             .mismatch
             .is_none());
         // A forged event is always seen, chosen or not.
@@ -432,22 +442,22 @@ mod tests {
             .unwrap();
         lies.push((forged, SparseOutcome::Event(1.0)));
         lies.sort_by_key(|o| o.0);
-        let mismatch = check_sampled(&lies, from, &chosen, sampled_truth)
+        let mismatch = check_sampled(&lies, from..to, &chosen, sampled_truth)
             .mismatch
             .unwrap();
         assert_eq!(mismatch.index, forged);
-        // A test that cannot be replayed checks nothing after it (a case
-        // replays all its tests or none).
+        // A test that cannot be replayed checks nothing in its block or
+        // after it (a case replays all its tests or none).
         let mut lies = honest(from, to);
         let forged = (to - 100..to).find(|i| truth(*i).0.is_none()).unwrap();
         lies.push((forged, SparseOutcome::Event(1.0)));
         lies.sort_by_key(|o| o.0);
-        let verified = check_sampled(&lies, from, &chosen, |indices| {
-            (!indices.contains(&(to - 1))).then(|| sampled_truth(indices).unwrap())
+        let verified = check_sampled(&lies, from..to, &chosen, |indices| {
+            (!indices.contains(&forged)).then(|| sampled_truth(indices).unwrap())
         });
         assert!(verified.mismatch.is_none());
         // Nothing to check.
-        assert!(check_sampled(&[], from, &[], |_| unreachable!())
+        assert!(check_sampled(&[], from..to, &[], |_| unreachable!())
             .mismatch
             .is_none());
     }

@@ -16,12 +16,13 @@ use std::sync::Arc;
 use tslg_api::{Method, ResultAck, ResultReport};
 use tslg_method::registry::CampaignTests;
 
-/// Replays a report may take on the async runtime: about 0.1 µs each on a
-/// grid case (a draw and a look-up), so a few dozen microseconds at most;
+/// Replays a report may take on the async runtime: about 50 ns each on a
+/// grid case (a draw and a look-up), so about a dozen microseconds at most;
 /// more go to the blocking pool.
 const INLINE_REPLAYS: u64 = 256;
 
-/// Replays a report may take on the writer itself (see [`at_once`]).
+/// Replays a report may take on the writer itself (see [`at_once`]), in
+/// expectation: the sample's size is not known before it is drawn.
 const WRITER_REPLAYS: usize = 64;
 
 /// Checks, records and accounts a report on lease `lease_id`; then runs
@@ -281,15 +282,19 @@ fn decide(
         if tests.planned(new).is_none() {
             return Ok(Decided::Declined);
         }
-        let chosen = sampler.pick_groups(config.replay_share, new, checked.to, audit::REPLAY_GROUP);
+        // Whether the writer takes the report is decided before the sample
+        // is drawn, on its expected size: a sample declined for being
+        // large, then drawn again on the general path, would check each
+        // test with less than the share.
         let work = if tests.outside_mass().is_some() {
-            (checked.to - new) as usize
+            (checked.to - new) as f64
         } else {
-            chosen.len() + checked.outcomes.len()
+            config.replay_share * (checked.to - new) as f64 + checked.outcomes.len() as f64
         };
-        if work > WRITER_REPLAYS {
+        if work > WRITER_REPLAYS as f64 {
             return Ok(Decided::Declined);
         }
+        let chosen = sampler.pick(config.replay_share, new, checked.to);
         let verified = replay_check::verify_builtin(tests.as_ref(), checked, new, &chosen);
         if let Some(mismatch) = verified.mismatch {
             let reason = format!("campaign {}: {mismatch}", campaign.id);
@@ -381,12 +386,9 @@ async fn verify_builtin(
         return Ok(None);
     }
     let (tests, report) = (Arc::clone(tests), Arc::clone(checked));
-    let chosen = state.sampler.pick_groups(
-        state.config.replay_share,
-        new_from,
-        checked.to,
-        audit::REPLAY_GROUP,
-    );
+    let chosen = state
+        .sampler
+        .pick(state.config.replay_share, new_from, checked.to);
     let everything = tests.outside_mass().is_some();
     let work = if everything {
         checked.to - new_from

@@ -247,9 +247,13 @@ async fn a_lying_worker_is_caught_by_replication_and_the_answer_is_the_honest_on
 /// The coordinator's sample of the quiet tests of a built-in vehicle's
 /// NDD campaign: a worker that hides one event of each report is caught
 /// when the hidden test is in the sample, each time with the replay share
-/// (here 0.5), and the refusal names the hidden test. Forty reports with an
-/// event hidden: Binomial(40, 0.5), caught between 8 and 32 times unless
-/// the sample is wired wrong (a share of 0 or 1 gives 0 or 40).
+/// (here 0.5), and the refusal names the hidden test. Reports of 20,000
+/// tests are checked off the writer, reports of 100 on it (the decision
+/// between the two is taken before the sample is drawn, so neither checks
+/// less than the share); 40 of each with an event hidden: each count
+/// Binomial(40, 0.5), between 8 and 32 (a chance of about 4 × 10⁻⁵ each to
+/// fall outside), unless the sample is wired wrong on that path (a share
+/// of 0 or 1 gives 0 or 40).
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn an_ndd_worker_hiding_events_is_caught_at_the_replay_share() {
     let dir = scratch();
@@ -276,36 +280,47 @@ async fn an_ndd_worker_hiding_events_is_caught_at_the_replay_share() {
             request.seed,
         )
         .unwrap();
-    let (mut trials, mut caught, mut leases) = (0, 0, 0);
-    while trials < 40 {
-        let name = format!("hider-{caught}");
-        let lease = client.claim(&ask(&name, &[])).await.unwrap().unwrap();
-        leases += 1;
-        assert!(leases < 2_000, "{trials} events hidden in {leases} leases");
-        let mut events = honest_events(tests.as_ref(), &lease);
-        if events.is_empty() {
-            client
-                .report(lease.id, &whole(&lease, &name, events))
-                .await
-                .unwrap();
-            continue;
-        }
-        let hidden = events.remove(events.len() / 2).index;
-        trials += 1;
-        match client.report(lease.id, &whole(&lease, &name, events)).await {
-            Ok(ack) => assert_eq!(ack.accepted, lease.end - lease.resume_at),
-            Err(CallError::Refused {
-                status: 422,
-                detail,
-            }) => {
-                assert!(
-                    detail.contains(&format!("test {hidden} was reported as no event")),
-                    "{detail}"
-                );
-                caught += 1;
+    let mut workers = 0;
+    for lease_tests in [None, Some(100)] {
+        let (mut trials, mut caught, mut leases) = (0, 0, 0);
+        while trials < 40 {
+            let name = format!("hider-{workers}");
+            let asked = tslg_api::LeaseRequest {
+                max_tests: lease_tests,
+                ..ask(&name, &[])
+            };
+            let lease = client.claim(&asked).await.unwrap().unwrap();
+            leases += 1;
+            assert!(leases < 20_000, "{trials} events hidden in {leases} leases");
+            let mut events = honest_events(tests.as_ref(), &lease);
+            if events.is_empty() {
+                client
+                    .report(lease.id, &whole(&lease, &name, events))
+                    .await
+                    .unwrap();
+                continue;
             }
-            Err(e) => panic!("{e}"),
+            let hidden = events.remove(events.len() / 2).index;
+            trials += 1;
+            match client.report(lease.id, &whole(&lease, &name, events)).await {
+                Ok(ack) => assert_eq!(ack.accepted, lease.end - lease.resume_at),
+                Err(CallError::Refused {
+                    status: 422,
+                    detail,
+                }) => {
+                    assert!(
+                        detail.contains(&format!("test {hidden} was reported as no event")),
+                        "{detail}"
+                    );
+                    caught += 1;
+                    workers += 1;
+                }
+                Err(e) => panic!("{e}"),
+            }
         }
+        assert!(
+            (8..=32).contains(&caught),
+            "leases of {lease_tests:?} tests: caught {caught} of 40"
+        );
     }
-    assert!((8..=32).contains(&caught), "caught {caught} of 40");
 }
