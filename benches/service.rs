@@ -1,7 +1,8 @@
-//! Service overhead: the same cheap NDD baseline (IDM on cut-in, ~1 µs per
+//! Service overhead: the same cheap NDD baseline (IDM on cut-in, ~60 ns per
 //! test) run in this process and through a local coordinator with one
-//! worker on the same cores, and the lease round-trip time. Prints a
-//! Markdown table for docs/benchmarks.md.
+//! worker on the same cores, the same tests as two campaigns side by side,
+//! and the lease round-trip time. Prints Markdown tables for
+//! docs/benchmarks.md.
 //!
 //! `cargo bench --bench service` (set TSLG_BENCH_TESTS to change the size
 //! of the NDD runs, TSLG_BENCH_HIGH_BETA the high-event campaign's β, and
@@ -77,6 +78,39 @@ async fn through_service(tests: u64, workers: usize, threads: usize) -> anyhow::
             break;
         }
         tokio::time::sleep(poll_after(view.indices, tests)).await;
+    }
+    let seconds = started.elapsed().as_secs_f64();
+    service.stop().await?;
+    Ok(seconds)
+}
+
+/// Two NDD campaigns of `tests / 2` tests each (seeds 1 and 2) side by
+/// side through the service: seconds from their creation until both
+/// stop. Leases take turns between the campaigns, so a worker's leases
+/// alternate between them.
+async fn side_by_side_service(tests: u64, threads: usize) -> anyhow::Result<f64> {
+    let dir = tempfile::tempdir()?;
+    let url = format!("sqlite://{}", dir.path().join("bench.sqlite").display());
+    let service = LocalService::start(&url, 1, threads).await?;
+    let client = Client::new(&service.url, None)?;
+    let started = Instant::now();
+    let mut ids = Vec::new();
+    for seed in [1, 2] {
+        let half = CreateCampaign {
+            seed,
+            ..request(tests / 2)
+        };
+        ids.push(client.create_campaign(&half).await?.id);
+    }
+    for id in ids {
+        loop {
+            let view = client.campaign(id).await?;
+            if view.status.is_final() {
+                assert_eq!(view.indices, tests / 2);
+                break;
+            }
+            tokio::time::sleep(poll_after(view.indices, tests / 2)).await;
+        }
     }
     let seconds = started.elapsed().as_secs_f64();
     service.stop().await?;
@@ -351,6 +385,17 @@ fn main() -> anyhow::Result<()> {
         tests as f64 / s
     );
     println!("\nthroughput ratio service / in-process: {:.3}\n", l / s);
+    let mut two = Vec::new();
+    for _ in 0..3 {
+        two.push(runtime.block_on(side_by_side_service(tests, cores))?);
+    }
+    let t = best(&two);
+    println!(
+        "two campaigns of {} tests side by side through the service: {t:.2} s, {:.3e} tests/s \
+         (one campaign of {tests}: {s:.2} s)\n",
+        tests / 2,
+        tests as f64 / t
+    );
     // How throughput grows with the number of workers (one thread each) on
     // this machine's cores: a quarter of the tests, best of 3.
     let scaled = tests / 4;
