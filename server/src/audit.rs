@@ -5,11 +5,12 @@
 //! - **Built-in vehicles** are run again by the coordinator
 //!   ([`crate::replay_check`]): every reported event and invalid test, and a share
 //!   (`--replay-share`, default 0.1) of the tests reported without an
-//!   event, drawn with a key only this coordinator process knows, so a
-//!   worker cannot tell which of its tests are checked. A grid case runs each
+//!   event, each drawn by a generator only this coordinator process knows
+//!   (seeded by the operating system), so a worker cannot tell which of
+//!   its tests are checked. A grid case runs each
 //!   cell once and remembers it, so a check costs a draw and a look-up.
 //! - **External programs** run only on workers, so a share of their tests
-//!   (`--audit-share`, default 0.01, by the same secret key) and every event
+//!   (`--audit-share`, default 0.01, by the same generator) and every event
 //!   that would carry at least `--audit-weight-share` (0.05) of the estimate
 //!   are run again by a different worker: BOINC's validation by
 //!   replication. The campaign's prefix does not pass an audited test until

@@ -91,7 +91,7 @@ pub struct Config {
     pub replay_share: f64,
 
     /// External programs: the share of reported tests run again by a
-    /// different worker (drawn by a secret key) before the campaign's
+    /// different worker (drawn by a secret generator) before the campaign's
     /// prefix passes them.
     #[arg(long, env = "TSLG_AUDIT_SHARE", default_value_t = 0.01)]
     pub audit_share: f64,

@@ -5,11 +5,11 @@
 //! run any reported test itself and compare. A grid case runs each cell
 //! once and remembers it, so a check costs a draw and a look-up.
 //!
+//! On a library campaign whose exploring tests the fold counts, every test
+//! of the new part is replayed (the fold needs each test's draw anyway).
 //! Else the report's events and invalid tests and a secret sample of the
-//! rest are replayed, walked together in index order, block by block
-//! ([`check_sampled`]). On a library campaign whose exploring tests the
-//! fold counts, every test of the new part is replayed (the fold needs
-//! each test's draw anyway).
+//! rest are, walked together in index order, block by block
+//! ([`check_sampled`]).
 //! That is the coordinator's largest cost on a high-event campaign, so the
 //! range is split into blocks run on rayon's pool, each walking the
 //! report's sorted outcomes with a cursor (no search per test); the blocks
@@ -264,13 +264,14 @@ fn check_sampled<F>(
 where
     F: Fn(&[u64]) -> Option<Vec<Option<SparseOutcome>>>,
 {
-    let within = |items: &[u64]| {
-        items.partition_point(|&i| i < range.start)..items.partition_point(|&i| i < range.end)
-    };
+    // Both lists cut to the range (the callers' samples are drawn within
+    // it; the cut keeps that from being this walk's assumption).
     let first = outcomes.partition_point(|o| o.0 < range.start);
     let last = outcomes.partition_point(|o| o.0 < range.end);
     let mut listed = outcomes[first..last].iter().peekable();
-    let mut chosen = chosen[within(chosen)].iter().copied().peekable();
+    let first = chosen.partition_point(|&c| c < range.start);
+    let last = chosen.partition_point(|&c| c < range.end);
+    let mut chosen = chosen[first..last].iter().copied().peekable();
     let mut indices = Vec::with_capacity(CHECK_BLOCK);
     let mut reported = Vec::with_capacity(CHECK_BLOCK);
     loop {
@@ -285,7 +286,7 @@ where
                 (Some(l), None) => l,
                 (None, Some(c)) => c,
             };
-            while chosen.next_if(|&c| c <= next).is_some() {}
+            chosen.next_if_eq(&next);
             indices.push(next);
             reported.push(listed.next_if(|o| o.0 == next).map(|o| o.1));
         }
@@ -452,10 +453,16 @@ mod tests {
         let forged = (to - 100..to).find(|i| truth(*i).0.is_none()).unwrap();
         lies.push((forged, SparseOutcome::Event(1.0)));
         lies.sort_by_key(|o| o.0);
-        let verified = check_sampled(&lies, from..to, &chosen, |indices| {
-            (!indices.contains(&forged)).then(|| sampled_truth(indices).unwrap())
-        });
+        let unreplayable =
+            |indices: &[u64]| (!indices.contains(&forged)).then(|| sampled_truth(indices).unwrap());
+        let verified = check_sampled(&lies, from..to, &chosen, unreplayable);
         assert!(verified.mismatch.is_none());
+        // A contradiction in an earlier block is still found.
+        let early = (from..from + 50).find(|i| truth(*i).0.is_none()).unwrap();
+        lies.push((early, SparseOutcome::Event(1.0)));
+        lies.sort_by_key(|o| o.0);
+        let mismatch = check_sampled(&lies, from..to, &chosen, unreplayable).mismatch;
+        assert_eq!(mismatch.map(|m| m.index), Some(early));
         // Nothing to check.
         assert!(check_sampled(&[], from..to, &[], |_| unreachable!())
             .mismatch

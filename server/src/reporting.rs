@@ -17,13 +17,20 @@ use tslg_api::{Method, ResultAck, ResultReport};
 use tslg_method::registry::CampaignTests;
 
 /// Replays a report may take on the async runtime: about 50 ns each on a
-/// grid case (a draw and a look-up), so about a dozen microseconds at most;
+/// grid case (the choice, a draw and a look-up), so about a dozen
+/// microseconds at most;
 /// more go to the blocking pool.
 const INLINE_REPLAYS: u64 = 256;
 
 /// Replays a report may take on the writer itself (see [`at_once`]), in
 /// expectation: the sample's size is not known before it is drawn.
 const WRITER_REPLAYS: usize = 64;
+
+/// The replays a report's check takes in expectation when `tests` of its
+/// tests are new: its listed outcomes and the share of the tests sampled.
+fn expected_replays(share: f64, tests: u64, checked: &CheckedReport) -> f64 {
+    share * tests as f64 + checked.outcomes.len() as f64
+}
 
 /// Checks, records and accounts a report on lease `lease_id`; then runs
 /// `next`, the claim of the worker's next lease that the report carries
@@ -36,12 +43,17 @@ pub async fn receive(
     checked: &Arc<CheckedReport>,
     next: Option<leases::ClaimJob>,
 ) -> Result<(ResultAck, Option<leases::Claimed>), ApiError> {
-    // A report whose replay surely exceeds what the writer takes (a real
+    // A report whose sampled replay exceeds what the writer takes (a real
     // worker's chunk of half a second holds millions of tests, a tenth of
     // them replayed) goes the general way at once, without a trip to the
-    // writer that could only decline it.
-    let expected = state.config.replay_share * (checked.to - checked.from) as f64;
-    if checked.outcomes.len() > WRITER_REPLAYS || expected > 2.0 * WRITER_REPLAYS as f64 {
+    // writer that could only decline it: by the writer's own rule, on the
+    // whole report (a resumed lease's new part is smaller).
+    let replays = expected_replays(
+        state.config.replay_share,
+        checked.to - checked.from,
+        checked,
+    );
+    if replays > WRITER_REPLAYS as f64 {
         return in_parts_then_claim(state, lease_id, report, checked, next).await;
     }
     let next = match at_once(state, lease_id, report, checked, next).await {
@@ -202,8 +214,9 @@ enum Decided {
 
 /// The common report in one trip to the writer, without a read before it:
 /// a report of a built-in vehicle whose campaign's tests the coordinator
-/// holds, with at most [`WRITER_REPLAYS`] tests to run again (a draw and a
-/// look-up each on a grid case, microseconds in all). The writer reads the
+/// holds, with at most [`WRITER_REPLAYS`] tests to run again in
+/// expectation (a draw and a look-up each on a grid case, microseconds in
+/// all). The writer reads the
 /// lease and its campaign (the holder checked, as always), runs the
 /// checks, and flags the worker or records the report, then claims the
 /// worker's next lease when the report asks for one. Anything else (an
@@ -289,7 +302,7 @@ fn decide(
         let work = if tests.outside_mass().is_some() {
             (checked.to - new) as f64
         } else {
-            config.replay_share * (checked.to - new) as f64 + checked.outcomes.len() as f64
+            expected_replays(config.replay_share, checked.to - new, checked)
         };
         if work > WRITER_REPLAYS as f64 {
             return Ok(Decided::Declined);
