@@ -64,52 +64,37 @@ fn poll_after(resolved: u64, budget: u64) -> Duration {
     }
 }
 
-async fn through_service(tests: u64, workers: usize, threads: usize) -> anyhow::Result<f64> {
+/// The NDD campaigns of `seeds`, `tests` tests each, side by side through
+/// a local coordinator with `workers` workers of `threads` threads:
+/// seconds from their creation until all stop. With several campaigns,
+/// leases take turns between them, so a worker's leases alternate.
+async fn through_service(
+    seeds: &[u64],
+    tests: u64,
+    workers: usize,
+    threads: usize,
+) -> anyhow::Result<f64> {
     let dir = tempfile::tempdir()?;
     let url = format!("sqlite://{}", dir.path().join("bench.sqlite").display());
     let service = LocalService::start(&url, workers, threads).await?;
     let client = Client::new(&service.url, None)?;
     let started = Instant::now();
-    let id = client.create_campaign(&request(tests)).await?.id;
-    loop {
-        let view = client.campaign(id).await?;
-        if view.status.is_final() {
-            assert_eq!(view.indices, tests);
-            break;
-        }
-        tokio::time::sleep(poll_after(view.indices, tests)).await;
-    }
-    let seconds = started.elapsed().as_secs_f64();
-    service.stop().await?;
-    Ok(seconds)
-}
-
-/// Two NDD campaigns of `tests / 2` tests each (seeds 1 and 2) side by
-/// side through the service: seconds from their creation until both
-/// stop. Leases take turns between the campaigns, so a worker's leases
-/// alternate between them.
-async fn side_by_side_service(tests: u64, threads: usize) -> anyhow::Result<f64> {
-    let dir = tempfile::tempdir()?;
-    let url = format!("sqlite://{}", dir.path().join("bench.sqlite").display());
-    let service = LocalService::start(&url, 1, threads).await?;
-    let client = Client::new(&service.url, None)?;
-    let started = Instant::now();
     let mut ids = Vec::new();
-    for seed in [1, 2] {
-        let half = CreateCampaign {
+    for &seed in seeds {
+        let campaign = CreateCampaign {
             seed,
-            ..request(tests / 2)
+            ..request(tests)
         };
-        ids.push(client.create_campaign(&half).await?.id);
+        ids.push(client.create_campaign(&campaign).await?.id);
     }
     for id in ids {
         loop {
             let view = client.campaign(id).await?;
             if view.status.is_final() {
-                assert_eq!(view.indices, tests / 2);
+                assert_eq!(view.indices, tests);
                 break;
             }
-            tokio::time::sleep(poll_after(view.indices, tests / 2)).await;
+            tokio::time::sleep(poll_after(view.indices, tests)).await;
         }
     }
     let seconds = started.elapsed().as_secs_f64();
@@ -369,7 +354,7 @@ fn main() -> anyhow::Result<()> {
     let mut service = Vec::new();
     for _ in 0..3 {
         local.push(in_process(tests));
-        service.push(runtime.block_on(through_service(tests, 1, cores))?);
+        service.push(runtime.block_on(through_service(&[1], tests, 1, cores))?);
     }
     let best = |v: &[f64]| v.iter().copied().fold(f64::INFINITY, f64::min);
     let (l, s) = (best(&local), best(&service));
@@ -387,7 +372,7 @@ fn main() -> anyhow::Result<()> {
     println!("\nthroughput ratio service / in-process: {:.3}\n", l / s);
     let mut two = Vec::new();
     for _ in 0..3 {
-        two.push(runtime.block_on(side_by_side_service(tests, cores))?);
+        two.push(runtime.block_on(through_service(&[1, 2], tests / 2, 1, cores))?);
     }
     let t = best(&two);
     println!(
@@ -404,7 +389,7 @@ fn main() -> anyhow::Result<()> {
     for workers in [1, 2, 4, 8] {
         let mut times = Vec::new();
         for _ in 0..3 {
-            times.push(runtime.block_on(through_service(scaled, workers, 1))?);
+            times.push(runtime.block_on(through_service(&[1], scaled, workers, 1))?);
         }
         let t = best(&times);
         println!(

@@ -22,7 +22,7 @@ use crate::store::audits;
 use rayon::prelude::*;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use tslg_method::prefix::SparseOutcome;
-use tslg_method::registry::CampaignTests;
+use tslg_method::registry::{CampaignTests, TestOutcome};
 
 /// Tests per block of a full replay: large enough that a block's overhead
 /// (a task, one binary search) is negligible against its ~10⁴ draws, small
@@ -48,16 +48,20 @@ pub struct Explored {
     pub tests: Vec<u64>,
 }
 
+/// A replayed test's outcome as a report lists it: an event with its
+/// weight, or nothing (quiet).
+fn as_listed(outcome: TestOutcome) -> Option<SparseOutcome> {
+    outcome
+        .event
+        .then_some(SparseOutcome::Event(outcome.weight))
+}
+
 /// The coordinator's outcome of test `index`: its replay (invalid when the
 /// simulation panics, as the worker's did if it reported invalid); `None`
 /// when it cannot run the test.
 fn replayed(tests: &dyn CampaignTests, index: u64) -> Option<Option<SparseOutcome>> {
     match catch_unwind(AssertUnwindSafe(|| tests.replay(index))) {
-        Ok(Some(outcome)) => Some(
-            outcome
-                .event
-                .then_some(SparseOutcome::Event(outcome.weight)),
-        ),
+        Ok(Some(outcome)) => Some(as_listed(outcome)),
         Ok(None) => None,
         Err(_) => Some(Some(SparseOutcome::Invalid)),
     }
@@ -76,7 +80,7 @@ fn replayed_explored_span(
         Ok(Some(outcomes)) if outcomes.len() as u64 == to - from => Some(
             outcomes
                 .into_iter()
-                .map(|(o, explores)| (o.event.then_some(SparseOutcome::Event(o.weight)), explores))
+                .map(|(o, explores)| (as_listed(o), explores))
                 .collect(),
         ),
         Ok(None) => None,
@@ -91,12 +95,7 @@ fn replayed_explored(
     index: u64,
 ) -> Option<(Option<SparseOutcome>, bool)> {
     match catch_unwind(AssertUnwindSafe(|| tests.replay_explored(index))) {
-        Ok(Some((outcome, explores))) => Some((
-            outcome
-                .event
-                .then_some(SparseOutcome::Event(outcome.weight)),
-            explores,
-        )),
+        Ok(Some((outcome, explores))) => Some((as_listed(outcome), explores)),
         Ok(None) => None,
         Err(_) => Some((Some(SparseOutcome::Invalid), tests.explores(index))),
     }
@@ -239,12 +238,7 @@ fn replayed_block(
         .flatten()
         .filter(|outcomes| outcomes.len() == indices.len());
     match batched {
-        Some(outcomes) => Some(
-            outcomes
-                .into_iter()
-                .map(|o| o.event.then_some(SparseOutcome::Event(o.weight)))
-                .collect(),
-        ),
+        Some(outcomes) => Some(outcomes.into_iter().map(as_listed).collect()),
         None => indices.iter().map(|&i| replayed(tests, i)).collect(),
     }
 }
