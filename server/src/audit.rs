@@ -6,7 +6,7 @@
 //!   ([`crate::replay_check`]): every reported event and invalid test, and a share
 //!   (`--replay-share`, default 0.1) of the tests reported without an
 //!   event, each drawn by a generator only this coordinator process knows
-//!   (seeded by the operating system), so a worker cannot tell which of
+//!   (seeded by the operating system, [`crate::secret_sample`]), so a worker cannot tell which of
 //!   its tests are checked. A grid case runs each
 //!   cell once and remembers it, so a check costs a draw and a look-up.
 //! - **External programs** run only on workers, so a share of their tests
@@ -34,59 +34,11 @@ use crate::store::fold::{fold_prefix, KnownExplored};
 use crate::store::leases::LeaseState;
 use crate::store::pairs;
 use crate::store::results::{check_effort, held_lease, stopped_ack, Recorded};
-use rand::rngs::StdRng;
-use rand::{Rng, SeedableRng};
 use rusqlite::{params, Connection};
 use std::sync::Arc;
-use std::sync::Mutex;
 use tslg_api::{CampaignStatus, ResultAck, ResultReport};
 use tslg_method::prefix::SparseOutcome;
 use tslg_method::registry::CampaignTests;
-
-/// Which tests are checked: drawn when a report arrives, from a generator
-/// seeded by the operating system when the coordinator starts, so a worker
-/// cannot know which of its tests will be run again.
-pub struct Sampler {
-    rng: Mutex<StdRng>,
-}
-
-impl Default for Sampler {
-    fn default() -> Self {
-        Self {
-            rng: Mutex::new(StdRng::from_os_rng()),
-        }
-    }
-}
-
-impl Sampler {
-    /// The indices of `from..to` each chosen with probability `share`,
-    /// independently, in increasing order. The gaps between chosen indices
-    /// are geometric, `⌊ln(1 − U)/ln(1 − share)⌋`, so the cost is in the
-    /// chosen tests, not in the range.
-    pub fn pick(&self, share: f64, from: u64, to: u64) -> Vec<u64> {
-        if share.is_nan() || share <= 0.0 || from >= to {
-            return Vec::new();
-        }
-        if share >= 1.0 {
-            return (from..to).collect();
-        }
-        let mut rng = self.rng.lock().unwrap_or_else(|p| p.into_inner());
-        let log_miss = (1.0 - share).ln();
-        let mut picked = Vec::new();
-        let mut at = from;
-        while at < to {
-            let u: f64 = rng.random();
-            let gap = ((1.0 - u).ln() / log_miss).floor();
-            if gap.is_nan() || gap >= (to - at) as f64 {
-                break;
-            }
-            at += gap as u64;
-            picked.push(at);
-            at += 1;
-        }
-        picked
-    }
-}
 
 /// A reported outcome the coordinator's own run contradicts.
 #[derive(Debug, Clone, PartialEq)]
@@ -477,53 +429,6 @@ pub async fn flag_for_mismatch(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn the_secret_sample_has_its_share_independently_and_differs_between_coordinators() {
-        let sampler = Sampler::default();
-        let (n, share) = (200_000u64, 0.1);
-        let picked = sampler.pick(share, 1000, 1000 + n);
-        // Binomial(200 000, 0.1): sd ≈ 134; 5 sd either side.
-        assert!(
-            (picked.len() as f64 - n as f64 * share).abs() < 700.0,
-            "{}",
-            picked.len()
-        );
-        assert!(picked.windows(2).all(|w| w[0] < w[1]));
-        assert!(picked.first() >= Some(&1000) && picked.last() < Some(&(1000 + n)));
-        // Independent: pairs of neighbours both chosen about share² of the time.
-        let set: std::collections::HashSet<u64> = picked.iter().copied().collect();
-        let pairs = (1000..1000 + n - 1)
-            .filter(|i| set.contains(i) && set.contains(&(i + 1)))
-            .count() as f64;
-        assert!((pairs - n as f64 * share * share).abs() < 300.0, "{pairs}");
-        // Each range in many small reports: the same share.
-        let small: usize = (0..20_000u64)
-            .map(|k| sampler.pick(share, k * 10, k * 10 + 10).len())
-            .sum();
-        assert!((small as f64 - 20_000.0).abs() < 700.0, "{small}");
-        let other = Sampler::default().pick(0.5, 0, 1000);
-        let mine = sampler.pick(0.5, 0, 1000);
-        assert_ne!(other, mine, "two coordinators draw alike");
-        assert!(sampler.pick(0.0, 0, 100).is_empty());
-        // A tiny share: gaps of a million.
-        let rare = sampler.pick(1e-6, 0, 100_000_000);
-        assert!((50..=150).contains(&rare.len()), "{}", rare.len());
-        // Gaps are geometric: P(gap = k) = share (1 − share)^k.
-        let picked = sampler.pick(0.3, 0, 3_000_000);
-        let mut counts = [0u64; 4];
-        for w in picked.windows(2) {
-            counts[((w[1] - w[0] - 1) as usize).min(3)] += 1;
-        }
-        let n = (picked.len() - 1) as f64;
-        for (k, &c) in counts.iter().enumerate().take(3) {
-            let p = 0.3 * 0.7f64.powi(k as i32);
-            let sd = (n * p * (1.0 - p)).sqrt();
-            assert!((c as f64 - n * p).abs() < 5.0 * sd, "gap {k}: {c} of {n}");
-        }
-        assert_eq!(sampler.pick(1.0, 5, 8), [5, 6, 7]);
-        assert!(sampler.pick(0.5, 8, 8).is_empty());
-    }
 
     fn report(from: u64, to: u64, outcomes: Vec<(u64, SparseOutcome)>) -> CheckedReport {
         CheckedReport {

@@ -24,6 +24,7 @@ mod report_check;
 mod reporting;
 mod routes;
 mod sampler_cache;
+mod secret_sample;
 mod state;
 mod store;
 mod throughput;

@@ -47,7 +47,7 @@ pub struct Shared {
     /// Request latencies, for `/metrics`.
     pub metrics: Arc<Metrics>,
     /// Which tests are checked again, by a key of this process.
-    pub sampler: Arc<crate::audit::Sampler>,
+    pub sampler: Arc<crate::secret_sample::Sampler>,
 }
 
 impl AppState {
