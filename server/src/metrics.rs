@@ -10,11 +10,14 @@
 
 use crate::db::sql;
 use crate::error::ApiError;
+use crate::replay_check::{Place, ReplayTotals};
 use crate::state::AppState;
 use axum::extract::State;
 use axum::http::header;
 use axum::response::{IntoResponse, Response};
-use prometheus::{Encoder, IntCounter, IntGauge, IntGaugeVec, Opts, Registry, TextEncoder};
+use prometheus::{
+    Encoder, IntCounter, IntCounterVec, IntGauge, IntGaugeVec, Opts, Registry, TextEncoder,
+};
 use tslg_api::CampaignStatus;
 
 /// Counts read from the database for one scrape.
@@ -33,15 +36,20 @@ struct Snapshot {
     groups: (u64, u64),
     /// Tests library campaigns' folds drew again since it started.
     fold_drawn: u64,
+    /// What the replay checks did since it started.
+    replays: ReplayTotals,
 }
 
 async fn snapshot(state: &AppState) -> Result<Snapshot, ApiError> {
     let groups = state.db.group_counts();
     let fold_drawn = state.samplers.explored().drawn();
-    state
+    let replays = state.replays.totals();
+    let mut snapshot = state
         .db
         .read(move |conn| read_snapshot(conn, groups, fold_drawn))
-        .await
+        .await?;
+    snapshot.replays = replays;
+    Ok(snapshot)
 }
 
 fn read_snapshot(
@@ -85,6 +93,7 @@ fn read_snapshot(
         reclaimed,
         groups,
         fold_drawn,
+        replays: ReplayTotals::default(),
     })
 }
 
@@ -200,6 +209,35 @@ fn scrape_registry(s: &Snapshot, live: usize, known: usize) -> Registry {
          the library, since the coordinator started (0 while its own runs of the reports cover \
          them).",
         s.fold_drawn as i64,
+    );
+    let checks = IntCounterVec::new(
+        Opts::new(
+            "tslg_replay_checks_total",
+            "Reports on built-in vehicles the coordinator checked by running tests again, since \
+             it started, by where the check ran: on the writer in the report's transaction, on \
+             the request's task, or on the blocking pool.",
+        ),
+        &["place"],
+    )
+    .expect("valid counter");
+    r.register(Box::new(checks.clone()))
+        .expect("registered once");
+    for (place, n) in Place::ALL.iter().zip(s.replays.reports) {
+        checks.with_label_values(&[place.label()]).inc_by(n);
+    }
+    counter(
+        &r,
+        "tslg_replay_sample_range_tests_total",
+        "Tests of the checked reports whose quiet tests were sampled, since the coordinator \
+         started (the tests the secret sample was drawn from).",
+        s.replays.sample_range as i64,
+    );
+    counter(
+        &r,
+        "tslg_replay_sampled_tests_total",
+        "Tests the secret sample chose to run again (divided by \
+         tslg_replay_sample_range_tests_total: the replay share).",
+        s.replays.sampled as i64,
     );
     let workers = gauge_vec(
         &r,

@@ -6,7 +6,7 @@
 use crate::audit;
 use crate::config::Config;
 use crate::error::ApiError;
-use crate::replay_check;
+use crate::replay_check::{self, Place, ReplayCounts};
 use crate::report_check::CheckedReport;
 use crate::sampler_cache::SamplerCache;
 use crate::state::AppState;
@@ -230,9 +230,10 @@ async fn at_once(
     checked: &Arc<CheckedReport>,
     next: Option<leases::ClaimJob>,
 ) -> Result<AtOnce, ApiError> {
-    let (samplers, sampler, config) = (
+    let (samplers, sampler, replays, config) = (
         Arc::clone(&state.samplers),
         Arc::clone(&state.sampler),
+        Arc::clone(&state.replays),
         Arc::clone(&state.config),
     );
     let (report, checked) = (Arc::clone(report), Arc::clone(checked));
@@ -242,6 +243,7 @@ async fn at_once(
             let shared = Shared {
                 samplers: &samplers,
                 sampler: &sampler,
+                replays: &replays,
                 config: &config,
             };
             Ok(match decide(conn, &shared, lease_id, &report, &checked)? {
@@ -264,6 +266,7 @@ async fn at_once(
 struct Shared<'a> {
     samplers: &'a SamplerCache,
     sampler: &'a crate::secret_sample::Sampler,
+    replays: &'a ReplayCounts,
     config: &'a Config,
 }
 
@@ -279,6 +282,7 @@ fn decide(
     let Shared {
         samplers,
         sampler,
+        replays,
         config,
     } = *shared;
     let (lease, campaign) = results::held_lease(conn, lease_id, report)?;
@@ -307,8 +311,13 @@ fn decide(
         if work > WRITER_REPLAYS as f64 {
             return Ok(Decided::Declined);
         }
-        let chosen = sampler.pick(config.replay_share, new, checked.to);
-        let verified = replay_check::verify_builtin(tests.as_ref(), checked, new, &chosen);
+        let verified = replay_check::verify_counted(
+            tests.as_ref(),
+            checked,
+            new,
+            |from, to| sampler.pick(config.replay_share, from, to),
+            (replays, Place::Writer),
+        );
         if let Some(mismatch) = verified.mismatch {
             let reason = format!("campaign {}: {mismatch}", campaign.id);
             audit::flag_worker(conn, &report.worker, &reason, campaign.id, mismatch.index)?;
@@ -410,16 +419,21 @@ async fn verify_builtin(
     // with the check, off the async runtime when the check is: for a
     // report of 2²² tests it takes milliseconds.
     let cheap = tests.planned(new_from).is_some();
-    let sampler = Arc::clone(&state.sampler);
-    let check = move || {
-        let chosen = sampler.pick(share, new_from, report.to);
-        replay_check::verify_builtin(tests.as_ref(), &report, new_from, &chosen)
+    let (sampler, replays) = (Arc::clone(&state.sampler), Arc::clone(&state.replays));
+    let check = move |place: Place| {
+        replay_check::verify_counted(
+            tests.as_ref(),
+            &report,
+            new_from,
+            |from, to| sampler.pick(share, from, to),
+            (&replays, place),
+        )
     };
     let verified = if cheap && work <= INLINE_REPLAYS {
         // A few microseconds: not worth a trip to the blocking pool.
-        check()
+        check(Place::Request)
     } else {
-        tokio::task::spawn_blocking(check)
+        tokio::task::spawn_blocking(move || check(Place::Pool))
             .await
             .map_err(|e| ApiError::Internal(e.into()))?
     };

@@ -46,8 +46,10 @@ pub struct Shared {
     pub pictures: Arc<PictureCache>,
     /// Request latencies, for `/metrics`.
     pub metrics: Arc<Metrics>,
-    /// Which tests are checked again, by a key of this process.
+    /// Which tests are checked again, by a generator of this process.
     pub sampler: Arc<crate::secret_sample::Sampler>,
+    /// What the replay checks did, for `/metrics`.
+    pub replays: Arc<crate::replay_check::ReplayCounts>,
 }
 
 impl AppState {
@@ -63,6 +65,7 @@ impl AppState {
             metrics: Arc::new(Metrics::default()),
             pictures: Arc::default(),
             sampler: Arc::default(),
+            replays: Arc::default(),
         }))
     }
 }

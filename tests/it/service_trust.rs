@@ -282,6 +282,7 @@ async fn an_ndd_worker_hiding_events_is_caught_at_the_replay_share() {
         .unwrap();
     let mut workers = 0;
     for lease_tests in [None, Some(100)] {
+        let before = replay_metrics(&server.url).await;
         let (mut trials, mut caught, mut leases) = (0, 0, 0);
         while trials < 40 {
             let name = format!("hider-{workers}");
@@ -322,5 +323,36 @@ async fn an_ndd_worker_hiding_events_is_caught_at_the_replay_share() {
             (8..=32).contains(&caught),
             "leases of {lease_tests:?} tests: caught {caught} of 40"
         );
+        // Each report checked once, where the routing rule sends it: a
+        // report of 20,000 tests (10,000 replays expected) to the blocking
+        // pool, one of 100 (50) to the writer; and the sample chose the
+        // share of the tests it was drawn from (5 sd).
+        let after = replay_metrics(&server.url).await;
+        let delta: Vec<f64> = (0..5).map(|k| after[k] - before[k]).collect();
+        let (writer, request, pool, range, sampled) =
+            (delta[0], delta[1], delta[2], delta[3], delta[4]);
+        assert_eq!(writer + request + pool, leases as f64, "{delta:?}");
+        match lease_tests {
+            None => assert_eq!(pool, leases as f64, "{delta:?}"),
+            Some(_) => assert!(writer >= 40.0, "{delta:?}"),
+        }
+        assert!(
+            (sampled - range / 2.0).abs() < 5.0 * (range / 4.0).sqrt(),
+            "{delta:?}"
+        );
     }
+}
+
+/// The replay check's counters in `/metrics`: reports checked on the
+/// writer, on the request's task and on the blocking pool; the tests the
+/// samples were drawn from, and the tests they chose.
+async fn replay_metrics(url: &str) -> [f64; 5] {
+    let checks = |place: &str| format!("tslg_replay_checks_total{{place=\"{place}\"}}");
+    [
+        scraped(url, &checks("writer")).await,
+        scraped(url, &checks("request")).await,
+        scraped(url, &checks("pool")).await,
+        scraped(url, "tslg_replay_sample_range_tests_total").await,
+        scraped(url, "tslg_replay_sampled_tests_total").await,
+    ]
 }

@@ -187,9 +187,8 @@ pub fn two_workers(url: &str) -> [WorkerProcess; 2] {
     ]
 }
 
-/// A fresh scratch directory.
-/// The value of the unlabelled metric `name` in the coordinator's
-/// `/metrics` at `url`.
+/// The value of the metric `name` in the coordinator's `/metrics` at
+/// `url` (with its labels, as the exposition writes them, if it has any).
 pub async fn scraped(url: &str, name: &str) -> f64 {
     let metrics = reqwest::get(format!("{url}/metrics"))
         .await
