@@ -315,14 +315,21 @@ mod tests {
             let picked = sampler.pick(share, 1000, 1000 + n);
             assert!(picked.windows(2).all(|w| w[0] < w[1]));
             assert!(picked.first() >= Some(&1000) && picked.last() < Some(&(1000 + n)));
-            // Independent: neighbours both chosen about share² of the time.
+            // Independent: pairs both chosen about share² of the time, at
+            // lag 1 (the same byte of neighbouring words) and at lag 8
+            // (neighbouring bytes of one word).
             let set: std::collections::HashSet<u64> = picked.iter().copied().collect();
-            let pairs = (1000..1000 + n - 1)
-                .filter(|i| set.contains(i) && set.contains(&(i + 1)))
-                .count() as f64;
-            let p2 = share * share;
-            let sd = (n as f64 * p2 * (1.0 - p2)).sqrt() * 2.0;
-            assert!((pairs - n as f64 * p2).abs() < 5.0 * sd, "{share}: {pairs}");
+            for lag in [1, 8] {
+                let pairs = (1000..1000 + n - lag)
+                    .filter(|i| set.contains(i) && set.contains(&(i + lag)))
+                    .count() as f64;
+                let p2 = share * share;
+                let sd = (n as f64 * p2 * (1.0 - p2)).sqrt() * 2.0;
+                assert!(
+                    (pairs - n as f64 * p2).abs() < 5.0 * sd,
+                    "{share}: lag {lag}: {pairs}"
+                );
+            }
             // Each position of a word, and of a group of 64, alike.
             let mut by_position = [0f64; 64];
             for &i in &picked {
