@@ -20,6 +20,7 @@ mod lease_size;
 mod metrics;
 mod problem_io;
 mod replay_check;
+mod replay_counts;
 mod report_check;
 mod reporting;
 mod routes;

@@ -17,11 +17,11 @@
 //! lowest-indexed one whatever the scheduling.
 
 use crate::audit::Mismatch;
+use crate::replay_counts::{Place, ReplayCounts};
 use crate::report_check::CheckedReport;
 use crate::store::audits;
 use rayon::prelude::*;
 use std::panic::{catch_unwind, AssertUnwindSafe};
-use std::sync::atomic::{AtomicU64, Ordering};
 use tslg_method::prefix::SparseOutcome;
 use tslg_method::registry::{CampaignTests, TestOutcome};
 
@@ -29,68 +29,6 @@ use tslg_method::registry::{CampaignTests, TestOutcome};
 /// (a task, one binary search) is negligible against its ~10⁴ draws, small
 /// enough that a report of 65,536 events spreads over every core.
 const REPLAY_BLOCK: u64 = 8192;
-
-/// Where a report's check ran: on the writer, in the report's own
-/// transaction (small checks); on the request's task (a few
-/// microseconds); or on the blocking pool.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Place {
-    Writer,
-    Request,
-    Pool,
-}
-
-impl Place {
-    pub const ALL: [Place; 3] = [Place::Writer, Place::Request, Place::Pool];
-
-    /// The label `/metrics` gives it.
-    pub fn label(self) -> &'static str {
-        match self {
-            Place::Writer => "writer",
-            Place::Request => "request",
-            Place::Pool => "pool",
-        }
-    }
-}
-
-/// What the replay checks did since the coordinator started, for
-/// `/metrics`: reports checked by place, and for the reports whose quiet
-/// tests were sampled, the tests the sample was drawn from and the tests
-/// it chose (their ratio is the replay share).
-#[derive(Debug, Default)]
-pub struct ReplayCounts {
-    reports: [AtomicU64; 3],
-    sample_range: AtomicU64,
-    sampled: AtomicU64,
-}
-
-/// [`ReplayCounts`] read at one moment.
-#[derive(Debug, Default, Clone, Copy, PartialEq)]
-pub struct ReplayTotals {
-    /// Reports checked, by [`Place::ALL`].
-    pub reports: [u64; 3],
-    pub sample_range: u64,
-    pub sampled: u64,
-}
-
-impl ReplayCounts {
-    /// A report checked at `place`, its quiet tests sampled from
-    /// `range` tests with `sampled` chosen (both 0 when every test is run).
-    pub fn record(&self, place: Place, range: u64, sampled: u64) {
-        let at = Place::ALL.iter().position(|&p| p == place).unwrap_or(0);
-        self.reports[at].fetch_add(1, Ordering::Relaxed);
-        self.sample_range.fetch_add(range, Ordering::Relaxed);
-        self.sampled.fetch_add(sampled, Ordering::Relaxed);
-    }
-
-    pub fn totals(&self) -> ReplayTotals {
-        ReplayTotals {
-            reports: self.reports.each_ref().map(|r| r.load(Ordering::Relaxed)),
-            sample_range: self.sample_range.load(Ordering::Relaxed),
-            sampled: self.sampled.load(Ordering::Relaxed),
-        }
-    }
-}
 
 /// [`verify_builtin`] with the report's secret sample drawn by
 /// `pick(from, to)` (only when the check samples: a library campaign whose

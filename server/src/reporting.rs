@@ -6,7 +6,8 @@
 use crate::audit;
 use crate::config::Config;
 use crate::error::ApiError;
-use crate::replay_check::{self, Place, ReplayCounts};
+use crate::replay_check;
+use crate::replay_counts::{Place, ReplayCounts};
 use crate::report_check::CheckedReport;
 use crate::sampler_cache::SamplerCache;
 use crate::state::AppState;
@@ -30,6 +31,18 @@ const WRITER_REPLAYS: usize = 64;
 /// tests are new: its listed outcomes and the share of the tests sampled.
 fn expected_replays(share: f64, tests: u64, checked: &CheckedReport) -> f64 {
     share * tests as f64 + checked.outcomes.len() as f64
+}
+
+/// The replays checking the tests `new..checked.to` of a report on
+/// `tests` takes in expectation: every test where the check runs every
+/// test (a library campaign whose exploring tests the fold counts), else
+/// [`expected_replays`].
+fn expected_check(tests: &dyn CampaignTests, share: f64, new: u64, checked: &CheckedReport) -> f64 {
+    if tests.outside_mass().is_some() {
+        (checked.to - new) as f64
+    } else {
+        expected_replays(share, checked.to - new, checked)
+    }
 }
 
 /// Checks, records and accounts a report on lease `lease_id`; then runs
@@ -303,11 +316,7 @@ fn decide(
         // is drawn, on its expected size: a sample declined for being
         // large, then drawn again on the general path, would check each
         // test with less than the share.
-        let work = if tests.outside_mass().is_some() {
-            (checked.to - new) as f64
-        } else {
-            expected_replays(config.replay_share, checked.to - new, checked)
-        };
+        let work = expected_check(tests.as_ref(), config.replay_share, new, checked);
         if work > WRITER_REPLAYS as f64 {
             return Ok(Decided::Declined);
         }
@@ -409,11 +418,7 @@ async fn verify_builtin(
     }
     let (tests, report) = (Arc::clone(tests), Arc::clone(checked));
     let share = state.config.replay_share;
-    let work = if tests.outside_mass().is_some() {
-        (checked.to - new_from) as f64
-    } else {
-        expected_replays(share, checked.to - new_from, checked)
-    };
+    let work = expected_check(tests.as_ref(), share, new_from, checked);
     // Grid cases replay with a draw and a look-up (their tests are planned);
     // a car-following replay simulates the whole test. The sample is drawn
     // with the check, off the async runtime when the check is: for a

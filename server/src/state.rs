@@ -49,7 +49,7 @@ pub struct Shared {
     /// Which tests are checked again, by a generator of this process.
     pub sampler: Arc<crate::secret_sample::Sampler>,
     /// What the replay checks did, for `/metrics`.
-    pub replays: Arc<crate::replay_check::ReplayCounts>,
+    pub replays: Arc<crate::replay_counts::ReplayCounts>,
 }
 
 impl AppState {
