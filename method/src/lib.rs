@@ -4,6 +4,7 @@
 //! handed in, no async, no HTTP: usable alone from a program or a benchmark.
 
 pub mod adaptive;
+pub mod alias;
 pub mod campaign;
 pub mod case;
 pub mod cases;

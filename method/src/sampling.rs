@@ -5,14 +5,13 @@
 //! from a ChaCha8 stream keyed by `s` and positioned at stream `i`, so the
 //! scenario of test `i` depends on `(s, i)` alone, not on who runs it or when.
 
+use crate::alias::AliasTable;
 use crate::library::Library;
 use crate::mass::GridMass;
 use crate::outside::OutsideMass;
 pub use crate::test_stream::{long_test_rng, test_rng, TestRng, TestStreams};
 use crate::tolerance::PROBABILITY_FLOOR;
-use rand::distr::Distribution;
 use rand::Rng;
-use rand_distr::weighted::WeightedAliasIndex;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
@@ -146,7 +145,7 @@ pub struct Draw {
 pub struct LibraryDistribution {
     exposure: GridMass,
     cells: Vec<usize>,
-    inside: WeightedAliasIndex<f64>,
+    inside: AliasTable,
     /// Position in `cells` of each grid cell in the library.
     in_library: Vec<Option<u32>>,
     inside_q: Vec<f64>,
@@ -155,7 +154,7 @@ pub struct LibraryDistribution {
     split: Split,
     outside_cells: usize,
     /// For the NDD spread: alias over the outside cells with positive exposure.
-    outside_ndd: Option<(Vec<usize>, WeightedAliasIndex<f64>, f64)>,
+    outside_ndd: Option<(Vec<usize>, AliasTable, f64)>,
     /// The worst-case fill of the outside cells, built when first asked for
     /// (only the coordinator and in-process runs need it).
     outside_mass: std::sync::OnceLock<OutsideMass>,
@@ -192,7 +191,7 @@ impl LibraryDistribution {
         // With nothing outside, all mass stays in the library.
         let epsilon = if outside_cells == 0 { 0.0 } else { epsilon };
         let weights: Vec<f64> = library.cells.iter().map(|c| c.criticality).collect();
-        let inside = WeightedAliasIndex::new(weights).map_err(|_| SamplingError::EmptyLibrary)?;
+        let inside = AliasTable::new(weights).map_err(|_| SamplingError::EmptyLibrary)?;
         let inside_q = library
             .cells
             .iter()
@@ -206,9 +205,7 @@ impl LibraryDistribution {
                     .collect();
                 let mass: Vec<f64> = out.iter().map(|&c| exposure.p(c)).collect();
                 let total: f64 = mass.iter().sum();
-                WeightedAliasIndex::new(mass)
-                    .ok()
-                    .map(|alias| (out, alias, total))
+                AliasTable::new(mass).ok().map(|alias| (out, alias, total))
             }
         };
         let epsilon = match (outside, &outside_ndd) {
@@ -360,13 +357,13 @@ impl LibraryDistribution {
 /// The NDD baseline: `q = P`, every weight 1.
 #[derive(Debug, Clone)]
 pub struct NddDistribution {
-    alias: WeightedAliasIndex<f64>,
+    alias: AliasTable,
 }
 
 impl NddDistribution {
     /// Tests drawn from the exposure itself.
     pub fn new(exposure: &GridMass) -> Self {
-        let alias = WeightedAliasIndex::new(exposure.masses().to_vec())
+        let alias = AliasTable::new(exposure.masses().to_vec())
             .expect("a mass function has positive total weight");
         Self { alias }
     }

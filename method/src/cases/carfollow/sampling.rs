@@ -21,11 +21,10 @@ use super::exposure::FollowExposure;
 use super::library::PolicyLibrary;
 use super::states::StateGrid;
 use super::world::{advance_with, FollowState, FollowWorld, Odometer};
+use crate::alias::AliasTable;
 use crate::sampling::{long_test_rng, OutsideSpread, SamplingError};
 use crate::vehicle::{FollowDriver, VehicleModel};
 use rand::Rng;
-use rand_distr::weighted::WeightedAliasIndex;
-use rand_distr::Distribution;
 use std::sync::Arc;
 
 /// One car-following test.
@@ -109,7 +108,7 @@ pub struct FollowSampler {
     /// `P(s)` and the initial-state distribution `q(s)` (= `P(s)` for the NDD).
     initial: Vec<f64>,
     initial_q: Vec<f64>,
-    initial_alias: Arc<WeightedAliasIndex<f64>>,
+    initial_alias: Arc<AliasTable>,
     library: Option<LibraryMix>,
 }
 
@@ -187,9 +186,8 @@ impl FollowSampler {
     ) -> Self {
         let ndd_actions = exposure.actions.clone();
         let ndd_cdf = running_sums(&ndd_actions, world.actions);
-        let initial_alias = Arc::new(
-            WeightedAliasIndex::new(initial_q.clone()).expect("a positive initial distribution"),
-        );
+        let initial_alias =
+            Arc::new(AliasTable::new(initial_q.clone()).expect("a positive initial distribution"));
         Self {
             world,
             grid,
