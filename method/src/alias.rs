@@ -148,7 +148,10 @@ fn probe(table: &WeightedAliasIndex<f64>, n: u32, redraw_below: u32, c: u32) -> 
 
 /// A first word whose draw is candidate `c` without a redraw: the smallest
 /// `v` with `⌊v·n / 2³²⌋ = c` and a low part out of the rejection zone.
-/// `None` when there is none (only for more than 2³¹ weights).
+/// There always is one among the first two of the candidate's words: the
+/// first one's low part is below `n`, only it can fall in the zone
+/// (`2³² mod n < n`), and at least one word of the candidate is kept. So
+/// `None` would mean the crate's rule is not the one written here.
 fn word_for(n: u32, redraw_below: u32, c: u32) -> Option<u32> {
     let first = (u64::from(c) << 32).div_ceil(u64::from(n));
     (first..=u64::from(u32::MAX))
@@ -214,6 +217,12 @@ mod tests {
         for n in [3, 10, 100, 5000] {
             sets.push((0..n).map(|_| rng.random::<f64>().powi(4)).collect());
         }
+        // A candidate kept for every `m` but the last (`k = 2⁵² − 1`),
+        // the bisection's upper end (found by a reviewer's fuzz).
+        sets.push((0..63).map(|i| 1.0 / f64::from(i % 7 + 1) / 63.0).collect());
+        // A sum at the largest double, and a subnormal one.
+        sets.push(vec![f64::MAX / 4.0; 4]);
+        sets.push(vec![5e-324, 0.0, 5e-324]);
         let cut_in = crate::cases::cutin::CutIn::builtin(Default::default());
         sets.push(crate::case::Case::exposure(&cut_in).masses().to_vec());
         sets
@@ -303,17 +312,19 @@ mod tests {
     /// the rejection zone followed by a word that is kept.
     #[test]
     fn draws_equal_the_crates_at_every_threshold_and_redraw() {
+        let last = (1 << 52) - 1;
+        // Whether some candidate is kept for every `m` but the last.
+        let mut kept_to_the_last = false;
         for weights in weight_sets() {
             let crate_table = WeightedAliasIndex::new(weights.clone()).unwrap();
             let table = AliasTable::new(weights.clone()).unwrap();
             let n = weights.len() as u32;
             for c in 0..n {
-                let Some(word) = word_for(n, table.redraw_below, c) else {
-                    continue;
-                };
+                let word = word_for(n, table.redraw_below, c).expect("a kept first word");
                 let keep = table.candidates[c as usize].keep_below;
-                for m in [keep.saturating_sub(1), keep, keep + 1, 0, (1 << 52) - 1] {
-                    let m = m.min((1 << 52) - 1);
+                kept_to_the_last |= keep == last;
+                for m in [keep.saturating_sub(1), keep, keep + 1, 0, last - 1, last] {
+                    let m = m.min(last);
                     for low_bits in [0, 0xfff] {
                         let wide = (m << 12) | low_bits;
                         let words = [word, wide as u32, (wide >> 32) as u32];
@@ -355,6 +366,10 @@ mod tests {
                 assert_eq!(mine, want, "first word {v} (low part {low}) of {n} weights");
             }
         }
+        assert!(
+            kept_to_the_last,
+            "no candidate tests the bisection's upper end"
+        );
     }
 
     /// Through the tests' own streams (the first block and past it), as

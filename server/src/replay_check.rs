@@ -504,4 +504,65 @@ mod tests {
         let empty = replay_every_test(&[], 10, 10, per_test(|i| Some(truth(i))));
         assert_eq!(empty.explored.unwrap().tests, Vec::<u64>::new());
     }
+
+    /// The cut-in IDM's NDD campaign seeded 1, as the coordinator replays it.
+    fn cut_in_ndd() -> std::sync::Arc<dyn CampaignTests> {
+        let case = tslg_method::cases::open_case(
+            "cut-in",
+            None,
+            &tslg_method::registry::ExposureSource::Builtin,
+        )
+        .unwrap();
+        let vut = serde_json::json!({"model": "idm"});
+        case.campaign(None, &vut, 0.1, Default::default(), Default::default(), 1)
+            .unwrap()
+    }
+
+    /// `/metrics` counts every test a check's sample chose, once: when the
+    /// walk runs to the end, and when a contradiction in its first block
+    /// ends it.
+    #[test]
+    fn a_check_counts_its_whole_sample_even_when_a_contradiction_ends_it() {
+        let tests = cut_in_ndd();
+        let (from, to) = (100, 30_100u64);
+        let outcomes: Vec<(u64, SparseOutcome)> = (from..to)
+            .filter_map(|i| as_listed(tests.replay(i).unwrap()).map(|o| (i, o)))
+            .collect();
+        let honest = CheckedReport {
+            from,
+            to,
+            events: Vec::new(),
+            outcomes: outcomes.clone(),
+            reasons: Vec::new(),
+        };
+        // A forged event on the first quiet test.
+        let quiet = (from..to)
+            .find(|&i| !tests.replay(i).unwrap().event)
+            .unwrap();
+        let mut forged = outcomes;
+        forged.push((quiet, SparseOutcome::Event(1.0)));
+        forged.sort_by_key(|o| o.0);
+        let forged = CheckedReport {
+            outcomes: forged,
+            ..honest.clone()
+        };
+        let every_third = |f: u64, t: u64| (f..t).step_by(3).collect::<Vec<u64>>();
+        let chosen = (to - from).div_ceil(3);
+        for (report, place, contradicted) in [
+            (&honest, Place::Request, false),
+            (&forged, Place::Pool, true),
+        ] {
+            let counts = ReplayCounts::default();
+            let verified =
+                verify_counted(tests.as_ref(), report, from, every_third, (&counts, place));
+            assert_eq!(
+                verified.mismatch.map(|m| m.index),
+                contradicted.then_some(quiet)
+            );
+            let totals = counts.totals();
+            assert_eq!(totals.reports[place as usize], 1);
+            assert_eq!(totals.reports.iter().sum::<u64>(), 1);
+            assert_eq!((totals.sample_range, totals.sampled), (to - from, chosen));
+        }
+    }
 }
