@@ -39,7 +39,7 @@ use rayon::prelude::*;
 /// Bits of the 64-bit word that make the uniform: its top 52.
 const UNIFORM_BITS: u32 = 52;
 
-/// Candidates probed per rayon task.
+/// Candidates probed per rayon task, at least.
 const PROBE_CHUNK: usize = 4096;
 
 /// A weighted draw of indices `0..n`, equal to `WeightedAliasIndex<f64>`'s
@@ -67,18 +67,14 @@ impl AliasTable {
     /// `WeightedAliasIndex::new` does (no weights, a negative, NaN or too
     /// large weight, all zero).
     pub fn new(weights: Vec<f64>) -> Result<Self, Error> {
-        let crate_table = WeightedAliasIndex::new(weights.clone())?;
         // The crate accepts at most `u32::MAX` weights.
         let n = weights.len() as u32;
+        let crate_table = WeightedAliasIndex::new(weights)?;
         let redraw_below = n.wrapping_neg() % n;
-        let indices: Vec<u32> = (0..n).collect();
-        let candidates = indices
-            .par_chunks(PROBE_CHUNK)
-            .flat_map_iter(|chunk| {
-                chunk
-                    .iter()
-                    .map(|&c| probe(&crate_table, n, redraw_below, c))
-            })
+        let candidates = (0..n)
+            .into_par_iter()
+            .with_min_len(PROBE_CHUNK)
+            .map(|c| probe(&crate_table, n, redraw_below, c))
             .collect();
         Ok(Self {
             n,

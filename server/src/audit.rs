@@ -6,9 +6,10 @@
 //!   ([`crate::replay_check`]): every reported event and invalid test, and a share
 //!   (`--replay-share`, default 0.1) of the tests reported without an
 //!   event, each drawn by a generator only this coordinator process knows
-//!   (seeded by the operating system, [`crate::secret_sample`]), so a worker cannot tell which of
-//!   its tests are checked. A grid case runs each
-//!   cell once and remembers it, so a check costs a draw and a look-up.
+//!   (seeded by the operating system, [`crate::secret_sample`]), so a
+//!   worker cannot tell which of its tests are checked. A grid case runs
+//!   each cell once and remembers it, so a check costs a draw and a
+//!   look-up.
 //! - **External programs** run only on workers, so a share of their tests
 //!   (`--audit-share`, default 0.01, by the same generator) and every event
 //!   that would carry at least `--audit-weight-share` (0.05) of the estimate

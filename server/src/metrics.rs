@@ -44,18 +44,17 @@ async fn snapshot(state: &AppState) -> Result<Snapshot, ApiError> {
     let groups = state.db.group_counts();
     let fold_drawn = state.samplers.explored().drawn();
     let replays = state.replays.totals();
-    let mut snapshot = state
+    state
         .db
-        .read(move |conn| read_snapshot(conn, groups, fold_drawn))
-        .await?;
-    snapshot.replays = replays;
-    Ok(snapshot)
+        .read(move |conn| read_snapshot(conn, groups, fold_drawn, replays))
+        .await
 }
 
 fn read_snapshot(
     conn: &rusqlite::Connection,
     groups: (u64, u64),
     fold_drawn: u64,
+    replays: ReplayTotals,
 ) -> Result<Snapshot, ApiError> {
     let campaigns = sql::all(
         conn,
@@ -93,7 +92,7 @@ fn read_snapshot(
         reclaimed,
         groups,
         fold_drawn,
-        replays: ReplayTotals::default(),
+        replays,
     })
 }
 

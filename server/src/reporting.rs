@@ -18,14 +18,14 @@ use tslg_api::{Method, ResultAck, ResultReport};
 use tslg_method::registry::CampaignTests;
 
 /// Replays a report may take on the async runtime, in expectation (the
-/// sample is drawn with the check): about 40 ns each on a grid case (the
-/// choice, a draw and a look-up), so about ten microseconds at most; more
-/// go to the blocking pool.
+/// sample is drawn with the check): about 30 ns each on a grid case (the
+/// choice, a draw and a look-up), so under ten microseconds; more go to
+/// the blocking pool.
 const INLINE_REPLAYS: f64 = 256.0;
 
 /// Replays a report may take on the writer itself (see [`at_once`]), in
 /// expectation: the sample's size is not known before it is drawn.
-const WRITER_REPLAYS: usize = 64;
+const WRITER_REPLAYS: f64 = 64.0;
 
 /// The replays a report's check takes in expectation when `tests` of its
 /// tests are new: its listed outcomes and the share of the tests sampled.
@@ -66,7 +66,7 @@ pub async fn receive(
         checked.to - checked.from,
         checked,
     );
-    if replays > WRITER_REPLAYS as f64 {
+    if replays > WRITER_REPLAYS {
         return in_parts_then_claim(state, lease_id, report, checked, next).await;
     }
     let next = match at_once(state, lease_id, report, checked, next).await {
@@ -317,7 +317,7 @@ fn decide(
         // large, then drawn again on the general path, would check each
         // test with less than the share.
         let work = expected_check(tests.as_ref(), config.replay_share, new, checked);
-        if work > WRITER_REPLAYS as f64 {
+        if work > WRITER_REPLAYS {
             return Ok(Decided::Declined);
         }
         let verified = replay_check::verify_counted(
