@@ -137,6 +137,7 @@ async fn round_trips(count: usize, library: bool) -> anyhow::Result<(Vec<f64>, f
                 offers: Vec::new(),
                 unhealthy: Vec::new(),
                 max_tests: None,
+                wait_seconds: None,
             })
             .await?
             .expect("work");

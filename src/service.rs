@@ -69,13 +69,17 @@ async fn stopped(mut rx: watch::Receiver<bool>) {
 
 impl LocalService {
     /// Starts a coordinator on `database_url` (a free loopback port) and
-    /// `workers` workers of `threads` threads each.
+    /// `workers` workers of `threads` threads each. The coordinator is open
+    /// (its store migrated) when this returns, so a bad database fails here
+    /// and the first request is answered at once rather than queued behind
+    /// the migrations.
     pub async fn start(database_url: &str, workers: usize, threads: usize) -> anyhow::Result<Self> {
         let listener = tokio::net::TcpListener::bind(SocketAddr::from(([127, 0, 0, 1], 0))).await?;
         let url = format!("http://{}", listener.local_addr()?);
         let (stop, rx) = watch::channel(false);
         let config = tslg_server::Config::embedded(database_url);
-        let server = tokio::spawn(tslg_server::serve(listener, config, stopped(rx.clone())));
+        let coordinator = tslg_server::Coordinator::open(config).await?;
+        let server = tokio::spawn(coordinator.serve(listener, stopped(rx.clone())));
         let workers = (1..=workers)
             .map(|k| {
                 let config =

@@ -49,7 +49,21 @@ pub struct LeaseRequest {
     /// test); the coordinator's own sizing applies below it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub max_tests: Option<u64>,
+    /// With no work right now, wait up to this many seconds (at most
+    /// [`MAX_CLAIM_WAIT_SECONDS`], and the coordinator's
+    /// `--max-claim-wait-seconds`) for some before answering 204: a
+    /// campaign that starts meanwhile is leased at once, and an idle
+    /// worker asks once per wait instead of polling. Absent or 0 answers
+    /// at once. Not in a report's `next_lease`, which is answered with the
+    /// report.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schema(minimum = 0.0, maximum = 30.0)]
+    pub wait_seconds: Option<f64>,
 }
+
+/// The longest a lease request may wait for work (`wait_seconds`), well
+/// below the HTTP timeouts of clients and proxies (a minute is common).
+pub const MAX_CLAIM_WAIT_SECONDS: f64 = 30.0;
 
 /// An external program a worker has stopped offering: it failed
 /// `failures` tests in a row; it is tried again after a rest.

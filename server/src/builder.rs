@@ -78,6 +78,8 @@ async fn record_build(
                 .db
                 .write(move |conn| libraries::mark_ready(conn, id, &Built::of(&library, seconds)))
                 .await?;
+            // Its pending campaigns run now.
+            state.work.announce();
             tracing::info!(library = id, size, seconds, "library ready");
         }
         Err(reason) => {

@@ -292,6 +292,9 @@ pub async fn start(state: &AppState, req: CreateCampaign) -> Result<CampaignRow,
             state.samplers.insert(row.id, tests);
         }
     }
+    if status == CampaignStatus::Running {
+        state.work.announce();
+    }
     Ok(rows.into_iter().next().expect("a campaign was inserted"))
 }
 

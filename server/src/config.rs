@@ -79,6 +79,19 @@ pub struct Config {
     #[arg(long, env = "TSLG_LEASE_SIZE")]
     pub lease_size: Option<u64>,
 
+    /// Longest a lease request waits for work when it asks to
+    /// (`wait_seconds`, at most 30): below the idle timeout of any proxy
+    /// in front of the coordinator.
+    #[arg(long, env = "TSLG_MAX_CLAIM_WAIT", default_value_t = 10.0)]
+    pub max_claim_wait_seconds: f64,
+
+    /// How often a waiting lease request asks the store again for work
+    /// that appears without a request to announce it (an expired lease, an
+    /// adaptive campaign's next stage); work a request starts (a campaign,
+    /// a ready library, a lease given back) wakes it at once.
+    #[arg(long, env = "TSLG_CLAIM_RECHECK", default_value_t = 0.5)]
+    pub claim_recheck_seconds: f64,
+
     /// Largest request body accepted, in bytes (uploaded tables included).
     #[arg(long, env = "TSLG_MAX_BODY", default_value_t = 16 * 1024 * 1024)]
     pub max_body_bytes: usize,
@@ -121,6 +134,17 @@ impl Config {
 
     /// Checks ranges clap cannot express.
     pub fn validate(&self) -> anyhow::Result<()> {
+        anyhow::ensure!(
+            (0.0..=tslg_api::MAX_CLAIM_WAIT_SECONDS).contains(&self.max_claim_wait_seconds),
+            "--max-claim-wait-seconds {} must be in [0, {}]",
+            self.max_claim_wait_seconds,
+            tslg_api::MAX_CLAIM_WAIT_SECONDS
+        );
+        anyhow::ensure!(
+            self.claim_recheck_seconds > 0.0 && self.claim_recheck_seconds <= 60.0,
+            "--claim-recheck-seconds {} must be in (0, 60]",
+            self.claim_recheck_seconds
+        );
         anyhow::ensure!(
             self.lease_ttl_seconds.is_finite() && self.lease_ttl_seconds >= 1.0,
             "--lease-ttl-seconds {} must be at least 1",

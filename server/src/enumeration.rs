@@ -127,6 +127,7 @@ pub async fn start(
     };
     let row = insert_build(state, library, Method::Enumerate, surrogate, rule).await?;
     state.samplers.insert(row.id, tests);
+    state.work.announce();
     tracing::info!(
         library = library.id,
         campaign = row.id,
@@ -273,6 +274,8 @@ pub async fn finish(state: &AppState, campaign_id: i64) -> Result<(), ApiError> 
                 .db
                 .write(move |conn| libraries::mark_ready(conn, id, &Built::of(&built, seconds)))
                 .await?;
+            // Its pending campaigns run now.
+            state.work.announce();
             tracing::info!(library = id, size, "library built on workers");
             Ok(())
         }

@@ -31,9 +31,11 @@ mod store;
 mod throughput;
 mod validate;
 mod whole_build;
+mod work_signal;
 mod workers;
 
-// The crate's surface is the coordinator itself: `serve` with its `Config`,
+// The crate's surface is the coordinator itself: `serve` with its `Config`
+// (or `Coordinator::open` then `Coordinator::serve`, to know it is ready),
 // and the online backup the `tslg db backup` command runs. Everything else is
 // internal to the coordinator (and documented where it helps a reader).
 pub use config::Config;
@@ -43,33 +45,73 @@ use anyhow::Context;
 use std::future::Future;
 use tokio::net::TcpListener;
 
+/// A coordinator whose store is open and migrated, its stored cases
+/// registered and its interrupted library builds resumed: ready to answer
+/// as soon as it serves. Opening is the slow part of a start (tens of
+/// milliseconds for a new database: the migrations, each with its fsync),
+/// and where a bad configuration or database fails.
+pub struct Coordinator {
+    state: state::AppState,
+}
+
+impl Coordinator {
+    /// Opens the coordinator `config` describes.
+    pub async fn open(config: Config) -> anyhow::Result<Self> {
+        config.validate()?;
+        if config.max_body_bytes < tslg_api::MAX_REPORT_BYTES {
+            tracing::warn!(
+                max_body_bytes = config.max_body_bytes,
+                largest_report = tslg_api::MAX_REPORT_BYTES,
+                "the body limit is below the largest report a worker may send: reports with many \
+                 events or invalid tests will be refused (413) and their leases released"
+            );
+        }
+        let db = db::Database::open(&config.database_url, config.durability).await?;
+        store::reports::move_legacy_events(&db).await?;
+        db.read(store::user_cases::register_stored)
+            .await
+            .map_err(|e| anyhow::anyhow!("user-defined cases: {e}"))?;
+        let state = state::AppState::new(db, config);
+        builder::resume_builds(&state).await?;
+        Ok(Self { state })
+    }
+
+    /// Serves on `listener` until `shutdown` completes, then finishes the
+    /// requests in flight.
+    pub async fn serve(
+        self,
+        listener: TcpListener,
+        shutdown: impl Future<Output = ()> + Send + 'static,
+    ) -> anyhow::Result<()> {
+        let address = listener.local_addr()?;
+        tracing::info!(%address, "coordinator listening");
+        // Lease requests waiting for work end at once on shutdown, so the
+        // graceful shutdown does not wait out their waits.
+        let work = self.state.work.clone();
+        let shutdown = async move {
+            shutdown.await;
+            work.close();
+        };
+        axum::serve(
+            problem_io::ProblemListener(listener),
+            routes::router(self.state),
+        )
+        .with_graceful_shutdown(shutdown)
+        .await
+        .context("server error")
+    }
+}
+
 /// Runs the coordinator on `listener` until `shutdown` completes, then
-/// finishes the requests in flight.
+/// finishes the requests in flight ([`Coordinator::open`], then
+/// [`Coordinator::serve`]).
 pub async fn serve(
     listener: TcpListener,
     config: Config,
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> anyhow::Result<()> {
-    config.validate()?;
-    if config.max_body_bytes < tslg_api::MAX_REPORT_BYTES {
-        tracing::warn!(
-            max_body_bytes = config.max_body_bytes,
-            largest_report = tslg_api::MAX_REPORT_BYTES,
-            "the body limit is below the largest report a worker may send: reports with many \
-             events or invalid tests will be refused (413) and their leases released"
-        );
-    }
-    let db = db::Database::open(&config.database_url, config.durability).await?;
-    store::reports::move_legacy_events(&db).await?;
-    db.read(store::user_cases::register_stored)
+    Coordinator::open(config)
+        .await?
+        .serve(listener, shutdown)
         .await
-        .map_err(|e| anyhow::anyhow!("user-defined cases: {e}"))?;
-    let state = state::AppState::new(db, config);
-    builder::resume_builds(&state).await?;
-    let address = listener.local_addr()?;
-    tracing::info!(%address, "coordinator listening");
-    axum::serve(problem_io::ProblemListener(listener), routes::router(state))
-        .with_graceful_shutdown(shutdown)
-        .await
-        .context("server error")
 }

@@ -50,6 +50,8 @@ pub struct Shared {
     pub sampler: Arc<crate::secret_sample::Sampler>,
     /// What the replay checks did, for `/metrics`.
     pub replays: Arc<crate::replay_counts::ReplayCounts>,
+    /// Wakes the lease requests that wait for work.
+    pub work: crate::work_signal::WorkSignal,
 }
 
 impl AppState {
@@ -66,6 +68,7 @@ impl AppState {
             pictures: Arc::default(),
             sampler: Arc::default(),
             replays: Arc::default(),
+            work: Default::default(),
         }))
     }
 }

@@ -245,6 +245,10 @@ pub async fn upload(state: &AppState, id: i64, upload: &LibraryUpload) -> Result
             Ok((campaign, library))
         })
         .await?;
+    if ok {
+        // The library's pending campaigns run now.
+        state.work.announce();
+    }
     tracing::info!(
         library = library.id,
         campaign = campaign.id,

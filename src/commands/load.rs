@@ -397,6 +397,7 @@ async fn simulated_worker(
         offers: Vec::new(),
         unhealthy: Vec::new(),
         max_tests: Some(shape.lease_tests),
+        wait_seconds: None,
     };
     let mut given = None;
     for round in 0..shape.requests {

@@ -23,6 +23,7 @@ mod service_external;
 mod service_fairness;
 mod service_highway;
 mod service_load;
+mod service_long_poll;
 mod service_next_lease;
 mod service_outside;
 mod service_paired;

@@ -419,6 +419,7 @@ async fn oversized_reports_are_refused_and_a_high_event_campaign_runs_through() 
             offers: Vec::new(),
             unhealthy: Vec::new(),
             max_tests: Some(70_000),
+            wait_seconds: None,
         })
         .await
         .unwrap()

@@ -253,6 +253,7 @@ async fn an_upload_that_is_not_the_library_asked_for_changes_nothing() {
             offers: vec![],
             unhealthy: vec![],
             max_tests: None,
+            wait_seconds: None,
         })
         .await
         .unwrap()

@@ -144,6 +144,7 @@ async fn car_following_library_campaigns_agree_with_ndd_baselines_with_far_fewer
                 offers: Vec::new(),
                 unhealthy: Vec::new(),
                 max_tests: None,
+                wait_seconds: None,
             })
             .await
             .unwrap();

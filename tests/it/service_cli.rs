@@ -165,6 +165,7 @@ async fn invalid_tests_use_indices_but_are_not_counted_as_tests() {
             offers: vec!["sim:cut-in:step".into()],
             unhealthy: Vec::new(),
             max_tests: None,
+            wait_seconds: None,
         })
         .await
         .unwrap()

@@ -315,6 +315,7 @@ async fn only_workers_offering_a_program_get_its_tests() {
         offers: offers.iter().map(|s| s.to_string()).collect(),
         unhealthy: Vec::new(),
         max_tests: None,
+        wait_seconds: None,
     };
     for offers in [
         &[][..],

@@ -69,6 +69,7 @@ async fn results_are_idempotent_fenced_on_the_attempt_and_leases_expire_and_retu
             offers: Vec::new(),
             unhealthy: Vec::new(),
             max_tests: None,
+            wait_seconds: None,
         })
         .await
         .unwrap()

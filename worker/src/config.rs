@@ -29,9 +29,18 @@ pub struct WorkerConfig {
     #[arg(long, env = "TSLG_WORKER_NAME")]
     pub name: Option<String>,
 
-    /// Longest pause between polls when there is no work (seconds).
+    /// Longest pause between polls when there is no work (seconds), for a
+    /// coordinator that answers a lease request at once (`--claim-wait-seconds
+    /// 0`, or its `--max-claim-wait-seconds 0`).
     #[arg(long, env = "TSLG_MAX_BACKOFF", default_value_t = 5.0)]
     pub max_backoff_seconds: f64,
+
+    /// With no work, how long a lease request waits at the coordinator for
+    /// some (long polling; at most 30 s, and the coordinator's
+    /// `--max-claim-wait-seconds`): a campaign is leased as soon as it
+    /// starts. 0 polls with backoff instead.
+    #[arg(long, env = "TSLG_CLAIM_WAIT", default_value_t = 10.0)]
+    pub claim_wait_seconds: f64,
 
     /// Exit when there has been no work for this many seconds (default:
     /// never).
@@ -72,6 +81,7 @@ impl WorkerConfig {
             token: None,
             name: Some(name.into()),
             max_backoff_seconds: 0.5,
+            claim_wait_seconds: 10.0,
             exit_when_idle_seconds: None,
             vut_exec: Vec::new(),
             vut_timeout_seconds: 60.0,
@@ -111,6 +121,11 @@ impl WorkerConfig {
         anyhow::ensure!(
             self.max_backoff_seconds.is_finite() && self.max_backoff_seconds > 0.0,
             "--max-backoff-seconds must be > 0"
+        );
+        anyhow::ensure!(
+            (0.0..=tslg_api::MAX_CLAIM_WAIT_SECONDS).contains(&self.claim_wait_seconds),
+            "--claim-wait-seconds must be in [0, {}]",
+            tslg_api::MAX_CLAIM_WAIT_SECONDS
         );
         anyhow::ensure!(
             self.vut_timeout_seconds.is_finite()

@@ -1,7 +1,8 @@
 //! The worker loop: take a lease, run its tests on the rayon pool in
 //! chunks, report each chunk (which also keeps the lease alive), heartbeat
-//! while a chunk runs, and back off with jitter when there is no work or no
-//! coordinator. On shutdown the running chunk is finished and reported and
+//! while a chunk runs; with no work, ask with a wait the coordinator holds
+//! until work appears (long polling), and back off with jitter when it
+//! answers at once or cannot be reached. On shutdown the running chunk is finished and reported and
 //! the rest of the lease is given back. A lease's last chunk is reported
 //! while the next lease runs (see [`crate::sending`]).
 
@@ -197,10 +198,24 @@ pub async fn run(
             let programs = Arc::clone(&worker.programs);
             tokio::task::spawn_blocking(move || programs.probe_rested()).await?;
         }
+        // With no lease at hand, the request waits at the coordinator for
+        // work (long polling), but not past the idle exit.
+        let wait = config
+            .exit_when_idle_seconds
+            .map_or(config.claim_wait_seconds, |s| {
+                config
+                    .claim_wait_seconds
+                    .min((s - idle_since.elapsed().as_secs_f64()).max(0.0))
+            });
+        let asked = Instant::now();
         let claimed = match worker.held_lease().await {
             Some(lease) => Ok(Some(lease)),
-            None => worker.client.claim(&worker.lease_request()).await,
+            None => worker.claim(wait).await,
         };
+        // The coordinator held the request (it waited for work): ask again
+        // at once. One that answered at once (its wait capped at 0 or near
+        // it, or the worker's wait 0) is polled with backoff.
+        let held = wait > 0.0 && asked.elapsed().as_secs_f64() >= wait.min(1.0) / 2.0;
         match claimed {
             Ok(Some(lease)) => {
                 idle.reset();
@@ -219,7 +234,9 @@ pub async fn run(
                 {
                     break;
                 }
-                worker.pause(idle.next_wait(&mut rng)).await;
+                if !held {
+                    worker.pause(idle.next_wait(&mut rng)).await;
+                }
             }
             Err(CallError::Refused {
                 status: 401,
@@ -300,6 +317,22 @@ impl Worker {
             offers: self.programs.offers(),
             unhealthy: self.programs.unhealthy(),
             max_tests: None,
+            wait_seconds: None,
+        }
+    }
+
+    /// Asks for a lease, waiting at the coordinator up to `wait` seconds
+    /// for one; `None` at once on shutdown. (A lease granted just as the
+    /// request is dropped is nobody's: it expires and is handed out again.)
+    async fn claim(&mut self, wait: f64) -> Result<Option<Lease>, CallError> {
+        let request = LeaseRequest {
+            wait_seconds: (wait > 0.0).then_some(wait),
+            ..self.lease_request()
+        };
+        let mut stop = self.stop.clone();
+        tokio::select! {
+            claimed = self.client.claim(&request) => claimed,
+            _ = stop.wait_for(|s| *s) => Ok(None),
         }
     }
 

@@ -10,9 +10,11 @@ use axum::extract::State;
 use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
 use axum::Json;
+use std::time::Duration;
 use tslg_api::{
     HeartbeatAck, Lease, LeaseFence, LeaseKey, LeaseRelease, LeaseRequest, LibraryUpload, Method,
-    Problem, ResultAck, ResultReport, TestCase, WorkerList, MAX_INVALID_REASON,
+    Problem, ResultAck, ResultReport, TestCase, WorkerList, MAX_CLAIM_WAIT_SECONDS,
+    MAX_INVALID_REASON,
 };
 use tslg_method::external::{check_program_name, ExternalMode};
 
@@ -42,7 +44,21 @@ pub async fn claim(
     ApiJson(req): ApiJson<LeaseRequest>,
 ) -> Result<Response, ApiError> {
     check_lease_request(&req)?;
-    Ok(match grant(&state, &req).await? {
+    // A request that asks to wait is held until work may be there (its
+    // campaign announced, or at every recheck): docs/api.md, long polling.
+    let wait = req
+        .wait_seconds
+        .unwrap_or(0.0)
+        .min(state.config.max_claim_wait_seconds);
+    let granted = state
+        .work
+        .ask_until(
+            Duration::from_secs_f64(wait),
+            Duration::from_secs_f64(state.config.claim_recheck_seconds),
+            || grant(&state, &req),
+        )
+        .await?;
+    Ok(match granted {
         Some(lease) => Json(lease).into_response(),
         None => StatusCode::NO_CONTENT.into_response(),
     })
@@ -57,6 +73,13 @@ fn check_lease_request(req: &LeaseRequest) -> Result<(), ApiError> {
             req.threads,
             leases::MAX_THREADS
         )));
+    }
+    if let Some(wait) = req.wait_seconds {
+        if !(0.0..=MAX_CLAIM_WAIT_SECONDS).contains(&wait) {
+            return Err(ApiError::Unprocessable(format!(
+                "wait_seconds = {wait} must be in [0, {MAX_CLAIM_WAIT_SECONDS}]"
+            )));
+        }
     }
     if req.max_tests == Some(0) {
         return Err(ApiError::Unprocessable(
@@ -283,6 +306,8 @@ pub async fn release(
         )));
     }
     let lease = leases::release(&state.db, id, &release.fence()).await?;
+    // Its tests are another worker's now (or when the lease's rest is due).
+    state.work.announce();
     state.workers.released(&release.worker, reason);
     tracing::info!(
         lease = id,
@@ -332,6 +357,13 @@ pub async fn results(
                 "next_lease.worker `{}` is not the reporting worker `{}`",
                 next.worker, report.worker
             )));
+        }
+        if next.wait_seconds.is_some_and(|w| w != 0.0) {
+            return Err(ApiError::Unprocessable(
+                "next_lease.wait_seconds: a report's next lease is answered with the report, \
+                 without waiting; wait in POST /api/v1/leases"
+                    .into(),
+            ));
         }
         check_lease_request(next).map_err(|e| match e {
             ApiError::Unprocessable(m) => ApiError::Unprocessable(format!("next_lease: {m}")),

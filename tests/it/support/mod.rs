@@ -111,6 +111,14 @@ impl ServerProcess {
         }
     }
 
+    /// SIGTERM, then waits for the coordinator to exit by itself.
+    pub fn terminate(mut self) -> std::process::ExitStatus {
+        let _ = Command::new("kill")
+            .args(["-TERM", &self.child.id().to_string()])
+            .status();
+        self.child.wait().expect("wait")
+    }
+
     /// SIGKILL: no shutdown, no flush beyond what was committed.
     pub fn kill(mut self) {
         let _ = self.child.kill();
@@ -313,6 +321,7 @@ pub async fn claim(client: &Client, worker: &str) -> Option<Lease> {
             offers: Vec::new(),
             unhealthy: Vec::new(),
             max_tests: None,
+            wait_seconds: None,
         })
         .await
         .expect("lease request")
@@ -585,6 +594,7 @@ pub fn ask(worker: &str, offers: &[&str]) -> tslg_api::LeaseRequest {
         offers: offers.iter().map(|o| o.to_string()).collect(),
         unhealthy: Vec::new(),
         max_tests: None,
+        wait_seconds: None,
     }
 }
 
