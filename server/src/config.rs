@@ -85,11 +85,13 @@ pub struct Config {
     #[arg(long, env = "TSLG_MAX_CLAIM_WAIT", default_value_t = 10.0)]
     pub max_claim_wait_seconds: f64,
 
-    /// How often a waiting lease request asks the store again for work
-    /// that appears without a request to announce it (an expired lease, an
-    /// adaptive campaign's next stage); work a request starts (a campaign,
-    /// a ready library, a lease given back) wakes it at once.
-    #[arg(long, env = "TSLG_CLAIM_RECHECK", default_value_t = 0.5)]
+    /// The longest a waiting lease request goes without asking the store
+    /// again, for work that appears without a request that wakes it (an
+    /// expired lease, an adaptive campaign's next stage): its rechecks
+    /// start at 50 ms and double up to this, jittered, as the workers' idle
+    /// polling did. Work a request starts (a campaign, a ready library, a
+    /// lease given back) wakes it at once.
+    #[arg(long, env = "TSLG_CLAIM_RECHECK", default_value_t = 5.0)]
     pub claim_recheck_seconds: f64,
 
     /// Largest request body accepted, in bytes (uploaded tables included).
@@ -129,7 +131,15 @@ pub enum BuildPlace {
 impl Config {
     /// Settings for an embedded coordinator (the demo, tests).
     pub fn embedded(database_url: impl Into<String>) -> Self {
-        Self::parse_from(["tslg-server", "--database-url", &database_url.into()])
+        // A few local workers: rechecks at most half a second apart, as
+        // the local workers' polling was.
+        Self::parse_from([
+            "tslg-server",
+            "--database-url",
+            &database_url.into(),
+            "--claim-recheck-seconds",
+            "0.5",
+        ])
     }
 
     /// Checks ranges clap cannot express.
@@ -141,8 +151,8 @@ impl Config {
             tslg_api::MAX_CLAIM_WAIT_SECONDS
         );
         anyhow::ensure!(
-            self.claim_recheck_seconds > 0.0 && self.claim_recheck_seconds <= 60.0,
-            "--claim-recheck-seconds {} must be in (0, 60]",
+            (0.05..=60.0).contains(&self.claim_recheck_seconds),
+            "--claim-recheck-seconds {} must be in [0.05, 60]",
             self.claim_recheck_seconds
         );
         anyhow::ensure!(

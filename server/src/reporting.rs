@@ -75,6 +75,9 @@ pub async fn receive(
             return Ok((recorded.ack, claimed.map(|c| *c)));
         }
         Ok(AtOnce::Contradicted(mismatch)) => {
+            // Its leases expired and its results taken back: work for the
+            // others.
+            state.work.announce();
             return Err(contradicted(&mismatch, &report.worker));
         }
         Ok(AtOnce::Declined(next)) => next,
@@ -446,6 +449,8 @@ async fn verify_builtin(
         return Ok(verified.explored);
     };
     audit::flag_for_mismatch(&state.db, worker, campaign, &mismatch).await?;
+    // Its leases expired and its results taken back: work for the others.
+    state.work.announce();
     Err(contradicted(&mismatch, worker))
 }
 

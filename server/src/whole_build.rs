@@ -45,6 +45,7 @@ pub async fn start(
     };
     let row =
         crate::enumeration::insert_build(state, library, Method::Build, surrogate, rule).await?;
+    state.work.announce();
     tracing::info!(
         library = library.id,
         campaign = row.id,

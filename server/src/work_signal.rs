@@ -1,70 +1,100 @@
 //! Lease requests that wait for work (`wait_seconds`, long polling).
 //!
 //! A worker with nothing to do asks with a wait; the coordinator holds the
-//! request until work may have appeared and asks the store again. Where
-//! work appears by a request (a campaign created running, a library ready
-//! and its campaigns with it, a library build's runs, a lease given back)
-//! the handler [`WorkSignal::announce`]s it and every waiting request asks
-//! at once, so a new campaign starts without a worker's polling delay.
-//! Work also appears without a request: a lease expires, a campaign's
-//! leases fall back below its predicted stop, an adaptive campaign opens
-//! its next stage. A waiting request therefore also asks again every
-//! recheck (`--claim-recheck-seconds`, half a second by default), which bounds the delay there as the workers' idle polling
-//! did (their backoff's ceiling was half a second), at one store claim per
-//! waiting worker per recheck instead of a request and a claim per poll.
+//! request until work may have appeared and asks the store again (a claim,
+//! one write). Where a request makes work claimable, its handler wakes the
+//! waiting requests: all of them for a campaign created running, a library
+//! turned ready (its pending campaigns run), a library build's runs or
+//! results taken back ([`WorkSignal::announce`]); one for a single lease
+//! given back ([`WorkSignal::announce_one`]), so a rolling restart of many
+//! workers does not make every idle one claim at each release.
 //!
-//! The signal is a generation count in a `watch` channel: a request reads
-//! it before it asks the store, so an announcement between the store's
-//! answer and the wait is not missed. On shutdown the signal closes and
-//! every wait ends, so the server's graceful shutdown is not held by them.
+//! Work also appears without such a request: a lease expires, a report
+//! lets a campaign's leases go past where they stopped (its predicted stop,
+//! a paired campaign's partner), an adaptive campaign opens its next stage.
+//! A waiting request finds these by asking again on its own, first soon and
+//! then less often, like the workers' idle polling it replaces: the k-th
+//! recheck comes uniformly in `[c/2, c]`, `c = min(50 ms · 2ᵏ, recheck)`
+//! (`--claim-recheck-seconds`, 5 s by default, the standalone worker's old
+//! backoff ceiling). The jitter spreads the rechecks of requests that
+//! started together. So an idle worker costs the store no more claims than
+//! its polling did, and a campaign starts at once instead of a poll later.
+//!
+//! Registration before the ask: a request enables its wake-up before it
+//! asks the store, so a wake between the store's answer and the wait is not
+//! missed. On shutdown the signal closes and every wait ends, so the
+//! server's graceful shutdown is not held by them.
 
 use std::future::Future;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
-use tokio::sync::watch;
+use tokio::sync::Notify;
 use tokio::time::Instant;
 
-/// What the waiting requests watch: the generation of announced work and
-/// whether the coordinator is shutting down.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-struct Generation {
-    count: u64,
-    closed: bool,
-}
+/// The first recheck's ceiling; each one after doubles it, up to the
+/// configured recheck.
+const FIRST_RECHECK: Duration = Duration::from_millis(50);
 
 /// Wakes the lease requests that wait for work.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct WorkSignal {
-    sender: Arc<watch::Sender<Generation>>,
+    inner: Arc<Inner>,
 }
 
-impl Default for WorkSignal {
-    fn default() -> Self {
-        Self {
-            sender: Arc::new(watch::Sender::new(Generation::default())),
-        }
-    }
+#[derive(Debug, Default)]
+struct Inner {
+    notify: Notify,
+    closed: AtomicBool,
+    /// Wake-ups sent, of all and of one (what the tests check handlers
+    /// send).
+    announced: [AtomicU64; 2],
 }
 
 impl WorkSignal {
-    /// Work may have appeared: every waiting request asks again now.
+    /// Work for many may have appeared: every waiting request asks again.
     pub fn announce(&self) {
-        self.sender.send_modify(|g| g.count += 1);
+        self.inner.announced[0].fetch_add(1, Ordering::Relaxed);
+        self.inner.notify.notify_waiters();
+    }
+
+    /// One range may have become claimable: one waiting request asks again
+    /// (or the next to wait asks at once, when none waits).
+    pub fn announce_one(&self) {
+        self.inner.announced[1].fetch_add(1, Ordering::Relaxed);
+        self.inner.notify.notify_one();
+    }
+
+    /// Wake-ups sent so far: `[of all, of one]`.
+    #[cfg(test)]
+    pub fn announced(&self) -> [u64; 2] {
+        self.inner
+            .announced
+            .each_ref()
+            .map(|a| a.load(Ordering::Relaxed))
     }
 
     /// The coordinator is shutting down: every wait ends, and none starts.
     pub fn close(&self) {
-        self.sender.send_modify(|g| g.closed = true);
+        self.inner.closed.store(true, Ordering::SeqCst);
+        self.inner.notify.notify_waiters();
+    }
+
+    fn closed(&self) -> bool {
+        self.inner.closed.load(Ordering::SeqCst)
     }
 
     /// Runs `ask` until it gives `Some`, or `wait` has passed, or the
-    /// signal closes: again after each announcement and every `recheck`.
-    /// `ask` runs at least once; a zero `wait` runs it once. The deadline
-    /// ends the wait without asking again: the worker asks anew at once.
+    /// signal closes: again at each wake-up and at rechecks that grow to
+    /// `recheck` (module doc), each `jitter()` (in `[0.5, 1]`) of its
+    /// ceiling. `ask` runs at least once; a zero `wait` runs it once. The
+    /// deadline ends the wait without asking again: the worker asks anew
+    /// at once.
     pub async fn ask_until<T, E, F, Fut>(
         &self,
         wait: Duration,
         recheck: Duration,
+        mut jitter: impl FnMut() -> f64,
         mut ask: F,
     ) -> Result<Option<T>, E>
     where
@@ -72,24 +102,25 @@ impl WorkSignal {
         Fut: Future<Output = Result<Option<T>, E>>,
     {
         let deadline = Instant::now() + wait;
+        let mut ceiling = FIRST_RECHECK.min(recheck);
         loop {
-            // Subscribed before asking: an announcement from here on wakes
-            // the wait below.
-            let mut watching = self.sender.subscribe();
+            // Registered before asking: a wake-up from here on ends the
+            // wait below at once.
+            let woken = self.inner.notify.notified();
+            tokio::pin!(woken);
+            woken.as_mut().enable();
             if let Some(found) = ask().await? {
                 return Ok(Some(found));
             }
             let now = Instant::now();
-            if now >= deadline || watching.borrow().closed {
+            if now >= deadline || self.closed() {
                 return Ok(None);
             }
-            let until = (now + recheck).min(deadline);
-            // An announcement (or the close), the recheck or the deadline
-            // (a dropped sender cannot happen while `self` holds it).
-            let announced = tokio::time::timeout_at(until, watching.changed())
-                .await
-                .is_ok();
-            if watching.borrow().closed || (!announced && until >= deadline) {
+            let pause = ceiling.mul_f64(jitter().clamp(0.5, 1.0));
+            ceiling = (ceiling * 2).min(recheck);
+            let until = (now + pause).min(deadline);
+            let was_woken = tokio::time::timeout_at(until, woken).await.is_ok();
+            if self.closed() || (!was_woken && until >= deadline) {
                 return Ok(None);
             }
         }
@@ -99,99 +130,102 @@ impl WorkSignal {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::sync::atomic::{AtomicU32, Ordering};
 
-    /// Asks that find work from `ready` on (virtual time since the start).
+    fn ms(ms: u64) -> Duration {
+        Duration::from_millis(ms)
+    }
+
+    /// The rechecks at their ceilings (`jitter() = 1`), growing to 0.5 s,
+    /// with asks that find work from `ready` on (virtual time since the
+    /// start): what they found, how many asks, and when it ended.
     async fn run(
         signal: &WorkSignal,
         wait: Duration,
         ready: Duration,
     ) -> (Option<u32>, u32, Duration) {
         let start = Instant::now();
-        let asked = AtomicU32::new(0);
+        let mut asked = 0;
         let found = signal
-            .ask_until(wait, ms(500), || {
-                let n = asked.fetch_add(1, Ordering::SeqCst) + 1;
-                let found = (start.elapsed() >= ready).then_some(n);
-                async move { Ok::<_, ()>(found) }
-            })
+            .ask_until(
+                wait,
+                ms(500),
+                || 1.0,
+                || {
+                    asked += 1;
+                    let found = (start.elapsed() >= ready).then_some(asked);
+                    async move { Ok::<_, ()>(found) }
+                },
+            )
             .await
             .unwrap();
-        (found, asked.load(Ordering::SeqCst), start.elapsed())
+        (found, asked, start.elapsed())
     }
 
-    fn ms(ms: u64) -> Duration {
-        Duration::from_millis(ms)
-    }
-
-    /// Work that appears by an announcement is found at the announcement,
-    /// not at the next recheck: with tokio's clock paused, the times are
-    /// exact.
+    /// Work that appears with a wake-up is found at the wake-up, not at
+    /// the next recheck: with tokio's clock paused, the times are exact.
     #[tokio::test(start_paused = true)]
-    async fn an_announcement_wakes_the_wait_at_once() {
-        let signal = WorkSignal::default();
-        let announcer = signal.clone();
-        tokio::spawn(async move {
-            tokio::time::sleep(Duration::from_millis(1234)).await;
-            announcer.announce();
-        });
-        let (found, asked, at) = run(
-            &signal,
-            Duration::from_secs(10),
-            Duration::from_millis(1234),
-        )
-        .await;
-        // Asked at 0, at the rechecks 0.5 and 1.0 s, then at the
-        // announcement.
-        assert_eq!((found, asked), (Some(4), 4));
-        assert_eq!(at, ms(1234));
+    async fn a_wake_up_ends_the_wait_at_once() {
+        for one in [false, true] {
+            let signal = WorkSignal::default();
+            let announcer = signal.clone();
+            tokio::spawn(async move {
+                tokio::time::sleep(ms(1234)).await;
+                if one {
+                    announcer.announce_one();
+                } else {
+                    announcer.announce();
+                }
+            });
+            let (found, asked, at) = run(&signal, ms(10_000), ms(1234)).await;
+            // Asked at 0 and at the rechecks 0.05, 0.15, 0.35 and 0.75 s,
+            // then at the wake-up.
+            assert_eq!((found, asked, at), (Some(6), 6, ms(1234)), "one: {one}");
+            assert_eq!(signal.announced(), if one { [0, 1] } else { [1, 0] });
+        }
     }
 
-    /// Without an announcement, work is found at the first recheck after
-    /// it appears; without work, the request ends at its deadline, having
-    /// asked at every recheck (not again at the deadline).
+    /// Without a wake-up, work is found at the first recheck after it
+    /// appears; the rechecks grow from 50 ms by doubling to the configured
+    /// 0.5 s. Without work, the request ends at its deadline without asking
+    /// again there.
     #[tokio::test(start_paused = true)]
-    async fn rechecks_find_unannounced_work_and_the_deadline_ends_the_wait() {
+    async fn rechecks_grow_find_unannounced_work_and_the_deadline_ends_the_wait() {
         let signal = WorkSignal::default();
-        let (found, asked, at) = run(
-            &signal,
-            Duration::from_secs(10),
-            Duration::from_millis(1100),
-        )
-        .await;
-        assert_eq!((found, asked, at), (Some(4), 4, ms(1500)));
-        let (found, asked, at) = run(
-            &signal,
-            Duration::from_millis(1200),
-            Duration::from_secs(1000),
-        )
-        .await;
-        assert_eq!((found, asked, at), (None, 3, ms(1200)));
+        // Asks at 0, 0.05, 0.15, 0.35, 0.75, 1.25, 1.75, 2.25 s.
+        let (found, asked, at) = run(&signal, ms(10_000), ms(1800)).await;
+        assert_eq!((found, asked, at), (Some(8), 8, ms(2250)));
+        let (found, asked, at) = run(&signal, ms(1200), ms(1_000_000)).await;
+        assert_eq!((found, asked, at), (None, 5, ms(1200)));
         // A zero wait asks once and answers at once.
-        let (found, asked, at) = run(&signal, Duration::ZERO, Duration::from_secs(1000)).await;
+        let (found, asked, at) = run(&signal, Duration::ZERO, ms(1_000_000)).await;
         assert_eq!((found, asked, at), (None, 1, ms(0)));
         // Work there at once is found by the first ask.
-        let (found, asked, at) = run(&signal, Duration::from_secs(10), Duration::ZERO).await;
+        let (found, asked, at) = run(&signal, ms(10_000), Duration::ZERO).await;
         assert_eq!((found, asked, at), (Some(1), 1, ms(0)));
     }
 
-    /// With a recheck longer than the wait, only an announcement wakes it:
-    /// unannounced work is left to the worker's next request.
+    /// The jitter shortens a recheck to between half its ceiling and all
+    /// of it: at half, the asks come at 0, 0.025, 0.075, 0.175 s.
     #[tokio::test(start_paused = true)]
-    async fn a_long_recheck_leaves_unannounced_work_to_the_next_request() {
+    async fn the_jitter_spreads_the_rechecks() {
         let signal = WorkSignal::default();
-        let asked = AtomicU32::new(0);
         let start = Instant::now();
+        let mut at = Vec::new();
         let found = signal
-            .ask_until(Duration::from_secs(2), Duration::from_secs(30), || {
-                let n = asked.fetch_add(1, Ordering::SeqCst) + 1;
-                let found = (start.elapsed() >= ms(100)).then_some(n);
-                async move { Ok::<_, ()>(found) }
-            })
+            .ask_until(
+                ms(10_000),
+                ms(500),
+                || 0.0,
+                || {
+                    at.push(start.elapsed());
+                    let n = at.len();
+                    async move { Ok::<_, ()>((n == 4).then_some(n)) }
+                },
+            )
             .await
             .unwrap();
-        assert_eq!((found, asked.load(Ordering::SeqCst)), (None, 1));
-        assert_eq!(start.elapsed(), ms(2000));
+        assert_eq!(found, Some(4));
+        assert_eq!(at, [ms(0), ms(25), ms(75), ms(175)]);
     }
 
     /// Closing ends the waits in progress at once, and later requests ask
@@ -201,37 +235,92 @@ mod tests {
         let signal = WorkSignal::default();
         let closer = signal.clone();
         tokio::spawn(async move {
-            tokio::time::sleep(Duration::from_millis(700)).await;
+            tokio::time::sleep(ms(700)).await;
             closer.close();
         });
-        let (found, asked, at) =
-            run(&signal, Duration::from_secs(30), Duration::from_secs(1000)).await;
-        assert_eq!((found, asked, at), (None, 2, ms(700)));
-        let (found, asked, at) =
-            run(&signal, Duration::from_secs(30), Duration::from_secs(1000)).await;
+        let (found, asked, at) = run(&signal, ms(30_000), ms(1_000_000)).await;
+        assert_eq!((found, asked, at), (None, 4, ms(700)));
+        let (found, asked, at) = run(&signal, ms(30_000), ms(1_000_000)).await;
         assert_eq!((found, asked, at), (None, 1, ms(0)));
     }
 
-    /// An announcement made while the store is being asked (after the
-    /// request read the generation) is not lost: the wait returns at once
-    /// and asks again.
+    /// A wake-up sent while the store is being asked (after the request
+    /// registered) is not lost: the wait ends at once and asks again. Of
+    /// all, or of one with no other request waiting.
     #[tokio::test(start_paused = true)]
-    async fn an_announcement_during_the_ask_is_not_missed() {
-        let signal = WorkSignal::default();
-        let inner = signal.clone();
-        let asked = AtomicU32::new(0);
-        let start = Instant::now();
-        let found = signal
-            .ask_until(Duration::from_secs(10), ms(500), || {
-                let n = asked.fetch_add(1, Ordering::SeqCst) + 1;
-                if n == 1 {
-                    inner.announce();
+    async fn a_wake_up_during_the_ask_is_not_missed() {
+        for one in [false, true] {
+            let signal = WorkSignal::default();
+            let inner = signal.clone();
+            let mut asked = 0;
+            let start = Instant::now();
+            let found = signal
+                .ask_until(
+                    ms(10_000),
+                    ms(500),
+                    || 1.0,
+                    || {
+                        asked += 1;
+                        if asked == 1 {
+                            if one {
+                                inner.announce_one();
+                            } else {
+                                inner.announce();
+                            }
+                        }
+                        let n = asked;
+                        async move { Ok::<_, ()>((n == 2).then_some(n)) }
+                    },
+                )
+                .await
+                .unwrap();
+            assert_eq!(found, Some(2), "one: {one}");
+            assert_eq!(start.elapsed(), Duration::ZERO, "one: {one}");
+        }
+    }
+
+    /// A wake-up of one wakes one of two waiting requests, and the other
+    /// waits on to its recheck; a wake-up of all wakes both.
+    #[tokio::test(start_paused = true)]
+    async fn one_wakes_one_and_all_wake_all() {
+        for one in [true, false] {
+            let signal = WorkSignal::default();
+            let announcer = signal.clone();
+            tokio::spawn(async move {
+                tokio::time::sleep(ms(1000)).await;
+                if one {
+                    announcer.announce_one();
+                } else {
+                    announcer.announce();
                 }
-                async move { Ok::<_, ()>((n == 2).then_some(n)) }
-            })
-            .await
-            .unwrap();
-        assert_eq!(found, Some(2));
-        assert_eq!(start.elapsed(), Duration::ZERO);
+            });
+            // Work from 1 s on for both; a recheck ceiling of 30 s, so
+            // after 0.75 s only a wake-up asks before 1.55 s.
+            let wait_for = |signal: WorkSignal| async move {
+                let start = Instant::now();
+                signal
+                    .ask_until(
+                        ms(10_000),
+                        ms(30_000),
+                        || 1.0,
+                        || {
+                            let found = (start.elapsed() >= ms(1000)).then_some(start.elapsed());
+                            async move { Ok::<_, ()>(found) }
+                        },
+                    )
+                    .await
+                    .unwrap()
+                    .unwrap()
+            };
+            let (a, b) = tokio::join!(wait_for(signal.clone()), wait_for(signal.clone()));
+            let mut ends = [a, b];
+            ends.sort();
+            let expected = if one {
+                [ms(1000), ms(1550)]
+            } else {
+                [ms(1000), ms(1000)]
+            };
+            assert_eq!(ends, expected, "one: {one}");
+        }
     }
 }

@@ -1,11 +1,10 @@
-//! Lease requests that wait for work (`wait_seconds`, long polling): a
-//! campaign that starts while a worker waits is leased to it at once, as
-//! is a lease another worker gives back; the waits end on shutdown; and a
-//! wait out of range is refused with a precise problem.
-//!
-//! The coordinators here recheck only every 30 s (`--claim-recheck-seconds`),
-//! longer than any wait the tests ask for, so a waiting request that gets a
-//! lease was woken by the start it waited for, not by a recheck.
+//! Lease requests that wait for work (`wait_seconds`, long polling), end
+//! to end over HTTP: a campaign that starts while a worker waits is leased
+//! to it within the wait, as is a lease another worker gives back; the
+//! waits end on shutdown, the coordinator's and the worker's; and a wait
+//! out of range is refused with a precise problem. Which requests wake the
+//! waits is tested on the router (`server/src/routes/tests.rs`), and when
+//! a wait asks again, in virtual time (`server/src/work_signal.rs`).
 
 use crate::support::*;
 use std::time::Duration;
@@ -30,16 +29,14 @@ fn ndd(max_tests: u64) -> CreateCampaign {
     }
 }
 
-fn announce_only(dir: &tempfile::TempDir, extra: &[&str]) -> ServerProcess {
-    let mut args = vec!["--claim-recheck-seconds", "30"];
-    args.extend_from_slice(extra);
-    ServerProcess::start(&dir.path().join("db.sqlite"), &args)
+fn coordinator(dir: &tempfile::TempDir, extra: &[&str]) -> ServerProcess {
+    ServerProcess::start(&dir.path().join("db.sqlite"), extra)
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_waiting_request_gets_the_campaign_that_starts_meanwhile() {
     let dir = scratch();
-    let server = announce_only(&dir, &[]);
+    let server = coordinator(&dir, &[]);
     let client = server.client();
     // Nothing to do: a request with a short wait answers 204 when it ends.
     assert!(client.claim(&waiting("w1", 0.3)).await.unwrap().is_none());
@@ -62,7 +59,7 @@ async fn a_waiting_request_gets_the_campaign_that_starts_meanwhile() {
 async fn a_waiting_request_gets_the_lease_another_worker_gives_back() {
     let dir = scratch();
     // One lease holds the whole campaign.
-    let server = announce_only(&dir, &["--lease-size", "1000"]);
+    let server = coordinator(&dir, &["--lease-size", "1000"]);
     let client = server.client();
     let id = client.create_campaign(&ndd(1000)).await.unwrap().id;
     let held = client.claim(&ask("w1", &[])).await.unwrap().expect("lease");
@@ -189,4 +186,34 @@ async fn waits_out_of_range_are_refused() {
     };
     let ack = client.report(lease.id, &plain).await.unwrap();
     assert_eq!(ack.accepted, lease.end - lease.start);
+}
+
+/// A coordinator that does not hold lease requests (its cap 0): the worker
+/// asking with a wait sees its 204s come at once and polls with backoff
+/// instead of asking again at once: a handful of requests in a second and
+/// a half, not the hundreds a worker asking again at once would send.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_worker_polls_with_backoff_when_the_coordinator_does_not_hold() {
+    let dir = scratch();
+    let server = coordinator(&dir, &["--max-claim-wait-seconds", "0"]);
+    let config = tslg_worker::WorkerConfig {
+        claim_wait_seconds: 10.0,
+        ..tslg_worker::WorkerConfig::local(&server.url, 1, "w1")
+    };
+    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+    let worker = tokio::spawn(tslg_worker::run(config, async move {
+        let _ = stopped.await;
+    }));
+    tokio::time::sleep(Duration::from_millis(1500)).await;
+    let _ = stop.send(());
+    worker.await.unwrap().unwrap();
+    let asked = scraped(
+        &server.url,
+        r#"tslg_http_request_duration_seconds_count{method="POST",route="/api/v1/leases",status="204"}"#,
+    )
+    .await;
+    // The backoff's pauses are uniform up to 0.05, 0.1, 0.2, 0.4, then
+    // 0.5 s: about a dozen requests in 1.5 s, and forty would need 35
+    // pauses of 0.25 s on average to fit in 1.5 s.
+    assert!((1.0..=40.0).contains(&asked), "{asked} requests");
 }

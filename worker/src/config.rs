@@ -36,7 +36,7 @@ pub struct WorkerConfig {
     pub max_backoff_seconds: f64,
 
     /// With no work, how long a lease request waits at the coordinator for
-    /// some (long polling; at most 30 s, and the coordinator's
+    /// some (long polling; 0.5 to 30 s, and at most the coordinator's
     /// `--max-claim-wait-seconds`): a campaign is leased as soon as it
     /// starts. 0 polls with backoff instead.
     #[arg(long, env = "TSLG_CLAIM_WAIT", default_value_t = 10.0)]
@@ -71,6 +71,12 @@ pub struct WorkerConfig {
     )]
     pub vut_cooldown_seconds: f64,
 }
+
+/// The shortest wait a worker asks for: a request the coordinator held at
+/// least half of it counts as held (and is asked again at once), one
+/// answered sooner as not (and polled with backoff), so no setting makes an
+/// idle worker ask more than about four times a second.
+pub const MIN_CLAIM_WAIT: f64 = 0.5;
 
 impl WorkerConfig {
     /// Settings for a worker in this process (the demo, tests).
@@ -123,8 +129,10 @@ impl WorkerConfig {
             "--max-backoff-seconds must be > 0"
         );
         anyhow::ensure!(
-            (0.0..=tslg_api::MAX_CLAIM_WAIT_SECONDS).contains(&self.claim_wait_seconds),
-            "--claim-wait-seconds must be in [0, {}]",
+            self.claim_wait_seconds == 0.0
+                || (MIN_CLAIM_WAIT..=tslg_api::MAX_CLAIM_WAIT_SECONDS)
+                    .contains(&self.claim_wait_seconds),
+            "--claim-wait-seconds must be 0 (poll) or in [{MIN_CLAIM_WAIT}, {}]",
             tslg_api::MAX_CLAIM_WAIT_SECONDS
         );
         anyhow::ensure!(

@@ -199,23 +199,28 @@ pub async fn run(
             tokio::task::spawn_blocking(move || programs.probe_rested()).await?;
         }
         // With no lease at hand, the request waits at the coordinator for
-        // work (long polling), but not past the idle exit.
-        let wait = config
+        // work (long polling), but not past the idle exit, and a second at
+        // most while a program rests (it is probed between requests).
+        let mut wait = config
             .exit_when_idle_seconds
             .map_or(config.claim_wait_seconds, |s| {
                 config
                     .claim_wait_seconds
                     .min((s - idle_since.elapsed().as_secs_f64()).max(0.0))
             });
+        if !worker.programs.unhealthy().is_empty() {
+            wait = wait.min(1.0);
+        }
         let asked = Instant::now();
         let claimed = match worker.held_lease().await {
             Some(lease) => Ok(Some(lease)),
             None => worker.claim(wait).await,
         };
         // The coordinator held the request (it waited for work): ask again
-        // at once. One that answered at once (its wait capped at 0 or near
-        // it, or the worker's wait 0) is polled with backoff.
-        let held = wait > 0.0 && asked.elapsed().as_secs_f64() >= wait.min(1.0) / 2.0;
+        // at once. One that answered sooner than half the shortest wait (its
+        // cap below that, or the worker's wait 0 or cut short by the idle
+        // exit) is polled with backoff.
+        let held = asked.elapsed().as_secs_f64() >= crate::config::MIN_CLAIM_WAIT / 2.0;
         match claimed {
             Ok(Some(lease)) => {
                 idle.reset();
@@ -331,6 +336,8 @@ impl Worker {
         };
         let mut stop = self.stop.clone();
         tokio::select! {
+            // An answer already there is taken, not dropped.
+            biased;
             claimed = self.client.claim(&request) => claimed,
             _ = stop.wait_for(|s| *s) => Ok(None),
         }

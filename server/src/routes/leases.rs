@@ -36,7 +36,7 @@ fn check_worker(worker: &str) -> Result<(), ApiError> {
 
 /// Takes a range of tests of a running campaign; 204 when there is none.
 #[utoipa::path(post, path = "/api/v1/leases", request_body = LeaseRequest, responses(
-    (status = 200, body = Lease), (status = 204, description = "No work right now"),
+    (status = 200, body = Lease), (status = 204, description = "No work right now (when the wait asked for ends)"),
     (status = 401, body = Problem), (status = 403, body = Problem),
     (status = 422, body = Problem)))]
 pub async fn claim(
@@ -55,6 +55,7 @@ pub async fn claim(
         .ask_until(
             Duration::from_secs_f64(wait),
             Duration::from_secs_f64(state.config.claim_recheck_seconds),
+            || rand::random_range(0.5..=1.0),
             || grant(&state, &req),
         )
         .await?;
@@ -76,8 +77,14 @@ fn check_lease_request(req: &LeaseRequest) -> Result<(), ApiError> {
     }
     if let Some(wait) = req.wait_seconds {
         if !(0.0..=MAX_CLAIM_WAIT_SECONDS).contains(&wait) {
+            // A huge number in exponent form, not in hundreds of digits.
+            let shown = if wait.abs() < 1e6 {
+                format!("{wait}")
+            } else {
+                format!("{wait:e}")
+            };
             return Err(ApiError::Unprocessable(format!(
-                "wait_seconds = {wait} must be in [0, {MAX_CLAIM_WAIT_SECONDS}]"
+                "wait_seconds = {shown} must be in [0, {MAX_CLAIM_WAIT_SECONDS}]"
             )));
         }
     }
@@ -128,8 +135,11 @@ async fn lease_of(
     let made = make_lease(state, req, claimed).await;
     if let Err(e) = &made {
         tracing::warn!(lease = id, error = %e, "a lease taken could not be handed out; given back");
-        if let Err(e) = leases::release(&state.db, id, &fence).await {
-            tracing::warn!(lease = id, error = %e, "the lease could not be given back either");
+        match leases::release(&state.db, id, &fence).await {
+            Ok(_) => state.work.announce_one(),
+            Err(e) => {
+                tracing::warn!(lease = id, error = %e, "the lease could not be given back either")
+            }
         }
     }
     made
@@ -307,7 +317,7 @@ pub async fn release(
     }
     let lease = leases::release(&state.db, id, &release.fence()).await?;
     // Its tests are another worker's now (or when the lease's rest is due).
-    state.work.announce();
+    state.work.announce_one();
     state.workers.released(&release.worker, reason);
     tracing::info!(
         lease = id,
@@ -358,6 +368,10 @@ pub async fn results(
                 next.worker, report.worker
             )));
         }
+        check_lease_request(next).map_err(|e| match e {
+            ApiError::Unprocessable(m) => ApiError::Unprocessable(format!("next_lease: {m}")),
+            other => other,
+        })?;
         if next.wait_seconds.is_some_and(|w| w != 0.0) {
             return Err(ApiError::Unprocessable(
                 "next_lease.wait_seconds: a report's next lease is answered with the report, \
@@ -365,10 +379,6 @@ pub async fn results(
                     .into(),
             ));
         }
-        check_lease_request(next).map_err(|e| match e {
-            ApiError::Unprocessable(m) => ApiError::Unprocessable(format!("next_lease: {m}")),
-            other => other,
-        })?;
     }
     let checked = std::sync::Arc::new(check_report(&report)?);
     let report = std::sync::Arc::new(report);

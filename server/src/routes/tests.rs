@@ -69,6 +69,29 @@ impl App {
         view["id"].as_i64().unwrap()
     }
 
+    /// An NDD campaign of the built-in IDM on cut-in (seed 3), which the
+    /// coordinator checks by running reported tests again.
+    async fn idm_ndd_campaign(&self) -> i64 {
+        let (status, view) = self
+            .call(
+                "POST",
+                "/api/v1/campaigns",
+                Some(
+                    json!({"case": "cut-in", "method": "ndd", "vut": {"model": "idm"},
+                            "beta": 0.01, "max_tests": 1_000_000, "seed": 3}),
+                ),
+            )
+            .await;
+        assert_eq!(status, StatusCode::CREATED, "{view}");
+        view["id"].as_i64().unwrap()
+    }
+
+    /// A lease of at most 40 tests for `worker`, offering no program.
+    async fn claim_builtin(&self, worker: &str) -> (StatusCode, Value) {
+        let ask = json!({"worker": worker, "threads": 1, "max_tests": 40});
+        self.call("POST", "/api/v1/leases", Some(ask)).await
+    }
+
     async fn claim(&self, worker: &str, max_tests: u64) -> (StatusCode, Value) {
         let ask = json!({"worker": worker, "threads": 1, "offers": ["x:cut-in:step"],
                          "max_tests": max_tests});
@@ -264,18 +287,7 @@ async fn an_overlong_target_is_a_414_problem() {
 #[tokio::test]
 async fn a_small_forged_report_is_refused_and_its_worker_flagged() {
     let app = app(|_| {}).await;
-    let (status, view) = app
-        .call(
-            "POST",
-            "/api/v1/campaigns",
-            Some(
-                json!({"case": "cut-in", "method": "ndd", "vut": {"model": "idm"},
-                        "beta": 0.01, "max_tests": 1_000_000, "seed": 3}),
-            ),
-        )
-        .await;
-    assert_eq!(status, StatusCode::CREATED, "{view}");
-    let id = view["id"].as_i64().unwrap();
+    let id = app.idm_ndd_campaign().await;
     let tests = app.state.samplers.cached(id).expect("built at creation");
     let events = |lease: &Value| -> Vec<u64> {
         let (from, to) = (
@@ -284,10 +296,7 @@ async fn a_small_forged_report_is_refused_and_its_worker_flagged() {
         );
         (from..to).filter(|&i| tests.run(i).event).collect()
     };
-    let claim = |worker: &'static str| {
-        let ask = json!({"worker": worker, "threads": 1, "max_tests": 40});
-        app.call("POST", "/api/v1/leases", Some(ask))
-    };
+    let claim = |worker: &'static str| app.claim_builtin(worker);
     let (_, first) = claim("forger").await;
     let mut honest = quiet_report("forger", &first);
     honest["events"] = json!(events(&first)
@@ -414,4 +423,72 @@ async fn campaigns_take_a_vehicle_name_and_the_default_budget_and_list_by_state(
             "{problem}"
         );
     }
+}
+
+/// The requests that make work claimable wake the lease requests waiting
+/// for it (`server/src/work_signal.rs`): a campaign created running, a
+/// library turned ready, a worker flagged (its results taken back) wake
+/// all; a lease given back wakes one. Other requests wake none.
+#[tokio::test]
+async fn requests_that_make_work_wake_the_waiting_lease_requests() {
+    let app = app(|_| {}).await;
+    let announced = || app.state.work.announced();
+    assert_eq!(announced(), [0, 0]);
+    let id = app.idm_ndd_campaign().await;
+    assert_eq!(announced(), [1, 0], "a campaign created running");
+    let claim = |worker: &'static str| app.claim_builtin(worker);
+    let (_, lease) = claim("w1").await;
+    app.call("GET", &format!("/api/v1/campaigns/{id}"), None)
+        .await;
+    assert_eq!(announced(), [1, 0], "a claim and a read wake none");
+    let release = json!({"worker": "w1", "attempt": lease["attempt"], "key": lease["key"],
+                         "reason": "shutting down"});
+    let (status, _) = app
+        .call(
+            "POST",
+            &format!("/api/v1/leases/{}/release", lease["id"]),
+            Some(release),
+        )
+        .await;
+    assert_eq!(status, StatusCode::NO_CONTENT);
+    assert_eq!(announced(), [1, 1], "a lease given back");
+
+    // A forged event: the worker is flagged and its results taken back.
+    let tests = app.state.samplers.cached(id).expect("built at creation");
+    let (_, lease) = claim("forger").await;
+    let start = lease["start"].as_u64().unwrap();
+    let fake = (start..start + 40).find(|&i| !tests.run(i).event).unwrap();
+    let mut forged = quiet_report("forger", &lease);
+    forged["events"] = json!([{"index": fake, "weight": 1.0}]);
+    let (status, problem) = app
+        .call(
+            "POST",
+            &format!("/api/v1/leases/{}/results", lease["id"]),
+            Some(forged),
+        )
+        .await;
+    assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY, "{problem}");
+    assert_eq!(announced(), [2, 1], "a worker flagged");
+
+    // A library built in the coordinator: ready, and its campaigns run.
+    let (status, library) = app
+        .call(
+            "POST",
+            "/api/v1/libraries",
+            Some(json!({"case": "cut-in", "surrogate": {"model": "idm"},
+                        "search": {"method": "exhaustive"}})),
+        )
+        .await;
+    assert_eq!(status, StatusCode::ACCEPTED, "{library}");
+    let path = format!("/api/v1/libraries/{}", library["id"]);
+    for _ in 0..600 {
+        let (_, library) = app.call("GET", &path, None).await;
+        if library["status"] == "ready" {
+            break;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+    }
+    let (_, library) = app.call("GET", &path, None).await;
+    assert_eq!(library["status"], "ready", "{library}");
+    assert_eq!(announced(), [3, 1], "a library turned ready");
 }
