@@ -16,9 +16,12 @@
 //! then less often, like the workers' idle polling it replaces: the k-th
 //! recheck comes uniformly in `[c/2, c]`, `c = min(50 ms · 2ᵏ, recheck)`
 //! (`--claim-recheck-seconds`, 5 s by default, the standalone worker's old
-//! backoff ceiling). The jitter spreads the rechecks of requests that
-//! started together. So an idle worker costs the store no more claims than
-//! its polling did, and a campaign starts at once instead of a poll later.
+//! backoff ceiling). A worker whose last wait found nothing starts at `c =
+//! recheck`: its rechecks do not begin anew at each of its requests. The
+//! jitter spreads the rechecks of requests that started together. So an
+//! idle worker costs the store about one claim per 3.75 s (its polling
+//! cost one per 2.5 s), and a campaign starts at once instead of a poll
+//! later.
 //!
 //! Registration before the ask: a request enables its wake-up before it
 //! asks the store, so a wake between the store's answer and the wait is not
@@ -32,9 +35,9 @@ use std::time::Duration;
 use tokio::sync::Notify;
 use tokio::time::Instant;
 
-/// The first recheck's ceiling; each one after doubles it, up to the
-/// configured recheck.
-const FIRST_RECHECK: Duration = Duration::from_millis(50);
+/// The first recheck's ceiling of a worker's request after work; each one
+/// after doubles it, up to the configured recheck.
+pub const FIRST_RECHECK: Duration = Duration::from_millis(50);
 
 /// Wakes the lease requests that wait for work.
 #[derive(Debug, Clone, Default)]
@@ -85,15 +88,15 @@ impl WorkSignal {
     }
 
     /// Runs `ask` until it gives `Some`, or `wait` has passed, or the
-    /// signal closes: again at each wake-up and at rechecks that grow to
-    /// `recheck` (module doc), each `jitter()` (in `[0.5, 1]`) of its
-    /// ceiling. `ask` runs at least once; a zero `wait` runs it once. The
-    /// deadline ends the wait without asking again: the worker asks anew
-    /// at once.
+    /// signal closes: again at each wake-up and at rechecks whose ceiling
+    /// starts at `first` and doubles up to `recheck` (module doc), each
+    /// `jitter()` (in `[0.5, 1]`) of its ceiling. `ask` runs at least once;
+    /// a zero `wait` runs it once. The deadline ends the wait without
+    /// asking again: the worker asks anew at once.
     pub async fn ask_until<T, E, F, Fut>(
         &self,
         wait: Duration,
-        recheck: Duration,
+        (first, recheck): (Duration, Duration),
         mut jitter: impl FnMut() -> f64,
         mut ask: F,
     ) -> Result<Option<T>, E>
@@ -102,7 +105,7 @@ impl WorkSignal {
         Fut: Future<Output = Result<Option<T>, E>>,
     {
         let deadline = Instant::now() + wait;
-        let mut ceiling = FIRST_RECHECK.min(recheck);
+        let mut ceiling = first.min(recheck);
         loop {
             // Registered before asking: a wake-up from here on ends the
             // wait below at once.
@@ -148,7 +151,7 @@ mod tests {
         let found = signal
             .ask_until(
                 wait,
-                ms(500),
+                (ms(50), ms(500)),
                 || 1.0,
                 || {
                     asked += 1;
@@ -204,6 +207,30 @@ mod tests {
         assert_eq!((found, asked, at), (Some(1), 1, ms(0)));
     }
 
+    /// A request of an idle worker starts at the long ceiling: asks at 0,
+    /// 0.5, 1.0 s and so on, not at 0.05, 0.15 s.
+    #[tokio::test(start_paused = true)]
+    async fn an_idle_worker_s_rechecks_start_at_the_ceiling() {
+        let signal = WorkSignal::default();
+        let start = Instant::now();
+        let mut at = Vec::new();
+        let found = signal
+            .ask_until(
+                ms(1200),
+                (ms(500), ms(500)),
+                || 1.0,
+                || {
+                    at.push(start.elapsed());
+                    async move { Ok::<Option<()>, ()>(None) }
+                },
+            )
+            .await
+            .unwrap();
+        assert_eq!(found, None);
+        assert_eq!(at, [ms(0), ms(500), ms(1000)]);
+        assert_eq!(start.elapsed(), ms(1200));
+    }
+
     /// The jitter shortens a recheck to between half its ceiling and all
     /// of it: at half, the asks come at 0, 0.025, 0.075, 0.175 s.
     #[tokio::test(start_paused = true)]
@@ -214,7 +241,7 @@ mod tests {
         let found = signal
             .ask_until(
                 ms(10_000),
-                ms(500),
+                (ms(50), ms(500)),
                 || 0.0,
                 || {
                     at.push(start.elapsed());
@@ -257,7 +284,7 @@ mod tests {
             let found = signal
                 .ask_until(
                     ms(10_000),
-                    ms(500),
+                    (ms(50), ms(500)),
                     || 1.0,
                     || {
                         asked += 1;
@@ -301,7 +328,7 @@ mod tests {
                 signal
                     .ask_until(
                         ms(10_000),
-                        ms(30_000),
+                        (ms(50), ms(30_000)),
                         || 1.0,
                         || {
                             let found = (start.elapsed() >= ms(1000)).then_some(start.elapsed());

@@ -23,6 +23,9 @@ struct Entry {
     invalid: u64,
     /// Why it last gave a lease back, when it said.
     last_release: Option<String>,
+    /// Its last lease request waited and found nothing: it is idle, and
+    /// its next wait rechecks at the long ceiling from the start.
+    idle: bool,
 }
 
 #[derive(Default)]
@@ -73,11 +76,26 @@ impl WorkerRegistry {
                 tests: 0,
                 invalid: 0,
                 last_release: None,
+                idle: false,
             });
         entry.threads = request.threads;
         entry.offers = request.offers.clone();
         entry.unhealthy = request.unhealthy.clone();
         entry.last_seen = Instant::now();
+    }
+
+    /// Whether `worker`'s last lease request waited and found nothing.
+    pub fn idle(&self, worker: &str) -> bool {
+        let workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
+        workers.get(worker).is_some_and(|e| e.idle)
+    }
+
+    /// Records whether `worker`'s lease request waited and found nothing.
+    pub fn set_idle(&self, worker: &str, idle: bool) {
+        let mut workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(entry) = workers.get_mut(worker) {
+            entry.idle = idle;
+        }
     }
 
     /// Counts a report's accepted tests toward the worker that sent it (one

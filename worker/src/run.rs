@@ -220,7 +220,8 @@ pub async fn run(
         // at once. One that answered sooner than half the shortest wait (its
         // cap below that, or the worker's wait 0 or cut short by the idle
         // exit) is polled with backoff.
-        let held = asked.elapsed().as_secs_f64() >= crate::config::MIN_CLAIM_WAIT / 2.0;
+        let held = wait > 0.0
+            && asked.elapsed().as_secs_f64() >= wait.min(crate::config::MIN_CLAIM_WAIT) / 2.0;
         match claimed {
             Ok(Some(lease)) => {
                 idle.reset();

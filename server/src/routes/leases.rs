@@ -6,6 +6,7 @@ use crate::reporting;
 use crate::routes::ApiPath;
 use crate::state::AppState;
 use crate::store::{audits, campaigns, leases};
+use crate::work_signal::FIRST_RECHECK;
 use axum::extract::State;
 use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
@@ -50,15 +51,26 @@ pub async fn claim(
         .wait_seconds
         .unwrap_or(0.0)
         .min(state.config.max_claim_wait_seconds);
+    // A worker whose last wait found nothing rechecks at the long ceiling
+    // from the start: its rechecks do not begin anew at every request.
+    let recheck = Duration::from_secs_f64(state.config.claim_recheck_seconds);
+    let first = if state.workers.idle(&req.worker) {
+        recheck
+    } else {
+        FIRST_RECHECK
+    };
     let granted = state
         .work
         .ask_until(
             Duration::from_secs_f64(wait),
-            Duration::from_secs_f64(state.config.claim_recheck_seconds),
+            (first, recheck),
             || rand::random_range(0.5..=1.0),
             || grant(&state, &req),
         )
         .await?;
+    state
+        .workers
+        .set_idle(&req.worker, wait > 0.0 && granted.is_none());
     Ok(match granted {
         Some(lease) => Json(lease).into_response(),
         None => StatusCode::NO_CONTENT.into_response(),

@@ -490,5 +490,35 @@ async fn requests_that_make_work_wake_the_waiting_lease_requests() {
     }
     let (_, library) = app.call("GET", &path, None).await;
     assert_eq!(library["status"], "ready", "{library}");
+    // The builder announces when the write's answer reaches it, which may
+    // be just after the status can be read.
+    for _ in 0..100 {
+        if announced() == [3, 1] {
+            break;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+    }
     assert_eq!(announced(), [3, 1], "a library turned ready");
+}
+
+/// A worker whose lease request waited and found nothing is idle (its next
+/// wait rechecks at the long ceiling from the start), until a request of
+/// it gets a lease; a request that did not wait does not make it idle.
+#[tokio::test]
+async fn a_wait_that_finds_nothing_marks_its_worker_idle() {
+    let app = app(|_| {}).await;
+    let ask = |wait: f64| {
+        let ask = json!({"worker": "w1", "threads": 1, "max_tests": 40, "wait_seconds": wait});
+        app.call("POST", "/api/v1/leases", Some(ask))
+    };
+    let (status, _) = ask(0.0).await;
+    assert_eq!(status, StatusCode::NO_CONTENT);
+    assert!(!app.state.workers.idle("w1"), "no wait, not idle");
+    let (status, _) = ask(0.2).await;
+    assert_eq!(status, StatusCode::NO_CONTENT);
+    assert!(app.state.workers.idle("w1"), "a wait that found nothing");
+    app.idm_ndd_campaign().await;
+    let (status, lease) = ask(0.2).await;
+    assert_eq!(status, StatusCode::OK, "{lease}");
+    assert!(!app.state.workers.idle("w1"), "a lease");
 }
