@@ -2,9 +2,10 @@
 //! chunks, report each chunk (which also keeps the lease alive), heartbeat
 //! while a chunk runs; with no work, ask with a wait the coordinator holds
 //! until work appears (long polling), and back off with jitter when it
-//! answers at once or cannot be reached. On shutdown the running chunk is finished and reported and
-//! the rest of the lease is given back. A lease's last chunk is reported
-//! while the next lease runs (see [`crate::sending`]).
+//! answers at once or cannot be reached. On shutdown the running chunk is
+//! finished and reported and the rest of the lease is given back. A lease's
+//! last chunk is reported while the next lease runs (see
+//! [`crate::sending`]).
 
 use crate::backoff::Backoff;
 use crate::config::WorkerConfig;
