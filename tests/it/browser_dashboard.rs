@@ -157,7 +157,9 @@ async fn the_dashboard_follows_a_running_campaign_and_agrees_with_the_api() {
     let library = ready_library(&client, "idm", true).await;
     // The NDD baseline to β = 0.005 needs about 2 × 10⁷ tests: it runs for
     // as long as the test looks at it, and is cancelled at the end.
-    let request = campaign(Method::Ndd, library.id, "fvdm", 0.005, 1);
+    // (The default budget of 10⁷ tests would end it first.)
+    let mut request = campaign(Method::Ndd, library.id, "fvdm", 0.005, 1);
+    request.max_tests = tslg_method::estimator::MAX_TESTS_LIMIT;
     let id = client.create_campaign(&request).await.unwrap().id;
     let ndd = id;
     let driver = Driver::start();

@@ -77,11 +77,17 @@ async fn metrics_parse_as_prometheus_exposition_and_agree_with_the_api() {
             .unwrap();
         views.push(finished(&client, started.id, Duration::from_secs(120)).await);
     }
-    // One more, cancelled while pending or running.
-    let cancelled = client
-        .create_campaign(&campaign(Method::Ndd, library.id, "idm", 0.001, 4))
-        .await
-        .unwrap();
+    // One more, cancelled while pending or running. No campaign this test
+    // cancels may stop on its own first: at β = 0.001 an NDD baseline needs
+    // far more than the default budget of 10⁷ tests, and two workers can
+    // use that up before the test looks (CI once found the campaign
+    // exhausted at its cancel), so the budget is the largest allowed.
+    let endless = |seed| {
+        let mut request = campaign(Method::Ndd, library.id, "idm", 0.001, seed);
+        request.max_tests = tslg_method::estimator::MAX_TESTS_LIMIT;
+        request
+    };
+    let cancelled = client.create_campaign(&endless(4)).await.unwrap();
     client.cancel_campaign(cancelled.id).await.unwrap();
     let cancelled = client.campaign(cancelled.id).await.unwrap();
     let url = format!("{}/metrics", server.url);
@@ -174,10 +180,7 @@ async fn metrics_parse_as_prometheus_exposition_and_agree_with_the_api() {
     // A running campaign has series of its own, labelled by its id, case
     // and method; the stopped ones have none (bounded cardinality).
     assert!(!text.contains("tslg_campaign_tests{"), "{text}");
-    let running = client
-        .create_campaign(&campaign(Method::Ndd, library.id, "idm", 0.001, 5))
-        .await
-        .unwrap();
+    let running = client.create_campaign(&endless(5)).await.unwrap();
     let labels = [
         ("campaign", running.id.to_string()),
         ("case", "cut-in".to_owned()),
