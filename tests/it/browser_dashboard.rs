@@ -155,10 +155,12 @@ async fn the_dashboard_follows_a_running_campaign_and_agrees_with_the_api() {
     let _worker = WorkerProcess::start(&server.url, 1, "w1");
     let client = server.client();
     let library = ready_library(&client, "idm", true).await;
-    // The NDD baseline to β = 0.005 needs about 2 × 10⁷ tests: it runs for
-    // as long as the test looks at it, and is cancelled at the end.
-    // (The default budget of 10⁷ tests would end it first.)
-    let mut request = campaign(Method::Ndd, library.id, "fvdm", 0.005, 1);
+    // The NDD baseline to β = 0.001 needs about 5 × 10⁸ tests (z²/(β²P(A)),
+    // P(A) = 5.4 × 10⁻³): it runs for as long as the test looks at it, and
+    // is cancelled at the end. (At β = 0.005 it needed 2 × 10⁷, a few
+    // seconds of a fast worker, about what the browser's looks take; the
+    // default budget of 10⁷ tests would end it sooner still.)
+    let mut request = campaign(Method::Ndd, library.id, "fvdm", 0.001, 1);
     request.max_tests = tslg_method::estimator::MAX_TESTS_LIMIT;
     let id = client.create_campaign(&request).await.unwrap().id;
     let ndd = id;
@@ -227,7 +229,7 @@ async fn the_dashboard_follows_a_running_campaign_and_agrees_with_the_api() {
             "at {width} px each row of figures spans the page and each drawing its figure"
         );
     }
-    let legend = eval(&browser, "[...document.querySelectorAll('#half-width-figure svg text')].some(t => t.textContent.trim() === 'β = 0.005')").await;
+    let legend = eval(&browser, "[...document.querySelectorAll('#half-width-figure svg text')].some(t => t.textContent.trim() === 'β = 0.001')").await;
     assert_eq!(legend, json!(true));
     // Redrawn as results arrive: its title counts the tests (the number of
     // points is capped, so it does not tell).

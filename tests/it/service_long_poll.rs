@@ -106,7 +106,14 @@ async fn shutdown_ends_the_waits() {
             tokio::spawn(async move { client.claim(&waiting(&format!("w{k}"), 30.0)).await })
         })
         .collect();
-    tokio::time::sleep(Duration::from_millis(500)).await;
+    // Each request is in the coordinator once its worker is listed (it is
+    // listed at its first ask, after its wake-up is registered); a fixed
+    // sleep could send the signal before a loaded host delivered them.
+    let deadline = std::time::Instant::now() + Duration::from_secs(60);
+    while client.workers().await.unwrap().workers.len() < 3 {
+        assert!(std::time::Instant::now() < deadline, "the requests arrive");
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
     let exited = tokio::task::spawn_blocking(move || server.terminate());
     for waiter in waiters {
         // A hang guard, not a speed limit: the waits are 30 s.

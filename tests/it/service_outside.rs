@@ -130,7 +130,9 @@ async fn a_mismatched_surrogate_is_flagged_and_the_guard_keeps_testing_until_the
 async fn a_campaign_started_before_the_outside_bound_is_counted_again_from_its_first_test() {
     let dir = scratch();
     let database = dir.path().join("db.sqlite");
-    let options = ["--lease-size", "5000"];
+    // The killed worker's lease holds the prefix until it expires: a short
+    // TTL, so the test does not wait out the default 30 s.
+    let options = ["--lease-size", "5000", "--lease-ttl-seconds", "2"];
     let server = ServerProcess::start(&database, &options);
     let worker = WorkerProcess::start(&server.url, 1, "w1");
     let client = server.client();

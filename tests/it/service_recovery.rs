@@ -20,7 +20,7 @@ async fn a_coordinator_killed_mid_campaign_continues_from_its_database_to_the_sa
     let _worker = WorkerProcess::start(&server.url, 1, "w1");
     let client = server.client();
     let library = ready_library(&client, "idm", false).await;
-    let request = campaign(Method::Ndd, library.id, "idm", 0.04, 9);
+    let request = disturbed_ndd(library.id);
     let id = client.create_campaign(&request).await.unwrap().id;
     let started = Instant::now();
     let before = loop {
@@ -68,7 +68,7 @@ async fn a_worker_killed_mid_lease_changes_neither_the_stop_index_nor_the_estima
     let server = ServerProcess::start(&dir.path().join("db.sqlite"), &options);
     let client = server.client();
     let library = ready_library(&client, "idm", false).await;
-    let request = campaign(Method::Ndd, library.id, "idm", 0.04, 9);
+    let request = disturbed_ndd(library.id);
     let id = client.create_campaign(&request).await.unwrap().id;
     let doomed = WorkerProcess::start(&server.url, 1, "doomed");
     let view = wait_for(&client, id, Duration::from_secs(120), |v| {
