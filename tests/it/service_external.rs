@@ -5,7 +5,8 @@
 //! built-in model (same model, another process); a program that crashes,
 //! hangs, prints garbage or exits early costs only the tests it spoiled;
 //! one that keeps failing is reported unhealthy instead of burning the
-//! campaign; and only workers offering a program get its tests.
+//! campaign; a worker killed outright takes its programs with it; and only
+//! workers offering a program get its tests.
 
 use crate::support::*;
 use std::path::{Path, PathBuf};
@@ -241,6 +242,66 @@ async fn crashes_hangs_garbage_and_early_exits_cost_only_the_tests_they_spoil() 
             }
         }
     }
+}
+
+/// A worker killed outright (SIGKILL: no chance to stop its programs)
+/// takes them with it: a program stuck in a scenario does not run on,
+/// orphaned, for as long as it is stuck (here an hour).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_killed_worker_takes_its_programs_with_it() {
+    let dir = scratch();
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &[]);
+    let client = server.client();
+    // Every test hangs, and the stuck process leaves `hanging-PID` here.
+    let markers = dir.path().join("markers");
+    std::fs::create_dir(&markers).unwrap();
+    let exec = python(
+        "py-stuck",
+        "tests/fixtures/faulty_vut.py",
+        &format!("hang 1 0 {}", markers.display()),
+    );
+    let worker = WorkerProcess::start_with(
+        &server.url,
+        1,
+        "stuck",
+        &["--vut-exec", &exec, "--vut-timeout", "600"],
+    );
+    let library = ready_library(&client, "idm", true).await;
+    let request = with_vut(
+        campaign(Method::Library, library.id, "idm", 0.2, 1),
+        serde_json::json!({"external": "py-stuck"}),
+    );
+    client.create_campaign(&request).await.unwrap();
+    let started = Instant::now();
+    let pid: u32 = loop {
+        let stuck = std::fs::read_dir(&markers).unwrap().find_map(|e| {
+            let name = e.unwrap().file_name().into_string().unwrap();
+            name.strip_prefix("hanging-").map(|p| p.parse().unwrap())
+        });
+        if let Some(pid) = stuck {
+            break pid;
+        }
+        assert!(started.elapsed() < Duration::from_secs(60), "never stuck");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    };
+    // Running, or a zombie not yet reaped by whoever inherited it.
+    let running = || {
+        std::fs::read_to_string(format!("/proc/{pid}/stat"))
+            .is_ok_and(|stat| !stat.rsplit(") ").next().unwrap().starts_with('Z'))
+    };
+    assert!(running(), "the stuck program runs while its worker does");
+    worker.kill();
+    let started = Instant::now();
+    while running() && started.elapsed() < Duration::from_secs(20) {
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    let orphan = running();
+    if orphan {
+        let _ = std::process::Command::new("kill")
+            .args(["-KILL", &pid.to_string()])
+            .status();
+    }
+    assert!(!orphan, "program {pid} outlived its killed worker");
 }
 
 async fn library_file(client: &Client, id: i64) -> Vec<u8> {

@@ -15,6 +15,7 @@
 
 mod process;
 mod protocol;
+mod spawner;
 
 pub use process::{Capabilities, Fault, ProgramProcess};
 

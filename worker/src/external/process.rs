@@ -4,9 +4,11 @@
 //! watchdog thread kills the group when a request's deadline passes, so a
 //! write to a program that stopped reading cannot block either; another
 //! thread keeps the last lines of stderr for the failure reason. Dropping
-//! the process kills the group (the program and anything it started).
+//! the process kills the group (the program and anything it started); a
+//! worker killed outright takes the program with it ([`super::spawner`]).
 
 use super::protocol::{Reply, Request, MAX_LINE};
+use super::spawner;
 use std::collections::{BTreeMap, VecDeque};
 use std::fmt;
 use std::io::{BufRead, BufReader, Read, Write};
@@ -197,14 +199,14 @@ impl ProgramProcess {
         if let Some(dir) = dir {
             command.current_dir(dir);
         }
-        let mut child = command
+        command
             .args(args)
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
-            .process_group(0)
-            .spawn()
-            .map_err(|e| Fault::Spawn(format!("{program}: {e}")))?;
+            .process_group(0);
+        let mut child =
+            spawner::spawn(command).map_err(|e| Fault::Spawn(format!("{program}: {e}")))?;
         let group = child.id() as i32;
         let watchdog = Arc::new(Watchdog::default());
         let watching = Arc::clone(&watchdog);
