@@ -1,22 +1,37 @@
 //! Request latencies, observed as requests are answered: a histogram by
 //! method, route template and status, which `/metrics` exposes.
+//!
+//! A lease request that asks to wait (long polling) is held while there is
+//! no work. That time is the workers' idleness, not the coordinator's
+//! slowness: the latency leaves it out (so an alert on the lease route's
+//! p99 means what it says), and a histogram of its own counts it.
 
 use axum::extract::{MatchedPath, Request, State};
 use axum::middleware::Next;
 use axum::response::Response;
-use prometheus::{HistogramOpts, HistogramVec, Registry};
+use prometheus::{Histogram, HistogramOpts, HistogramVec, Registry};
 use std::sync::Arc;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// Latency buckets in seconds: 0.5 ms to 10 s.
 const LATENCY_BUCKETS: [f64; 14] = [
     0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0,
 ];
 
+/// Buckets of the time a lease request was held, seconds: 10 ms to the
+/// longest wait a request may ask (30 s).
+const HELD_BUCKETS: [f64; 9] = [0.01, 0.05, 0.1, 0.5, 1.0, 2.5, 5.0, 10.0, 30.0];
+
+/// Set on a response by a handler that held its request waiting for work:
+/// how long it waited, which is not the request's latency.
+#[derive(Debug, Clone, Copy)]
+pub struct HeldForWork(pub Duration);
+
 /// The metrics observed while serving.
 pub struct Metrics {
     registry: Registry,
     latency: HistogramVec,
+    held: Histogram,
 }
 
 impl Default for Metrics {
@@ -31,10 +46,26 @@ impl Default for Metrics {
             &["method", "route", "status"],
         )
         .expect("valid histogram");
-        registry
-            .register(Box::new(latency.clone()))
-            .expect("registered once");
-        Self { registry, latency }
+        let held = Histogram::with_opts(
+            HistogramOpts::new(
+                "tslg_lease_request_held_seconds",
+                "Time lease requests that asked to wait were held for work \
+                 (left out of their latency): the workers' idle time.",
+            )
+            .buckets(HELD_BUCKETS.to_vec()),
+        )
+        .expect("valid histogram");
+        for metric in [
+            Box::new(latency.clone()) as Box<dyn prometheus::core::Collector>,
+            Box::new(held.clone()),
+        ] {
+            registry.register(metric).expect("registered once");
+        }
+        Self {
+            registry,
+            latency,
+            held,
+        }
     }
 }
 
@@ -70,9 +101,14 @@ pub async fn observe(
         .get::<MatchedPath>()
         .map_or_else(|| "unmatched".to_owned(), |p| p.as_str().to_owned());
     let response = next.run(request).await;
+    let mut latency = started.elapsed();
+    if let Some(HeldForWork(held)) = response.extensions().get::<HeldForWork>() {
+        latency = latency.saturating_sub(*held);
+        metrics.held.observe(held.as_secs_f64());
+    }
     metrics
         .latency
         .with_label_values(&[method, route.as_str(), response.status().as_str()])
-        .observe(started.elapsed().as_secs_f64());
+        .observe(latency.as_secs_f64());
     response
 }

@@ -224,3 +224,37 @@ async fn a_worker_polls_with_backoff_when_the_coordinator_does_not_hold() {
     // pauses of 0.25 s on average to fit in 1.5 s.
     assert!((1.0..=40.0).contains(&asked), "{asked} requests");
 }
+
+/// The time a request was held for work is the workers' idle time, not
+/// the coordinator's latency: `/metrics` counts it apart, so an alert on
+/// the lease route's latency is not set off by idle workers.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_time_held_is_counted_apart_from_the_latency() {
+    let dir = scratch();
+    let server = coordinator(&dir, &[]);
+    let client = server.client();
+    let started = std::time::Instant::now();
+    assert!(client.claim(&waiting("w1", 1.0)).await.unwrap().is_none());
+    // A request without a wait is not held.
+    assert!(client.claim(&ask("w2", &[])).await.unwrap().is_none());
+    let round_trips = started.elapsed().as_secs_f64();
+    let url = &server.url;
+    let latency = |part: &str| {
+        format!(
+            "tslg_http_request_duration_seconds_{part}\
+             {{method=\"POST\",route=\"/api/v1/leases\",status=\"204\"}}"
+        )
+    };
+    let latency_count = scraped(url, &latency("count")).await;
+    let latency = scraped(url, &latency("sum")).await;
+    let held_count = scraped(url, "tslg_lease_request_held_seconds_count").await;
+    let held = scraped(url, "tslg_lease_request_held_seconds_sum").await;
+    assert_eq!((latency_count, held_count), (2.0, 1.0));
+    // Together they are the time the coordinator took, at least the wait
+    // and at most the round trips; the wait is in the held time only.
+    assert!(
+        (1.0..=round_trips).contains(&(held + latency)),
+        "held {held} s, latency {latency} s, round trips {round_trips} s"
+    );
+    assert!(latency < held, "held {held} s, latency {latency} s");
+}

@@ -1,6 +1,7 @@
 //! `/api/v1/leases`: workers take ranges of tests and report outcomes.
 
 use crate::error::{ApiError, ApiJson};
+use crate::latency::HeldForWork;
 use crate::report_check::check_report;
 use crate::reporting;
 use crate::routes::ApiPath;
@@ -11,7 +12,8 @@ use axum::extract::State;
 use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
 use axum::Json;
-use std::time::Duration;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
 use tslg_api::{
     HeartbeatAck, Lease, LeaseFence, LeaseKey, LeaseRelease, LeaseRequest, LibraryUpload, Method,
     Problem, ResultAck, ResultReport, TestCase, WorkerList, MAX_CLAIM_WAIT_SECONDS,
@@ -59,22 +61,37 @@ pub async fn claim(
     } else {
         FIRST_RECHECK
     };
+    // The time spent asking the store; the rest was spent waiting.
+    let started = Instant::now();
+    let asking = AtomicU64::new(0);
     let granted = state
         .work
         .ask_until(
             Duration::from_secs_f64(wait),
             (first, recheck),
             || rand::random_range(0.5..=1.0),
-            || grant(&state, &req),
+            || async {
+                let asked = Instant::now();
+                let granted = grant(&state, &req).await;
+                let nanos = asked.elapsed().as_nanos().try_into().unwrap_or(u64::MAX);
+                asking.fetch_add(nanos, Ordering::Relaxed);
+                granted
+            },
         )
         .await?;
     state
         .workers
         .set_idle(&req.worker, wait > 0.0 && granted.is_none());
-    Ok(match granted {
+    let mut response = match granted {
         Some(lease) => Json(lease).into_response(),
         None => StatusCode::NO_CONTENT.into_response(),
-    })
+    };
+    if wait > 0.0 {
+        let asking = Duration::from_nanos(asking.load(Ordering::Relaxed));
+        let held = started.elapsed().saturating_sub(asking);
+        response.extensions_mut().insert(HeldForWork(held));
+    }
+    Ok(response)
 }
 
 /// What a lease request must be before anything is taken (422 otherwise).
