@@ -39,16 +39,23 @@ fn sci(value: Option<f64>) -> String {
     value.map_or("-".into(), |v| format!("{v:.3e}"))
 }
 
-/// One line of progress toward β.
+/// One line of progress toward β. An adaptive campaign counts every test
+/// it ran (its library and search tests too, as the demo's table does),
+/// not only the estimation tests its `tests` holds.
 pub fn progress_line(label: &str, view: &CampaignView) -> String {
     let r = view
         .relative_half_width
         .map_or("∞".into(), |r| format!("{r:.3}"));
+    let tests = if view.adaptive.is_some() {
+        view.indices
+    } else {
+        view.tests
+    };
     format!(
         "{label:<8} #{:<3} {:<9} {:>10} tests {:>6} events  r {r:>6} → β {}",
         view.id,
         view.status.as_str(),
-        view.tests,
+        tests,
         view.events,
         view.beta
     )

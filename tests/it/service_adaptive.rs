@@ -111,6 +111,30 @@ async fn an_adaptive_campaign_through_the_service_is_the_in_process_one() {
     // No lease reached past the stage the campaign stopped in.
     let stage = AdaptiveSettings::default().stage_tests;
     assert!(view.leased - view.indices < stage, "{view:?}");
+    // The same campaign started by `tslg campaign start --wait`: its
+    // progress line counts every test it ran, as the demo's table does, not
+    // only the estimation tests.
+    let library_id = library.id.to_string();
+    let o = tslg(&[
+        "campaign",
+        "start",
+        "--server",
+        &server.url,
+        "--method",
+        "adaptive",
+        "--library-id",
+        &library_id,
+        "--vut",
+        "fvdm",
+        "--seed",
+        "3",
+        "--wait",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let progress = String::from_utf8_lossy(&o.stderr);
+    assert!(view.tests < view.indices, "{view:?}");
+    let line = format!(" {} tests {:>6} events", view.indices, view.events);
+    assert!(progress.lines().any(|l| l.contains(&line)), "{progress}");
 
     // A coordinator killed mid-campaign rebuilds its stages from the
     // database and ends at the same answer.
