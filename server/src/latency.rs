@@ -10,6 +10,8 @@ use axum::extract::{MatchedPath, Request, State};
 use axum::middleware::Next;
 use axum::response::Response;
 use prometheus::{Histogram, HistogramOpts, HistogramVec, Registry};
+use std::future::Future;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -18,14 +20,46 @@ const LATENCY_BUCKETS: [f64; 14] = [
     0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0,
 ];
 
-/// Buckets of the time a lease request was held, seconds: 10 ms to the
-/// longest wait a request may ask (30 s).
-const HELD_BUCKETS: [f64; 9] = [0.01, 0.05, 0.1, 0.5, 1.0, 2.5, 5.0, 10.0, 30.0];
+/// Buckets of the time a lease request was held, seconds: 10 ms to past
+/// the longest wait a request may ask (30 s, which the last ask may pass).
+const HELD_BUCKETS: [f64; 10] = [0.01, 0.05, 0.1, 0.5, 1.0, 2.5, 5.0, 10.0, 30.0, 60.0];
 
 /// Set on a response by a handler that held its request waiting for work:
 /// how long it waited, which is not the request's latency.
 #[derive(Debug, Clone, Copy)]
-pub struct HeldForWork(pub Duration);
+struct HeldForWork(Duration);
+
+/// Times a held request: the time its asks of the store took is latency,
+/// the rest is held time ([`HoldClock::mark`]).
+pub struct HoldClock {
+    started: Instant,
+    asking_nanos: AtomicU64,
+}
+
+impl HoldClock {
+    pub fn start() -> Self {
+        Self {
+            started: Instant::now(),
+            asking_nanos: AtomicU64::new(0),
+        }
+    }
+
+    /// Runs one ask, counting its time as latency.
+    pub async fn ask<T>(&self, ask: impl Future<Output = T>) -> T {
+        let asked = Instant::now();
+        let answer = ask.await;
+        let nanos = asked.elapsed().as_nanos().try_into().unwrap_or(u64::MAX);
+        self.asking_nanos.fetch_add(nanos, Ordering::Relaxed);
+        answer
+    }
+
+    /// Marks `response` with the time held: all but the asks.
+    pub fn mark(&self, response: &mut Response) {
+        let asking = Duration::from_nanos(self.asking_nanos.load(Ordering::Relaxed));
+        let held = self.started.elapsed().saturating_sub(asking);
+        response.extensions_mut().insert(HeldForWork(held));
+    }
+}
 
 /// The metrics observed while serving.
 pub struct Metrics {

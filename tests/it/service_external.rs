@@ -246,7 +246,9 @@ async fn crashes_hangs_garbage_and_early_exits_cost_only_the_tests_they_spoil() 
 
 /// A worker killed outright (SIGKILL: no chance to stop its programs)
 /// takes them with it: a program stuck in a scenario does not run on,
-/// orphaned, for as long as it is stuck (here an hour).
+/// orphaned, for as long as it is stuck (here an hour). Linux: the kernel's
+/// `PR_SET_PDEATHSIG`, and `/proc`.
+#[cfg(target_os = "linux")]
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_killed_worker_takes_its_programs_with_it() {
     let dir = scratch();

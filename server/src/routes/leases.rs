@@ -1,7 +1,7 @@
 //! `/api/v1/leases`: workers take ranges of tests and report outcomes.
 
 use crate::error::{ApiError, ApiJson};
-use crate::latency::HeldForWork;
+use crate::latency::HoldClock;
 use crate::report_check::check_report;
 use crate::reporting;
 use crate::routes::ApiPath;
@@ -12,8 +12,7 @@ use axum::extract::State;
 use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
 use axum::Json;
-use std::sync::atomic::{AtomicU64, Ordering};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 use tslg_api::{
     HeartbeatAck, Lease, LeaseFence, LeaseKey, LeaseRelease, LeaseRequest, LibraryUpload, Method,
     Problem, ResultAck, ResultReport, TestCase, WorkerList, MAX_CLAIM_WAIT_SECONDS,
@@ -61,35 +60,31 @@ pub async fn claim(
     } else {
         FIRST_RECHECK
     };
-    // The time spent asking the store; the rest was spent waiting.
-    let started = Instant::now();
-    let asking = AtomicU64::new(0);
+    // The time spent asking the store is latency; the rest is held time.
+    let clock = HoldClock::start();
     let granted = state
         .work
         .ask_until(
             Duration::from_secs_f64(wait),
             (first, recheck),
             || rand::random_range(0.5..=1.0),
-            || async {
-                let asked = Instant::now();
-                let granted = grant(&state, &req).await;
-                let nanos = asked.elapsed().as_nanos().try_into().unwrap_or(u64::MAX);
-                asking.fetch_add(nanos, Ordering::Relaxed);
-                granted
-            },
+            || clock.ask(grant(&state, &req)),
         )
-        .await?;
-    state
-        .workers
-        .set_idle(&req.worker, wait > 0.0 && granted.is_none());
+        .await;
+    if let Ok(granted) = &granted {
+        state
+            .workers
+            .set_idle(&req.worker, wait > 0.0 && granted.is_none());
+    }
+    // A store error can end a held request too: its wait is held time all
+    // the same.
     let mut response = match granted {
-        Some(lease) => Json(lease).into_response(),
-        None => StatusCode::NO_CONTENT.into_response(),
+        Ok(Some(lease)) => Json(lease).into_response(),
+        Ok(None) => StatusCode::NO_CONTENT.into_response(),
+        Err(e) => e.into_response(),
     };
     if wait > 0.0 {
-        let asking = Duration::from_nanos(asking.load(Ordering::Relaxed));
-        let held = started.elapsed().saturating_sub(asking);
-        response.extensions_mut().insert(HeldForWork(held));
+        clock.mark(&mut response);
     }
     Ok(response)
 }

@@ -205,8 +205,8 @@ impl ProgramProcess {
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
             .process_group(0);
-        let mut child =
-            spawner::spawn(command).map_err(|e| Fault::Spawn(format!("{program}: {e}")))?;
+        let mut child = spawner::spawn(command, deadline)
+            .map_err(|e| Fault::Spawn(format!("{program}: {e}")))?;
         let group = child.id() as i32;
         let watchdog = Arc::new(Watchdog::default());
         let watching = Arc::clone(&watchdog);

@@ -16,22 +16,25 @@
 //! thread that lives as long as the worker ([`spawn`]).
 //!
 //! What the program starts in turn is in its process group, which the
-//! worker kills on a timeout and when it lets the program go, but the
-//! kernel signals only the program itself when the worker is killed; the
-//! program's stdin closes then, which a program that starts others can
-//! take as the sign to end them (docs/vut-protocol.md, "End").
+//! worker kills on a timeout and when it lets the program go; but when the
+//! worker is killed the kernel signals only the program, so its helpers
+//! must see to themselves (docs/vut-protocol.md, "End"). A program that
+//! runs a set-user-ID binary loses the signal (the kernel clears it).
 
 use std::io;
 use std::process::{Child, Command};
-use std::sync::mpsc::{self, Sender, SyncSender};
+use std::sync::mpsc::{self, RecvTimeoutError, SendError, Sender, SyncSender};
 use std::sync::OnceLock;
+use std::time::Instant;
 
 /// A command to start, and where its child goes.
 type Job = (Command, SyncSender<io::Result<Child>>);
 
 /// Starts `command` from the worker's spawner thread, tied to the worker's
-/// life on Linux (module doc).
-pub fn spawn(mut command: Command) -> io::Result<Child> {
+/// life on Linux (module doc), by `deadline`: starts are made one at a
+/// time, and one that hangs (an `exec` from a stuck file system) must not
+/// hold the others' callers past their tests' deadlines.
+pub fn spawn(mut command: Command, deadline: Instant) -> io::Result<Child> {
     tie_to_worker(&mut command);
     static SPAWNER: OnceLock<Sender<Job>> = OnceLock::new();
     let spawner = SPAWNER.get_or_init(|| {
@@ -39,18 +42,31 @@ pub fn spawn(mut command: Command) -> io::Result<Child> {
         std::thread::Builder::new()
             .name("tslg-program-spawner".into())
             .spawn(move || {
-                // Never ends: the sender lives in a static.
-                for (mut command, child) in waiting {
-                    let _ = child.send(command.spawn());
+                // Never ends (the sender lives in a static; `spawn` returns
+                // its errors), which matters: the kernel kills every program
+                // when this thread ends.
+                for (mut command, caller) in waiting {
+                    // A caller that gave up leaves its program to nobody.
+                    if let Err(SendError(Ok(mut child))) = caller.send(command.spawn()) {
+                        let _ = child.kill();
+                        let _ = child.wait();
+                    }
                 }
             })
             .expect("the spawner thread starts");
         jobs
     });
     let gone = || io::Error::other("the worker's spawner thread has ended");
-    let (child, started) = mpsc::sync_channel(1);
-    spawner.send((command, child)).map_err(|_| gone())?;
-    started.recv().map_err(|_| gone())?
+    let (caller, started) = mpsc::sync_channel(1);
+    spawner.send((command, caller)).map_err(|_| gone())?;
+    match started.recv_timeout(deadline.saturating_duration_since(Instant::now())) {
+        Ok(child) => child,
+        Err(RecvTimeoutError::Timeout) => Err(io::Error::new(
+            io::ErrorKind::TimedOut,
+            "not started by its deadline (the worker starts programs one at a time)",
+        )),
+        Err(RecvTimeoutError::Disconnected) => Err(gone()),
+    }
 }
 
 /// Asks the kernel to SIGKILL the child when the thread that starts it
@@ -86,7 +102,11 @@ fn tie_to_worker(_command: &mut Command) {}
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::time::{Duration, Instant};
+    use std::time::Duration;
+
+    fn soon() -> Instant {
+        Instant::now() + Duration::from_secs(60)
+    }
 
     /// Whether `child` is still running after `seconds`.
     fn alive_after(child: &mut Child, seconds: f64) -> bool {
@@ -108,7 +128,7 @@ mod tests {
         let mut child = std::thread::spawn(|| {
             let mut sleep = Command::new("sleep");
             sleep.arg("30");
-            spawn(sleep).unwrap()
+            spawn(sleep, soon()).unwrap()
         })
         .join()
         .unwrap();
@@ -117,13 +137,51 @@ mod tests {
         child.wait().unwrap();
     }
 
+    /// A start that hangs holds the spawner, but not past the others'
+    /// deadlines: they get an error in time, and the spawner serves again
+    /// once it is done.
+    #[test]
+    #[allow(unsafe_code)]
+    fn a_hanging_start_does_not_hold_other_callers_past_their_deadlines() {
+        let slow = std::thread::spawn(|| {
+            let mut command = Command::new("true");
+            // SAFETY: sleep(3) is async-signal-safe; it stands for an exec
+            // stuck in the kernel.
+            unsafe {
+                std::os::unix::process::CommandExt::pre_exec(&mut command, || {
+                    libc::sleep(3);
+                    Ok(())
+                });
+            }
+            spawn(command, soon()).unwrap().wait().unwrap()
+        });
+        // The slow start is under way (its thread asked first).
+        std::thread::sleep(Duration::from_millis(500));
+        let late = spawn(
+            Command::new("true"),
+            Instant::now() + Duration::from_millis(100),
+        );
+        let late = late.unwrap_err();
+        assert_eq!(late.kind(), io::ErrorKind::TimedOut, "{late}");
+        assert!(
+            !slow.is_finished(),
+            "the error came only when the hang ended"
+        );
+        assert!(slow.join().unwrap().success());
+        assert!(spawn(Command::new("true"), soon())
+            .unwrap()
+            .wait()
+            .unwrap()
+            .success());
+    }
+
     /// A command that cannot start is an error, and the spawner serves the
     /// next one.
     #[test]
     fn a_command_that_cannot_start_is_an_error_and_the_next_starts() {
-        let missing = spawn(Command::new("/nonexistent/tslg-program")).unwrap_err();
+        let missing = spawn(Command::new("/nonexistent/tslg-program"), soon()).unwrap_err();
         assert_eq!(missing.kind(), io::ErrorKind::NotFound);
-        let status = spawn(Command::new("true")).unwrap().wait().unwrap();
+        let status = spawn(Command::new("true"), soon()).unwrap().wait().unwrap();
         assert!(status.success());
     }
 }
