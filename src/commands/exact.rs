@@ -27,14 +27,21 @@ pub fn run(args: &ExactArgs) -> anyhow::Result<()> {
          campaigns are checked against a high-precision reference: docs/statistics.md)",
         descriptor.name
     );
+    // The user's table is read first: a wrong one is refused before the
+    // built-in model's answers are worked out and printed (seconds on the
+    // highway).
+    let tabled = match args.case.ndd_table {
+        Some(_) => Some(open(&args.case)?),
+        None => None,
+    };
     let builtin = open(&CaseArgs {
         ndd_table: None,
         ..args.case.clone()
     })?;
     print_table(builtin.as_ref(), args)?;
-    if args.case.ndd_table.is_some() {
+    if let Some(tabled) = tabled {
         outln!();
-        print_table(open(&args.case)?.as_ref(), args)?;
+        print_table(tabled.as_ref(), args)?;
     }
     Ok(())
 }

@@ -196,6 +196,8 @@ fn wrong_tables_are_refused_with_the_line_and_the_reason() {
             o
         };
         assert!(!o.status.success(), "{case}: {expected}");
+        // Refused before anything is worked out or printed.
+        assert!(o.stdout.is_empty(), "{case}: {}", text(&o.stdout));
         let err = text(&o.stderr);
         assert!(err.contains(expected), "{case}: `{expected}` not in\n{err}");
         assert!(err.contains("bad.csv"), "the table is named: {err}");
