@@ -143,12 +143,19 @@ impl ImportanceEstimator {
         (self.s1 > 0.0).then(|| self.largest / self.s1)
     }
 
-    /// The interval `μ̂ₙ ± z sₙ/√n`.
+    /// The interval `μ̂ₙ ± z sₙ/√n`, its lower end cut at 0 ([`probability_interval`]).
     pub fn interval(&self, z: f64) -> (f64, f64) {
-        let h = self.half_width(z);
-        let mean = self.estimate();
-        (mean - h, mean + h)
+        probability_interval(self.estimate(), self.half_width(z))
     }
+}
+
+/// The interval `[max(0, μ̂ − h), μ̂ + h]` of a probability: few events of
+/// large weight make the normal interval reach below 0, where no
+/// probability lies (a lower end of −2 × 10⁻⁷ reads as nonsense). Cutting
+/// it changes no coverage, since the true value is at least 0; the
+/// half-width, and so the stopping rule, stay the symmetric ones.
+pub fn probability_interval(estimate: f64, half_width: f64) -> (f64, f64) {
+    ((estimate - half_width).max(0.0), estimate + half_width)
 }
 
 /// The two-sided normal quantile `z = Φ⁻¹(1 − (1 − c)/2)`; 1.6449 for c = 0.90.
@@ -237,8 +244,10 @@ pub const DEFAULT_EXPLORING_TESTS: f64 = 10.0;
 /// The default `n_min` of a campaign whose every test explores outside the
 /// library with share `exploring_share` (ε of a grid case's library
 /// campaign; `None` for NDD campaigns and for car-following, which explores
-/// in each of its 30 decisions): `max(30, min(⌈10/ε⌉, max_tests))`, about
-/// ten exploring tests before the rule may hold.
+/// in each of its 30 decisions): `min(max(30, ⌈10/ε⌉), max_tests)`, about
+/// ten exploring tests before the rule may hold (30 tests for the others),
+/// and never more than the budget: a campaign of 10 tests is not refused
+/// for a default it did not ask for.
 ///
 /// Why, measured with `tslg validate` (1,000 replicates, ε 0.1, β 0.2,
 /// docs/statistics.md). Under the random split the count of library tests
@@ -253,13 +262,14 @@ pub const DEFAULT_EXPLORING_TESTS: f64 = 10.0;
 /// library's interval on the FVDM covers 0.37 at n_min 100 against 0.14 at
 /// 30, for 70 more tests on a matched pair.
 pub fn default_n_min(exploring_share: Option<f64>, max_tests: u64) -> u64 {
-    match exploring_share {
+    let wanted = match exploring_share {
         Some(epsilon) if epsilon > 0.0 => {
             let wanted = (DEFAULT_EXPLORING_TESTS / epsilon).ceil();
             (wanted.min(max_tests as f64) as u64).max(DEFAULT_N_MIN)
         }
         _ => DEFAULT_N_MIN,
-    }
+    };
+    wanted.min(max_tests)
 }
 
 impl StoppingRule {
@@ -401,6 +411,36 @@ mod tests {
         assert_eq!(e.events(), 3);
         let z = z_for_confidence(0.9);
         assert!((e.relative_half_width(z) - z * (var / 5.0).sqrt() / mean).abs() < 1e-12);
+    }
+
+    /// One event among ten tests: μ̂ = 0.1, s = √0.1 = 0.316, so the
+    /// normal interval's lower end is 0.1 − 1.645 · 0.1 = −0.0645; the
+    /// probability's interval starts at 0 and keeps its upper end.
+    #[test]
+    fn the_interval_of_a_probability_does_not_reach_below_zero() {
+        let mut e = ImportanceEstimator::default();
+        for i in 0..10 {
+            e.push(1.0, i == 0);
+        }
+        let z = z_for_confidence(0.9);
+        let h = e.half_width(z);
+        assert!((h - z * 0.1).abs() < 1e-12, "{h}");
+        assert_eq!(e.interval(z), (0.0, 0.1 + h));
+        // An interval above 0 is the symmetric one.
+        assert_eq!(probability_interval(0.5, 0.25), (0.25, 0.75));
+    }
+
+    /// `min(max(30, ⌈10/ε⌉), max_tests)`.
+    #[test]
+    fn the_default_n_min_waits_for_ten_exploring_tests_within_the_budget() {
+        assert_eq!(default_n_min(None, 10_000), 30);
+        assert_eq!(default_n_min(Some(0.1), 10_000), 100);
+        assert_eq!(default_n_min(Some(0.05), 10_000), 200);
+        assert_eq!(default_n_min(Some(0.5), 10_000), 30);
+        assert_eq!(default_n_min(Some(0.1), 50), 50);
+        assert_eq!(default_n_min(Some(0.1), 10), 10);
+        assert_eq!(default_n_min(None, 10), 10);
+        assert_eq!(default_n_min(Some(0.0), 1), 1);
     }
 
     #[test]

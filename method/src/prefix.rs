@@ -292,10 +292,10 @@ impl PrefixFold {
         }
     }
 
-    /// The interval `μ̂ₙ ± z sₙ/√n`.
+    /// The interval `μ̂ₙ ± z sₙ/√n`, its lower end cut at 0
+    /// ([`crate::estimator::probability_interval`]).
     pub fn interval(&self, z: f64) -> (f64, f64) {
-        let (h, mean) = (self.half_width(z), self.estimate());
-        (mean - h, mean + h)
+        crate::estimator::probability_interval(self.estimate(), self.half_width(z))
     }
 
     /// Whether both strata of a stratified campaign have a valid test (the

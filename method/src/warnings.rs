@@ -70,6 +70,9 @@ pub struct WarningContext {
     pub guard_outside: bool,
     /// Whose names the advice uses.
     pub dialect: Dialect,
+    /// A library campaign with ε = 0: no test explores outside the
+    /// library.
+    pub unexplored: bool,
 }
 
 /// The warnings `result` deserves under `context`: empty unless the tests
@@ -77,6 +80,18 @@ pub struct WarningContext {
 pub fn warnings(result: &CampaignResult, context: WarningContext) -> Vec<String> {
     let mut found = Vec::new();
     let advice = context.dialect.guard_advice();
+    if context.unexplored {
+        // Not evidence of a miss, but the absence of any check: the only
+        // campaign whose interval can be exact and wrong (a vehicle that
+        // fails on every library scenario gives every test the same
+        // weight, a zero-width interval at P(library)).
+        found.push(format!(
+            "no test explores outside the library (ε = 0): nothing checks that the library \
+             holds every failure of this vehicle, and the interval is right only if it does; \
+             the estimate counts only failures inside the library. Use ε > 0 (0.1 by default) \
+             with {advice} to bound what the library leaves out"
+        ));
+    }
     if result.mismatched_events > 0 {
         let remedy = if context.guard_outside {
             "The guard keeps the campaign testing until the outside bound is within β; a \
@@ -167,7 +182,39 @@ mod tests {
             beta: 0.2,
             guard_outside,
             dialect,
+            unexplored: false,
         }
+    }
+
+    /// A library campaign that never explores is warned whatever it found:
+    /// nothing tested its assumption. Here every test had the same weight
+    /// (a zero-width interval at the library's probability).
+    #[test]
+    fn a_campaign_that_never_explores_is_warned() {
+        let blind = CampaignResult {
+            half_width: 0.0,
+            relative_half_width: 0.0,
+            ci_low: 1e-3,
+            ci_high: 1e-3,
+            outside_tests: 0,
+            outside_share: None,
+            outside_upper: None,
+            guarded_ci_high: None,
+            ..matched()
+        };
+        let unexplored = WarningContext {
+            unexplored: true,
+            ..context(false, Dialect::Cli)
+        };
+        let found = warnings(&blind, unexplored);
+        assert_eq!(found.len(), 1, "{found:?}");
+        assert!(
+            found[0].starts_with("no test explores outside the library (ε = 0)")
+                && found[0].contains("--guard-outside --outside ndd"),
+            "{}",
+            found[0]
+        );
+        assert!(warnings(&blind, context(false, Dialect::Cli)).is_empty());
     }
 
     #[test]

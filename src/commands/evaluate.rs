@@ -172,6 +172,8 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
                 beta: rule.beta,
                 guard_outside: rule.guard_outside,
                 dialect: Dialect::Cli,
+                unexplored: matches!(args.method, MethodArg::Library)
+                    && args.exploration.epsilon == 0.0,
             },
         ),
     };

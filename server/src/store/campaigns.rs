@@ -251,6 +251,7 @@ impl CampaignRow {
                         beta: self.beta,
                         guard_outside: self.guard_outside,
                         dialect: Dialect::Api,
+                        unexplored: self.method == Method::Library && self.epsilon == 0.0,
                     },
                 );
                 match self.paired_with {
