@@ -209,8 +209,8 @@ fn print_table(args: &DemoArgs, views: &[CampaignView], report: Option<&ExactRep
     let measured = by_ndd.tests as f64 / by_library.indices.max(1) as f64;
     if let Some(adaptive) = views.iter().find(|v| v.method == Method::Adaptive) {
         outln!(
-            "\nNDD tests / adaptive tests: {:.0} measured",
-            by_ndd.tests as f64 / adaptive.indices.max(1) as f64
+            "\nNDD tests / adaptive tests: {} measured",
+            crate::output::ratio(by_ndd.tests as f64 / adaptive.indices.max(1) as f64)
         );
     }
     let Some(report) = report else {
@@ -228,7 +228,10 @@ fn print_table(args: &DemoArgs, views: &[CampaignView], report: Option<&ExactRep
         } else {
             "at least "
         };
-        outln!("acceleration ratio (NDD tests / library tests): {at_least}{measured:.0} measured");
+        outln!(
+            "acceleration ratio (NDD tests / library tests): {at_least}{} measured",
+            crate::output::ratio(measured)
+        );
         return;
     };
     let exact = report.probability;
@@ -255,8 +258,9 @@ fn print_table(args: &DemoArgs, views: &[CampaignView], report: Option<&ExactRep
         );
     }
     outln!(
-        "acceleration ratio (NDD tests / library tests): {measured:.0} measured, {:.0} analytic ({:.0} / {:.0} expected tests)",
-        report.ratio(),
+        "acceleration ratio (NDD tests / library tests): {} measured, {} analytic ({:.0} / {:.0} expected tests)",
+        crate::output::ratio(measured),
+        crate::output::ratio(report.ratio()),
         report.ndd_tests,
         report.library_tests
     );

@@ -102,12 +102,12 @@ fn print_table(case: &dyn ScenarioCase, args: &ExactArgs) -> anyhow::Result<()> 
             )
             .with_context(|| format!("the exact answer of {name}"))?;
         outln!(
-            "{:<14} {:>12.4e} {:>14.1} {:>14.0} {:>10.1}",
+            "{:<14} {:>12.4e} {:>14.1} {:>14.0} {:>10}",
             name,
             r.probability,
             r.library_tests,
             r.ndd_tests,
-            r.ratio()
+            crate::output::ratio(r.ratio())
         );
     }
     Ok(())
