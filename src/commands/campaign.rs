@@ -57,11 +57,23 @@ fn judge(view: &tslg_api::CampaignView, limit: Option<f64>) -> anyhow::Result<()
     Ok(())
 }
 
-/// Polls a campaign until it stops, showing a progress bar on stderr.
+/// Polls a campaign until it stops, showing a progress bar on stderr, and
+/// why it waits when no worker serves it (once each time it starts to).
 pub async fn watch(client: &Client, id: i64) -> anyhow::Result<tslg_api::CampaignView> {
     let bars = CampaignBars::new(&["campaign"]);
+    let mut waiting: Vec<String> = Vec::new();
     loop {
         let view = client.campaign(id).await?;
+        let now: Vec<String> = view
+            .warnings
+            .iter()
+            .filter(|w| w.starts_with("no worker"))
+            .cloned()
+            .collect();
+        for warning in now.iter().filter(|w| !waiting.contains(w)) {
+            bars.note(0, &format!("campaign {id}: {warning}"));
+        }
+        waiting = now;
         bars.update(0, &view);
         if view.status.is_final() {
             return Ok(view);

@@ -1,9 +1,11 @@
 //! Progress in the terminal: one bar per campaign toward β, and one per
 //! library build. A campaign's bar runs over the tests predicted to reach β
 //! (`n (rₙ/β)²`, from the coordinator), so it fills as the relative
-//! half-width falls; until that prediction exists (too few events) it shows
-//! the tests so far. When stderr is not a terminal the bars are hidden and
-//! each campaign's final state is printed as one line instead.
+//! half-width falls; until that prediction exists (too few events) it runs
+//! over the campaign's budget (`max_tests`), not over the tests so far,
+//! which drew a full bar far from β. When stderr is not a terminal the bars
+//! are hidden and each campaign's final state is printed as one line
+//! instead. Why a campaign waits (no worker) is printed once as it appears.
 
 use crate::commands::remote::progress_line;
 use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -77,6 +79,16 @@ impl CampaignBars {
         }
     }
 
+    /// Prints `text` above the bars, or on its own line when they are
+    /// hidden.
+    pub fn note(&self, k: usize, text: &str) {
+        if self.shown {
+            self.bars[k].1.println(text);
+        } else {
+            eprintln!("{text}");
+        }
+    }
+
     /// Shows campaign `k`'s state; a stopped campaign's bar is finished.
     pub fn update(&self, k: usize, view: &CampaignView) {
         let (label, bar) = &self.bars[k];
@@ -85,7 +97,7 @@ impl CampaignBars {
         }
         let target = view
             .predicted_tests
-            .unwrap_or(view.tests)
+            .unwrap_or(view.max_tests)
             .max(view.tests)
             .max(1);
         bar.set_length(target);

@@ -318,3 +318,51 @@ fn a_campaign_gates_a_pipeline_on_its_upper_bound() {
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("--wait"));
 }
+
+/// `campaign start --wait` with no worker says why the campaign waits (the
+/// view's `no worker` warning) instead of a silent bar, and finishes once
+/// a worker comes.
+#[test]
+fn a_waiting_command_says_why_the_campaign_does_not_move() {
+    use std::io::{BufRead, BufReader};
+    let dir = scratch();
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &[]);
+    let url = server.url.as_str();
+    let o = tslg(&["library", "create", "--server", url, "--wait", "--json"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let library: LibraryView = serde_json::from_slice(&o.stdout).unwrap();
+    let mut waiting = Command::new(env!("CARGO_BIN_EXE_tslg"))
+        .args([
+            "campaign", "start", "--server", url, "--vut", "idm", "--wait", "--json",
+        ])
+        .args(["--library-id", &library.id.to_string()])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let (lines, said) = std::sync::mpsc::channel();
+    let stderr = waiting.stderr.take().unwrap();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stderr).lines() {
+            let _ = lines.send(line.unwrap());
+        }
+    });
+    let why = loop {
+        let line = said
+            .recv_timeout(std::time::Duration::from_secs(60))
+            .expect("the command says why it waits");
+        if line.contains("no worker") {
+            break line;
+        }
+    };
+    assert!(
+        why.starts_with("campaign 1: no worker: no worker has asked for work"),
+        "{why}"
+    );
+    let _worker = WorkerProcess::start(url, 1, "w1");
+    let done = waiting.wait_with_output().unwrap();
+    assert!(done.status.success());
+    let view: CampaignView = serde_json::from_slice(&done.stdout)
+        .unwrap_or_else(|_| panic!("{}", String::from_utf8_lossy(&done.stdout)));
+    assert_eq!(view.status.as_str(), "converged");
+}
