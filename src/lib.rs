@@ -679,7 +679,9 @@ pub struct DemoArgs {
     #[arg(long)]
     pub surrogate: Option<String>,
     /// The vehicle under test: a built-in name or a JSON specification
-    /// (default: the surrogate's model).
+    /// (default: on cut-in with its default surrogate, fvdm, a vehicle that
+    /// fails where the IDM's library does not look; else the surrogate's
+    /// model).
     #[arg(long)]
     pub vut: Option<String>,
     /// Target relative half-width.

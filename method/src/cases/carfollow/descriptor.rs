@@ -24,7 +24,7 @@ pub fn descriptor() -> CaseDescriptor {
         presets: vec![
             Preset {
                 name: "paper",
-                summary: "the built-in exposure of SPEC §6",
+                summary: "the built-in exposure (docs/models.md, car-following, Exposure)",
             },
             Preset {
                 name: "risky",
