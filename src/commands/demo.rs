@@ -27,6 +27,7 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
 async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
     let exposure = exposure_request(&args.case)?;
     let vut = vehicle_json(&demo_vut(args)?)?;
+    check_before_starting(args)?;
     let local = Local::start(args.database.as_deref(), args.workers, "demo").await?;
     outln!(
         "coordinator {} on {}, {} workers × {} threads",
@@ -118,6 +119,23 @@ async fn drive(
     })
     .await?;
     print_table(args, &views, exact.as_ref());
+    Ok(())
+}
+
+/// What the coordinator would refuse, refused before it is started and the
+/// library built: the stopping rule, ε and (for a built-in case, which
+/// opens in milliseconds) the vehicles.
+fn check_before_starting(args: &DemoArgs) -> anyhow::Result<()> {
+    crate::inputs::check_epsilon(args.exploration.epsilon)?;
+    tslg_method::estimator::StoppingRule::new(args.beta, args.max_tests)
+        .validate()
+        .map_err(|e| anyhow::anyhow!("--{e}"))?;
+    if args.case.case_file.is_none() {
+        let case = crate::inputs::open(&args.case)?;
+        let surrogate = args.case.vehicle_or_default(&args.surrogate)?;
+        crate::inputs::vehicle_spec(case.as_ref(), surrogate, "surrogate")?;
+        crate::inputs::vehicle_spec(case.as_ref(), &demo_vut(args)?, "vehicle under test")?;
+    }
     Ok(())
 }
 

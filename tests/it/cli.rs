@@ -861,6 +861,29 @@ fn the_car_following_demo_compares_library_and_ndd_intervals() {
     assert!(stderr(&o).contains("presets are paper"), "{}", stderr(&o));
 }
 
+/// What the coordinator would refuse is refused before the demo starts one
+/// and builds its library: nothing is printed but the reason.
+#[test]
+fn the_demo_refuses_bad_settings_before_it_starts() {
+    for (args, reason) in [
+        (
+            &["--beta", "0.00001"][..],
+            "--beta = 1e-5 must be in [0.0001, 0.99]",
+        ),
+        (
+            &["--vut", "gap-seeker"][..],
+            "invalid vehicle under test `gap-seeker`",
+        ),
+        (&["--surrogate", "nope"][..], "invalid surrogate `nope`"),
+        (&["--epsilon", "2"][..], "--epsilon: ε = 2 must be 0 or in"),
+    ] {
+        let o = tslg(&[&["demo"][..], args].concat());
+        assert!(!o.status.success(), "{args:?}");
+        assert!(stdout(&o).is_empty(), "{args:?}: {}", stdout(&o));
+        assert!(stderr(&o).contains(reason), "{args:?}: {}", stderr(&o));
+    }
+}
+
 #[test]
 fn policy_prints_the_car_following_librarys_action_distribution_at_the_papers_state() {
     let o = tslg(&["policy", "--state", "38,6,-2"]);
