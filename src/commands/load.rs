@@ -13,7 +13,8 @@
 //! the events reported exactly its events, so no test was lost or counted
 //! twice. It also reports how many requests the coordinator committed per
 //! transaction meanwhile (group commit, from `/metrics`). It fails (exit 1)
-//! on any refused or failed request or a mismatch.
+//! on any refused or failed request or a mismatch, and refuses to start on
+//! a coordinator that live workers serve (they would take its leases).
 
 use crate::commands::remote::client;
 use crate::ServerArgs;
@@ -196,6 +197,7 @@ pub fn run(args: &LoadArgs) -> anyhow::Result<()> {
         separate_claims: args.separate_claims,
     };
     let report = runtime.block_on(async {
+        refuse_live_workers(&admin).await?;
         let commits_before = group_commits(&admin).await;
         let campaign = admin.create_campaign(&load_campaign()).await?;
         let outcome = tokio::select! {
@@ -231,10 +233,44 @@ pub fn run(args: &LoadArgs) -> anyhow::Result<()> {
     }
     anyhow::ensure!(
         report.clean(),
-        "the load test found errors or unbalanced books ({} errors)",
-        report.errors.len()
+        "the load test found errors or unbalanced books ({} errors{})",
+        report.errors.len(),
+        if report.errors.is_empty() {
+            "; a worker that joined during the run takes leases of its campaign too"
+        } else {
+            ""
+        }
     );
     Ok(())
+}
+
+/// Refuses to load a coordinator that live workers serve: they would take
+/// leases of the load test's campaign, and the books, which count only the
+/// simulated workers' tests, could not balance. (The simulated workers of
+/// an earlier run, `load-N`, stay listed for a minute; they do not count.)
+async fn refuse_live_workers(admin: &Client) -> anyhow::Result<()> {
+    let live: Vec<String> = admin
+        .workers()
+        .await?
+        .workers
+        .into_iter()
+        .filter(|w| w.live && !is_simulated(&w.name))
+        .map(|w| w.name)
+        .collect();
+    anyhow::ensure!(
+        live.is_empty(),
+        "{} live worker(s) ({}) serve this coordinator: they would take leases of the load \
+         test's campaign and unbalance its books; run it against a coordinator without workers",
+        live.len(),
+        live.join(", ")
+    );
+    Ok(())
+}
+
+/// Whether `name` is one of the load test's simulated workers (`load-N`).
+fn is_simulated(name: &str) -> bool {
+    name.strip_prefix("load-")
+        .is_some_and(|n| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()))
 }
 
 fn print_table(r: &LoadReport) {

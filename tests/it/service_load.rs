@@ -134,4 +134,27 @@ async fn the_load_test_works_against_a_default_coordinator_and_always_cleans_up(
     for view in campaigns {
         assert_eq!(view.status, CampaignStatus::Cancelled, "{view:?}");
     }
+    // A live real worker would take the load campaign's leases and
+    // unbalance the books: refused, and no campaign is started.
+    let _worker = WorkerProcess::start(&server.url, 1, "real");
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+    while !client
+        .workers()
+        .await
+        .unwrap()
+        .workers
+        .iter()
+        .any(|w| w.name == "real")
+    {
+        assert!(std::time::Instant::now() < deadline, "the worker is listed");
+        tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+    }
+    let output = run(&["--workers", "2", "--requests", "2"]);
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        stderr.contains("1 live worker(s) (real) serve this coordinator"),
+        "{stderr}"
+    );
+    assert_eq!(client.campaigns().await.unwrap().campaigns.len(), 2);
 }
