@@ -165,7 +165,19 @@ pub fn describe(view: &CampaignView) -> String {
         ),
         None => String::new(),
     };
-    let pair = view.pair.as_ref().map_or(String::new(), describe_pair);
+    let pair = view.pair.as_ref().map_or(String::new(), |pair| {
+        let mut text = describe_pair(pair);
+        // Each campaign of a pair folds its own results as they come, so
+        // one can hold more than the pair's decision used.
+        if view.indices > pair.tests {
+            text.push_str(&format!(
+                "\n    (the pair decides on its first {} tests; this campaign's own figures \
+                 above count all {} it resolved)",
+                pair.tests, view.indices
+            ));
+        }
+        text
+    });
     let warnings: String = view
         .warnings
         .iter()

@@ -133,6 +133,16 @@ async fn a_paired_campaign_stops_where_the_same_pair_in_process_stops_and_stops_
         "{text}"
     );
     assert!(text.contains("difference a - b"), "{text}");
+    // A campaign that resolved more than the pair decided on says so.
+    assert_eq!(
+        text.contains(&format!(
+            "(the pair decides on its first {} tests; this campaign's own figures above \
+             count all {} it resolved)",
+            pair.tests, b.indices
+        )),
+        b.indices > pair.tests,
+        "{text}"
+    );
 
     // As a pipeline's gate the pair is judged on the difference's upper end.
     let gate = |limit: &str| {
