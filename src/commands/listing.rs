@@ -10,7 +10,8 @@ fn sci(value: Option<f64>) -> String {
     value.map_or("-".into(), |v| format!("{v:.3e}"))
 }
 
-/// One campaign's line of the list.
+/// One campaign's line of the list (its tests as the progress line counts
+/// them, [`crate::commands::remote::tests_shown`]).
 fn campaign_line(view: &CampaignView) -> String {
     let interval = match (view.ci_low, view.ci_high) {
         (Some(low), Some(high)) => format!("[{low:.3e}, {high:.3e}]"),
@@ -23,7 +24,7 @@ fn campaign_line(view: &CampaignView) -> String {
         view.case,
         view.method.as_str(),
         vehicle_name(&view.vut),
-        view.tests,
+        crate::commands::remote::tests_shown(view),
         view.events,
         sci(view.estimate),
         interval,

@@ -39,18 +39,24 @@ fn sci(value: Option<f64>) -> String {
     value.map_or("-".into(), |v| format!("{v:.3e}"))
 }
 
-/// One line of progress toward β. An adaptive campaign counts every test
-/// it ran (its library and search tests too, as the demo's table does),
-/// not only the estimation tests its `tests` holds.
+/// The tests a campaign's one-line views show: an adaptive campaign counts
+/// every test it ran (its library and search tests too, as the demo's table
+/// does), not only the estimation tests its `tests` holds; the others their
+/// valid tests.
+pub fn tests_shown(view: &CampaignView) -> u64 {
+    if view.adaptive.is_some() {
+        view.indices
+    } else {
+        view.tests
+    }
+}
+
+/// One line of progress toward β ([`tests_shown`]).
 pub fn progress_line(label: &str, view: &CampaignView) -> String {
     let r = view
         .relative_half_width
         .map_or("∞".into(), |r| format!("{r:.3}"));
-    let tests = if view.adaptive.is_some() {
-        view.indices
-    } else {
-        view.tests
-    };
+    let tests = tests_shown(view);
     format!(
         "{label:<8} #{:<3} {:<9} {:>10} tests {:>6} events  r {r:>6} → β {}",
         view.id,

@@ -135,6 +135,15 @@ async fn an_adaptive_campaign_through_the_service_is_the_in_process_one() {
     assert!(view.tests < view.indices, "{view:?}");
     let line = format!(" {} tests {:>6} events", view.indices, view.events);
     assert!(progress.lines().any(|l| l.contains(&line)), "{progress}");
+    // So does its line in `campaign list`.
+    let o = tslg(&["campaign", "list", "--server", &server.url]);
+    let list = String::from_utf8_lossy(&o.stdout);
+    let row = list
+        .lines()
+        .find(|l| l.trim_start().starts_with(&format!("{id} ")))
+        .unwrap_or_else(|| panic!("{list}"));
+    let columns: Vec<&str> = row.split_whitespace().collect();
+    assert_eq!(columns[5], view.indices.to_string(), "{list}");
 
     // A coordinator killed mid-campaign rebuilds its stages from the
     // database and ends at the same answer.
