@@ -80,6 +80,14 @@ pub fn run(args: &PolicyArgs) -> anyhow::Result<()> {
         at.range_rate,
         library.challenge[s]
     );
+    // The grid's nearest state answers for an off-grid one: say so.
+    let asked = (state.bv_speed, state.range, state.range_rate);
+    if asked != (at.bv_speed, at.range, at.range_rate) {
+        outln!(
+            "(--state {} is not a grid state: the nearest one answers)",
+            args.state
+        );
+    }
     let ndd = exposure.actions(&world, at.bv_speed);
     let guided = library.action_distribution(s);
     if transitions.zones[s] != Zone::Dangerous || guided.is_none() {

@@ -890,6 +890,14 @@ fn policy_prints_the_car_following_librarys_action_distribution_at_the_papers_st
     assert!(o.status.success(), "{}", stderr(&o));
     let text = stdout(&o);
     assert!(text.contains("zone dangerous"), "{text}");
+    assert!(!text.contains("not a grid state"), "{text}");
+    // An off-grid state is answered by the nearest grid state, saying so.
+    let off = stdout(&tslg(&["policy", "--state", "100,6.5,-2"]));
+    assert!(off.contains("state (v 40, R 7, Ṙ -2)"), "{off}");
+    assert!(
+        off.contains("(--state 100,6.5,-2 is not a grid state: the nearest one answers)"),
+        "{off}"
+    );
     assert!(text.contains("by dynamic programming"), "{text}");
     // The learned distribution peaks at a hard but not the hardest braking.
     assert!(text.contains("peaks at u = -3.6 m/s²"), "{text}");
