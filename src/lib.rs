@@ -246,9 +246,10 @@ fn wire_name<T: serde::de::DeserializeOwned>(text: &str) -> Result<T, String> {
 pub struct CampaignStartArgs {
     #[command(flatten)]
     pub server: ServerArgs,
-    /// The case.
-    #[arg(long, default_value = "cut-in")]
-    pub case: String,
+    /// The case (default: the library's, with `--library-id`; else
+    /// `cut-in`).
+    #[arg(long)]
+    pub case: Option<String>,
     /// `library`, `adaptive` (stages that learn where this vehicle fails,
     /// from the library; grid cases) or `ndd`.
     #[arg(long, value_enum, default_value = "library")]

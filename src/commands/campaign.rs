@@ -13,8 +13,8 @@ use tslg_client::Client;
 
 pub fn start(args: &CampaignStartArgs) -> anyhow::Result<()> {
     let client = client(&args.server)?;
-    let request = CreateCampaign {
-        case: args.case.clone(),
+    let mut request = CreateCampaign {
+        case: args.case.clone().unwrap_or_else(|| "cut-in".into()),
         method: match args.method {
             MethodArg::Library => Method::Library,
             MethodArg::Adaptive => Method::Adaptive,
@@ -38,6 +38,10 @@ pub fn start(args: &CampaignStartArgs) -> anyhow::Result<()> {
         gate::check_limit(limit)?;
     }
     block_on(async {
+        // Without --case, a library's campaign is of the library's case.
+        if let (None, Some(id)) = (&args.case, args.library_id) {
+            request.case = client.library(id).await?.case;
+        }
         let view = client.create_campaign(&request).await?;
         if !args.wait {
             return print(&view, args.json);

@@ -180,6 +180,24 @@ async fn builds_of_builtin_surrogates_run_on_workers_and_equal_the_offline_ones(
         served_bytes(policy.id).await,
         std::fs::read(&policy_file).unwrap()
     );
+    // `campaign start` without --case takes its library's case.
+    let highway_id = highway.id.to_string();
+    let o = tslg(&[
+        "campaign",
+        "start",
+        "--server",
+        &server.url,
+        "--library-id",
+        &highway_id,
+        "--vut",
+        "gap-seeker",
+        "--max-tests",
+        "1000",
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let started: tslg_api::CampaignView = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(started.case, "highway-exit");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
