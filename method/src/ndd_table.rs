@@ -36,7 +36,13 @@ pub enum TableError {
         actual: usize,
     },
     /// A field that is not a number.
-    #[error("line {line}, field {field}: `{text}` is not a number")]
+    #[error("line {line}, field {field}: `{text}` is not a number{hint}", hint = if *line == 1 {
+        " (this case's table is a matrix: its first line holds an empty corner cell, then \
+         the column labels as numbers; a first line of column names is another case's \
+         table; `tslg table` prints this case's)"
+    } else {
+        ""
+    })]
     NotNumeric {
         /// Line number (from 1).
         line: usize,

@@ -166,6 +166,12 @@ fn wrong_tables_are_refused_with_the_line_and_the_reason() {
             "v1,range,v2,probability\n28,40,28,0.4\n".to_owned(),
             "sum to 0.4",
         ),
+        // Another case's table: the reader says what this one's looks like.
+        (
+            "cut-in",
+            "v1,range,v2,probability\n28,40,28,1\n".to_owned(),
+            "`range` is not a number (this case's table is a matrix",
+        ),
         ("car-following", states.to_owned(), "P(u | v) is missing"),
         (
             "car-following",
