@@ -26,8 +26,9 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
 
 async fn demo(args: &DemoArgs) -> anyhow::Result<()> {
     let exposure = exposure_request(&args.case)?;
-    let vut = vehicle_json(&demo_vut(args)?)?;
-    check_before_starting(args)?;
+    let vut_name = demo_vut(args)?;
+    check_before_starting(args, &vut_name)?;
+    let vut = vehicle_json(&vut_name)?;
     let local = Local::start(args.database.as_deref(), args.workers, "demo").await?;
     outln!(
         "coordinator {} on {}, {} workers × {} threads",
@@ -124,8 +125,8 @@ async fn drive(
 
 /// What the coordinator would refuse, refused before it is started and the
 /// library built: the stopping rule, ε and (for a built-in case, which
-/// opens in milliseconds) the vehicles.
-fn check_before_starting(args: &DemoArgs) -> anyhow::Result<()> {
+/// opens in milliseconds) the surrogate and the vehicle under test `vut`.
+fn check_before_starting(args: &DemoArgs, vut: &str) -> anyhow::Result<()> {
     crate::inputs::check_epsilon(args.exploration.epsilon)?;
     tslg_method::estimator::StoppingRule::new(args.beta, args.max_tests)
         .validate()
@@ -134,7 +135,7 @@ fn check_before_starting(args: &DemoArgs) -> anyhow::Result<()> {
         let case = crate::inputs::open(&args.case)?;
         let surrogate = args.case.vehicle_or_default(&args.surrogate)?;
         crate::inputs::vehicle_spec(case.as_ref(), surrogate, "surrogate")?;
-        crate::inputs::vehicle_spec(case.as_ref(), &demo_vut(args)?, "vehicle under test")?;
+        crate::inputs::vehicle_spec(case.as_ref(), vut, "vehicle under test")?;
     }
     Ok(())
 }
