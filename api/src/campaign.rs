@@ -1,6 +1,7 @@
 //! Campaigns: start requests, their state and history, and the plan a
 //! worker needs to run their tests.
 
+use crate::campaign_kind::{CampaignStatus, Method, Outside, Split};
 use crate::library::ExposureRequest;
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
@@ -33,101 +34,6 @@ pub struct RunningStage {
     pub start: u64,
     /// One past its last test index.
     pub end: u64,
-}
-
-/// How tests are drawn.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
-#[serde(rename_all = "kebab-case")]
-pub enum Method {
-    /// From the library with ε-greedy exploration, importance-weighted.
-    Library,
-    /// From the naturalistic distribution itself (the baseline), weight 1.
-    Ndd,
-    /// In stages that learn where this vehicle fails: the library's tests,
-    /// a search around the failures and near misses they meet, then
-    /// estimation on the failures found (grid cases; docs/statistics.md,
-    /// "Adaptive campaigns").
-    Adaptive,
-    /// A library build's surrogate runs, which the coordinator leases to
-    /// workers as tests: test `i` runs the surrogate on the `i`-th cell
-    /// with exposure (`build_of` names the library). Created by the
-    /// coordinator for a build whose surrogate is a program, not by
-    /// clients.
-    Enumerate,
-    /// A library build that one worker runs whole (a multistart search, a
-    /// car-following policy): its one test is the build, and the worker
-    /// uploads the library to `POST /api/v1/leases/{id}/library`
-    /// (`build_search` and `build_threshold` in the plan say how to build
-    /// it). Created by the coordinator, not by clients.
-    Build,
-}
-
-impl Method {
-    /// The method's name on the wire (`library`, `ndd`).
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Method::Library => "library",
-            Method::Ndd => "ndd",
-            Method::Adaptive => "adaptive",
-            Method::Enumerate => "enumerate",
-            Method::Build => "build",
-        }
-    }
-
-    /// Whether the campaign draws from a library (`library`, `adaptive`).
-    pub fn uses_library(self) -> bool {
-        matches!(self, Method::Library | Method::Adaptive)
-    }
-}
-
-/// How a library campaign of a grid case splits its tests between the
-/// library and the scenarios outside it (docs/statistics.md, "Strata").
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, ToSchema)]
-#[serde(rename_all = "kebab-case")]
-pub enum Split {
-    /// Test `i` explores exactly when `⌊(i + 1)ε⌋ > ⌊iε⌋`, and the estimate
-    /// weights the two strata by their shares `1 − ε` and `ε`: no noise from
-    /// how many tests happened to explore.
-    Stratified,
-    /// Each test explores with probability ε, as in the paper. The default
-    /// of a plan that does not say (campaigns created before the
-    /// stratified split).
-    #[default]
-    Random,
-}
-
-impl Split {
-    /// The split's name on the wire (`stratified`, `random`).
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Split::Stratified => "stratified",
-            Split::Random => "random",
-        }
-    }
-}
-
-/// How a library campaign spreads its exploration share ε outside the library.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, ToSchema)]
-#[serde(rename_all = "kebab-case")]
-pub enum Outside {
-    /// `q(x) = ε / (N(X) − N(Φ))`, the paper's form (car-following: ε
-    /// uniform over the states and over the 31 actions).
-    #[default]
-    Uniform,
-    /// `q(x) = ε P(x) / P(X \ Φ)`: weights outside the library stay below
-    /// `P(X \ Φ)/ε`, so a vehicle that fails outside the library costs tests
-    /// but never an unbounded weight.
-    Ndd,
-}
-
-impl Outside {
-    /// The spread's name on the wire (`uniform`, `ndd`).
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Outside::Uniform => "uniform",
-            Outside::Ndd => "ndd",
-        }
-    }
 }
 
 /// `POST /api/v1/campaigns`.
@@ -227,56 +133,6 @@ pub fn vehicle_spec(value: &serde_json::Value) -> serde_json::Value {
 /// `P(A)` when it is created (one simulation per scenario: about 60 ms on
 /// highway-exit `coarse`, 10 s on its 1.6 × 10⁶-scenario `paper` grid).
 pub const EXACT_MAX_SCENARIOS: usize = 100_000;
-
-/// A campaign's state.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
-#[serde(rename_all = "kebab-case")]
-pub enum CampaignStatus {
-    /// Waiting for its library to finish building.
-    Pending,
-    /// Handing out tests and folding results until the stopping rule holds.
-    Running,
-    /// Stopped by the rule: relative half-width ≤ β.
-    Converged,
-    /// Stopped at `max_tests` without the precision asked for.
-    Exhausted,
-    /// Stopped by a user; the estimate is that of the resolved prefix.
-    Cancelled,
-    /// Could not run (e.g. its library failed to build).
-    Failed,
-}
-
-impl CampaignStatus {
-    /// The status's name on the wire and in the database.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            CampaignStatus::Pending => "pending",
-            CampaignStatus::Running => "running",
-            CampaignStatus::Converged => "converged",
-            CampaignStatus::Exhausted => "exhausted",
-            CampaignStatus::Cancelled => "cancelled",
-            CampaignStatus::Failed => "failed",
-        }
-    }
-
-    /// The status named `s`, if it is one.
-    pub fn parse(s: &str) -> Option<Self> {
-        Some(match s {
-            "pending" => CampaignStatus::Pending,
-            "running" => CampaignStatus::Running,
-            "converged" => CampaignStatus::Converged,
-            "exhausted" => CampaignStatus::Exhausted,
-            "cancelled" => CampaignStatus::Cancelled,
-            "failed" => CampaignStatus::Failed,
-            _ => return None,
-        })
-    }
-
-    /// Whether the campaign has stopped for good.
-    pub fn is_final(self) -> bool {
-        !matches!(self, CampaignStatus::Pending | CampaignStatus::Running)
-    }
-}
 
 /// `GET /api/v1/campaigns/{id}`. Numbers describe the resolved prefix:
 /// the tests `0..indices`, folded in index order.

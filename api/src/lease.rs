@@ -1,6 +1,6 @@
 //! Leases and results: how workers take tests and report outcomes.
 
-use crate::campaign::CampaignStatus;
+use crate::campaign_kind::CampaignStatus;
 use serde::{Deserialize, Serialize};
 use std::fmt;
 use utoipa::ToSchema;

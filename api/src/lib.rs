@@ -7,6 +7,7 @@
 //! case they are used with.
 
 mod campaign;
+mod campaign_kind;
 mod case;
 mod events;
 mod lease;
@@ -15,6 +16,7 @@ pub mod packed;
 mod pair;
 
 pub use campaign::*;
+pub use campaign_kind::*;
 pub use case::*;
 pub use events::*;
 pub use lease::*;

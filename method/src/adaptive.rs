@@ -30,15 +30,15 @@
 //! stages before it, so the estimate is a martingale average, and the
 //! stopping rule of [`crate::estimator`] applies to it as to any campaign.
 
-use crate::campaign::CampaignResult;
+use crate::campaign::result::CampaignResult;
 use crate::case::Case;
 use crate::estimator::{Decision, StoppingRule};
 use crate::library::Library;
 use crate::prefix::{PrefixFold, SparseOutcome};
+use crate::sampling::SupportDistribution;
 use crate::sampling::{
     LibraryDistribution, NddDistribution, OutsideSpread, SamplingError, Split, TestDistribution,
 };
-use crate::support_sampling::SupportDistribution;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;

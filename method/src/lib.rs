@@ -27,7 +27,6 @@ pub mod prefix;
 pub mod progress;
 pub mod registry;
 pub mod sampling;
-pub mod support_sampling;
 pub mod test_stream;
 pub mod tolerance;
 pub mod vehicle;

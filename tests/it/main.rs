@@ -4,6 +4,9 @@
 
 mod support;
 
+mod architecture;
+mod module_graph;
+
 mod browser_dashboard;
 mod cli;
 mod docs_commands;

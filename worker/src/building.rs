@@ -2,8 +2,8 @@
 //! multistart search, a car-following policy), which the coordinator
 //! leases to one worker when it sends builds to workers.
 
+use crate::heartbeat::heartbeat;
 use crate::prepared::WholeBuild;
-use crate::run::heartbeat;
 use crate::sending::LeaseLink;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;

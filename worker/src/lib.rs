@@ -4,13 +4,19 @@
 
 mod backoff;
 mod building;
+mod chunks;
 mod config;
 pub mod external;
+mod heartbeat;
+mod lease_work;
 mod panics;
 pub mod prepared;
+mod range;
 mod report_parts;
 mod run;
 mod sending;
+mod worker;
 
 pub use config::WorkerConfig;
-pub use run::{run, WorkerSummary};
+pub use run::run;
+pub use worker::WorkerSummary;

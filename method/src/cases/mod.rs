@@ -8,51 +8,22 @@
 //! descriptor, or the opened case ([`crate::registry::ScenarioCase`]).
 //!
 //! Adding a case means a folder with its descriptor and its opener, and one
-//! entry in [`BUILTIN`].
+//! entry in [`BUILTIN`] (`builtin.rs`).
 
+mod builtin;
 pub mod carfollow;
 pub mod cutin;
 pub mod highway;
+pub(crate) mod table_note;
 pub mod user;
+
+pub use builtin::{BuiltinCase, Opener, BUILTIN};
 
 pub use crate::descriptor::{
     CaseDescriptor, PaperFigures, Preset, Reproduction, Scenarios, TableFormat, Validation,
 };
 use crate::registry::{CaseError, ExposureSource, ScenarioCase};
 use std::sync::Arc;
-
-/// Opens a case with a preset (its default when `None`) on an exposure.
-pub type Opener = fn(Option<&str>, &ExposureSource) -> Result<Arc<dyn ScenarioCase>, CaseError>;
-
-/// A built-in case: its descriptor and how to open it.
-pub struct BuiltinCase {
-    /// Its descriptor.
-    pub descriptor: fn() -> CaseDescriptor,
-    /// Opens it with `preset` (the default when `None`) on `exposure`.
-    pub open: Opener,
-    /// Its built-in exposure model for `preset`, written as the table a
-    /// user would upload (the format its descriptor's `tables` names).
-    pub builtin_table: fn(Option<&str>) -> Result<String, CaseError>,
-}
-
-/// Every built-in case, in the order help texts list them.
-pub const BUILTIN: [BuiltinCase; 3] = [
-    BuiltinCase {
-        descriptor: cutin::descriptor::descriptor,
-        open: cutin::descriptor::open,
-        builtin_table: cutin::descriptor::builtin_table,
-    },
-    BuiltinCase {
-        descriptor: highway::descriptor::descriptor,
-        open: highway::descriptor::open,
-        builtin_table: highway::descriptor::builtin_table,
-    },
-    BuiltinCase {
-        descriptor: carfollow::descriptor::descriptor,
-        open: carfollow::descriptor::open,
-        builtin_table: carfollow::descriptor::builtin_table,
-    },
-];
 
 /// The descriptors of every case: the built-in ones, then the user-defined
 /// cases registered in this process ([`user::registry`]), by name.
@@ -110,19 +81,6 @@ pub fn open_case(
             None => Err(e),
         },
     }
-}
-
-/// What a user should know about an exposure table once read: how far it
-/// lies from the case's built-in model (total variation distance
-/// `½ Σ |P − P_builtin|` on the grid) and whether its sum was renormalised.
-pub(crate) fn table_note(name: &str, sum: f64, distance: f64) -> String {
-    let mut note = format!(
-        "exposure table {name}: total variation distance {distance:.3} from the built-in model"
-    );
-    if (sum - 1.0).abs() > 1e-12 {
-        note.push_str(&format!("; it sums to {sum:.7} and was renormalised to 1"));
-    }
-    note
 }
 
 #[cfg(test)]

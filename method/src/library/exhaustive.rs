@@ -1,7 +1,7 @@
 //! Exhaustive search: the surrogate on every cell with positive exposure.
 //! Cells with `P(x) = 0` have `V(x) = 0` without a simulation.
 
-use super::Evaluated;
+use super::definition::Evaluated;
 use crate::case::{parallel_chunk, Case};
 use crate::progress::Progress;
 use rayon::prelude::*;

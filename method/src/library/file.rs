@@ -2,7 +2,8 @@
 //! A library file is small (one entry per library cell), so JSON costs little
 //! and stays readable; `docs/library-format.md` documents every field.
 
-use super::Library;
+use super::definition::Library;
+use crate::case::Case;
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
@@ -181,6 +182,26 @@ impl Library {
                 field: "w",
                 value: self.w,
                 reason: "differs from the sum of the cells' criticality",
+            });
+        }
+        Ok(())
+    }
+}
+
+impl Library {
+    /// Checks that this library belongs to `case` (name, grid and exposure).
+    pub fn check_matches<C: Case>(&self, case: &C) -> Result<(), LibraryFileError> {
+        if self.case != case.name() {
+            return Err(LibraryFileError::WrongCase {
+                library: self.case.clone(),
+                expected: case.name().to_owned(),
+            });
+        }
+        let fingerprint = case.exposure().fingerprint();
+        if self.exposure.fingerprint != fingerprint {
+            return Err(LibraryFileError::WrongExposure {
+                library: format!("{} ({})", self.exposure.name, self.exposure.fingerprint),
+                campaign: format!("{} ({})", case.exposure_name(), fingerprint),
             });
         }
         Ok(())

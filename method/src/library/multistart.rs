@@ -19,7 +19,7 @@
 //! never exceeds the true one. Every simulation is memoised: `sm_evaluations`
 //! counts distinct cells.
 
-use super::{Evaluated, Threshold};
+use super::definition::{Evaluated, Threshold};
 use crate::case::{Case, SurrogateEvaluation};
 use crate::progress::Progress;
 use rand::{Rng, SeedableRng};

@@ -319,7 +319,7 @@ pub trait AdaptiveStages: Send + Sync {
 pub struct AdaptiveRun {
     /// The estimate over the estimation tests; `indices` counts every
     /// index the campaign used.
-    pub result: crate::campaign::CampaignResult,
+    pub result: crate::campaign::result::CampaignResult,
     /// Tests of the library stage.
     pub library_tests: u64,
     /// What learning where the vehicle fails took: search tests (grid

@@ -1,7 +1,7 @@
 //! ChaCha8's first block of eight streams in AVX2 registers: each of the
 //! sixteen state words one 256-bit vector, a lane per stream.
 //!
-//! The portable [`super::blocks`] computes the same words; the compiler
+//! The portable [`super::chacha::blocks`] computes the same words; the compiler
 //! vectorised it only in part (scalar rotates mixed with vector adds, the
 //! state kept on the stack), about 40 ns a block on this machine's AVX2
 //! cores. Written with the intrinsics, rotations by 16 and 8 are byte
@@ -9,7 +9,7 @@
 //! registers as far as sixteen allow. The words are `rand_chacha`'s (tests
 //! in [`super`]).
 
-use super::{double_round, BLOCK_WORDS, DOUBLE_ROUNDS, LANES, SIGMA};
+use super::chacha::{double_round, BLOCK_WORDS, DOUBLE_ROUNDS, LANES, SIGMA};
 use std::arch::x86_64::{
     __m256i, _mm256_add_epi32, _mm256_or_si256, _mm256_set1_epi32, _mm256_setr_epi32,
     _mm256_setr_epi8, _mm256_shuffle_epi8, _mm256_slli_epi32, _mm256_srli_epi32,

@@ -20,7 +20,8 @@
 //! The gains keep the discrete loop stable at the 1 s step of the `paper-code`
 //! preset (`k_r dt < 2`, `k_s dt² < 1`).
 
-use super::{check, FollowerObservation, ParamError};
+use super::observation::FollowerObservation;
+use super::parameters::{check, ParamError};
 use serde::{Deserialize, Serialize};
 
 /// Parameters of the ACC + AEB vehicle.

@@ -2,8 +2,9 @@
 //! specification gives (Jiang et al. 2001 without the velocity-difference
 //! term): the vehicle relaxes toward an optimal speed that depends on the gap.
 
+use super::observation::FollowerObservation;
+use super::parameters::{check, ParamError};
 use super::tanh::tanh;
-use super::{check, FollowerObservation, ParamError};
 use serde::{Deserialize, Serialize};
 
 /// FVDM parameters. Acceleration `a = k (V₁ + V₂ tanh(C₁ (R − L) − C₂) − v)`.

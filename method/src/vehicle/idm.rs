@@ -1,7 +1,8 @@
 //! Intelligent Driver Model (Treiber et al. 2000), with the calibration of the
 //! paper's Table III (Ro et al. 2018, "A formal characterization of the IDM").
 
-use super::{check, FollowerObservation, ParamError};
+use super::observation::FollowerObservation;
+use super::parameters::{check, ParamError};
 use serde::{Deserialize, Serialize};
 
 /// IDM parameters. Acceleration

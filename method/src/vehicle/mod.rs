@@ -11,6 +11,8 @@ mod acc_aeb;
 pub mod batch;
 mod fvdm;
 mod idm;
+mod observation;
+mod parameters;
 pub mod power;
 mod switching_acc;
 pub mod tanh;
@@ -18,70 +20,13 @@ pub mod tanh;
 pub use acc_aeb::AccAebParams;
 pub use fvdm::FvdmParams;
 pub use idm::IdmParams;
+pub use observation::FollowerObservation;
+pub(crate) use parameters::check;
+pub use parameters::{ParamError, MAX_PARAMETER_MAGNITUDE, MIN_PARAMETER_MAGNITUDE};
 pub use switching_acc::{SwitchingAccParams, SwitchingAccState};
 
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
-
-/// A parameter outside its valid range.
-#[derive(Debug, Error, PartialEq)]
-#[error("{model}: parameter `{parameter}` = {} {requirement}", crate::number::Num(*.value))]
-pub struct ParamError {
-    /// The model's name.
-    pub model: &'static str,
-    /// The parameter's name.
-    pub parameter: &'static str,
-    /// The value given.
-    pub value: f64,
-    /// The range it must be in, in words.
-    pub requirement: &'static str,
-}
-
-/// The largest magnitude of any vehicle parameter in SI units (m, s, m/s,
-/// m/s², gains): far beyond any real vehicle, small enough that no product
-/// of a few parameters and states overflows.
-pub const MAX_PARAMETER_MAGNITUDE: f64 = 1e4;
-/// The smallest non-zero magnitude: below it a parameter is a rounding
-/// error (a subnormal time constant or gain only breeds infinities).
-pub const MIN_PARAMETER_MAGNITUDE: f64 = 1e-9;
-
-/// Returns an error unless `value` is finite, 0 or of a magnitude in
-/// `[MIN_PARAMETER_MAGNITUDE, MAX_PARAMETER_MAGNITUDE]`, and satisfies `ok`.
-pub(crate) fn check(
-    model: &'static str,
-    parameter: &'static str,
-    value: f64,
-    ok: impl Fn(f64) -> bool,
-    requirement: &'static str,
-) -> Result<(), ParamError> {
-    let magnitude = value.abs();
-    let requirement = if !(value == 0.0
-        || (MIN_PARAMETER_MAGNITUDE..=MAX_PARAMETER_MAGNITUDE).contains(&magnitude))
-    {
-        "must be 0 or between 1e-9 and 1e4 in magnitude (SI units)"
-    } else if !ok(value) {
-        requirement
-    } else {
-        return Ok(());
-    };
-    Err(ParamError {
-        model,
-        parameter,
-        value,
-        requirement,
-    })
-}
-
-/// What a car-following controller sees at one step.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct FollowerObservation {
-    /// Own speed v (m/s).
-    pub speed: f64,
-    /// Leader's speed (m/s).
-    pub lead_speed: f64,
-    /// Range R: leader's rear bumper to own front bumper (m).
-    pub gap: f64,
-}
 
 /// One control step of a follower, as its driver sees it.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -1,7 +1,8 @@
 //! Switching adaptive cruise control: incremental PI control of the
 //! time-to-collision error, with full braking when the error is negative.
 
-use super::{check, FollowerObservation, ParamError};
+use super::observation::FollowerObservation;
+use super::parameters::{check, ParamError};
 use serde::{Deserialize, Serialize};
 
 /// Parameters of the switching ACC.

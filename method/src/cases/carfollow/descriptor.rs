@@ -1,15 +1,11 @@
 //! What the service and the command line know about the car-following case.
 
-use super::service::FollowScenarioCase;
 use super::{CarFollowing, FollowPreset};
-use crate::cases::{
-    table_note, CaseDescriptor, PaperFigures, Preset, Reproduction, Scenarios, TableFormat,
-};
+use crate::cases::{CaseDescriptor, PaperFigures, Preset, Reproduction, Scenarios, TableFormat};
 use crate::library::{LibrarySearch, PolicySolver};
-use crate::registry::{CaseError, ExposureSource, ScenarioCase};
+use crate::registry::CaseError;
 use crate::sampling::OutsideSpread;
 use serde_json::json;
-use std::sync::Arc;
 
 /// The case's name.
 pub const NAME: &str = "car-following";
@@ -63,40 +59,6 @@ pub fn descriptor() -> CaseDescriptor {
             },
         }),
     }
-}
-
-/// Opens the car-following case with `preset` on its built-in exposure.
-pub fn open(
-    preset: Option<&str>,
-    exposure: &ExposureSource,
-) -> Result<Arc<dyn ScenarioCase>, CaseError> {
-    let preset: FollowPreset = match preset {
-        None => FollowPreset::default(),
-        Some(p) => p.parse().map_err(CaseError::Preset)?,
-    };
-    let (case, note) = match exposure {
-        ExposureSource::Builtin => (CarFollowing::new(preset), None),
-        ExposureSource::Table { name, text } => {
-            let (case, sum) =
-                CarFollowing::from_tables(preset, text, name.clone()).map_err(|e| {
-                    CaseError::Exposure {
-                        name: name.clone(),
-                        reason: e.to_string(),
-                    }
-                })?;
-            let builtin = CarFollowing::new(preset);
-            let (states, laws) = case
-                .exposure
-                .distance(&builtin.exposure, case.world.actions);
-            let mut note = table_note(name, sum, states);
-            note.push_str(&format!(
-                " (P(s); P(u | v): at most {laws:.3} at any speed; preset {})",
-                preset.name()
-            ));
-            (case, Some(note))
-        }
-    };
-    Ok(Arc::new(FollowScenarioCase::new(case).with_note(note)))
 }
 
 /// The built-in `P(s)` and `P(u|v)` of `preset`, as tables.

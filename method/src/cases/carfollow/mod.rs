@@ -12,6 +12,7 @@ pub mod exposure;
 mod exposure_model;
 pub mod file;
 pub mod library;
+pub mod opener;
 pub mod sampling;
 pub(crate) mod service;
 pub mod states;

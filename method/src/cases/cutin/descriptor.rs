@@ -2,9 +2,9 @@
 
 use super::{CutIn, CutInError, CutInPreset};
 use crate::case::Case;
+use crate::cases::table_note::table_note;
 use crate::cases::{
-    table_note, CaseDescriptor, PaperFigures, Preset, Reproduction, Scenarios, TableFormat,
-    Validation,
+    CaseDescriptor, PaperFigures, Preset, Reproduction, Scenarios, TableFormat, Validation,
 };
 use crate::library::{LibrarySearch, SearchMethod, Threshold};
 use crate::registry::cells::Registered;

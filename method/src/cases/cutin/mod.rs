@@ -4,6 +4,8 @@
 //! background vehicle cuts in; the event is an accident during the run.
 
 pub mod batch;
+#[cfg(test)]
+mod batch_tests;
 pub mod descriptor;
 mod exposure_model;
 mod simulation;

@@ -6,6 +6,8 @@
 //! left lane, or collided).
 
 pub mod batch;
+#[cfg(test)]
+mod batch_tests;
 pub mod descriptor;
 pub mod drivers;
 mod exposure_model;

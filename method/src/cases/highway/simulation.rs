@@ -169,3 +169,34 @@ impl RunInProgress {
         Ok(None)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::run;
+    use crate::cases::highway::{ExitVehicle, ExitWorld};
+
+    /// The plan's bounds must hold 0: `brake` above 0 or `accelerate`
+    /// below it left no plan acceleration and panicked.
+    #[test]
+    fn plan_bounds_that_miss_zero_are_refused() {
+        for (spec, name) in [
+            (r#"{"model": "mobil", "brake": 3}"#, "brake"),
+            (r#"{"model": "mobil", "accelerate": -5}"#, "accelerate"),
+            (
+                r#"{"model": "mobil", "brake": -1, "accelerate": -2}"#,
+                "accelerate",
+            ),
+        ] {
+            let err = serde_json::from_str::<ExitVehicle>(spec)
+                .expect_err(spec)
+                .to_string();
+            assert!(err.contains(name), "{spec}: {err}");
+        }
+        let ok: ExitVehicle =
+            serde_json::from_str(r#"{"model": "mobil", "brake": 0, "accelerate": 0}"#)
+                .expect("a plan of 0 only");
+        let world = ExitWorld::paper();
+        let run = run(&world, &ok, [100.0, 25.0, 20.0, 30.0]);
+        assert!(run.time > 0.0);
+    }
+}

@@ -114,7 +114,7 @@ impl CaseFile {
                 self.name
             ));
         }
-        if crate::cases::BUILTIN
+        if crate::cases::builtin::BUILTIN
             .iter()
             .any(|c| (c.descriptor)().name == self.name)
         {

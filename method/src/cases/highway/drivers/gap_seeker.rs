@@ -29,10 +29,9 @@
 //! In the right lane it follows the BV ahead by IDM with its own desired
 //! speed and headway.
 
-use super::{
-    follow_in_right_lane, neighbours, safe_gaps, within_speed_bounds, Action, DriverView, Idm,
-    IdmSteps, Lane,
-};
+use super::gaps::{follow_in_right_lane, neighbours, safe_gaps, within_speed_bounds};
+use super::idm::{Idm, IdmSteps};
+use super::view::{Action, DriverView, Lane};
 use crate::cases::highway::world::{Bv, ExitWorld};
 use crate::vehicle::{check, ParamError};
 use serde::{Deserialize, Serialize};

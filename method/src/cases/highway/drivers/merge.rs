@@ -2,7 +2,8 @@
 //! utility at one state, the BVs at the plan search's instants, and a
 //! plan's constant-acceleration move between them.
 
-use super::{neighbour_indices, IdmSteps};
+use super::gaps::neighbour_indices;
+use super::idm::IdmSteps;
 use crate::cases::highway::world::{Bv, ExitWorld};
 use crate::cases::highway::zone::blocked;
 
@@ -30,7 +31,7 @@ impl Predicted {
         }
     }
 
-    /// [`super::safe_gaps`] at `position`, on the stored intervals.
+    /// [`super::gaps::safe_gaps`] at `position`, on the stored intervals.
     #[inline]
     pub fn safe(&self, position: f64) -> bool {
         self.blocked

@@ -26,8 +26,10 @@
 //! react, so a merge in front of a faster BV that MOBIL judged safe (it
 //! assumes the follower brakes up to `b_safe`) can still end in a collision.
 
+use super::gaps::{follow_in_right_lane, safe_gaps, within_speed_bounds};
+use super::idm::{Idm, IdmSteps};
 use super::merge::{advance, Criterion, Predicted};
-use super::{safe_gaps, within_speed_bounds, Action, DriverView, Idm, IdmSteps, Lane};
+use super::view::{Action, DriverView, Lane};
 use crate::cases::highway::world::{Bv, ExitWorld};
 use crate::vehicle::{check, ParamError};
 use serde::{Deserialize, Serialize};
@@ -178,7 +180,7 @@ impl MobilDriver {
         }
     }
 
-    /// The IDM it follows with in the right lane ([`super::follow_in_right_lane`]).
+    /// The IDM it follows with in the right lane ([`follow_in_right_lane`]).
     pub fn right_lane_idm(&self) -> &IdmSteps {
         &self.criterion.idm
     }
@@ -187,7 +189,7 @@ impl MobilDriver {
         let idm = &self.criterion.idm;
         if view.lane == Lane::Right {
             return Action {
-                accel: super::follow_in_right_lane(idm, view),
+                accel: follow_in_right_lane(idm, view),
                 change_lane: false,
             };
         }
@@ -340,31 +342,6 @@ mod tests {
     /// accelerations picks the same plan, to the bit, as the plain search,
     /// over random states for three parameter sets; and it finds a plan in
     /// a good share of them, so the comparison is not only of `None`s.
-    /// The plan's bounds must hold 0: `brake` above 0 or `accelerate`
-    /// below it left no plan acceleration and panicked.
-    #[test]
-    fn plan_bounds_that_miss_zero_are_refused() {
-        for (spec, name) in [
-            (r#"{"model": "mobil", "brake": 3}"#, "brake"),
-            (r#"{"model": "mobil", "accelerate": -5}"#, "accelerate"),
-            (
-                r#"{"model": "mobil", "brake": -1, "accelerate": -2}"#,
-                "accelerate",
-            ),
-        ] {
-            let err = serde_json::from_str::<super::super::ExitVehicle>(spec)
-                .expect_err(spec)
-                .to_string();
-            assert!(err.contains(name), "{spec}: {err}");
-        }
-        let ok: super::super::ExitVehicle =
-            serde_json::from_str(r#"{"model": "mobil", "brake": 0, "accelerate": 0}"#)
-                .expect("a plan of 0 only");
-        let world = ExitWorld::paper();
-        let run = crate::cases::highway::simulation::run(&world, &ok, [100.0, 25.0, 20.0, 30.0]);
-        assert!(run.time > 0.0);
-    }
-
     #[test]
     fn the_shared_predictions_give_the_plain_search_s_plan() {
         let world = ExitWorld::paper();

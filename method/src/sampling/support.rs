@@ -17,8 +17,11 @@
 //! scan of the cells off `K`. Either way the cell is distributed as `P`
 //! restricted to `X∖K`, and depends on the test's random stream alone.
 
+use super::draw::Draw;
+use super::ndd::NddDistribution;
+use super::share::stratified_explores;
 use crate::mass::GridMass;
-use crate::sampling::{stratified_explores, test_rng, Draw, NddDistribution, TestRng};
+use crate::test_stream::{test_rng, TestRng};
 use rand::Rng;
 use std::sync::Arc;
 
