@@ -3,7 +3,7 @@
 //! descriptor and the registry (`tslg_method::cases`), so these commands
 //! work the same on each.
 
-use crate::{CaseArgs, RuleArgs};
+use crate::args::{CaseArgs, RuleArgs};
 use anyhow::Context;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, OnceLock};
@@ -272,4 +272,26 @@ pub fn stopping_rule(
 /// ε must be 0 or in the method's range.
 pub fn check_epsilon(epsilon: f64) -> anyhow::Result<()> {
     tslg_method::sampling::check_epsilon(epsilon).map_err(|e| anyhow::anyhow!("--epsilon: {e}"))
+}
+
+/// The case `case` names: a built-in or registered one by its descriptor,
+/// a user-defined one from its case file.
+pub fn case_descriptor(case: &CaseArgs) -> anyhow::Result<tslg_method::cases::CaseDescriptor> {
+    match &case.case_file {
+        Some(path) => Ok(tslg_method::cases::user::descriptor::descriptor(
+            &read_case_file(path)?.0,
+        )),
+        None => Ok(tslg_method::cases::descriptor(case.name())?),
+    }
+}
+
+/// `given`, or the default surrogate of the case `case` names.
+pub fn surrogate_or_default<'a>(
+    case: &CaseArgs,
+    given: &'a Option<String>,
+) -> anyhow::Result<&'a str> {
+    Ok(match given {
+        Some(v) => v.as_str(),
+        None => case_descriptor(case)?.default_surrogate,
+    })
 }

@@ -1,13 +1,50 @@
 //! `tslg cases`: every case with its presets, vehicles and defaults, from
-//! the case descriptors (what `GET /api/v1/cases` serves).
+//! the case descriptors (what `GET /api/v1/cases` serves); `tslg case
+//! create|list` on a coordinator; `tslg table`, a case's built-in exposure.
 
+use crate::args::ServerArgs;
 use crate::commands::remote::{block_on, client};
-use crate::ServerArgs;
 use anyhow::Context;
-use std::path::Path;
+use clap::Subcommand;
+use std::path::{Path, PathBuf};
 use tslg_api::{CaseView, ScenarioKind};
 use tslg_client::wire::case_view;
 
+#[derive(Debug, Subcommand)]
+pub enum CaseCommand {
+    /// Define a user-defined case from its case file (and the exposure table
+    /// it names) on a coordinator; libraries and campaigns then name it.
+    Create {
+        /// The case file (TOML; docs/bring-your-own.md).
+        file: PathBuf,
+        #[command(flatten)]
+        server: ServerArgs,
+    },
+    /// List the cases a coordinator runs, its user-defined ones included.
+    List {
+        #[command(flatten)]
+        server: ServerArgs,
+        /// Print JSON.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+/// Runs `tslg case …`.
+pub fn run_case(command: CaseCommand) -> anyhow::Result<()> {
+    match command {
+        CaseCommand::Create { file, server } => create(&file, &server),
+        CaseCommand::List { server, json } => list(&server, json),
+    }
+}
+
+/// `tslg table`: the case's built-in exposure model as the table it accepts.
+pub fn table(case: &str, preset: Option<&str>) -> anyhow::Result<()> {
+    out!("{}", tslg_method::cases::builtin_table(case, preset)?);
+    Ok(())
+}
+
+/// `tslg cases`: the cases this build knows.
 pub fn run(json: bool) -> anyhow::Result<()> {
     let views: Vec<_> = tslg_method::cases::descriptors()
         .iter()

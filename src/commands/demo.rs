@@ -7,9 +7,45 @@
 //! assumes. On cut-in the vehicle is by default the FVDM, which fails where
 //! the IDM's library does not.
 
+#[derive(Debug, Args)]
+pub struct DemoArgs {
+    #[command(flatten)]
+    pub case: CaseArgs,
+    /// The surrogate model the library is built from (default: idm for cut-in
+    /// and car-following, mobil for highway-exit).
+    #[arg(long)]
+    pub surrogate: Option<String>,
+    /// The vehicle under test: a built-in name or a JSON specification
+    /// (default: on cut-in with its default surrogate, fvdm, a vehicle that
+    /// fails where the IDM's library does not look; else the surrogate's
+    /// model).
+    #[arg(long)]
+    pub vut: Option<String>,
+    /// Target relative half-width.
+    #[arg(long, default_value_t = 0.2)]
+    pub beta: f64,
+    #[command(flatten)]
+    pub exploration: ExplorationArgs,
+    /// Campaign seed.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Test budget of each campaign.
+    #[arg(long, default_value_t = 10_000_000)]
+    pub max_tests: u64,
+    /// Local workers to start.
+    #[arg(long, default_value_t = 2)]
+    pub workers: usize,
+    /// Keep the coordinator's database in this file (default: a scratch file, removed after).
+    #[arg(long)]
+    pub database: Option<PathBuf>,
+}
+
+use crate::args::{CaseArgs, ExplorationArgs};
 use crate::commands::local::{build_library, exact_report, watch_campaigns, ExactQuestion, Local};
 use crate::commands::remote::{exposure_request, vehicle_json};
-use crate::DemoArgs;
+use crate::inputs::{case_descriptor, surrogate_or_default};
+use clap::Args;
+use std::path::PathBuf;
 use std::time::Instant;
 use tslg_api::{CampaignView, CreateCampaign, CreateLibrary, ExposureRequest, Method};
 use tslg_client::Client;
@@ -50,8 +86,8 @@ async fn drive(
 ) -> anyhow::Result<()> {
     let client = Client::new(url, None)?;
     let started = Instant::now();
-    let descriptor = args.case.descriptor()?;
-    let surrogate = args.case.vehicle_or_default(&args.surrogate)?;
+    let descriptor = case_descriptor(&args.case)?;
+    let surrogate = surrogate_or_default(&args.case, &args.surrogate)?;
     let library = build_library(
         &client,
         &CreateLibrary {
@@ -81,7 +117,7 @@ async fn drive(
         library_id: Some(library.id),
         vut: vut.clone(),
         epsilon: args.exploration.epsilon,
-        outside: args.exploration.outside.map(crate::OutsideArg::wire),
+        outside: args.exploration.outside.map(crate::args::OutsideArg::wire),
         split: Some(args.exploration.split.wire()),
         beta: args.beta,
         confidence: 0.9,
@@ -133,7 +169,7 @@ fn check_before_starting(args: &DemoArgs, vut: &str) -> anyhow::Result<()> {
         .map_err(|e| anyhow::anyhow!("--{e}"))?;
     if args.case.case_file.is_none() {
         let case = crate::inputs::open(&args.case)?;
-        let surrogate = args.case.vehicle_or_default(&args.surrogate)?;
+        let surrogate = surrogate_or_default(&args.case, &args.surrogate)?;
         crate::inputs::vehicle_spec(case.as_ref(), surrogate, "surrogate")?;
         crate::inputs::vehicle_spec(case.as_ref(), vut, "vehicle under test")?;
     }
@@ -144,11 +180,11 @@ fn check_before_starting(args: &DemoArgs, vut: &str) -> anyhow::Result<()> {
 /// (on cut-in the FVDM, which fails where the IDM library does not), when
 /// the surrogate is the case's own; else the surrogate.
 fn demo_vut(args: &DemoArgs) -> anyhow::Result<String> {
-    let descriptor = args.case.descriptor()?;
+    let descriptor = case_descriptor(&args.case)?;
     Ok(match (&args.vut, descriptor.demo_vut) {
         (Some(vut), _) => vut.clone(),
         (None, Some(vut)) if args.surrogate.is_none() => vut.to_owned(),
-        (None, _) => args.case.vehicle_or_default(&args.surrogate)?.to_owned(),
+        (None, _) => surrogate_or_default(&args.case, &args.surrogate)?.to_owned(),
     })
 }
 

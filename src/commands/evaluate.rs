@@ -3,16 +3,63 @@
 //! adaptive one. On a grid case small enough to enumerate
 //! ([`tslg_api::EXACT_MAX_SCENARIOS`]) the exact P(A) is printed beside it.
 
+use crate::args::{CaseArgs, ExplorationArgs, OutsideArg, RuleArgs};
+use crate::commands::exact::exact_answer;
 use crate::inputs::{
     case_of_library, check_epsilon, open, read_library_file, stopping_rule, vehicle_spec,
 };
-use crate::{EvaluateArgs, EvaluateMethodArg as MethodArg, OutsideArg};
+use clap::{Args, ValueEnum};
 use serde::Serialize;
+use std::path::PathBuf;
 use tslg_method::adaptive::AdaptiveSettings;
 use tslg_method::campaign::{run_campaign_tests, CampaignResult};
 use tslg_method::estimator::StoppingRule;
-use tslg_method::registry::{AdaptiveRun, ScenarioCase};
+use tslg_method::registry::AdaptiveRun;
 use tslg_method::warnings::{warnings, Dialect, WarningContext};
+
+#[derive(Debug, Args)]
+pub struct EvaluateArgs {
+    #[command(flatten)]
+    pub case: CaseArgs,
+    /// The vehicle under test: a built-in name or a JSON specification.
+    #[arg(long)]
+    pub vut: String,
+    /// `library` (importance sampling from a library), `adaptive` (search
+    /// from the library's failures and the near misses, then sample the
+    /// failures found; docs/adaptive-design.md) or `ndd` (the naturalistic
+    /// baseline).
+    #[arg(long, value_enum, default_value = "library")]
+    pub method: MethodArg,
+    /// The library file (methods `library` and `adaptive`), as `tslg
+    /// library build` writes it: the campaign runs on its case and preset
+    /// (with `ndd`, the baseline runs on them too).
+    #[arg(long)]
+    pub library: Option<PathBuf>,
+    #[command(flatten)]
+    pub exploration: ExplorationArgs,
+    #[command(flatten)]
+    pub rule: RuleArgs,
+    /// Campaign seed: test i is determined by (seed, i).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// A paired regression campaign: test this vehicle too (a built-in name
+    /// or a JSON specification) on the same tests, and estimate the
+    /// difference of the two rates (--vut's minus this one's) from the
+    /// same draws (methods library and ndd; docs/statistics.md).
+    #[arg(long, value_name = "VUT")]
+    pub paired_with: Option<String>,
+    /// Print the result as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// How `tslg evaluate` draws its tests.
+#[derive(Debug, Clone, Copy, ValueEnum, PartialEq, Eq)]
+pub enum MethodArg {
+    Library,
+    Adaptive,
+    Ndd,
+}
 
 #[derive(Serialize)]
 struct Report {
@@ -183,15 +230,6 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
     }
     print(&report, &rule);
     Ok(())
-}
-
-/// P(A) by enumeration of the grid, where the case has one and it is
-/// small enough to run here in a few seconds.
-pub fn exact_answer(case: &dyn ScenarioCase, vut: &serde_json::Value) -> Option<f64> {
-    let small = case.total_scenarios() <= tslg_api::EXACT_MAX_SCENARIOS;
-    (case.descriptor().is_grid() && small)
-        .then(|| case.exact_event_probability(vut).ok())
-        .flatten()
 }
 
 fn print(report: &Report, rule: &StoppingRule) {

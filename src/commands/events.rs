@@ -4,9 +4,10 @@
 //! simulator can replay (`GET …/tests/{index}/openscenario`, with the
 //! straight road they name written beside them).
 
+use crate::args::ServerArgs;
 use crate::commands::remote::{block_on, client};
-use crate::{EventFormat, ServerArgs};
 use anyhow::Context;
+use clap::ValueEnum;
 use std::path::Path;
 use tslg_api::{CampaignEvent, EventPage, MAX_EVENTS_PAGE};
 use tslg_method::openscenario::{straight_road_xodr, ROAD_FILE};
@@ -30,6 +31,14 @@ async fn all_events(
         page.events.truncate(max as usize);
     }
     Ok(page)
+}
+
+/// How `tslg campaign events` writes the events.
+#[derive(Debug, Clone, Copy, ValueEnum, PartialEq, Eq)]
+pub enum EventFormat {
+    Csv,
+    Json,
+    Xosc,
 }
 
 /// A number for the CSV: empty when absent.

@@ -3,9 +3,40 @@
 //! NDD baseline need, for every grid case through its descriptor and the
 //! registry.
 
-use crate::inputs::{check_epsilon, open, vehicle_name, vehicle_spec};
-use crate::{CaseArgs, ExactArgs};
+#[derive(Debug, Args)]
+pub struct ExactArgs {
+    #[command(flatten)]
+    pub case: CaseArgs,
+    /// The surrogate whose library the expected library tests refer to
+    /// (default: the case's).
+    #[arg(long)]
+    pub surrogate: Option<String>,
+    /// ε of the library distribution.
+    #[arg(long, default_value_t = 0.1)]
+    pub epsilon: f64,
+    /// Target relative half-width.
+    #[arg(long, default_value_t = 0.2)]
+    pub beta: f64,
+    /// Confidence level.
+    #[arg(long, default_value_t = 0.9)]
+    pub confidence: f64,
+}
+
+/// P(A) by enumeration of the grid, where the case has one and it is
+/// small enough to run here in a few seconds.
+pub fn exact_answer(case: &dyn ScenarioCase, vut: &serde_json::Value) -> Option<f64> {
+    let small = case.total_scenarios() <= tslg_api::EXACT_MAX_SCENARIOS;
+    (case.descriptor().is_grid() && small)
+        .then(|| case.exact_event_probability(vut).ok())
+        .flatten()
+}
+
+use crate::args::CaseArgs;
+use crate::inputs::{
+    case_descriptor, check_epsilon, open, surrogate_or_default, vehicle_name, vehicle_spec,
+};
 use anyhow::Context;
+use clap::Args;
 use tslg_method::estimator::StoppingRule;
 use tslg_method::library::{LibrarySearch, SearchMethod};
 use tslg_method::registry::{BuildRequest, ScenarioCase};
@@ -20,7 +51,7 @@ pub fn run(args: &ExactArgs) -> anyhow::Result<()> {
     }
     .validate()
     .map_err(|e| anyhow::anyhow!("--{e}"))?;
-    let descriptor = args.case.descriptor()?;
+    let descriptor = case_descriptor(&args.case)?;
     anyhow::ensure!(
         descriptor.is_grid(),
         "case {}: no enumeration reaches its scenarios, so it has no exact answer (its \
@@ -50,7 +81,7 @@ fn print_table(case: &dyn ScenarioCase, args: &ExactArgs) -> anyhow::Result<()> 
     let descriptor = case.descriptor();
     let surrogate = vehicle_spec(
         case,
-        args.case.vehicle_or_default(&args.surrogate)?,
+        surrogate_or_default(&args.case, &args.surrogate)?,
         "surrogate",
     )?;
     let library = case.build_library(

@@ -1,9 +1,9 @@
 //! `tslg campaign list` and `tslg library list`: a coordinator's campaigns
 //! and libraries, a line each; and how one library is shown.
 
+use crate::args::ServerArgs;
 use crate::commands::remote::{block_on, client};
 use crate::inputs::vehicle_name;
-use crate::ServerArgs;
 use tslg_api::{CampaignStatus, CampaignView, LibraryStatus, LibraryView};
 
 fn sci(value: Option<f64>) -> String {

@@ -16,8 +16,8 @@
 //! on any refused or failed request or a mismatch, and refuses to start on
 //! a coordinator that live workers serve (they would take its leases).
 
+use crate::args::ServerArgs;
 use crate::commands::remote::client;
-use crate::ServerArgs;
 use clap::Args;
 use std::sync::Arc;
 use std::time::{Duration, Instant};

@@ -2,7 +2,7 @@
 //! coordinator on a scratch (or kept) SQLite file with local workers, a
 //! library built through the API, and the exact answer computed beside it.
 
-use crate::commands::campaign::wait_for_library;
+use crate::commands::library::wait_for_library;
 use crate::commands::progress::CampaignBars;
 use crate::service::LocalService;
 use std::path::{Path, PathBuf};

@@ -1,5 +1,6 @@
 //! One module per subcommand.
 
+pub mod backup;
 pub mod campaign;
 pub mod cases;
 pub mod demo;

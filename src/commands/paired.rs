@@ -4,7 +4,7 @@
 //! (`tslg_method::paired`); on a grid case small enough to enumerate, the
 //! exact difference is printed beside it.
 
-use crate::commands::evaluate::exact_answer;
+use crate::commands::exact::exact_answer;
 use crate::inputs::vehicle_spec;
 use serde::Serialize;
 use tslg_method::estimator::StoppingRule;

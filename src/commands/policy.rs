@@ -2,8 +2,8 @@
 //! state, `P(u|s, S) = Q(s, u) / Σ_u Q(s, u)`, beside the naturalistic
 //! `P(u|v)` (SPEC §6; the paper's example is s = (38, 6, −2)).
 
-use crate::{PolicyArgs, SolverArg};
 use anyhow::{bail, Context};
+use clap::{Args, ValueEnum};
 use std::time::Instant;
 use tslg_method::cases::carfollow::{
     dynamic_programming, highway_vehicle, temporal_difference, FollowExposure, FollowExposureModel,
@@ -11,6 +11,27 @@ use tslg_method::cases::carfollow::{
 };
 
 /// `v,R,Ṙ` as three numbers.
+#[derive(Debug, Clone, Copy, ValueEnum, PartialEq, Eq)]
+pub enum SolverArg {
+    /// Backward dynamic programming.
+    Dp,
+    /// The paper's TD(0) (α 0.1, until every |δ| < 1e-10).
+    Td,
+}
+
+#[derive(Debug, Args)]
+pub struct PolicyArgs {
+    /// The state `v_BV,R,Ṙ` (m/s, m, m/s); looked up at the nearest grid state.
+    #[arg(long, default_value = "38,6,-2", allow_hyphen_values = true)]
+    pub state: String,
+    /// The surrogate: `idm` or `acc-aeb` (highway versions, docs/models.md).
+    #[arg(long, default_value = "idm")]
+    pub surrogate: String,
+    /// How the Q-values are computed.
+    #[arg(long, value_enum, default_value = "dp")]
+    pub solver: SolverArg,
+}
+
 fn parse_state(text: &str) -> anyhow::Result<FollowState> {
     let values: Vec<f64> = text
         .split(',')

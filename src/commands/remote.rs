@@ -1,7 +1,7 @@
 //! Talking to a running coordinator: connection arguments, the runtime for
 //! one command, and how a campaign is shown.
 
-use crate::{CaseArgs, ServerArgs};
+use crate::args::{CaseArgs, ServerArgs};
 use tslg_api::CampaignView;
 use tslg_api::ExposureRequest;
 use tslg_client::Client;
@@ -221,4 +221,14 @@ pub fn exposure_request(case: &CaseArgs) -> anyhow::Result<ExposureRequest> {
             ExposureRequest::Table { name, text }
         }
     })
+}
+
+/// Prints a campaign: as JSON, or described in a few lines.
+pub fn print_campaign(view: &tslg_api::CampaignView, json: bool) -> anyhow::Result<()> {
+    if json {
+        outln!("{}", serde_json::to_string_pretty(view)?);
+    } else {
+        outln!("{}", describe(view));
+    }
+    Ok(())
 }

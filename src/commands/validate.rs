@@ -57,8 +57,8 @@ pub struct ValidateArgs {
     pub epsilon: f64,
     /// The splits of the tests between the library and the outside to
     /// compare (comma-separated): stratified, random.
-    #[arg(long, value_delimiter = ',', value_enum, default_values_t = [crate::SplitArg::Stratified])]
-    pub splits: Vec<crate::SplitArg>,
+    #[arg(long, value_delimiter = ',', value_enum, default_values_t = [crate::args::SplitArg::Stratified])]
+    pub splits: Vec<crate::args::SplitArg>,
     /// Also run each pairing with the outside guard (ε 0.5, outside spread
     /// ndd); the same as adding `guarded` to --methods.
     #[arg(long)]

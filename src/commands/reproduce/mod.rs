@@ -10,11 +10,14 @@
 //! car-following, the library campaigns' median estimate. The table
 //! ([`table`]) puts the paper's numbers beside ours.
 
+mod row;
 mod table;
 
+use row::{lower_median, NddSource, Row};
+
+use crate::args::CaseArgs;
 use crate::commands::local::{build_library, exact_report, watch_campaigns, ExactQuestion, Local};
 use crate::commands::remote::exposure_request;
-use crate::CaseArgs;
 use std::path::PathBuf;
 use tslg_api::{
     CampaignView, CreateCampaign, CreateLibrary, ExposureRequest, Method, Outside, SearchRequest,
@@ -97,41 +100,6 @@ fn settings(case: &str) -> anyhow::Result<CaseSetting> {
         grid: descriptor.is_grid(),
         takes_table: r.takes_table,
     })
-}
-
-/// Where an NDD test count comes from.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum NddSource {
-    /// A campaign ran to β.
-    Run,
-    /// `z² (1 − μ)/(β² μ)` with the exact `P(A)`.
-    AnalyticExact,
-    /// The same with the library campaigns' median estimate.
-    AnalyticEstimate,
-}
-
-/// One vehicle tested with one case's library: the row of the table.
-pub struct Row {
-    pub case: &'static str,
-    pub preset: &'static str,
-    pub exposure: String,
-    pub surrogate: &'static str,
-    pub library_size: u64,
-    pub total_scenarios: u64,
-    pub vehicle: &'static str,
-    pub epsilon: f64,
-    pub beta: f64,
-    pub library_runs: Vec<CampaignView>,
-    /// The guarded campaign (grid cases).
-    pub guarded_run: Option<CampaignView>,
-    /// Adaptive campaigns, one per seed of the library campaigns (grid
-    /// cases; none for car-following).
-    pub adaptive_runs: Vec<CampaignView>,
-    pub ndd_run: Option<CampaignView>,
-    pub ndd_tests: f64,
-    pub ndd_source: NddSource,
-    pub exact: Option<ExactReport>,
-    pub paper: Paper,
 }
 
 pub fn run(args: &ReproduceArgs) -> anyhow::Result<()> {
@@ -350,12 +318,6 @@ fn expected_ndd(
         ),
         _ => (f64::INFINITY, NddSource::AnalyticEstimate),
     }
-}
-
-/// The median of sorted values, the lower middle one of an even count (a
-/// value that occurred); `None` when empty.
-pub fn lower_median<T>(sorted: &[T]) -> Option<&T> {
-    sorted.get(sorted.len().saturating_sub(1) / 2)
 }
 
 /// Polls the campaigns `ids` with a bar each until all have stopped.

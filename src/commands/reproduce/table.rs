@@ -1,7 +1,7 @@
 //! The reproduction's tables: Markdown (tests, estimates, every campaign)
 //! and CSV (one line per campaign, the row's figures repeated on each).
 
-use super::{lower_median, NddSource, Row};
+use super::row::{lower_median, NddSource, Row};
 use std::fmt::Write as _;
 use tslg_api::CampaignView;
 

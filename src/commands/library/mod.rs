@@ -1,23 +1,98 @@
-//! `tslg library build` and `tslg library show`, for every case through
-//! its descriptor and the registry.
+//! `tslg library …`: `build` and `show` in this process, for every case
+//! through its descriptor and the registry; `create`, `delete` and `list`
+//! on a coordinator ([`coordinator`], [`crate::commands::listing`]).
 
+mod coordinator;
+
+pub use coordinator::wait_for_library;
+
+use crate::args::{wire_name, CaseArgs, SearchArgs, ServerArgs};
+use crate::commands::listing;
 use crate::commands::progress::with_progress;
-use crate::inputs::{open, read_library_file, vehicle_name, vehicle_spec};
-use crate::BuildArgs;
+use crate::inputs::{open, read_library_file, surrogate_or_default, vehicle_name, vehicle_spec};
 use anyhow::Context;
+use clap::{Args, Subcommand};
 use std::path::Path;
+use std::path::PathBuf;
 use std::time::Instant;
 use tslg_method::cases::open_case;
 use tslg_method::library::{Library, LibrarySearch, SearchMethod};
 use tslg_method::registry::cells::grid_library_summary;
 use tslg_method::registry::{BuildRequest, ExposureSource, LibrarySummary, ScenarioCase};
 
-pub fn build(args: &BuildArgs) -> anyhow::Result<()> {
+#[derive(Debug, Subcommand)]
+pub enum LibraryCommand {
+    /// Search the critical scenarios of a surrogate model and write a library file.
+    Build(BuildArgs),
+    /// Print a summary of a library file.
+    Show {
+        /// The library file.
+        file: PathBuf,
+    },
+    /// Ask a running coordinator to build a library.
+    Create(coordinator::LibraryCreateArgs),
+    /// Delete a library no campaign uses from a coordinator (with its file).
+    Delete {
+        /// The library's id.
+        id: i64,
+        #[command(flatten)]
+        server: ServerArgs,
+    },
+    /// List the coordinator's libraries, newest first, a line each.
+    List {
+        #[command(flatten)]
+        server: ServerArgs,
+        /// Only those in this state: building, ready or failed.
+        #[arg(long, value_parser = wire_name::<tslg_api::LibraryStatus>)]
+        status: Option<tslg_api::LibraryStatus>,
+        /// Print JSON (as `GET /api/v1/libraries` answers).
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+/// Runs `tslg library …`.
+pub fn run(command: LibraryCommand) -> anyhow::Result<()> {
+    match command {
+        LibraryCommand::Build(args) => build(&args),
+        LibraryCommand::Show { file } => show(&file),
+        LibraryCommand::Create(args) => coordinator::create_library(&args),
+        LibraryCommand::Delete { id, server } => coordinator::delete_library(&server, id),
+        LibraryCommand::List {
+            server,
+            status,
+            json,
+        } => listing::libraries(&server, status, json),
+    }
+}
+
+#[derive(Debug, Args)]
+pub struct BuildArgs {
+    #[command(flatten)]
+    pub case: CaseArgs,
+    /// The surrogate model: a built-in name (`tslg cases` lists each case's)
+    /// or a JSON specification such as '{"model":"idm","v0":25}' (default:
+    /// the case's).
+    #[arg(long)]
+    pub surrogate: Option<String>,
+    #[command(flatten)]
+    pub search: SearchArgs,
+    /// Also run the exhaustive search and report the recall of a multistart
+    /// search (grid cases).
+    #[arg(long)]
+    pub recall: bool,
+    /// Where to write the library (JSON for grid cases, the binary policy
+    /// format for car-following; docs/library-format.md).
+    #[arg(long, short)]
+    pub out: PathBuf,
+}
+
+fn build(args: &BuildArgs) -> anyhow::Result<()> {
     let case = open(&args.case)?;
     let descriptor = case.descriptor().clone();
     let surrogate = vehicle_spec(
         case.as_ref(),
-        args.case.vehicle_or_default(&args.surrogate)?,
+        surrogate_or_default(&args.case, &args.surrogate)?,
         "surrogate",
     )?;
     if let Some(threshold) = args.search.threshold() {
@@ -82,7 +157,7 @@ fn with_recall(
     Ok(library.to_json().into_bytes())
 }
 
-pub fn show(path: &Path) -> anyhow::Result<()> {
+fn show(path: &Path) -> anyhow::Result<()> {
     let (file, head) = read_library_file(path)?;
     // The summary reads the file alone: a built-in case opens on its
     // built-in exposure whatever the library was built on; a user-defined

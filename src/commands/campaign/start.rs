@@ -1,0 +1,164 @@
+//! `tslg campaign start` and `tslg campaign watch`: a campaign started on a
+//! coordinator, and watched with a progress bar until it stops, as a gate
+//! when `--fail-above` is given.
+
+use crate::args::{ExplorationArgs, OutsideArg, RuleArgs, ServerArgs};
+use crate::commands::gate;
+use crate::commands::progress::CampaignBars;
+use crate::commands::remote::{block_on, client, print_campaign as print, vehicle_json};
+use clap::{Args, ValueEnum};
+use std::time::Duration;
+use tslg_api::{CreateCampaign, Method};
+use tslg_client::Client;
+
+#[derive(Debug, Args)]
+pub struct CampaignStartArgs {
+    #[command(flatten)]
+    pub server: ServerArgs,
+    /// The case (default: the library's, with `--library-id`; else
+    /// `cut-in`).
+    #[arg(long)]
+    pub case: Option<String>,
+    /// `library`, `adaptive` (stages that learn where this vehicle fails,
+    /// from the library; grid cases) or `ndd`.
+    #[arg(long, value_enum, default_value = "library")]
+    pub method: MethodArg,
+    /// The library (on the coordinator) to sample from; for `ndd`, the exposure to use.
+    #[arg(long)]
+    pub library_id: Option<i64>,
+    /// The vehicle under test: a built-in name or a JSON specification.
+    #[arg(long)]
+    pub vut: String,
+    #[command(flatten)]
+    pub exploration: ExplorationArgs,
+    #[command(flatten)]
+    pub rule: RuleArgs,
+    /// Campaign seed: test i is determined by (seed, i).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// A paired regression campaign: test this vehicle too (a built-in name
+    /// or a JSON specification, as --vut) on the same tests, and estimate
+    /// the difference of the rates (--vut's minus this one's) from the same
+    /// draws; methods library and ndd (docs/statistics.md).
+    #[arg(long, value_name = "VUT")]
+    pub paired_with: Option<String>,
+    /// Wait until the campaign stops, showing progress.
+    #[arg(long)]
+    pub wait: bool,
+    /// With --wait, a gate for continuous integration: exit 3 when the
+    /// campaign converged with its upper bound (the guarded one where the
+    /// campaign has it) above this probability, 4 when it stopped without
+    /// converging, 0 when it converged at or below it.
+    #[arg(
+        long,
+        value_name = "P",
+        requires = "wait",
+        allow_negative_numbers = true
+    )]
+    pub fail_above: Option<f64>,
+    /// Print JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, Clone, Copy, ValueEnum, PartialEq, Eq)]
+pub enum MethodArg {
+    Library,
+    Adaptive,
+    Ndd,
+}
+
+/// Runs `tslg campaign start`.
+pub fn start(args: &CampaignStartArgs) -> anyhow::Result<()> {
+    let client = client(&args.server)?;
+    let mut request = CreateCampaign {
+        case: args.case.clone().unwrap_or_else(|| "cut-in".into()),
+        method: match args.method {
+            MethodArg::Library => Method::Library,
+            MethodArg::Adaptive => Method::Adaptive,
+            MethodArg::Ndd => Method::Ndd,
+        },
+        library_id: args.library_id,
+        vut: vehicle_json(&args.vut)?,
+        epsilon: args.exploration.epsilon,
+        outside: args.exploration.outside.map(OutsideArg::wire),
+        split: Some(args.exploration.split.wire()),
+        beta: args.rule.beta,
+        confidence: args.rule.confidence,
+        max_tests: args.rule.max_tests,
+        seed: args.seed,
+        n_min: args.rule.n_min,
+        min_events: Some(args.rule.min_events),
+        guard_outside: args.rule.guard_outside,
+        paired_with: args.paired_with.as_deref().map(vehicle_json).transpose()?,
+    };
+    if let Some(limit) = args.fail_above {
+        gate::check_limit(limit)?;
+    }
+    block_on(async {
+        // Without --case, a library's campaign is of the library's case.
+        if let (None, Some(id)) = (&args.case, args.library_id) {
+            request.case = client.library(id).await?.case;
+        }
+        let view = client.create_campaign(&request).await?;
+        if !args.wait {
+            return print(&view, args.json);
+        }
+        eprintln!("campaign {} started; waiting for it to stop", view.id);
+        let view = watch(&client, view.id).await?;
+        print(&view, args.json)?;
+        judge(&view, args.fail_above)
+    })
+}
+
+/// The gate's verdict when a limit is given (`--fail-above`).
+fn judge(view: &tslg_api::CampaignView, limit: Option<f64>) -> anyhow::Result<()> {
+    if let Some(limit) = limit {
+        eprintln!("{}", gate::judge(view, limit)?);
+    }
+    Ok(())
+}
+
+/// Polls a campaign until it stops, showing a progress bar on stderr, and
+/// why it waits when no worker serves it (once each time it starts to).
+pub async fn watch(client: &Client, id: i64) -> anyhow::Result<tslg_api::CampaignView> {
+    let bars = CampaignBars::new(&["campaign"]);
+    let mut waiting: Vec<String> = Vec::new();
+    loop {
+        let view = client.campaign(id).await?;
+        let now: Vec<String> = view
+            .warnings
+            .iter()
+            .filter(|w| w.starts_with("no worker"))
+            .cloned()
+            .collect();
+        for warning in now.iter().filter(|w| !waiting.contains(w)) {
+            bars.note(0, &format!("campaign {id}: {warning}"));
+        }
+        waiting = now;
+        bars.update(0, &view);
+        if view.status.is_final() {
+            return Ok(view);
+        }
+        tokio::time::sleep(Duration::from_millis(250)).await;
+    }
+}
+
+/// `tslg campaign watch ID`: a progress bar until the campaign stops, then
+/// its state.
+pub fn watch_command(
+    server: &ServerArgs,
+    id: i64,
+    fail_above: Option<f64>,
+    json: bool,
+) -> anyhow::Result<()> {
+    if let Some(limit) = fail_above {
+        gate::check_limit(limit)?;
+    }
+    let client = client(server)?;
+    block_on(async {
+        let view = watch(&client, id).await?;
+        print(&view, json)?;
+        judge(&view, fail_above)
+    })
+}
