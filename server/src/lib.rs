@@ -3,7 +3,6 @@
 //! workers as leases, and folds their results into each campaign's prefix
 //! estimator until the stopping rule holds. See `docs/architecture.md`.
 
-mod audit;
 mod build_progress;
 mod builder;
 mod campaign_metrics;
@@ -13,19 +12,14 @@ mod db;
 mod enumeration;
 mod error;
 mod event_export;
-mod explored_ranges;
 mod history;
 mod latency;
 mod lease_size;
 mod metrics;
 mod problem_io;
-mod replay_check;
-mod replay_counts;
-mod report_check;
-mod reporting;
+mod report;
 mod routes;
 mod sampler_cache;
-mod secret_sample;
 mod state;
 mod store;
 mod throughput;

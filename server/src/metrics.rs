@@ -10,7 +10,7 @@
 
 use crate::db::sql;
 use crate::error::ApiError;
-use crate::replay_counts::{Place, ReplayTotals};
+use crate::report::replay_counts::{Place, ReplayTotals};
 use crate::state::AppState;
 use axum::extract::State;
 use axum::http::header;

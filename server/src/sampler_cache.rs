@@ -4,7 +4,7 @@
 
 use crate::db::Database;
 use crate::error::ApiError;
-use crate::explored_ranges::ExploredRanges;
+use crate::report::explored::ExploredRanges;
 use crate::store::campaigns::CampaignRow;
 use crate::store::libraries;
 use anyhow::Context;
@@ -99,7 +99,7 @@ async fn load(db: &Database, row: &CampaignRow) -> Result<Arc<dyn CampaignTests>
     // An adaptive campaign's copy resolves again the stages its stored
     // state has passed.
     let caught_up = Arc::clone(&tests);
-    db.read(move |conn| crate::store::adaptive::catch_up(conn, &row, &caught_up))
+    db.read(move |conn| crate::report::stages::catch_up(conn, &row, &caught_up))
         .await?;
     Ok(tests)
 }

@@ -47,9 +47,9 @@ pub struct Shared {
     /// Request latencies, for `/metrics`.
     pub metrics: Arc<Metrics>,
     /// Which tests are checked again, by a generator of this process.
-    pub sampler: Arc<crate::secret_sample::Sampler>,
+    pub sampler: Arc<crate::report::secret_sample::Sampler>,
     /// What the replay checks did, for `/metrics`.
-    pub replays: Arc<crate::replay_counts::ReplayCounts>,
+    pub replays: Arc<crate::report::replay_counts::ReplayCounts>,
     /// Wakes the lease requests that wait for work.
     pub work: crate::work_signal::WorkSignal,
 }

@@ -2,8 +2,8 @@
 
 use crate::error::{ApiError, ApiJson};
 use crate::latency::HoldClock;
-use crate::report_check::check_report;
-use crate::reporting;
+use crate::report::check::check_report;
+use crate::report::receive;
 use crate::routes::ApiPath;
 use crate::state::AppState;
 use crate::store::{audits, campaigns, leases};
@@ -410,7 +410,7 @@ pub async fn results(
         .next_lease
         .as_ref()
         .map(|next| leases::ClaimJob::new(&state.config, &claim_of(next)));
-    let (mut ack, claimed) = reporting::receive(&state, id, &report, &checked, next).await?;
+    let (mut ack, claimed) = receive::receive(&state, id, &report, &checked, next).await?;
     if let Some(next) = &report.next_lease {
         state.workers.seen(next);
         if let Some(claimed) = claimed {

@@ -280,7 +280,7 @@ async fn an_overlong_target_is_a_414_problem() {
 }
 
 /// A small report of a built-in vehicle, which the writer checks and
-/// records in one trip (`reporting::at_once`): an honest one is recorded;
+/// records in one trip (`receive::at_once`): an honest one is recorded;
 /// a forged one (an event where the coordinator's run gives none) is
 /// refused, its worker flagged and its earlier report taken back, and the
 /// flag holds (it commits although the report is refused).

@@ -25,7 +25,7 @@ pub struct NewAudit {
     pub first_outcome: String,
 }
 
-/// Where an audit stands (see [`crate::audit`] and the `audits` table).
+/// Where an audit stands (see [`crate::report::audit`] and the `audits` table).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum AuditState {

@@ -419,7 +419,7 @@ fn claim_in(
 }
 
 /// A one-test lease for an open audit `job`'s worker may run (see
-/// [`crate::audit`]): a new lease, or the audit's expired one taken over.
+/// [`crate::report::audit`]): a new lease, or the audit's expired one taken over.
 fn claim_audit(conn: &Connection, job: &ClaimJob) -> Result<Option<LeaseRow>, ApiError> {
     let Some(audit) = audits::runnable(conn, &job.worker, &job.offered, job.now)? else {
         return Ok(None);

@@ -1,15 +1,12 @@
 //! Database access, one module per table family. Every write runs on the
 //! single writer connection ([`crate::db::Database::write`]).
 
-pub mod adaptive;
 pub mod audits;
 pub mod campaign_row;
 pub mod campaigns;
 pub mod deletion;
-pub mod fold;
 pub mod leases;
 pub mod libraries;
 pub mod pairs;
 pub mod reports;
-pub mod results;
 pub mod user_cases;

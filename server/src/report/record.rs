@@ -12,13 +12,13 @@ use crate::config::Config;
 use crate::db::sql;
 use crate::db::{now_ms, Database};
 use crate::error::ApiError;
-use crate::explored_ranges::ExploredRanges;
 use crate::lease_size::update_cost;
-use crate::replay_check::Explored;
-use crate::report_check::CheckedReport;
+use crate::report::check::CheckedReport;
+use crate::report::explored::ExploredRanges;
+use crate::report::fold::{fold_prefix, Charge, KnownExplored};
+use crate::report::replay::Explored;
 use crate::store::audits::{self, NewAudit};
 use crate::store::campaigns::{self, CampaignRow};
-use crate::store::fold::{fold_prefix, Charge, KnownExplored};
 use crate::store::leases::{self, check_fence, LeaseRow, LeaseState};
 use crate::store::pairs;
 use crate::store::reports::{self, NewReport};
@@ -62,7 +62,7 @@ pub(crate) fn check_effort(
     Ok(())
 }
 
-/// The audits an external program's report asks for ([`crate::audit`]):
+/// The audits an external program's report asks for ([`crate::report::audit`]):
 /// `audits` from the report's start (those in the part recorded now are
 /// stored), or, when no other worker could run them, only counted as
 /// `waived`.
@@ -259,12 +259,7 @@ fn store_new_part(
         },
     )?;
     if campaign.method == Method::Adaptive {
-        crate::store::adaptive::store_near_misses(
-            conn,
-            campaign.id,
-            &report.near_misses,
-            new_from,
-        )?;
+        crate::report::stages::store_near_misses(conn, campaign.id, &report.near_misses, new_from)?;
     }
     let done = checked.to == lease.end_index as u64;
     let state = if done {

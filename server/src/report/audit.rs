@@ -3,10 +3,10 @@
 //! A worker is trusted with nothing the coordinator cannot check:
 //!
 //! - **Built-in vehicles** are run again by the coordinator
-//!   ([`crate::replay_check`]): every reported event and invalid test, and a share
+//!   ([`crate::report::replay`]): every reported event and invalid test, and a share
 //!   (`--replay-share`, default 0.1) of the tests reported without an
 //!   event, each drawn by a generator only this coordinator process knows
-//!   (seeded by the operating system, [`crate::secret_sample`]), so a
+//!   (seeded by the operating system, [`crate::report::secret_sample`]), so a
 //!   worker cannot tell which of its tests are checked. A grid case runs
 //!   each cell once and remembers it, so a check costs a draw and a
 //!   look-up.
@@ -28,13 +28,13 @@
 use crate::db::sql;
 use crate::db::{now_ms, Database};
 use crate::error::ApiError;
-use crate::report_check::CheckedReport;
+use crate::report::check::CheckedReport;
+use crate::report::fold::{fold_prefix, KnownExplored};
+use crate::report::record::{check_effort, held_lease, stopped_ack, Recorded};
 use crate::store::audits::{self, AuditRow, AuditState, NewAudit};
 use crate::store::campaigns;
-use crate::store::fold::{fold_prefix, KnownExplored};
 use crate::store::leases::LeaseState;
 use crate::store::pairs;
-use crate::store::results::{check_effort, held_lease, stopped_ack, Recorded};
 use rusqlite::{params, Connection};
 use std::sync::Arc;
 use tslg_api::{CampaignStatus, ResultAck, ResultReport};

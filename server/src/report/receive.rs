@@ -1,17 +1,17 @@
 //! Receiving a worker's report: who may report, what is checked before it
-//! is stored ([`crate::audit`]: the coordinator's replay of built-in
+//! is stored ([`crate::report::audit`]: the coordinator's replay of built-in
 //! vehicles, the weights and the audits of external programs), recording
 //! it, and the bookkeeping that follows. The route only parses.
 
-use crate::audit;
 use crate::config::Config;
 use crate::error::ApiError;
-use crate::replay_check;
-use crate::replay_counts::{Place, ReplayCounts};
-use crate::report_check::CheckedReport;
+use crate::report::audit;
+use crate::report::check::CheckedReport;
+use crate::report::record::{self, AuditPlan, Findings, Recorded};
+use crate::report::replay;
+use crate::report::replay_counts::{Place, ReplayCounts};
 use crate::sampler_cache::SamplerCache;
 use crate::state::AppState;
-use crate::store::results::{self, AuditPlan, Findings, Recorded};
 use crate::store::{audits, campaigns, leases};
 use std::sync::Arc;
 use tslg_api::{Method, ResultAck, ResultReport};
@@ -185,7 +185,7 @@ async fn receive_in_parts(
             kept: Some(state.samplers.explored()),
         };
         let config = &state.config;
-        results::record(
+        record::record(
             &state.db,
             config,
             lease_id,
@@ -281,7 +281,7 @@ async fn at_once(
 /// What [`decide`] needs of the coordinator's state.
 struct Shared<'a> {
     samplers: &'a SamplerCache,
-    sampler: &'a crate::secret_sample::Sampler,
+    sampler: &'a crate::report::secret_sample::Sampler,
     replays: &'a ReplayCounts,
     config: &'a Config,
 }
@@ -301,7 +301,7 @@ fn decide(
         replays,
         config,
     } = *shared;
-    let (lease, campaign) = results::held_lease(conn, lease_id, report)?;
+    let (lease, campaign) = record::held_lease(conn, lease_id, report)?;
     let tests = samplers.cached(campaign.id);
     let Some(tests) = tests.filter(|t| t.external().is_none()) else {
         return Ok(Decided::Declined);
@@ -323,7 +323,7 @@ fn decide(
         if work > WRITER_REPLAYS {
             return Ok(Decided::Declined);
         }
-        let verified = replay_check::verify_counted(
+        let verified = replay::verify_counted(
             tests.as_ref(),
             checked,
             new,
@@ -343,7 +343,7 @@ fn decide(
         explored,
         kept: Some(samplers.explored()),
     };
-    let recorded = results::record_held(conn, config, &lease, &campaign, report, checked, found)?;
+    let recorded = record::record_held(conn, config, &lease, &campaign, report, checked, found)?;
     Ok(Decided::Recorded(Box::new(recorded)))
 }
 
@@ -406,7 +406,7 @@ fn account(state: &AppState, report: &ResultReport, recorded: &Recorded) {
 }
 
 /// Runs a built-in vehicle's reported tests again on the coordinator (see
-/// [`replay_check::verify_builtin`]); a contradiction refuses the report and flags
+/// [`replay::verify_builtin`]); a contradiction refuses the report and flags
 /// the worker. The exploring tests it found, when it ran every test.
 async fn verify_builtin(
     state: &AppState,
@@ -415,7 +415,7 @@ async fn verify_builtin(
     worker: &str,
     checked: &Arc<CheckedReport>,
     new_from: u64,
-) -> Result<Option<replay_check::Explored>, ApiError> {
+) -> Result<Option<replay::Explored>, ApiError> {
     if new_from >= checked.to {
         return Ok(None);
     }
@@ -429,7 +429,7 @@ async fn verify_builtin(
     let cheap = tests.planned(new_from).is_some();
     let (sampler, replays) = (Arc::clone(&state.sampler), Arc::clone(&state.replays));
     let check = move |place: Place| {
-        replay_check::verify_counted(
+        replay::verify_counted(
             tests.as_ref(),
             &report,
             new_from,

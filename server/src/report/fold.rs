@@ -10,10 +10,10 @@
 
 use crate::db::sql;
 use crate::error::ApiError;
-use crate::explored_ranges::{exploring_in, ExploredRanges};
 use crate::history;
-use crate::replay_check::Explored;
-use crate::report_check::CheckedReport;
+use crate::report::check::CheckedReport;
+use crate::report::explored::{exploring_in, ExploredRanges};
+use crate::report::replay::Explored;
 use crate::store::audits;
 use crate::store::campaigns::CampaignRow;
 use crate::store::reports;
@@ -75,7 +75,7 @@ pub fn fold_step(
 /// The first index the prefix may not pass: the smallest `resume_at` of
 /// the campaign's active leases (below it every outcome is recorded), its
 /// `next_index`, and its first open audit (a test two workers have not yet
-/// agreed on, [`crate::audit`]).
+/// agreed on, [`crate::report::audit`]).
 pub(crate) fn frontier(conn: &Connection, campaign: &CampaignRow) -> Result<u64, ApiError> {
     Ok(bounds(conn, campaign)?.frontier)
 }
@@ -176,7 +176,7 @@ impl KnownExplored<'_> {
 
 /// Folds the newly resolved prefix of `campaign` and persists the
 /// estimate (an adaptive campaign resolves its stages instead,
-/// [`crate::store::adaptive`]), and
+/// [`crate::report::stages`]), and
 /// estimate, its history points and, when the rule stops the campaign, its
 /// final status. `tests` are a library campaign's tests, which say which
 /// tests explored outside the library; `None` for the NDD. `known` are the
@@ -253,7 +253,7 @@ fn fold_charging(
                 campaign.id
             )
         })?;
-        return crate::store::adaptive::resolve_stages(conn, campaign, &tests);
+        return crate::report::stages::resolve_stages(conn, campaign, &tests);
     }
     let Bounds {
         frontier,

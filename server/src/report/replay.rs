@@ -16,9 +16,9 @@
 //! are joined in index order, so the first contradiction reported is the
 //! lowest-indexed one whatever the scheduling.
 
-use crate::audit::Mismatch;
-use crate::replay_counts::{Place, ReplayCounts};
-use crate::report_check::CheckedReport;
+use crate::report::audit::Mismatch;
+use crate::report::check::CheckedReport;
+use crate::report::replay_counts::{Place, ReplayCounts};
 use crate::store::audits;
 use rayon::prelude::*;
 use std::panic::{catch_unwind, AssertUnwindSafe};

@@ -1,5 +1,5 @@
 //! What the replay checks did since the coordinator started, for
-//! `/metrics` ([`crate::replay_check::verify_counted`] counts each check).
+//! `/metrics` ([`crate::report::replay::verify_counted`] counts each check).
 
 use std::sync::atomic::{AtomicU64, Ordering};
 

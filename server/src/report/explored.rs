@@ -4,7 +4,7 @@
 //! A library campaign's fold counts the tests drawn outside the library
 //! (the outside bound, docs/statistics.md). The coordinator learns which
 //! tests those are when it runs a report's tests again, all of them
-//! ([`crate::replay_check`]). But a report ahead of the resolved prefix is
+//! ([`crate::report::replay`]). But a report ahead of the resolved prefix is
 //! folded later, by the report that fills the gap before it, and that fold
 //! drew every test of the ranges it passed once more, on the writer's
 //! thread while every other write waited: about one lease per other
@@ -16,7 +16,7 @@
 //! (not of anything a worker reported), so keeping one longer than needed,
 //! or one from a report whose write failed, changes no result.
 
-use crate::replay_check::Explored;
+use crate::report::replay::Explored;
 use std::collections::{BTreeMap, HashMap};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
