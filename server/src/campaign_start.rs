@@ -3,7 +3,7 @@
 //! (what a worker could not prepare is refused here, not leased forever),
 //! and the campaign stored `running`, or `pending` while its library builds.
 
-use crate::error::ApiError;
+use crate::error::ServiceError;
 use crate::state::AppState;
 use crate::store::campaigns::{self, CampaignRow, NewCampaign};
 use crate::store::libraries::{self, LibraryRow};
@@ -20,8 +20,8 @@ use tslg_method::external::ExternalVut;
 use tslg_method::registry::{CampaignTests, CaseError, ExposureSource, ScenarioCase};
 use tslg_method::sampling::{check_epsilon, OutsideSpread, Split};
 
-fn bad(message: impl Into<String>) -> ApiError {
-    ApiError::Unprocessable(message.into())
+fn bad(message: impl Into<String>) -> ServiceError {
+    ServiceError::Unprocessable(message.into())
 }
 
 /// The names of the grid cases, comma-separated.
@@ -36,7 +36,7 @@ fn grid_cases() -> String {
 
 /// The stopping rule a request asks for, with the defaults filled in, and
 /// every number checked against the method's ranges; pure.
-pub fn rule_of(req: &CreateCampaign) -> Result<StoppingRule, ApiError> {
+pub fn rule_of(req: &CreateCampaign) -> Result<StoppingRule, ServiceError> {
     check_name("case", &req.case, 64)?;
     if matches!(req.method, Method::Enumerate | Method::Build) {
         return Err(bad(format!(
@@ -114,7 +114,7 @@ pub fn rule_of(req: &CreateCampaign) -> Result<StoppingRule, ApiError> {
 async fn library_of(
     state: &AppState,
     req: &CreateCampaign,
-) -> Result<Option<LibraryRow>, ApiError> {
+) -> Result<Option<LibraryRow>, ServiceError> {
     let library = match (req.method, req.library_id) {
         (Method::Library | Method::Adaptive, None) => {
             return Err(bad(format!(
@@ -207,7 +207,7 @@ fn open(
 
 /// Starts the campaign `req` asks for; for a paired regression campaign
 /// (`paired_with`), both of its campaigns, linked, and answers vehicle a's.
-pub async fn start(state: &AppState, req: CreateCampaign) -> Result<CampaignRow, ApiError> {
+pub async fn start(state: &AppState, req: CreateCampaign) -> Result<CampaignRow, ServiceError> {
     let rule = rule_of(&req)?;
     let library = library_of(state, &req).await?;
     let exposure = library.as_ref().map_or(ExposureSource::Builtin, |lib| {
@@ -222,7 +222,7 @@ pub async fn start(state: &AppState, req: CreateCampaign) -> Result<CampaignRow,
                 .read(move |conn| libraries::file(conn, id))
                 .await?
                 .ok_or_else(|| {
-                    ApiError::Internal(anyhow::anyhow!("ready library {} has no file", lib.id))
+                    ServiceError::Internal(anyhow::anyhow!("ready library {} has no file", lib.id))
                 })?
                 .bytes
         }),
@@ -254,7 +254,7 @@ pub async fn start(state: &AppState, req: CreateCampaign) -> Result<CampaignRow,
             .collect::<Result<Vec<Opened>, String>>()
     })
     .await
-    .map_err(|e| ApiError::Internal(e.into()))?
+    .map_err(|e| ServiceError::Internal(e.into()))?
     .map_err(bad)?;
     let status = match &library {
         Some(lib) if req.method.uses_library() && lib.status == LibraryStatus::Building => {
@@ -272,7 +272,7 @@ pub async fn start(state: &AppState, req: CreateCampaign) -> Result<CampaignRow,
         .collect();
     let rows = state
         .db
-        .write(move |conn| {
+        .write(move |conn| -> Result<_, ServiceError> {
             let rows = news
                 .iter()
                 .map(|new| campaigns::insert(conn, new))

@@ -12,7 +12,7 @@
 //! which cell: each cell's outcome is the program's, and the library a
 //! function of the set of cells with the event.
 
-use crate::error::ApiError;
+use crate::error::ServiceError;
 use crate::state::AppState;
 use crate::store::campaigns::{self, CampaignRow, NewCampaign};
 use crate::store::libraries::{self, Built, LibraryRow};
@@ -110,15 +110,15 @@ pub async fn start(
     library: &LibraryRow,
     case: Arc<dyn ScenarioCase>,
     surrogate: &serde_json::Value,
-) -> Result<CampaignRow, ApiError> {
+) -> Result<CampaignRow, ServiceError> {
     let spec = surrogate.clone();
     let (tests, len) = tokio::task::spawn_blocking(move || {
         let tests = case.enumeration(&spec)?;
         Ok::<_, tslg_method::registry::CaseError>((tests, case.enumeration_len()))
     })
     .await
-    .map_err(|e| ApiError::Internal(e.into()))?
-    .map_err(|e| ApiError::Unprocessable(e.to_string()))?;
+    .map_err(|e| ServiceError::Internal(e.into()))?
+    .map_err(|e| ServiceError::Unprocessable(e.to_string()))?;
     // Every cell once: the rule holds only when all are in.
     let rule = StoppingRule {
         n_min: len,
@@ -146,7 +146,7 @@ pub async fn insert_build(
     method: Method,
     surrogate: &serde_json::Value,
     rule: StoppingRule,
-) -> Result<CampaignRow, ApiError> {
+) -> Result<CampaignRow, ServiceError> {
     let requires = ExternalVut::from_spec(surrogate)
         .and_then(Result::ok)
         .map(|e| e.requirement(&library.case_name));
@@ -169,29 +169,29 @@ pub async fn insert_build(
         exact_probability: None,
         first_stage: None,
     };
-    state
+    Ok(state
         .db
         .write(move |conn| campaigns::insert(conn, &new))
-        .await
+        .await?)
 }
 
 /// The enumeration campaign of library `id`, if it is built on workers.
-pub async fn campaign_of(state: &AppState, id: i64) -> Result<Option<CampaignRow>, ApiError> {
+pub async fn campaign_of(state: &AppState, id: i64) -> Result<Option<CampaignRow>, ServiceError> {
     let sql = format!(
         "SELECT {} FROM campaigns WHERE library_id = ? AND enumerate >= 1 \
          ORDER BY id DESC LIMIT 1",
         campaigns::COLUMNS
     );
-    state
+    Ok(state
         .db
         .read(move |conn| crate::db::sql::optional(conn, &sql, [id]))
-        .await
+        .await?)
 }
 
 /// Records the library of a stopped enumeration campaign: ready from its
 /// events, or failed with the reason (a cell without a valid outcome, a
 /// cancelled build). Harmless when the library is done already.
-pub async fn finish(state: &AppState, campaign_id: i64) -> Result<(), ApiError> {
+pub async fn finish(state: &AppState, campaign_id: i64) -> Result<(), ServiceError> {
     let campaign = state
         .db
         .read(move |conn| campaigns::get(conn, campaign_id))
@@ -227,7 +227,7 @@ pub async fn finish(state: &AppState, campaign_id: i64) -> Result<(), ApiError> 
     let indices = campaign.indices as u64;
     let (outcomes, invalid) = state
         .db
-        .read(move |conn| {
+        .read(move |conn| -> Result<_, ServiceError> {
             let outcomes = reports::outcomes(conn, campaign_id, 0, indices)?;
             let Some(&(index, _)) = outcomes
                 .iter()
@@ -253,20 +253,20 @@ pub async fn finish(state: &AppState, campaign_id: i64) -> Result<(), ApiError> 
     }
     let events: Vec<u64> = outcomes.into_iter().map(|(i, _)| i).collect();
     let request: CreateLibrary =
-        serde_json::from_str(&library.request).map_err(|e| ApiError::Internal(e.into()))?;
+        serde_json::from_str(&library.request).map_err(|e| ServiceError::Internal(e.into()))?;
     let threshold = crate::builder::build_request(&request)
-        .map_err(ApiError::Unprocessable)?
+        .map_err(ServiceError::Unprocessable)?
         .threshold;
     let source = library.exposure_source();
     let surrogate: serde_json::Value =
-        serde_json::from_str(&campaign.vut).map_err(|e| ApiError::Internal(e.into()))?;
+        serde_json::from_str(&campaign.vut).map_err(|e| ServiceError::Internal(e.into()))?;
     let (case_name, preset) = (library.case_name.clone(), library.preset.clone());
     let built = tokio::task::spawn_blocking(move || {
         let case = tslg_method::cases::open_case(&case_name, Some(&preset), &source)?;
         case.library_from_enumeration(&surrogate, threshold, &events)
     })
     .await
-    .map_err(|e| ApiError::Internal(e.into()))?;
+    .map_err(|e| ServiceError::Internal(e.into()))?;
     match built {
         Ok(built) => {
             let (size, seconds) = (built.size, campaign.worker_seconds);
@@ -284,17 +284,20 @@ pub async fn finish(state: &AppState, campaign_id: i64) -> Result<(), ApiError> 
 }
 
 /// Marks library `id` failed for `reason`.
-async fn mark_failed(state: &AppState, id: i64, reason: String) -> Result<(), ApiError> {
-    state
+async fn mark_failed(state: &AppState, id: i64, reason: String) -> Result<(), ServiceError> {
+    Ok(state
         .db
         .write(move |conn| libraries::mark_failed(conn, id, &reason))
-        .await
+        .await?)
 }
 
 /// What a library built on workers shows while it builds: its cells done
 /// of all, and, while no live worker offers its program, that it waits for
 /// one.
-pub async fn progress(state: &AppState, view: &mut tslg_api::LibraryView) -> Result<(), ApiError> {
+pub async fn progress(
+    state: &AppState,
+    view: &mut tslg_api::LibraryView,
+) -> Result<(), ServiceError> {
     if view.status != LibraryStatus::Building {
         return Ok(());
     }

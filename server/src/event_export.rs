@@ -5,7 +5,7 @@
 //! grid case as an OpenSCENARIO file. The scenario is the campaign's own
 //! test `index` drawn again (SPEC §7), so nothing more is stored.
 
-use crate::error::ApiError;
+use crate::error::ServiceError;
 use crate::state::AppState;
 use crate::store::{campaigns, campaigns::CampaignRow, libraries, reports};
 use anyhow::Context;
@@ -14,14 +14,14 @@ use tslg_api::{CampaignEvent, EventPage, DEFAULT_EVENTS_PAGE, MAX_EVENTS_PAGE};
 use tslg_method::cases::open_case;
 use tslg_method::registry::ScenarioCase;
 
-async fn campaign(state: &AppState, id: i64) -> Result<CampaignRow, ApiError> {
-    state.db.read(move |conn| campaigns::get(conn, id)).await
+async fn campaign(state: &AppState, id: i64) -> Result<CampaignRow, ServiceError> {
+    Ok(state.db.read(move |conn| campaigns::get(conn, id)).await?)
 }
 
-fn case_of(row: &CampaignRow) -> Result<std::sync::Arc<dyn ScenarioCase>, ApiError> {
+fn case_of(row: &CampaignRow) -> Result<std::sync::Arc<dyn ScenarioCase>, ServiceError> {
     open_case(&row.case_name, Some(&row.preset), &row.exposure_source())
         .with_context(|| format!("campaign {} cannot open its case", row.id))
-        .map_err(ApiError::Internal)
+        .map_err(ServiceError::Internal)
 }
 
 /// The page of campaign `id`'s events after test index `after` (from the
@@ -31,10 +31,10 @@ pub async fn page(
     id: i64,
     after: Option<u64>,
     limit: Option<usize>,
-) -> Result<EventPage, ApiError> {
+) -> Result<EventPage, ServiceError> {
     let limit = limit.unwrap_or(DEFAULT_EVENTS_PAGE);
     if !(1..=MAX_EVENTS_PAGE).contains(&limit) {
-        return Err(ApiError::BadRequest(format!(
+        return Err(ServiceError::BadRequest(format!(
             "limit = {limit} must be in 1..={MAX_EVENTS_PAGE}"
         )));
     }
@@ -124,11 +124,11 @@ pub async fn page(
 }
 
 /// Test `index` of campaign `id` as an OpenSCENARIO 1.0 document.
-pub async fn openscenario(state: &AppState, id: i64, index: u64) -> Result<String, ApiError> {
+pub async fn openscenario(state: &AppState, id: i64, index: u64) -> Result<String, ServiceError> {
     let row = campaign(state, id).await?;
     let budget = row.max_tests.max(0) as u64;
     if index >= budget {
-        return Err(ApiError::NotFound(format!(
+        return Err(ServiceError::NotFound(format!(
             "campaign {id} has no test {index} (its tests are 0..{budget})"
         )));
     }
@@ -136,7 +136,7 @@ pub async fn openscenario(state: &AppState, id: i64, index: u64) -> Result<Strin
     tokio::task::spawn_blocking(move || {
         let case = case_of(&row)?;
         let no_file = || {
-            ApiError::NotFound(format!(
+            ServiceError::NotFound(format!(
                 "campaign {id} is of case {}, whose scenarios have no OpenSCENARIO form \
                  (grid cases do: cut-in, highway-exit)",
                 row.case_name
@@ -146,7 +146,7 @@ pub async fn openscenario(state: &AppState, id: i64, index: u64) -> Result<Strin
             return Err(no_file());
         }
         let planned = tests.planned(index).ok_or_else(|| {
-            ApiError::NotFound(format!(
+            ServiceError::NotFound(format!(
                 "test {index} of campaign {id} is not planned yet: an adaptive campaign plans \
                  each stage's tests when the stage before it is resolved"
             ))

@@ -9,7 +9,7 @@
 //! state of things now are gauges.
 
 use crate::db::sql;
-use crate::error::ApiError;
+use crate::error::ServiceError;
 use crate::report::replay_counts::{Place, ReplayTotals};
 use crate::state::AppState;
 use axum::extract::State;
@@ -40,7 +40,7 @@ struct Snapshot {
     replays: ReplayTotals,
 }
 
-async fn snapshot(state: &AppState) -> Result<Snapshot, ApiError> {
+async fn snapshot(state: &AppState) -> Result<Snapshot, ServiceError> {
     let groups = state.db.group_counts();
     let fold_drawn = state.samplers.explored().drawn();
     let replays = state.replays.totals();
@@ -55,7 +55,7 @@ fn read_snapshot(
     groups: (u64, u64),
     fold_drawn: u64,
     replays: ReplayTotals,
-) -> Result<Snapshot, ApiError> {
+) -> Result<Snapshot, ServiceError> {
     let campaigns = sql::all(
         conn,
         "SELECT status, COUNT(*) FROM campaigns GROUP BY status",
@@ -252,7 +252,7 @@ fn scrape_registry(s: &Snapshot, live: usize, known: usize) -> Registry {
 }
 
 /// `GET /metrics`.
-pub async fn scrape(State(state): State<AppState>) -> Result<Response, ApiError> {
+pub async fn scrape(State(state): State<AppState>) -> Result<Response, ServiceError> {
     let snapshot = snapshot(&state).await?;
     let (live, known) = state.workers.counts();
     let running = state
@@ -277,6 +277,6 @@ pub async fn scrape(State(state): State<AppState>) -> Result<Response, ApiError>
     let mut body = Vec::new();
     TextEncoder::new()
         .encode(&families, &mut body)
-        .map_err(|e| ApiError::Internal(e.into()))?;
+        .map_err(|e| ServiceError::Internal(e.into()))?;
     Ok(([(header::CONTENT_TYPE, prometheus::TEXT_FORMAT)], body).into_response())
 }

@@ -3,7 +3,7 @@
 //! workers report and lists tests for clients that ask for them.
 
 use crate::db::Database;
-use crate::error::ApiError;
+use crate::error::ServiceError;
 use crate::report::explored::ExploredRanges;
 use crate::store::campaigns::CampaignRow;
 use crate::store::libraries;
@@ -27,7 +27,7 @@ impl SamplerCache {
         &self,
         db: &Database,
         row: &CampaignRow,
-    ) -> Result<Arc<dyn CampaignTests>, ApiError> {
+    ) -> Result<Arc<dyn CampaignTests>, ServiceError> {
         if let Some(sampler) = self.lock().get(&row.id) {
             return Ok(Arc::clone(sampler));
         }
@@ -42,7 +42,7 @@ impl SamplerCache {
         &self,
         db: &Database,
         row: &CampaignRow,
-    ) -> Result<Arc<dyn CampaignTests>, ApiError> {
+    ) -> Result<Arc<dyn CampaignTests>, ServiceError> {
         match self.cached(row.id) {
             Some(tests) => Ok(tests),
             None => load(db, row).await,
@@ -81,7 +81,7 @@ impl SamplerCache {
 
 /// Builds campaign `row`'s tests off the async runtime, caught up with its
 /// stored state.
-async fn load(db: &Database, row: &CampaignRow) -> Result<Arc<dyn CampaignTests>, ApiError> {
+async fn load(db: &Database, row: &CampaignRow) -> Result<Arc<dyn CampaignTests>, ServiceError> {
     let file = match row.library_id {
         Some(id) if row.method.uses_library() => Some(
             db.read(move |conn| libraries::file(conn, id))

@@ -14,7 +14,7 @@
 //! be a failure of it.
 
 use crate::db::sql;
-use crate::error::ApiError;
+use crate::error::ServiceError;
 use crate::state::AppState;
 use crate::store::campaigns::{self, CampaignRow};
 use crate::store::leases;
@@ -37,7 +37,7 @@ pub async fn start(
     state: &AppState,
     library: &LibraryRow,
     surrogate: &serde_json::Value,
-) -> Result<CampaignRow, ApiError> {
+) -> Result<CampaignRow, ServiceError> {
     let rule = StoppingRule {
         n_min: 1,
         min_events: 1,
@@ -61,8 +61,8 @@ enum Uploaded {
     Failed(String),
 }
 
-fn parse(upload: &LibraryUpload) -> Result<Uploaded, ApiError> {
-    let bad = |m: String| Err(ApiError::Unprocessable(m));
+fn parse(upload: &LibraryUpload) -> Result<Uploaded, ServiceError> {
+    let bad = |m: String| Err(ServiceError::Unprocessable(m));
     if !(upload.seconds.is_finite() && upload.seconds >= 0.0) {
         return bad(format!(
             "seconds = {} must be a finite number ≥ 0",
@@ -92,12 +92,12 @@ fn holder_of(
     conn: &rusqlite::Connection,
     id: i64,
     upload: &Holder,
-) -> Result<(CampaignRow, LibraryRow), ApiError> {
+) -> Result<(CampaignRow, LibraryRow), ServiceError> {
     let lease = leases::get_unless_flagged(conn, id, &upload.worker)?;
     leases::check_fence(&lease, &upload.worker, upload.attempt, upload.key.as_str())?;
     let campaign = campaigns::get(conn, lease.campaign_id)?;
     if campaign.method != Method::Build {
-        return Err(ApiError::Conflict(format!(
+        return Err(ServiceError::Conflict(format!(
             "lease {id} is of campaign {} of method {}: its results go to POST \
              /api/v1/leases/{id}/results",
             campaign.id,
@@ -105,7 +105,7 @@ fn holder_of(
         )));
     }
     if campaign.status != CampaignStatus::Running || lease.state != leases::LeaseState::Active {
-        return Err(ApiError::Conflict(format!(
+        return Err(ServiceError::Conflict(format!(
             "campaign {} is {}: the build is no longer wanted",
             campaign.id,
             campaign.status.as_str()
@@ -113,10 +113,10 @@ fn holder_of(
     }
     let library_id = campaign
         .library_id
-        .ok_or_else(|| ApiError::Internal(anyhow::anyhow!("build without a library")))?;
+        .ok_or_else(|| ServiceError::Internal(anyhow::anyhow!("build without a library")))?;
     let library = libraries::get(conn, library_id)?;
     if library.status != LibraryStatus::Building {
-        return Err(ApiError::Conflict(format!(
+        return Err(ServiceError::Conflict(format!(
             "library {library_id} is {}: the build is no longer wanted",
             library.status.as_str()
         )));
@@ -183,7 +183,7 @@ struct Holder {
 /// campaign converged), or failed with the worker's reason. A file that is
 /// not the library asked for is a 422 and changes nothing: the lease
 /// expires and another worker builds it.
-pub async fn upload(state: &AppState, id: i64, upload: &LibraryUpload) -> Result<(), ApiError> {
+pub async fn upload(state: &AppState, id: i64, upload: &LibraryUpload) -> Result<(), ServiceError> {
     let uploaded = parse(upload)?;
     let holder = Holder {
         worker: upload.worker.clone(),
@@ -203,9 +203,9 @@ pub async fn upload(state: &AppState, id: i64, upload: &LibraryUpload) -> Result
             let (c, l) = (campaign.clone(), library.clone());
             let built = tokio::task::spawn_blocking(move || check_file(&c, &l, &file))
                 .await
-                .map_err(|e| ApiError::Internal(e.into()))?;
+                .map_err(|e| ServiceError::Internal(e.into()))?;
             Ok(built.map_err(|e| {
-                ApiError::Unprocessable(format!(
+                ServiceError::Unprocessable(format!(
                     "the uploaded file is not library {}: {e}",
                     library.id
                 ))
@@ -216,7 +216,7 @@ pub async fn upload(state: &AppState, id: i64, upload: &LibraryUpload) -> Result
     let seconds = upload.seconds;
     let (campaign, library) = state
         .db
-        .write(move |conn| {
+        .write(move |conn| -> Result<_, ServiceError> {
             // Again in the transaction: only the first upload of the holder
             // counts.
             let (campaign, library) = holder_of(conn, id, &holder)?;

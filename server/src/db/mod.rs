@@ -11,12 +11,15 @@
 //! are applied at start-up by sqlx's migrator (its `_sqlx_migrations`
 //! table records them, as it always has).
 
+mod error;
 mod readers;
 pub mod sql;
+#[cfg(test)]
+mod tests;
 mod writer;
 
-use crate::error::ApiError;
 use anyhow::Context;
+pub use error::DbError;
 use readers::Readers;
 use rusqlite::{Connection, OpenFlags};
 use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, SqliteSynchronous};
@@ -92,19 +95,21 @@ impl Database {
     /// Runs `work` on the write connection, in the savepoint of a
     /// transaction that concurrent writes share, and answers once it is
     /// committed ([`writer::Writer::run`]).
-    pub async fn write<T, F>(&self, work: F) -> Result<T, ApiError>
+    pub async fn write<T, E, F>(&self, work: F) -> Result<T, E>
     where
         T: Send + 'static,
-        F: FnOnce(&Connection) -> Result<T, ApiError> + Send + 'static,
+        E: From<DbError> + Send + 'static,
+        F: FnOnce(&Connection) -> Result<T, E> + Send + 'static,
     {
         self.writer.run(work).await
     }
 
     /// Runs `work` on a read-only connection, off the async runtime.
-    pub async fn read<T, F>(&self, work: F) -> Result<T, ApiError>
+    pub async fn read<T, E, F>(&self, work: F) -> Result<T, E>
     where
         T: Send + 'static,
-        F: FnOnce(&Connection) -> Result<T, ApiError> + Send + 'static,
+        E: From<DbError> + Send + 'static,
+        F: FnOnce(&Connection) -> Result<T, E> + Send + 'static,
     {
         self.readers.run(work).await
     }

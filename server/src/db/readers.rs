@@ -6,8 +6,8 @@
 //! connection taken from this pool (at most [`Readers::new`]'s `size` at
 //! once; a connection is opened when none is idle, and kept after).
 
-use crate::db::writer::panicked;
-use crate::error::ApiError;
+use super::error::DbError;
+use super::writer::panicked;
 use rusqlite::Connection;
 use std::panic::AssertUnwindSafe;
 use std::sync::Mutex;
@@ -33,30 +33,30 @@ impl Readers {
     }
 
     /// Runs `work` on a read connection off the async runtime.
-    pub async fn run<T, F>(&self, work: F) -> Result<T, ApiError>
+    pub async fn run<T, E, F>(&self, work: F) -> Result<T, E>
     where
         T: Send + 'static,
-        F: FnOnce(&Connection) -> Result<T, ApiError> + Send + 'static,
+        E: From<DbError> + Send + 'static,
+        F: FnOnce(&Connection) -> Result<T, E> + Send + 'static,
     {
         let _permit = self
             .permits
             .acquire()
             .await
-            .map_err(|e| ApiError::Internal(e.into()))?;
+            .map_err(|e| DbError(e.into()))?;
         let idle = self.idle.lock().unwrap_or_else(|p| p.into_inner()).pop();
         let conn = match idle {
             Some(conn) => conn,
-            None => (self.open)().map_err(|e| {
-                ApiError::Internal(anyhow::anyhow!("cannot open the database for reading: {e}"))
-            })?,
+            None => (self.open)()
+                .map_err(|e| DbError::new(format!("cannot open the database for reading: {e}")))?,
         };
         let (conn, outcome) = tokio::task::spawn_blocking(move || {
             let outcome = std::panic::catch_unwind(AssertUnwindSafe(|| work(&conn)))
-                .unwrap_or_else(|panic| Err(panicked("a read", &*panic)));
+                .unwrap_or_else(|panic| Err(panicked("a read", &*panic).into()));
             (conn, outcome)
         })
         .await
-        .map_err(|e| ApiError::Internal(e.into()))?;
+        .map_err(|e| DbError(e.into()))?;
         self.idle
             .lock()
             .unwrap_or_else(|p| p.into_inner())

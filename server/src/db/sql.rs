@@ -1,9 +1,8 @@
 //! The store's few ways of running a statement: rows into `serde` types by
 //! column name (a struct's fields) or by position (a tuple), through each
-//! connection's cache of prepared statements, errors as [`ApiError`]
-//! (an opaque 500 with the cause logged).
+//! connection's cache of prepared statements, errors as [`DbError`].
 
-use crate::error::ApiError;
+use super::error::DbError;
 use rusqlite::{Connection, Params, Statement};
 use serde::de::DeserializeOwned;
 use std::cell::RefCell;
@@ -15,7 +14,7 @@ pub fn all<T: DeserializeOwned>(
     conn: &Connection,
     sql: &str,
     params: impl Params,
-) -> Result<Vec<T>, ApiError> {
+) -> Result<Vec<T>, DbError> {
     rows(conn, sql, params, usize::MAX)
 }
 
@@ -24,7 +23,7 @@ pub fn optional<T: DeserializeOwned>(
     conn: &Connection,
     sql: &str,
     params: impl Params,
-) -> Result<Option<T>, ApiError> {
+) -> Result<Option<T>, DbError> {
     Ok(rows(conn, sql, params, 1)?.pop())
 }
 
@@ -34,7 +33,7 @@ fn rows<T: DeserializeOwned>(
     sql: &str,
     params: impl Params,
     most: usize,
-) -> Result<Vec<T>, ApiError> {
+) -> Result<Vec<T>, DbError> {
     let mut statement = conn.prepare_cached(sql)?;
     let columns = columns_of(sql, &statement);
     let mut rows = statement.query(params)?;
@@ -72,12 +71,12 @@ pub fn one<T: DeserializeOwned>(
     conn: &Connection,
     sql: &str,
     params: impl Params,
-) -> Result<T, ApiError> {
+) -> Result<T, DbError> {
     optional(conn, sql, params)?
-        .ok_or_else(|| ApiError::Internal(anyhow::anyhow!("a statement returned no row: {sql}")))
+        .ok_or_else(|| DbError::new(format!("a statement returned no row: {sql}")))
 }
 
 /// Runs `sql`; the rows it changed.
-pub fn execute(conn: &Connection, sql: &str, params: impl Params) -> Result<usize, ApiError> {
+pub fn execute(conn: &Connection, sql: &str, params: impl Params) -> Result<usize, DbError> {
     Ok(conn.prepare_cached(sql)?.execute(params)?)
 }

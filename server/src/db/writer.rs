@@ -29,7 +29,7 @@
 //! unused; a report's worker sends it again and it is a duplicate). Nothing
 //! is half-written either way.
 
-use crate::error::ApiError;
+use super::error::DbError;
 use rusqlite::Connection;
 use std::panic::AssertUnwindSafe;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -49,31 +49,29 @@ const MIN_GROUP_CAP: usize = 16;
 /// The longest a group keeps taking jobs after its first started.
 const MAX_GROUP_TIME: Duration = Duration::from_millis(20);
 
-/// The answer a job's requester waits for.
-type Answer<T> = Result<T, ApiError>;
-
 /// A write waiting for the writer thread.
 trait Job: Send {
     /// Runs the write on `conn`, inside the job's savepoint; whether it
     /// succeeded (a failed job's savepoint is rolled back).
     fn run(&mut self, conn: &Connection) -> bool;
     /// The job failed around its write (its savepoint could not be set).
-    fn fail(&mut self, error: ApiError);
+    fn fail(&mut self, error: DbError);
     /// Answers the requester once the group's commit is known.
     fn answer(self: Box<Self>, commit: &Result<(), Arc<str>>);
 }
 
 /// A job and where its answer goes.
-struct Pending<T, F> {
+struct Pending<T, E, F> {
     work: Option<F>,
-    outcome: Option<Answer<T>>,
-    reply: oneshot::Sender<Answer<T>>,
+    outcome: Option<Result<T, E>>,
+    reply: oneshot::Sender<Result<T, E>>,
 }
 
-impl<T, F> Job for Pending<T, F>
+impl<T, E, F> Job for Pending<T, E, F>
 where
     T: Send,
-    F: FnOnce(&Connection) -> Answer<T> + Send,
+    E: From<DbError> + Send,
+    F: FnOnce(&Connection) -> Result<T, E> + Send,
 {
     fn run(&mut self, conn: &Connection) -> bool {
         let Some(work) = self.work.take() else {
@@ -81,41 +79,39 @@ where
         };
         // A panicking write is a failed request, not a dead writer.
         let outcome = std::panic::catch_unwind(AssertUnwindSafe(|| work(conn)))
-            .unwrap_or_else(|panic| Err(panicked("a write", &*panic)));
+            .unwrap_or_else(|panic| Err(panicked("a write", &*panic).into()));
         let ok = outcome.is_ok();
         self.outcome = Some(outcome);
         ok
     }
 
-    fn fail(&mut self, error: ApiError) {
+    fn fail(&mut self, error: DbError) {
         self.work = None;
-        self.outcome = Some(Err(error));
+        self.outcome = Some(Err(error.into()));
     }
 
     fn answer(self: Box<Self>, commit: &Result<(), Arc<str>>) {
         let outcome = match (self.outcome, commit) {
             (Some(Ok(value)), Ok(())) => Ok(value),
-            (Some(Ok(_)), Err(reason)) => Err(ApiError::Internal(anyhow::anyhow!(
-                "the group commit failed: {reason}"
-            ))),
+            (Some(Ok(_)), Err(reason)) => {
+                Err(DbError::new(format!("the group commit failed: {reason}")).into())
+            }
             (Some(Err(e)), _) => Err(e),
-            (None, _) => Err(ApiError::Internal(anyhow::anyhow!(
-                "a write was answered without running"
-            ))),
+            (None, _) => Err(DbError::new("a write was answered without running").into()),
         };
         // A request whose client went away no longer listens.
         let _ = self.reply.send(outcome);
     }
 }
 
-/// A 500 for a panic in `what`, with its message.
-pub(crate) fn panicked(what: &str, panic: &(dyn std::any::Any + Send)) -> ApiError {
+/// The failure of a panic in `what`, with its message.
+pub(super) fn panicked(what: &str, panic: &(dyn std::any::Any + Send)) -> DbError {
     let message = panic
         .downcast_ref::<&str>()
         .map(|s| s.to_string())
         .or_else(|| panic.downcast_ref::<String>().cloned())
         .unwrap_or_else(|| "no message".into());
-    ApiError::Internal(anyhow::anyhow!("{what} panicked: {message}"))
+    DbError::new(format!("{what} panicked: {message}"))
 }
 
 /// Groups committed and the jobs they carried (for `/metrics`: their ratio
@@ -149,10 +145,11 @@ impl Writer {
     /// transaction, and answers once the group is committed: the work's
     /// value when both succeeded, the work's error (its writes rolled
     /// back, the others' kept) or the commit's.
-    pub async fn run<T, F>(&self, work: F) -> Answer<T>
+    pub async fn run<T, E, F>(&self, work: F) -> Result<T, E>
     where
         T: Send + 'static,
-        F: FnOnce(&Connection) -> Answer<T> + Send + 'static,
+        E: From<DbError> + Send + 'static,
+        F: FnOnce(&Connection) -> Result<T, E> + Send + 'static,
     {
         let (reply, answer) = oneshot::channel();
         let job = Box::new(Pending {
@@ -162,12 +159,10 @@ impl Writer {
         });
         self.jobs
             .send(job)
-            .map_err(|_| ApiError::Internal(anyhow::anyhow!("the database writer has stopped")))?;
-        answer.await.map_err(|_| {
-            ApiError::Internal(anyhow::anyhow!(
-                "the database writer stopped before answering"
-            ))
-        })?
+            .map_err(|_| DbError::new("the database writer has stopped"))?;
+        answer
+            .await
+            .map_err(|_| DbError::new("the database writer stopped before answering"))?
     }
 
     /// Groups committed so far, and the jobs they answered.
@@ -236,7 +231,7 @@ fn serve(conn: &Connection, queue: &mpsc::Receiver<Box<dyn Job>>, counters: &Cou
         while let Some(mut job) = next {
             match &begun {
                 Ok(()) => run_in_savepoint(conn, job.as_mut()),
-                Err(e) => job.fail(ApiError::Internal(anyhow::anyhow!(
+                Err(e) => job.fail(DbError::new(format!(
                     "cannot begin a write transaction: {e}"
                 ))),
             }
@@ -282,9 +277,7 @@ fn run_statement(conn: &Connection, sql: &str) -> rusqlite::Result<()> {
 /// succeeds, rolled back (and released) when it fails.
 fn run_in_savepoint(conn: &Connection, job: &mut dyn Job) {
     if let Err(e) = run_statement(conn, "SAVEPOINT job") {
-        job.fail(ApiError::Internal(anyhow::anyhow!(
-            "cannot open a savepoint: {e}"
-        )));
+        job.fail(DbError::new(format!("cannot open a savepoint: {e}")));
         return;
     }
     let ended = if job.run(conn) {
@@ -293,161 +286,12 @@ fn run_in_savepoint(conn: &Connection, job: &mut dyn Job) {
         run_statement(conn, "ROLLBACK TO job").and_then(|()| run_statement(conn, "RELEASE job"))
     };
     if let Err(e) = ended {
-        job.fail(ApiError::Internal(anyhow::anyhow!(
-            "cannot close a savepoint: {e}"
-        )));
+        job.fail(DbError::new(format!("cannot close a savepoint: {e}")));
     }
 }
 
 #[cfg(test)]
 mod tests {
-    use crate::db::{sql, Database, Durability};
-    use crate::error::ApiError;
-    use std::sync::mpsc;
-    use std::time::Duration;
-
-    async fn database() -> (tempfile::TempDir, Database) {
-        let dir = tempfile::tempdir().unwrap();
-        let url = format!("sqlite://{}/db.sqlite", dir.path().display());
-        let db = Database::open(&url, Durability::Full).await.unwrap();
-        db.write(|conn| sql::execute(conn, "CREATE TABLE rows (n INTEGER PRIMARY KEY)", []))
-            .await
-            .unwrap();
-        (dir, db)
-    }
-
-    fn insert(conn: &rusqlite::Connection, n: i64) -> Result<(), ApiError> {
-        sql::execute(conn, "INSERT INTO rows (n) VALUES (?)", [n])?;
-        Ok(())
-    }
-
-    async fn stored(db: &Database) -> Vec<i64> {
-        let rows: Vec<(i64,)> = db
-            .read(|conn| sql::all(conn, "SELECT n FROM rows ORDER BY n", []))
-            .await
-            .unwrap();
-        rows.into_iter().map(|(n,)| n).collect()
-    }
-
-    /// Holds the writer thread inside a job that wrote row `n` until
-    /// `release` is sent; `entered` says it is inside.
-    fn write_and_wait(
-        db: &Database,
-        n: i64,
-    ) -> (
-        tokio::task::JoinHandle<Result<(), ApiError>>,
-        tokio::sync::oneshot::Receiver<()>,
-        mpsc::Sender<()>,
-    ) {
-        let (inside, entered) = tokio::sync::oneshot::channel::<()>();
-        let (release, released) = mpsc::channel::<()>();
-        let db = db.clone();
-        let task = tokio::spawn(async move {
-            db.write(move |conn| {
-                insert(conn, n)?;
-                inside.send(()).unwrap();
-                released.recv().unwrap();
-                Ok(())
-            })
-            .await
-        });
-        (task, entered, release)
-    }
-
-    /// Forty concurrent writes, every third failing after its insert, and
-    /// one panicking: the others' rows are all stored, the failed ones'
-    /// none, each success is readable from another connection the moment
-    /// it is answered, and they shared fewer commits than there were
-    /// writes.
-    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-    async fn a_failed_write_rolls_back_only_its_own_rows() {
-        let (_dir, db) = database().await;
-        let (groups_before, grouped_before) = db.group_counts();
-        // Held, so the writes below queue and share transactions.
-        let (held, entered, release) = write_and_wait(&db, 1000);
-        entered.await.unwrap();
-        let tasks: Vec<_> = (0..40)
-            .map(|n| {
-                let db = db.clone();
-                tokio::spawn(async move {
-                    let answer = db
-                        .write(move |conn| {
-                            insert(conn, n)?;
-                            if n == 20 {
-                                panic!("write {n} panics");
-                            }
-                            if n % 3 == 0 {
-                                return Err(ApiError::Conflict(format!("write {n} fails")));
-                            }
-                            Ok(n)
-                        })
-                        .await;
-                    if answer.is_ok() {
-                        // Answered only once committed: another connection
-                        // sees the row.
-                        assert!(stored(&db).await.contains(&n), "row {n} not committed");
-                    }
-                    answer
-                })
-            })
-            .collect();
-        tokio::time::sleep(Duration::from_millis(200)).await;
-        release.send(()).unwrap();
-        held.await.unwrap().unwrap();
-        let mut succeeded = Vec::new();
-        for (n, task) in tasks.into_iter().enumerate() {
-            match task.await.unwrap() {
-                Ok(value) => succeeded.push(value),
-                Err(e) if n == 20 => {
-                    assert!(e.to_string().contains("write 20 panics"), "{e}")
-                }
-                Err(e) => {
-                    assert_eq!(n % 3, 0);
-                    assert_eq!(e.to_string(), format!("write {n} fails"));
-                }
-            }
-        }
-        let expected: Vec<i64> = (0..40).filter(|n| n % 3 != 0 && *n != 20).collect();
-        assert_eq!(succeeded, expected);
-        let mut all = expected.clone();
-        all.push(1000);
-        assert_eq!(stored(&db).await, all);
-        let (groups, grouped) = db.group_counts();
-        let (groups, grouped) = (groups - groups_before, grouped - grouped_before);
-        assert_eq!(grouped, 41, "every write was answered after a commit");
-        assert!(groups < 10, "{groups} commits for {grouped} writes");
-    }
-
-    /// A write whose requester stops waiting (its client went away) still
-    /// runs and commits whole, and the writes queued behind it too.
-    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-    async fn a_write_whose_requester_left_commits_whole() {
-        let (_dir, db) = database().await;
-        let (held, entered, release) = write_and_wait(&db, 1);
-        entered.await.unwrap();
-        let gone = tokio::spawn({
-            let db = db.clone();
-            async move {
-                db.write(|conn| {
-                    insert(conn, 2)?;
-                    insert(conn, 3)
-                })
-                .await
-            }
-        });
-        tokio::time::sleep(Duration::from_millis(50)).await;
-        gone.abort();
-        let behind = tokio::spawn({
-            let db = db.clone();
-            async move { db.write(|conn| insert(conn, 4)).await }
-        });
-        tokio::time::sleep(Duration::from_millis(50)).await;
-        release.send(()).unwrap();
-        held.await.unwrap().unwrap();
-        behind.await.unwrap().unwrap();
-        assert_eq!(stored(&db).await, vec![1, 2, 3, 4]);
-    }
-
     /// A group takes about as many jobs as its commit takes time, within
     /// its bounds: a quick sync keeps groups at the floor, a slow one lets
     /// them grow, a start with nothing measured takes the floor, and
@@ -455,6 +299,7 @@ mod tests {
     #[test]
     fn groups_grow_with_the_commit_s_cost() {
         use super::{GroupCap, MAX_GROUP, MIN_GROUP_CAP};
+        use std::time::Duration;
         let ms = Duration::from_secs_f64;
         assert_eq!(GroupCap::default().jobs(), MIN_GROUP_CAP);
         let mut quick = GroupCap::default();
@@ -476,20 +321,5 @@ mod tests {
         assert_eq!(instant.jobs(), MAX_GROUP);
         instant.record(0, Duration::ZERO, ms(0.001));
         assert_eq!(instant.jobs(), MAX_GROUP);
-    }
-
-    /// Reads never wait on the writer: while a write holds it with its
-    /// rows uncommitted, a read answers, without them.
-    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-    async fn reads_answer_while_a_write_is_uncommitted() {
-        let (_dir, db) = database().await;
-        db.write(|conn| insert(conn, 1)).await.unwrap();
-        let (held, entered, release) = write_and_wait(&db, 2);
-        entered.await.unwrap();
-        let read = tokio::time::timeout(Duration::from_secs(2), stored(&db)).await;
-        assert_eq!(read.expect("a read while the writer is held"), vec![1]);
-        release.send(()).unwrap();
-        held.await.unwrap().unwrap();
-        assert_eq!(stored(&db).await, vec![1, 2]);
     }
 }

@@ -27,7 +27,7 @@
 
 use crate::db::sql;
 use crate::db::{now_ms, Database};
-use crate::error::ApiError;
+use crate::error::ServiceError;
 use crate::report::check::CheckedReport;
 use crate::report::fold::{fold_prefix, KnownExplored};
 use crate::report::record::{check_effort, held_lease, stopped_ack, Recorded};
@@ -140,7 +140,7 @@ pub fn record_run(
     audit: &AuditRow,
     worker: &str,
     outcome: &str,
-) -> Result<Verdict, ApiError> {
+) -> Result<Verdict, ServiceError> {
     let (state, column, verdict) = match audit.state {
         AuditState::Replica if outcome == audit.first_outcome => {
             (AuditState::Agreed, "replica", Verdict::Agreed)
@@ -211,7 +211,7 @@ pub fn flag_worker(
     reason: &str,
     campaign: i64,
     index: u64,
-) -> Result<Vec<i64>, ApiError> {
+) -> Result<Vec<i64>, ServiceError> {
     sql::execute(
         conn,
         "INSERT OR IGNORE INTO flagged_workers (name, reason, campaign_id, test_index) \
@@ -261,7 +261,7 @@ pub fn flag_worker(
 /// ranges become leases for others, and the estimate is folded again from
 /// the start (a campaign that stopped on those results runs again). A
 /// cancelled campaign, or one that stopped before them, is left alone.
-fn take_back(conn: &Connection, id: i64, worker: &str) -> Result<bool, ApiError> {
+fn take_back(conn: &Connection, id: i64, worker: &str) -> Result<bool, ServiceError> {
     let campaign = campaigns::get(conn, id)?;
     let ranges: Vec<(i64, i64)> = sql::all(
         conn,
@@ -346,7 +346,7 @@ pub async fn record_audit_run(
     lease_id: i64,
     report: &Arc<ResultReport>,
     checked: &Arc<CheckedReport>,
-) -> Result<Recorded, ApiError> {
+) -> Result<Recorded, ServiceError> {
     let (report, checked) = (Arc::clone(report), Arc::clone(checked));
     db.write(move |conn| record_audit_run_in(conn, tests, lease_id, &report, &checked))
         .await
@@ -359,7 +359,7 @@ fn record_audit_run_in(
     lease_id: i64,
     report: &ResultReport,
     checked: &CheckedReport,
-) -> Result<Recorded, ApiError> {
+) -> Result<Recorded, ServiceError> {
     let (lease, campaign) = held_lease(conn, lease_id, report)?;
     let (start, end) = (lease.start_index as u64, lease.end_index as u64);
     let audit = audits::get(conn, lease.audit_id.unwrap_or_default())?;
@@ -376,7 +376,7 @@ fn record_audit_run_in(
     }
     check_effort(&lease, report, now_ms())?;
     if (checked.from, checked.to) != (start, end) {
-        return Err(ApiError::Unprocessable(format!(
+        return Err(ServiceError::Unprocessable(format!(
             "lease {lease_id} is the audit run of test {start}: report {start}..{end}"
         )));
     }
@@ -419,7 +419,7 @@ pub async fn flag_for_mismatch(
     worker: &str,
     campaign: i64,
     mismatch: &Mismatch,
-) -> Result<(), ApiError> {
+) -> Result<(), ServiceError> {
     let reason = format!("campaign {campaign}: {mismatch}");
     let (worker, index) = (worker.to_string(), mismatch.index);
     db.write(move |conn| flag_worker(conn, &worker, &reason, campaign, index))

@@ -3,7 +3,7 @@
 //! and [`MAX_REPORT_INVALID`] invalid tests), the effort it claims, and its
 //! outcomes sorted, disjoint and inside the range.
 
-use crate::error::ApiError;
+use crate::error::ServiceError;
 use tslg_api::{
     ResultReport, MAX_INVALID_REASON, MAX_REPORT_EVENTS, MAX_REPORT_INVALID, MAX_REPORT_TESTS,
     MAX_THREADS,
@@ -30,8 +30,8 @@ pub struct CheckedReport {
     pub reasons: Vec<(u64, String)>,
 }
 
-pub fn check_report(report: &ResultReport) -> Result<CheckedReport, ApiError> {
-    let bad = |m: String| Err(ApiError::Unprocessable(m));
+pub fn check_report(report: &ResultReport) -> Result<CheckedReport, ServiceError> {
+    let bad = |m: String| Err(ServiceError::Unprocessable(m));
     if report.from >= report.to {
         return bad(format!(
             "empty range: from {} must be < to {}",
@@ -64,7 +64,7 @@ pub fn check_report(report: &ResultReport) -> Result<CheckedReport, ApiError> {
             report.threads
         ));
     }
-    let mut events = report.event_list().map_err(ApiError::Unprocessable)?;
+    let mut events = report.event_list().map_err(ServiceError::Unprocessable)?;
     if events.len() > MAX_REPORT_EVENTS {
         return bad(format!(
             "the report lists {} events; at most {MAX_REPORT_EVENTS} per report: report the \
@@ -130,8 +130,8 @@ pub fn check_report(report: &ResultReport) -> Result<CheckedReport, ApiError> {
 
 /// Near misses: at most one per test of the range, in increasing index,
 /// each criticality a number in `[0, 1]`.
-fn check_near_misses(report: &ResultReport) -> Result<(), ApiError> {
-    let bad = |m: String| Err(ApiError::Unprocessable(m));
+fn check_near_misses(report: &ResultReport) -> Result<(), ServiceError> {
+    let bad = |m: String| Err(ServiceError::Unprocessable(m));
     let mut last = None;
     for m in &report.near_misses {
         if m.index < report.from || m.index >= report.to {

@@ -9,7 +9,7 @@
 //! (SPEC §7), so the stop index does not depend on who reported what when.
 
 use crate::db::sql;
-use crate::error::ApiError;
+use crate::error::ServiceError;
 use crate::history;
 use crate::report::check::CheckedReport;
 use crate::report::explored::{exploring_in, ExploredRanges};
@@ -76,7 +76,7 @@ pub fn fold_step(
 /// the campaign's active leases (below it every outcome is recorded), its
 /// `next_index`, and its first open audit (a test two workers have not yet
 /// agreed on, [`crate::report::audit`]).
-pub(crate) fn frontier(conn: &Connection, campaign: &CampaignRow) -> Result<u64, ApiError> {
+pub(crate) fn frontier(conn: &Connection, campaign: &CampaignRow) -> Result<u64, ServiceError> {
     Ok(bounds(conn, campaign)?.frontier)
 }
 
@@ -89,7 +89,7 @@ struct Bounds {
 }
 
 /// [`Bounds`] in one read (a fold runs in every report's transaction).
-fn bounds(conn: &Connection, campaign: &CampaignRow) -> Result<Bounds, ApiError> {
+fn bounds(conn: &Connection, campaign: &CampaignRow) -> Result<Bounds, ServiceError> {
     let (open, audited, last_stored): (Option<i64>, Option<i64>, Option<i64>) = sql::one(
         conn,
         &format!(
@@ -194,7 +194,7 @@ pub fn fold_prefix(
     known: KnownExplored<'_>,
     fresh: Option<&CheckedReport>,
     charge: Option<Charge>,
-) -> Result<Option<CampaignStatus>, ApiError> {
+) -> Result<Option<CampaignStatus>, ServiceError> {
     let mut pending = charge;
     let folded = fold_charging(conn, campaign, tests, known, fresh, &mut pending)?;
     if let Some(charge) = pending {
@@ -216,7 +216,7 @@ pub struct Charge {
 
 impl Charge {
     /// The charge on its own.
-    fn apply(&self, conn: &Connection, campaign: i64) -> Result<(), ApiError> {
+    fn apply(&self, conn: &Connection, campaign: i64) -> Result<(), ServiceError> {
         sql::execute(
             conn,
             "UPDATE campaigns SET cost_per_test = ?, worker_seconds = worker_seconds + ?, \
@@ -241,7 +241,7 @@ fn fold_charging(
     known: KnownExplored<'_>,
     fresh: Option<&CheckedReport>,
     charge: &mut Option<Charge>,
-) -> Result<Option<CampaignStatus>, ApiError> {
+) -> Result<Option<CampaignStatus>, ServiceError> {
     if campaign.method == Method::Adaptive {
         // Resolving stages reads the campaign's row: charged first.
         if let Some(charge) = charge.take() {
@@ -326,9 +326,9 @@ fn outcomes_to_fold(
     from: u64,
     to: u64,
     fresh: Option<&CheckedReport>,
-) -> Result<Vec<(u64, SparseOutcome)>, ApiError> {
+) -> Result<Vec<(u64, SparseOutcome)>, ServiceError> {
     let Some(fresh) = fresh.filter(|f| f.from < to && f.to > from) else {
-        return reports::outcomes(conn, campaign, from, to);
+        return Ok(reports::outcomes(conn, campaign, from, to)?);
     };
     let mut outcomes = if from < fresh.from {
         reports::outcomes(conn, campaign, from, fresh.from)?
@@ -382,7 +382,7 @@ fn write(
     folded: &Folded,
     upper: Option<f64>,
     charge: Option<Charge>,
-) -> Result<Option<CampaignStatus>, ApiError> {
+) -> Result<Option<CampaignStatus>, ServiceError> {
     let fold = &folded.fold;
     let (status, detail) = outcome(folded.decision, rule, fold);
     let (s1, s2) = fold.estimator.sums();
@@ -458,7 +458,11 @@ fn write(
 
 /// A stopped campaign's leases cancelled, and its audits of tests past the
 /// stop index `stop` set aside (they check tests that no longer count).
-pub(crate) fn close_stopped(conn: &Connection, campaign: i64, stop: u64) -> Result<(), ApiError> {
+pub(crate) fn close_stopped(
+    conn: &Connection,
+    campaign: i64,
+    stop: u64,
+) -> Result<(), ServiceError> {
     crate::store::leases::cancel_active(conn, campaign)?;
     sql::execute(
         conn,

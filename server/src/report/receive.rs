@@ -4,7 +4,7 @@
 //! it, and the bookkeeping that follows. The route only parses.
 
 use crate::config::Config;
-use crate::error::ApiError;
+use crate::error::ServiceError;
 use crate::report::audit;
 use crate::report::check::CheckedReport;
 use crate::report::record::{self, AuditPlan, Findings, Recorded};
@@ -55,7 +55,7 @@ pub async fn receive(
     report: &Arc<ResultReport>,
     checked: &Arc<CheckedReport>,
     next: Option<leases::ClaimJob>,
-) -> Result<(ResultAck, Option<leases::Claimed>), ApiError> {
+) -> Result<(ResultAck, Option<leases::Claimed>), ServiceError> {
     // A report whose sampled replay exceeds what the writer takes (a real
     // worker's chunk of half a second holds millions of tests, a tenth of
     // them replayed) goes the general way at once, without a trip to the
@@ -99,7 +99,7 @@ async fn in_parts_then_claim(
     report: &Arc<ResultReport>,
     checked: &Arc<CheckedReport>,
     mut next: Option<leases::ClaimJob>,
-) -> Result<(ResultAck, Option<leases::Claimed>), ApiError> {
+) -> Result<(ResultAck, Option<leases::Claimed>), ServiceError> {
     let (ack, mut claimed) = receive_in_parts(state, lease_id, report, checked, &mut next).await?;
     if let Some(job) = next {
         claimed = {
@@ -130,7 +130,7 @@ async fn receive_in_parts(
     report: &Arc<ResultReport>,
     checked: &Arc<CheckedReport>,
     next: &mut Option<leases::ClaimJob>,
-) -> Result<(ResultAck, Option<leases::Claimed>), ApiError> {
+) -> Result<(ResultAck, Option<leases::Claimed>), ServiceError> {
     // One read for what decides the checks. Only the lease's holder may
     // report on it, and only what it reports is checked: a report in
     // another worker's name must not get that worker flagged. (The
@@ -139,7 +139,7 @@ async fn receive_in_parts(
         let report = Arc::clone(report);
         state
             .db
-            .read(move |conn| {
+            .read(move |conn| -> Result<_, ServiceError> {
                 let lease = leases::get_unless_flagged(conn, lease_id, &report.worker)?;
                 leases::check_fence(&lease, &report.worker, report.attempt, report.key.as_str())?;
                 let campaign = campaigns::get(conn, lease.campaign_id)?;
@@ -148,7 +148,7 @@ async fn receive_in_parts(
             .await?
     };
     if campaign.method == Method::Build {
-        return Err(ApiError::Conflict(format!(
+        return Err(ServiceError::Conflict(format!(
             "lease {lease_id} is a library build: its worker uploads the library to POST \
              /api/v1/leases/{lease_id}/library"
         )));
@@ -245,7 +245,7 @@ async fn at_once(
     report: &Arc<ResultReport>,
     checked: &Arc<CheckedReport>,
     next: Option<leases::ClaimJob>,
-) -> Result<AtOnce, ApiError> {
+) -> Result<AtOnce, ServiceError> {
     let (samplers, sampler, replays, config) = (
         Arc::clone(&state.samplers),
         Arc::clone(&state.sampler),
@@ -294,7 +294,7 @@ fn decide(
     lease_id: i64,
     report: &ResultReport,
     checked: &CheckedReport,
-) -> Result<Decided, ApiError> {
+) -> Result<Decided, ServiceError> {
     let Shared {
         samplers,
         sampler,
@@ -368,8 +368,8 @@ fn forget_adaptive(state: &AppState, lease_id: i64) {
 }
 
 /// The 422 of a report the coordinator's own run contradicts.
-fn contradicted(mismatch: &audit::Mismatch, worker: &str) -> ApiError {
-    ApiError::Unprocessable(format!(
+fn contradicted(mismatch: &audit::Mismatch, worker: &str) -> ServiceError {
+    ServiceError::Unprocessable(format!(
         "{mismatch}: the report is refused and worker `{worker}` is flagged; its results are \
          taken back"
     ))
@@ -415,7 +415,7 @@ async fn verify_builtin(
     worker: &str,
     checked: &Arc<CheckedReport>,
     new_from: u64,
-) -> Result<Option<replay::Explored>, ApiError> {
+) -> Result<Option<replay::Explored>, ServiceError> {
     if new_from >= checked.to {
         return Ok(None);
     }
@@ -443,7 +443,7 @@ async fn verify_builtin(
     } else {
         tokio::task::spawn_blocking(move || check(Place::Pool))
             .await
-            .map_err(|e| ApiError::Internal(e.into()))?
+            .map_err(|e| ServiceError::Internal(e.into()))?
     };
     let Some(mismatch) = verified.mismatch else {
         return Ok(verified.explored);
@@ -461,7 +461,7 @@ async fn verify_builtin(
 async fn check_weights(
     tests: &Arc<dyn CampaignTests>,
     report: &CheckedReport,
-) -> Result<(), ApiError> {
+) -> Result<(), ServiceError> {
     if report.events.is_empty() {
         return Ok(());
     }
@@ -473,9 +473,9 @@ async fn check_weights(
             .try_for_each(|&(index, weight)| tests.check_event(index, weight))
     })
     .await
-    .map_err(|e| ApiError::Internal(e.into()))?;
+    .map_err(|e| ServiceError::Internal(e.into()))?;
     checked.map_err(|reason| {
-        ApiError::Unprocessable(format!(
+        ServiceError::Unprocessable(format!(
             "{reason}: the worker draws different scenarios (another version of tslg?)"
         ))
     })
@@ -488,7 +488,7 @@ async fn audit_plan(
     campaign: &campaigns::CampaignRow,
     worker: &str,
     checked: &CheckedReport,
-) -> Result<AuditPlan, ApiError> {
+) -> Result<AuditPlan, ServiceError> {
     let config = &state.config;
     let chosen = state
         .sampler

@@ -11,7 +11,7 @@
 use crate::config::Config;
 use crate::db::sql;
 use crate::db::{now_ms, Database};
-use crate::error::ApiError;
+use crate::error::ServiceError;
 use crate::lease_size::update_cost;
 use crate::report::check::CheckedReport;
 use crate::report::explored::ExploredRanges;
@@ -42,10 +42,10 @@ pub(crate) fn check_effort(
     lease: &LeaseRow,
     report: &ResultReport,
     now_ms: i64,
-) -> Result<(), ApiError> {
+) -> Result<(), ServiceError> {
     let age = (now_ms - lease.claimed_at).max(0) as f64 / 1000.0 + CLOCK_SLACK_SECONDS;
     if report.compute_seconds > age {
-        return Err(ApiError::Unprocessable(format!(
+        return Err(ServiceError::Unprocessable(format!(
             "compute_seconds = {} exceeds the {age:.3} s since lease {} was handed to worker \
              `{}`",
             Num(report.compute_seconds),
@@ -54,7 +54,7 @@ pub(crate) fn check_effort(
         )));
     }
     if i64::from(report.threads) > lease.threads {
-        return Err(ApiError::Unprocessable(format!(
+        return Err(ServiceError::Unprocessable(format!(
             "threads = {} exceeds the {} threads lease {} was asked for",
             report.threads, lease.threads, lease.id
         )));
@@ -97,7 +97,7 @@ pub async fn record(
     checked: &Arc<CheckedReport>,
     found: Findings,
     next: Option<leases::ClaimJob>,
-) -> Result<(Recorded, Option<leases::Claimed>), ApiError> {
+) -> Result<(Recorded, Option<leases::Claimed>), ServiceError> {
     let (config, report, checked) = (Arc::clone(config), Arc::clone(report), Arc::clone(checked));
     db.write(move |conn| {
         let recorded = record_in(conn, &config, lease_id, &report, &checked, found)?;
@@ -121,7 +121,7 @@ fn record_in(
     report: &ResultReport,
     checked: &CheckedReport,
     found: Findings,
-) -> Result<Recorded, ApiError> {
+) -> Result<Recorded, ServiceError> {
     let (lease, campaign) = held_lease(tx, lease_id, report)?;
     record_held(tx, config, &lease, &campaign, report, checked, found)
 }
@@ -136,7 +136,7 @@ pub(crate) fn record_held(
     report: &ResultReport,
     checked: &CheckedReport,
     found: Findings,
-) -> Result<Recorded, ApiError> {
+) -> Result<Recorded, ServiceError> {
     let Findings {
         tests,
         audits: plan,
@@ -160,13 +160,13 @@ pub(crate) fn record_held(
     }
     check_effort(lease, report, now_ms())?;
     if checked.from < start || checked.to > end {
-        return Err(ApiError::Unprocessable(format!(
+        return Err(ServiceError::Unprocessable(format!(
             "range {}..{} is not inside lease {lease_id}'s range {start}..{end}",
             checked.from, checked.to
         )));
     }
     if checked.from > resume_at {
-        return Err(ApiError::Unprocessable(format!(
+        return Err(ServiceError::Unprocessable(format!(
             "range {}..{} leaves a gap: lease {lease_id} has results up to {resume_at}; report from there",
             checked.from, checked.to
         )));
@@ -219,7 +219,7 @@ pub(crate) fn held_lease(
     conn: &Connection,
     lease_id: i64,
     report: &ResultReport,
-) -> Result<(LeaseRow, CampaignRow), ApiError> {
+) -> Result<(LeaseRow, CampaignRow), ServiceError> {
     let lease = leases::get_unless_flagged(conn, lease_id, &report.worker)?;
     check_fence(&lease, &report.worker, report.attempt, report.key.as_str())?;
     let campaign = campaigns::get(conn, lease.campaign_id)?;
@@ -238,7 +238,7 @@ fn store_new_part(
     checked: &CheckedReport,
     new_from: u64,
     expires_at: i64,
-) -> Result<Charge, ApiError> {
+) -> Result<Charge, ServiceError> {
     let first_new = checked.events.partition_point(|&(i, _)| i < new_from);
     let invalid: Vec<(u64, &str)> = checked
         .reasons
@@ -282,7 +282,7 @@ fn store_new_part(
         ],
     )?;
     if moved != 1 {
-        return Err(ApiError::Conflict(format!(
+        return Err(ServiceError::Conflict(format!(
             "lease {} changed during this report; send it again",
             lease.id
         )));
@@ -310,7 +310,7 @@ fn store_audits(
     worker: &str,
     plan: &AuditPlan,
     new_from: u64,
-) -> Result<(), ApiError> {
+) -> Result<(), ServiceError> {
     let new: Vec<NewAudit> = plan
         .audits
         .iter()
@@ -328,7 +328,7 @@ fn store_audits(
         )?;
         return Ok(());
     }
-    audits::insert(conn, campaign, worker, &new)
+    Ok(audits::insert(conn, campaign, worker, &new)?)
 }
 
 /// What recording a report did.
@@ -386,7 +386,7 @@ fn compare_with_stored(
     campaign: &CampaignRow,
     checked: &CheckedReport,
     overlap_end: u64,
-) -> Result<(), ApiError> {
+) -> Result<(), ServiceError> {
     let stored = reports::outcomes(conn, campaign.id, checked.from, overlap_end)?;
     let reported: Vec<(u64, SparseOutcome)> = checked
         .outcomes
@@ -430,5 +430,5 @@ fn compare_with_stored(
         describe(find(&reported, index)),
     );
     tracing::warn!(campaign = campaign.id, test = index, "{detail}");
-    Err(ApiError::Conflict(detail))
+    Err(ServiceError::Conflict(detail))
 }

@@ -12,7 +12,7 @@
 //! again ([`catch_up`]) and the campaign is the in-process one.
 
 use crate::db::sql;
-use crate::error::ApiError;
+use crate::error::ServiceError;
 use crate::report::fold::{close_stopped, frontier};
 use crate::store::campaigns::CampaignRow;
 use crate::store::reports;
@@ -31,7 +31,7 @@ fn stage_results(
     tests: &Arc<dyn CampaignTests>,
     from: u64,
     to: u64,
-) -> Result<Vec<TestResult>, ApiError> {
+) -> Result<Vec<TestResult>, ServiceError> {
     let stages = tests.adaptive().expect("an adaptive campaign's tests");
     let outcomes = reports::outcomes(conn, campaign, from, to)?;
     let replayed = stages.replay_stage(from, to);
@@ -78,7 +78,7 @@ pub fn catch_up(
     conn: &Connection,
     campaign: &CampaignRow,
     tests: &Arc<dyn CampaignTests>,
-) -> Result<(), ApiError> {
+) -> Result<(), ServiceError> {
     let Some(stages) = tests.adaptive() else {
         return Ok(());
     };
@@ -103,7 +103,7 @@ pub fn resolve_stages(
     conn: &Connection,
     campaign: &CampaignRow,
     tests: &Arc<dyn CampaignTests>,
-) -> Result<Option<CampaignStatus>, ApiError> {
+) -> Result<Option<CampaignStatus>, ServiceError> {
     let stages: &dyn AdaptiveStages = tests
         .adaptive()
         .ok_or_else(|| anyhow::anyhow!("campaign {} has no adaptive stages", campaign.id))?;
@@ -112,7 +112,7 @@ pub fn resolve_stages(
         _ => false,
     };
     if !in_step {
-        return Err(ApiError::Internal(anyhow::anyhow!(
+        return Err(ServiceError::Internal(anyhow::anyhow!(
             "the coordinator's copy of adaptive campaign {} is not at its stored stage",
             campaign.id
         )));
@@ -138,7 +138,7 @@ fn write(
     conn: &Connection,
     campaign: &CampaignRow,
     stages: &dyn AdaptiveStages,
-) -> Result<Option<CampaignStatus>, ApiError> {
+) -> Result<Option<CampaignStatus>, ServiceError> {
     let p = stages.progress();
     let fold = p.fold;
     let (s1, s2) = fold.estimator.sums();
@@ -232,7 +232,7 @@ pub fn store_near_misses(
     campaign: i64,
     near_misses: &[NearMiss],
     new_from: u64,
-) -> Result<(), ApiError> {
+) -> Result<(), ServiceError> {
     for m in near_misses.iter().filter(|m| m.index >= new_from) {
         sql::execute(
             conn,

@@ -5,7 +5,7 @@
 //! constant time and never logged: the request log records method, path
 //! and status, not headers, and a refusal names the role, not the token.
 
-use crate::error::ApiError;
+use crate::error::ServiceError;
 use crate::state::AppState;
 use axum::extract::{Request, State};
 use axum::http::header::{AUTHORIZATION, WWW_AUTHENTICATE};
@@ -97,7 +97,7 @@ async fn check(
         Role::Worker => "the worker token",
         Role::Read => "the read token",
     };
-    let mut response = ApiError::Unauthorized(format!(
+    let mut response = ServiceError::Unauthorized(format!(
         "this endpoint needs {which} as `Authorization: Bearer <token>`"
     ))
     .into_response();

@@ -1,8 +1,9 @@
 //! `/api/v1/campaigns`: starting, watching and cancelling campaigns.
 
 use crate::campaign_start;
-use crate::error::{ApiError, ApiJson};
+use crate::error::ServiceError;
 use crate::history;
+use crate::routes::problem::ApiJson;
 use crate::routes::{ApiPath, ApiQuery};
 use crate::state::AppState;
 use crate::store::{audits, campaigns, pairs};
@@ -21,7 +22,7 @@ use tslg_api::{
 pub async fn create(
     State(state): State<AppState>,
     ApiJson(req): ApiJson<CreateCampaign>,
-) -> Result<impl IntoResponse, ApiError> {
+) -> Result<impl IntoResponse, ServiceError> {
     let row = campaign_start::start(&state, req).await?;
     let location = format!("/api/v1/campaigns/{}", row.id);
     let view = live_view(&state, &row).await?;
@@ -48,7 +49,7 @@ pub struct ListQuery {
 pub async fn list(
     State(state): State<AppState>,
     ApiQuery(query): ApiQuery<ListQuery>,
-) -> Result<Json<CampaignList>, ApiError> {
+) -> Result<Json<CampaignList>, ServiceError> {
     let status = query.status;
     let rows = state
         .db
@@ -67,15 +68,18 @@ pub async fn list(
 pub async fn get_one(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
-) -> Result<Json<CampaignView>, ApiError> {
+) -> Result<Json<CampaignView>, ServiceError> {
     Ok(Json(
         live_view(&state, &read_campaign(&state, id).await?).await?,
     ))
 }
 
 /// Campaign `id` as stored.
-pub async fn read_campaign(state: &AppState, id: i64) -> Result<campaigns::CampaignRow, ApiError> {
-    state.db.read(move |conn| campaigns::get(conn, id)).await
+pub async fn read_campaign(
+    state: &AppState,
+    id: i64,
+) -> Result<campaigns::CampaignRow, ServiceError> {
+    Ok(state.db.read(move |conn| campaigns::get(conn, id)).await?)
 }
 
 /// A campaign's view with its current rate, the time left and, for an
@@ -83,7 +87,7 @@ pub async fn read_campaign(state: &AppState, id: i64) -> Result<campaigns::Campa
 pub async fn live_view(
     state: &AppState,
     row: &campaigns::CampaignRow,
-) -> Result<CampaignView, ApiError> {
+) -> Result<CampaignView, ServiceError> {
     let mut view = row.view();
     state.throughput.fill(&mut view);
     if let Some(waiting) = waiting_for_workers(state, row) {
@@ -101,7 +105,9 @@ pub async fn live_view(
         let row = row.clone();
         let (pair, other) = state
             .db
-            .read(move |conn| Ok((pairs::view_of(conn, &row)?, campaigns::get(conn, partner)?)))
+            .read(move |conn| {
+                Ok::<_, ServiceError>((pairs::view_of(conn, &row)?, campaigns::get(conn, partner)?))
+            })
             .await?;
         view.pair = pair;
         // The pair waits for the slower campaign: say why it waits.
@@ -154,10 +160,10 @@ pub async fn history(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
     ApiQuery(query): ApiQuery<HistoryQuery>,
-) -> Result<Json<History>, ApiError> {
+) -> Result<Json<History>, ServiceError> {
     let max = query.points.unwrap_or(history::DEFAULT_POINTS);
     if !(2..=history::MAX_POINTS).contains(&max) {
-        return Err(ApiError::BadRequest(format!(
+        return Err(ServiceError::BadRequest(format!(
             "points = {max} must be in 2..={}",
             history::MAX_POINTS
         )));
@@ -181,10 +187,10 @@ pub async fn history(
 pub async fn plan(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
-) -> Result<Json<CampaignPlan>, ApiError> {
+) -> Result<Json<CampaignPlan>, ServiceError> {
     let (row, library, user_case) = state
         .db
-        .read(move |conn| {
+        .read(move |conn| -> Result<_, ServiceError> {
             let row = campaigns::get(conn, id)?;
             let library = match (row.method, row.library_id) {
                 (Method::Build, Some(library)) => {
@@ -198,8 +204,8 @@ pub async fn plan(
         .await?;
     let (build_search, build_threshold) = match library {
         Some(library) => {
-            let request: tslg_api::CreateLibrary =
-                serde_json::from_str(&library.request).map_err(|e| ApiError::Internal(e.into()))?;
+            let request: tslg_api::CreateLibrary = serde_json::from_str(&library.request)
+                .map_err(|e| ServiceError::Internal(e.into()))?;
             (request.search, request.threshold)
         }
         _ => (None, None),
@@ -220,7 +226,7 @@ pub async fn plan(
         outside: row.outside,
         split: row.split,
         seed: row.seed(),
-        vut: serde_json::from_str(&row.vut).map_err(|e| ApiError::Internal(e.into()))?,
+        vut: serde_json::from_str(&row.vut).map_err(|e| ServiceError::Internal(e.into()))?,
         near_miss: (row.method == Method::Adaptive)
             .then(|| tslg_method::adaptive::AdaptiveSettings::default().near_miss),
         user_case: user_case.map(|d| tslg_api::UserCaseDefinition {
@@ -240,7 +246,7 @@ pub async fn plan(
 pub async fn cancel(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
-) -> Result<Json<CampaignView>, ApiError> {
+) -> Result<Json<CampaignView>, ServiceError> {
     let row = state.db.write(move |conn| pairs::cancel(conn, id)).await?;
     for id in std::iter::once(id).chain(row.paired_with) {
         state.samplers.forget(id);
@@ -259,7 +265,7 @@ pub async fn cancel(
 pub async fn delete(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
-) -> Result<axum::http::StatusCode, ApiError> {
+) -> Result<axum::http::StatusCode, ServiceError> {
     let partner = state
         .db
         .write(move |conn| crate::store::deletion::delete_campaign(conn, id))

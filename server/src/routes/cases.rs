@@ -1,7 +1,8 @@
 //! `/api/v1/cases`: the cases this coordinator runs, each described by its
 //! descriptor (presets, defaults, accepted tables, grid or sequential).
 
-use crate::error::{ApiError, ApiJson};
+use crate::error::ServiceError;
+use crate::routes::problem::ApiJson;
 use crate::state::AppState;
 use crate::store::user_cases;
 use axum::extract::State;
@@ -35,9 +36,9 @@ pub async fn list() -> Json<Vec<CaseView>> {
 pub async fn create(
     State(state): State<AppState>,
     ApiJson(req): ApiJson<CreateCase>,
-) -> Result<impl IntoResponse, ApiError> {
+) -> Result<impl IntoResponse, ServiceError> {
     let file = CaseFile::parse(&req.file)
-        .map_err(|e| ApiError::Unprocessable(format!("case file: {e}")))?;
+        .map_err(|e| ServiceError::Unprocessable(format!("case file: {e}")))?;
     let definition = UserCaseDefinition {
         table_name: req
             .table_name
@@ -50,10 +51,10 @@ pub async fn create(
     let checked = definition.clone();
     let name = tokio::task::spawn_blocking(move || registry::register(checked))
         .await
-        .map_err(|e| ApiError::Internal(e.into()))?
+        .map_err(|e| ServiceError::Internal(e.into()))?
         .map_err(|e| match e {
-            CaseError::AlreadyDefined(_) => ApiError::Conflict(e.to_string()),
-            e => ApiError::Unprocessable(e.to_string()),
+            CaseError::AlreadyDefined(_) => ServiceError::Conflict(e.to_string()),
+            e => ServiceError::Unprocessable(e.to_string()),
         })?;
     let stored = name.clone();
     state
@@ -62,7 +63,7 @@ pub async fn create(
         .await?;
     let view = case_view(
         &tslg_method::cases::descriptor(&name)
-            .map_err(|e| ApiError::Internal(anyhow::anyhow!("a case just registered: {e}")))?,
+            .map_err(|e| ServiceError::Internal(anyhow::anyhow!("a case just registered: {e}")))?,
     );
     let status = if existed {
         StatusCode::OK

@@ -2,7 +2,7 @@
 //! into the binary (nothing is fetched at run time). The pages poll the
 //! JSON API and show the server's SVG figures; see `server/assets/`.
 
-use crate::error::ApiError;
+use crate::error::ServiceError;
 use crate::routes::ApiPath;
 use crate::state::AppState;
 use crate::store::{campaigns, libraries};
@@ -25,7 +25,7 @@ pub async fn index() -> Html<&'static str> {
 pub async fn campaign(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
-) -> Result<Html<String>, ApiError> {
+) -> Result<Html<String>, ServiceError> {
     state.db.read(move |conn| campaigns::get(conn, id)).await?;
     Ok(Html(CAMPAIGN.replace("{{ID}}", &id.to_string())))
 }
@@ -34,7 +34,7 @@ pub async fn campaign(
 pub async fn library(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
-) -> Result<Html<String>, ApiError> {
+) -> Result<Html<String>, ServiceError> {
     state.db.read(move |conn| libraries::get(conn, id)).await?;
     Ok(Html(LIBRARY.replace("{{ID}}", &id.to_string())))
 }

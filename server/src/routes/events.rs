@@ -1,7 +1,7 @@
 //! Results leaving the service: a campaign's events, paged, and any test of
 //! a grid case as an OpenSCENARIO file (`event_export.rs` does the work).
 
-use crate::error::ApiError;
+use crate::error::ServiceError;
 use crate::routes::{ApiPath, ApiQuery};
 use crate::state::AppState;
 use axum::extract::State;
@@ -31,7 +31,7 @@ pub async fn list(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
     ApiQuery(query): ApiQuery<EventQuery>,
-) -> Result<Json<EventPage>, ApiError> {
+) -> Result<Json<EventPage>, ServiceError> {
     Ok(Json(
         crate::event_export::page(&state, id, query.after, query.limit).await?,
     ))
@@ -46,7 +46,7 @@ pub async fn list(
 pub async fn openscenario(
     State(state): State<AppState>,
     ApiPath((id, index)): ApiPath<(i64, u64)>,
-) -> Result<Response, ApiError> {
+) -> Result<Response, ServiceError> {
     let xml = crate::event_export::openscenario(&state, id, index).await?;
     Ok(([(header::CONTENT_TYPE, "application/xml")], xml).into_response())
 }

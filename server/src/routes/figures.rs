@@ -2,7 +2,7 @@
 //! against tests, and a library's picture. The dashboard shows these and
 //! `tslg campaign report` writes the same ones (`tslg-figures`).
 
-use crate::error::ApiError;
+use crate::error::ServiceError;
 use crate::routes::ApiPath;
 use crate::state::AppState;
 use crate::store::{campaigns, libraries};
@@ -14,8 +14,8 @@ use tslg_figures::{FigureError, Heatmap, HeatmapAxis};
 use tslg_method::cases::open_case;
 use tslg_method::registry::PictureMap;
 
-fn svg(figure: Result<String, FigureError>) -> Result<Response, ApiError> {
-    let figure = figure.map_err(|e| ApiError::Internal(e.into()))?;
+fn svg(figure: Result<String, FigureError>) -> Result<Response, ServiceError> {
+    let figure = figure.map_err(|e| ServiceError::Internal(e.into()))?;
     Ok((
         [
             (header::CONTENT_TYPE, "image/svg+xml"),
@@ -30,10 +30,10 @@ fn svg(figure: Result<String, FigureError>) -> Result<Response, ApiError> {
 async fn campaign(
     state: &AppState,
     id: i64,
-) -> Result<(tslg_api::CampaignView, Vec<tslg_api::HistoryPoint>), ApiError> {
+) -> Result<(tslg_api::CampaignView, Vec<tslg_api::HistoryPoint>), ServiceError> {
     let (row, points) = state
         .db
-        .read(move |conn| {
+        .read(move |conn| -> Result<_, ServiceError> {
             let row = campaigns::get(conn, id)?;
             let points = campaigns::history(conn, &row, crate::history::DEFAULT_POINTS)?;
             Ok((row, points))
@@ -48,7 +48,7 @@ async fn campaign(
 pub async fn estimate(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
-) -> Result<Response, ApiError> {
+) -> Result<Response, ServiceError> {
     let (view, points) = campaign(&state, id).await?;
     svg(tslg_figures::estimate_svg(&view, &points))
 }
@@ -59,7 +59,7 @@ pub async fn estimate(
 pub async fn relative_half_width(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
-) -> Result<Response, ApiError> {
+) -> Result<Response, ServiceError> {
     let (view, points) = campaign(&state, id).await?;
     svg(tslg_figures::relative_half_width_svg(&view, &points))
 }
@@ -73,7 +73,7 @@ pub async fn relative_half_width(
 pub async fn library_picture(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
-) -> Result<Response, ApiError> {
+) -> Result<Response, ServiceError> {
     // A ready library never changes: its picture is drawn once, and one
     // at a time (the highway grid has 1.6 × 10⁶ cells to project).
     let mut pictures = state.pictures.lock().await;
@@ -85,7 +85,7 @@ pub async fn library_picture(
     svg(Ok(picture))
 }
 
-async fn draw_picture(state: &AppState, id: i64) -> Result<String, ApiError> {
+async fn draw_picture(state: &AppState, id: i64) -> Result<String, ServiceError> {
     let (row, file) = state
         .db
         .read(move |conn| libraries::ready_file(conn, id))
@@ -103,10 +103,10 @@ async fn draw_picture(state: &AppState, id: i64) -> Result<String, ApiError> {
         Ok(case.library_picture(&file.bytes)?)
     })
     .await
-    .map_err(|e| ApiError::Internal(e.into()))?
-    .map_err(ApiError::Internal)?;
+    .map_err(|e| ServiceError::Internal(e.into()))?
+    .map_err(ServiceError::Internal)?;
     let maps: Vec<Heatmap> = maps.into_iter().map(heatmap).collect();
-    tslg_figures::heatmaps_svg(&title, &maps).map_err(|e| ApiError::Internal(e.into()))
+    tslg_figures::heatmaps_svg(&title, &maps).map_err(|e| ServiceError::Internal(e.into()))
 }
 
 fn heatmap(map: PictureMap) -> Heatmap {

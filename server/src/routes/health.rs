@@ -1,4 +1,4 @@
-use crate::error::ApiError;
+use crate::error::ServiceError;
 use crate::state::AppState;
 use axum::extract::State;
 use axum::Json;
@@ -7,10 +7,10 @@ use tslg_api::{Health, Problem};
 /// Liveness and database health.
 #[utoipa::path(get, path = "/healthz", responses(
     (status = 200, body = Health), (status = 500, body = Problem)))]
-pub async fn healthz(State(state): State<AppState>) -> Result<Json<Health>, ApiError> {
+pub async fn healthz(State(state): State<AppState>) -> Result<Json<Health>, ServiceError> {
     state
         .db
-        .read(|conn| {
+        .read(|conn| -> Result<_, ServiceError> {
             conn.query_row("SELECT 1", [], |_| Ok(()))?;
             Ok(())
         })

@@ -1,9 +1,10 @@
 //! `/api/v1/leases`: workers take ranges of tests and report outcomes.
 
-use crate::error::{ApiError, ApiJson};
+use crate::error::ServiceError;
 use crate::latency::HoldClock;
 use crate::report::check::check_report;
 use crate::report::receive;
+use crate::routes::problem::ApiJson;
 use crate::routes::ApiPath;
 use crate::state::AppState;
 use crate::store::{audits, campaigns, leases};
@@ -32,8 +33,8 @@ fn worker_name_problem(worker: &str) -> Option<String> {
         .then(|| "worker must be 1 to 128 printable characters".to_string())
 }
 
-fn check_worker(worker: &str) -> Result<(), ApiError> {
-    worker_name_problem(worker).map_or(Ok(()), |m| Err(ApiError::Unprocessable(m)))
+fn check_worker(worker: &str) -> Result<(), ServiceError> {
+    worker_name_problem(worker).map_or(Ok(()), |m| Err(ServiceError::Unprocessable(m)))
 }
 
 /// Takes a range of tests of a running campaign; 204 when there is none.
@@ -44,7 +45,7 @@ fn check_worker(worker: &str) -> Result<(), ApiError> {
 pub async fn claim(
     State(state): State<AppState>,
     ApiJson(req): ApiJson<LeaseRequest>,
-) -> Result<Response, ApiError> {
+) -> Result<Response, ServiceError> {
     check_lease_request(&req)?;
     // A request that asks to wait is held until work may be there (its
     // campaign announced, or at every recheck): docs/api.md, long polling.
@@ -90,10 +91,10 @@ pub async fn claim(
 }
 
 /// What a lease request must be before anything is taken (422 otherwise).
-fn check_lease_request(req: &LeaseRequest) -> Result<(), ApiError> {
+fn check_lease_request(req: &LeaseRequest) -> Result<(), ServiceError> {
     check_worker(&req.worker)?;
     if !(1..=leases::MAX_THREADS).contains(&req.threads) {
-        return Err(ApiError::Unprocessable(format!(
+        return Err(ServiceError::Unprocessable(format!(
             "threads = {} must be in 1..={}",
             req.threads,
             leases::MAX_THREADS
@@ -107,13 +108,13 @@ fn check_lease_request(req: &LeaseRequest) -> Result<(), ApiError> {
             } else {
                 format!("{wait:e}")
             };
-            return Err(ApiError::Unprocessable(format!(
+            return Err(ServiceError::Unprocessable(format!(
                 "wait_seconds = {shown} must be in [0, {MAX_CLAIM_WAIT_SECONDS}]"
             )));
         }
     }
     if req.max_tests == Some(0) {
-        return Err(ApiError::Unprocessable(
+        return Err(ServiceError::Unprocessable(
             "max_tests = 0: a lease holds at least one test".into(),
         ));
     }
@@ -122,7 +123,7 @@ fn check_lease_request(req: &LeaseRequest) -> Result<(), ApiError> {
 
 /// Hands a checked lease request a range of tests, `None` when there is
 /// no work right now.
-async fn grant(state: &AppState, req: &LeaseRequest) -> Result<Option<Lease>, ApiError> {
+async fn grant(state: &AppState, req: &LeaseRequest) -> Result<Option<Lease>, ServiceError> {
     state.workers.seen(req);
     match leases::claim(&state.db, &state.config, &claim_of(req)).await? {
         Some(claimed) => lease_of(state, req, claimed).await.map(Some),
@@ -149,7 +150,7 @@ async fn lease_of(
     state: &AppState,
     req: &LeaseRequest,
     claimed: leases::Claimed,
-) -> Result<Lease, ApiError> {
+) -> Result<Lease, ServiceError> {
     let fence = LeaseFence {
         worker: claimed.lease.worker.clone(),
         attempt: claimed.lease.attempt,
@@ -174,7 +175,7 @@ async fn make_lease(
     state: &AppState,
     req: &LeaseRequest,
     claimed: leases::Claimed,
-) -> Result<Lease, ApiError> {
+) -> Result<Lease, ServiceError> {
     let row = claimed.lease;
     let campaign = match claimed.campaign {
         Some(campaign) => campaign,
@@ -202,9 +203,9 @@ async fn make_lease(
                 .collect::<Option<Vec<_>>>()
         })
         .await
-        .map_err(|e| ApiError::Internal(e.into()))?
+        .map_err(|e| ServiceError::Internal(e.into()))?
         .ok_or_else(|| {
-            ApiError::Internal(anyhow::anyhow!(
+            ServiceError::Internal(anyhow::anyhow!(
                 "campaign {} has no planned tests but was leased with include_tests",
                 campaign.id
             ))
@@ -230,8 +231,8 @@ async fn make_lease(
 
 /// Checks the external programs a lease request offers (`NAME:case:mode`)
 /// and reports unhealthy.
-fn check_programs(req: &LeaseRequest) -> Result<(), ApiError> {
-    let bad = |m: String| Err(ApiError::Unprocessable(m));
+fn check_programs(req: &LeaseRequest) -> Result<(), ServiceError> {
+    let bad = |m: String| Err(ServiceError::Unprocessable(m));
     if req.offers.len() > MAX_OFFERS {
         return bad(format!(
             "offers lists {} entries; at most {MAX_OFFERS}",
@@ -243,7 +244,7 @@ fn check_programs(req: &LeaseRequest) -> Result<(), ApiError> {
         let [name, case, mode] = parts[..] else {
             return bad(format!("offer `{offer}` must be NAME:case:mode"));
         };
-        check_program_name(name).map_err(ApiError::Unprocessable)?;
+        check_program_name(name).map_err(ServiceError::Unprocessable)?;
         if case.is_empty() || case.len() > 64 {
             return bad(format!(
                 "offer `{offer}`: the case must be 1 to 64 characters"
@@ -260,7 +261,7 @@ fn check_programs(req: &LeaseRequest) -> Result<(), ApiError> {
         ));
     }
     for u in &req.unhealthy {
-        check_program_name(&u.name).map_err(ApiError::Unprocessable)?;
+        check_program_name(&u.name).map_err(ServiceError::Unprocessable)?;
         if u.reason.len() > MAX_UNHEALTHY_REASON {
             return bad(format!(
                 "the reason program `{}` is unhealthy exceeds {MAX_UNHEALTHY_REASON} bytes",
@@ -275,7 +276,7 @@ fn check_programs(req: &LeaseRequest) -> Result<(), ApiError> {
 /// their threads, the external programs they offer and those they report
 /// unhealthy.
 #[utoipa::path(get, path = "/api/v1/workers", responses((status = 200, body = WorkerList)))]
-pub async fn workers(State(state): State<AppState>) -> Result<Json<WorkerList>, ApiError> {
+pub async fn workers(State(state): State<AppState>) -> Result<Json<WorkerList>, ServiceError> {
     let flagged = state.db.read(audits::flagged).await?;
     Ok(Json(WorkerList {
         workers: state.workers.list(&flagged),
@@ -290,9 +291,9 @@ pub async fn workers(State(state): State<AppState>) -> Result<Json<WorkerList>, 
 pub async fn unflag(
     State(state): State<AppState>,
     ApiPath(name): ApiPath<String>,
-) -> Result<StatusCode, ApiError> {
+) -> Result<StatusCode, ServiceError> {
     if let Some(message) = worker_name_problem(&name) {
-        return Err(ApiError::BadRequest(message));
+        return Err(ServiceError::BadRequest(message));
     }
     let worker = name.clone();
     if !state
@@ -300,7 +301,7 @@ pub async fn unflag(
         .write(move |conn| audits::unflag(conn, &worker))
         .await?
     {
-        return Err(ApiError::NotFound(format!(
+        return Err(ServiceError::NotFound(format!(
             "worker `{name}` is not flagged"
         )));
     }
@@ -316,7 +317,7 @@ pub async fn heartbeat(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
     ApiJson(fence): ApiJson<LeaseFence>,
-) -> Result<Json<HeartbeatAck>, ApiError> {
+) -> Result<Json<HeartbeatAck>, ServiceError> {
     Ok(Json(
         leases::heartbeat(&state.db, &state.config, id, &fence).await?,
     ))
@@ -332,10 +333,10 @@ pub async fn release(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
     ApiJson(release): ApiJson<LeaseRelease>,
-) -> Result<StatusCode, ApiError> {
+) -> Result<StatusCode, ServiceError> {
     let reason = release.reason.as_deref().unwrap_or("no reason given");
     if reason.len() > MAX_INVALID_REASON || reason.chars().any(|c| c.is_control() && c != '\n') {
-        return Err(ApiError::Unprocessable(format!(
+        return Err(ServiceError::Unprocessable(format!(
             "the reason must be at most {MAX_INVALID_REASON} bytes without control characters"
         )));
     }
@@ -367,7 +368,7 @@ pub async fn library(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
     ApiJson(upload): ApiJson<LibraryUpload>,
-) -> Result<StatusCode, ApiError> {
+) -> Result<StatusCode, ServiceError> {
     check_worker(&upload.worker)?;
     crate::whole_build::upload(&state, id, &upload).await?;
     Ok(StatusCode::NO_CONTENT)
@@ -383,21 +384,23 @@ pub async fn results(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
     ApiJson(report): ApiJson<ResultReport>,
-) -> Result<Json<ResultAck>, ApiError> {
+) -> Result<Json<ResultAck>, ServiceError> {
     check_worker(&report.worker)?;
     if let Some(next) = &report.next_lease {
         if next.worker != report.worker {
-            return Err(ApiError::Unprocessable(format!(
+            return Err(ServiceError::Unprocessable(format!(
                 "next_lease.worker `{}` is not the reporting worker `{}`",
                 next.worker, report.worker
             )));
         }
         check_lease_request(next).map_err(|e| match e {
-            ApiError::Unprocessable(m) => ApiError::Unprocessable(format!("next_lease: {m}")),
+            ServiceError::Unprocessable(m) => {
+                ServiceError::Unprocessable(format!("next_lease: {m}"))
+            }
             other => other,
         })?;
         if next.wait_seconds.is_some_and(|w| w != 0.0) {
-            return Err(ApiError::Unprocessable(
+            return Err(ServiceError::Unprocessable(
                 "next_lease.wait_seconds: a report's next lease is answered with the report, \
                  without waiting; wait in POST /api/v1/leases"
                     .into(),

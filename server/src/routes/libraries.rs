@@ -2,7 +2,8 @@
 
 use crate::builder::{build_request, spawn_build};
 use crate::enumeration::{placement, Placement};
-use crate::error::{ApiError, ApiJson};
+use crate::error::ServiceError;
+use crate::routes::problem::ApiJson;
 use crate::routes::{ApiPath, ApiQuery};
 use crate::state::AppState;
 use crate::store::libraries::{self, NewLibrary};
@@ -21,8 +22,8 @@ use tslg_method::cases::open_case;
 pub async fn create(
     State(state): State<AppState>,
     ApiJson(req): ApiJson<CreateLibrary>,
-) -> Result<impl IntoResponse, ApiError> {
-    let request = build_request(&req).map_err(ApiError::Unprocessable)?;
+) -> Result<impl IntoResponse, ServiceError> {
+    let request = build_request(&req).map_err(ServiceError::Unprocessable)?;
     check_name("case", &req.case, 64)?;
     if let Some(preset) = &req.preset {
         check_name("preset", preset, 64)?;
@@ -30,7 +31,7 @@ pub async fn create(
     if let ExposureRequest::Table { name, .. } = &req.exposure {
         check_name("exposure.name", name, 256)?;
         if name.trim().is_empty() {
-            return Err(ApiError::Unprocessable(
+            return Err(ServiceError::Unprocessable(
                 "exposure.name must not be empty".into(),
             ));
         }
@@ -50,13 +51,13 @@ pub async fn create(
         Ok::<_, tslg_method::registry::CaseError>((case, surrogate, placement))
     })
     .await
-    .map_err(|e| ApiError::Internal(e.into()))?
-    .map_err(|e| ApiError::Unprocessable(e.to_string()))?;
+    .map_err(|e| ServiceError::Internal(e.into()))?
+    .map_err(|e| ServiceError::Unprocessable(e.to_string()))?;
     let table = match &req.exposure {
         ExposureRequest::Builtin => None,
         ExposureRequest::Table { text, .. } => Some(text.clone()),
     };
-    let request = serde_json::to_string(&req).map_err(|e| ApiError::Internal(e.into()))?;
+    let request = serde_json::to_string(&req).map_err(|e| ServiceError::Internal(e.into()))?;
     let surrogate_spec = surrogate.clone();
     let surrogate = surrogate.to_string();
     let (name, preset, exposure_name) = (
@@ -122,7 +123,7 @@ pub struct ListQuery {
 pub async fn list(
     State(state): State<AppState>,
     ApiQuery(query): ApiQuery<ListQuery>,
-) -> Result<Json<Vec<LibraryView>>, ApiError> {
+) -> Result<Json<Vec<LibraryView>>, ServiceError> {
     let status = query.status;
     let rows = state
         .db
@@ -141,7 +142,7 @@ pub async fn list(
 pub async fn get_one(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
-) -> Result<Json<LibraryView>, ApiError> {
+) -> Result<Json<LibraryView>, ServiceError> {
     Ok(Json(
         live_view(
             &state,
@@ -162,7 +163,7 @@ pub async fn get_one(
 pub async fn file(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
-) -> Result<impl IntoResponse, ApiError> {
+) -> Result<impl IntoResponse, ServiceError> {
     let (_, file) = state
         .db
         .read(move |conn| libraries::ready_file(conn, id))
@@ -171,7 +172,10 @@ pub async fn file(
 }
 
 /// A library's view with the progress of its build, while it runs.
-async fn live_view(state: &AppState, row: &libraries::LibraryRow) -> Result<LibraryView, ApiError> {
+async fn live_view(
+    state: &AppState,
+    row: &libraries::LibraryRow,
+) -> Result<LibraryView, ServiceError> {
     let mut view = row.view();
     state.build_progress.fill(&mut view);
     crate::enumeration::progress(state, &mut view).await?;
@@ -186,7 +190,7 @@ async fn live_view(state: &AppState, row: &libraries::LibraryRow) -> Result<Libr
 pub async fn delete(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
-) -> Result<StatusCode, ApiError> {
+) -> Result<StatusCode, ServiceError> {
     state
         .db
         .write(move |conn| crate::store::deletion::delete_library(conn, id))

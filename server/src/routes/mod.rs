@@ -16,18 +16,20 @@ mod health;
 mod leases;
 mod libraries;
 pub mod openapi;
+mod problem;
 #[cfg(test)]
 mod tests;
 
 pub use extract::{ApiPath, ApiQuery};
 
-use crate::error::{problem, ApiError};
+use crate::error::ServiceError;
 use crate::state::AppState;
 use axum::extract::{DefaultBodyLimit, State};
 use axum::http::StatusCode;
 use axum::middleware::from_fn_with_state;
 use axum::routing::{delete, get, post};
 use axum::Router;
+use problem::problem;
 use std::sync::Arc;
 
 pub fn router(state: AppState) -> Router {
@@ -94,7 +96,7 @@ pub fn router(state: AppState) -> Router {
         .layer(DefaultBodyLimit::max(limit))
         .layer(from_fn_with_state(state.clone(), refuse_large_bodies))
         .layer(axum::middleware::from_fn(refuse_long_uris))
-        .layer(axum::middleware::from_fn(crate::error::log_internal_errors))
+        .layer(axum::middleware::from_fn(problem::log_internal_errors))
         .layer(from_fn_with_state(
             Arc::clone(&state.metrics),
             crate::latency::observe,
@@ -151,11 +153,11 @@ async fn refuse_long_uris(
     next.run(request).await
 }
 
-async fn not_found(uri: axum::http::Uri) -> ApiError {
+async fn not_found(uri: axum::http::Uri) -> ServiceError {
     let path = uri.path();
     let shown: String = path.chars().take(200).collect();
     let more = if shown.len() < path.len() { "…" } else { "" };
-    ApiError::NotFound(format!("no route for {shown}{more}"))
+    ServiceError::NotFound(format!("no route for {shown}{more}"))
 }
 
 async fn method_not_allowed(

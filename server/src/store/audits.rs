@@ -2,7 +2,7 @@
 //! workers, and the workers caught disagreeing with two others.
 
 use crate::db::sql;
-use crate::error::ApiError;
+use crate::store::error::StoreError;
 use rusqlite::{params, Connection};
 use tslg_method::prefix::SparseOutcome;
 
@@ -86,7 +86,7 @@ pub fn insert(
     campaign: i64,
     worker: &str,
     audits: &[NewAudit],
-) -> Result<(), ApiError> {
+) -> Result<(), StoreError> {
     for audit in audits {
         sql::execute(
             conn,
@@ -109,13 +109,13 @@ pub fn insert(
     Ok(())
 }
 
-pub fn get(conn: &Connection, id: i64) -> Result<AuditRow, ApiError> {
+pub fn get(conn: &Connection, id: i64) -> Result<AuditRow, StoreError> {
     sql::optional(
         conn,
         &format!("SELECT {COLUMNS} FROM audits WHERE id = ?"),
         [id],
     )?
-    .ok_or_else(|| ApiError::Internal(anyhow::anyhow!("audit {id} is missing")))
+    .ok_or_else(|| StoreError::Database(crate::db::DbError::new(format!("audit {id} is missing"))))
 }
 
 /// An open audit that `worker` may run: of a running campaign whose program
@@ -125,7 +125,7 @@ pub fn runnable(
     worker: &str,
     offered: &str,
     now_ms: i64,
-) -> Result<Option<AuditRow>, ApiError> {
+) -> Result<Option<AuditRow>, StoreError> {
     let columns: Vec<String> = COLUMNS.split(", ").map(|c| format!("a.{c}")).collect();
     let sql = format!(
         "SELECT {} FROM audits a JOIN campaigns c ON c.id = a.campaign_id \
@@ -137,20 +137,24 @@ pub fn runnable(
          ORDER BY a.campaign_id, a.test_index LIMIT 1",
         columns.join(", ")
     );
-    sql::optional(conn, &sql, params![offered, worker, worker, now_ms])
+    Ok(sql::optional(
+        conn,
+        &sql,
+        params![offered, worker, worker, now_ms],
+    )?)
 }
 
 /// Counts of a campaign's audits by state, for its view.
-pub fn counts(conn: &Connection, campaign: i64) -> Result<Vec<(AuditState, i64)>, ApiError> {
-    sql::all(
+pub fn counts(conn: &Connection, campaign: i64) -> Result<Vec<(AuditState, i64)>, StoreError> {
+    Ok(sql::all(
         conn,
         "SELECT state, COUNT(*) FROM audits WHERE campaign_id = ? GROUP BY state",
         [campaign],
-    )
+    )?)
 }
 
 /// Why `worker` is flagged, if it is.
-pub fn flag_of(conn: &Connection, worker: &str) -> Result<Option<String>, ApiError> {
+pub fn flag_of(conn: &Connection, worker: &str) -> Result<Option<String>, StoreError> {
     let row: Option<(String,)> = sql::optional(
         conn,
         "SELECT reason FROM flagged_workers WHERE name = ?",
@@ -161,7 +165,7 @@ pub fn flag_of(conn: &Connection, worker: &str) -> Result<Option<String>, ApiErr
 
 /// Refuses a flagged worker (403), inside the transaction that would give
 /// it work or take its results, so a flag set meanwhile cannot be missed.
-pub fn refuse_flagged(conn: &Connection, worker: &str) -> Result<(), ApiError> {
+pub fn refuse_flagged(conn: &Connection, worker: &str) -> Result<(), StoreError> {
     match flag_of(conn, worker)? {
         None => Ok(()),
         Some(reason) => Err(flagged_problem(worker, &reason)),
@@ -169,23 +173,23 @@ pub fn refuse_flagged(conn: &Connection, worker: &str) -> Result<(), ApiError> {
 }
 
 /// The 403 a flagged worker gets.
-pub fn flagged_problem(worker: &str, reason: &str) -> ApiError {
-    ApiError::Forbidden(format!(
+pub fn flagged_problem(worker: &str, reason: &str) -> StoreError {
+    StoreError::NotYours(format!(
         "worker `{worker}` is flagged and gets no work: {reason}; an operator clears the flag \
          with DELETE /api/v1/workers/{worker}/flag"
     ))
 }
 
 /// Every flagged worker with why.
-pub fn flagged(conn: &Connection) -> Result<Vec<(String, String)>, ApiError> {
-    sql::all(
+pub fn flagged(conn: &Connection) -> Result<Vec<(String, String)>, StoreError> {
+    Ok(sql::all(
         conn,
         "SELECT name, reason FROM flagged_workers ORDER BY flagged_at",
         [],
-    )
+    )?)
 }
 
 /// Clears a flag (a write); false when the worker was not flagged.
-pub fn unflag(conn: &Connection, worker: &str) -> Result<bool, ApiError> {
+pub fn unflag(conn: &Connection, worker: &str) -> Result<bool, StoreError> {
     Ok(sql::execute(conn, "DELETE FROM flagged_workers WHERE name = ?", [worker])? == 1)
 }

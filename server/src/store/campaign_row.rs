@@ -9,7 +9,7 @@
 //! the same row.
 
 use super::campaigns::CampaignRow;
-use crate::error::ApiError;
+use crate::store::error::StoreError;
 use rusqlite::types::FromSql;
 use rusqlite::{Connection, Params, Row};
 use serde::de::{DeserializeOwned, IntoDeserializer};
@@ -20,7 +20,7 @@ pub fn first(
     conn: &Connection,
     sql: &str,
     params: impl Params,
-) -> Result<Option<CampaignRow>, ApiError> {
+) -> Result<Option<CampaignRow>, StoreError> {
     let mut statement = conn.prepare_cached(sql)?;
     let mut rows = statement.query(params)?;
     match rows.next()? {
@@ -124,7 +124,7 @@ mod tests {
         let url = format!("sqlite://{}", dir.path().join("db.sqlite").display());
         let db = Database::open(&url, Durability::Full).await.unwrap();
         let (by_name, by_position, count) = db
-            .write(|conn| {
+            .write(|conn| -> Result<_, StoreError> {
                 conn.execute_batch(
                     "INSERT INTO campaigns (case_name, preset, method, exposure_name, \
                      exposure_fingerprint, vut, epsilon, beta, confidence, n_min, min_events, \

@@ -1,9 +1,9 @@
 //! The `campaigns` and `history` tables.
 
 use crate::db::sql;
-use crate::error::ApiError;
 use crate::lease_size::predicted_unleased;
 use crate::store::audits::AuditState;
+use crate::store::error::StoreError;
 use rusqlite::{params, Connection};
 use tslg_api::{
     AdaptiveView, AuditCounts, CampaignStatus, CampaignView, ExposureRequest, HistoryPoint, Method,
@@ -368,7 +368,7 @@ pub struct NewCampaign {
     pub first_stage: Option<(u64, u64, &'static str)>,
 }
 
-pub fn insert(conn: &Connection, new: &NewCampaign) -> Result<CampaignRow, ApiError> {
+pub fn insert(conn: &Connection, new: &NewCampaign) -> Result<CampaignRow, StoreError> {
     let sql = format!(
         "INSERT INTO campaigns (case_name, preset, method, library_id, exposure_name, \
          exposure_fingerprint, exposure_table, vut, requires, epsilon, outside, beta, confidence, \
@@ -389,7 +389,7 @@ pub fn insert(conn: &Connection, new: &NewCampaign) -> Result<CampaignRow, ApiEr
         other => other,
     };
     let first_stage = new.first_stage.as_ref();
-    sql::one(
+    Ok(sql::one(
         conn,
         &sql,
         params![
@@ -420,36 +420,36 @@ pub fn insert(conn: &Connection, new: &NewCampaign) -> Result<CampaignRow, ApiEr
             first_stage.map(|s| s.2),
             enumerate,
         ],
-    )
+    )?)
 }
 
-pub fn get(conn: &Connection, id: i64) -> Result<CampaignRow, ApiError> {
+pub fn get(conn: &Connection, id: i64) -> Result<CampaignRow, StoreError> {
     thread_local! {
         static SQL: String = format!("SELECT {COLUMNS} FROM campaigns WHERE id = ?");
     }
     SQL.with(|sql| super::campaign_row::first(conn, sql, [id]))?
-        .ok_or_else(|| ApiError::NotFound(format!("campaign {id} does not exist")))
+        .ok_or_else(|| StoreError::NotFound(format!("campaign {id} does not exist")))
 }
 
 /// Every campaign, or those in `status`, newest first.
 pub fn list(
     conn: &Connection,
     status: Option<CampaignStatus>,
-) -> Result<Vec<CampaignRow>, ApiError> {
-    sql::all(
+) -> Result<Vec<CampaignRow>, StoreError> {
+    Ok(sql::all(
         conn,
         &format!(
             "SELECT {COLUMNS} FROM campaigns WHERE ?1 IS NULL OR status = ?1 ORDER BY id DESC"
         ),
         [status.map(CampaignStatus::as_str)],
-    )
+    )?)
 }
 
 /// Cancels a pending or running campaign and its leases (a write).
-pub fn cancel(conn: &Connection, id: i64) -> Result<CampaignRow, ApiError> {
+pub fn cancel(conn: &Connection, id: i64) -> Result<CampaignRow, StoreError> {
     let row = get(conn, id)?;
     if row.status.is_final() {
-        return Err(ApiError::Conflict(format!(
+        return Err(StoreError::Conflict(format!(
             "campaign {id} has already stopped ({})",
             row.status.as_str()
         )));
@@ -471,7 +471,7 @@ pub fn history(
     conn: &Connection,
     row: &CampaignRow,
     max: usize,
-) -> Result<Vec<HistoryPoint>, ApiError> {
+) -> Result<Vec<HistoryPoint>, StoreError> {
     let rows: Vec<(i64, i64, i64, f64, f64, i64, f64)> = sql::all(
         conn,
         "SELECT indices, tests, events, s1, s2, outside_tests, outside_s1 FROM history \

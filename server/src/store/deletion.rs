@@ -4,7 +4,7 @@
 //! campaign is cancelled first, a building library waits for its build.
 
 use crate::db::sql;
-use crate::error::ApiError;
+use crate::store::error::StoreError;
 use rusqlite::Connection;
 use tslg_api::LibraryStatus;
 
@@ -19,7 +19,7 @@ const CAMPAIGN_TABLES: [&str; 6] = [
     "history",
 ];
 
-fn delete_campaign_rows(conn: &Connection, id: i64) -> Result<(), ApiError> {
+fn delete_campaign_rows(conn: &Connection, id: i64) -> Result<(), StoreError> {
     for table in CAMPAIGN_TABLES {
         sql::execute(
             conn,
@@ -43,10 +43,10 @@ fn delete_campaign_rows(conn: &Connection, id: i64) -> Result<(), ApiError> {
 /// Deletes stopped campaign `id` and its records, with the other campaign
 /// of its pair if it has one (a write), and returns that one's id; 409
 /// while either runs.
-pub fn delete_campaign(conn: &Connection, id: i64) -> Result<Option<i64>, ApiError> {
+pub fn delete_campaign(conn: &Connection, id: i64) -> Result<Option<i64>, StoreError> {
     let row = crate::store::campaigns::get(conn, id)?;
     if !row.status.is_final() {
-        return Err(ApiError::Conflict(format!(
+        return Err(StoreError::Conflict(format!(
             "campaign {id} is {}: cancel it first (POST /api/v1/campaigns/{id}/cancel)",
             row.status.as_str()
         )));
@@ -56,7 +56,7 @@ pub fn delete_campaign(conn: &Connection, id: i64) -> Result<Option<i64>, ApiErr
         tslg_api::Method::Enumerate | tslg_api::Method::Build
     ) {
         if let Some(library) = row.library_id {
-            return Err(ApiError::Conflict(format!(
+            return Err(StoreError::Conflict(format!(
                 "campaign {id} built library {library}: it goes with the library \
                  (DELETE /api/v1/libraries/{library})"
             )));
@@ -66,7 +66,7 @@ pub fn delete_campaign(conn: &Connection, id: i64) -> Result<Option<i64>, ApiErr
     if let Some(partner) = row.paired_with {
         let other = crate::store::campaigns::get(conn, partner)?;
         if !other.status.is_final() {
-            return Err(ApiError::Conflict(format!(
+            return Err(StoreError::Conflict(format!(
                 "campaign {id} is paired with campaign {partner}, which is {}: cancel it first \
                  (POST /api/v1/campaigns/{partner}/cancel)",
                 other.status.as_str()
@@ -81,10 +81,10 @@ pub fn delete_campaign(conn: &Connection, id: i64) -> Result<Option<i64>, ApiErr
 
 /// Deletes library `id` and its file, with the campaign that built it on
 /// workers (a write); 409 while it builds or while campaigns use it.
-pub fn delete_library(conn: &Connection, id: i64) -> Result<(), ApiError> {
+pub fn delete_library(conn: &Connection, id: i64) -> Result<(), StoreError> {
     let library = crate::store::libraries::get(conn, id)?;
     if library.status == LibraryStatus::Building {
-        return Err(ApiError::Conflict(format!(
+        return Err(StoreError::Conflict(format!(
             "library {id} is building: delete it once its build has ended"
         )));
     }
@@ -95,7 +95,7 @@ pub fn delete_library(conn: &Connection, id: i64) -> Result<(), ApiError> {
     )?;
     if !users.is_empty() {
         let ids: Vec<String> = users.iter().map(|(c,)| c.to_string()).collect();
-        return Err(ApiError::Conflict(format!(
+        return Err(StoreError::Conflict(format!(
             "library {id} is used by campaign(s) {}: delete them first (DELETE \
              /api/v1/campaigns/ID; a running one is cancelled before)",
             ids.join(", ")

@@ -4,11 +4,11 @@
 use crate::config::Config;
 use crate::db::sql;
 use crate::db::{now_ms, Database};
-use crate::error::ApiError;
 use crate::lease_size::{
     lease_size, predicted_unleased, SizingInput, LIBRARY_MAX_LEASE, MAX_INLINE_LEASE, MAX_LEASE,
 };
 use crate::store::campaigns::{self, CampaignRow, COLUMNS as CAMPAIGN_COLUMNS};
+use crate::store::error::StoreError;
 use crate::store::{audits, campaign_row};
 use rusqlite::{params, Connection};
 use std::sync::{Arc, LazyLock};
@@ -109,7 +109,7 @@ pub async fn claim(
     db: &Database,
     config: &Arc<Config>,
     ask: &Claim<'_>,
-) -> Result<Option<Claimed>, ApiError> {
+) -> Result<Option<Claimed>, StoreError> {
     let job = ClaimJob::new(config, ask);
     let config = Arc::clone(config);
     db.write(move |conn| {
@@ -179,7 +179,7 @@ pub fn claim_after(
     config: &Config,
     job: &ClaimJob,
     retried_on: Option<i64>,
-) -> Result<Option<Claimed>, ApiError> {
+) -> Result<Option<Claimed>, StoreError> {
     let now = now_ms();
     let job = ClaimJob {
         now,
@@ -218,7 +218,7 @@ fn unstarted(
     conn: &Connection,
     job: &ClaimJob,
     besides: i64,
-) -> Result<Option<LeaseRow>, ApiError> {
+) -> Result<Option<LeaseRow>, StoreError> {
     let filters = job.filters();
     // An audit's run goes only to a request that may run audits.
     let audits = if job.audits {
@@ -238,7 +238,7 @@ fn unstarted(
     let mut values: Vec<&dyn rusqlite::ToSql> =
         vec![&job.now, &job.worker, &besides, &job.span_limit];
     values.extend(filter_values.iter().map(|v| v as &dyn rusqlite::ToSql));
-    sql::optional(conn, &sql, values.as_slice())
+    Ok(sql::optional(conn, &sql, values.as_slice())?)
 }
 
 /// A claim as the writer runs it.
@@ -289,7 +289,7 @@ fn claim_in(
     conn: &Connection,
     config: &Config,
     job: &ClaimJob,
-) -> Result<Option<Claimed>, ApiError> {
+) -> Result<Option<Claimed>, StoreError> {
     let worker = job.worker.as_str();
     let filters = job.filters();
     let filter_values = job.filter_values();
@@ -420,7 +420,7 @@ fn claim_in(
 
 /// A one-test lease for an open audit `job`'s worker may run (see
 /// [`crate::report::audit`]): a new lease, or the audit's expired one taken over.
-fn claim_audit(conn: &Connection, job: &ClaimJob) -> Result<Option<LeaseRow>, ApiError> {
+fn claim_audit(conn: &Connection, job: &ClaimJob) -> Result<Option<LeaseRow>, StoreError> {
     let Some(audit) = audits::runnable(conn, &job.worker, &job.offered, job.now)? else {
         return Ok(None);
     };
@@ -469,7 +469,7 @@ fn claim_audit(conn: &Connection, job: &ClaimJob) -> Result<Option<LeaseRow>, Ap
 
 /// A lease of `from..to` for any worker, expired at once so the next
 /// claim takes it: the range of results taken back from a flagged worker.
-pub fn insert_redo(conn: &Connection, campaign: i64, from: u64, to: u64) -> Result<(), ApiError> {
+pub fn insert_redo(conn: &Connection, campaign: i64, from: u64, to: u64) -> Result<(), StoreError> {
     sql::execute(
         conn,
         "INSERT INTO leases (campaign_id, start_index, end_index, resume_at, attempt, worker, \
@@ -482,7 +482,7 @@ pub fn insert_redo(conn: &Connection, campaign: i64, from: u64, to: u64) -> Resu
 
 /// Cancels the active leases of `campaign` (it stopped): their workers
 /// are told to stop at their next heartbeat or report.
-pub fn cancel_active(conn: &Connection, campaign: i64) -> Result<(), ApiError> {
+pub fn cancel_active(conn: &Connection, campaign: i64) -> Result<(), StoreError> {
     sql::execute(
         conn,
         "UPDATE leases SET state = 'cancelled' WHERE campaign_id = ? AND state = 'active'",
@@ -494,7 +494,7 @@ pub fn cancel_active(conn: &Connection, campaign: i64) -> Result<(), ApiError> {
 /// The leases a stop cancelled with ranges not yet reported, active again
 /// and expired, so that they are leased again first (a stopped campaign
 /// that runs again).
-pub fn reactivate_cancelled(conn: &Connection, campaign: i64) -> Result<(), ApiError> {
+pub fn reactivate_cancelled(conn: &Connection, campaign: i64) -> Result<(), StoreError> {
     sql::execute(
         conn,
         "UPDATE leases SET state = 'active', expires_at = 0 WHERE campaign_id = ? \
@@ -558,18 +558,22 @@ fn new_lease_size(config: &Config, campaign: &CampaignRow, threads: u32) -> u64 
     })
 }
 
-pub fn get(conn: &Connection, id: i64) -> Result<LeaseRow, ApiError> {
+pub fn get(conn: &Connection, id: i64) -> Result<LeaseRow, StoreError> {
     sql::optional(
         conn,
         &format!("SELECT {COLUMNS} FROM leases WHERE id = ?"),
         [id],
     )?
-    .ok_or_else(|| ApiError::NotFound(format!("lease {id} does not exist")))
+    .ok_or_else(|| StoreError::NotFound(format!("lease {id} does not exist")))
 }
 
 /// Lease `id` for a request of `worker`, refused when `worker` is flagged
 /// (checked first: a flagged worker learns that whatever it asks).
-pub fn get_unless_flagged(conn: &Connection, id: i64, worker: &str) -> Result<LeaseRow, ApiError> {
+pub fn get_unless_flagged(
+    conn: &Connection,
+    id: i64,
+    worker: &str,
+) -> Result<LeaseRow, StoreError> {
     audits::refuse_flagged(conn, worker)?;
     get(conn, id)
 }
@@ -583,16 +587,16 @@ pub fn check_fence(
     worker: &str,
     attempt: i64,
     key: &str,
-) -> Result<(), ApiError> {
+) -> Result<(), StoreError> {
     if lease.worker != worker || lease.attempt != attempt {
-        return Err(ApiError::Conflict(format!(
+        return Err(StoreError::Conflict(format!(
             "lease {} is held by worker `{}` in attempt {}; this request is from worker `{}` \
              for attempt {}: the lease expired and was handed out again",
             lease.id, lease.worker, lease.attempt, worker, attempt
         )));
     }
     if !bool::from(lease.key.as_bytes().ct_eq(key.as_bytes())) {
-        return Err(ApiError::Forbidden(format!(
+        return Err(StoreError::NotYours(format!(
             "the key does not match lease {}'s attempt {}: only the worker it was handed to \
              may report on it",
             lease.id, lease.attempt
@@ -607,7 +611,7 @@ pub async fn heartbeat(
     config: &Config,
     id: i64,
     fence: &LeaseFence,
-) -> Result<HeartbeatAck, ApiError> {
+) -> Result<HeartbeatAck, StoreError> {
     let fence = fence.clone();
     let ttl_seconds = config.lease_ttl_seconds;
     let ttl = ttl_ms(config);
@@ -640,7 +644,7 @@ pub async fn heartbeat(
 
 /// Gives a lease back unfinished: it expires now and is handed out again
 /// from its first unreported index.
-pub async fn release(db: &Database, id: i64, fence: &LeaseFence) -> Result<LeaseRow, ApiError> {
+pub async fn release(db: &Database, id: i64, fence: &LeaseFence) -> Result<LeaseRow, StoreError> {
     let fence = fence.clone();
     db.write(move |conn| {
         let lease = get(conn, id)?;

@@ -1,7 +1,7 @@
 //! The `libraries` table.
 
 use crate::db::sql;
-use crate::error::ApiError;
+use crate::store::error::StoreError;
 use rusqlite::{params, Connection};
 use tslg_api::{LibraryStatus, LibraryView};
 
@@ -73,13 +73,13 @@ pub struct NewLibrary<'a> {
     pub total_scenarios: usize,
 }
 
-pub fn insert(conn: &Connection, new: &NewLibrary<'_>) -> Result<LibraryRow, ApiError> {
+pub fn insert(conn: &Connection, new: &NewLibrary<'_>) -> Result<LibraryRow, StoreError> {
     let sql = format!(
         "INSERT INTO libraries (case_name, preset, status, request, surrogate, exposure_name, \
          exposure_fingerprint, exposure_table, exposure_note, total_scenarios) \
          VALUES (?, ?, 'building', ?, ?, ?, ?, ?, ?, ?) RETURNING {COLUMNS}"
     );
-    sql::one(
+    Ok(sql::one(
         conn,
         &sql,
         params![
@@ -93,35 +93,38 @@ pub fn insert(conn: &Connection, new: &NewLibrary<'_>) -> Result<LibraryRow, Api
             new.exposure_note,
             new.total_scenarios as i64
         ],
-    )
+    )?)
 }
 
-pub fn get(conn: &Connection, id: i64) -> Result<LibraryRow, ApiError> {
+pub fn get(conn: &Connection, id: i64) -> Result<LibraryRow, StoreError> {
     sql::optional(
         conn,
         &format!("SELECT {COLUMNS} FROM libraries WHERE id = ?"),
         [id],
     )?
-    .ok_or_else(|| ApiError::NotFound(format!("library {id} does not exist")))
+    .ok_or_else(|| StoreError::NotFound(format!("library {id} does not exist")))
 }
 
 /// Every library, or those in `status`, newest first.
-pub fn list(conn: &Connection, status: Option<LibraryStatus>) -> Result<Vec<LibraryRow>, ApiError> {
-    sql::all(
+pub fn list(
+    conn: &Connection,
+    status: Option<LibraryStatus>,
+) -> Result<Vec<LibraryRow>, StoreError> {
+    Ok(sql::all(
         conn,
         &format!(
             "SELECT {COLUMNS} FROM libraries WHERE ?1 IS NULL OR status = ?1 ORDER BY id DESC"
         ),
         [status.map(LibraryStatus::as_str)],
-    )
+    )?)
 }
 
-pub fn building(conn: &Connection) -> Result<Vec<LibraryRow>, ApiError> {
-    sql::all(
+pub fn building(conn: &Connection) -> Result<Vec<LibraryRow>, StoreError> {
+    Ok(sql::all(
         conn,
         &format!("SELECT {COLUMNS} FROM libraries WHERE status = 'building' ORDER BY id"),
         [],
-    )
+    )?)
 }
 
 /// A library file and its media type.
@@ -131,7 +134,7 @@ pub struct LibraryFile {
 }
 
 /// The library file, once ready.
-pub fn file(conn: &Connection, id: i64) -> Result<Option<LibraryFile>, ApiError> {
+pub fn file(conn: &Connection, id: i64) -> Result<Option<LibraryFile>, StoreError> {
     let row: Option<(Option<Vec<u8>>, Option<String>)> = sql::optional(
         conn,
         "SELECT file, media_type FROM libraries WHERE id = ?",
@@ -147,16 +150,19 @@ pub fn file(conn: &Connection, id: i64) -> Result<Option<LibraryFile>, ApiError>
 }
 
 /// A ready library and its file; 404 if unknown, 409 if not ready (yet).
-pub fn ready_file(conn: &Connection, id: i64) -> Result<(LibraryRow, LibraryFile), ApiError> {
+pub fn ready_file(conn: &Connection, id: i64) -> Result<(LibraryRow, LibraryFile), StoreError> {
     let row = get(conn, id)?;
     if row.status != LibraryStatus::Ready {
-        return Err(ApiError::Conflict(format!(
+        return Err(StoreError::Conflict(format!(
             "library {id} is {}, not ready",
             row.status.as_str()
         )));
     }
-    let file = file(conn, id)?
-        .ok_or_else(|| ApiError::Internal(anyhow::anyhow!("ready library {id} has no file")))?;
+    let file = file(conn, id)?.ok_or_else(|| {
+        StoreError::Database(crate::db::DbError::new(format!(
+            "ready library {id} has no file"
+        )))
+    })?;
     Ok((row, file))
 }
 
@@ -187,7 +193,7 @@ impl<'a> Built<'a> {
 }
 
 /// Marks a library ready and lets its pending campaigns run (a write).
-pub fn mark_ready(conn: &Connection, id: i64, built: &Built<'_>) -> Result<(), ApiError> {
+pub fn mark_ready(conn: &Connection, id: i64, built: &Built<'_>) -> Result<(), StoreError> {
     sql::execute(
         conn,
         "UPDATE libraries SET status = 'ready', file = ?, media_type = ?, size = ?, \
@@ -214,7 +220,7 @@ pub fn mark_ready(conn: &Connection, id: i64, built: &Built<'_>) -> Result<(), A
 }
 
 /// Marks a library failed, and its pending campaigns with it (a write).
-pub fn mark_failed(conn: &Connection, id: i64, error: &str) -> Result<(), ApiError> {
+pub fn mark_failed(conn: &Connection, id: i64, error: &str) -> Result<(), StoreError> {
     sql::execute(
         conn,
         "UPDATE libraries SET status = 'failed', error = ? WHERE id = ?",

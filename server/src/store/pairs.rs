@@ -11,8 +11,8 @@
 //! worker reported what first.
 
 use crate::db::sql;
-use crate::error::ApiError;
 use crate::store::campaigns::{self, CampaignRow};
+use crate::store::error::StoreError;
 use crate::store::reports;
 use rusqlite::{params, Connection};
 use tslg_api::{CampaignStatus, PairStop, PairView, PairedInterval};
@@ -132,7 +132,7 @@ impl PairRow {
 
 /// Makes `a` and `b` a pair (a write, in the transaction that inserted
 /// them).
-pub fn link(conn: &Connection, a: i64, b: i64) -> Result<(), ApiError> {
+pub fn link(conn: &Connection, a: i64, b: i64) -> Result<(), StoreError> {
     sql::execute(
         conn,
         "INSERT INTO campaign_pairs (campaign_a, campaign_b) VALUES (?, ?)",
@@ -149,19 +149,19 @@ pub fn link(conn: &Connection, a: i64, b: i64) -> Result<(), ApiError> {
 }
 
 /// The pair `campaign` belongs to, if any.
-pub fn of(conn: &Connection, campaign: &CampaignRow) -> Result<Option<PairRow>, ApiError> {
+pub fn of(conn: &Connection, campaign: &CampaignRow) -> Result<Option<PairRow>, StoreError> {
     if campaign.paired_with.is_none() {
         return Ok(None);
     }
-    sql::optional(
+    Ok(sql::optional(
         conn,
         &format!("SELECT {COLUMNS} FROM campaign_pairs WHERE campaign_a = ?1 OR campaign_b = ?1"),
         [campaign.id],
-    )
+    )?)
 }
 
 /// The pair of `campaign` as the API shows it, if it has one.
-pub fn view_of(conn: &Connection, campaign: &CampaignRow) -> Result<Option<PairView>, ApiError> {
+pub fn view_of(conn: &Connection, campaign: &CampaignRow) -> Result<Option<PairView>, StoreError> {
     let Some(pair) = of(conn, campaign)? else {
         return Ok(None);
     };
@@ -206,7 +206,7 @@ fn merge(a: &[(u64, SparseOutcome)], b: &[(u64, SparseOutcome)]) -> Vec<(u64, Pa
 /// the tests both campaigns have now resolved and, when the paired rule
 /// holds, stops both. Returns `campaign`'s new status when the pair
 /// stopped it.
-fn fold(conn: &Connection, campaign: &CampaignRow) -> Result<Option<CampaignStatus>, ApiError> {
+fn fold(conn: &Connection, campaign: &CampaignRow) -> Result<Option<CampaignStatus>, StoreError> {
     let Some(pair) = of(conn, campaign)? else {
         return Ok(None);
     };
@@ -289,7 +289,7 @@ pub fn fold_after(
     conn: &Connection,
     campaign: &CampaignRow,
     own: Option<CampaignStatus>,
-) -> Result<(Option<CampaignStatus>, Option<i64>), ApiError> {
+) -> Result<(Option<CampaignStatus>, Option<i64>), StoreError> {
     Ok(match fold(conn, campaign)? {
         Some(status) => (Some(status), campaign.paired_with),
         None => (own, None),
@@ -302,7 +302,7 @@ fn write(
     sums: &PairedSums,
     indices: u64,
     result: Option<&PairedResult>,
-) -> Result<(), ApiError> {
+) -> Result<(), StoreError> {
     sql::execute(
         conn,
         "UPDATE campaign_pairs SET indices = ?, tests = ?, events_a = ?, events_b = ?, \
@@ -330,7 +330,7 @@ fn write(
 
 /// Cancels campaign `id` and, when it is one of a pair, the other one and
 /// the pair (a write).
-pub fn cancel(conn: &Connection, id: i64) -> Result<CampaignRow, ApiError> {
+pub fn cancel(conn: &Connection, id: i64) -> Result<CampaignRow, StoreError> {
     let row = campaigns::cancel(conn, id)?;
     if let Some(pair) = of(conn, &row)? {
         let partner = campaigns::get(conn, pair.partner(id))?;
@@ -350,7 +350,7 @@ pub fn cancel(conn: &Connection, id: i64) -> Result<CampaignRow, ApiError> {
 
 /// The index the pair of a stopped campaign decided at, when the pair
 /// stopped it: results past it no longer count for the pair.
-pub fn decided_at(conn: &Connection, campaign: &CampaignRow) -> Result<Option<u64>, ApiError> {
+pub fn decided_at(conn: &Connection, campaign: &CampaignRow) -> Result<Option<u64>, StoreError> {
     Ok(of(conn, campaign)?
         .filter(|p| p.stop.is_some())
         .map(|p| p.indices as u64))
@@ -359,7 +359,7 @@ pub fn decided_at(conn: &Connection, campaign: &CampaignRow) -> Result<Option<u6
 /// After campaign `id`'s results were taken back and it runs again: its
 /// pair folds again from the start, and the other campaign, if the pair
 /// had stopped it, runs again too (with the leases the stop cancelled).
-pub fn reopen(conn: &Connection, campaign: &CampaignRow) -> Result<(), ApiError> {
+pub fn reopen(conn: &Connection, campaign: &CampaignRow) -> Result<(), StoreError> {
     let Some(pair) = of(conn, campaign)? else {
         return Ok(());
     };
@@ -395,7 +395,7 @@ pub fn reopen(conn: &Connection, campaign: &CampaignRow) -> Result<(), ApiError>
 }
 
 /// Removes the pair of `campaign` (before its campaigns are deleted).
-pub fn unlink(conn: &Connection, campaign: &CampaignRow) -> Result<Option<i64>, ApiError> {
+pub fn unlink(conn: &Connection, campaign: &CampaignRow) -> Result<Option<i64>, StoreError> {
     let Some(pair) = of(conn, campaign)? else {
         return Ok(None);
     };

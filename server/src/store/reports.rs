@@ -10,7 +10,7 @@
 //! milliseconds.
 
 use crate::db::sql;
-use crate::error::ApiError;
+use crate::store::error::StoreError;
 use rusqlite::{params, Connection};
 use tslg_api::{packed, MAX_REPORT_TESTS};
 use tslg_method::prefix::SparseOutcome;
@@ -27,7 +27,7 @@ pub struct NewReport<'a> {
     pub invalid: &'a [(u64, &'a str)],
 }
 
-pub fn insert(conn: &Connection, report: &NewReport<'_>) -> Result<(), ApiError> {
+pub fn insert(conn: &Connection, report: &NewReport<'_>) -> Result<(), StoreError> {
     sql::execute(
         conn,
         "INSERT INTO reports (campaign_id, from_index, to_index, lease_id, worker, events, packed) \
@@ -79,7 +79,7 @@ fn unpack_into(
     start: i64,
     bytes: &[u8],
     range: std::ops::Range<u64>,
-) -> Result<(), ApiError> {
+) -> Result<(), StoreError> {
     let unpacked = packed::unpack(start as u64, bytes).map_err(|e| {
         anyhow::anyhow!("stored report at {start} of campaign {campaign} is damaged: {e}")
     })?;
@@ -96,7 +96,7 @@ pub fn events_page(
     from: u64,
     to: u64,
     limit: usize,
-) -> Result<Vec<(u64, f64)>, ApiError> {
+) -> Result<Vec<(u64, f64)>, StoreError> {
     // Rows are read in batches; the first may hold events before `from`,
     // each later one at least one event in range (`events > 0`).
     let batch = limit.clamp(1, 4096) + 1;
@@ -139,7 +139,7 @@ pub fn outcomes(
     campaign: i64,
     from: u64,
     to: u64,
-) -> Result<Vec<(u64, SparseOutcome)>, ApiError> {
+) -> Result<Vec<(u64, SparseOutcome)>, StoreError> {
     // A report row carries its packed events; an invalid test, none.
     let rows: Vec<(i64, Option<Vec<u8>>)> = sql::all(
         conn,
@@ -178,7 +178,7 @@ const LEGACY_CHUNK: usize = 65_536;
 /// Runs at start-up, after the migrations, in one transaction.
 pub async fn move_legacy_events(db: &crate::db::Database) -> anyhow::Result<()> {
     let moved = db
-        .write(|conn| move_legacy_rows(conn).map_err(ApiError::Internal))
+        .write(|conn| move_legacy_rows(conn).map_err(StoreError::from))
         .await
         .map_err(|e| anyhow::anyhow!("cannot move the old event rows into report rows: {e}"))?;
     if moved > 0 {

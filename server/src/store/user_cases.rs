@@ -2,13 +2,13 @@
 //! in this process at start-up and when a client adds one.
 
 use crate::db::sql;
-use crate::error::ApiError;
+use crate::store::error::StoreError;
 use rusqlite::{params, Connection};
 use tslg_method::cases::user::registry::{register, UserCaseDefinition};
 
 /// Registers every stored case; one that no longer reads (a newer build
 /// refusing it) is logged and left out.
-pub fn register_stored(conn: &Connection) -> Result<(), ApiError> {
+pub fn register_stored(conn: &Connection) -> Result<(), StoreError> {
     let rows: Vec<(String, String, String, String)> = sql::all(
         conn,
         "SELECT name, file, table_name, table_text FROM user_cases ORDER BY name",
@@ -33,7 +33,7 @@ pub fn insert(
     conn: &Connection,
     name: &str,
     definition: &UserCaseDefinition,
-) -> Result<(), ApiError> {
+) -> Result<(), StoreError> {
     sql::execute(
         conn,
         "INSERT OR IGNORE INTO user_cases (name, file, table_name, table_text) \
@@ -49,7 +49,7 @@ pub fn insert(
 }
 
 /// The stored definition of case `name`, for the plans workers read.
-pub fn get(conn: &Connection, name: &str) -> Result<Option<UserCaseDefinition>, ApiError> {
+pub fn get(conn: &Connection, name: &str) -> Result<Option<UserCaseDefinition>, StoreError> {
     let row: Option<(String, String, String)> = sql::optional(
         conn,
         "SELECT file, table_name, table_text FROM user_cases WHERE name = ?",
