@@ -24,6 +24,7 @@ mod state;
 mod store;
 mod throughput;
 mod validate;
+mod views;
 mod whole_build;
 mod work_signal;
 mod workers;

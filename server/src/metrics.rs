@@ -263,7 +263,7 @@ pub async fn scrape(State(state): State<AppState>) -> Result<Response, ServiceEr
         .iter()
         .take(crate::campaign_metrics::MAX_CAMPAIGN_SERIES)
         .map(|row| {
-            let mut view = row.view();
+            let mut view = crate::views::campaign_view(&row);
             state.throughput.fill(&mut view);
             view
         })

@@ -30,6 +30,7 @@ use crate::db::{now_ms, Database};
 use crate::error::ServiceError;
 use crate::report::check::CheckedReport;
 use crate::report::fold::{fold_prefix, KnownExplored};
+use crate::report::mismatch::{describe, Mismatch};
 use crate::report::record::{check_effort, held_lease, stopped_ack, Recorded};
 use crate::store::audits::{self, AuditRow, AuditState, NewAudit};
 use crate::store::campaigns;
@@ -40,39 +41,6 @@ use std::sync::Arc;
 use tslg_api::{CampaignStatus, ResultAck, ResultReport};
 use tslg_method::prefix::SparseOutcome;
 use tslg_method::registry::CampaignTests;
-
-/// A reported outcome the coordinator's own run contradicts.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Mismatch {
-    pub index: u64,
-    pub reported: String,
-    pub replayed: String,
-}
-
-fn describe(outcome: &str) -> String {
-    match outcome.strip_prefix("event:") {
-        Some(bits) => {
-            let w = u64::from_str_radix(bits, 16)
-                .map(f64::from_bits)
-                .unwrap_or(f64::NAN);
-            format!("an event of weight {w:e}")
-        }
-        None if outcome == "none" => "no event".into(),
-        None => outcome.into(),
-    }
-}
-
-impl std::fmt::Display for Mismatch {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(
-            f,
-            "test {} was reported as {}, but the coordinator's run gives {}",
-            self.index,
-            describe(&self.reported),
-            describe(&self.replayed)
-        )
-    }
-}
 
 /// The audits of the part of an external program's report from `new_from`:
 /// the tests `chosen` (the secret sample, sorted), and every event that would carry
@@ -393,7 +361,7 @@ fn record_audit_run_in(
     // The flag may have reset the campaign: fold from what is stored now.
     let campaign = campaigns::get(conn, campaign.id)?;
     let own = fold_prefix(conn, &campaign, tests, KnownExplored::default(), None, None)?;
-    let (stopped, partner_stopped) = pairs::fold_after(conn, &campaign, own)?;
+    let (stopped, partner_stopped) = crate::report::pair_fold::fold_after(conn, &campaign, own)?;
     Ok(Recorded {
         ack: ResultAck {
             accepted: 1,

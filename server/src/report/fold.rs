@@ -8,16 +8,15 @@
 //! outcomes in index order and checks the stopping rule at every index
 //! (SPEC §7), so the stop index does not depend on who reported what when.
 
-use crate::db::sql;
 use crate::error::ServiceError;
 use crate::history;
 use crate::report::check::CheckedReport;
 use crate::report::explored::{exploring_in, ExploredRanges};
 use crate::report::replay::Explored;
-use crate::store::audits;
 use crate::store::campaigns::CampaignRow;
+use crate::store::prefix::{self, Charge};
 use crate::store::reports;
-use rusqlite::{params, Connection};
+use rusqlite::Connection;
 use std::sync::Arc;
 use tslg_api::{CampaignStatus, Method};
 use tslg_method::estimator::{Decision, StoppingRule};
@@ -69,43 +68,6 @@ pub fn fold_step(
         fold,
         course,
         decision,
-    })
-}
-
-/// The first index the prefix may not pass: the smallest `resume_at` of
-/// the campaign's active leases (below it every outcome is recorded), its
-/// `next_index`, and its first open audit (a test two workers have not yet
-/// agreed on, [`crate::report::audit`]).
-pub(crate) fn frontier(conn: &Connection, campaign: &CampaignRow) -> Result<u64, ServiceError> {
-    Ok(bounds(conn, campaign)?.frontier)
-}
-
-/// Where a fold may go and where its history stands.
-struct Bounds {
-    /// See [`frontier`].
-    frontier: u64,
-    /// The campaign's last stored history point.
-    last_stored: Option<u64>,
-}
-
-/// [`Bounds`] in one read (a fold runs in every report's transaction).
-fn bounds(conn: &Connection, campaign: &CampaignRow) -> Result<Bounds, ServiceError> {
-    let (open, audited, last_stored): (Option<i64>, Option<i64>, Option<i64>) = sql::one(
-        conn,
-        &format!(
-            "SELECT (SELECT MIN(resume_at) FROM leases WHERE campaign_id = ?1 \
-                     AND state = 'active' AND audit_id IS NULL), \
-                    (SELECT MIN(test_index) FROM audits WHERE campaign_id = ?1 \
-                     AND state IN {open}), \
-                    (SELECT MAX(indices) FROM history WHERE campaign_id = ?1)",
-            open = audits::OPEN
-        ),
-        [campaign.id],
-    )?;
-    let recorded = open.map_or(campaign.next_index, |r| r.min(campaign.next_index)) as u64;
-    Ok(Bounds {
-        frontier: audited.map_or(recorded, |a| (a as u64).min(recorded)),
-        last_stored: last_stored.map(|i| i as u64),
     })
 }
 
@@ -198,38 +160,9 @@ pub fn fold_prefix(
     let mut pending = charge;
     let folded = fold_charging(conn, campaign, tests, known, fresh, &mut pending)?;
     if let Some(charge) = pending {
-        charge.apply(conn, campaign.id)?;
+        prefix::charge(conn, campaign.id, &charge)?;
     }
     Ok(folded)
-}
-
-/// A report's charge to its campaign's row: the smoothed cost per test
-/// (which sizes leases), the worker time and the weights of its events.
-/// The fold updates the same row: one update for both instead of two (the
-/// row has 51 columns, and the writer updates it for every report).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Charge {
-    pub cost_per_test: Option<f64>,
-    pub worker_seconds: f64,
-    pub reported_s1: f64,
-}
-
-impl Charge {
-    /// The charge on its own.
-    fn apply(&self, conn: &Connection, campaign: i64) -> Result<(), ServiceError> {
-        sql::execute(
-            conn,
-            "UPDATE campaigns SET cost_per_test = ?, worker_seconds = worker_seconds + ?, \
-             reported_s1 = reported_s1 + ? WHERE id = ?",
-            params![
-                self.cost_per_test,
-                self.worker_seconds,
-                self.reported_s1,
-                campaign
-            ],
-        )?;
-        Ok(())
-    }
 }
 
 /// [`fold_prefix`], leaving `charge` for the caller where it does not
@@ -245,7 +178,7 @@ fn fold_charging(
     if campaign.method == Method::Adaptive {
         // Resolving stages reads the campaign's row: charged first.
         if let Some(charge) = charge.take() {
-            charge.apply(conn, campaign.id)?;
+            prefix::charge(conn, campaign.id, &charge)?;
         }
         let tests = tests.ok_or_else(|| {
             anyhow::anyhow!(
@@ -255,10 +188,10 @@ fn fold_charging(
         })?;
         return crate::report::stages::resolve_stages(conn, campaign, &tests);
     }
-    let Bounds {
+    let prefix::Bounds {
         frontier,
         last_stored,
-    } = bounds(conn, campaign)?;
+    } = prefix::bounds(conn, campaign)?;
     let mut fold = campaign.fold();
     if frontier <= fold.indices {
         known.settle(campaign.id, fold.indices);
@@ -385,68 +318,22 @@ fn write(
 ) -> Result<Option<CampaignStatus>, ServiceError> {
     let fold = &folded.fold;
     let (status, detail) = outcome(folded.decision, rule, fold);
-    let (s1, s2) = fold.estimator.sums();
-    let charged = charge.is_some();
-    let charge = charge.unwrap_or(Charge {
-        cost_per_test: None,
-        worker_seconds: 0.0,
-        reported_s1: 0.0,
-    });
-    sql::execute(
+    prefix::store_fold(
         conn,
-        "UPDATE campaigns SET indices = ?, tests = ?, events = ?, invalid = ?, s1 = ?, s2 = ?, \
-         largest = ?, outside_tests = ?, outside_events = ?, outside_s1 = ?, outside_upper = ?, \
-         outside_mismatches = ?, strata_epsilon = ?, \
-         status = ?, status_detail = COALESCE(?, status_detail), \
-         cost_per_test = CASE WHEN ? THEN ? ELSE cost_per_test END, \
-         worker_seconds = worker_seconds + ?, reported_s1 = reported_s1 + ?, \
-         updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now') WHERE id = ?",
-        params![
-            fold.indices as i64,
-            fold.estimator.tests() as i64,
-            fold.estimator.events() as i64,
-            fold.invalid as i64,
-            s1,
-            s2,
-            fold.estimator.largest_term(),
-            fold.outside.tests as i64,
-            fold.outside.events as i64,
-            fold.outside.s1,
+        campaign.id,
+        &prefix::FoldState {
+            fold,
             upper,
-            fold.outside.mismatches as i64,
-            fold.strata,
-            status.as_str(),
-            detail,
-            charged,
-            charge.cost_per_test,
-            charge.worker_seconds,
-            charge.reported_s1,
-            campaign.id
-        ],
+            status,
+            detail: detail.as_deref(),
+        },
+        charge,
     )?;
-    if !folded.course.is_empty() {
-        let mut statement = conn.prepare_cached(
-            "INSERT OR REPLACE INTO history (campaign_id, indices, tests, events, s1, s2, \
-             outside_tests, outside_s1) VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
-        )?;
-        for state in &folded.course {
-            let (s1, s2) = state.estimator.sums();
-            statement.execute(params![
-                campaign.id,
-                state.indices as i64,
-                state.estimator.tests() as i64,
-                state.estimator.events() as i64,
-                s1,
-                s2,
-                state.outside.tests as i64,
-                state.outside.s1
-            ])?;
-        }
-    }
+    prefix::store_history(conn, campaign.id, &folded.course)?;
     if folded.decision.is_none() {
         return Ok(None);
     }
-    close_stopped(conn, campaign.id, fold.indices)?;
+    prefix::close_stopped(conn, campaign.id, fold.indices)?;
     tracing::info!(
         campaign = campaign.id,
         status = status.as_str(),
@@ -454,24 +341,4 @@ fn write(
         "campaign stopped"
     );
     Ok(Some(status))
-}
-
-/// A stopped campaign's leases cancelled, and its audits of tests past the
-/// stop index `stop` set aside (they check tests that no longer count).
-pub(crate) fn close_stopped(
-    conn: &Connection,
-    campaign: i64,
-    stop: u64,
-) -> Result<(), ServiceError> {
-    crate::store::leases::cancel_active(conn, campaign)?;
-    sql::execute(
-        conn,
-        &format!(
-            "UPDATE audits SET state = 'past' WHERE campaign_id = ? AND test_index >= ? \
-             AND state IN {}",
-            audits::OPEN
-        ),
-        [campaign, stop as i64],
-    )?;
-    Ok(())
 }

@@ -10,6 +10,8 @@ pub mod audit;
 pub mod check;
 pub mod explored;
 pub mod fold;
+pub mod mismatch;
+pub mod pair_fold;
 pub mod receive;
 pub mod record;
 pub mod replay;

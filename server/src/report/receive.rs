@@ -215,7 +215,7 @@ enum AtOnce {
     /// one was taken.
     Recorded(Box<Recorded>, Option<Box<leases::Claimed>>),
     /// The coordinator's own run contradicts it: the worker is flagged.
-    Contradicted(audit::Mismatch),
+    Contradicted(crate::report::mismatch::Mismatch),
     /// It needs more than the writer should do: the general path, which
     /// also runs the claim of the next lease, handed back.
     Declined(Option<leases::ClaimJob>),
@@ -224,7 +224,7 @@ enum AtOnce {
 /// [`AtOnce`] before the next lease is claimed.
 enum Decided {
     Recorded(Box<Recorded>),
-    Contradicted(audit::Mismatch),
+    Contradicted(crate::report::mismatch::Mismatch),
     Declined,
 }
 
@@ -368,7 +368,7 @@ fn forget_adaptive(state: &AppState, lease_id: i64) {
 }
 
 /// The 422 of a report the coordinator's own run contradicts.
-fn contradicted(mismatch: &audit::Mismatch, worker: &str) -> ServiceError {
+fn contradicted(mismatch: &crate::report::mismatch::Mismatch, worker: &str) -> ServiceError {
     ServiceError::Unprocessable(format!(
         "{mismatch}: the report is refused and worker `{worker}` is flagged; its results are \
          taken back"

@@ -15,12 +15,12 @@ use crate::error::ServiceError;
 use crate::lease_size::update_cost;
 use crate::report::check::CheckedReport;
 use crate::report::explored::ExploredRanges;
-use crate::report::fold::{fold_prefix, Charge, KnownExplored};
+use crate::report::fold::{fold_prefix, KnownExplored};
 use crate::report::replay::Explored;
 use crate::store::audits::{self, NewAudit};
 use crate::store::campaigns::{self, CampaignRow};
 use crate::store::leases::{self, check_fence, LeaseRow, LeaseState};
-use crate::store::pairs;
+use crate::store::prefix::Charge;
 use crate::store::reports::{self, NewReport};
 use rusqlite::{params, Connection};
 use std::sync::Arc;
@@ -192,7 +192,7 @@ pub(crate) fn record_held(
     };
     let own = fold_prefix(tx, campaign, tests, known, Some(checked), charge)?;
     // A campaign of a pair: the pair folds over what both resolved.
-    let (stopped, partner_stopped) = pairs::fold_after(tx, campaign, own)?;
+    let (stopped, partner_stopped) = crate::report::pair_fold::fold_after(tx, campaign, own)?;
     let status = stopped.unwrap_or(CampaignStatus::Running);
     let resume_at = resume_at.max(checked.to);
     Ok(Recorded {

@@ -16,8 +16,8 @@
 //! are joined in index order, so the first contradiction reported is the
 //! lowest-indexed one whatever the scheduling.
 
-use crate::report::audit::Mismatch;
 use crate::report::check::CheckedReport;
+use crate::report::mismatch::Mismatch;
 use crate::report::replay_counts::{Place, ReplayCounts};
 use crate::store::audits;
 use rayon::prelude::*;

@@ -13,8 +13,8 @@
 
 use crate::db::sql;
 use crate::error::ServiceError;
-use crate::report::fold::{close_stopped, frontier};
 use crate::store::campaigns::CampaignRow;
+use crate::store::prefix::{close_stopped, frontier};
 use crate::store::reports;
 use rusqlite::{params, Connection};
 use std::sync::Arc;

@@ -6,7 +6,8 @@ use crate::history;
 use crate::routes::problem::ApiJson;
 use crate::routes::{ApiPath, ApiQuery};
 use crate::state::AppState;
-use crate::store::{audits, campaigns, pairs};
+use crate::store::{campaigns, pairs};
+use crate::views::live_view;
 use axum::extract::State;
 use axum::http::{header, StatusCode};
 use axum::response::IntoResponse;
@@ -82,65 +83,6 @@ pub async fn read_campaign(
     Ok(state.db.read(move |conn| campaigns::get(conn, id)).await?)
 }
 
-/// A campaign's view with its current rate, the time left and, for an
-/// external program, its audits.
-pub async fn live_view(
-    state: &AppState,
-    row: &campaigns::CampaignRow,
-) -> Result<CampaignView, ServiceError> {
-    let mut view = row.view();
-    state.throughput.fill(&mut view);
-    if let Some(waiting) = waiting_for_workers(state, row) {
-        view.warnings.push(waiting);
-    }
-    if row.requires.is_some() {
-        let id = row.id;
-        let states = state.db.read(move |conn| audits::counts(conn, id)).await?;
-        let (counts, warnings) = campaigns::audit_counts(row, &states);
-        view.audits = Some(counts);
-        view.warnings.extend(warnings);
-    }
-    if let Some(partner) = row.paired_with {
-        // The pair and the other campaign as one read sees them.
-        let row = row.clone();
-        let (pair, other) = state
-            .db
-            .read(move |conn| {
-                Ok::<_, ServiceError>((pairs::view_of(conn, &row)?, campaigns::get(conn, partner)?))
-            })
-            .await?;
-        view.pair = pair;
-        // The pair waits for the slower campaign: say why it waits.
-        if let Some(waiting) = waiting_for_workers(state, &other) {
-            view.warnings
-                .push(format!("its pair's campaign {partner}: {waiting}"));
-        }
-    }
-    Ok(view)
-}
-
-/// Why a running campaign gets no tests, when no live worker (one seen
-/// within a minute) can run them: none at all, or none offering its
-/// external program.
-fn waiting_for_workers(state: &AppState, row: &campaigns::CampaignRow) -> Option<String> {
-    if row.status != tslg_api::CampaignStatus::Running {
-        return None;
-    }
-    match &row.requires {
-        Some(requirement) if state.workers.live_offering(requirement).is_empty() => Some(format!(
-            "no worker: no live worker offers the program `{requirement}` this campaign's \
-             tests need (start one with `tslg-worker --vut-exec NAME=COMMAND`; GET \
-             /api/v1/workers lists what each offers); its tests wait"
-        )),
-        None if state.workers.counts().0 == 0 => Some(
-            "no worker: no worker has asked for work in the last minute; the campaign's tests \
-             wait for one (`tslg-worker --server URL`)"
-                .to_owned(),
-        ),
-        _ => None,
-    }
-}
-
 /// `?points=N` of the history read.
 #[derive(Debug, serde::Deserialize, utoipa::IntoParams)]
 #[serde(deny_unknown_fields)]
@@ -172,7 +114,7 @@ pub async fn history(
         .db
         .read(move |conn| {
             let row = campaigns::get(conn, id)?;
-            campaigns::history(conn, &row, max)
+            history::read(conn, &row, max)
         })
         .await?;
     Ok(Json(History {

@@ -176,7 +176,7 @@ async fn live_view(
     state: &AppState,
     row: &libraries::LibraryRow,
 ) -> Result<LibraryView, ServiceError> {
-    let mut view = row.view();
+    let mut view = crate::views::library_view(row);
     state.build_progress.fill(&mut view);
     crate::enumeration::progress(state, &mut view).await?;
     Ok(view)

@@ -1,20 +1,173 @@
-//! Reading a campaign's row by position.
+//! A campaign's row: its columns, what they mean to the method (the
+//! stopping rule, the persisted prefix fold, the exposure), and reading it
+//! by position.
 //!
 //! The writer reads a campaign's row twice for every report that takes the
 //! next lease (the report's campaign, then the campaign the claim picks):
 //! through `serde` by column name, matching each of its 51 columns against
 //! the struct's field names, that was a tenth of the writer's time under
 //! load (`perf`, docs/benchmarks.md). [`first`] reads the columns of
-//! [`COLUMNS`](super::campaigns::COLUMNS) by their position instead; a test checks both readings give
+//! [`COLUMNS`] by their position instead; a test checks both readings give
 //! the same row.
 
-use super::campaigns::CampaignRow;
 use crate::store::error::StoreError;
 use rusqlite::types::FromSql;
 use rusqlite::{Connection, Params, Row};
 use serde::de::{DeserializeOwned, IntoDeserializer};
+use tslg_api::{CampaignStatus, ExposureRequest, Method, Outside, Split};
+use tslg_method::estimator::{ImportanceEstimator, StoppingRule};
+use tslg_method::outside::OutsideTally;
+use tslg_method::prefix::PrefixFold;
+use tslg_method::registry::ExposureSource;
 
-/// The first row of `sql`, a `SELECT` of [`COLUMNS`](super::campaigns::COLUMNS) (the prefix of its
+#[derive(Debug, Clone, serde::Deserialize)]
+pub struct CampaignRow {
+    pub id: i64,
+    pub case_name: String,
+    pub preset: String,
+    pub method: Method,
+    pub library_id: Option<i64>,
+    pub exposure_name: String,
+    pub exposure_fingerprint: String,
+    pub exposure_table: Option<String>,
+    pub vut: String,
+    /// `NAME:case:mode` of an external vehicle under test.
+    pub requires: Option<String>,
+    pub epsilon: f64,
+    pub outside: Outside,
+    /// How the tests are split between the library and the outside.
+    pub split: Split,
+    /// The exploring share the estimate stratifies on (NULL: the plain mean).
+    pub strata_epsilon: Option<f64>,
+    pub beta: f64,
+    pub confidence: f64,
+    pub n_min: i64,
+    pub min_events: i64,
+    pub max_tests: i64,
+    pub seed: i64,
+    pub status: CampaignStatus,
+    pub status_detail: Option<String>,
+    pub next_index: i64,
+    pub indices: i64,
+    pub tests: i64,
+    pub events: i64,
+    pub invalid: i64,
+    pub s1: f64,
+    pub s2: f64,
+    /// The largest weighted term of the prefix, `max wᵢ yᵢ`.
+    pub largest: f64,
+    pub guard_outside: bool,
+    /// The prefix's exploring tests, their events and those events' `S₁`.
+    pub outside_tests: i64,
+    pub outside_events: i64,
+    pub outside_s1: f64,
+    pub outside_mismatches: i64,
+    /// `U` for the prefix; NULL until the exploring tests are counted, and
+    /// for campaigns without a library outside (NDD, car-following).
+    pub outside_upper: Option<f64>,
+    pub cost_per_test: Option<f64>,
+    pub worker_seconds: f64,
+    /// Tests chosen for an audit that no other worker could run.
+    pub audits_waived: i64,
+    /// The weights of every event recorded, folded or not.
+    pub reported_s1: f64,
+    /// `P(A)` by enumeration of the grid, where it was computed.
+    pub exact_probability: Option<f64>,
+    /// An adaptive campaign's running stage `[stage_start, stage_end)` and
+    /// kind; NULL for other methods and once it stopped.
+    pub stage_start: Option<i64>,
+    pub stage_end: Option<i64>,
+    pub stage_kind: Option<String>,
+    pub library_tests: i64,
+    pub search_tests: i64,
+    pub stages: i64,
+    pub support: i64,
+    /// The other campaign of a paired regression campaign
+    /// ([`crate::store::pairs`]).
+    pub paired_with: Option<i64>,
+    pub created_at: String,
+    pub updated_at: String,
+}
+
+/// An adaptive campaign is stored as method 'library' with `adaptive = 1`
+/// (migrations/…14_adaptive.sql) and read as `adaptive`; a library build's
+/// enumeration as 'ndd' with `enumerate = 1` (…17_enumerate.sql), a
+/// build one worker runs whole as 'ndd' with `enumerate = 2`.
+pub const COLUMNS: &str = "id, case_name, preset, \
+    CASE WHEN adaptive = 1 THEN 'adaptive' WHEN enumerate = 1 THEN 'enumerate' \
+    WHEN enumerate = 2 THEN 'build' ELSE method END \
+    AS method, library_id, exposure_name, \
+    exposure_fingerprint, exposure_table, vut, requires, epsilon, outside, split, strata_epsilon, \
+    beta, confidence, n_min, min_events, max_tests, seed, status, status_detail, next_index, indices, tests, events, invalid, s1, s2, \
+    largest, guard_outside, outside_tests, outside_events, outside_s1, outside_upper, \
+    outside_mismatches, \
+    cost_per_test, worker_seconds, audits_waived, reported_s1, exact_probability, \
+    stage_start, stage_end, stage_kind, library_tests, search_tests, stages, support, paired_with, created_at, \
+    updated_at";
+
+impl CampaignRow {
+    pub fn seed(&self) -> u64 {
+        self.seed as u64
+    }
+
+    pub fn rule(&self) -> StoppingRule {
+        StoppingRule {
+            beta: self.beta,
+            confidence: self.confidence,
+            n_min: self.n_min as u64,
+            min_events: self.min_events as u64,
+            max_tests: self.max_tests as u64,
+            guard_outside: self.guard_outside,
+        }
+    }
+
+    /// The rule the campaign's own fold applies: its rule, except that a
+    /// campaign of a pair never stops on its own precision (`min_events`
+    /// is never reached): the pair's rule on the difference stops it
+    /// ([`crate::store::pairs::fold`]), or `max_tests`.
+    pub fn fold_rule(&self) -> StoppingRule {
+        let rule = self.rule();
+        match self.paired_with {
+            Some(_) => StoppingRule {
+                min_events: u64::MAX,
+                ..rule
+            },
+            None => rule,
+        }
+    }
+
+    /// The prefix estimator as persisted.
+    pub fn fold(&self) -> PrefixFold {
+        PrefixFold {
+            estimator: ImportanceEstimator::from_sums(
+                self.tests as u64,
+                self.events as u64,
+                self.s1,
+                self.s2,
+            )
+            .with_largest(self.largest),
+            indices: self.indices as u64,
+            invalid: self.invalid as u64,
+            outside: OutsideTally {
+                tests: self.outside_tests as u64,
+                events: self.outside_events as u64,
+                s1: self.outside_s1,
+                mismatches: self.outside_mismatches as u64,
+            },
+            strata: self.strata_epsilon,
+        }
+    }
+
+    pub fn exposure_source(&self) -> ExposureSource {
+        tslg_client::wire::stored_exposure(&self.exposure_name, self.exposure_table.as_ref())
+    }
+
+    pub fn exposure_request(&self) -> ExposureRequest {
+        tslg_client::wire::exposure_request(self.exposure_source())
+    }
+}
+
+/// The first row of `sql`, a `SELECT` of [`COLUMNS`] (the prefix of its
 /// column list), if any.
 pub fn first(
     conn: &Connection,
@@ -48,7 +201,7 @@ fn at<T: FromSql>(row: &Row<'_>, i: usize) -> rusqlite::Result<T> {
     row.get(i)
 }
 
-/// A row of `SELECT {COLUMNS}`, by position (the order of [`COLUMNS`](super::campaigns::COLUMNS)).
+/// A row of `SELECT {COLUMNS}`, by position (the order of [`COLUMNS`]).
 fn from_row(row: &Row<'_>) -> rusqlite::Result<CampaignRow> {
     Ok(CampaignRow {
         id: at(row, 0)?,
@@ -113,9 +266,8 @@ const READ: usize = 51;
 mod tests {
     use super::*;
     use crate::db::{sql, Database, Durability};
-    use crate::store::campaigns::COLUMNS;
 
-    /// Every column of [`COLUMNS`](super::campaigns::COLUMNS), in order, as the positional reader
+    /// Every column of [`COLUMNS`], in order, as the positional reader
     /// takes them: a column added to the list without the reader (or in
     /// another place) fails here.
     #[tokio::test]

@@ -3,7 +3,7 @@
 use crate::db::sql;
 use crate::store::error::StoreError;
 use rusqlite::{params, Connection};
-use tslg_api::{LibraryStatus, LibraryView};
+use tslg_api::LibraryStatus;
 
 #[derive(Debug, Clone, serde::Deserialize)]
 pub struct LibraryRow {
@@ -34,29 +34,6 @@ const COLUMNS: &str = "id, case_name, preset, status, request, surrogate, exposu
 impl LibraryRow {
     pub fn exposure_source(&self) -> tslg_method::registry::ExposureSource {
         tslg_client::wire::stored_exposure(&self.exposure_name, self.exposure_table.as_ref())
-    }
-
-    pub fn view(&self) -> LibraryView {
-        LibraryView {
-            id: self.id,
-            case: self.case_name.clone(),
-            preset: self.preset.clone(),
-            status: self.status,
-            exposure: self.exposure_name.clone(),
-            exposure_fingerprint: self.exposure_fingerprint.clone(),
-            exposure_note: self.exposure_note.clone(),
-            surrogate: serde_json::from_str(&self.surrogate).unwrap_or_default(),
-            size: self.size.map(|v| v as u64),
-            total_scenarios: self.total_scenarios as u64,
-            sm_evaluations: self.sm_evaluations.map(|v| v as u64),
-            mu_s: self.mu_s,
-            w: self.w,
-            build_seconds: self.build_seconds,
-            error: self.error.clone(),
-            status_detail: None,
-            progress: None,
-            created_at: self.created_at.clone(),
-        }
     }
 }
 

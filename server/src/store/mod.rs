@@ -9,5 +9,6 @@ pub mod error;
 pub mod leases;
 pub mod libraries;
 pub mod pairs;
+pub mod prefix;
 pub mod reports;
 pub mod user_cases;

@@ -1,0 +1,188 @@
+//! A campaign's resolved prefix as rows: where a fold may go (the
+//! frontier), the fold's state and the reports' charges on the campaign's
+//! row, its history points, and a stopped campaign closed.
+
+use crate::db::sql;
+use crate::store::audits;
+use crate::store::campaign_row::CampaignRow;
+use crate::store::error::StoreError;
+use crate::store::leases;
+use rusqlite::{params, Connection};
+use tslg_api::CampaignStatus;
+use tslg_method::prefix::PrefixFold;
+
+/// The first index the prefix may not pass: the smallest `resume_at` of
+/// the campaign's active leases (below it every outcome is recorded), its
+/// `next_index`, and its first open audit (a test two workers have not yet
+/// agreed on, `report/audit.rs`).
+pub fn frontier(conn: &Connection, campaign: &CampaignRow) -> Result<u64, StoreError> {
+    Ok(bounds(conn, campaign)?.frontier)
+}
+
+/// Where a fold may go and where its history stands.
+pub struct Bounds {
+    /// See [`frontier`].
+    pub frontier: u64,
+    /// The campaign's last stored history point.
+    pub last_stored: Option<u64>,
+}
+
+/// [`Bounds`] in one read (a fold runs in every report's transaction).
+pub fn bounds(conn: &Connection, campaign: &CampaignRow) -> Result<Bounds, StoreError> {
+    let (open, audited, last_stored): (Option<i64>, Option<i64>, Option<i64>) = sql::one(
+        conn,
+        &format!(
+            "SELECT (SELECT MIN(resume_at) FROM leases WHERE campaign_id = ?1 \
+                     AND state = 'active' AND audit_id IS NULL), \
+                    (SELECT MIN(test_index) FROM audits WHERE campaign_id = ?1 \
+                     AND state IN {open}), \
+                    (SELECT MAX(indices) FROM history WHERE campaign_id = ?1)",
+            open = audits::OPEN
+        ),
+        [campaign.id],
+    )?;
+    let recorded = open.map_or(campaign.next_index, |r| r.min(campaign.next_index)) as u64;
+    Ok(Bounds {
+        frontier: audited.map_or(recorded, |a| (a as u64).min(recorded)),
+        last_stored: last_stored.map(|i| i as u64),
+    })
+}
+
+/// A report's charge to its campaign's row: the smoothed cost per test
+/// (which sizes leases), the worker time and the weights of its events.
+/// The fold updates the same row: one update for both instead of two (the
+/// row has 51 columns, and the writer updates it for every report).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Charge {
+    pub cost_per_test: Option<f64>,
+    pub worker_seconds: f64,
+    pub reported_s1: f64,
+}
+
+/// Writes `charge` to `campaign`'s row on its own (where no fold writes
+/// the row).
+pub fn charge(conn: &Connection, campaign: i64, charge: &Charge) -> Result<(), StoreError> {
+    sql::execute(
+        conn,
+        "UPDATE campaigns SET cost_per_test = ?, worker_seconds = worker_seconds + ?, \
+         reported_s1 = reported_s1 + ? WHERE id = ?",
+        params![
+            charge.cost_per_test,
+            charge.worker_seconds,
+            charge.reported_s1,
+            campaign
+        ],
+    )?;
+    Ok(())
+}
+
+/// A fold's result as the campaign's row keeps it.
+pub struct FoldState<'a> {
+    pub fold: &'a PrefixFold,
+    /// The bound on the failure mass outside the library, where there is one.
+    pub upper: Option<f64>,
+    pub status: CampaignStatus,
+    /// Why the campaign stopped, when it did.
+    pub detail: Option<&'a str>,
+}
+
+/// Writes a fold's state and the report's `charge` (one update of the
+/// row for both: it has 51 columns, and the writer updates it for every
+/// report).
+pub fn store_fold(
+    conn: &Connection,
+    campaign: i64,
+    state: &FoldState<'_>,
+    charge: Option<Charge>,
+) -> Result<(), StoreError> {
+    let FoldState {
+        fold,
+        upper,
+        status,
+        detail,
+    } = *state;
+    let (s1, s2) = fold.estimator.sums();
+    let charged = charge.is_some();
+    let charge = charge.unwrap_or(Charge {
+        cost_per_test: None,
+        worker_seconds: 0.0,
+        reported_s1: 0.0,
+    });
+    sql::execute(
+        conn,
+        "UPDATE campaigns SET indices = ?, tests = ?, events = ?, invalid = ?, s1 = ?, s2 = ?, \
+         largest = ?, outside_tests = ?, outside_events = ?, outside_s1 = ?, outside_upper = ?, \
+         outside_mismatches = ?, strata_epsilon = ?, \
+         status = ?, status_detail = COALESCE(?, status_detail), \
+         cost_per_test = CASE WHEN ? THEN ? ELSE cost_per_test END, \
+         worker_seconds = worker_seconds + ?, reported_s1 = reported_s1 + ?, \
+         updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now') WHERE id = ?",
+        params![
+            fold.indices as i64,
+            fold.estimator.tests() as i64,
+            fold.estimator.events() as i64,
+            fold.invalid as i64,
+            s1,
+            s2,
+            fold.estimator.largest_term(),
+            fold.outside.tests as i64,
+            fold.outside.events as i64,
+            fold.outside.s1,
+            upper,
+            fold.outside.mismatches as i64,
+            fold.strata,
+            status.as_str(),
+            detail,
+            charged,
+            charge.cost_per_test,
+            charge.worker_seconds,
+            charge.reported_s1,
+            campaign
+        ],
+    )?;
+    Ok(())
+}
+
+/// Stores the history points `course` of a campaign's prefix.
+pub fn store_history(
+    conn: &Connection,
+    campaign: i64,
+    course: &[PrefixFold],
+) -> Result<(), StoreError> {
+    if !course.is_empty() {
+        let mut statement = conn.prepare_cached(
+            "INSERT OR REPLACE INTO history (campaign_id, indices, tests, events, s1, s2, \
+             outside_tests, outside_s1) VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+        )?;
+        for state in course {
+            let (s1, s2) = state.estimator.sums();
+            statement.execute(params![
+                campaign,
+                state.indices as i64,
+                state.estimator.tests() as i64,
+                state.estimator.events() as i64,
+                s1,
+                s2,
+                state.outside.tests as i64,
+                state.outside.s1
+            ])?;
+        }
+    }
+    Ok(())
+}
+
+/// A stopped campaign's leases cancelled, and its audits of tests past the
+/// stop index `stop` set aside (they check tests that no longer count).
+pub(crate) fn close_stopped(conn: &Connection, campaign: i64, stop: u64) -> Result<(), StoreError> {
+    leases::cancel_active(conn, campaign)?;
+    sql::execute(
+        conn,
+        &format!(
+            "UPDATE audits SET state = 'past' WHERE campaign_id = ? AND test_index >= ? \
+             AND state IN {}",
+            audits::OPEN
+        ),
+        [campaign, stop as i64],
+    )?;
+    Ok(())
+}

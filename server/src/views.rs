@@ -1,0 +1,331 @@
+//! What the API and the dashboard show of a campaign: its row as a view
+//! (estimate, interval, prediction, warnings), with what the coordinator
+//! knows live (rate, time left, why it waits for workers, its audits and
+//! its pair); and of a pair and a library.
+
+use crate::error::ServiceError;
+use crate::history;
+use crate::lease_size::predicted_unleased;
+use crate::state::AppState;
+use crate::store::audits::{self, AuditState};
+use crate::store::campaigns::{self, CampaignRow};
+use crate::store::error::StoreError;
+use crate::store::libraries::LibraryRow;
+use crate::store::pairs::{self, PairRow};
+use rusqlite::Connection;
+use tslg_api::{
+    AdaptiveView, AuditCounts, CampaignStatus, CampaignView, HistoryPoint, LibraryView, Method,
+    PairStop, PairView, PairedInterval, RunningStage,
+};
+use tslg_method::campaign::CampaignResult;
+use tslg_method::estimator::{Decision, StoppingRule};
+use tslg_method::paired::PairedStop;
+use tslg_method::warnings::{warnings, Dialect, WarningContext};
+
+/// How the warnings' advice to rerun with the guard reads for a campaign of
+/// a pair.
+const PAIRED_RERUN: &str =
+    "Rerun each vehicle as a campaign of its own (a pair takes no guard) with ";
+
+/// `n (rₙ/β)²` valid tests, at least `n_min`, once the prefix has
+/// `min_events` events (and at least 2); see [`crate::lease_size`].
+fn predicted_tests(rule: &StoppingRule, point: &HistoryPoint) -> Option<u64> {
+    let r = point.relative_half_width?;
+    let needed = predicted_unleased(point.tests, point.events, rule.min_events, r, rule.beta, 0)?;
+    Some(needed.max(rule.n_min).max(point.tests))
+}
+
+/// A campaign as the API shows it, from its row alone (no rate, audits or
+/// pair: [`live_view`] adds them).
+pub fn campaign_view(row: &CampaignRow) -> CampaignView {
+    let rule = row.rule();
+    let fold = row.fold();
+    let point = history::point(&fold, rule.z());
+    let has_events = row.events > 0;
+    let started = row.indices > 0;
+    let summary =
+        CampaignResult::with_outside_upper(Decision::Continue, &fold, rule.z(), row.outside_upper);
+    CampaignView {
+        id: row.id,
+        case: row.case_name.clone(),
+        method: row.method,
+        library_id: row.library_id,
+        vut: serde_json::from_str(&row.vut).unwrap_or_default(),
+        epsilon: row.epsilon,
+        outside: row.outside,
+        split: row.split,
+        beta: row.beta,
+        confidence: row.confidence,
+        n_min: rule.n_min,
+        min_events: rule.min_events,
+        max_tests: rule.max_tests,
+        seed: row.seed(),
+        status: row.status,
+        status_detail: row.status_detail.clone(),
+        tests: row.tests as u64,
+        events: row.events as u64,
+        invalid: row.invalid as u64,
+        indices: row.indices as u64,
+        leased: row.next_index as u64,
+        worker_seconds: row.worker_seconds,
+        estimate: started.then_some(point.estimate),
+        half_width: (row.tests > 1).then_some(point.half_width),
+        relative_half_width: point.relative_half_width,
+        ci_low: (row.tests > 1).then_some(point.ci_low),
+        ci_high: (row.tests > 1).then_some(point.ci_high),
+        // A campaign of a pair stops with its pair, not at its own β.
+        predicted_tests: predicted_tests(&row.fold_rule(), &point),
+        effective_events: has_events.then(|| fold.estimator.effective_events()),
+        largest_weight_share: fold.estimator.largest_share(),
+        guard_outside: row.guard_outside,
+        outside_tests: summary.outside_tests,
+        outside_events: summary.outside_events,
+        mismatched_events: summary.mismatched_events,
+        outside_share: summary.outside_share,
+        outside_upper: summary.outside_upper,
+        guarded_ci_high: summary.guarded_ci_high.filter(|_| row.tests > 1),
+        exact_probability: row.exact_probability,
+        adaptive: (row.method == Method::Adaptive).then(|| AdaptiveView {
+            library_tests: row.library_tests as u64,
+            search_tests: row.search_tests as u64,
+            stages: row.stages as u64,
+            running: match (row.stage_start, row.stage_end, &row.stage_kind) {
+                (Some(start), Some(end), Some(kind)) if !row.status.is_final() => {
+                    Some(RunningStage {
+                        kind: kind.clone(),
+                        start: start as u64,
+                        end: end as u64,
+                    })
+                }
+                _ => None,
+            },
+            support: row.support as u64,
+        }),
+        warnings: if row.tests > 1 {
+            let found = warnings(
+                &summary,
+                WarningContext {
+                    beta: row.beta,
+                    guard_outside: row.guard_outside,
+                    dialect: Dialect::Api,
+                    unexplored: row.method == Method::Library && row.epsilon == 0.0,
+                },
+            );
+            match row.paired_with {
+                // The guard is the remedy the warnings give, and a
+                // pair takes none.
+                Some(_) => found
+                    .into_iter()
+                    .map(|w| w.replace("Rerun with ", PAIRED_RERUN))
+                    .collect(),
+                None => found,
+            }
+        } else {
+            Vec::new()
+        },
+        tests_per_second: None,
+        seconds_left: None,
+        audits: None,
+        pair: None,
+        created_at: row.created_at.clone(),
+        updated_at: row.updated_at.clone(),
+    }
+}
+
+/// A campaign's audit counts from `(state, count)` rows, with what they
+/// mean for its user in words.
+pub fn audit_counts(row: &CampaignRow, states: &[(AuditState, i64)]) -> (AuditCounts, Vec<String>) {
+    let count = |state: AuditState| {
+        states
+            .iter()
+            .filter(|(s, _)| *s == state)
+            .map(|(_, n)| *n as u64)
+            .sum::<u64>()
+    };
+    let counts = AuditCounts {
+        open: count(AuditState::Replica) + count(AuditState::Tiebreak),
+        agreed: count(AuditState::Agreed),
+        settled: count(AuditState::Settled),
+        undecided: count(AuditState::Undecided),
+        void: count(AuditState::Void),
+        waived: row.audits_waived as u64,
+    };
+    let program = row
+        .requires
+        .as_deref()
+        .and_then(|r| r.split(':').next())
+        .unwrap_or("the program");
+    let mut warnings = Vec::new();
+    if counts.waived > 0 {
+        warnings.push(format!(
+            "{} tests chosen for an audit were not run again: no other worker offering \
+             `{program}` was live; run two or more workers offering it to have them checked",
+            counts.waived
+        ));
+    }
+    if counts.open > 0 && !row.status.is_final() {
+        warnings.push(format!(
+            "{} tests wait to be run again by another worker offering `{program}`; the estimate \
+             stops at the first of them until they are",
+            counts.open
+        ));
+    }
+    if counts.undecided > 0 {
+        warnings.push(format!(
+            "{} audited tests got three different outcomes from three workers: is `{program}` \
+             deterministic for a given test?",
+            counts.undecided
+        ));
+    }
+    (counts, warnings)
+}
+
+/// A campaign's view with its current rate, the time left and, for an
+/// external program, its audits.
+pub async fn live_view(state: &AppState, row: &CampaignRow) -> Result<CampaignView, ServiceError> {
+    let mut view = campaign_view(row);
+    state.throughput.fill(&mut view);
+    if let Some(waiting) = waiting_for_workers(state, row) {
+        view.warnings.push(waiting);
+    }
+    if row.requires.is_some() {
+        let id = row.id;
+        let states = state.db.read(move |conn| audits::counts(conn, id)).await?;
+        let (counts, warnings) = audit_counts(row, &states);
+        view.audits = Some(counts);
+        view.warnings.extend(warnings);
+    }
+    if let Some(partner) = row.paired_with {
+        // The pair and the other campaign as one read sees them.
+        let row = row.clone();
+        let (pair, other) = state
+            .db
+            .read(move |conn| {
+                Ok::<_, ServiceError>((pair_view_of(conn, &row)?, campaigns::get(conn, partner)?))
+            })
+            .await?;
+        view.pair = pair;
+        // The pair waits for the slower campaign: say why it waits.
+        if let Some(waiting) = waiting_for_workers(state, &other) {
+            view.warnings
+                .push(format!("its pair's campaign {partner}: {waiting}"));
+        }
+    }
+    Ok(view)
+}
+
+/// Why a running campaign gets no tests, when no live worker (one seen
+/// within a minute) can run them: none at all, or none offering its
+/// external program.
+fn waiting_for_workers(state: &AppState, row: &CampaignRow) -> Option<String> {
+    if row.status != tslg_api::CampaignStatus::Running {
+        return None;
+    }
+    match &row.requires {
+        Some(requirement) if state.workers.live_offering(requirement).is_empty() => Some(format!(
+            "no worker: no live worker offers the program `{requirement}` this campaign's \
+             tests need (start one with `tslg-worker --vut-exec NAME=COMMAND`; GET \
+             /api/v1/workers lists what each offers); its tests wait"
+        )),
+        None if state.workers.counts().0 == 0 => Some(
+            "no worker: no worker has asked for work in the last minute; the campaign's tests \
+             wait for one (`tslg-worker --server URL`)"
+                .to_owned(),
+        ),
+        _ => None,
+    }
+}
+
+/// The pair as the API shows it; `a` and `b` are its campaigns.
+pub fn pair_view(pair: &PairRow, a: &CampaignRow, b: &CampaignRow) -> PairView {
+    let sums = pair.sums();
+    let rule = a.rule();
+    let stop = pair.stop();
+    let result = sums.stopped(
+        &rule,
+        PairedStop::parse(pair.stop.as_deref().unwrap_or_default())
+            .unwrap_or(PairedStop::Exhausted),
+        pair.look_confidence,
+    );
+    let interval = |(estimate, ci_low, ci_high): (f64, f64, f64)| {
+        (sums.n > 1).then_some(PairedInterval {
+            estimate,
+            ci_low,
+            ci_high,
+        })
+    };
+    PairView {
+        campaign_a: pair.campaign_a,
+        campaign_b: pair.campaign_b,
+        status: match stop {
+            // Before its rule holds the pair stands as its campaigns:
+            // waiting for its library, or failed with it.
+            None if [a.status, b.status].contains(&CampaignStatus::Failed) => {
+                CampaignStatus::Failed
+            }
+            None if [a.status, b.status].contains(&CampaignStatus::Cancelled) => {
+                CampaignStatus::Cancelled
+            }
+            None if a.status == CampaignStatus::Pending => CampaignStatus::Pending,
+            None => CampaignStatus::Running,
+            Some(PairStop::Precision | PairStop::Significant) => CampaignStatus::Converged,
+            Some(PairStop::Exhausted) => CampaignStatus::Exhausted,
+            Some(PairStop::Cancelled) => CampaignStatus::Cancelled,
+        },
+        stop,
+        indices: pair.indices as u64,
+        tests: sums.n,
+        events_a: sums.events.0,
+        events_b: sums.events.1,
+        discordant: sums.events.2,
+        rate_a: interval(result.rate_a),
+        rate_b: interval(result.rate_b),
+        difference: interval(result.difference),
+        look_confidence: pair.look_confidence,
+        independent_tests: result.independent_tests,
+        exact_difference: a
+            .exact_probability
+            .zip(b.exact_probability)
+            .map(|(pa, pb)| pa - pb),
+    }
+}
+
+/// The pair of `campaign` as the API shows it, if it has one.
+pub fn pair_view_of(
+    conn: &Connection,
+    campaign: &CampaignRow,
+) -> Result<Option<PairView>, StoreError> {
+    let Some(pair) = pairs::of(conn, campaign)? else {
+        return Ok(None);
+    };
+    let partner = campaigns::get(conn, pair.partner(campaign.id))?;
+    Ok(Some(if campaign.id == pair.campaign_a {
+        pair_view(&pair, campaign, &partner)
+    } else {
+        pair_view(&pair, &partner, campaign)
+    }))
+}
+
+/// A library as the API shows it (its build's progress aside).
+pub fn library_view(row: &LibraryRow) -> LibraryView {
+    LibraryView {
+        id: row.id,
+        case: row.case_name.clone(),
+        preset: row.preset.clone(),
+        status: row.status,
+        exposure: row.exposure_name.clone(),
+        exposure_fingerprint: row.exposure_fingerprint.clone(),
+        exposure_note: row.exposure_note.clone(),
+        surrogate: serde_json::from_str(&row.surrogate).unwrap_or_default(),
+        size: row.size.map(|v| v as u64),
+        total_scenarios: row.total_scenarios as u64,
+        sm_evaluations: row.sm_evaluations.map(|v| v as u64),
+        mu_s: row.mu_s,
+        w: row.w,
+        build_seconds: row.build_seconds,
+        error: row.error.clone(),
+        status_detail: None,
+        progress: None,
+        created_at: row.created_at.clone(),
+    }
+}
