@@ -3,18 +3,16 @@
 //! workers as leases, and folds their results into each campaign's prefix
 //! estimator until the stopping rule holds. See `docs/architecture.md`.
 
-mod build_progress;
-mod builder;
+mod builds;
 mod campaign_metrics;
 mod campaign_start;
 mod config;
 mod db;
-mod enumeration;
 mod error;
 mod event_export;
 mod history;
 mod latency;
-mod lease_size;
+mod leasing;
 mod metrics;
 mod problem_io;
 mod report;
@@ -25,7 +23,6 @@ mod store;
 mod throughput;
 mod validate;
 mod views;
-mod whole_build;
 mod work_signal;
 mod workers;
 
@@ -67,7 +64,7 @@ impl Coordinator {
             .await
             .map_err(|e| anyhow::anyhow!("user-defined cases: {e}"))?;
         let state = state::AppState::new(db, config);
-        builder::resume_builds(&state).await?;
+        builds::resume_builds(&state).await?;
         Ok(Self { state })
     }
 

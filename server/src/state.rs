@@ -1,6 +1,6 @@
 //! Shared state of the request handlers.
 
-use crate::build_progress::BuildTracker;
+use crate::builds::progress::BuildTracker;
 use crate::config::Config;
 use crate::db::Database;
 use crate::latency::Metrics;

@@ -5,7 +5,7 @@
 
 use crate::error::ServiceError;
 use crate::history;
-use crate::lease_size::predicted_unleased;
+use crate::leasing::size::predicted_unleased;
 use crate::state::AppState;
 use crate::store::audits::{self, AuditState};
 use crate::store::campaigns::{self, CampaignRow};
@@ -28,7 +28,7 @@ const PAIRED_RERUN: &str =
     "Rerun each vehicle as a campaign of its own (a pair takes no guard) with ";
 
 /// `n (rₙ/β)²` valid tests, at least `n_min`, once the prefix has
-/// `min_events` events (and at least 2); see [`crate::lease_size`].
+/// `min_events` events (and at least 2); see [`crate::leasing::size`].
 fn predicted_tests(rule: &StoppingRule, point: &HistoryPoint) -> Option<u64> {
     let r = point.relative_half_width?;
     let needed = predicted_unleased(point.tests, point.events, rule.min_events, r, rule.beta, 0)?;

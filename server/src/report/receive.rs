@@ -5,6 +5,8 @@
 
 use crate::config::Config;
 use crate::error::ServiceError;
+use crate::leasing::claim as claiming;
+use crate::leasing::fence;
 use crate::report::audit;
 use crate::report::check::CheckedReport;
 use crate::report::record::{self, AuditPlan, Findings, Recorded};
@@ -54,8 +56,8 @@ pub async fn receive(
     lease_id: i64,
     report: &Arc<ResultReport>,
     checked: &Arc<CheckedReport>,
-    next: Option<leases::ClaimJob>,
-) -> Result<(ResultAck, Option<leases::Claimed>), ServiceError> {
+    next: Option<claiming::ClaimJob>,
+) -> Result<(ResultAck, Option<claiming::Claimed>), ServiceError> {
     // A report whose sampled replay exceeds what the writer takes (a real
     // worker's chunk of half a second holds millions of tests, a tenth of
     // them replayed) goes the general way at once, without a trip to the
@@ -98,19 +100,19 @@ async fn in_parts_then_claim(
     lease_id: i64,
     report: &Arc<ResultReport>,
     checked: &Arc<CheckedReport>,
-    mut next: Option<leases::ClaimJob>,
-) -> Result<(ResultAck, Option<leases::Claimed>), ServiceError> {
+    mut next: Option<claiming::ClaimJob>,
+) -> Result<(ResultAck, Option<claiming::Claimed>), ServiceError> {
     let (ack, mut claimed) = receive_in_parts(state, lease_id, report, checked, &mut next).await?;
     if let Some(job) = next {
         claimed = {
             let config = Arc::clone(&state.config);
-            let retried = leases::retried_on(lease_id, &ack);
+            let retried = claiming::retried_on(lease_id, &ack);
             // The report is recorded: a claim that fails now must not turn
             // its acknowledgement into an error (the worker would send it
             // again); the worker asks for work as usual.
             state
                 .db
-                .write(move |conn| leases::claim_after(conn, &config, &job, retried))
+                .write(move |conn| claiming::claim_after(conn, &config, &job, retried))
                 .await
                 .unwrap_or_else(|e| {
                     tracing::warn!(worker = %report.worker, error = %e, "no next lease with a report");
@@ -129,8 +131,8 @@ async fn receive_in_parts(
     lease_id: i64,
     report: &Arc<ResultReport>,
     checked: &Arc<CheckedReport>,
-    next: &mut Option<leases::ClaimJob>,
-) -> Result<(ResultAck, Option<leases::Claimed>), ServiceError> {
+    next: &mut Option<claiming::ClaimJob>,
+) -> Result<(ResultAck, Option<claiming::Claimed>), ServiceError> {
     // One read for what decides the checks. Only the lease's holder may
     // report on it, and only what it reports is checked: a report in
     // another worker's name must not get that worker flagged. (The
@@ -140,8 +142,8 @@ async fn receive_in_parts(
         state
             .db
             .read(move |conn| -> Result<_, ServiceError> {
-                let lease = leases::get_unless_flagged(conn, lease_id, &report.worker)?;
-                leases::check_fence(&lease, &report.worker, report.attempt, report.key.as_str())?;
+                let lease = fence::get_unless_flagged(conn, lease_id, &report.worker)?;
+                fence::check_fence(&lease, &report.worker, report.attempt, report.key.as_str())?;
                 let campaign = campaigns::get(conn, lease.campaign_id)?;
                 Ok((lease, campaign))
             })
@@ -213,12 +215,12 @@ async fn receive_in_parts(
 enum AtOnce {
     /// Recorded, with the next lease when the report asked for one and
     /// one was taken.
-    Recorded(Box<Recorded>, Option<Box<leases::Claimed>>),
+    Recorded(Box<Recorded>, Option<Box<claiming::Claimed>>),
     /// The coordinator's own run contradicts it: the worker is flagged.
     Contradicted(crate::report::mismatch::Mismatch),
     /// It needs more than the writer should do: the general path, which
     /// also runs the claim of the next lease, handed back.
-    Declined(Option<leases::ClaimJob>),
+    Declined(Option<claiming::ClaimJob>),
 }
 
 /// [`AtOnce`] before the next lease is claimed.
@@ -244,7 +246,7 @@ async fn at_once(
     lease_id: i64,
     report: &Arc<ResultReport>,
     checked: &Arc<CheckedReport>,
-    next: Option<leases::ClaimJob>,
+    next: Option<claiming::ClaimJob>,
 ) -> Result<AtOnce, ServiceError> {
     let (samplers, sampler, replays, config) = (
         Arc::clone(&state.samplers),
@@ -264,9 +266,9 @@ async fn at_once(
             };
             Ok(match decide(conn, &shared, lease_id, &report, &checked)? {
                 Decided::Recorded(recorded) => {
-                    let retried = leases::retried_on(lease_id, &recorded.ack);
+                    let retried = claiming::retried_on(lease_id, &recorded.ack);
                     let claimed = match next {
-                        Some(job) => leases::claim_after(conn, &config, &job, retried)?,
+                        Some(job) => claiming::claim_after(conn, &config, &job, retried)?,
                         None => None,
                     };
                     AtOnce::Recorded(recorded, claimed.map(Box::new))
@@ -398,7 +400,7 @@ fn account(state: &AppState, report: &ResultReport, recorded: &Recorded) {
         // A library build's enumeration: the library from its events.
         let (state, id) = (state.clone(), recorded.campaign_id);
         tokio::spawn(async move {
-            if let Err(e) = crate::enumeration::finish(&state, id).await {
+            if let Err(e) = crate::builds::on_workers::finish(&state, id).await {
                 tracing::error!(campaign = id, error = %e, "a library built on workers could not be recorded");
             }
         });

@@ -12,14 +12,16 @@ use crate::config::Config;
 use crate::db::sql;
 use crate::db::{now_ms, Database};
 use crate::error::ServiceError;
-use crate::lease_size::update_cost;
+use crate::leasing::claim as claiming;
+use crate::leasing::fence::{self, check_fence};
+use crate::leasing::size::update_cost;
 use crate::report::check::CheckedReport;
 use crate::report::explored::ExploredRanges;
 use crate::report::fold::{fold_prefix, KnownExplored};
 use crate::report::replay::Explored;
 use crate::store::audits::{self, NewAudit};
 use crate::store::campaigns::{self, CampaignRow};
-use crate::store::leases::{self, check_fence, LeaseRow, LeaseState};
+use crate::store::leases::{LeaseRow, LeaseState};
 use crate::store::prefix::Charge;
 use crate::store::reports::{self, NewReport};
 use rusqlite::{params, Connection};
@@ -88,7 +90,7 @@ pub struct Findings {
 
 /// Records a checked report on lease `lease_id` and folds the prefix;
 /// then, in the same write, claims the worker's next lease when the
-/// report asks for one (`next`, [`leases::claim_after`]).
+/// report asks for one (`next`, [`claiming::claim_after`]).
 pub async fn record(
     db: &Database,
     config: &Arc<Config>,
@@ -96,15 +98,15 @@ pub async fn record(
     report: &Arc<ResultReport>,
     checked: &Arc<CheckedReport>,
     found: Findings,
-    next: Option<leases::ClaimJob>,
-) -> Result<(Recorded, Option<leases::Claimed>), ServiceError> {
+    next: Option<claiming::ClaimJob>,
+) -> Result<(Recorded, Option<claiming::Claimed>), ServiceError> {
     let (config, report, checked) = (Arc::clone(config), Arc::clone(report), Arc::clone(checked));
     db.write(move |conn| {
         let recorded = record_in(conn, &config, lease_id, &report, &checked, found)?;
         let claimed = match next {
             Some(job) => {
-                let retried = leases::retried_on(lease_id, &recorded.ack);
-                leases::claim_after(conn, &config, &job, retried)?
+                let retried = claiming::retried_on(lease_id, &recorded.ack);
+                claiming::claim_after(conn, &config, &job, retried)?
             }
             None => None,
         };
@@ -220,7 +222,7 @@ pub(crate) fn held_lease(
     lease_id: i64,
     report: &ResultReport,
 ) -> Result<(LeaseRow, CampaignRow), ServiceError> {
-    let lease = leases::get_unless_flagged(conn, lease_id, &report.worker)?;
+    let lease = fence::get_unless_flagged(conn, lease_id, &report.worker)?;
     check_fence(&lease, &report.worker, report.attempt, report.key.as_str())?;
     let campaign = campaigns::get(conn, lease.campaign_id)?;
     Ok((lease, campaign))

@@ -195,7 +195,7 @@ pub async fn cancel(
         state.throughput.forget(id);
     }
     // Cancelling a library build's enumeration fails the build.
-    crate::enumeration::finish(&state, id).await?;
+    crate::builds::on_workers::finish(&state, id).await?;
     Ok(Json(live_view(&state, &row).await?))
 }
 

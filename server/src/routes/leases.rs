@@ -2,12 +2,14 @@
 
 use crate::error::ServiceError;
 use crate::latency::HoldClock;
+use crate::leasing::claim as claiming;
+use crate::leasing::fence;
 use crate::report::check::check_report;
 use crate::report::receive;
 use crate::routes::problem::ApiJson;
 use crate::routes::ApiPath;
 use crate::state::AppState;
-use crate::store::{audits, campaigns, leases};
+use crate::store::{audits, campaigns};
 use crate::work_signal::FIRST_RECHECK;
 use axum::extract::State;
 use axum::http::StatusCode;
@@ -93,11 +95,11 @@ pub async fn claim(
 /// What a lease request must be before anything is taken (422 otherwise).
 fn check_lease_request(req: &LeaseRequest) -> Result<(), ServiceError> {
     check_worker(&req.worker)?;
-    if !(1..=leases::MAX_THREADS).contains(&req.threads) {
+    if !(1..=claiming::MAX_THREADS).contains(&req.threads) {
         return Err(ServiceError::Unprocessable(format!(
             "threads = {} must be in 1..={}",
             req.threads,
-            leases::MAX_THREADS
+            claiming::MAX_THREADS
         )));
     }
     if let Some(wait) = req.wait_seconds {
@@ -125,15 +127,15 @@ fn check_lease_request(req: &LeaseRequest) -> Result<(), ServiceError> {
 /// no work right now.
 async fn grant(state: &AppState, req: &LeaseRequest) -> Result<Option<Lease>, ServiceError> {
     state.workers.seen(req);
-    match leases::claim(&state.db, &state.config, &claim_of(req)).await? {
+    match claiming::claim(&state.db, &state.config, &claim_of(req)).await? {
         Some(claimed) => lease_of(state, req, claimed).await.map(Some),
         None => Ok(None),
     }
 }
 
 /// The store's claim of a lease request.
-fn claim_of(req: &LeaseRequest) -> leases::Claim<'_> {
-    leases::Claim {
+fn claim_of(req: &LeaseRequest) -> claiming::Claim<'_> {
+    claiming::Claim {
         worker: &req.worker,
         threads: req.threads,
         inline: req.include_tests,
@@ -149,7 +151,7 @@ fn claim_of(req: &LeaseRequest) -> leases::Claim<'_> {
 async fn lease_of(
     state: &AppState,
     req: &LeaseRequest,
-    claimed: leases::Claimed,
+    claimed: claiming::Claimed,
 ) -> Result<Lease, ServiceError> {
     let fence = LeaseFence {
         worker: claimed.lease.worker.clone(),
@@ -160,7 +162,7 @@ async fn lease_of(
     let made = make_lease(state, req, claimed).await;
     if let Err(e) = &made {
         tracing::warn!(lease = id, error = %e, "a lease taken could not be handed out; given back");
-        match leases::release(&state.db, id, &fence).await {
+        match fence::release(&state.db, id, &fence).await {
             Ok(_) => state.work.announce_one(),
             Err(e) => {
                 tracing::warn!(lease = id, error = %e, "the lease could not be given back either")
@@ -174,7 +176,7 @@ async fn lease_of(
 async fn make_lease(
     state: &AppState,
     req: &LeaseRequest,
-    claimed: leases::Claimed,
+    claimed: claiming::Claimed,
 ) -> Result<Lease, ServiceError> {
     let row = claimed.lease;
     let campaign = match claimed.campaign {
@@ -319,7 +321,7 @@ pub async fn heartbeat(
     ApiJson(fence): ApiJson<LeaseFence>,
 ) -> Result<Json<HeartbeatAck>, ServiceError> {
     Ok(Json(
-        leases::heartbeat(&state.db, &state.config, id, &fence).await?,
+        fence::heartbeat(&state.db, &state.config, id, &fence).await?,
     ))
 }
 
@@ -340,7 +342,7 @@ pub async fn release(
             "the reason must be at most {MAX_INVALID_REASON} bytes without control characters"
         )));
     }
-    let lease = leases::release(&state.db, id, &release.fence()).await?;
+    let lease = fence::release(&state.db, id, &release.fence()).await?;
     // Its tests are another worker's now (or when the lease's rest is due).
     state.work.announce_one();
     state.workers.released(&release.worker, reason);
@@ -370,7 +372,7 @@ pub async fn library(
     ApiJson(upload): ApiJson<LibraryUpload>,
 ) -> Result<StatusCode, ServiceError> {
     check_worker(&upload.worker)?;
-    crate::whole_build::upload(&state, id, &upload).await?;
+    crate::builds::whole::upload(&state, id, &upload).await?;
     Ok(StatusCode::NO_CONTENT)
 }
 
@@ -412,7 +414,7 @@ pub async fn results(
     let next = report
         .next_lease
         .as_ref()
-        .map(|next| leases::ClaimJob::new(&state.config, &claim_of(next)));
+        .map(|next| claiming::ClaimJob::new(&state.config, &claim_of(next)));
     let (mut ack, claimed) = receive::receive(&state, id, &report, &checked, next).await?;
     if let Some(next) = &report.next_lease {
         state.workers.seen(next);

@@ -1,7 +1,8 @@
 //! `/api/v1/libraries`: build requests, state and files.
 
-use crate::builder::{build_request, spawn_build};
-use crate::enumeration::{placement, Placement};
+use crate::builds::local::spawn_build;
+use crate::builds::on_workers::{placement, Placement};
+use crate::builds::request::build_request;
 use crate::error::ServiceError;
 use crate::routes::problem::ApiJson;
 use crate::routes::{ApiPath, ApiQuery};
@@ -93,10 +94,10 @@ pub async fn create(
         Placement::Coordinator => spawn_build(state.clone(), row.id),
         // Its surrogate runs are the workers' tests.
         Placement::Cells => {
-            crate::enumeration::start(&state, &row, case, &surrogate_spec).await?;
+            crate::builds::on_workers::start(&state, &row, case, &surrogate_spec).await?;
         }
         Placement::Whole => {
-            crate::whole_build::start(&state, &row, &surrogate_spec).await?;
+            crate::builds::whole::start(&state, &row, &surrogate_spec).await?;
         }
     }
     let location = format!("/api/v1/libraries/{}", row.id);
@@ -178,7 +179,7 @@ async fn live_view(
 ) -> Result<LibraryView, ServiceError> {
     let mut view = crate::views::library_view(row);
     state.build_progress.fill(&mut view);
-    crate::enumeration::progress(state, &mut view).await?;
+    crate::builds::on_workers::progress(state, &mut view).await?;
     Ok(view)
 }
 

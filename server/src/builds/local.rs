@@ -1,32 +1,15 @@
-//! Library builds: CPU work off the async runtime, one build at a time
-//! (each already uses every core through rayon), status in the database.
+//! Library builds on the coordinator: CPU work off the async runtime, one
+//! build at a time (each already uses every core through rayon), status in
+//! the database.
 
+use super::request::build_request;
 use crate::state::AppState;
 use crate::store::libraries::{self, Built};
 use std::time::Instant;
-use tslg_api::{CreateLibrary, SearchRequest};
+use tslg_api::CreateLibrary;
 use tslg_method::cases::open_case;
 use tslg_method::progress::Progress;
-use tslg_method::registry::{BuildRequest, BuiltLibrary, LibrarySearch};
-
-/// The method's threshold and search from the request, validated; what the
-/// request leaves out is the case's default.
-pub fn build_request(req: &CreateLibrary) -> Result<BuildRequest, String> {
-    let threshold = req.threshold.map(tslg_client::wire::threshold);
-    if let Some(t) = threshold {
-        t.validate().map_err(|e| e.to_string())?;
-    }
-    if let Some(SearchRequest::Multistart { starts, .. }) = req.search {
-        if !(1..=100_000).contains(&starts) {
-            return Err(format!("search.starts = {starts} must be in 1..=100000"));
-        }
-    }
-    let search = req.search.map(tslg_client::wire::library_search);
-    if let Some(LibrarySearch::Policy(solver)) = search {
-        solver.validate()?;
-    }
-    Ok(BuildRequest { threshold, search })
-}
+use tslg_method::registry::BuiltLibrary;
 
 fn build(req: &CreateLibrary, progress: &Progress) -> Result<(BuiltLibrary, f64), String> {
     let started = Instant::now();
@@ -90,26 +73,6 @@ async fn record_build(
                 .await?;
             tracing::warn!(library = id, %reason, "library build failed");
         }
-    }
-    Ok(())
-}
-
-/// Restarts the builds a stopped coordinator left unfinished.
-pub async fn resume_builds(state: &AppState) -> anyhow::Result<()> {
-    for row in state.db.read(libraries::building).await? {
-        // A build on workers goes on as its campaign does; one whose
-        // campaign stopped while the coordinator was down is recorded now.
-        if let Some(campaign) = crate::enumeration::campaign_of(state, row.id)
-            .await
-            .map_err(|e| anyhow::anyhow!("library {}: {e}", row.id))?
-        {
-            crate::enumeration::finish(state, campaign.id)
-                .await
-                .map_err(|e| anyhow::anyhow!("library {}: {e}", row.id))?;
-            continue;
-        }
-        tracing::info!(library = row.id, "resuming an unfinished library build");
-        spawn_build(state.clone(), row.id);
     }
     Ok(())
 }

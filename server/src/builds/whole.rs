@@ -15,6 +15,7 @@
 
 use crate::db::sql;
 use crate::error::ServiceError;
+use crate::leasing::fence;
 use crate::state::AppState;
 use crate::store::campaigns::{self, CampaignRow};
 use crate::store::leases;
@@ -44,7 +45,8 @@ pub async fn start(
         ..StoppingRule::new(tslg_method::estimator::MAX_BETA, 1)
     };
     let row =
-        crate::enumeration::insert_build(state, library, Method::Build, surrogate, rule).await?;
+        crate::builds::on_workers::insert_build(state, library, Method::Build, surrogate, rule)
+            .await?;
     state.work.announce();
     tracing::info!(
         library = library.id,
@@ -93,8 +95,8 @@ fn holder_of(
     id: i64,
     upload: &Holder,
 ) -> Result<(CampaignRow, LibraryRow), ServiceError> {
-    let lease = leases::get_unless_flagged(conn, id, &upload.worker)?;
-    leases::check_fence(&lease, &upload.worker, upload.attempt, upload.key.as_str())?;
+    let lease = fence::get_unless_flagged(conn, id, &upload.worker)?;
+    fence::check_fence(&lease, &upload.worker, upload.attempt, upload.key.as_str())?;
     let campaign = campaigns::get(conn, lease.campaign_id)?;
     if campaign.method != Method::Build {
         return Err(ServiceError::Conflict(format!(

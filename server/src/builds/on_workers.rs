@@ -33,12 +33,12 @@ fn is_program(surrogate: &serde_json::Value) -> bool {
 /// Where a library is built.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Placement {
-    /// On the coordinator ([`crate::builder`]).
+    /// On the coordinator ([`crate::builds::local`]).
     Coordinator,
     /// On workers, cell by cell: a campaign of method `enumerate`.
     Cells,
     /// On one worker, whole: a campaign of method `build`
-    /// ([`crate::whole_build`]).
+    /// ([`crate::builds::whole`]).
     Whole,
 }
 
@@ -254,7 +254,7 @@ pub async fn finish(state: &AppState, campaign_id: i64) -> Result<(), ServiceErr
     let events: Vec<u64> = outcomes.into_iter().map(|(i, _)| i).collect();
     let request: CreateLibrary =
         serde_json::from_str(&library.request).map_err(|e| ServiceError::Internal(e.into()))?;
-    let threshold = crate::builder::build_request(&request)
+    let threshold = crate::builds::request::build_request(&request)
         .map_err(ServiceError::Unprocessable)?
         .threshold;
     let source = library.exposure_source();

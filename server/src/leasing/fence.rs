@@ -1,0 +1,96 @@
+//! Who may keep, report on or give back a lease: its holder in its
+//! current attempt, with the attempt's secret key, and not flagged.
+
+use super::claim::ttl_ms;
+use crate::config::Config;
+use crate::db::{now_ms, Database};
+use crate::error::ServiceError;
+use crate::store::audits;
+use crate::store::campaigns;
+use crate::store::leases::{self, LeaseRow, LeaseState};
+use rusqlite::Connection;
+use subtle::ConstantTimeEq;
+use tslg_api::{CampaignStatus, HeartbeatAck, LeaseFence};
+
+/// Lease `id` for a request of `worker`, refused when `worker` is flagged
+/// (checked first: a flagged worker learns that whatever it asks).
+pub fn get_unless_flagged(
+    conn: &Connection,
+    id: i64,
+    worker: &str,
+) -> Result<LeaseRow, ServiceError> {
+    audits::refuse_flagged(conn, worker)?;
+    Ok(leases::get(conn, id)?)
+}
+
+/// Refuses a caller that does not hold the lease in its current attempt:
+/// 409 when the attempt or worker is not the current one (the lease expired
+/// and was handed out again; a stale holder stops), 403 when they are but
+/// the key is wrong (somebody else's lease). Keys compare in constant time.
+pub fn check_fence(
+    lease: &LeaseRow,
+    worker: &str,
+    attempt: i64,
+    key: &str,
+) -> Result<(), ServiceError> {
+    if lease.worker != worker || lease.attempt != attempt {
+        return Err(ServiceError::Conflict(format!(
+            "lease {} is held by worker `{}` in attempt {}; this request is from worker `{}` \
+             for attempt {}: the lease expired and was handed out again",
+            lease.id, lease.worker, lease.attempt, worker, attempt
+        )));
+    }
+    if !bool::from(lease.key.as_bytes().ct_eq(key.as_bytes())) {
+        return Err(ServiceError::Forbidden(format!(
+            "the key does not match lease {}'s attempt {}: only the worker it was handed to \
+             may report on it",
+            lease.id, lease.attempt
+        )));
+    }
+    Ok(())
+}
+
+/// Extends a held lease, or says the campaign no longer needs it.
+pub async fn heartbeat(
+    db: &Database,
+    config: &Config,
+    id: i64,
+    fence: &LeaseFence,
+) -> Result<HeartbeatAck, ServiceError> {
+    let fence = fence.clone();
+    let ttl_seconds = config.lease_ttl_seconds;
+    let ttl = ttl_ms(config);
+    db.write(move |conn| {
+        let lease = get_unless_flagged(conn, id, &fence.worker)?;
+        check_fence(&lease, &fence.worker, fence.attempt, fence.key.as_str())?;
+        let campaign = campaigns::get(conn, lease.campaign_id)?;
+        let status = campaign.status;
+        if lease.state != LeaseState::Active || status != CampaignStatus::Running {
+            return Ok(HeartbeatAck {
+                proceed: false,
+                campaign_status: status,
+                ttl_seconds: 0.0,
+            });
+        }
+        let extended = leases::extend(conn, id, &fence.worker, fence.attempt, now_ms() + ttl)?;
+        Ok(HeartbeatAck {
+            proceed: extended,
+            campaign_status: status,
+            ttl_seconds,
+        })
+    })
+    .await
+}
+
+/// Gives a lease back unfinished: it expires now and is handed out again
+/// from its first unreported index.
+pub async fn release(db: &Database, id: i64, fence: &LeaseFence) -> Result<LeaseRow, ServiceError> {
+    let fence = fence.clone();
+    db.write(move |conn| -> Result<_, ServiceError> {
+        let lease = leases::get(conn, id)?;
+        check_fence(&lease, &fence.worker, fence.attempt, fence.key.as_str())?;
+        leases::expire(conn, id, &fence.worker, fence.attempt)?;
+        Ok(leases::get(conn, id)?)
+    })
+    .await
+}
