@@ -118,6 +118,16 @@ pub enum CampaignStatus {
 }
 
 impl CampaignStatus {
+    /// Every status, in the order a campaign goes through them.
+    pub const ALL: [CampaignStatus; 6] = [
+        CampaignStatus::Pending,
+        CampaignStatus::Running,
+        CampaignStatus::Converged,
+        CampaignStatus::Exhausted,
+        CampaignStatus::Cancelled,
+        CampaignStatus::Failed,
+    ];
+
     /// The status's name on the wire and in the database.
     pub fn as_str(self) -> &'static str {
         match self {

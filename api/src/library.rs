@@ -112,6 +112,13 @@ pub enum LibraryStatus {
 }
 
 impl LibraryStatus {
+    /// Every status, in the order a build goes through them.
+    pub const ALL: [LibraryStatus; 3] = [
+        LibraryStatus::Building,
+        LibraryStatus::Ready,
+        LibraryStatus::Failed,
+    ];
+
     /// The status's name on the wire and in the database.
     pub fn as_str(self) -> &'static str {
         match self {

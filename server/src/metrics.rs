@@ -8,29 +8,26 @@
 //! `deleted_totals`), the
 //! state of things now are gauges.
 
-use crate::db::sql;
 use crate::error::ServiceError;
 use crate::report::replay_counts::{Place, ReplayTotals};
 use crate::state::AppState;
+use crate::store::error::StoreError;
+use crate::store::totals::{self, LeaseTotals, ResultTotals};
 use axum::extract::State;
 use axum::http::header;
 use axum::response::{IntoResponse, Response};
 use prometheus::{
     Encoder, IntCounter, IntCounterVec, IntGauge, IntGaugeVec, Opts, Registry, TextEncoder,
 };
-use tslg_api::CampaignStatus;
+use tslg_api::{CampaignStatus, LibraryStatus};
 
 /// Counts read from the database for one scrape.
 #[derive(Default)]
 struct Snapshot {
-    campaigns: Vec<(String, i64)>,
-    libraries: Vec<(String, i64)>,
-    resolved: i64,
-    events: i64,
-    invalid: i64,
-    outstanding: i64,
-    expired: i64,
-    reclaimed: i64,
+    campaigns: Vec<(CampaignStatus, i64)>,
+    libraries: Vec<(LibraryStatus, i64)>,
+    results: ResultTotals,
+    leases: LeaseTotals,
     /// Group commits since the coordinator started, and the requests
     /// they answered.
     groups: (u64, u64),
@@ -44,10 +41,10 @@ async fn snapshot(state: &AppState) -> Result<Snapshot, ServiceError> {
     let groups = state.db.group_counts();
     let fold_drawn = state.samplers.explored().drawn();
     let replays = state.replays.totals();
-    state
+    Ok(state
         .db
         .read(move |conn| read_snapshot(conn, groups, fold_drawn, replays))
-        .await
+        .await?)
 }
 
 fn read_snapshot(
@@ -55,41 +52,12 @@ fn read_snapshot(
     groups: (u64, u64),
     fold_drawn: u64,
     replays: ReplayTotals,
-) -> Result<Snapshot, ServiceError> {
-    let campaigns = sql::all(
-        conn,
-        "SELECT status, COUNT(*) FROM campaigns GROUP BY status",
-        [],
-    )?;
-    let libraries = sql::all(
-        conn,
-        "SELECT status, COUNT(*) FROM libraries GROUP BY status",
-        [],
-    )?;
-    // With what deleted campaigns had: the counters never fall.
-    let (resolved, events, invalid): (i64, i64, i64) = sql::one(
-        conn,
-        "SELECT d.indices + COALESCE(SUM(c.indices), 0), d.events + COALESCE(SUM(c.events), 0), \
-         d.invalid + COALESCE(SUM(c.invalid), 0) FROM deleted_totals AS d LEFT JOIN campaigns AS c",
-        [],
-    )?;
-    let now = crate::db::now_ms();
-    let (outstanding, expired, reclaimed): (i64, i64, i64) = sql::one(
-        conn,
-        "SELECT COALESCE(SUM(state = 'active' AND expires_at >= ?1), 0), \
-                COALESCE(SUM(state = 'active' AND expires_at < ?1), 0), \
-                COALESCE(SUM(attempt - 1), 0) FROM leases",
-        [now],
-    )?;
+) -> Result<Snapshot, StoreError> {
     Ok(Snapshot {
-        campaigns,
-        libraries,
-        resolved,
-        events,
-        invalid,
-        outstanding,
-        expired,
-        reclaimed,
+        campaigns: totals::campaigns_by_status(conn)?,
+        libraries: totals::libraries_by_status(conn)?,
+        results: totals::results(conn)?,
+        leases: totals::leases(conn, crate::db::now_ms())?,
         groups,
         fold_drawn,
         replays,
@@ -121,94 +89,123 @@ fn gauge(registry: &Registry, name: &str, help: &str, value: i64) {
 /// The metrics of this moment, as a registry of its own.
 fn scrape_registry(s: &Snapshot, live: usize, known: usize) -> Registry {
     let r = Registry::new();
-    let campaigns = gauge_vec(&r, "tslg_campaigns", "Campaigns by status.", "status");
-    for status in [
-        CampaignStatus::Pending,
-        CampaignStatus::Running,
-        CampaignStatus::Converged,
-        CampaignStatus::Exhausted,
-        CampaignStatus::Cancelled,
-        CampaignStatus::Failed,
-    ] {
+    register_statuses(&r, s);
+    register_results(&r, &s.results);
+    register_leases(&r, &s.leases);
+    register_writer(&r, s);
+    register_replays(&r, &s.replays);
+    let workers = gauge_vec(
+        &r,
+        "tslg_workers",
+        "Workers seen since the coordinator started: live (asked for work within a minute) or stale.",
+        "state",
+    );
+    workers.with_label_values(&["live"]).set(live as i64);
+    workers
+        .with_label_values(&["stale"])
+        .set((known - live) as i64);
+    r
+}
+
+/// Campaigns and libraries by status (every status, 0 where none is).
+fn register_statuses(r: &Registry, s: &Snapshot) {
+    let campaigns = gauge_vec(r, "tslg_campaigns", "Campaigns by status.", "status");
+    for status in CampaignStatus::ALL {
         let n = s
             .campaigns
             .iter()
-            .find(|(k, _)| k == status.as_str())
+            .find(|(k, _)| *k == status)
             .map_or(0, |c| c.1);
         campaigns.with_label_values(&[status.as_str()]).set(n);
     }
     let libraries = gauge_vec(
-        &r,
+        r,
         "tslg_libraries",
         "Scenario libraries by status.",
         "status",
     );
-    for status in ["building", "ready", "failed"] {
+    for status in LibraryStatus::ALL {
         let n = s
             .libraries
             .iter()
-            .find(|(k, _)| k == status)
+            .find(|(k, _)| *k == status)
             .map_or(0, |c| c.1);
-        libraries.with_label_values(&[status]).set(n);
+        libraries.with_label_values(&[status.as_str()]).set(n);
     }
+}
+
+/// The tests resolved over all campaigns, their events and invalid tests.
+fn register_results(r: &Registry, totals: &ResultTotals) {
     counter(
-        &r,
+        r,
         "tslg_tests_resolved_total",
         "Test indices resolved in order over all campaigns (valid and invalid).",
-        s.resolved,
+        totals.resolved,
     );
     counter(
-        &r,
+        r,
         "tslg_events_total",
         "Tests with the event, over all campaigns.",
-        s.events,
+        totals.events,
     );
     counter(
-        &r,
+        r,
         "tslg_invalid_tests_total",
         "Tests recorded invalid (an external vehicle failed them), over all campaigns.",
-        s.invalid,
+        totals.invalid,
     );
+}
+
+/// Leases out, expired and handed out again.
+fn register_leases(r: &Registry, totals: &LeaseTotals) {
     gauge(
-        &r,
+        r,
         "tslg_leases_outstanding",
         "Leases held by workers and not expired.",
-        s.outstanding,
+        totals.outstanding,
     );
     gauge(
-        &r,
+        r,
         "tslg_leases_expired",
         "Leases expired and not yet handed out again.",
-        s.expired,
+        totals.expired,
     );
     counter(
-        &r,
+        r,
         "tslg_leases_reclaimed_total",
         "Expired or released leases handed out again.",
-        s.reclaimed,
+        totals.reclaimed,
     );
+}
+
+/// The writer's group commits, and the draws folds made again.
+fn register_writer(r: &Registry, s: &Snapshot) {
     counter(
-        &r,
+        r,
         "tslg_write_groups_total",
         "Transactions that committed the coordinator's writes together, since it started \
          (one fsync each).",
         s.groups.0 as i64,
     );
     counter(
-        &r,
+        r,
         "tslg_grouped_writes_total",
         "Writes committed by those transactions (divided by tslg_write_groups_total: the mean \
          group size).",
         s.groups.1 as i64,
     );
     counter(
-        &r,
+        r,
         "tslg_fold_drawn_tests_total",
         "Tests whose draws a library campaign's fold made again to find which explored outside \
          the library, since the coordinator started (0 while its own runs of the reports cover \
          them).",
         s.fold_drawn as i64,
     );
+}
+
+/// What the replay checks did since the coordinator started.
+fn register_replays(r: &Registry, replays: &ReplayTotals) {
     let checks = IntCounterVec::new(
         Opts::new(
             "tslg_replay_checks_total",
@@ -221,34 +218,23 @@ fn scrape_registry(s: &Snapshot, live: usize, known: usize) -> Registry {
     .expect("valid counter");
     r.register(Box::new(checks.clone()))
         .expect("registered once");
-    for (place, n) in Place::ALL.iter().zip(s.replays.reports) {
+    for (place, n) in Place::ALL.iter().zip(replays.reports) {
         checks.with_label_values(&[place.label()]).inc_by(n);
     }
     counter(
-        &r,
+        r,
         "tslg_replay_sample_range_tests_total",
         "Tests of the checked reports whose quiet tests were sampled, since the coordinator \
          started (the tests the secret sample was drawn from).",
-        s.replays.sample_range as i64,
+        replays.sample_range as i64,
     );
     counter(
-        &r,
+        r,
         "tslg_replay_sampled_tests_total",
         "Tests the secret sample chose to run again (divided by \
          tslg_replay_sample_range_tests_total: the replay share).",
-        s.replays.sampled as i64,
+        replays.sampled as i64,
     );
-    let workers = gauge_vec(
-        &r,
-        "tslg_workers",
-        "Workers seen since the coordinator started: live (asked for work within a minute) or stale.",
-        "state",
-    );
-    workers.with_label_values(&["live"]).set(live as i64);
-    workers
-        .with_label_values(&["stale"])
-        .set((known - live) as i64);
-    r
 }
 
 /// `GET /metrics`.

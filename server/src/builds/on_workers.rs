@@ -177,14 +177,9 @@ pub async fn insert_build(
 
 /// The enumeration campaign of library `id`, if it is built on workers.
 pub async fn campaign_of(state: &AppState, id: i64) -> Result<Option<CampaignRow>, ServiceError> {
-    let sql = format!(
-        "SELECT {} FROM campaigns WHERE library_id = ? AND enumerate >= 1 \
-         ORDER BY id DESC LIMIT 1",
-        campaigns::COLUMNS
-    );
     Ok(state
         .db
-        .read(move |conn| crate::db::sql::optional(conn, &sql, [id]))
+        .read(move |conn| campaigns::building_library(conn, id))
         .await?)
 }
 
@@ -235,11 +230,7 @@ pub async fn finish(state: &AppState, campaign_id: i64) -> Result<(), ServiceErr
             else {
                 return Ok((outcomes, None));
             };
-            let reason: Option<(String,)> = crate::db::sql::optional(
-                conn,
-                "SELECT reason FROM invalid_tests WHERE campaign_id = ? AND test_index = ?",
-                [campaign_id, index as i64],
-            )?;
+            let reason = reports::invalid_reason(conn, campaign_id, index)?;
             Ok((outcomes, Some((index, reason))))
         })
         .await?;
@@ -247,7 +238,7 @@ pub async fn finish(state: &AppState, campaign_id: i64) -> Result<(), ServiceErr
         let reason = format!(
             "the surrogate gave no valid outcome at test {index} of its build (campaign \
              {campaign_id}): {}",
-            reason.map_or_else(|| "no reason recorded".into(), |r| r.0)
+            reason.unwrap_or_else(|| "no reason recorded".into())
         );
         return mark_failed(state, id, reason).await;
     }

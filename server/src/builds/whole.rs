@@ -13,14 +13,12 @@
 //! runs the surrogate again on a sample of the library's cells: each must
 //! be a failure of it.
 
-use crate::db::sql;
 use crate::error::ServiceError;
 use crate::leasing::fence;
 use crate::state::AppState;
 use crate::store::campaigns::{self, CampaignRow};
 use crate::store::leases;
 use crate::store::libraries::{self, Built, LibraryRow};
-use rusqlite::params;
 use tslg_api::{CampaignStatus, LibraryStatus, LibraryUpload, Method};
 use tslg_method::estimator::StoppingRule;
 use tslg_method::registry::BuiltLibrary;
@@ -233,18 +231,8 @@ pub async fn upload(state: &AppState, id: i64, upload: &LibraryUpload) -> Result
                     (CampaignStatus::Failed, Some(reason))
                 }
             };
-            sql::execute(
-                conn,
-                "UPDATE campaigns SET status = ?, status_detail = ?, next_index = 1, indices = 1, \
-                 tests = 1, worker_seconds = worker_seconds + ?, \
-                 updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now') WHERE id = ?",
-                params![status.as_str(), detail, seconds, campaign.id],
-            )?;
-            sql::execute(
-                conn,
-                "UPDATE leases SET state = 'done', resume_at = end_index WHERE id = ?",
-                [id],
-            )?;
+            campaigns::finish_whole_build(conn, campaign.id, status, detail.as_deref(), seconds)?;
+            leases::finish(conn, id)?;
             Ok((campaign, library))
         })
         .await?;

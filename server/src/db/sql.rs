@@ -80,3 +80,9 @@ pub fn one<T: DeserializeOwned>(
 pub fn execute(conn: &Connection, sql: &str, params: impl Params) -> Result<usize, DbError> {
     Ok(conn.prepare_cached(sql)?.execute(params)?)
 }
+
+/// Whether the connection answers a statement.
+pub fn ping(conn: &Connection) -> Result<(), DbError> {
+    conn.query_row("SELECT 1", [], |_| Ok(()))?;
+    Ok(())
+}

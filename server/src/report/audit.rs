@@ -25,18 +25,17 @@
 //! stopped on such results runs again. So the answer is the one honest
 //! workers give, whatever the flagged worker did.
 
-use crate::db::sql;
 use crate::db::{now_ms, Database};
 use crate::error::ServiceError;
 use crate::report::check::CheckedReport;
 use crate::report::fold::{fold_prefix, KnownExplored};
 use crate::report::mismatch::{describe, Mismatch};
 use crate::report::record::{check_effort, held_lease, stopped_ack, Recorded};
-use crate::store::audits::{self, AuditRow, AuditState, NewAudit};
-use crate::store::campaigns;
+use crate::store::audits::{self, AuditRow, AuditState, NewAudit, RunColumn};
 use crate::store::leases::LeaseState;
 use crate::store::pairs;
-use rusqlite::{params, Connection};
+use crate::store::{campaigns, leases, reports};
+use rusqlite::Connection;
 use std::sync::Arc;
 use tslg_api::{CampaignStatus, ResultAck, ResultReport};
 use tslg_method::prefix::SparseOutcome;
@@ -111,9 +110,9 @@ pub fn record_run(
 ) -> Result<Verdict, ServiceError> {
     let (state, column, verdict) = match audit.state {
         AuditState::Replica if outcome == audit.first_outcome => {
-            (AuditState::Agreed, "replica", Verdict::Agreed)
+            (AuditState::Agreed, RunColumn::Replica, Verdict::Agreed)
         }
-        AuditState::Replica => (AuditState::Tiebreak, "replica", Verdict::Pending),
+        AuditState::Replica => (AuditState::Tiebreak, RunColumn::Replica, Verdict::Pending),
         AuditState::Tiebreak => {
             let replica = audit.replica_outcome.as_deref().unwrap_or("");
             let replica_worker = audit.replica_worker.clone().unwrap_or_default();
@@ -133,25 +132,22 @@ pub fn record_run(
                     liar: replica_worker,
                     detail,
                 };
-                (AuditState::Settled, "third", verdict)
+                (AuditState::Settled, RunColumn::Third, verdict)
             } else if outcome == replica {
                 let detail = detail(&audit.first_worker, &audit.first_outcome, outcome);
                 let liar = audit.first_worker.clone();
-                (AuditState::Settled, "third", Verdict::Liar { liar, detail })
+                (
+                    AuditState::Settled,
+                    RunColumn::Third,
+                    Verdict::Liar { liar, detail },
+                )
             } else {
-                (AuditState::Undecided, "third", Verdict::Undecided)
+                (AuditState::Undecided, RunColumn::Third, Verdict::Undecided)
             }
         }
         _ => return Ok(Verdict::Pending),
     };
-    sql::execute(
-        conn,
-        &format!(
-            "UPDATE audits SET state = ?, {column}_worker = ?, {column}_outcome = ?, \
-             lease_id = NULL WHERE id = ?"
-        ),
-        params![state.as_str(), worker, outcome, audit.id],
-    )?;
+    audits::record_run(conn, audit.id, state, column, worker, outcome)?;
     match &verdict {
         Verdict::Undecided => tracing::warn!(
             campaign = audit.campaign_id,
@@ -180,40 +176,15 @@ pub fn flag_worker(
     campaign: i64,
     index: u64,
 ) -> Result<Vec<i64>, ServiceError> {
-    sql::execute(
-        conn,
-        "INSERT OR IGNORE INTO flagged_workers (name, reason, campaign_id, test_index) \
-         VALUES (?, ?, ?, ?)",
-        params![worker, reason, campaign, index as i64],
-    )?;
-    let touched: Vec<(i64,)> = sql::all(
-        conn,
-        "SELECT DISTINCT campaign_id FROM reports WHERE worker = ?",
-        [worker],
-    )?;
+    audits::flag(conn, worker, reason, campaign, index)?;
     let mut changed = Vec::new();
-    for (id,) in touched {
+    for id in reports::campaigns_of_worker(conn, worker)? {
         if take_back(conn, id, worker)? {
             changed.push(id);
         }
     }
-    sql::execute(
-        conn,
-        "UPDATE leases SET expires_at = 0 WHERE worker = ? AND state = 'active'",
-        [worker],
-    )?;
-    sql::execute(
-        conn,
-        "UPDATE audits SET state = 'void', lease_id = NULL \
-         WHERE first_worker = ? AND state IN ('replica', 'tiebreak', 'agreed')",
-        [worker],
-    )?;
-    sql::execute(
-        conn,
-        "UPDATE audits SET state = 'replica', replica_worker = NULL, replica_outcome = NULL, \
-         lease_id = NULL WHERE replica_worker = ? AND state = 'tiebreak'",
-        [worker],
-    )?;
+    leases::expire_all_of(conn, worker)?;
+    audits::void_runs_of(conn, worker)?;
     tracing::warn!(
         worker,
         campaign,
@@ -231,12 +202,7 @@ pub fn flag_worker(
 /// cancelled campaign, or one that stopped before them, is left alone.
 fn take_back(conn: &Connection, id: i64, worker: &str) -> Result<bool, ServiceError> {
     let campaign = campaigns::get(conn, id)?;
-    let ranges: Vec<(i64, i64)> = sql::all(
-        conn,
-        "SELECT from_index, to_index FROM reports WHERE campaign_id = ? AND worker = ? \
-         ORDER BY from_index",
-        params![id, worker],
-    )?;
+    let ranges = reports::ranges_of_worker(conn, id, worker)?;
     let Some(first) = ranges.first().map(|r| r.0) else {
         return Ok(false);
     };
@@ -244,22 +210,14 @@ fn take_back(conn: &Connection, id: i64, worker: &str) -> Result<bool, ServiceEr
     let stopped = status.is_final();
     // A campaign its pair stopped was decided at the pair's index.
     let decided = pairs::decided_at(conn, &campaign)?.unwrap_or(campaign.indices as u64);
-    if matches!(status.as_str(), "cancelled" | "failed") || (stopped && decided <= first as u64) {
+    if matches!(status, CampaignStatus::Cancelled | CampaignStatus::Failed)
+        || (stopped && decided <= first as u64)
+    {
         return Ok(false);
     }
     for &(from, to) in &ranges {
-        sql::execute(
-            conn,
-            "DELETE FROM reports WHERE campaign_id = ? AND from_index = ?",
-            [id, from],
-        )?;
-        sql::execute(
-            conn,
-            "DELETE FROM invalid_tests WHERE campaign_id = ? AND test_index >= ? \
-             AND test_index < ?",
-            [id, from, to],
-        )?;
-        crate::store::leases::insert_redo(conn, id, from as u64, to as u64)?;
+        reports::delete_range(conn, id, from, to)?;
+        leases::insert_redo(conn, id, from as u64, to as u64)?;
     }
     if campaign.method == tslg_api::Method::Adaptive && campaign.indices > first {
         // Later stages were planned from those results: they cannot be
@@ -269,12 +227,8 @@ fn take_back(conn: &Connection, id: i64, worker: &str) -> Result<bool, ServiceEr
              reporting what others could not reproduce); the adaptive stages planned from them \
              cannot stand: start the campaign again"
         );
-        sql::execute(
-            conn,
-            "UPDATE campaigns SET status = 'failed', status_detail = ? WHERE id = ?",
-            params![detail, id],
-        )?;
-        crate::store::leases::cancel_active(conn, id)?;
+        campaigns::set_failed(conn, id, &detail)?;
+        leases::cancel_active(conn, id)?;
         return Ok(true);
     }
     if campaign.indices > first {
@@ -282,22 +236,10 @@ fn take_back(conn: &Connection, id: i64, worker: &str) -> Result<bool, ServiceEr
             "results of worker `{worker}` from test {first} on were taken back (it was caught \
              reporting what others could not reproduce) and are being run again"
         );
-        sql::execute(
-            conn,
-            "UPDATE campaigns SET indices = 0, tests = 0, events = 0, invalid = 0, s1 = 0, \
-             s2 = 0, largest = 0, outside_tests = 0, outside_events = 0, outside_s1 = 0, \
-             outside_mismatches = 0, outside_upper = NULL, status = 'running', status_detail = ? \
-             WHERE id = ?",
-            params![detail, id],
-        )?;
-        sql::execute(
-            conn,
-            "DELETE FROM history WHERE campaign_id = ? AND indices > ?",
-            [id, first],
-        )?;
+        campaigns::run_again(conn, id, &detail, first)?;
         if stopped {
             // The leases the stop cancelled hold ranges not yet reported.
-            crate::store::leases::reactivate_cancelled(conn, id)?;
+            leases::reactivate_cancelled(conn, id)?;
             tracing::warn!(campaign = id, worker, "a stopped campaign runs again");
         }
         pairs::reopen(conn, &campaign)?;
@@ -350,11 +292,7 @@ fn record_audit_run_in(
     }
     let outcome = audits::encode(checked.outcomes.first().map(|o| o.1));
     let verdict = record_run(conn, &audit, &report.worker, &outcome)?;
-    sql::execute(
-        conn,
-        "UPDATE leases SET resume_at = end_index, state = 'done' WHERE id = ?",
-        [lease.id],
-    )?;
+    leases::finish(conn, lease.id)?;
     if let Verdict::Liar { liar, detail } = &verdict {
         flag_worker(conn, liar, detail, campaign.id, start)?;
     }

@@ -9,7 +9,6 @@
 //! one transaction, so an acknowledged result is always on disk.
 
 use crate::config::Config;
-use crate::db::sql;
 use crate::db::{now_ms, Database};
 use crate::error::ServiceError;
 use crate::leasing::claim as claiming;
@@ -21,10 +20,11 @@ use crate::report::fold::{fold_prefix, KnownExplored};
 use crate::report::replay::Explored;
 use crate::store::audits::{self, NewAudit};
 use crate::store::campaigns::{self, CampaignRow};
-use crate::store::leases::{LeaseRow, LeaseState};
+use crate::store::leases::{self, LeaseRow, LeaseState};
+use crate::store::near_misses;
 use crate::store::prefix::Charge;
 use crate::store::reports::{self, NewReport};
-use rusqlite::{params, Connection};
+use rusqlite::Connection;
 use std::sync::Arc;
 use tslg_api::{CampaignStatus, Method, ResultAck, ResultReport};
 use tslg_method::number::Num;
@@ -261,7 +261,7 @@ fn store_new_part(
         },
     )?;
     if campaign.method == Method::Adaptive {
-        crate::report::stages::store_near_misses(conn, campaign.id, &report.near_misses, new_from)?;
+        near_misses::insert(conn, campaign.id, &report.near_misses, new_from)?;
     }
     let done = checked.to == lease.end_index as u64;
     let state = if done {
@@ -269,21 +269,7 @@ fn store_new_part(
     } else {
         LeaseState::Active
     };
-    let moved = sql::execute(
-        conn,
-        "UPDATE leases SET resume_at = ?, expires_at = ?, state = ? \
-         WHERE id = ? AND worker = ? AND attempt = ? AND resume_at = ? AND state = 'active'",
-        params![
-            checked.to as i64,
-            expires_at,
-            state.as_str(),
-            lease.id,
-            report.worker,
-            report.attempt,
-            lease.resume_at
-        ],
-    )?;
-    if moved != 1 {
+    if !leases::advance(conn, lease, checked.to as i64, expires_at, state)? {
         return Err(ServiceError::Conflict(format!(
             "lease {} changed during this report; send it again",
             lease.id
@@ -323,11 +309,7 @@ fn store_audits(
         return Ok(());
     }
     if plan.waived {
-        sql::execute(
-            conn,
-            "UPDATE campaigns SET audits_waived = audits_waived + ? WHERE id = ?",
-            [new.len() as i64, campaign],
-        )?;
+        campaigns::count_waived_audits(conn, campaign, new.len() as u64)?;
         return Ok(());
     }
     Ok(audits::insert(conn, campaign, worker, &new)?)

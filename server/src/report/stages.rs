@@ -11,17 +11,17 @@
 //! coordinator's copy rebuilt after a restart resolves the same stages
 //! again ([`catch_up`]) and the campaign is the in-process one.
 
-use crate::db::sql;
 use crate::error::ServiceError;
 use crate::store::campaigns::CampaignRow;
-use crate::store::prefix::{close_stopped, frontier};
-use crate::store::reports;
-use rusqlite::{params, Connection};
+use crate::store::prefix::{self, close_stopped, frontier};
+use crate::store::{near_misses, reports};
+use rusqlite::Connection;
 use std::sync::Arc;
-use tslg_api::{CampaignStatus, NearMiss};
+use tslg_api::CampaignStatus;
 use tslg_method::adaptive::TestResult;
 use tslg_method::estimator::Decision;
-use tslg_method::prefix::SparseOutcome;
+use tslg_method::outside::OutsideTally;
+use tslg_method::prefix::{PrefixFold, SparseOutcome};
 use tslg_method::registry::{AdaptiveStages, CampaignTests};
 
 /// The results of the running stage's tests `from..to`, in index order.
@@ -35,15 +35,10 @@ fn stage_results(
     let stages = tests.adaptive().expect("an adaptive campaign's tests");
     let outcomes = reports::outcomes(conn, campaign, from, to)?;
     let replayed = stages.replay_stage(from, to);
-    let near_misses: Vec<(i64, f64)> = if replayed.is_some() {
+    let near_misses = if replayed.is_some() {
         Vec::new()
     } else {
-        sql::all(
-            conn,
-            "SELECT test_index, criticality FROM near_misses \
-             WHERE campaign_id = ? AND test_index >= ? AND test_index < ? ORDER BY test_index",
-            params![campaign, from as i64, to as i64],
-        )?
+        near_misses::of_range(conn, campaign, from, to)?
     };
     // A test that did not come within `near_miss` is "far": only whether a
     // criticality is within it matters to the plan.
@@ -141,7 +136,6 @@ fn write(
 ) -> Result<Option<CampaignStatus>, ServiceError> {
     let p = stages.progress();
     let fold = p.fold;
-    let (s1, s2) = fold.estimator.sums();
     let (status, detail, indices) = match &p.finished {
         None => (CampaignStatus::Running, None, p.running.map_or(0, |r| r.0)),
         Some(done) => {
@@ -169,48 +163,24 @@ fn write(
             (status, Some(detail), done.result.indices)
         }
     };
-    let running = p.running;
-    sql::execute(
+    prefix::store_stages(
         conn,
-        "UPDATE campaigns SET indices = ?, tests = ?, events = ?, invalid = ?, s1 = ?, s2 = ?, \
-         largest = ?, stage_start = ?, stage_end = ?, stage_kind = ?, library_tests = ?, \
-         search_tests = ?, stages = ?, support = ?, status = ?, \
-         status_detail = COALESCE(?, status_detail), \
-         updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now') WHERE id = ?",
-        params![
-            indices as i64,
-            fold.estimator.tests() as i64,
-            fold.estimator.events() as i64,
-            fold.invalid as i64,
-            s1,
-            s2,
-            fold.estimator.largest_term(),
-            running.map(|r| r.0 as i64),
-            running.map(|r| r.1 as i64),
-            running.map(|r| r.2),
-            p.library_tests as i64,
-            p.search_tests as i64,
-            p.stages as i64,
-            p.support as i64,
-            status.as_str(),
-            detail,
-            campaign.id
-        ],
+        campaign.id,
+        &prefix::StagesState {
+            indices,
+            progress: &p,
+            status,
+            detail: detail.as_deref(),
+        },
     )?;
     if fold.estimator.tests() > 0 {
-        sql::execute(
-            conn,
-            "INSERT OR REPLACE INTO history (campaign_id, indices, tests, events, s1, s2, \
-             outside_tests, outside_s1) VALUES (?, ?, ?, ?, ?, ?, 0, 0)",
-            params![
-                campaign.id,
-                indices as i64,
-                fold.estimator.tests() as i64,
-                fold.estimator.events() as i64,
-                s1,
-                s2
-            ],
-        )?;
+        // The estimate's point at every test the campaign used.
+        let point = PrefixFold {
+            indices,
+            outside: OutsideTally::default(),
+            ..fold
+        };
+        prefix::store_history(conn, campaign.id, &[point])?;
     }
     if p.finished.is_none() {
         return Ok(None);
@@ -223,23 +193,4 @@ fn write(
         "adaptive campaign stopped"
     );
     Ok(Some(status))
-}
-
-/// Stores a report's near misses of the part `new_from..` (a program's;
-/// a built-in vehicle's are run again here).
-pub fn store_near_misses(
-    conn: &Connection,
-    campaign: i64,
-    near_misses: &[NearMiss],
-    new_from: u64,
-) -> Result<(), ServiceError> {
-    for m in near_misses.iter().filter(|m| m.index >= new_from) {
-        sql::execute(
-            conn,
-            "INSERT OR REPLACE INTO near_misses (campaign_id, test_index, criticality) \
-             VALUES (?, ?, ?)",
-            params![campaign, m.index as i64, m.criticality],
-        )?;
-    }
-    Ok(())
 }

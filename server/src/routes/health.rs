@@ -1,3 +1,6 @@
+//! `/healthz`: the coordinator answers and its database does.
+
+use crate::db::DbError;
 use crate::error::ServiceError;
 use crate::state::AppState;
 use axum::extract::State;
@@ -8,13 +11,7 @@ use tslg_api::{Health, Problem};
 #[utoipa::path(get, path = "/healthz", responses(
     (status = 200, body = Health), (status = 500, body = Problem)))]
 pub async fn healthz(State(state): State<AppState>) -> Result<Json<Health>, ServiceError> {
-    state
-        .db
-        .read(|conn| -> Result<_, ServiceError> {
-            conn.query_row("SELECT 1", [], |_| Ok(()))?;
-            Ok(())
-        })
-        .await?;
+    state.db.read::<_, DbError, _>(crate::db::sql::ping).await?;
     Ok(Json(Health {
         status: "ok".into(),
         version: env!("CARGO_PKG_VERSION").into(),

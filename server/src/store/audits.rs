@@ -3,6 +3,11 @@
 
 use crate::db::sql;
 use crate::store::error::StoreError;
+use crate::store::states::{
+    AUDIT_AGREED, AUDIT_OPEN, AUDIT_PAST, AUDIT_REPLICA, AUDIT_TIEBREAK, AUDIT_VOID,
+    CAMPAIGN_RUNNING, LEASE_ACTIVE,
+};
+use const_format::formatcp;
 use rusqlite::{params, Connection};
 use tslg_method::prefix::SparseOutcome;
 
@@ -75,10 +80,6 @@ pub struct AuditRow {
 const COLUMNS: &str = "id, campaign_id, test_index, state, first_worker, first_outcome, \
     replica_worker, replica_outcome, lease_id";
 
-/// States in which an audit waits for a run and holds the campaign's
-/// prefix at its test.
-pub const OPEN: &str = "('replica', 'tiebreak')";
-
 /// Stores the audits of a report of `worker` on `campaign`. A test whose
 /// earlier audit was voided (its first run taken back) is audited afresh.
 pub fn insert(
@@ -90,13 +91,13 @@ pub fn insert(
     for audit in audits {
         sql::execute(
             conn,
-            "INSERT INTO audits (campaign_id, test_index, reason, state, first_worker, first_outcome) \
-             VALUES (?, ?, ?, 'replica', ?, ?) \
+            formatcp!("INSERT INTO audits (campaign_id, test_index, reason, state, first_worker, first_outcome) \
+             VALUES (?, ?, ?, {AUDIT_REPLICA}, ?, ?) \
              ON CONFLICT (campaign_id, test_index) DO UPDATE SET reason = excluded.reason, \
-               state = 'replica', first_worker = excluded.first_worker, \
+               state = {AUDIT_REPLICA}, first_worker = excluded.first_worker, \
                first_outcome = excluded.first_outcome, replica_worker = NULL, \
                replica_outcome = NULL, third_worker = NULL, third_outcome = NULL, lease_id = NULL \
-             WHERE audits.state IN ('void', 'past')",
+             WHERE audits.state IN ({AUDIT_VOID}, {AUDIT_PAST})"),
             params![
                 campaign,
                 audit.test_index as i64,
@@ -130,10 +131,10 @@ pub fn runnable(
     let sql = format!(
         "SELECT {} FROM audits a JOIN campaigns c ON c.id = a.campaign_id \
          LEFT JOIN leases l ON l.id = a.lease_id \
-         WHERE a.state IN {OPEN} AND c.status = 'running' \
+         WHERE a.state IN {AUDIT_OPEN} AND c.status = {CAMPAIGN_RUNNING} \
            AND c.requires IN (SELECT value FROM json_each(?)) \
            AND a.first_worker <> ? AND COALESCE(a.replica_worker, '') <> ? \
-           AND (a.lease_id IS NULL OR l.state <> 'active' OR l.expires_at < ?) \
+           AND (a.lease_id IS NULL OR l.state <> {LEASE_ACTIVE} OR l.expires_at < ?) \
          ORDER BY a.campaign_id, a.test_index LIMIT 1",
         columns.join(", ")
     );
@@ -192,4 +193,76 @@ pub fn flagged(conn: &Connection) -> Result<Vec<(String, String)>, StoreError> {
 /// Clears a flag (a write); false when the worker was not flagged.
 pub fn unflag(conn: &Connection, worker: &str) -> Result<bool, StoreError> {
     Ok(sql::execute(conn, "DELETE FROM flagged_workers WHERE name = ?", [worker])? == 1)
+}
+
+/// Records a run of audit `id`: the audit moves to `state`, its `column`
+/// run (`replica` or `third`) is `worker`'s with `outcome`, and its lease
+/// is done with.
+pub fn record_run(
+    conn: &Connection,
+    id: i64,
+    state: AuditState,
+    column: RunColumn,
+    worker: &str,
+    outcome: &str,
+) -> Result<(), StoreError> {
+    let sql = match column {
+        RunColumn::Replica => {
+            "UPDATE audits SET state = ?, replica_worker = ?, replica_outcome = ?, \
+             lease_id = NULL WHERE id = ?"
+        }
+        RunColumn::Third => {
+            "UPDATE audits SET state = ?, third_worker = ?, third_outcome = ?, \
+             lease_id = NULL WHERE id = ?"
+        }
+    };
+    sql::execute(conn, sql, params![state.as_str(), worker, outcome, id])?;
+    Ok(())
+}
+
+/// Which run of an audit a result is: the second (`replica`) or the one
+/// that breaks a tie (`third`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RunColumn {
+    Replica,
+    Third,
+}
+
+/// Flags `worker`, caught at test `index` of `campaign` for `reason` (a
+/// worker flagged before keeps its first reason).
+pub fn flag(
+    conn: &Connection,
+    worker: &str,
+    reason: &str,
+    campaign: i64,
+    index: u64,
+) -> Result<(), StoreError> {
+    sql::execute(
+        conn,
+        "INSERT OR IGNORE INTO flagged_workers (name, reason, campaign_id, test_index) \
+         VALUES (?, ?, ?, ?)",
+        params![worker, reason, campaign, index as i64],
+    )?;
+    Ok(())
+}
+
+/// Takes a flagged worker's runs out of the audits: the audits of its
+/// first runs are void (its results are taken back), and a tie it made
+/// waits for another second run.
+pub fn void_runs_of(conn: &Connection, worker: &str) -> Result<(), StoreError> {
+    sql::execute(
+        conn,
+        formatcp!(
+            "UPDATE audits SET state = {AUDIT_VOID}, lease_id = NULL \
+         WHERE first_worker = ? AND state IN ({AUDIT_REPLICA}, {AUDIT_TIEBREAK}, {AUDIT_AGREED})"
+        ),
+        [worker],
+    )?;
+    sql::execute(
+        conn,
+        formatcp!("UPDATE audits SET state = {AUDIT_REPLICA}, replica_worker = NULL, replica_outcome = NULL, \
+         lease_id = NULL WHERE replica_worker = ? AND state = {AUDIT_TIEBREAK}"),
+        [worker],
+    )?;
+    Ok(())
 }

@@ -4,6 +4,8 @@ pub use crate::store::campaign_row::{CampaignRow, COLUMNS};
 
 use crate::db::sql;
 use crate::store::error::StoreError;
+use crate::store::states::{CAMPAIGN_CANCELLED, CAMPAIGN_FAILED, CAMPAIGN_RUNNING};
+use const_format::formatcp;
 use rusqlite::{params, Connection};
 use tslg_api::{CampaignStatus, Method, Outside, Split};
 use tslg_method::estimator::StoppingRule;
@@ -119,8 +121,8 @@ pub fn cancel(conn: &Connection, id: i64) -> Result<CampaignRow, StoreError> {
     }
     sql::execute(
         conn,
-        "UPDATE campaigns SET status = 'cancelled', status_detail = 'cancelled on request', \
-         updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now') WHERE id = ?",
+        formatcp!("UPDATE campaigns SET status = {CAMPAIGN_CANCELLED}, status_detail = 'cancelled on request', \
+         updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now') WHERE id = ?"),
         [id],
     )?;
     crate::store::leases::cancel_active(conn, id)?;
@@ -153,6 +155,87 @@ pub fn set_status(
         "UPDATE campaigns SET status = ?, status_detail = ?, \
          updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now') WHERE id = ?",
         params![status.as_str(), detail, id],
+    )?;
+    Ok(())
+}
+
+/// Campaign `id` failed, saying why (its leases are cancelled apart).
+pub fn set_failed(conn: &Connection, id: i64, detail: &str) -> Result<(), StoreError> {
+    sql::execute(
+        conn,
+        formatcp!(
+            "UPDATE campaigns SET status = {CAMPAIGN_FAILED}, status_detail = ? WHERE id = ?"
+        ),
+        params![detail, id],
+    )?;
+    Ok(())
+}
+
+/// Campaign `id` runs again from an empty prefix, saying why; its history
+/// past index `first` goes.
+pub fn run_again(conn: &Connection, id: i64, detail: &str, first: i64) -> Result<(), StoreError> {
+    sql::execute(
+        conn,
+        formatcp!("UPDATE campaigns SET indices = 0, tests = 0, events = 0, invalid = 0, s1 = 0, \
+         s2 = 0, largest = 0, outside_tests = 0, outside_events = 0, outside_s1 = 0, \
+         outside_mismatches = 0, outside_upper = NULL, status = {CAMPAIGN_RUNNING}, status_detail = ? \
+         WHERE id = ?"),
+        params![detail, id],
+    )?;
+    sql::execute(
+        conn,
+        "DELETE FROM history WHERE campaign_id = ? AND indices > ?",
+        [id, first],
+    )?;
+    Ok(())
+}
+
+/// Counts `audits` tests of `campaign` chosen for an audit that no other
+/// worker could run.
+pub fn count_waived_audits(
+    conn: &Connection,
+    campaign: i64,
+    audits: u64,
+) -> Result<(), StoreError> {
+    sql::execute(
+        conn,
+        "UPDATE campaigns SET audits_waived = audits_waived + ? WHERE id = ?",
+        [audits as i64, campaign],
+    )?;
+    Ok(())
+}
+
+/// The campaign that builds library `library` on workers (its
+/// enumeration, or the whole build one worker runs), the newest, if any.
+pub fn building_library(
+    conn: &Connection,
+    library: i64,
+) -> Result<Option<CampaignRow>, StoreError> {
+    Ok(sql::optional(
+        conn,
+        &format!(
+            "SELECT {COLUMNS} FROM campaigns WHERE library_id = ? AND enumerate >= 1 \
+             ORDER BY id DESC LIMIT 1"
+        ),
+        [library],
+    )?)
+}
+
+/// A whole build's campaign `id` done: its one test resolved, with its
+/// `status` and why, and the worker's `seconds` charged.
+pub fn finish_whole_build(
+    conn: &Connection,
+    id: i64,
+    status: CampaignStatus,
+    detail: Option<&str>,
+    seconds: f64,
+) -> Result<(), StoreError> {
+    sql::execute(
+        conn,
+        "UPDATE campaigns SET status = ?, status_detail = ?, next_index = 1, indices = 1, \
+         tests = 1, worker_seconds = worker_seconds + ?, \
+         updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now') WHERE id = ?",
+        params![status.as_str(), detail, seconds, id],
     )?;
     Ok(())
 }

@@ -7,6 +7,8 @@ use crate::db::sql;
 use crate::store::audits;
 use crate::store::campaign_row::{self, CampaignRow, COLUMNS as CAMPAIGN_COLUMNS};
 use crate::store::error::StoreError;
+use crate::store::states::{CAMPAIGN_RUNNING, LEASE_ACTIVE, LEASE_CANCELLED, LEASE_DONE};
+use const_format::formatcp;
 use rusqlite::{params, Connection};
 
 /// Where a lease stands: being worked on (or expired, waiting for another
@@ -124,7 +126,7 @@ pub fn find_expired(
     let sql = format!(
         "SELECT l.id FROM leases l INDEXED BY leases_active \
          JOIN campaigns c ON c.id = l.campaign_id \
-         WHERE l.state = 'active' AND l.expires_at < ? AND c.status = 'running' \
+         WHERE l.state = {LEASE_ACTIVE} AND l.expires_at < ? AND c.status = {CAMPAIGN_RUNNING} \
            AND l.audit_id IS NULL AND l.end_index - l.resume_at <= ? {filters} \
          ORDER BY l.campaign_id, l.resume_at LIMIT 1"
     );
@@ -167,7 +169,7 @@ pub fn next_in_turn(
 ) -> Result<Option<CampaignRow>, StoreError> {
     let filters = eligible.filters();
     let sql = format!(
-        "SELECT {CAMPAIGN_COLUMNS} FROM campaigns c WHERE status = 'running' \
+        "SELECT {CAMPAIGN_COLUMNS} FROM campaigns c WHERE status = {CAMPAIGN_RUNNING} \
          AND next_index < max_tests {filters} \
          AND (stage_end IS NULL OR next_index < stage_end) \
          AND (paired_with IS NULL OR next_index <= \
@@ -175,7 +177,7 @@ pub fn next_in_turn(
          AND (SELECT COUNT(*) FROM audits a WHERE a.campaign_id = c.id \
               AND a.state IN {open}) < {MAX_OPEN_AUDITS} \
          ORDER BY next_turn_at, id LIMIT 1",
-        open = audits::OPEN
+        open = crate::store::states::AUDIT_OPEN
     );
     let filter_values = eligible.values();
     let values: Vec<&dyn rusqlite::ToSql> = filter_values
@@ -198,8 +200,10 @@ pub fn insert_range(
     let start = campaign.next_index;
     let moved = sql::execute(
         conn,
-        "UPDATE campaigns SET next_index = ?, next_turn_at = ? \
-         WHERE id = ? AND next_index = ? AND status = 'running'",
+        formatcp!(
+            "UPDATE campaigns SET next_index = ?, next_turn_at = ? \
+         WHERE id = ? AND next_index = ? AND status = {CAMPAIGN_RUNNING}"
+        ),
         params![end, turn_at, campaign.id, start],
     )?;
     if moved != 1 {
@@ -210,9 +214,11 @@ pub fn insert_range(
     let key = new_key();
     sql::execute(
         conn,
-        "INSERT INTO leases (campaign_id, start_index, end_index, resume_at, attempt, worker, \
+        formatcp!(
+            "INSERT INTO leases (campaign_id, start_index, end_index, resume_at, attempt, worker, \
          expires_at, state, key, claimed_at, threads) \
-         VALUES (?, ?, ?, ?, 1, ?, ?, 'active', ?, ?, ?)",
+         VALUES (?, ?, ?, ?, 1, ?, ?, {LEASE_ACTIVE}, ?, ?, ?)"
+        ),
         params![
             campaign.id,
             start,
@@ -251,14 +257,17 @@ pub fn insert_audit_run(
     if let Some(old) = audit.lease_id {
         sql::execute(
             conn,
-            "UPDATE leases SET state = 'cancelled' WHERE id = ? AND state = 'active'",
+            formatcp!(
+                "UPDATE leases SET state = {LEASE_CANCELLED} WHERE id = ? \
+                 AND state = {LEASE_ACTIVE}"
+            ),
             [old],
         )?;
     }
     let sql = format!(
         "INSERT INTO leases (campaign_id, start_index, end_index, resume_at, attempt, worker, \
          expires_at, state, key, claimed_at, threads, audit_id) \
-         VALUES (?, ?, ?, ?, 1, ?, ?, 'active', ?, ?, ?, ?) RETURNING {COLUMNS}"
+         VALUES (?, ?, ?, ?, 1, ?, ?, {LEASE_ACTIVE}, ?, ?, ?, ?) RETURNING {COLUMNS}"
     );
     let lease: LeaseRow = sql::one(
         conn,
@@ -302,7 +311,7 @@ pub fn unstarted(
     let sql = format!(
         "SELECT {COLUMNS} FROM leases WHERE id = (SELECT l.id FROM leases l \
          JOIN campaigns c ON c.id = l.campaign_id \
-         WHERE l.state = 'active' AND l.expires_at > ? AND l.worker = ? AND l.id != ? \
+         WHERE l.state = {LEASE_ACTIVE} AND l.expires_at > ? AND l.worker = ? AND l.id != ? \
            AND l.resume_at = l.start_index AND l.end_index - l.resume_at <= ? {audits} \
            {filters} \
          ORDER BY l.id DESC LIMIT 1)"
@@ -318,9 +327,11 @@ pub fn unstarted(
 pub fn insert_redo(conn: &Connection, campaign: i64, from: u64, to: u64) -> Result<(), StoreError> {
     sql::execute(
         conn,
-        "INSERT INTO leases (campaign_id, start_index, end_index, resume_at, attempt, worker, \
+        formatcp!(
+            "INSERT INTO leases (campaign_id, start_index, end_index, resume_at, attempt, worker, \
          expires_at, state, key, claimed_at, threads) \
-         VALUES (?, ?, ?, ?, 0, '', 0, 'active', ?, 0, 1)",
+         VALUES (?, ?, ?, ?, 0, '', 0, {LEASE_ACTIVE}, ?, 0, 1)"
+        ),
         params![campaign, from as i64, to as i64, from as i64, new_key()],
     )?;
     Ok(())
@@ -331,7 +342,7 @@ pub fn insert_redo(conn: &Connection, campaign: i64, from: u64, to: u64) -> Resu
 pub fn cancel_active(conn: &Connection, campaign: i64) -> Result<(), StoreError> {
     sql::execute(
         conn,
-        "UPDATE leases SET state = 'cancelled' WHERE campaign_id = ? AND state = 'active'",
+        formatcp!("UPDATE leases SET state = {LEASE_CANCELLED} WHERE campaign_id = ? AND state = {LEASE_ACTIVE}"),
         [campaign],
     )?;
     Ok(())
@@ -343,9 +354,62 @@ pub fn cancel_active(conn: &Connection, campaign: i64) -> Result<(), StoreError>
 pub fn reactivate_cancelled(conn: &Connection, campaign: i64) -> Result<(), StoreError> {
     sql::execute(
         conn,
-        "UPDATE leases SET state = 'active', expires_at = 0 WHERE campaign_id = ? \
-         AND state = 'cancelled' AND resume_at < end_index AND audit_id IS NULL",
+        formatcp!(
+            "UPDATE leases SET state = {LEASE_ACTIVE}, expires_at = 0 WHERE campaign_id = ? \
+         AND state = {LEASE_CANCELLED} AND resume_at < end_index AND audit_id IS NULL"
+        ),
         [campaign],
+    )?;
+    Ok(())
+}
+
+/// Moves `lease`'s `resume_at` to `to` past a report of its holder in its
+/// attempt, keeps it until `expires_at` (a report is a heartbeat) and sets
+/// its `state`; `false` when the lease changed since it was read (another
+/// report of it came first).
+pub fn advance(
+    conn: &Connection,
+    lease: &LeaseRow,
+    to: i64,
+    expires_at: i64,
+    state: LeaseState,
+) -> Result<bool, StoreError> {
+    let moved = sql::execute(
+        conn,
+        formatcp!(
+            "UPDATE leases SET resume_at = ?, expires_at = ?, state = ? \
+         WHERE id = ? AND worker = ? AND attempt = ? AND resume_at = ? AND state = {LEASE_ACTIVE}"
+        ),
+        params![
+            to,
+            expires_at,
+            state.as_str(),
+            lease.id,
+            lease.worker,
+            lease.attempt,
+            lease.resume_at
+        ],
+    )?;
+    Ok(moved == 1)
+}
+
+/// Expires every active lease of `worker` (it was flagged): each is
+/// handed out again to another.
+pub fn expire_all_of(conn: &Connection, worker: &str) -> Result<(), StoreError> {
+    sql::execute(
+        conn,
+        formatcp!("UPDATE leases SET expires_at = 0 WHERE worker = ? AND state = {LEASE_ACTIVE}"),
+        [worker],
+    )?;
+    Ok(())
+}
+
+/// A one-test lease (an audit's run, a whole build), reported: done.
+pub fn finish(conn: &Connection, id: i64) -> Result<(), StoreError> {
+    sql::execute(
+        conn,
+        formatcp!("UPDATE leases SET resume_at = end_index, state = {LEASE_DONE} WHERE id = ?"),
+        [id],
     )?;
     Ok(())
 }
@@ -361,8 +425,10 @@ pub fn extend(
 ) -> Result<bool, StoreError> {
     let updated = sql::execute(
         conn,
-        "UPDATE leases SET expires_at = ? WHERE id = ? AND worker = ? AND attempt = ? \
-         AND state = 'active'",
+        formatcp!(
+            "UPDATE leases SET expires_at = ? WHERE id = ? AND worker = ? AND attempt = ? \
+         AND state = {LEASE_ACTIVE}"
+        ),
         params![expires_at, id, worker, attempt],
     )?;
     Ok(updated == 1)
@@ -373,8 +439,10 @@ pub fn extend(
 pub fn expire(conn: &Connection, id: i64, worker: &str, attempt: i64) -> Result<(), StoreError> {
     sql::execute(
         conn,
-        "UPDATE leases SET expires_at = 0 WHERE id = ? AND worker = ? AND attempt = ? \
-         AND state = 'active'",
+        formatcp!(
+            "UPDATE leases SET expires_at = 0 WHERE id = ? AND worker = ? AND attempt = ? \
+         AND state = {LEASE_ACTIVE}"
+        ),
         params![id, worker, attempt],
     )?;
     Ok(())

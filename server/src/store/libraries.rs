@@ -2,6 +2,11 @@
 
 use crate::db::sql;
 use crate::store::error::StoreError;
+use crate::store::states::{
+    CAMPAIGN_FAILED, CAMPAIGN_PENDING, CAMPAIGN_RUNNING, LIBRARY_BUILDING, LIBRARY_FAILED,
+    LIBRARY_READY,
+};
+use const_format::formatcp;
 use rusqlite::{params, Connection};
 use tslg_api::LibraryStatus;
 
@@ -54,7 +59,7 @@ pub fn insert(conn: &Connection, new: &NewLibrary<'_>) -> Result<LibraryRow, Sto
     let sql = format!(
         "INSERT INTO libraries (case_name, preset, status, request, surrogate, exposure_name, \
          exposure_fingerprint, exposure_table, exposure_note, total_scenarios) \
-         VALUES (?, ?, 'building', ?, ?, ?, ?, ?, ?, ?) RETURNING {COLUMNS}"
+         VALUES (?, ?, {LIBRARY_BUILDING}, ?, ?, ?, ?, ?, ?, ?) RETURNING {COLUMNS}"
     );
     Ok(sql::one(
         conn,
@@ -99,7 +104,7 @@ pub fn list(
 pub fn building(conn: &Connection) -> Result<Vec<LibraryRow>, StoreError> {
     Ok(sql::all(
         conn,
-        &format!("SELECT {COLUMNS} FROM libraries WHERE status = 'building' ORDER BY id"),
+        &format!("SELECT {COLUMNS} FROM libraries WHERE status = {LIBRARY_BUILDING} ORDER BY id"),
         [],
     )?)
 }
@@ -173,8 +178,10 @@ impl<'a> Built<'a> {
 pub fn mark_ready(conn: &Connection, id: i64, built: &Built<'_>) -> Result<(), StoreError> {
     sql::execute(
         conn,
-        "UPDATE libraries SET status = 'ready', file = ?, media_type = ?, size = ?, \
-         sm_evaluations = ?, mu_s = ?, w = ?, build_seconds = ? WHERE id = ?",
+        formatcp!(
+            "UPDATE libraries SET status = {LIBRARY_READY}, file = ?, media_type = ?, size = ?, \
+         sm_evaluations = ?, mu_s = ?, w = ?, build_seconds = ? WHERE id = ?"
+        ),
         params![
             built.file,
             built.media_type,
@@ -188,9 +195,11 @@ pub fn mark_ready(conn: &Connection, id: i64, built: &Built<'_>) -> Result<(), S
     )?;
     sql::execute(
         conn,
-        "UPDATE campaigns SET status = 'running', \
+        formatcp!(
+            "UPDATE campaigns SET status = {CAMPAIGN_RUNNING}, \
          updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now') \
-         WHERE library_id = ? AND status = 'pending'",
+         WHERE library_id = ? AND status = {CAMPAIGN_PENDING}"
+        ),
         [id],
     )?;
     Ok(())
@@ -200,14 +209,16 @@ pub fn mark_ready(conn: &Connection, id: i64, built: &Built<'_>) -> Result<(), S
 pub fn mark_failed(conn: &Connection, id: i64, error: &str) -> Result<(), StoreError> {
     sql::execute(
         conn,
-        "UPDATE libraries SET status = 'failed', error = ? WHERE id = ?",
+        formatcp!("UPDATE libraries SET status = {LIBRARY_FAILED}, error = ? WHERE id = ?"),
         params![error, id],
     )?;
     sql::execute(
         conn,
-        "UPDATE campaigns SET status = 'failed', status_detail = ?, \
+        formatcp!(
+            "UPDATE campaigns SET status = {CAMPAIGN_FAILED}, status_detail = ?, \
          updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now') \
-         WHERE library_id = ? AND status = 'pending'",
+         WHERE library_id = ? AND status = {CAMPAIGN_PENDING}"
+        ),
         params![format!("library {id} failed to build: {error}"), id],
     )?;
     Ok(())

@@ -5,6 +5,8 @@
 use crate::db::sql;
 use crate::store::campaigns::{self, CampaignRow};
 use crate::store::error::StoreError;
+use crate::store::states::{CAMPAIGN_RUNNING, PAIR_CANCELLED};
+use const_format::formatcp;
 use rusqlite::{params, Connection};
 use tslg_api::{CampaignStatus, PairStop};
 use tslg_method::paired::{PairedResult, PairedSums};
@@ -142,7 +144,7 @@ pub fn cancel(conn: &Connection, id: i64) -> Result<CampaignRow, StoreError> {
         if pair.stop.is_none() {
             sql::execute(
                 conn,
-                "UPDATE campaign_pairs SET stop = 'cancelled' WHERE campaign_a = ?",
+                formatcp!("UPDATE campaign_pairs SET stop = {PAIR_CANCELLED} WHERE campaign_a = ?"),
                 [pair.campaign_a],
             )?;
         }
@@ -182,7 +184,9 @@ pub fn reopen(conn: &Connection, campaign: &CampaignRow) -> Result<(), StoreErro
     ) {
         sql::execute(
             conn,
-            "UPDATE campaigns SET status = 'running', status_detail = ? WHERE id = ?",
+            formatcp!(
+                "UPDATE campaigns SET status = {CAMPAIGN_RUNNING}, status_detail = ? WHERE id = ?"
+            ),
             params![
                 format!(
                     "runs again with campaign {}, whose results were taken back",

@@ -3,13 +3,14 @@
 //! row, its history points, and a stopped campaign closed.
 
 use crate::db::sql;
-use crate::store::audits;
 use crate::store::campaign_row::CampaignRow;
 use crate::store::error::StoreError;
 use crate::store::leases;
+use crate::store::states::{AUDIT_PAST, LEASE_ACTIVE};
 use rusqlite::{params, Connection};
 use tslg_api::CampaignStatus;
 use tslg_method::prefix::PrefixFold;
+use tslg_method::registry::AdaptiveProgress;
 
 /// The first index the prefix may not pass: the smallest `resume_at` of
 /// the campaign's active leases (below it every outcome is recorded), its
@@ -33,11 +34,11 @@ pub fn bounds(conn: &Connection, campaign: &CampaignRow) -> Result<Bounds, Store
         conn,
         &format!(
             "SELECT (SELECT MIN(resume_at) FROM leases WHERE campaign_id = ?1 \
-                     AND state = 'active' AND audit_id IS NULL), \
+                     AND state = {LEASE_ACTIVE} AND audit_id IS NULL), \
                     (SELECT MIN(test_index) FROM audits WHERE campaign_id = ?1 \
                      AND state IN {open}), \
                     (SELECT MAX(indices) FROM history WHERE campaign_id = ?1)",
-            open = audits::OPEN
+            open = crate::store::states::AUDIT_OPEN
         ),
         [campaign.id],
     )?;
@@ -143,6 +144,57 @@ pub fn store_fold(
     Ok(())
 }
 
+/// An adaptive campaign's state after its stages were resolved, as its row
+/// keeps it: the estimation tests' fold, the running stage and the counts
+/// (`progress`), every test it used (`indices`) and its status.
+pub struct StagesState<'a> {
+    pub indices: u64,
+    pub progress: &'a AdaptiveProgress,
+    pub status: CampaignStatus,
+    /// Why the campaign stopped, when it did.
+    pub detail: Option<&'a str>,
+}
+
+/// Writes an adaptive campaign's state after resolving stages.
+pub fn store_stages(
+    conn: &Connection,
+    campaign: i64,
+    state: &StagesState<'_>,
+) -> Result<(), StoreError> {
+    let p = state.progress;
+    let fold = &p.fold;
+    let (s1, s2) = fold.estimator.sums();
+    let running = p.running;
+    sql::execute(
+        conn,
+        "UPDATE campaigns SET indices = ?, tests = ?, events = ?, invalid = ?, s1 = ?, s2 = ?, \
+         largest = ?, stage_start = ?, stage_end = ?, stage_kind = ?, library_tests = ?, \
+         search_tests = ?, stages = ?, support = ?, status = ?, \
+         status_detail = COALESCE(?, status_detail), \
+         updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now') WHERE id = ?",
+        params![
+            state.indices as i64,
+            fold.estimator.tests() as i64,
+            fold.estimator.events() as i64,
+            fold.invalid as i64,
+            s1,
+            s2,
+            fold.estimator.largest_term(),
+            running.map(|r| r.0 as i64),
+            running.map(|r| r.1 as i64),
+            running.map(|r| r.2),
+            p.library_tests as i64,
+            p.search_tests as i64,
+            p.stages as i64,
+            p.support as i64,
+            state.status.as_str(),
+            state.detail,
+            campaign
+        ],
+    )?;
+    Ok(())
+}
+
 /// Stores the history points `course` of a campaign's prefix.
 pub fn store_history(
     conn: &Connection,
@@ -178,9 +230,9 @@ pub(crate) fn close_stopped(conn: &Connection, campaign: i64, stop: u64) -> Resu
     sql::execute(
         conn,
         &format!(
-            "UPDATE audits SET state = 'past' WHERE campaign_id = ? AND test_index >= ? \
+            "UPDATE audits SET state = {AUDIT_PAST} WHERE campaign_id = ? AND test_index >= ? \
              AND state IN {}",
-            audits::OPEN
+            crate::store::states::AUDIT_OPEN
         ),
         [campaign, stop as i64],
     )?;

@@ -235,3 +235,63 @@ fn move_legacy_rows(conn: &Connection) -> Result<u64, anyhow::Error> {
     conn.execute_batch("DROP TABLE legacy_events")?;
     Ok(moved)
 }
+
+/// The campaigns `worker` reported to.
+pub fn campaigns_of_worker(conn: &Connection, worker: &str) -> Result<Vec<i64>, StoreError> {
+    let rows: Vec<(i64,)> = sql::all(
+        conn,
+        "SELECT DISTINCT campaign_id FROM reports WHERE worker = ?",
+        [worker],
+    )?;
+    Ok(rows.into_iter().map(|(id,)| id).collect())
+}
+
+/// The ranges `(from, to)` of `worker`'s reports to `campaign`, in order.
+pub fn ranges_of_worker(
+    conn: &Connection,
+    campaign: i64,
+    worker: &str,
+) -> Result<Vec<(i64, i64)>, StoreError> {
+    Ok(sql::all(
+        conn,
+        "SELECT from_index, to_index FROM reports WHERE campaign_id = ? AND worker = ? \
+         ORDER BY from_index",
+        params![campaign, worker],
+    )?)
+}
+
+/// Deletes the report of `campaign` that starts at `from` and the invalid
+/// tests of its range `from..to`.
+pub fn delete_range(
+    conn: &Connection,
+    campaign: i64,
+    from: i64,
+    to: i64,
+) -> Result<(), StoreError> {
+    sql::execute(
+        conn,
+        "DELETE FROM reports WHERE campaign_id = ? AND from_index = ?",
+        [campaign, from],
+    )?;
+    sql::execute(
+        conn,
+        "DELETE FROM invalid_tests WHERE campaign_id = ? AND test_index >= ? \
+         AND test_index < ?",
+        [campaign, from, to],
+    )?;
+    Ok(())
+}
+
+/// Why test `index` of `campaign` was invalid, as its worker said.
+pub fn invalid_reason(
+    conn: &Connection,
+    campaign: i64,
+    index: u64,
+) -> Result<Option<String>, StoreError> {
+    let reason: Option<(String,)> = sql::optional(
+        conn,
+        "SELECT reason FROM invalid_tests WHERE campaign_id = ? AND test_index = ?",
+        [campaign, index as i64],
+    )?;
+    Ok(reason.map(|(r,)| r))
+}
