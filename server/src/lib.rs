@@ -11,11 +11,10 @@ mod db;
 mod error;
 mod event_export;
 mod history;
-mod latency;
 mod leasing;
 mod metrics;
-mod problem_io;
 mod report;
+mod request_metrics;
 mod routes;
 mod sampler_cache;
 mod state;
@@ -85,7 +84,7 @@ impl Coordinator {
             work.close();
         };
         axum::serve(
-            problem_io::ProblemListener(listener),
+            routes::problem_io::ProblemListener(listener),
             routes::router(self.state),
         )
         .with_graceful_shutdown(shutdown)

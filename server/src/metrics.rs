@@ -13,9 +13,6 @@ use crate::report::replay_counts::{Place, ReplayTotals};
 use crate::state::AppState;
 use crate::store::error::StoreError;
 use crate::store::totals::{self, LeaseTotals, ResultTotals};
-use axum::extract::State;
-use axum::http::header;
-use axum::response::{IntoResponse, Response};
 use prometheus::{
     Encoder, IntCounter, IntCounterVec, IntGauge, IntGaugeVec, Opts, Registry, TextEncoder,
 };
@@ -237,9 +234,11 @@ fn register_replays(r: &Registry, replays: &ReplayTotals) {
     );
 }
 
-/// `GET /metrics`.
-pub async fn scrape(State(state): State<AppState>) -> Result<Response, ServiceError> {
-    let snapshot = snapshot(&state).await?;
+/// The metrics of this moment in the Prometheus text exposition format:
+/// the observed request latencies, totals read from the store, and one
+/// set of series per running campaign.
+pub async fn exposition(state: &AppState) -> Result<Vec<u8>, ServiceError> {
+    let snapshot = snapshot(state).await?;
     let (live, known) = state.workers.counts();
     let running = state
         .db
@@ -264,5 +263,5 @@ pub async fn scrape(State(state): State<AppState>) -> Result<Response, ServiceEr
     TextEncoder::new()
         .encode(&families, &mut body)
         .map_err(|e| ServiceError::Internal(e.into()))?;
-    Ok(([(header::CONTENT_TYPE, prometheus::TEXT_FORMAT)], body).into_response())
+    Ok(body)
 }

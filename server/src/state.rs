@@ -3,7 +3,7 @@
 use crate::builds::progress::BuildTracker;
 use crate::config::Config;
 use crate::db::Database;
-use crate::latency::Metrics;
+use crate::request_metrics::Metrics;
 use crate::sampler_cache::SamplerCache;
 use crate::throughput::Throughput;
 use crate::workers::WorkerRegistry;

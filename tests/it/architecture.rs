@@ -40,6 +40,69 @@ fn no_file_imports_itself_around_a_loop() {
     assert!(report.is_empty(), "import cycles between files:\n{report}");
 }
 
+/// The coordinator's layers (docs/architecture.md): the routes (with
+/// `lib.rs`, which serves them) over the domain (`report/`, `leasing/`,
+/// `builds/`, the views, campaign starts…) over `store/` over `db/`. Every
+/// import points down or sideways; only the routes speak HTTP (`axum`,
+/// `hyper`, `tower`); only `store/` and `db/` hold SQL statements; the
+/// store answers in its own error type.
+#[test]
+fn the_coordinator_s_layers_point_down() {
+    let root = workspace().join("server/src/lib.rs");
+    let graph = ModuleGraph::read(workspace(), &root).unwrap();
+    let layer = |file: &Path| -> u8 {
+        let path = file.to_string_lossy();
+        if path.starts_with("server/src/db/") {
+            0
+        } else if path.starts_with("server/src/store/") {
+            1
+        } else if path.starts_with("server/src/routes/") || path == "server/src/lib.rs" {
+            3
+        } else {
+            2
+        }
+    };
+    let mut wrong = Vec::new();
+    for (from, to) in &graph.edges {
+        let (a, b) = (&graph.files[*from], &graph.files[*to]);
+        if layer(a) < layer(b) {
+            wrong.push(format!("{} imports {} above it", a.display(), b.display()));
+        }
+    }
+    for (file, crates) in graph.files.iter().zip(&graph.crates) {
+        let http: Vec<&String> = crates
+            .iter()
+            .filter(|c| ["axum", "hyper", "tower", "tower_http"].contains(&c.as_str()))
+            .collect();
+        if layer(file) < 3 && !http.is_empty() {
+            wrong.push(format!("{} speaks HTTP ({http:?})", file.display()));
+        }
+    }
+    for (file, sql) in graph.files.iter().zip(&graph.sql) {
+        if layer(file) > 1 && !sql.is_empty() {
+            wrong.push(format!("{} holds SQL: {:?}", file.display(), sql[0]));
+        }
+    }
+    let store_errors = graph
+        .files
+        .iter()
+        .filter(|f| layer(f) <= 1)
+        .filter_map(|f| {
+            let text = std::fs::read_to_string(workspace().join(f)).unwrap();
+            (text.contains("ServiceError") && !f.ends_with("store/error.rs"))
+                .then(|| f.display().to_string())
+        })
+        .collect::<Vec<_>>();
+    for f in store_errors {
+        wrong.push(format!("{f} names the service's error type"));
+    }
+    assert!(wrong.is_empty(), "layering broken:\n{}", wrong.join("\n"));
+    // What the check relies on: it read the layers, their HTTP and SQL.
+    let sql_files = graph.sql.iter().filter(|s| !s.is_empty()).count();
+    assert!(sql_files >= 8, "{sql_files} files with SQL found");
+    assert!(graph.crates.iter().any(|c| c.contains("axum")));
+}
+
 /// The check finds what it is for, in a crate written for the purpose: a
 /// cycle through a parent that uses its child's type, and one made of a
 /// path in code and a path inside a macro. It does not count as an import
@@ -108,4 +171,34 @@ fn the_cycle_check_sees_uses_paths_and_macros() {
         graph.imports_of(Path::new("src/lib.rs")),
         vec![(Path::new("src/report.rs"), vec!["crate::report::N"])]
     );
+    // A store that imports its route, speaks HTTP and a route with SQL:
+    // what the coordinator's layer check looks for.
+    write(
+        "store/rows.rs",
+        "use super::Store;\nuse axum::Json;\npub struct Row(Store);\n\
+         pub fn f() -> u8 { crate::routes::M }\n",
+    );
+    write(
+        "routes.rs",
+        "pub const M: u8 = 2;\npub fn h() { let _ = format!(\"SELECT {}\", 1); }\n\
+         #[cfg(test)]\nmod tests { const Q: &str = \"DELETE FROM t\"; }\n",
+    );
+    let graph = ModuleGraph::read(dir.path(), &src.join("lib.rs")).unwrap();
+    let rows = graph
+        .files
+        .iter()
+        .position(|f| f.ends_with("store/rows.rs"))
+        .unwrap();
+    let routes = graph
+        .files
+        .iter()
+        .position(|f| f.ends_with("src/routes.rs"))
+        .unwrap();
+    assert!(graph.edges.contains(&(rows, routes)));
+    assert!(
+        graph.crates[rows].contains("axum"),
+        "{:?}",
+        graph.crates[rows]
+    );
+    assert_eq!(graph.sql[routes], vec!["SELECT {}".to_string()]);
 }

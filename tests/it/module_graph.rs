@@ -26,6 +26,13 @@ pub struct ModuleGraph {
     pub edges: BTreeSet<(usize, usize)>,
     /// For each edge, the paths that make it (as written, `::`-joined).
     pub because: BTreeMap<(usize, usize), BTreeSet<String>>,
+    /// For each file, the other crates it names (`axum`, `rusqlite`…):
+    /// the first segment of a path that is no module of this crate.
+    pub crates: Vec<BTreeSet<String>>,
+    /// For each file, its string literals that read as SQL statements
+    /// (they begin with `SELECT`, `INSERT`, `UPDATE` or `DELETE FROM`),
+    /// outside `#[cfg(test)]` items.
+    pub sql: Vec<Vec<String>>,
 }
 
 /// A module: the file that holds it (inline modules share their file) and
@@ -52,8 +59,9 @@ impl ModuleGraph {
             modules: BTreeMap::new(),
             scopes: Vec::new(),
             uses: Vec::new(),
+            tests: Vec::new(),
         };
-        reader.read_file(root, Vec::new(), true)?;
+        reader.read_file(root, Vec::new(), true, false)?;
         let mut names = Names {
             modules: reader.modules,
         };
@@ -61,19 +69,31 @@ impl ModuleGraph {
             names.import(module, item);
         }
         let mut because = BTreeMap::new();
+        let mut crates = vec![BTreeSet::new(); reader.files.len()];
+        let mut sql = vec![Vec::new(); reader.files.len()];
         for (file, ast) in reader.asts.iter().enumerate() {
             let mut visitor = PathCollector {
                 names: &names,
                 file,
                 module: reader.scopes[file].clone(),
                 because: &mut because,
+                crates: &mut crates[file],
+                sql: &mut sql[file],
             };
             visitor.visit_file(ast);
+            if reader.tests[file] {
+                // Test code may name anything; only its imports of this
+                // crate count (a cycle through a test is a cycle).
+                crates[file].clear();
+                sql[file].clear();
+            }
         }
         Ok(Self {
             files: reader.files,
             edges: because.keys().copied().collect(),
             because,
+            crates,
+            sql,
         })
     }
 
@@ -182,6 +202,9 @@ struct TreeReader {
     scopes: Vec<Vec<String>>,
     /// Every `use` item with the module it is written in.
     uses: Vec<(Vec<String>, syn::ItemUse)>,
+    /// Whether each file is test code (declared `#[cfg(test)] mod x;`, or
+    /// under such a module).
+    tests: Vec<bool>,
 }
 
 impl TreeReader {
@@ -193,6 +216,7 @@ impl TreeReader {
         path: &Path,
         module: Vec<String>,
         owns_directory: bool,
+        test: bool,
     ) -> Result<(), String> {
         let text = std::fs::read_to_string(path)
             .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
@@ -201,6 +225,7 @@ impl TreeReader {
         let shown = path.strip_prefix(&self.base).unwrap_or(path).to_path_buf();
         self.files.push(shown);
         self.scopes.push(module.clone());
+        self.tests.push(test);
         let directory = if owns_directory {
             path.parent().expect("a file has a folder").to_path_buf()
         } else {
@@ -251,10 +276,11 @@ impl TreeReader {
                 None => {
                     let flat = directory.join(format!("{name}.rs"));
                     let nested = directory.join(&name).join("mod.rs");
+                    let test = self.tests[file] || is_test(&declared.attrs);
                     if flat.exists() {
-                        self.read_file(&flat, child, false)?;
+                        self.read_file(&flat, child, false, test)?;
                     } else if nested.exists() {
-                        self.read_file(&nested, child, true)?;
+                        self.read_file(&nested, child, true, test)?;
                     } else {
                         return Err(format!(
                             "module {name} of {} has no file",
@@ -448,12 +474,21 @@ struct PathCollector<'a> {
     /// The module the visitor is in (inline modules push onto it).
     module: Vec<String>,
     because: &'a mut BTreeMap<(usize, usize), BTreeSet<String>>,
+    crates: &'a mut BTreeSet<String>,
+    sql: &'a mut Vec<String>,
 }
 
 impl PathCollector<'_> {
-    /// Resolves a path given as its segments' names and records the edge.
+    /// Resolves a path given as its segments' names and records the edge
+    /// (or the other crate it names).
     fn record(&mut self, segments: &[String]) {
         let Some(absolute) = self.names.absolute(&self.module, segments) else {
+            if segments.len() > 1 {
+                if let Some(first) = segments.first() {
+                    self.crates
+                        .insert(first.trim_start_matches("::").to_owned());
+                }
+            }
             return;
         };
         if let Some(target) = self.names.file_of(&absolute, 0) {
@@ -477,6 +512,12 @@ impl PathCollector<'_> {
             match &trees[i] {
                 TokenTree::Group(group) => {
                     self.tokens(group.stream());
+                    i += 1;
+                }
+                TokenTree::Literal(literal) => {
+                    if let Ok(text) = syn::parse_str::<syn::LitStr>(&literal.to_string()) {
+                        self.visit_lit_str(&text);
+                    }
                     i += 1;
                 }
                 TokenTree::Ident(ident)
@@ -507,7 +548,47 @@ impl PathCollector<'_> {
     }
 }
 
+/// Whether `attrs` hold `#[cfg(test)]`.
+fn is_test(attrs: &[syn::Attribute]) -> bool {
+    attrs.iter().any(|a| {
+        a.path().is_ident("cfg")
+            && a.parse_args::<syn::Meta>()
+                .is_ok_and(|m| m.path().is_ident("test"))
+    })
+}
+
 impl<'ast> Visit<'ast> for PathCollector<'_> {
+    fn visit_item(&mut self, item: &'ast syn::Item) {
+        let attrs: &[syn::Attribute] = match item {
+            syn::Item::Mod(i) => &i.attrs,
+            syn::Item::Fn(i) => &i.attrs,
+            syn::Item::Impl(i) => &i.attrs,
+            syn::Item::Const(i) => &i.attrs,
+            syn::Item::Use(i) => &i.attrs,
+            _ => &[],
+        };
+        if is_test(attrs) {
+            // Test code may name anything; only its imports of this crate
+            // count (a cycle through a test is a cycle).
+            let (sql, crates) = (std::mem::take(self.sql), std::mem::take(self.crates));
+            syn::visit::visit_item(self, item);
+            (*self.sql, *self.crates) = (sql, crates);
+            return;
+        }
+        syn::visit::visit_item(self, item);
+    }
+
+    fn visit_lit_str(&mut self, lit: &'ast syn::LitStr) {
+        let text = lit.value();
+        let start = text.trim_start();
+        if ["SELECT ", "INSERT ", "UPDATE ", "DELETE FROM "]
+            .iter()
+            .any(|k| start.starts_with(k))
+        {
+            self.sql.push(text);
+        }
+    }
+
     fn visit_item_mod(&mut self, item: &'ast syn::ItemMod) {
         if let Some((_, items)) = &item.content {
             self.module.push(item.ident.to_string());

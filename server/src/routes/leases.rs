@@ -1,11 +1,11 @@
 //! `/api/v1/leases`: workers take ranges of tests and report outcomes.
 
 use crate::error::ServiceError;
-use crate::latency::HoldClock;
 use crate::leasing::claim as claiming;
 use crate::leasing::fence;
 use crate::report::check::check_report;
 use crate::report::receive;
+use crate::routes::latency::HoldClock;
 use crate::routes::problem::ApiJson;
 use crate::routes::ApiPath;
 use crate::state::AppState;

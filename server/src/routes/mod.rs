@@ -13,10 +13,13 @@ mod events;
 mod extract;
 mod figures;
 mod health;
+mod latency;
 mod leases;
 mod libraries;
+mod metrics;
 pub mod openapi;
 mod problem;
+pub(crate) mod problem_io;
 #[cfg(test)]
 mod tests;
 
@@ -79,7 +82,7 @@ pub fn router(state: AppState) -> Router {
             "/api/v1/libraries/{id}/figures/picture.svg",
             get(figures::library_picture),
         )
-        .route("/metrics", get(crate::metrics::scrape))
+        .route("/metrics", get(metrics::scrape))
         .route("/", get(dashboard::index))
         .route("/campaigns/{id}", get(dashboard::campaign))
         .route("/libraries/{id}", get(dashboard::library))
@@ -99,7 +102,7 @@ pub fn router(state: AppState) -> Router {
         .layer(axum::middleware::from_fn(problem::log_internal_errors))
         .layer(from_fn_with_state(
             Arc::clone(&state.metrics),
-            crate::latency::observe,
+            latency::observe,
         ))
         .layer(tower_http::trace::TraceLayer::new_for_http())
         .with_state(state)
@@ -134,7 +137,7 @@ async fn refuse_large_bodies(
 pub const MAX_URI_BYTES: usize = 8192;
 
 /// Refuses a request target over [`MAX_URI_BYTES`] with 414 before routing.
-/// (Targets over 65,534 bytes hyper refuses itself; [`crate::problem_io`]
+/// (Targets over 65,534 bytes hyper refuses itself; [`problem_io`]
 /// gives that answer its problem body.)
 async fn refuse_long_uris(
     request: axum::extract::Request,

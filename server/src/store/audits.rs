@@ -3,6 +3,7 @@
 
 use crate::db::sql;
 use crate::store::error::StoreError;
+pub use crate::store::states::AuditState;
 use crate::store::states::{
     AUDIT_AGREED, AUDIT_OPEN, AUDIT_PAST, AUDIT_REPLICA, AUDIT_TIEBREAK, AUDIT_VOID,
     CAMPAIGN_RUNNING, LEASE_ACTIVE,
@@ -28,40 +29,6 @@ pub struct NewAudit {
     pub test_index: u64,
     pub reason: &'static str,
     pub first_outcome: String,
-}
-
-/// Where an audit stands (see [`crate::report::audit`] and the `audits` table).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum AuditState {
-    /// Waits for a second run.
-    Replica,
-    /// Two runs disagree; a third decides.
-    Tiebreak,
-    Agreed,
-    /// The third run decided and the minority was flagged.
-    Settled,
-    /// The first run was taken back with its worker.
-    Void,
-    /// Three runs, three outcomes.
-    Undecided,
-    /// Still open when its campaign stopped before its test.
-    Past,
-}
-
-impl AuditState {
-    /// The state as the `audits` table stores it.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            AuditState::Replica => "replica",
-            AuditState::Tiebreak => "tiebreak",
-            AuditState::Agreed => "agreed",
-            AuditState::Settled => "settled",
-            AuditState::Void => "void",
-            AuditState::Undecided => "undecided",
-            AuditState::Past => "past",
-        }
-    }
 }
 
 #[derive(Debug, Clone, serde::Deserialize)]

@@ -7,30 +7,10 @@ use crate::db::sql;
 use crate::store::audits;
 use crate::store::campaign_row::{self, CampaignRow, COLUMNS as CAMPAIGN_COLUMNS};
 use crate::store::error::StoreError;
+pub use crate::store::states::LeaseState;
 use crate::store::states::{CAMPAIGN_RUNNING, LEASE_ACTIVE, LEASE_CANCELLED, LEASE_DONE};
 use const_format::formatcp;
 use rusqlite::{params, Connection};
-
-/// Where a lease stands: being worked on (or expired, waiting for another
-/// worker), fully reported, or cancelled with its campaign.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum LeaseState {
-    Active,
-    Done,
-    Cancelled,
-}
-
-impl LeaseState {
-    /// The state as the `leases` table stores it.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            LeaseState::Active => "active",
-            LeaseState::Done => "done",
-            LeaseState::Cancelled => "cancelled",
-        }
-    }
-}
 
 #[derive(Debug, Clone, serde::Deserialize)]
 pub struct LeaseRow {

@@ -1,12 +1,69 @@
-//! Every state the store's SQL statements name, in one place: each is the
-//! enum's `as_str()` quoted as an SQL literal (a test checks them against
-//! the enums), spliced into the statements at compile time
+//! The states of the store's rows (a lease's, an audit's; campaigns' and
+//! libraries' are the API's enums), and every state its SQL statements
+//! name, in one place: each is the enum's `as_str()` quoted as an SQL
+//! literal (a test checks them against the enums), spliced into the
+//! statements at compile time
 //! (`const_format::formatcp!`). Literals rather than bound values where a
 //! partial index must be seen to apply (`leases_active`, `leases_open`:
 //! `WHERE state = 'active'`), and everywhere else alike, so a statement
 //! reads as what it does.
 
 use const_format::formatcp;
+
+/// Where a lease stands: being worked on (or expired, waiting for another
+/// worker), fully reported, or cancelled with its campaign.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LeaseState {
+    Active,
+    Done,
+    Cancelled,
+}
+
+impl LeaseState {
+    /// The state as the `leases` table stores it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            LeaseState::Active => "active",
+            LeaseState::Done => "done",
+            LeaseState::Cancelled => "cancelled",
+        }
+    }
+}
+
+/// Where an audit stands (see `report/audit.rs` and the `audits` table).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum AuditState {
+    /// Waits for a second run.
+    Replica,
+    /// Two runs disagree; a third decides.
+    Tiebreak,
+    Agreed,
+    /// The third run decided and the minority was flagged.
+    Settled,
+    /// The first run was taken back with its worker.
+    Void,
+    /// Three runs, three outcomes.
+    Undecided,
+    /// Still open when its campaign stopped before its test.
+    Past,
+}
+
+impl AuditState {
+    /// The state as the `audits` table stores it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            AuditState::Replica => "replica",
+            AuditState::Tiebreak => "tiebreak",
+            AuditState::Agreed => "agreed",
+            AuditState::Settled => "settled",
+            AuditState::Void => "void",
+            AuditState::Undecided => "undecided",
+            AuditState::Past => "past",
+        }
+    }
+}
 
 /// `CampaignStatus::Pending`.
 pub const CAMPAIGN_PENDING: &str = "'pending'";
@@ -51,8 +108,6 @@ pub const PAIR_CANCELLED: &str = "'cancelled'";
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::store::audits::AuditState;
-    use crate::store::leases::LeaseState;
     use tslg_api::{CampaignStatus, LibraryStatus, PairStop};
 
     fn quoted(name: &str) -> String {

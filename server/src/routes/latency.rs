@@ -1,28 +1,20 @@
-//! Request latencies, observed as requests are answered: a histogram by
-//! method, route template and status, which `/metrics` exposes.
+//! Request latencies, observed as requests are answered: a middleware
+//! that times each request under its route template into
+//! [`crate::request_metrics::Metrics`].
 //!
 //! A lease request that asks to wait (long polling) is held while there is
 //! no work. That time is the workers' idleness, not the coordinator's
 //! slowness: the latency leaves it out (so an alert on the lease route's
 //! p99 means what it says), and a histogram of its own counts it.
 
+use crate::request_metrics::Metrics;
 use axum::extract::{MatchedPath, Request, State};
 use axum::middleware::Next;
 use axum::response::Response;
-use prometheus::{Histogram, HistogramOpts, HistogramVec, Registry};
 use std::future::Future;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
-
-/// Latency buckets in seconds: 0.5 ms to 10 s.
-const LATENCY_BUCKETS: [f64; 14] = [
-    0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0,
-];
-
-/// Buckets of the time a lease request was held, seconds: 10 ms to past
-/// the longest wait a request may ask (30 s, which the last ask may pass).
-const HELD_BUCKETS: [f64; 10] = [0.01, 0.05, 0.1, 0.5, 1.0, 2.5, 5.0, 10.0, 30.0, 60.0];
 
 /// Set on a response by a handler that held its request waiting for work:
 /// how long it waited, which is not the request's latency.
@@ -61,55 +53,6 @@ impl HoldClock {
     }
 }
 
-/// The metrics observed while serving.
-pub struct Metrics {
-    registry: Registry,
-    latency: HistogramVec,
-    held: Histogram,
-}
-
-impl Default for Metrics {
-    fn default() -> Self {
-        let registry = Registry::new();
-        let latency = HistogramVec::new(
-            HistogramOpts::new(
-                "tslg_http_request_duration_seconds",
-                "Time to answer an HTTP request, by method, route template and status.",
-            )
-            .buckets(LATENCY_BUCKETS.to_vec()),
-            &["method", "route", "status"],
-        )
-        .expect("valid histogram");
-        let held = Histogram::with_opts(
-            HistogramOpts::new(
-                "tslg_lease_request_held_seconds",
-                "Time lease requests that asked to wait were held for work \
-                 (left out of their latency): the workers' idle time.",
-            )
-            .buckets(HELD_BUCKETS.to_vec()),
-        )
-        .expect("valid histogram");
-        for metric in [
-            Box::new(latency.clone()) as Box<dyn prometheus::core::Collector>,
-            Box::new(held.clone()),
-        ] {
-            registry.register(metric).expect("registered once");
-        }
-        Self {
-            registry,
-            latency,
-            held,
-        }
-    }
-}
-
-impl Metrics {
-    /// The observed series, for a scrape.
-    pub fn gather(&self) -> Vec<prometheus::proto::MetricFamily> {
-        self.registry.gather()
-    }
-}
-
 /// Middleware: observes each request's latency under its route template
 /// (`/api/v1/campaigns/{id}`, so ids do not multiply the series).
 pub async fn observe(
@@ -138,11 +81,13 @@ pub async fn observe(
     let mut latency = started.elapsed();
     if let Some(HeldForWork(held)) = response.extensions().get::<HeldForWork>() {
         latency = latency.saturating_sub(*held);
-        metrics.held.observe(held.as_secs_f64());
+        metrics.observe_held(held.as_secs_f64());
     }
-    metrics
-        .latency
-        .with_label_values(&[method, route.as_str(), response.status().as_str()])
-        .observe(latency.as_secs_f64());
+    metrics.observe_latency(
+        method,
+        route.as_str(),
+        response.status().as_str(),
+        latency.as_secs_f64(),
+    );
     response
 }
