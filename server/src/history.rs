@@ -66,6 +66,63 @@ pub fn log_downsample(points: Vec<HistoryPoint>, max: usize) -> Vec<HistoryPoint
         .collect()
 }
 
+/// The persisted history of a campaign's prefix estimate (thinned as
+/// this module says), ending at the campaign's current prefix: at most
+/// `max` points, logarithmically spaced in tests.
+pub fn read(
+    conn: &Connection,
+    row: &CampaignRow,
+    max: usize,
+) -> Result<Vec<HistoryPoint>, StoreError> {
+    let rows = campaigns::history_rows(conn, row.id)?;
+    let z = row.rule().z();
+    let mut points: Vec<HistoryPoint> = rows
+        .into_iter()
+        .map(
+            |(indices, tests, events, s1, s2, outside_tests, outside_s1)| {
+                let fold = PrefixFold {
+                    estimator: ImportanceEstimator::from_sums(tests as u64, events as u64, s1, s2),
+                    indices: indices as u64,
+                    invalid: (indices - tests) as u64,
+                    outside: OutsideTally {
+                        tests: outside_tests as u64,
+                        s1: outside_s1,
+                        ..OutsideTally::default()
+                    },
+                    strata: row.strata_epsilon,
+                };
+                point(&fold, z)
+            },
+        )
+        .collect();
+    let current = row.fold();
+    if current.indices > points.last().map_or(0, |p| p.indices) {
+        points.push(point(&current, z));
+    }
+    Ok(log_downsample(points, max))
+}
+
+/// The estimate, interval and relative half-width of a prefix.
+pub fn point(fold: &PrefixFold, z: f64) -> HistoryPoint {
+    let e = &fold.estimator;
+    let (ci_low, ci_high) = fold.interval(z);
+    let r = fold.relative_half_width(z);
+    HistoryPoint {
+        tests: e.tests(),
+        indices: fold.indices,
+        events: e.events(),
+        estimate: fold.estimate(),
+        half_width: if e.tests() > 0 {
+            fold.half_width(z)
+        } else {
+            0.0
+        },
+        relative_half_width: r.is_finite().then_some(r),
+        ci_low: if e.tests() > 0 { ci_low } else { 0.0 },
+        ci_high: if e.tests() > 0 { ci_high } else { 0.0 },
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -136,62 +193,5 @@ mod tests {
         assert_eq!(kept.last().unwrap().indices, 1000);
         let two = log_downsample(kept, 2);
         assert_eq!(two.iter().map(|p| p.indices).collect::<Vec<_>>(), [1, 1000]);
-    }
-}
-
-/// The persisted history of a campaign's prefix estimate (thinned as
-/// this module says), ending at the campaign's current prefix: at most
-/// `max` points, logarithmically spaced in tests.
-pub fn read(
-    conn: &Connection,
-    row: &CampaignRow,
-    max: usize,
-) -> Result<Vec<HistoryPoint>, StoreError> {
-    let rows = campaigns::history_rows(conn, row.id)?;
-    let z = row.rule().z();
-    let mut points: Vec<HistoryPoint> = rows
-        .into_iter()
-        .map(
-            |(indices, tests, events, s1, s2, outside_tests, outside_s1)| {
-                let fold = PrefixFold {
-                    estimator: ImportanceEstimator::from_sums(tests as u64, events as u64, s1, s2),
-                    indices: indices as u64,
-                    invalid: (indices - tests) as u64,
-                    outside: OutsideTally {
-                        tests: outside_tests as u64,
-                        s1: outside_s1,
-                        ..OutsideTally::default()
-                    },
-                    strata: row.strata_epsilon,
-                };
-                point(&fold, z)
-            },
-        )
-        .collect();
-    let current = row.fold();
-    if current.indices > points.last().map_or(0, |p| p.indices) {
-        points.push(point(&current, z));
-    }
-    Ok(log_downsample(points, max))
-}
-
-/// The estimate, interval and relative half-width of a prefix.
-pub fn point(fold: &PrefixFold, z: f64) -> HistoryPoint {
-    let e = &fold.estimator;
-    let (ci_low, ci_high) = fold.interval(z);
-    let r = fold.relative_half_width(z);
-    HistoryPoint {
-        tests: e.tests(),
-        indices: fold.indices,
-        events: e.events(),
-        estimate: fold.estimate(),
-        half_width: if e.tests() > 0 {
-            fold.half_width(z)
-        } else {
-            0.0
-        },
-        relative_half_width: r.is_finite().then_some(r),
-        ci_low: if e.tests() > 0 { ci_low } else { 0.0 },
-        ci_high: if e.tests() > 0 { ci_high } else { 0.0 },
     }
 }

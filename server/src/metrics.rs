@@ -248,7 +248,7 @@ pub async fn exposition(state: &AppState) -> Result<Vec<u8>, ServiceError> {
         .iter()
         .take(crate::campaign_metrics::MAX_CAMPAIGN_SERIES)
         .map(|row| {
-            let mut view = crate::views::campaign_view(&row);
+            let mut view = crate::views::campaign_view(row);
             state.throughput.fill(&mut view);
             view
         })
