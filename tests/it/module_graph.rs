@@ -621,7 +621,18 @@ impl<'ast> Visit<'ast> for PathCollector<'_> {
 
     fn visit_path(&mut self, path: &'ast syn::Path) {
         let segments: Vec<String> = path.segments.iter().map(|s| s.ident.to_string()).collect();
-        self.record(&segments);
+        // A lone name in code is a variable, a function or an item: it names
+        // another file only through an import (a re-exported child's item
+        // used by its parent), never as a module.
+        let imported = segments.len() == 1
+            && self
+                .names
+                .modules
+                .get(&self.module)
+                .is_some_and(|m| m.imported.contains_key(&segments[0]));
+        if segments.len() > 1 || imported {
+            self.record(&segments);
+        }
         syn::visit::visit_path(self, path);
     }
 
