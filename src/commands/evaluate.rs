@@ -14,7 +14,7 @@ use std::path::PathBuf;
 use tslg_method::adaptive::AdaptiveSettings;
 use tslg_method::campaign::{run_campaign_tests, CampaignResult};
 use tslg_method::estimator::StoppingRule;
-use tslg_method::registry::AdaptiveRun;
+use tslg_method::registry::{AdaptiveRun, ScenarioCase};
 use tslg_method::warnings::{warnings, Dialect, WarningContext};
 
 #[derive(Debug, Args)]
@@ -100,7 +100,49 @@ struct Search {
     search_kind: &'static str,
 }
 
+/// What a campaign runs on, worked out from the arguments: the case (the
+/// library's, where one is given), the vehicle, the rule, and the library
+/// file the method samples from.
+struct Setup {
+    case: std::sync::Arc<dyn ScenarioCase>,
+    descriptor: tslg_method::cases::CaseDescriptor,
+    vut: serde_json::Value,
+    rule: StoppingRule,
+    outside: tslg_method::sampling::OutsideSpread,
+    /// The library file, for methods `library` and `adaptive`.
+    file: Option<Vec<u8>>,
+}
+
+/// Runs `tslg evaluate`.
 pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
+    let setup = set_up(args)?;
+    if let Some(other) = &args.paired_with {
+        let file = setup
+            .file
+            .as_deref()
+            .filter(|_| args.method == MethodArg::Library);
+        let plan = crate::commands::paired::Plan {
+            case: setup.case.as_ref(),
+            file,
+            epsilon: args.exploration.epsilon,
+            outside: setup.outside,
+            split: args.exploration.split.split(),
+            seed: args.seed,
+        };
+        return crate::commands::paired::run(&plan, &setup.vut, other, &setup.rule, args.json);
+    }
+    let (result, search) = run_campaign(args, &setup)?;
+    let report = report(args, &setup, result, search);
+    if args.json {
+        outln!("{}", serde_json::to_string_pretty(&report)?);
+        return Ok(());
+    }
+    print(&report, &setup.rule);
+    Ok(())
+}
+
+/// The arguments checked and the case, vehicle, rule and library read.
+fn set_up(args: &EvaluateArgs) -> anyhow::Result<Setup> {
     check_epsilon(args.exploration.epsilon)?;
     anyhow::ensure!(
         args.paired_with.is_none() || args.method != MethodArg::Adaptive,
@@ -139,29 +181,39 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
         .outside
         .map_or(descriptor.default_outside, OutsideArg::spread);
     let file = library
-        .as_ref()
         .filter(|_| args.method != MethodArg::Ndd)
-        .map(|(bytes, _)| bytes.as_slice());
-    if let Some(other) = &args.paired_with {
-        let file = file.filter(|_| args.method == MethodArg::Library);
-        let plan = crate::commands::paired::Plan {
-            case: case.as_ref(),
-            file,
-            epsilon: args.exploration.epsilon,
-            outside,
-            split: args.exploration.split.split(),
-            seed: args.seed,
-        };
-        return crate::commands::paired::run(&plan, &vut, other, &rule, args.json);
-    }
-    let (result, search) = match (args.method, file) {
+        .map(|(bytes, _)| bytes);
+    Ok(Setup {
+        case,
+        descriptor,
+        vut,
+        rule,
+        outside,
+        file,
+    })
+}
+
+/// Runs the campaign the method asks for: adaptive stages, or the library
+/// or NDD campaign.
+fn run_campaign(
+    args: &EvaluateArgs,
+    setup: &Setup,
+) -> anyhow::Result<(CampaignResult, Option<Search>)> {
+    let Setup {
+        case,
+        vut,
+        rule,
+        outside,
+        ..
+    } = setup;
+    Ok(match (args.method, setup.file.as_deref()) {
         (MethodArg::Adaptive, Some(file)) => {
             let run = case.adaptive_campaign(
                 file,
-                &vut,
+                vut,
                 args.exploration.epsilon,
                 AdaptiveSettings::default(),
-                &rule,
+                rule,
                 args.seed,
             )?;
             let AdaptiveRun {
@@ -189,26 +241,35 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
             let file = file.filter(|_| args.method == MethodArg::Library);
             let tests = case.campaign(
                 file,
-                &vut,
+                vut,
                 args.exploration.epsilon,
-                outside,
+                *outside,
                 args.exploration.split.split(),
                 args.seed,
             )?;
-            (run_campaign_tests(tests.as_ref(), &rule, &|_| false), None)
+            (run_campaign_tests(tests.as_ref(), rule, &|_| false), None)
         }
-    };
-    let exact = exact_answer(case.as_ref(), &vut);
-    let report = Report {
-        case: descriptor.name,
-        grid: descriptor.is_grid(),
-        preset: case.preset(),
+    })
+}
+
+/// What the campaign gave, beside the exact answer and with its warnings.
+fn report(
+    args: &EvaluateArgs,
+    setup: &Setup,
+    result: CampaignResult,
+    search: Option<Search>,
+) -> Report {
+    let exact = exact_answer(setup.case.as_ref(), &setup.vut);
+    Report {
+        case: setup.descriptor.name,
+        grid: setup.descriptor.is_grid(),
+        preset: setup.case.preset(),
         method: match args.method {
             MethodArg::Library => "library",
             MethodArg::Adaptive => "adaptive",
             MethodArg::Ndd => "ndd",
         },
-        vut,
+        vut: setup.vut.clone(),
         result,
         search,
         exact,
@@ -216,20 +277,14 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
         warnings: warnings(
             &result,
             WarningContext {
-                beta: rule.beta,
-                guard_outside: rule.guard_outside,
+                beta: setup.rule.beta,
+                guard_outside: setup.rule.guard_outside,
                 dialect: Dialect::Cli,
                 unexplored: matches!(args.method, MethodArg::Library)
                     && args.exploration.epsilon == 0.0,
             },
         ),
-    };
-    if args.json {
-        outln!("{}", serde_json::to_string_pretty(&report)?);
-        return Ok(());
     }
-    print(&report, &rule);
-    Ok(())
 }
 
 fn print(report: &Report, rule: &StoppingRule) {

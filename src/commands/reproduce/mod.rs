@@ -20,7 +20,8 @@ use crate::commands::local::{build_library, exact_report, watch_campaigns, Exact
 use crate::commands::remote::exposure_request;
 use std::path::PathBuf;
 use tslg_api::{
-    CampaignView, CreateCampaign, CreateLibrary, ExposureRequest, Method, Outside, SearchRequest,
+    CampaignView, CreateCampaign, CreateLibrary, ExposureRequest, LibraryView, Method, Outside,
+    SearchRequest,
 };
 use tslg_client::Client;
 use tslg_method::estimator::z_for_confidence;
@@ -198,15 +199,45 @@ async fn run_case(
     let file = client.library_file(library.id).await?;
     let mut rows = Vec::new();
     for (label, vut) in &setting.vehicles {
-        let request = |method, seed| CreateCampaign {
-            case: setting.case.into(),
+        let vehicle = Vehicle {
+            setting,
+            library: &library,
+            file: &file,
+            exposure: &exposure,
+            label,
+            vut,
+            seed,
+        };
+        rows.push(vehicle.run(client, replicates, budget).await?);
+    }
+    Ok(rows)
+}
+
+/// One vehicle tested with one case's library.
+struct Vehicle<'a> {
+    setting: &'a CaseSetting,
+    library: &'a LibraryView,
+    /// The library's file, for the exact answer.
+    file: &'a [u8],
+    exposure: &'a ExposureRequest,
+    label: &'static str,
+    vut: &'a serde_json::Value,
+    seed: u64,
+}
+
+impl Vehicle<'_> {
+    /// A campaign of this vehicle on the library with `method` and `seed`,
+    /// at the case's ε and β.
+    fn request(&self, method: Method, seed: u64) -> CreateCampaign {
+        CreateCampaign {
+            case: self.setting.case.into(),
             method,
-            library_id: Some(library.id),
-            vut: vut.clone(),
-            epsilon: setting.epsilon,
+            library_id: Some(self.library.id),
+            vut: self.vut.clone(),
+            epsilon: self.setting.epsilon,
             outside: None,
             split: None,
-            beta: setting.beta,
+            beta: self.setting.beta,
             confidence: 0.9,
             max_tests: 10_000_000,
             seed,
@@ -214,48 +245,30 @@ async fn run_case(
             min_events: None,
             guard_outside: false,
             paired_with: None,
-        };
-        let mut ids = Vec::new();
-        for k in 0..replicates {
-            ids.push(
-                client
-                    .create_campaign(&request(Method::Library, seed + k))
-                    .await?
-                    .id,
-            );
         }
-        // Grid cases: one campaign that does not assume the library covers
-        // the vehicle's failures (the outside guard, with ε 0.5 spread by
-        // the exposure so exploring tests weigh at most P(X∖Φ)/ε).
-        let guarded = setting.grid;
-        if guarded {
-            let mut request = request(Method::Library, seed);
-            request.epsilon = 0.5;
-            request.outside = Some(Outside::Ndd);
-            request.guard_outside = true;
-            ids.push(client.create_campaign(&request).await?.id);
-        }
-        // Grid cases: as many adaptive campaigns, same seeds (stages that
-        // learn where this vehicle fails; docs/statistics.md).
-        if guarded {
-            for k in 0..replicates {
-                let request = request(Method::Adaptive, seed + k);
-                ids.push(client.create_campaign(&request).await?.id);
-            }
-        }
-        let mut library_runs = watch(client, &ids, &format!("{} {label}", setting.case)).await?;
-        let adaptive_runs = if guarded {
+    }
+
+    /// Its row: the library campaigns (and on grid cases the guarded and
+    /// the adaptive ones), the exact answer, and the NDD baseline run when
+    /// it fits the budget (else its analytic count).
+    async fn run(&self, client: &Client, replicates: u64, budget: u64) -> anyhow::Result<Row> {
+        let setting = self.setting;
+        let grid = setting.grid;
+        let ids = self.start(client, replicates).await?;
+        let label = format!("{} {}", setting.case, self.label);
+        let mut library_runs = watch(client, &ids, &label).await?;
+        let adaptive_runs = if grid {
             library_runs.split_off(library_runs.len() - replicates as usize)
         } else {
             Vec::new()
         };
-        let guarded_run = guarded.then(|| library_runs.pop()).flatten();
+        let guarded_run = grid.then(|| library_runs.pop()).flatten();
         let exact = exact_report(ExactQuestion {
             case: setting.case.into(),
             preset: Some(setting.preset.into()),
-            exposure: exposure.clone(),
-            vut: vut.clone(),
-            library_file: file.clone(),
+            exposure: self.exposure.clone(),
+            vut: self.vut.clone(),
+            library_file: self.file.to_vec(),
             epsilon: setting.epsilon,
             outside: library_runs[0].outside,
             beta: setting.beta,
@@ -264,11 +277,7 @@ async fn run_case(
         .await?;
         let (expected, source) = expected_ndd(&library_runs, exact.as_ref(), setting.beta);
         let ndd_run = if expected.is_finite() && expected <= budget as f64 {
-            // Room for an unlucky run: five times the expected count.
-            let mut ndd = request(Method::Ndd, seed);
-            ndd.max_tests = ((5.0 * expected) as u64).max(100_000);
-            let id = client.create_campaign(&ndd).await?.id;
-            Some(watch(client, &[id], &format!("{} {label} ndd", setting.case)).await?[0].clone())
+            Some(self.ndd_baseline(client, expected, &label).await?)
         } else {
             None
         };
@@ -276,14 +285,14 @@ async fn run_case(
             Some(v) => (v.tests as f64, NddSource::Run),
             None => (expected, source),
         };
-        rows.push(Row {
+        Ok(Row {
             case: setting.case,
             preset: setting.preset,
-            exposure: library.exposure.clone(),
+            exposure: self.library.exposure.clone(),
             surrogate: setting.surrogate,
-            library_size: library.size.unwrap_or(0),
-            total_scenarios: library.total_scenarios,
-            vehicle: label,
+            library_size: self.library.size.unwrap_or(0),
+            total_scenarios: self.library.total_scenarios,
+            vehicle: self.label,
             epsilon: setting.epsilon,
             beta: setting.beta,
             library_runs,
@@ -294,9 +303,47 @@ async fn run_case(
             ndd_source,
             exact,
             paper: setting.paper,
-        });
+        })
     }
-    Ok(rows)
+
+    /// Starts the seeded library campaigns and, on grid cases, one that
+    /// does not assume the library covers the vehicle's failures (the
+    /// outside guard, with ε 0.5 spread by the exposure so exploring tests
+    /// weigh at most P(X∖Φ)/ε) and as many adaptive campaigns, same seeds
+    /// (stages that learn where this vehicle fails; docs/statistics.md).
+    async fn start(&self, client: &Client, replicates: u64) -> anyhow::Result<Vec<i64>> {
+        let mut ids = Vec::new();
+        for k in 0..replicates {
+            let request = self.request(Method::Library, self.seed + k);
+            ids.push(client.create_campaign(&request).await?.id);
+        }
+        if self.setting.grid {
+            let mut request = self.request(Method::Library, self.seed);
+            request.epsilon = 0.5;
+            request.outside = Some(Outside::Ndd);
+            request.guard_outside = true;
+            ids.push(client.create_campaign(&request).await?.id);
+            for k in 0..replicates {
+                let request = self.request(Method::Adaptive, self.seed + k);
+                ids.push(client.create_campaign(&request).await?.id);
+            }
+        }
+        Ok(ids)
+    }
+
+    /// The NDD baseline run to β, with room for an unlucky run: a budget of
+    /// five times the `expected` count.
+    async fn ndd_baseline(
+        &self,
+        client: &Client,
+        expected: f64,
+        label: &str,
+    ) -> anyhow::Result<CampaignView> {
+        let mut ndd = self.request(Method::Ndd, self.seed);
+        ndd.max_tests = ((5.0 * expected) as u64).max(100_000);
+        let id = client.create_campaign(&ndd).await?.id;
+        Ok(watch(client, &[id], &format!("{label} ndd")).await?[0].clone())
+    }
 }
 
 /// The NDD baseline's expected tests at β, 90%: from the exact `P(A)` where
