@@ -4,6 +4,7 @@
 //! estimator until the stopping rule holds. See `docs/architecture.md`.
 
 mod builds;
+mod campaign_end;
 mod campaign_metrics;
 mod campaign_start;
 mod config;

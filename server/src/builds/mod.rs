@@ -8,6 +8,7 @@ pub mod local;
 pub mod on_workers;
 pub mod progress;
 pub mod request;
+pub mod start;
 pub mod whole;
 
 use crate::state::AppState;

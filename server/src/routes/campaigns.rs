@@ -6,7 +6,7 @@ use crate::history;
 use crate::routes::problem::ApiJson;
 use crate::routes::{ApiPath, ApiQuery};
 use crate::state::AppState;
-use crate::store::{campaigns, pairs};
+use crate::store::campaigns;
 use crate::views::live_view;
 use axum::extract::State;
 use axum::http::{header, StatusCode};
@@ -189,13 +189,7 @@ pub async fn cancel(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
 ) -> Result<Json<CampaignView>, ServiceError> {
-    let row = state.db.write(move |conn| pairs::cancel(conn, id)).await?;
-    for id in std::iter::once(id).chain(row.paired_with) {
-        state.samplers.forget(id);
-        state.throughput.forget(id);
-    }
-    // Cancelling a library build's enumeration fails the build.
-    crate::builds::on_workers::finish(&state, id).await?;
+    let row = crate::campaign_end::cancel(&state, id).await?;
     Ok(Json(live_view(&state, &row).await?))
 }
 
@@ -208,14 +202,6 @@ pub async fn delete(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
 ) -> Result<axum::http::StatusCode, ServiceError> {
-    let partner = state
-        .db
-        .write(move |conn| crate::store::deletion::delete_campaign(conn, id))
-        .await?;
-    for id in std::iter::once(id).chain(partner) {
-        state.samplers.forget(id);
-        state.throughput.forget(id);
-    }
-    tracing::info!(campaign = id, "campaign deleted");
+    crate::campaign_end::delete(&state, id).await?;
     Ok(axum::http::StatusCode::NO_CONTENT)
 }
