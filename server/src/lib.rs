@@ -4,25 +4,17 @@
 //! estimator until the stopping rule holds. See `docs/architecture.md`.
 
 mod builds;
-mod campaign_end;
-mod campaign_metrics;
-mod campaign_start;
+mod campaign;
 mod config;
 mod db;
 mod error;
-mod event_export;
-mod history;
 mod leasing;
-mod metrics;
 mod report;
-mod request_metrics;
 mod routes;
-mod sampler_cache;
 mod state;
 mod store;
-mod throughput;
+mod telemetry;
 mod validate;
-mod views;
 mod work_signal;
 mod workers;
 

@@ -1,11 +1,11 @@
 //! Shared state of the request handlers.
 
 use crate::builds::progress::BuildTracker;
+use crate::campaign::tests_cache::SamplerCache;
 use crate::config::Config;
 use crate::db::Database;
-use crate::request_metrics::Metrics;
-use crate::sampler_cache::SamplerCache;
-use crate::throughput::Throughput;
+use crate::telemetry::requests::Metrics;
+use crate::telemetry::throughput::Throughput;
 use crate::workers::WorkerRegistry;
 use std::sync::Arc;
 use tokio::sync::Semaphore;

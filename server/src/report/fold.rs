@@ -8,8 +8,8 @@
 //! outcomes in index order and checks the stopping rule at every index
 //! (SPEC §7), so the stop index does not depend on who reported what when.
 
+use crate::campaign::history;
 use crate::error::ServiceError;
-use crate::history;
 use crate::report::check::CheckedReport;
 use crate::report::explored::{exploring_in, ExploredRanges};
 use crate::report::replay::Explored;

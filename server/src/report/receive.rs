@@ -3,6 +3,7 @@
 //! vehicles, the weights and the audits of external programs), recording
 //! it, and the bookkeeping that follows. The route only parses.
 
+use crate::campaign::tests_cache::SamplerCache;
 use crate::config::Config;
 use crate::error::ServiceError;
 use crate::leasing::claim as claiming;
@@ -12,7 +13,6 @@ use crate::report::check::CheckedReport;
 use crate::report::record::{self, AuditPlan, Findings, Recorded};
 use crate::report::replay;
 use crate::report::replay_counts::{Place, ReplayCounts};
-use crate::sampler_cache::SamplerCache;
 use crate::state::AppState;
 use crate::store::{audits, campaigns, leases};
 use std::sync::Arc;

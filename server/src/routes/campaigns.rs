@@ -1,13 +1,13 @@
 //! `/api/v1/campaigns`: starting, watching and cancelling campaigns.
 
-use crate::campaign_start;
+use crate::campaign;
+use crate::campaign::history;
+use crate::campaign::views::live_view;
 use crate::error::ServiceError;
-use crate::history;
 use crate::routes::problem::ApiJson;
 use crate::routes::{ApiPath, ApiQuery};
 use crate::state::AppState;
 use crate::store::campaigns;
-use crate::views::live_view;
 use axum::extract::State;
 use axum::http::{header, StatusCode};
 use axum::response::IntoResponse;
@@ -24,7 +24,7 @@ pub async fn create(
     State(state): State<AppState>,
     ApiJson(req): ApiJson<CreateCampaign>,
 ) -> Result<impl IntoResponse, ServiceError> {
-    let row = campaign_start::start(&state, req).await?;
+    let row = campaign::start::start(&state, req).await?;
     let location = format!("/api/v1/campaigns/{}", row.id);
     let view = live_view(&state, &row).await?;
     Ok((
@@ -189,7 +189,7 @@ pub async fn cancel(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
 ) -> Result<Json<CampaignView>, ServiceError> {
-    let row = crate::campaign_end::cancel(&state, id).await?;
+    let row = crate::campaign::end::cancel(&state, id).await?;
     Ok(Json(live_view(&state, &row).await?))
 }
 
@@ -202,6 +202,6 @@ pub async fn delete(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
 ) -> Result<axum::http::StatusCode, ServiceError> {
-    crate::campaign_end::delete(&state, id).await?;
+    crate::campaign::end::delete(&state, id).await?;
     Ok(axum::http::StatusCode::NO_CONTENT)
 }

@@ -33,7 +33,7 @@ pub async fn list(
     ApiQuery(query): ApiQuery<EventQuery>,
 ) -> Result<Json<EventPage>, ServiceError> {
     Ok(Json(
-        crate::event_export::page(&state, id, query.after, query.limit).await?,
+        crate::campaign::events::page(&state, id, query.after, query.limit).await?,
     ))
 }
 
@@ -47,6 +47,6 @@ pub async fn openscenario(
     State(state): State<AppState>,
     ApiPath((id, index)): ApiPath<(i64, u64)>,
 ) -> Result<Response, ServiceError> {
-    let xml = crate::event_export::openscenario(&state, id, index).await?;
+    let xml = crate::campaign::events::openscenario(&state, id, index).await?;
     Ok(([(header::CONTENT_TYPE, "application/xml")], xml).into_response())
 }

@@ -35,11 +35,18 @@ async fn campaign(
         .db
         .read(move |conn| -> Result<_, ServiceError> {
             let row = campaigns::get(conn, id)?;
-            let points = crate::history::read(conn, &row, crate::history::DEFAULT_POINTS)?;
+            let points = crate::campaign::history::read(
+                conn,
+                &row,
+                crate::campaign::history::DEFAULT_POINTS,
+            )?;
             Ok((row, points))
         })
         .await?;
-    Ok((crate::views::live_view(state, &row).await?, points))
+    Ok((
+        crate::campaign::views::live_view(state, &row).await?,
+        points,
+    ))
 }
 
 /// The estimate with its interval band against tests (log axis).

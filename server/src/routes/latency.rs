@@ -1,13 +1,13 @@
 //! Request latencies, observed as requests are answered: a middleware
 //! that times each request under its route template into
-//! [`crate::request_metrics::Metrics`].
+//! [`crate::telemetry::requests::Metrics`].
 //!
 //! A lease request that asks to wait (long polling) is held while there is
 //! no work. That time is the workers' idleness, not the coordinator's
 //! slowness: the latency leaves it out (so an alert on the lease route's
 //! p99 means what it says), and a histogram of its own counts it.
 
-use crate::request_metrics::Metrics;
+use crate::telemetry::requests::Metrics;
 use axum::extract::{MatchedPath, Request, State};
 use axum::middleware::Next;
 use axum::response::Response;

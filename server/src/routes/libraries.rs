@@ -97,7 +97,7 @@ async fn live_view(
     state: &AppState,
     row: &libraries::LibraryRow,
 ) -> Result<LibraryView, ServiceError> {
-    let mut view = crate::views::library_view(row);
+    let mut view = crate::campaign::views::library_view(row);
     state.build_progress.fill(&mut view);
     crate::builds::on_workers::progress(state, &mut view).await?;
     Ok(view)

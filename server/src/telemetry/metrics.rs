@@ -246,9 +246,9 @@ pub async fn exposition(state: &AppState) -> Result<Vec<u8>, ServiceError> {
         .await?;
     let views: Vec<_> = running
         .iter()
-        .take(crate::campaign_metrics::MAX_CAMPAIGN_SERIES)
+        .take(crate::telemetry::campaign_metrics::MAX_CAMPAIGN_SERIES)
         .map(|row| {
-            let mut view = crate::views::campaign_view(row);
+            let mut view = crate::campaign::views::campaign_view(row);
             state.throughput.fill(&mut view);
             view
         })
@@ -256,7 +256,7 @@ pub async fn exposition(state: &AppState) -> Result<Vec<u8>, ServiceError> {
     let registry = scrape_registry(&snapshot, live, known);
     // Every running campaign counts toward the omitted ones; only the
     // newest have views built.
-    crate::campaign_metrics::register(&registry, &views, running.len());
+    crate::telemetry::campaign_metrics::register(&registry, &views, running.len());
     let mut families = state.metrics.gather();
     families.extend(registry.gather());
     let mut body = Vec::new();

@@ -3,8 +3,8 @@
 //! knows live (rate, time left, why it waits for workers, its audits and
 //! its pair); and of a pair and a library.
 
+use crate::campaign::history;
 use crate::error::ServiceError;
-use crate::history;
 use crate::leasing::size::predicted_unleased;
 use crate::state::AppState;
 use crate::store::audits::{self, AuditState};
