@@ -2,6 +2,36 @@
 //! importance-sampling campaigns in SQLite, hands out ranges of tests to
 //! workers as leases, and folds their results into each campaign's prefix
 //! estimator until the stopping rule holds. See `docs/architecture.md`.
+//!
+//! # Layout
+//!
+//! Four layers; imports point down or sideways, never up, and no two files
+//! import each other (`tests/it/architecture.rs` checks both).
+//!
+//! HTTP:
+//! - `routes/`: the API, the dashboard and `/metrics`: parse, call the
+//!   domain, answer; errors as problem+json (`routes/problem.rs`), tokens
+//!   (`routes/auth.rs`), request latencies (`routes/latency.rs`).
+//!
+//! Domain:
+//! - `campaign/`: a campaign's start, end, views, history, exported events,
+//!   and the coordinator's copy of its tests.
+//! - `report/`: what happens to a worker's report: shape, replays, audits,
+//!   recording, the fold, adaptive stages, the pair's fold.
+//! - `leasing/`: which lease a request gets, how many tests it holds, who
+//!   may keep, report on or give back a lease.
+//! - `builds/`: library builds, on the coordinator or on workers.
+//! - `telemetry/`: `/metrics`, per-campaign series, request latencies and
+//!   campaigns' rates.
+//! - `workers.rs` (the workers seen), `work_signal.rs` (waking held lease
+//!   requests), `state.rs` (the handlers' shared state), `validate.rs`
+//!   (names), `error.rs` (the service's error), `config.rs` (settings).
+//!
+//! Rows:
+//! - `store/`: one module per table family, its own error type, every SQL
+//!   statement and the states they name (`store/states.rs`).
+//! - `db/`: the SQLite database: one writer with group commit, a pool of
+//!   readers, the migrations.
 
 mod builds;
 mod campaign;

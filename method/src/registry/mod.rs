@@ -3,7 +3,7 @@
 //! opened by name with a preset and an exposure source, vehicles are given as
 //! JSON specifications, libraries are files in the case's own format, and a
 //! campaign's tests are run (worker) and checked (coordinator) by index.
-//! Adding a case means one arm in [`open_case`].
+//! Adding a case means one entry in [`crate::cases::BUILTIN`].
 
 mod adaptive_tests;
 mod build;

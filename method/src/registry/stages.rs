@@ -27,7 +27,7 @@ pub trait AdaptiveStages: Send + Sync {
 }
 
 /// What an adaptive campaign run in this process did, whatever the case
-/// ([`ScenarioCase::adaptive_campaign`]).
+/// ([`super::CampaignSampler::adaptive_campaign`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct AdaptiveRun {
     /// The estimate over the estimation tests; `indices` counts every

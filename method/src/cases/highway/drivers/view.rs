@@ -39,8 +39,8 @@ pub struct Action {
     pub change_lane: bool,
 }
 
-/// Whatever drives the VUT on the highway: a built-in [`Driver`] (which
-/// cannot fail) or an external program (see [`super::external`]).
+/// Whatever drives the VUT on the highway: a built-in [`super::Driver`] (which
+/// cannot fail) or an external program (see [`crate::cases::highway::external`]).
 pub trait ExitDriver {
     /// Why a decision failed (`Infallible` for built-in drivers).
     type Error;
