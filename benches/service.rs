@@ -138,6 +138,7 @@ async fn round_trips(count: usize, library: bool) -> anyhow::Result<(Vec<f64>, f
                 unhealthy: Vec::new(),
                 max_tests: None,
                 wait_seconds: None,
+                audits_only: false,
             })
             .await?
             .expect("work");

@@ -59,6 +59,12 @@ pub struct LeaseRequest {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     #[schema(minimum = 0.0, maximum = 30.0)]
     pub wait_seconds: Option<f64>,
+    /// Only an audit's run (a one-test lease of another worker's test) or
+    /// nothing: what a worker of a slow program asks for with its reports
+    /// while its lease runs, so that an audit holding a campaign's prefix
+    /// runs before its next chunk instead of after its lease.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub audits_only: bool,
 }
 
 /// The longest a lease request may wait for work (`wait_seconds`), well
@@ -83,6 +89,20 @@ pub struct UnhealthyProgram {
 pub struct WorkerList {
     /// The workers, by name.
     pub workers: Vec<WorkerView>,
+    /// What one test of each program costs on one thread, as the
+    /// coordinator measured it from reports (kept across campaigns: a
+    /// new campaign of the program starts its leases from it).
+    #[serde(default)]
+    pub costs: Vec<ProgramCost>,
+}
+
+/// The measured cost of a program's tests.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct ProgramCost {
+    /// The program as workers offer it, `NAME:case:mode`.
+    pub program: String,
+    /// Seconds one test takes on one thread.
+    pub seconds_per_test: f64,
 }
 
 /// A worker as its lease requests describe it.
@@ -156,6 +176,12 @@ pub struct Lease {
     /// Present when asked for with `include_tests`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub tests: Option<Vec<TestCase>>,
+    /// Seconds one test of the campaign's vehicle takes on one thread, as
+    /// the coordinator has measured it (on this campaign, or on earlier
+    /// ones of the same program or vehicle); absent while nobody knows.
+    /// The worker sizes its first chunk from it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seconds_per_test: Option<f64>,
 }
 
 /// `POST /api/v1/leases/{id}/heartbeat`.

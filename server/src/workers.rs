@@ -28,6 +28,26 @@ struct Entry {
     idle: bool,
 }
 
+/// The threads of the live workers: all of them, and those of the
+/// workers offering each program (`NAME:case:mode`). A campaign's leases
+/// are shared among the threads that can run it.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Fleet {
+    pub threads: u32,
+    pub offering: HashMap<String, u32>,
+}
+
+impl Fleet {
+    /// Threads able to run a campaign that `requires` a program (or none:
+    /// a built-in vehicle, which every worker runs).
+    pub fn serving(&self, requires: Option<&str>) -> u32 {
+        match requires {
+            None => self.threads,
+            Some(program) => self.offering.get(program).copied().unwrap_or(0),
+        }
+    }
+}
+
 #[derive(Default)]
 pub struct WorkerRegistry {
     workers: Mutex<HashMap<String, Entry>>,
@@ -129,6 +149,29 @@ impl WorkerRegistry {
             })
             .map(|(name, _)| name.clone())
             .collect()
+    }
+
+    /// Notes that `worker` was heard from (a heartbeat): a worker on a
+    /// long test asks for no lease for a while, and is still live.
+    pub fn heard(&self, worker: &str) {
+        let mut workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(entry) = workers.get_mut(worker) {
+            entry.last_seen = Instant::now();
+        }
+    }
+
+    /// The threads of the live workers (see [`Fleet`]).
+    pub fn fleet(&self) -> Fleet {
+        let workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
+        let mut fleet = Fleet::default();
+        for entry in workers.values().filter(|e| e.last_seen.elapsed() < LIVE) {
+            fleet.threads = fleet.threads.saturating_add(entry.threads);
+            for offer in &entry.offers {
+                let threads = fleet.offering.entry(offer.clone()).or_default();
+                *threads = threads.saturating_add(entry.threads);
+            }
+        }
+        fleet
     }
 
     /// Workers heard from within the last minute, and all workers known.

@@ -23,7 +23,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tslg_api::{CreateCampaign, LeaseRequest, Method, ResultReport};
 use tslg_client::Client;
-use tslg_method::estimator::MIN_BETA;
+use tslg_method::estimator::{DEFAULT_N_MIN, MIN_BETA};
 use tslg_worker::prepared::{Cache, PreparedCampaign};
 
 #[derive(Debug, Args)]
@@ -199,7 +199,7 @@ pub fn run(args: &LoadArgs) -> anyhow::Result<()> {
     let report = runtime.block_on(async {
         refuse_live_workers(&admin).await?;
         let commits_before = group_commits(&admin).await;
-        let campaign = admin.create_campaign(&load_campaign()).await?;
+        let campaign = admin.create_campaign(&load_campaign(&shape)).await?;
         let outcome = tokio::select! {
             run = tokio::time::timeout(limit, load(&worker, campaign.id, shape)) => match run {
                 Ok(run) => run,
@@ -336,8 +336,16 @@ struct Shape {
 
 /// The campaign the load runs on: cut-in NDD of the IDM at the smallest β
 /// a campaign takes, which needs billions of tests (about 2.7 × 10⁹ at
-/// P(A) ≈ 10⁻³), so it cannot stop during a load test.
-pub fn load_campaign() -> CreateCampaign {
+/// P(A) ≈ 10⁻³), so it cannot stop during a load test. Its `n_min` is the
+/// tests the load plans (`shape`): a campaign's leases reach no further
+/// than its stop can need (`server/src/leasing/size.rs`), which before
+/// its first prediction is `n_min` or twice its resolved prefix, and the
+/// load's leases are to be the size it asks for from the start.
+fn load_campaign(shape: &Shape) -> CreateCampaign {
+    let max_tests = 1 << 50;
+    let planned = (shape.workers as u64)
+        .saturating_mul(shape.requests as u64)
+        .saturating_mul(shape.lease_tests);
     CreateCampaign {
         case: "cut-in".into(),
         method: Method::Ndd,
@@ -346,9 +354,9 @@ pub fn load_campaign() -> CreateCampaign {
         epsilon: 0.1,
         beta: MIN_BETA,
         confidence: 0.9,
-        max_tests: 1 << 50,
+        max_tests,
         seed: 1,
-        n_min: None,
+        n_min: Some(planned.clamp(DEFAULT_N_MIN, max_tests)),
         min_events: None,
         guard_outside: false,
         paired_with: None,
@@ -434,6 +442,7 @@ async fn simulated_worker(
         unhealthy: Vec::new(),
         max_tests: Some(shape.lease_tests),
         wait_seconds: None,
+        audits_only: false,
     };
     let mut given = None;
     for round in 0..shape.requests {

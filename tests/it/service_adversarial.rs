@@ -420,6 +420,7 @@ async fn oversized_reports_are_refused_and_a_high_event_campaign_runs_through() 
             unhealthy: Vec::new(),
             max_tests: Some(70_000),
             wait_seconds: None,
+            audits_only: false,
         })
         .await
         .unwrap()

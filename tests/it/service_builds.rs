@@ -272,6 +272,7 @@ async fn an_upload_that_is_not_the_library_asked_for_changes_nothing() {
             unhealthy: vec![],
             max_tests: None,
             wait_seconds: None,
+            audits_only: false,
         })
         .await
         .unwrap()

@@ -145,6 +145,7 @@ async fn car_following_library_campaigns_agree_with_ndd_baselines_with_far_fewer
                 unhealthy: Vec::new(),
                 max_tests: None,
                 wait_seconds: None,
+                audits_only: false,
             })
             .await
             .unwrap();

@@ -166,6 +166,7 @@ async fn invalid_tests_use_indices_but_are_not_counted_as_tests() {
             unhealthy: Vec::new(),
             max_tests: None,
             wait_seconds: None,
+            audits_only: false,
         })
         .await
         .unwrap()

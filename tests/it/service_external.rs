@@ -379,6 +379,7 @@ async fn only_workers_offering_a_program_get_its_tests() {
         unhealthy: Vec::new(),
         max_tests: None,
         wait_seconds: None,
+        audits_only: false,
     };
     for offers in [
         &[][..],

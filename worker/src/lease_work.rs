@@ -17,7 +17,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tokio::task::JoinHandle;
-use tslg_api::{Lease, ResultReport};
+use tslg_api::{Lease, LeaseRequest, ResultReport};
 
 /// What a lease of tests runs on: its campaign, the program when the
 /// vehicle is one, and the cells it names (adaptive campaigns).
@@ -78,6 +78,16 @@ pub fn lease_tests(
     })
 }
 
+/// What a chunk's report asks for besides its results.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Ask {
+    Nothing,
+    /// The worker's next lease: the lease's last chunk is running.
+    NextLease,
+    /// An audit this worker may run, if one is open.
+    Audit,
+}
+
 /// A chunk running on the pool: tests `from..to`, started at `started`.
 struct RunningChunk {
     from: u64,
@@ -87,16 +97,17 @@ struct RunningChunk {
 }
 
 impl LeaseTests {
-    /// Starts tests `from..from + chunk` (cut at the lease's end) on `pool`.
+    /// Starts tests `from..from + chunk` (cut at the lease's end) on `pool`;
+    /// none starts once `go_on` is false.
     fn start(
         &self,
         pool: &Arc<rayon::ThreadPool>,
         lease: &Lease,
-        from: u64,
-        chunk: u64,
+        (from, chunk): (u64, u64),
+        go_on: &Arc<AtomicBool>,
     ) -> RunningChunk {
         let to = (from + chunk).min(lease.end);
-        let (pool, tests) = (Arc::clone(pool), self.clone());
+        let (pool, tests, go_on) = (Arc::clone(pool), self.clone(), Arc::clone(go_on));
         let campaign = lease.campaign_id;
         let handle = tokio::task::spawn_blocking(move || {
             pool.install(|| {
@@ -105,8 +116,8 @@ impl LeaseTests {
                     tests.program.as_deref(),
                     tests.planned.as_deref(),
                     campaign,
-                    from,
-                    to,
+                    (from, to),
+                    &go_on,
                 )
             })
         });
@@ -176,23 +187,29 @@ impl Worker {
     /// Runs the lease's tests chunk by chunk, the next chunk running while
     /// the last one is reported (the threads do not wait for the
     /// coordinator's acknowledgement); returns how far the lease's tests
-    /// are reported. Each chunk's size comes from the last one's rate.
+    /// are reported. Each chunk's size comes from the last one's rate. A
+    /// program's reports ask for an audit this worker may run: one handed
+    /// out runs before the next chunk starts, so a campaign's prefix held
+    /// at an audited test waits for one chunk, not for this lease's end.
+    /// Once `go_on` is false (a report's or heartbeat's answer: the
+    /// campaign stopped) no test starts any more.
     async fn run_chunks(
         &mut self,
         lease: &Lease,
         link: &LeaseLink,
         tests: &LeaseTests,
-        proceed: &AtomicBool,
+        go_on: &Arc<AtomicBool>,
     ) -> anyhow::Result<u64> {
         let mut at = lease.resume_at;
         let mut chunk = first_chunk(
             self.chunks.get(lease.campaign_id),
             self.threads,
             lease.end.saturating_sub(at),
+            lease.seconds_per_test,
         );
         let pool = Arc::clone(&self.pool);
-        let mut running =
-            (at < lease.end && !self.stopping()).then(|| tests.start(&pool, lease, at, chunk));
+        let mut running = (at < lease.end && !self.stopping())
+            .then(|| tests.start(&pool, lease, (at, chunk), go_on));
         while let Some(RunningChunk {
             from,
             to,
@@ -203,23 +220,31 @@ impl Worker {
             let ran = handle.await?;
             let seconds = started.elapsed().as_secs_f64();
             if ran.end == from {
-                // The program turned unhealthy before this chunk ran.
+                // The program turned unhealthy, or the campaign stopped,
+                // before this chunk ran.
                 break;
             }
-            if ran.end == to
-                && to < lease.end
-                && proceed.load(Ordering::Relaxed)
-                && !self.stopping()
+            self.run_pending_audit().await;
+            if ran.end == to && to < lease.end && go_on.load(Ordering::Relaxed) && !self.stopping()
             {
-                chunk = measured_chunk((ran.end - from) as f64 / seconds.max(1e-6));
+                let rate = (ran.end - from) as f64 / seconds.max(1e-6);
+                chunk = measured_chunk(rate, self.threads);
                 self.chunks.set(lease.campaign_id, chunk);
-                running = Some(tests.start(&pool, lease, to, chunk));
+                running = Some(tests.start(&pool, lease, (to, chunk), go_on));
             }
             // The chunk started meanwhile is the lease's last: this report
             // asks for the next lease, which is then in hand when that
             // chunk ends (one request per lease fewer).
-            let last_started = running.as_ref().is_some_and(|r| r.to == lease.end);
-            let parts = self.chunk_parts(lease, from, &ran, seconds, last_started);
+            // A program's report while its lease's next chunk runs asks for
+            // an audit to run before the chunk after. The lease's last
+            // chunk asks nothing: its reports go as the tail, whose answer
+            // nobody reads, and the worker's next claim takes audits first.
+            let ask = match &running {
+                Some(r) if r.to == lease.end => Ask::NextLease,
+                Some(_) if tests.program.is_some() => Ask::Audit,
+                _ => Ask::Nothing,
+            };
+            let parts = self.chunk_parts(lease, from, &ran, seconds, ask);
             self.summary.events += ran.events.len() as u64;
             if running.is_none() && ran.end == lease.end && !self.stopping() {
                 // The lease's last chunk: its reports go while the threads
@@ -234,25 +259,43 @@ impl Worker {
             self.summary.tests += sent.accepted;
             at = sent.reported_to;
             if let Some(next) = sent.next_lease {
-                self.next_lease = Some((next, Instant::now()));
+                match ask {
+                    Ask::Audit => self.pending_audit = Some(next),
+                    _ => self.next_lease = Some((next, Instant::now())),
+                }
             }
             if !sent.proceed || at < to {
-                // A chunk started meanwhile is left to finish unreported.
+                // The campaign stopped, or the lease moved on: the chunk
+                // started meanwhile starts no more tests and is left
+                // unreported.
+                go_on.store(false, Ordering::Relaxed);
                 break;
             }
         }
         Ok(at)
     }
 
+    /// Runs the audit a report's answer handed out, if there is one (a
+    /// one-test lease, worked as any other).
+    async fn run_pending_audit(&mut self) {
+        let Some(audit) = self.pending_audit.take() else {
+            return;
+        };
+        let id = audit.id;
+        if let Err(e) = Box::pin(self.work(audit)).await {
+            tracing::warn!(lease = id, error = %e, "an audit run was abandoned");
+        }
+    }
+
     /// The reports of a chunk's tests `from..ran.end`; the last asks for
-    /// the next lease when `ask_next` (and the worker is not stopping).
+    /// what `ask` says (unless the worker is stopping).
     fn chunk_parts(
         &self,
         lease: &Lease,
         from: u64,
         ran: &RangeRun,
         seconds: f64,
-        ask_next: bool,
+        ask: Ask,
     ) -> Vec<ResultReport> {
         let who = Reporter {
             worker: &self.name,
@@ -270,9 +313,17 @@ impl Worker {
             PartLimits::default(),
         );
         attach_near_misses(&mut parts, &ran.near_misses);
-        if ask_next && !self.stopping() {
+        let request = match ask {
+            Ask::Nothing => None,
+            Ask::NextLease => Some(self.lease_request()),
+            Ask::Audit => Some(LeaseRequest {
+                audits_only: true,
+                ..self.lease_request()
+            }),
+        };
+        if let (Some(request), false) = (request, self.stopping()) {
             if let Some(part) = parts.last_mut() {
-                part.next_lease = Some(self.lease_request());
+                part.next_lease = Some(request);
             }
         }
         parts

@@ -7,6 +7,7 @@ use crate::external::{Program, ProgramRun};
 use crate::prepared::PreparedCampaign;
 use rayon::prelude::*;
 use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::sync::atomic::{AtomicBool, Ordering};
 use tslg_api::{EventResult, InvalidResult, NearMiss};
 use tslg_method::registry::TestOutcome;
 
@@ -18,7 +19,7 @@ const INVALID_TRIES: usize = 2;
 #[derive(Debug, Default)]
 pub struct RangeRun {
     /// Tests `from..end` ran; `end < to` when an external program turned
-    /// unhealthy, and the rest is left for others.
+    /// unhealthy (the rest is left for others) or the lease was stopped.
     pub end: u64,
     pub events: Vec<EventResult>,
     pub invalid: Vec<InvalidResult>,
@@ -38,13 +39,17 @@ pub struct Planned {
 
 /// Runs tests `from..to` in parallel, on the campaign's built-in vehicle or
 /// with `program`; returns the events and invalid tests in index order.
+/// Once `go_on` turns false (the campaign stopped, the lease is gone) no
+/// test starts any more: the range ends at the first test not run, and
+/// only what ran before it is kept (the built-in vehicle's spans, each a
+/// few microseconds, run to their end).
 pub fn run_range(
     p: &PreparedCampaign,
     program: Option<&Program>,
     planned: Option<&Planned>,
     campaign: i64,
-    from: u64,
-    to: u64,
+    (from, to): (u64, u64),
+    go_on: &AtomicBool,
 ) -> RangeRun {
     if program.is_none() && planned.is_none() {
         if let Some(ran) = run_spans(p, from, to) {
@@ -59,6 +64,9 @@ pub fn run_range(
     let mut found: Vec<(u64, ProgramRun)> = (from..to)
         .into_par_iter()
         .filter_map(|index| {
+            if !go_on.load(Ordering::Relaxed) {
+                return Some((index, ProgramRun::Skipped));
+            }
             let cell = planned.map(|p| p.tests[(index - p.first) as usize]);
             let run = match (program, cell) {
                 (Some(program), None) => program.run_test(p.tests.as_ref(), campaign, index),

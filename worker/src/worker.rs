@@ -44,6 +44,9 @@ pub struct Worker {
     /// The chunk sizes measured on recent campaigns, which their next
     /// leases start from ([`crate::chunks::first_chunk`]).
     pub chunks: ChunkSizes,
+    /// An audit's run handed out with a report, to run before the next
+    /// chunk (or, at a lease's end, before the next lease).
+    pub pending_audit: Option<Lease>,
 }
 
 impl Worker {
@@ -91,6 +94,7 @@ impl Worker {
             tail: None,
             next_lease: None,
             chunks: ChunkSizes::default(),
+            pending_audit: None,
         })
     }
 
@@ -114,6 +118,9 @@ impl Worker {
     /// coordinator) is kept alive first, and dropped if the coordinator
     /// says it is gone or its campaign stopped.
     pub async fn held_lease(&mut self) -> Option<Lease> {
+        if let Some(audit) = self.pending_audit.take() {
+            return Some(audit);
+        }
         let (lease, since) = self.next_lease.take()?;
         if since.elapsed().as_secs_f64() < lease.heartbeat_seconds {
             return Some(lease);
@@ -139,6 +146,7 @@ impl Worker {
             unhealthy: self.programs.unhealthy(),
             max_tests: None,
             wait_seconds: None,
+            audits_only: false,
         }
     }
 
@@ -169,14 +177,15 @@ impl Worker {
     }
 
     /// Ends the worker's business with the coordinator: the last reports
-    /// are delivered, and a lease taken with a report but never started is
-    /// given back, so another worker gets it at once rather than when it
-    /// expires.
+    /// are delivered, and a lease taken with a report but never started
+    /// (an audit's run too) is given back, so another worker gets it at
+    /// once rather than when it expires.
     pub async fn finish(&mut self) {
         if let Some(tail) = self.tail.take() {
             self.summary.tests += tail.settle().await;
         }
-        if let Some((lease, _)) = self.next_lease.take() {
+        let unstarted = self.next_lease.take().map(|(lease, _)| lease);
+        for lease in unstarted.into_iter().chain(self.pending_audit.take()) {
             self.link(&lease)
                 .give_back("the worker is shutting down")
                 .await;

@@ -184,7 +184,14 @@ pub fn audit_counts(row: &CampaignRow, states: &[(AuditState, i64)]) -> (AuditCo
 /// external program, its audits.
 pub async fn live_view(state: &AppState, row: &CampaignRow) -> Result<CampaignView, ServiceError> {
     let mut view = campaign_view(row);
-    state.throughput.fill(&mut view);
+    // What the live workers able to run it can do: their threads over the
+    // cost of one test on one thread.
+    let serving = state.workers.fleet().serving(row.requires.as_deref());
+    let capacity = row
+        .cost_per_test
+        .filter(|c| *c > 0.0)
+        .map(|c| f64::from(serving) / c);
+    state.throughput.fill(&mut view, capacity);
     if let Some(waiting) = waiting_for_workers(state, row) {
         view.warnings.push(waiting);
     }

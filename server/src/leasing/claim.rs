@@ -4,18 +4,23 @@
 //! the running campaign whose turn comes first.
 
 use super::size::{
-    lease_size, predicted_unleased, SizingInput, LIBRARY_MAX_LEASE, MAX_INLINE_LEASE, MAX_LEASE,
+    lease_limit, lease_size, SizingInput, LIBRARY_MAX_LEASE, MAX_INLINE_LEASE, MAX_LEASE,
 };
 use crate::config::Config;
 use crate::db::{now_ms, Database};
 use crate::error::ServiceError;
 use crate::store::audits;
 use crate::store::campaigns::CampaignRow;
-use crate::store::leases::{self, Eligible, LeaseRow, Taker};
+use crate::store::leases::{self, Eligible, LeaseRow, Runs, Taker};
+use crate::workers::Fleet;
 use rusqlite::Connection;
 use std::sync::{Arc, LazyLock};
 
 pub use tslg_api::MAX_THREADS;
+
+/// Running campaigns a claim considers, in turn order: it takes the first
+/// that may lease more (those at their limit wait for results).
+const CANDIDATES: usize = 32;
 
 /// The longest a lease's work is expected to take for fair sharing, in
 /// milliseconds (a day): a campaign's turn never moves further ahead.
@@ -44,6 +49,8 @@ pub struct Claim<'a> {
     pub offers: &'a [String],
     /// The most tests the worker takes in one lease.
     pub max_tests: Option<u64>,
+    /// Only an audit's run, or nothing.
+    pub audits_only: bool,
 }
 
 /// Hands out work: first a lease that expired (its holder is presumed
@@ -59,8 +66,9 @@ pub async fn claim(
     db: &Database,
     config: &Arc<Config>,
     ask: &Claim<'_>,
+    fleet: Fleet,
 ) -> Result<Option<Claimed>, ServiceError> {
-    let job = ClaimJob::new(config, ask);
+    let job = ClaimJob::new(config, ask, fleet);
     let config = Arc::clone(config);
     db.write(move |conn| {
         // In the transaction: a flag set since the route's check still counts.
@@ -83,11 +91,12 @@ static SEQUENTIAL: LazyLock<String> = LazyLock::new(|| {
 
 impl ClaimJob {
     /// The claim `ask` as the writer runs it, timed now.
-    pub fn new(config: &Config, ask: &Claim<'_>) -> Self {
+    pub fn new(config: &Config, ask: &Claim<'_>, fleet: Fleet) -> Self {
         let Claim {
             inline,
             offers,
             max_tests,
+            audits_only,
             ..
         } = *ask;
         let now = now_ms();
@@ -108,6 +117,8 @@ impl ClaimJob {
             span_limit,
             now,
             expires,
+            audits_only,
+            fleet,
         }
     }
 }
@@ -143,14 +154,18 @@ pub fn claim_after(
         return Ok(None);
     }
     if let Some(reported) = retried_on {
+        let runs = match (job.audits, job.audits_only) {
+            (false, _) => Runs::Ranges,
+            (true, false) => Runs::Both,
+            (true, true) => Runs::Audits,
+        };
         if let Some(lease) = leases::unstarted(
             conn,
             &job.worker,
             reported,
             &job.eligible,
-            job.now,
-            job.span_limit,
-            job.audits,
+            (job.now, job.span_limit),
+            runs,
         )? {
             return Ok(Some(Claimed {
                 lease,
@@ -182,6 +197,12 @@ pub struct ClaimJob {
     span_limit: i64,
     now: i64,
     expires: i64,
+    /// Only an audit's run, or nothing (a slow program's worker asking
+    /// with a report while its lease runs).
+    audits_only: bool,
+    /// The threads of the live workers, which a campaign's leases are
+    /// shared among.
+    fleet: Fleet,
 }
 
 impl ClaimJob {
@@ -198,12 +219,24 @@ impl ClaimJob {
 
 /// [`claim`] on the writer connection, for a worker that is not flagged:
 /// an expired lease, else an audit's run (for a worker that may run
-/// audits), else a new range.
+/// audits), else a new range; only the audit's run when the job asks for
+/// audits only.
 fn claim_in(
     conn: &Connection,
     config: &Config,
     job: &ClaimJob,
 ) -> Result<Option<Claimed>, ServiceError> {
+    if job.audits_only {
+        let lease = if job.audits {
+            claim_audit(conn, job)?
+        } else {
+            None
+        };
+        return Ok(lease.map(|lease| Claimed {
+            lease,
+            campaign: None,
+        }));
+    }
     if let Some(id) = leases::find_expired(conn, &job.eligible, job.now, job.span_limit)? {
         let lease = leases::take_again(conn, id, &job.taker())?;
         tracing::info!(
@@ -228,27 +261,32 @@ fn claim_in(
     new_range(conn, config, job)
 }
 
-/// A new range of the campaign whose turn comes first, sized for the
-/// worker ([`new_lease_size`]); its turn moves to when the range's work is
-/// expected to be done.
+/// A new range of the first campaign in turn that may lease more, sized
+/// for the worker ([`new_lease_size`]); its turn moves to when the range's
+/// work is expected to be done.
 fn new_range(
     conn: &Connection,
     config: &Config,
     job: &ClaimJob,
 ) -> Result<Option<Claimed>, ServiceError> {
-    let Some(campaign) = leases::next_in_turn(conn, &job.eligible)? else {
-        return Ok(None);
-    };
-    let size = new_lease_size(config, &campaign, job.threads).min(job.span_limit as u64);
-    let end = campaign.next_index + size as i64;
-    let turn_at = job
-        .now
-        .saturating_add(expected_ms(&campaign, size, job.threads));
-    let lease = leases::insert_range(conn, &campaign, end, turn_at, &job.taker())?;
-    Ok(lease.map(|lease| Claimed {
-        lease,
-        campaign: Some(campaign),
-    }))
+    for campaign in leases::in_turn(conn, &job.eligible, CANDIDATES)? {
+        let serving = job.fleet.serving(campaign.requires.as_deref());
+        let size = new_lease_size(config, &campaign, job.threads, serving)
+            .min(job.span_limit.max(0) as u64);
+        if size == 0 {
+            continue;
+        }
+        let end = campaign.next_index + size as i64;
+        let turn_at = job
+            .now
+            .saturating_add(expected_ms(&campaign, size, job.threads));
+        let lease = leases::insert_range(conn, &campaign, end, turn_at, &job.taker())?;
+        return Ok(lease.map(|lease| Claimed {
+            lease,
+            campaign: Some(campaign),
+        }));
+    }
+    Ok(None)
 }
 
 /// A one-test lease for an open audit `job`'s worker may run (see
@@ -281,43 +319,36 @@ fn expected_ms(campaign: &CampaignRow, size: u64, threads: u32) -> i64 {
     ms.round().clamp(0.0, MAX_EXPECTED_MS as f64) as i64
 }
 
-/// An adaptive campaign's leases end with its running stage: the next is
-/// planned from this one's results.
-fn new_lease_size(config: &Config, campaign: &CampaignRow, threads: u32) -> u64 {
-    let end = campaign
+/// The size of a new lease of `campaign` for a worker of `threads`
+/// threads, `serving` threads of live workers able to run it
+/// ([`lease_size`], up to [`lease_limit`]); 0 when it has leased all it
+/// may. `--lease-size` fixes the size (experiments, tests), within the
+/// budget and the running stage.
+fn new_lease_size(config: &Config, campaign: &CampaignRow, threads: u32, serving: u32) -> u64 {
+    let next_index = campaign.next_index.max(0) as u64;
+    let mut budget_end = campaign
         .stage_end
-        .map_or(campaign.max_tests, |e| e.min(campaign.max_tests));
-    let mut budget_left = (end - campaign.next_index).max(0) as u64;
+        .map_or(campaign.max_tests, |e| e.min(campaign.max_tests))
+        .max(0) as u64;
     if campaign.stage_end.is_some() {
         // Its leases list their tests.
-        budget_left = budget_left.min(MAX_INLINE_LEASE);
+        budget_end = budget_end.min(next_index + MAX_INLINE_LEASE);
     }
     if let Some(fixed) = config.lease_size {
-        return fixed.min(budget_left);
+        return fixed.min(budget_end.saturating_sub(next_index));
     }
-    // A campaign of a pair has no stop of its own to aim at (its fold's
-    // rule never converges): its leases grow with its prefix, as before a
-    // prediction.
-    let rule = campaign.fold_rule();
-    let fold = campaign.fold();
-    let r = fold.estimator.relative_half_width(rule.z());
-    lease_size(&SizingInput {
+    let size = lease_size(&SizingInput {
         threads,
+        serving_threads: serving,
         cost_per_test: campaign.cost_per_test,
         target_seconds: config.lease_target_seconds,
-        budget_left,
-        predicted_unleased: predicted_unleased(
-            fold.estimator.tests(),
-            fold.estimator.events(),
-            rule.min_events,
-            r,
-            rule.beta,
-            campaign.next_index as u64,
-        ),
-        resolved: fold.indices,
+        next_index,
+        resolved: campaign.indices.max(0) as u64,
+        limit: lease_limit(campaign),
         max_lease: match campaign.method {
             tslg_api::Method::Library => LIBRARY_MAX_LEASE,
             _ => MAX_LEASE,
         },
-    })
+    });
+    size.min(budget_end.saturating_sub(next_index))
 }

@@ -1,25 +1,35 @@
-//! How many tests a new lease gets.
+//! How many tests a new lease gets, and how far a campaign's leases may
+//! reach: sized in seconds of work from what a test costs, and never much
+//! more than the campaign can use (docs/operations.md, "Slow vehicles").
 //!
-//! A lease should keep a worker busy for about `target` seconds: long enough
-//! that the round trip is negligible, short enough that a lost worker costs
-//! little and the campaign does not overshoot its stop. With `c` the
-//! smoothed cost of one test on one thread and `T` the worker's threads,
-//! `size_time = target · T / c`. Near the goal the lease shrinks further:
-//! from the current prefix, `n_needed ≈ n (rₙ/β)²` tests reach `rₙ = β`
-//! (the half-width shrinks as `1/√n`), so no lease takes more than half of
-//! the tests predicted to be still unleased. Before the prefix allows a
-//! prediction (too few events), a lease holds at most half as many tests
-//! as the prefix has resolved (and at least a first lease): the leases
-//! grow geometrically with the prefix, so a campaign that turns out to
-//! need `N` tests is leased about `N` plus the leases in flight when it
-//! stops (each at most `N/2`), not a few seconds of work of a cheap test
-//! (millions) after a few thousand. Growth is tied to what is resolved,
-//! not to what was leased: workers that finish quickly and claim again
-//! while an earlier lease is still out would otherwise double the leased
-//! total at every claim (measured: 131,072 leased for a stop at 25,138).
+//! **How far** ([`lease_limit`]): a campaign's `next_index` stays within
+//! what its stop can still need. Before the prefix allows a prediction
+//! (too few events), that is `max(n_min, 2 × resolved)`: the leased total
+//! grows geometrically with what is resolved, not with what was leased
+//! (workers that finish quickly and claim again while an earlier lease is
+//! out would otherwise double it at every claim: 131,072 leased for a stop
+//! at 25,138, measured). After, it is the prediction `n (rₙ/β)²` (the
+//! half-width shrinks as `1/√n`), in indices. It is always a step past the
+//! resolved prefix while the campaign runs (a quarter of it, at least one
+//! test), so a campaign whose rule waits on more than the prediction (the
+//! outside guard) is never stalled. An adaptive campaign's leases reach
+//! no further than that, nor past the end of its running stage (its last
+//! stage usually holds more tests than the stop needs); a library
+//! build's reach its budget.
+//!
+//! **How many** ([`lease_size`]): `size_time = target · T / c` with `c`
+//! the cost of one test on one thread and `T` the worker's threads: long
+//! enough that the round trip is negligible, short enough that a lost
+//! worker costs little. While nobody knows the cost (a program never run
+//! here), one test per thread: its report sets `c`. And no more than the
+//! worker's share of the window up to the limit, `⌈(limit − resolved) ·
+//! T / W⌉` with `W` the threads of the live workers that can run the
+//! campaign: a campaign that needs 100 tests, with 8 one-thread workers,
+//! gives each about 13, not 256.
 
-/// Fewest tests in a lease.
-pub const MIN_LEASE: u64 = 16;
+use crate::store::campaign_row::CampaignRow;
+use tslg_api::Method;
+
 /// Most tests in a lease: far above what the time target gives a test of
 /// the fastest kernels (2 s on 2 threads at 40 ns a test is 10⁸), so the
 /// target decides; the cap only bounds a cost measured absurdly low.
@@ -28,54 +38,126 @@ pub const MIN_LEASE: u64 = 16;
 pub const MAX_LEASE: u64 = 1 << 27;
 /// Most tests in a lease of a library campaign: the old bound, kept where
 /// the fold may draw again every test between its prefix and the frontier
-/// to find the exploring ones (`store/fold.rs`, when a lagging lease's
+/// to find the exploring ones (`report/fold.rs`, when a lagging lease's
 /// last report clears the frontier: about one lease per other worker, at
 /// about 10⁷ draws a second while the writer waits). For a built-in
 /// vehicle the sets the coordinator's replay found are kept for that fold
-/// (`explored_ranges.rs`); an external program's tests are always drawn.
+/// (`report/explored.rs`); an external program's tests are always drawn.
 pub const LIBRARY_MAX_LEASE: u64 = 1 << 22;
-/// Tests per thread of a campaign's first leases, before any cost is known.
-pub const FIRST_LEASE_PER_THREAD: u64 = 256;
 /// Leases carrying their tests inline are capped (response size).
 pub const MAX_INLINE_LEASE: u64 = 10_000;
 
-/// What the size depends on.
+/// What a lease's size depends on.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SizingInput {
+    /// The asking worker's threads.
     pub threads: u32,
+    /// Threads of the live workers that can run the campaign (the asking
+    /// one among them).
+    pub serving_threads: u32,
     /// Seconds per test on one thread, once measured.
     pub cost_per_test: Option<f64>,
     pub target_seconds: f64,
-    /// Indices left in the budget: `max_tests − next_index`.
-    pub budget_left: u64,
-    /// `n_needed − next_index`, when the prefix allows a prediction.
-    pub predicted_unleased: Option<u64>,
-    /// Tests of the campaign's resolved prefix (every outcome below is
-    /// recorded and folded).
+    /// The campaign's first index not yet leased.
+    pub next_index: u64,
+    /// Indices of the campaign's resolved prefix.
     pub resolved: u64,
+    /// How far its leases may reach ([`lease_limit`]).
+    pub limit: u64,
     /// The bound of the campaign's kind: [`MAX_LEASE`], or
     /// [`LIBRARY_MAX_LEASE`].
     pub max_lease: u64,
 }
 
+/// The size of a new lease; 0 when the campaign has leased all it may.
 pub fn lease_size(input: &SizingInput) -> u64 {
-    let threads = f64::from(input.threads.max(1));
+    let left = input.limit.saturating_sub(input.next_index);
+    if left == 0 {
+        return 0;
+    }
+    let threads = u64::from(input.threads.max(1));
+    let serving = u64::from(input.serving_threads.max(input.threads).max(1));
+    let window = input.limit.saturating_sub(input.resolved);
+    let share = (u128::from(window) * u128::from(threads)).div_ceil(u128::from(serving));
+    let share = share.min(u128::from(u64::MAX)) as u64;
     let by_time = match input.cost_per_test {
-        Some(c) if c > 0.0 => {
-            (input.target_seconds * threads / c).min(input.max_lease as f64) as u64
+        Some(c) if c > 0.0 && c.is_finite() => {
+            (input.target_seconds * threads as f64 / c).min(input.max_lease as f64) as u64
         }
-        _ => FIRST_LEASE_PER_THREAD * u64::from(input.threads.max(1)),
+        _ => threads,
     };
-    let first = FIRST_LEASE_PER_THREAD * u64::from(input.threads.max(1));
-    let by_goal = input
-        .predicted_unleased
-        .map_or((input.resolved / 2).max(first), |left| {
-            (left / 2).max(MIN_LEASE)
-        });
-    by_time
-        .min(by_goal)
-        .clamp(MIN_LEASE, input.max_lease.max(MIN_LEASE))
-        .min(input.budget_left)
+    by_time.min(share).min(input.max_lease).max(1).min(left)
+}
+
+/// How far campaign `row`'s leases may reach: the most its `next_index`
+/// may be (see the module's documentation).
+pub fn lease_limit(row: &CampaignRow) -> u64 {
+    let rule = row.fold_rule();
+    let fold = row.fold();
+    limit(&LimitInput {
+        method: row.method,
+        max_tests: row.max_tests.max(0) as u64,
+        stage_end: row.stage_end.map(|end| end.max(0) as u64),
+        n_min: rule.n_min,
+        min_events: rule.min_events,
+        beta: rule.beta,
+        resolved: fold.indices,
+        tests: fold.estimator.tests(),
+        events: fold.estimator.events(),
+        relative_half_width: fold.relative_half_width(rule.z()),
+    })
+}
+
+/// What [`lease_limit`] reads of a campaign.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LimitInput {
+    pub method: Method,
+    pub max_tests: u64,
+    /// An adaptive campaign's running stage's end.
+    pub stage_end: Option<u64>,
+    pub n_min: u64,
+    pub min_events: u64,
+    pub beta: f64,
+    /// Indices of the resolved prefix, its valid tests and their events.
+    pub resolved: u64,
+    pub tests: u64,
+    pub events: u64,
+    /// `rₙ` of the prefix (infinite before it has an estimate).
+    pub relative_half_width: f64,
+}
+
+/// [`lease_limit`] of what a campaign's row says.
+pub fn limit(input: &LimitInput) -> u64 {
+    let max = input.max_tests;
+    let stage_end = match input.method {
+        Method::Enumerate | Method::Build => return max,
+        Method::Adaptive => Some(input.stage_end.map_or(0, |end| end.min(max))),
+        Method::Library | Method::Ndd => None,
+    };
+    let resolved = input.resolved;
+    let predicted = predicted_unleased(
+        input.tests,
+        input.events,
+        input.min_events,
+        input.relative_half_width,
+        input.beta,
+        0,
+    );
+    let wanted = match predicted {
+        // Valid tests to indices, at the prefix's share of valid tests.
+        Some(needed) => {
+            let needed = u128::from(needed.max(input.n_min));
+            let indices = match input.tests {
+                0 => needed,
+                tests => (needed * u128::from(resolved)).div_ceil(u128::from(tests)),
+            };
+            indices.min(u128::from(max)) as u64
+        }
+        None => input.n_min.max(resolved.saturating_mul(2)),
+    };
+    let step = (resolved / 4).max(1);
+    let reach = wanted.max(resolved.saturating_add(step)).min(max);
+    stage_end.map_or(reach, |end| reach.min(end))
 }
 
 /// Tests still needed beyond `next_index`, predicted from a prefix of `n`
@@ -115,18 +197,20 @@ mod tests {
     fn input() -> SizingInput {
         SizingInput {
             threads: 4,
+            serving_threads: 4,
             cost_per_test: None,
             target_seconds: 2.0,
-            budget_left: u64::MAX,
-            predicted_unleased: None,
-            resolved: u64::MAX,
+            next_index: 0,
+            resolved: 0,
+            limit: u64::MAX,
             max_lease: MAX_LEASE,
         }
     }
 
     #[test]
-    fn cheap_tests_get_large_leases_and_slow_tests_small_ones() {
-        assert_eq!(lease_size(&input()), 1024);
+    fn leases_hold_the_target_s_seconds_of_work_and_one_test_a_thread_before_a_cost() {
+        // Nobody knows the cost: one test per thread.
+        assert_eq!(lease_size(&input()), 4);
         // 0.5 µs per test: 2 s on 4 threads is 16 million.
         let cheap = SizingInput {
             cost_per_test: Some(5e-7),
@@ -136,6 +220,7 @@ mod tests {
         // 40 ns per test on 2 threads: 10⁸, under the cap.
         let cheapest = SizingInput {
             threads: 2,
+            serving_threads: 2,
             cost_per_test: Some(4e-8),
             ..input()
         };
@@ -146,66 +231,146 @@ mod tests {
             ..input()
         };
         assert_eq!(lease_size(&absurd), MAX_LEASE);
-        // A library campaign's bound.
         let library = SizingInput {
             max_lease: LIBRARY_MAX_LEASE,
             ..cheap
         };
         assert_eq!(lease_size(&library), LIBRARY_MAX_LEASE);
-        // 1 ms per test: 8000 tests.
+        // 1 ms per test: 8000 tests; 10 s: one a thread, not 16.
         let slow = SizingInput {
             cost_per_test: Some(1e-3),
             ..input()
         };
         assert_eq!(lease_size(&slow), 8000);
-        // 10 s per test: the minimum.
         let very_slow = SizingInput {
             cost_per_test: Some(10.0),
             ..input()
         };
-        assert_eq!(lease_size(&very_slow), MIN_LEASE);
+        assert_eq!(lease_size(&very_slow), 1);
     }
 
     #[test]
-    fn before_a_prediction_leases_hold_at_most_half_the_resolved_prefix() {
-        let cheap = SizingInput {
-            cost_per_test: Some(5e-7),
-            resolved: 0,
+    fn a_worker_takes_its_share_of_what_the_campaign_can_use() {
+        // 100 tests wanted, 8 one-thread workers, 50 ms a test (40 tests
+        // in 2 s): 13 each, not 40 (nor 2,048).
+        let share = SizingInput {
+            threads: 1,
+            serving_threads: 8,
+            cost_per_test: Some(0.05),
+            limit: 100,
             ..input()
         };
-        // The first leases: 256 a thread.
-        assert_eq!(lease_size(&cheap), 1024);
-        let grown = SizingInput {
-            resolved: 100_000,
-            ..cheap
+        assert_eq!(lease_size(&share), 13);
+        // Later: the share of what is not resolved, within what is left.
+        let later = SizingInput {
+            next_index: 91,
+            resolved: 26,
+            ..share
         };
-        assert_eq!(lease_size(&grown), 50_000);
-        // A prediction decides once there is one.
-        let predicted = SizingInput {
-            predicted_unleased: Some(1_000_000),
-            ..grown
+        assert_eq!(lease_size(&later), 9);
+        assert_eq!(
+            lease_size(&SizingInput {
+                next_index: 100,
+                ..later
+            }),
+            0,
+            "all leased: nothing"
+        );
+        // A worker of 4 threads takes 4 shares; one alone, everything.
+        let big = SizingInput {
+            threads: 4,
+            serving_threads: 11,
+            ..share
         };
-        assert_eq!(lease_size(&predicted), 500_000);
-    }
-
-    #[test]
-    fn leases_shrink_near_the_goal_and_respect_the_budget() {
-        let near = SizingInput {
+        assert_eq!(lease_size(&big), 37);
+        let alone = SizingInput {
+            serving_threads: 0,
             cost_per_test: Some(1e-6),
-            predicted_unleased: Some(1000),
-            ..input()
+            ..share
         };
-        assert_eq!(lease_size(&near), 500);
-        let past = SizingInput {
-            predicted_unleased: Some(0),
-            ..near
+        assert_eq!(lease_size(&alone), 100);
+    }
+
+    fn campaign() -> LimitInput {
+        LimitInput {
+            method: Method::Ndd,
+            max_tests: 10_000_000,
+            stage_end: None,
+            n_min: 100,
+            min_events: 10,
+            beta: 0.2,
+            resolved: 0,
+            tests: 0,
+            events: 0,
+            relative_half_width: f64::INFINITY,
+        }
+    }
+
+    #[test]
+    fn a_campaign_leases_what_its_stop_can_still_need() {
+        // Before any result: n_min.
+        assert_eq!(limit(&campaign()), 100);
+        // Before a prediction: twice what is resolved.
+        let growing = LimitInput {
+            resolved: 1000,
+            tests: 990,
+            events: 3,
+            ..campaign()
         };
-        assert_eq!(lease_size(&past), MIN_LEASE);
-        let budget = SizingInput {
-            budget_left: 7,
-            ..near
+        assert_eq!(limit(&growing), 2000);
+        // After: n (r/β)² valid tests, in indices (1 % invalid).
+        let predicted = LimitInput {
+            resolved: 1000,
+            tests: 990,
+            events: 30,
+            relative_half_width: 0.4,
+            ..campaign()
         };
-        assert_eq!(lease_size(&budget), 7);
+        assert_eq!(limit(&predicted), 3960 * 1000 / 990);
+        // A rule that waits on more than the prediction (the outside
+        // guard) is never stalled: a quarter past the prefix.
+        let waiting = LimitInput {
+            relative_half_width: 0.1,
+            ..predicted
+        };
+        assert_eq!(limit(&waiting), 1250);
+        // The budget bounds it, and so does an adaptive campaign's running
+        // stage; a build's budget decides alone.
+        assert_eq!(
+            limit(&LimitInput {
+                max_tests: 150,
+                ..predicted
+            }),
+            150
+        );
+        let stage = LimitInput {
+            method: Method::Adaptive,
+            stage_end: Some(5000),
+            ..predicted
+        };
+        assert_eq!(limit(&stage), 4000, "the prediction, within the stage");
+        assert_eq!(
+            limit(&LimitInput {
+                stage_end: Some(1500),
+                ..stage
+            }),
+            1500
+        );
+        assert_eq!(
+            limit(&LimitInput {
+                stage_end: None,
+                ..stage
+            }),
+            0,
+            "no stage runs while the next is planned"
+        );
+        assert_eq!(
+            limit(&LimitInput {
+                method: Method::Enumerate,
+                ..predicted
+            }),
+            10_000_000
+        );
     }
 
     #[test]

@@ -30,7 +30,7 @@ use crate::error::ServiceError;
 use crate::report::check::CheckedReport;
 use crate::report::fold::{fold_prefix, KnownExplored};
 use crate::report::mismatch::{describe, Mismatch};
-use crate::report::record::{check_effort, held_lease, stopped_ack, Recorded};
+use crate::report::record::{at_lease_limit, check_effort, held_lease, stopped_ack, Recorded};
 use crate::store::audits::{self, AuditRow, AuditState, NewAudit, RunColumn};
 use crate::store::leases::LeaseState;
 use crate::store::pairs;
@@ -282,6 +282,7 @@ fn record_audit_run_in(
             stopped: None,
             campaign_id: campaign.id,
             partner_stopped: None,
+            opens_work: false,
         });
     }
     check_effort(&lease, report, now_ms())?;
@@ -314,6 +315,8 @@ fn record_audit_run_in(
         stopped,
         campaign_id: campaign.id,
         partner_stopped,
+        // An audit held the prefix: the campaign may lease again.
+        opens_work: at_lease_limit(&campaign),
     })
 }
 

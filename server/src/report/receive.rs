@@ -387,6 +387,9 @@ fn account(state: &AppState, report: &ResultReport, recorded: &Recorded) {
         .filter(|i| i.index >= report.to - accepted)
         .count() as u64;
     state.workers.reported(&report.worker, accepted, invalid);
+    if recorded.opens_work {
+        state.work.announce();
+    }
     if accepted > 0 && recorded.ack.proceed {
         state.throughput.accepted(recorded.campaign_id, accepted);
     }

@@ -20,6 +20,7 @@ use crate::report::fold::{fold_prefix, KnownExplored};
 use crate::report::replay::Explored;
 use crate::store::audits::{self, NewAudit};
 use crate::store::campaigns::{self, CampaignRow};
+use crate::store::costs;
 use crate::store::leases::{self, LeaseRow, LeaseState};
 use crate::store::near_misses;
 use crate::store::prefix::Charge;
@@ -158,6 +159,7 @@ pub(crate) fn record_held(
             stopped: None,
             campaign_id: campaign.id,
             partner_stopped: None,
+            opens_work: false,
         });
     }
     check_effort(lease, report, now_ms())?;
@@ -192,9 +194,25 @@ pub(crate) fn record_held(
         replayed: known.map(Arc::new),
         kept: kept.as_deref(),
     };
+    let measured = charge.and_then(|c| c.cost_per_test);
+    let opens_work =
+        accepted > 0 && (at_lease_limit(campaign) || !(plan.waived || plan.audits.is_empty()));
     let own = fold_prefix(tx, campaign, tests, known, Some(checked), charge)?;
     // A campaign of a pair: the pair folds over what both resolved.
     let (stopped, partner_stopped) = crate::report::pair_fold::fold_after(tx, campaign, own)?;
+    // Its vehicle's cost, kept for later campaigns: when first measured,
+    // and when it stops.
+    if let Some(cost) = measured {
+        if campaign.cost_per_test.is_none() || stopped.is_some() {
+            let key = costs::key(
+                &campaign.case_name,
+                &campaign.preset,
+                &campaign.vut,
+                campaign.requires.as_deref(),
+            );
+            costs::put(tx, &key, cost)?;
+        }
+    }
     let status = stopped.unwrap_or(CampaignStatus::Running);
     let resume_at = resume_at.max(checked.to);
     Ok(Recorded {
@@ -211,6 +229,7 @@ pub(crate) fn record_held(
         stopped,
         campaign_id: campaign.id,
         partner_stopped,
+        opens_work,
     })
 }
 
@@ -323,6 +342,20 @@ pub struct Recorded {
     pub campaign_id: i64,
     /// The other campaign of the pair, when this report's pair stopped both.
     pub partner_stopped: Option<i64>,
+    /// Whether the report may have opened work: its campaign had leased
+    /// all it could (`leasing::size::lease_limit`, an adaptive campaign's
+    /// running stage) and its prefix moved, or it asked for audits. The
+    /// lease requests that wait for work are woken then, not at their
+    /// next recheck.
+    pub opens_work: bool,
+}
+
+/// Whether `campaign` has leased all it may now: its limit (what its stop
+/// can still need, or its running stage) is reached, so only results
+/// open work.
+pub fn at_lease_limit(campaign: &CampaignRow) -> bool {
+    campaign.status == CampaignStatus::Running
+        && campaign.next_index.max(0) as u64 >= crate::leasing::size::lease_limit(campaign)
 }
 
 /// Thread-seconds a report cost, prorated to the tests it newly resolved:

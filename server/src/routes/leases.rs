@@ -9,7 +9,7 @@ use crate::routes::latency::HoldClock;
 use crate::routes::problem::ApiJson;
 use crate::routes::ApiPath;
 use crate::state::AppState;
-use crate::store::{audits, campaigns};
+use crate::store::{audits, campaigns, costs};
 use crate::work_signal::FIRST_RECHECK;
 use axum::extract::State;
 use axum::http::StatusCode;
@@ -18,7 +18,7 @@ use axum::Json;
 use std::time::Duration;
 use tslg_api::{
     HeartbeatAck, Lease, LeaseFence, LeaseKey, LeaseRelease, LeaseRequest, LibraryUpload, Method,
-    Problem, ResultAck, ResultReport, TestCase, WorkerList, MAX_CLAIM_WAIT_SECONDS,
+    Problem, ProgramCost, ResultAck, ResultReport, TestCase, WorkerList, MAX_CLAIM_WAIT_SECONDS,
     MAX_INVALID_REASON,
 };
 use tslg_method::external::{check_program_name, ExternalMode};
@@ -127,7 +127,8 @@ fn check_lease_request(req: &LeaseRequest) -> Result<(), ServiceError> {
 /// no work right now.
 async fn grant(state: &AppState, req: &LeaseRequest) -> Result<Option<Lease>, ServiceError> {
     state.workers.seen(req);
-    match claiming::claim(&state.db, &state.config, &claim_of(req)).await? {
+    let fleet = state.workers.fleet();
+    match claiming::claim(&state.db, &state.config, &claim_of(req), fleet).await? {
         Some(claimed) => lease_of(state, req, claimed).await.map(Some),
         None => Ok(None),
     }
@@ -141,6 +142,7 @@ fn claim_of(req: &LeaseRequest) -> claiming::Claim<'_> {
         inline: req.include_tests,
         offers: &req.offers,
         max_tests: req.max_tests,
+        audits_only: req.audits_only,
     }
 }
 
@@ -228,6 +230,7 @@ async fn make_lease(
         ttl_seconds: ttl,
         heartbeat_seconds: ttl / 3.0,
         tests,
+        seconds_per_test: campaign.cost_per_test,
     })
 }
 
@@ -279,9 +282,19 @@ fn check_programs(req: &LeaseRequest) -> Result<(), ServiceError> {
 /// unhealthy.
 #[utoipa::path(get, path = "/api/v1/workers", responses((status = 200, body = WorkerList)))]
 pub async fn workers(State(state): State<AppState>) -> Result<Json<WorkerList>, ServiceError> {
-    let flagged = state.db.read(audits::flagged).await?;
+    let (flagged, costs) = state
+        .db
+        .read(|conn| Ok::<_, ServiceError>((audits::flagged(conn)?, costs::programs(conn)?)))
+        .await?;
     Ok(Json(WorkerList {
         workers: state.workers.list(&flagged),
+        costs: costs
+            .into_iter()
+            .map(|(program, seconds_per_test)| ProgramCost {
+                program,
+                seconds_per_test,
+            })
+            .collect(),
     }))
 }
 
@@ -320,6 +333,7 @@ pub async fn heartbeat(
     ApiPath(id): ApiPath<i64>,
     ApiJson(fence): ApiJson<LeaseFence>,
 ) -> Result<Json<HeartbeatAck>, ServiceError> {
+    state.workers.heard(&fence.worker);
     Ok(Json(
         fence::heartbeat(&state.db, &state.config, id, &fence).await?,
     ))
@@ -414,7 +428,7 @@ pub async fn results(
     let next = report
         .next_lease
         .as_ref()
-        .map(|next| claiming::ClaimJob::new(&state.config, &claim_of(next)));
+        .map(|next| claiming::ClaimJob::new(&state.config, &claim_of(next), state.workers.fleet()));
     let (mut ack, claimed) = receive::receive(&state, id, &report, &checked, next).await?;
     if let Some(next) = &report.next_lease {
         state.workers.seen(next);

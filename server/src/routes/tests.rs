@@ -108,7 +108,8 @@ fn quiet_report(worker: &str, lease: &Value) -> Value {
 
 #[tokio::test]
 async fn reports_beyond_the_limits_or_damaged_are_refused_precisely() {
-    let app = app(|_| {}).await;
+    // Leases of a fixed size: a first lease is otherwise one test.
+    let app = app(|c| c.lease_size = Some(100_000)).await;
     app.external_campaign().await;
     let (_, lease) = app.claim("w", 100_000).await;
     let id = lease["id"].as_i64().unwrap();
@@ -214,7 +215,11 @@ async fn a_flagged_worker_gets_nothing_until_an_operator_clears_it() {
 
 #[tokio::test]
 async fn an_audit_is_run_by_another_worker_and_holds_the_prefix_until_it_agrees() {
-    let app = app(|c| c.audit_share = 1.0).await;
+    let app = app(|c| {
+        c.audit_share = 1.0;
+        c.lease_size = Some(5);
+    })
+    .await;
     let id = app.external_campaign().await;
     // Both workers are seen before the first report, so its audits are
     // not waived; with a share of 1 every test is audited.
@@ -286,7 +291,7 @@ async fn an_overlong_target_is_a_414_problem() {
 /// flag holds (it commits although the report is refused).
 #[tokio::test]
 async fn a_small_forged_report_is_refused_and_its_worker_flagged() {
-    let app = app(|_| {}).await;
+    let app = app(|c| c.lease_size = Some(40)).await;
     let id = app.idm_ndd_campaign().await;
     let tests = app.state.samplers.cached(id).expect("built at creation");
     let events = |lease: &Value| -> Vec<u64> {

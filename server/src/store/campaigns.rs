@@ -3,6 +3,7 @@
 pub use crate::store::campaign_row::{CampaignRow, COLUMNS};
 
 use crate::db::sql;
+use crate::store::costs;
 use crate::store::error::StoreError;
 use crate::store::states::{CAMPAIGN_CANCELLED, CAMPAIGN_FAILED, CAMPAIGN_RUNNING};
 use const_format::formatcp;
@@ -38,8 +39,8 @@ pub fn insert(conn: &Connection, new: &NewCampaign) -> Result<CampaignRow, Store
         "INSERT INTO campaigns (case_name, preset, method, library_id, exposure_name, \
          exposure_fingerprint, exposure_table, vut, requires, epsilon, outside, beta, confidence, \
          n_min, min_events, max_tests, seed, status, guard_outside, exact_probability, split, \
-         adaptive, stage_start, stage_end, stage_kind, enumerate) \
-         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) \
+         adaptive, stage_start, stage_end, stage_kind, enumerate, cost_per_test) \
+         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) \
          RETURNING {COLUMNS}"
     );
     let adaptive = new.method == Method::Adaptive;
@@ -54,6 +55,17 @@ pub fn insert(conn: &Connection, new: &NewCampaign) -> Result<CampaignRow, Store
         other => other,
     };
     let first_stage = new.first_stage.as_ref();
+    // What its vehicle's tests cost in earlier campaigns: its first leases
+    // are sized in seconds of work.
+    let cost = costs::get(
+        conn,
+        &costs::key(
+            &new.case_name,
+            &new.preset,
+            &new.vut,
+            new.requires.as_deref(),
+        ),
+    )?;
     Ok(sql::one(
         conn,
         &sql,
@@ -84,6 +96,7 @@ pub fn insert(conn: &Connection, new: &NewCampaign) -> Result<CampaignRow, Store
             first_stage.map(|s| s.1 as i64),
             first_stage.map(|s| s.2),
             enumerate,
+            cost,
         ],
     )?)
 }

@@ -135,18 +135,20 @@ pub fn take_again(conn: &Connection, id: i64, taker: &Taker<'_>) -> Result<Lease
     get(conn, id)
 }
 
-/// The running campaign `eligible` allows whose turn comes first, with
-/// tests left to lease. A campaign with many tests waiting for their
+/// The running campaigns `eligible` allows with tests left to lease, at
+/// most `most`, whose turn comes first (the claim takes the first that
+/// may lease more, `leasing/size.rs`). A campaign with many tests waiting for their
 /// audits gets no new range until workers have run them: audits come
 /// first, and the work behind them cannot count before they are done. A
 /// campaign of a pair gets a new range only when it is not ahead of the
 /// other campaign's: the pair uses only the tests both resolved, so one
 /// running ahead (the other's program slow, or offered by no worker) would
 /// waste its tests; it is at most a lease ahead.
-pub fn next_in_turn(
+pub fn in_turn(
     conn: &Connection,
     eligible: &Eligible,
-) -> Result<Option<CampaignRow>, StoreError> {
+    most: usize,
+) -> Result<Vec<CampaignRow>, StoreError> {
     let filters = eligible.filters();
     let sql = format!(
         "SELECT {CAMPAIGN_COLUMNS} FROM campaigns c WHERE status = {CAMPAIGN_RUNNING} \
@@ -156,7 +158,7 @@ pub fn next_in_turn(
               (SELECT p.next_index FROM campaigns p WHERE p.id = c.paired_with)) \
          AND (SELECT COUNT(*) FROM audits a WHERE a.campaign_id = c.id \
               AND a.state IN {open}) < {MAX_OPEN_AUDITS} \
-         ORDER BY next_turn_at, id LIMIT 1",
+         ORDER BY next_turn_at, id LIMIT {most}",
         open = crate::store::states::AUDIT_OPEN
     );
     let filter_values = eligible.values();
@@ -164,7 +166,7 @@ pub fn next_in_turn(
         .iter()
         .map(|v| v as &dyn rusqlite::ToSql)
         .collect();
-    campaign_row::first(conn, &sql, values.as_slice())
+    campaign_row::rows(conn, &sql, values.as_slice(), most)
 }
 
 /// Leases `campaign`'s tests `start..end` to `taker` and moves its turn to
@@ -273,21 +275,35 @@ pub fn insert_audit_run(
     Ok(lease)
 }
 
+/// Which leases a request may be handed (see [`unstarted`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Runs {
+    /// Ranges only: the worker runs no audits.
+    Ranges,
+    /// Ranges and audits' runs.
+    Both,
+    /// Audits' runs only.
+    Audits,
+}
+
 /// A live lease of `worker` other than `besides` with nothing reported
 /// yet, the newest, that `eligible` allows, of at most `span_limit` tests,
-/// and an audit run only when `audits` (see `leasing::claim_after`).
+/// of the kind `runs` says (see `leasing::claim_after`).
 pub fn unstarted(
     conn: &Connection,
     worker: &str,
     besides: i64,
     eligible: &Eligible,
-    now: i64,
-    span_limit: i64,
-    audits: bool,
+    (now, span_limit): (i64, i64),
+    runs: Runs,
 ) -> Result<Option<LeaseRow>, StoreError> {
     let filters = eligible.filters();
     // An audit's run goes only to a request that may run audits.
-    let audits = if audits { "" } else { "AND l.audit_id IS NULL" };
+    let audits = match runs {
+        Runs::Ranges => "AND l.audit_id IS NULL",
+        Runs::Both => "",
+        Runs::Audits => "AND l.audit_id IS NOT NULL",
+    };
     let sql = format!(
         "SELECT {COLUMNS} FROM leases WHERE id = (SELECT l.id FROM leases l \
          JOIN campaigns c ON c.id = l.campaign_id \

@@ -4,6 +4,7 @@
 pub mod audits;
 pub mod campaign_row;
 pub mod campaigns;
+pub mod costs;
 pub mod deletion;
 pub mod error;
 pub mod leases;

@@ -249,7 +249,7 @@ pub async fn exposition(state: &AppState) -> Result<Vec<u8>, ServiceError> {
         .take(crate::telemetry::campaign_metrics::MAX_CAMPAIGN_SERIES)
         .map(|row| {
             let mut view = crate::campaign::views::campaign_view(row);
-            state.throughput.fill(&mut view);
+            state.throughput.fill(&mut view, None);
             view
         })
         .collect();

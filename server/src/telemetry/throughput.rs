@@ -65,12 +65,17 @@ impl Throughput {
         (count > 0 && seconds >= MIN_SPAN).then(|| tests as f64 / seconds)
     }
 
-    /// Fills the rate and the time left of a running campaign's view.
-    pub fn fill(&self, view: &mut CampaignView) {
+    /// Fills the rate and the time left of a running campaign's view: the
+    /// rate measured over the last minute, else (no two reports a second
+    /// apart yet: a slow vehicle's first tests) what the workers able to
+    /// run it can do, `capacity` (their threads over the cost of a test).
+    pub fn fill(&self, view: &mut CampaignView, capacity: Option<f64>) {
         if view.status.is_final() {
             return;
         }
-        view.tests_per_second = self.per_second(view.id);
+        view.tests_per_second = self
+            .per_second(view.id)
+            .or(capacity.filter(|c| c.is_finite() && *c > 0.0));
         // The rate counts every accepted test; the prediction valid ones.
         let valid_share = view.tests as f64 / view.indices.max(1) as f64;
         view.seconds_left = match (view.predicted_tests, view.tests_per_second) {

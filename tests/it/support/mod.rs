@@ -322,6 +322,7 @@ pub async fn claim(client: &Client, worker: &str) -> Option<Lease> {
             unhealthy: Vec::new(),
             max_tests: None,
             wait_seconds: None,
+            audits_only: false,
         })
         .await
         .expect("lease request")
@@ -603,6 +604,7 @@ pub fn ask(worker: &str, offers: &[&str]) -> tslg_api::LeaseRequest {
         unhealthy: Vec::new(),
         max_tests: None,
         wait_seconds: None,
+        audits_only: false,
     }
 }
 
