@@ -9,15 +9,83 @@
 //! tslg-worker --vut-exec rs-fvdm=target/release/examples/fvdm_vut
 //! ```
 //!
+//! Options make it another vehicle or a slow one: `--gain K` sets the
+//! FVDM's sensitivity `k` (0.85; a lower gain reacts later and crashes
+//! more), `--sleep SECONDS` waits that long at the start of every test, as
+//! a simulator or a test track would take, and `--tally FILE` appends a
+//! byte to FILE for every test, so a benchmark can count the tests run
+//! (`benches/slow_vehicle.rs`).
+//!
 //! The protocol (one JSON object per line) is docs/vut-protocol.md.
 
 use serde_json::{json, Value};
 use std::io::{BufRead, Write};
 
-/// `a = k (V₁ + V₂ tanh(C₁ (R − L) − C₂) − v)` with the built-in defaults.
-fn fvdm(speed: f64, gap: f64) -> f64 {
+/// The vehicle's settings, from the command line.
+#[derive(Debug, Default)]
+struct Settings {
+    /// The FVDM's sensitivity `k`.
+    gain: f64,
+    /// Seconds every test waits at its start.
+    sleep: f64,
+    /// Where a byte is appended for every test.
+    tally: Option<std::fs::File>,
+}
+
+impl Settings {
+    /// `--gain K`, `--sleep SECONDS` and `--tally FILE`, each optional.
+    fn parse(args: impl Iterator<Item = String>) -> Result<Self, String> {
+        let mut settings = Settings {
+            gain: 0.85,
+            ..Settings::default()
+        };
+        let mut args = args;
+        while let Some(flag) = args.next() {
+            let value = args.next().ok_or_else(|| format!("{flag} takes a value"))?;
+            let number = || {
+                value
+                    .parse::<f64>()
+                    .ok()
+                    .filter(|v| v.is_finite() && *v >= 0.0)
+                    .ok_or_else(|| format!("{flag} takes a number ≥ 0"))
+            };
+            match flag.as_str() {
+                "--gain" => settings.gain = number()?,
+                "--sleep" => settings.sleep = number()?,
+                "--tally" => {
+                    let file = std::fs::OpenOptions::new()
+                        .create(true)
+                        .append(true)
+                        .open(&value)
+                        .map_err(|e| format!("--tally {value}: {e}"))?;
+                    settings.tally = Some(file);
+                }
+                other => {
+                    return Err(format!(
+                        "unknown option {other}; options: --gain, --sleep, --tally"
+                    ))
+                }
+            }
+        }
+        Ok(settings)
+    }
+
+    /// A test starts: counted, then the wait.
+    fn start_test(&mut self) {
+        if let Some(tally) = &mut self.tally {
+            let _ = tally.write_all(b".");
+        }
+        if self.sleep > 0.0 {
+            std::thread::sleep(std::time::Duration::from_secs_f64(self.sleep));
+        }
+    }
+}
+
+/// `a = k (V₁ + V₂ tanh(C₁ (R − L) − C₂) − v)` with the built-in defaults
+/// but for `k`.
+fn fvdm(k: f64, speed: f64, gap: f64) -> f64 {
     let optimal_speed = 6.75 + 7.91 * (0.13 * (gap - 5.0) - 1.57).tanh();
-    0.85 * (optimal_speed - speed)
+    k * (optimal_speed - speed)
 }
 
 fn number(v: &Value) -> f64 {
@@ -27,7 +95,7 @@ fn number(v: &Value) -> f64 {
 /// The cut-in at `(range, range_rate)`: the leader keeps its speed; each
 /// step the acceleration is clipped to its bounds and to what keeps the
 /// speed in bounds, then the gap and the speed advance.
-fn crashes(world: &Value, scenario: &Value) -> bool {
+fn crashes(k: f64, world: &Value, scenario: &Value) -> bool {
     let (dt, v0) = (number(&world["dt"]), number(&world["initial_speed"]));
     let (a, v) = (&world["acceleration"], &world["speed"]);
     let accident_gap = number(&world["accident_gap"]);
@@ -40,7 +108,7 @@ fn crashes(world: &Value, scenario: &Value) -> bool {
     let steps = world["steps"].as_u64().unwrap_or(0);
     hit(gap)
         || (0..steps).any(|_| {
-            let accel = fvdm(speed, gap)
+            let accel = fvdm(k, speed, gap)
                 .clamp(number(&a[0]), number(&a[1]))
                 .clamp((number(&v[0]) - speed) / dt, (number(&v[1]) - speed) / dt);
             gap += (lead_speed - speed) * dt - accel * dt * dt / 2.0;
@@ -49,11 +117,12 @@ fn crashes(world: &Value, scenario: &Value) -> bool {
         })
 }
 
-fn respond(message: &Value, world: &mut Value) -> Value {
+fn respond(settings: &mut Settings, message: &Value, world: &mut Value) -> Value {
     match message["type"].as_str() {
         Some("hello") => json!({"type": "hello", "protocol": 1, "name": "rs-fvdm",
                                 "cases": {"cut-in": ["step", "episode"]}}),
         Some("reset") => {
+            settings.start_test();
             *world = message["world"].clone();
             json!({"type": "ready"})
         }
@@ -65,24 +134,35 @@ fn respond(message: &Value, world: &mut Value) -> Value {
                 return json!({"type": "error", "message": "no vehicle ahead"});
             };
             let a = &world["acceleration"];
-            let accel = fvdm(number(&message["ego"]["speed"]), number(&lead["gap"]))
-                .clamp(number(&a[0]), number(&a[1]));
+            let accel = fvdm(
+                settings.gain,
+                number(&message["ego"]["speed"]),
+                number(&lead["gap"]),
+            )
+            .clamp(number(&a[0]), number(&a[1]));
             json!({"type": "control", "acceleration": accel})
         }
         Some("episode") => {
-            json!({"type": "outcome", "event": crashes(world, &message["scenario"])})
+            json!({"type": "outcome", "event": crashes(settings.gain, world, &message["scenario"])})
         }
         _ => json!({"type": "error", "message": format!("unexpected message {message}")}),
     }
 }
 
 fn main() {
+    let mut settings = match Settings::parse(std::env::args().skip(1)) {
+        Ok(settings) => settings,
+        Err(e) => {
+            eprintln!("fvdm_vut: {e}");
+            std::process::exit(2);
+        }
+    };
     let mut world = Value::Null;
     let mut out = std::io::stdout().lock();
     for line in std::io::stdin().lock().lines() {
         let Ok(line) = line else { break };
         let reply = match serde_json::from_str(&line) {
-            Ok(message) => respond(&message, &mut world),
+            Ok(message) => respond(&mut settings, &message, &mut world),
             Err(e) => json!({"type": "error", "message": format!("not JSON: {e}")}),
         };
         if writeln!(out, "{reply}").and_then(|()| out.flush()).is_err() {

@@ -1,0 +1,315 @@
+//! Wall time to the answer with a slow vehicle under test: an external
+//! program (`examples/fvdm_vut.rs` with `--sleep d`: a fixed wait at the
+//! start of every test, as a simulator takes) driven by `W` workers of one
+//! thread each through a local coordinator. For each `(d, W)`: a library
+//! campaign (the FVDM program tested with the IDM's exhaustive cut-in
+//! library, on the authors' exposure table where it is found, as in the
+//! issue that asked for this bench; else on the built-in exposure, where
+//! that campaign needs about 10⁴ tests), an adaptive campaign (the same)
+//! and an NDD campaign of a
+//! vehicle that fails often (the FVDM with a lower gain, so that it stops
+//! within about 2,000 tests), each against the ideal: the tests it used
+//! times `d`, over `W` (an adaptive campaign's stages run one after
+//! another: `stages × d + tests × d / W`). Prints a Markdown table for
+//! docs/benchmarks.md.
+//!
+//! ```sh
+//! cargo build --release --example fvdm_vut
+//! cargo bench --bench slow_vehicle
+//! ```
+//!
+//! `TSLG_SLOW_SLEEPS` (seconds, comma-separated; default `0.01,0.05`) and
+//! `TSLG_SLOW_WORKERS` (default `1,4,8,16`) choose the rows.
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+use tslg_api::{CampaignView, CreateCampaign, Method};
+use tslg_client::Client;
+
+/// The NDD vehicle's gain: the FVDM at an eighth of its usual sensitivity
+/// fails on 3.5 % of the built-in exposure's cut-ins (exact, `tslg
+/// evaluate --method ndd --vut '{"model":"fvdm","k":0.1}'`), so its NDD
+/// baseline stops after about 1,900 tests at β 0.2.
+const HOT_GAIN: f64 = 0.1;
+
+/// The authors' cut-in table (`../shared/data`, or `$TSLG_SHARED_DATA`),
+/// when it is there.
+fn authors_table() -> Option<tslg_api::ExposureRequest> {
+    let dir = std::env::var_os("TSLG_SHARED_DATA").map_or_else(
+        || Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data"),
+        PathBuf::from,
+    );
+    let text = std::fs::read_to_string(dir.join("cutin_ndd_spmd.csv")).ok()?;
+    Some(tslg_api::ExposureRequest::Table {
+        name: "cutin_ndd_spmd.csv".into(),
+        text,
+    })
+}
+
+/// The Rust example built in release mode, next to this benchmark.
+fn example() -> PathBuf {
+    let exe = std::env::current_exe().expect("the bench's path");
+    let path = exe
+        .parent()
+        .and_then(Path::parent)
+        .expect("target/release")
+        .join("examples/fvdm_vut");
+    assert!(
+        path.exists(),
+        "build the example first: cargo build --release --example fvdm_vut"
+    );
+    path
+}
+
+fn list<T: std::str::FromStr>(var: &str, default: &str) -> Vec<T> {
+    std::env::var(var)
+        .unwrap_or_else(|_| default.into())
+        .split(',')
+        .map(|v| v.trim().parse().unwrap_or_else(|_| panic!("{var}: `{v}`")))
+        .collect()
+}
+
+/// One campaign's run.
+struct Row {
+    sleep: f64,
+    workers: usize,
+    kind: &'static str,
+    used: u64,
+    ran: u64,
+    audits: u64,
+    stages: u64,
+    wall: f64,
+    ideal: f64,
+    first_result: f64,
+}
+
+/// A coordinator and `workers` one-thread workers offering the program
+/// `slow` (the FVDM) and `hot` (the FVDM at [`HOT_GAIN`]), each waiting
+/// `sleep` per test, counting their tests into `dir`.
+struct Fleet {
+    url: String,
+    stop: tokio::sync::watch::Sender<bool>,
+    tasks: Vec<tokio::task::JoinHandle<()>>,
+    dir: tempfile::TempDir,
+}
+
+impl Fleet {
+    async fn start(sleep: f64, workers: usize) -> anyhow::Result<Self> {
+        let dir = tempfile::tempdir()?;
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await?;
+        let url = format!("http://{}", listener.local_addr()?);
+        let (stop, rx) = tokio::sync::watch::channel(false);
+        let stopped = |mut rx: tokio::sync::watch::Receiver<bool>| async move {
+            let _ = rx.wait_for(|s| *s).await;
+        };
+        let database = format!("sqlite://{}", dir.path().join("db.sqlite").display());
+        let config = tslg_server::Config::embedded(&database);
+        let coordinator = tslg_server::Coordinator::open(config).await?;
+        let mut tasks = vec![tokio::spawn({
+            let served = coordinator.serve(listener, stopped(rx.clone()));
+            async move {
+                served.await.expect("the coordinator");
+            }
+        })];
+        let exe = example();
+        for k in 0..workers {
+            let mut config = tslg_worker::WorkerConfig::local(&url, 1, format!("slow-{k}"));
+            let tally = |name: &str| dir.path().join(format!("{name}.tally"));
+            config.vut_exec = vec![
+                format!(
+                    "slow={} --sleep {sleep} --tally {}",
+                    exe.display(),
+                    tally("slow").display()
+                ),
+                format!(
+                    "hot={} --sleep {sleep} --gain {HOT_GAIN} --tally {}",
+                    exe.display(),
+                    tally("hot").display()
+                ),
+            ];
+            let run = tslg_worker::run(config, stopped(rx.clone()));
+            tasks.push(tokio::spawn(async move {
+                run.await.expect("a worker");
+            }));
+        }
+        Ok(Self {
+            url,
+            stop,
+            tasks,
+            dir,
+        })
+    }
+
+    /// Tests the program `name` has started so far, on every worker.
+    fn tally(&self, name: &str) -> u64 {
+        std::fs::metadata(self.dir.path().join(format!("{name}.tally"))).map_or(0, |m| m.len())
+    }
+
+    /// The count of `name` once it has not moved for a while (the workers
+    /// drop what is left of a stopped campaign's leases).
+    async fn settled_tally(&self, name: &str, sleep: f64) -> u64 {
+        let quiet = Duration::from_secs_f64(2.0 * sleep + 0.5);
+        let mut last = self.tally(name);
+        loop {
+            tokio::time::sleep(quiet).await;
+            let now = self.tally(name);
+            if now == last {
+                return now;
+            }
+            last = now;
+        }
+    }
+
+    async fn stop(self) {
+        let _ = self.stop.send(true);
+        for task in self.tasks {
+            let _ = task.await;
+        }
+    }
+}
+
+/// Runs `request` to its stop: the final view, the wall time, and when
+/// its first result came (the first report charged to it).
+async fn run(
+    client: &Client,
+    request: &CreateCampaign,
+) -> anyhow::Result<(CampaignView, f64, f64)> {
+    let started = Instant::now();
+    let mut view = client.create_campaign(request).await?;
+    let mut first = None;
+    while !view.status.is_final() {
+        tokio::time::sleep(Duration::from_millis(5)).await;
+        view = client.campaign(view.id).await?;
+        if first.is_none() && view.worker_seconds > 0.0 {
+            first = Some(started.elapsed().as_secs_f64());
+        }
+    }
+    let wall = started.elapsed().as_secs_f64();
+    Ok((view, wall, first.unwrap_or(wall)))
+}
+
+/// The IDM's exhaustive cut-in library on `exposure`, built through the
+/// service: its id.
+async fn idm_library(client: &Client, exposure: &tslg_api::ExposureRequest) -> anyhow::Result<i64> {
+    let mut view = client
+        .create_library(&tslg_api::CreateLibrary {
+            case: "cut-in".into(),
+            preset: None,
+            surrogate: serde_json::json!({"model": "idm"}),
+            exposure: exposure.clone(),
+            search: Some(tslg_api::SearchRequest::Exhaustive),
+            threshold: None,
+        })
+        .await?;
+    while view.status == tslg_api::LibraryStatus::Building {
+        tokio::time::sleep(Duration::from_millis(20)).await;
+        view = client.library(view.id).await?;
+    }
+    anyhow::ensure!(view.status == tslg_api::LibraryStatus::Ready, "{view:?}");
+    Ok(view.id)
+}
+
+fn campaign(method: Method, program: &str, library: Option<i64>) -> CreateCampaign {
+    CreateCampaign {
+        case: "cut-in".into(),
+        method,
+        library_id: library,
+        vut: serde_json::json!({"external": program, "mode": "episode"}),
+        epsilon: 0.1,
+        outside: None,
+        split: None,
+        beta: 0.2,
+        confidence: 0.9,
+        max_tests: 1_000_000,
+        seed: 2,
+        n_min: None,
+        min_events: None,
+        guard_outside: false,
+        paired_with: None,
+    }
+}
+
+async fn measure(sleep: f64, workers: usize) -> anyhow::Result<Vec<Row>> {
+    let fleet = Fleet::start(sleep, workers).await?;
+    let client = Client::new(&fleet.url, None)?;
+    let exposure = authors_table().unwrap_or(tslg_api::ExposureRequest::Builtin);
+    let library = idm_library(&client, &exposure).await?;
+    let mut rows = Vec::new();
+    for (kind, method, program) in [
+        ("library", Method::Library, "slow"),
+        ("adaptive", Method::Adaptive, "slow"),
+        ("ndd", Method::Ndd, "hot"),
+    ] {
+        let before = fleet.tally(program);
+        let library = (method != Method::Ndd).then_some(library);
+        let (view, wall, first_result) = run(&client, &campaign(method, program, library)).await?;
+        let ran = fleet.settled_tally(program, sleep).await - before;
+        let used = view.indices;
+        let stages = view.adaptive.as_ref().map_or(0, |a| a.stages);
+        // The runs audits add: one a test, two where the first two runs
+        // disagreed and a third decided (or did not).
+        let audits = view.audits.map_or(0, |a| {
+            a.open + a.agreed + a.void + 2 * (a.settled + a.undecided)
+        });
+        let w = workers as f64;
+        let ideal = used as f64 * sleep / w + stages as f64 * sleep;
+        rows.push(Row {
+            sleep,
+            workers,
+            kind,
+            used,
+            ran,
+            audits,
+            stages,
+            wall,
+            ideal,
+            first_result,
+        });
+        eprintln!(
+            "d {sleep} s, {workers} workers, {kind}: {used} tests used, {ran} run, {wall:.2} s"
+        );
+    }
+    fleet.stop().await;
+    Ok(rows)
+}
+
+fn main() -> anyhow::Result<()> {
+    let sleeps: Vec<f64> = list("TSLG_SLOW_SLEEPS", "0.01,0.05");
+    let workers: Vec<usize> = list("TSLG_SLOW_WORKERS", "1,4,8,16");
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()?;
+    let mut rows = Vec::new();
+    for &sleep in &sleeps {
+        for &w in &workers {
+            rows.extend(runtime.block_on(measure(sleep, w))?);
+        }
+    }
+    println!(
+        "| d (s) | workers | campaign | tests used | tests run | audit runs | stages | wall (s) | ideal (s) | wall / ideal | within target | first result (s) |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
+    for r in &rows {
+        let target = 1.3 * r.ideal + 1.0;
+        println!(
+            "| {} | {} | {} | {} | {} | {} | {} | {:.2} | {:.2} | {:.2} | {} | {:.2} |",
+            r.sleep,
+            r.workers,
+            r.kind,
+            r.used,
+            r.ran,
+            r.audits,
+            r.stages,
+            r.wall,
+            r.ideal,
+            r.wall / r.ideal,
+            if r.wall <= target && r.ran as f64 <= 1.2 * r.used as f64 + r.audits as f64 {
+                "yes"
+            } else {
+                "no"
+            },
+            r.first_result
+        );
+    }
+    Ok(())
+}
