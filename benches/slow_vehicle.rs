@@ -18,8 +18,14 @@
 //! cargo bench --bench slow_vehicle
 //! ```
 //!
-//! `TSLG_SLOW_SLEEPS` (seconds, comma-separated; default `0.01,0.05`) and
-//! `TSLG_SLOW_WORKERS` (default `1,4,8,16`) choose the rows.
+//! `TSLG_SLOW_SLEEPS` (seconds, comma-separated; default `0.01,0.05`),
+//! `TSLG_SLOW_WORKERS` (default `1,4,8,16`) and `TSLG_SLOW_CAMPAIGNS`
+//! (default `library,adaptive,ndd`) choose the rows.
+//!
+//! The last column checks the time left the service shows
+//! (`seconds_left`, as the dashboard and `tslg campaign watch` show it):
+//! what it said half-way through the run over the time the run then
+//! really took.
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -81,6 +87,8 @@ struct Row {
     wall: f64,
     ideal: f64,
     first_result: f64,
+    /// `seconds_left` shown half-way over the time that was left.
+    time_left: Option<f64>,
 }
 
 /// A coordinator and `workers` one-thread workers offering the program
@@ -168,24 +176,48 @@ impl Fleet {
     }
 }
 
-/// Runs `request` to its stop: the final view, the wall time, and when
-/// its first result came (the first report charged to it).
-async fn run(
-    client: &Client,
-    request: &CreateCampaign,
-) -> anyhow::Result<(CampaignView, f64, f64)> {
+/// A campaign's run to its stop.
+struct Run {
+    view: CampaignView,
+    wall: f64,
+    /// When its first result came (the first report charged to it).
+    first_result: f64,
+    /// The `seconds_left` shown nearest half-way, over the time then left.
+    time_left: Option<f64>,
+}
+
+/// Runs `request` to its stop, watching it as a user would.
+async fn run(client: &Client, request: &CreateCampaign) -> anyhow::Result<Run> {
     let started = Instant::now();
     let mut view = client.create_campaign(request).await?;
     let mut first = None;
+    let mut shown = Vec::new();
     while !view.status.is_final() {
         tokio::time::sleep(Duration::from_millis(5)).await;
         view = client.campaign(view.id).await?;
+        let now = started.elapsed().as_secs_f64();
         if first.is_none() && view.worker_seconds > 0.0 {
-            first = Some(started.elapsed().as_secs_f64());
+            first = Some(now);
+        }
+        if let Some(left) = view.seconds_left {
+            shown.push((now, left));
         }
     }
     let wall = started.elapsed().as_secs_f64();
-    Ok((view, wall, first.unwrap_or(wall)))
+    let time_left = shown
+        .iter()
+        .min_by(|a, b| {
+            (a.0 - wall / 2.0)
+                .abs()
+                .total_cmp(&(b.0 - wall / 2.0).abs())
+        })
+        .map(|&(at, left)| left / (wall - at));
+    Ok(Run {
+        view,
+        wall,
+        first_result: first.unwrap_or(wall),
+        time_left,
+    })
 }
 
 /// The IDM's exhaustive cut-in library on `exposure`, built through the
@@ -235,14 +267,23 @@ async fn measure(sleep: f64, workers: usize) -> anyhow::Result<Vec<Row>> {
     let exposure = authors_table().unwrap_or(tslg_api::ExposureRequest::Builtin);
     let library = idm_library(&client, &exposure).await?;
     let mut rows = Vec::new();
+    let chosen: Vec<String> = list("TSLG_SLOW_CAMPAIGNS", "library,adaptive,ndd");
     for (kind, method, program) in [
         ("library", Method::Library, "slow"),
         ("adaptive", Method::Adaptive, "slow"),
         ("ndd", Method::Ndd, "hot"),
     ] {
+        if !chosen.iter().any(|c| c == kind) {
+            continue;
+        }
         let before = fleet.tally(program);
         let library = (method != Method::Ndd).then_some(library);
-        let (view, wall, first_result) = run(&client, &campaign(method, program, library)).await?;
+        let Run {
+            view,
+            wall,
+            first_result,
+            time_left,
+        } = run(&client, &campaign(method, program, library)).await?;
         let ran = fleet.settled_tally(program, sleep).await - before;
         let used = view.indices;
         let stages = view.adaptive.as_ref().map_or(0, |a| a.stages);
@@ -264,9 +305,11 @@ async fn measure(sleep: f64, workers: usize) -> anyhow::Result<Vec<Row>> {
             wall,
             ideal,
             first_result,
+            time_left,
         });
         eprintln!(
-            "d {sleep} s, {workers} workers, {kind}: {used} tests used, {ran} run, {wall:.2} s"
+            "d {sleep} s, {workers} workers, {kind}: {used} tests used, {} leased, {ran} run, {audits} audit runs, {wall:.2} s",
+            view.leased
         );
     }
     fleet.stop().await;
@@ -286,13 +329,13 @@ fn main() -> anyhow::Result<()> {
         }
     }
     println!(
-        "| d (s) | workers | campaign | tests used | tests run | audit runs | stages | wall (s) | ideal (s) | wall / ideal | within target | first result (s) |"
+        "| d (s) | workers | campaign | tests used | tests run | audit runs | stages | wall (s) | ideal (s) | wall / ideal | within target | first result (s) | time left shown / actual, half-way |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for r in &rows {
         let target = 1.3 * r.ideal + 1.0;
         println!(
-            "| {} | {} | {} | {} | {} | {} | {} | {:.2} | {:.2} | {:.2} | {} | {:.2} |",
+            "| {} | {} | {} | {} | {} | {} | {} | {:.2} | {:.2} | {:.2} | {} | {:.2} | {} |",
             r.sleep,
             r.workers,
             r.kind,
@@ -308,7 +351,8 @@ fn main() -> anyhow::Result<()> {
             } else {
                 "no"
             },
-            r.first_result
+            r.first_result,
+            r.time_left.map_or("–".into(), |t| format!("{t:.2}"))
         );
     }
     Ok(())

@@ -580,25 +580,8 @@ impl<C: Case> Planner<'_, C> {
             Stage::Library(_) => state.spent.library_tests += planned.len,
             Stage::Search(_) => state.spent.search_tests += planned.len,
             Stage::Estimate(_) => {
-                let from = state.fold.indices;
-                let to = from + planned.len;
-                let outcomes: Vec<(u64, SparseOutcome)> = results
-                    .iter()
-                    .enumerate()
-                    .filter_map(|(k, r)| {
-                        let i = from + k as u64;
-                        match r {
-                            TestResult::Done { event: true, .. } => Some((
-                                i,
-                                SparseOutcome::Event(
-                                    planned.test(seed, planned.start + k as u64).1,
-                                ),
-                            )),
-                            TestResult::Done { .. } => None,
-                            TestResult::Invalid => Some((i, SparseOutcome::Invalid)),
-                        }
-                    })
-                    .collect();
+                let to = state.fold.indices + planned.len;
+                let outcomes = estimation_outcomes(&planned, seed, state.fold.indices, results);
                 if let Some((status, used)) =
                     fold_estimation_stage(&mut state.fold, rule, planned.end(), to, &outcomes)
                 {
@@ -631,6 +614,59 @@ impl<C: Case> Planner<'_, C> {
             stage,
         });
     }
+}
+
+impl<C: Case> Planner<'_, C> {
+    /// Whether the running stage is an estimation stage whose rule holds
+    /// within its first `results.len()` tests. The fold is sequential, so
+    /// [`Self::resolve`] then stops the campaign at the same index whatever
+    /// the stage's later tests give (it folds no further, and plans
+    /// nothing): a coordinator may resolve the stage at once with any
+    /// results after them, and its workers need not run them.
+    pub fn stops_within(
+        &self,
+        state: &AdaptiveState,
+        rule: &StoppingRule,
+        results: &[TestResult],
+    ) -> bool {
+        let planned = state.current();
+        if state.finished.is_some()
+            || !matches!(planned.stage, Stage::Estimate(_))
+            || results.len() as u64 > planned.len
+        {
+            return false;
+        }
+        let mut fold = state.fold;
+        let to = fold.indices + results.len() as u64;
+        let outcomes = estimation_outcomes(planned, state.seed, fold.indices, results);
+        fold_estimation_stage(&mut fold, rule, planned.end(), to, &outcomes).is_some()
+    }
+}
+
+/// The sparse outcomes of an estimation stage's first `results.len()`
+/// tests, at estimation indices from `from`: events with their weights,
+/// and invalid tests.
+fn estimation_outcomes(
+    planned: &PlannedStage,
+    seed: u64,
+    from: u64,
+    results: &[TestResult],
+) -> Vec<(u64, SparseOutcome)> {
+    results
+        .iter()
+        .enumerate()
+        .filter_map(|(k, r)| {
+            let i = from + k as u64;
+            match r {
+                TestResult::Done { event: true, .. } => Some((
+                    i,
+                    SparseOutcome::Event(planned.test(seed, planned.start + k as u64).1),
+                )),
+                TestResult::Done { .. } => None,
+                TestResult::Invalid => Some((i, SparseOutcome::Invalid)),
+            }
+        })
+        .collect()
 }
 
 /// Folds an estimation stage's `outcomes` (estimation indices up to `to`)

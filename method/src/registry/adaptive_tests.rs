@@ -170,6 +170,11 @@ where
         self.planner.resolve(&mut state, &self.rule, results);
     }
 
+    fn stops_within(&self, results: &[TestResult]) -> bool {
+        self.planner
+            .stops_within(&self.state(), &self.rule, results)
+    }
+
     fn stage_kind(&self, index: u64) -> Option<&'static str> {
         self.state().stage_of(index).map(|stage| stage.kind())
     }

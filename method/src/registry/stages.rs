@@ -18,6 +18,11 @@ pub trait AdaptiveStages: Send + Sync {
     /// Resolves the running stage with one result per test
     /// ([`crate::adaptive::Planner::resolve`]).
     fn resolve(&self, results: &[TestResult]);
+    /// Whether the running stage's rule stops the campaign within its
+    /// first `results.len()` tests, whatever the rest give
+    /// ([`crate::adaptive::Planner::stops_within`]): the stage may then be
+    /// resolved at once, with any results for the others.
+    fn stops_within(&self, results: &[TestResult]) -> bool;
     /// Where the campaign stands.
     fn progress(&self) -> AdaptiveProgress;
     /// The kind of the stage test `index` belongs to (`"library"`,

@@ -7,7 +7,7 @@ use tslg_method::adaptive::{run_adaptive, AdaptiveResult, AdaptiveSettings};
 use tslg_method::case::Case;
 use tslg_method::cases::cutin::{CutIn, CutInPreset};
 use tslg_method::cases::highway::{ExitVehicle, HighwayExit, HighwayPreset};
-use tslg_method::estimator::{z_for_confidence, StoppingRule};
+use tslg_method::estimator::{z_for_confidence, Decision, StoppingRule};
 use tslg_method::exact::{event_cells, event_probability};
 use tslg_method::library::{build_library, LibraryRequest, SearchMethod, Threshold};
 use tslg_method::registry::AdaptiveRun;
@@ -248,7 +248,34 @@ fn a_service_adaptive_campaign_resolved_from_workers_runs_is_the_in_process_one(
                         }
                     })
                     .collect();
-                stages.resolve(&results);
+                // The first prefix of the stage within which the rule
+                // stops the campaign: the coordinator resolves the stage
+                // there, with any results after it (here: events, which
+                // would move the estimate were they folded), and
+                // must get the in-process campaign, stopped at that test.
+                match (1..=results.len()).find(|&k| stages.stops_within(&results[..k])) {
+                    Some(k) => {
+                        let mut early = results[..k].to_vec();
+                        early.resize(
+                            results.len(),
+                            TestResult::Done {
+                                event: true,
+                                criticality: 0.0,
+                            },
+                        );
+                        stages.resolve(&early);
+                        assert_eq!(stages.running(), None, "stopped");
+                        assert_eq!(in_process.result.indices, from + k as u64);
+                    }
+                    None => {
+                        stages.resolve(&results);
+                        assert!(
+                            stages.running().is_some()
+                                || in_process.result.status != Decision::Converged,
+                            "a campaign that converged stopped within its last stage"
+                        );
+                    }
+                }
             }
             let done = stages.progress().finished.unwrap();
             assert_eq!(

@@ -12,6 +12,7 @@ use crate::error::ServiceError;
 use crate::store::audits;
 use crate::store::campaigns::CampaignRow;
 use crate::store::leases::{self, Eligible, LeaseRow, Runs, Taker};
+use crate::store::prefix;
 use crate::workers::Fleet;
 use rusqlite::Connection;
 use std::sync::{Arc, LazyLock};
@@ -271,7 +272,12 @@ fn new_range(
 ) -> Result<Option<Claimed>, ServiceError> {
     for campaign in leases::in_turn(conn, &job.eligible, CANDIDATES)? {
         let serving = job.fleet.serving(campaign.requires.as_deref());
-        let size = new_lease_size(config, &campaign, job.threads, serving)
+        // An estimation stage's leases follow its recorded results.
+        let frontier = match campaign.stage_kind.as_deref() {
+            Some("estimate") => Some(prefix::frontier(conn, &campaign)?),
+            _ => None,
+        };
+        let size = new_lease_size(config, &campaign, job.threads, serving, frontier)
             .min(job.span_limit.max(0) as u64);
         if size == 0 {
             continue;
@@ -324,7 +330,13 @@ fn expected_ms(campaign: &CampaignRow, size: u64, threads: u32) -> i64 {
 /// ([`lease_size`], up to [`lease_limit`]); 0 when it has leased all it
 /// may. `--lease-size` fixes the size (experiments, tests), within the
 /// budget and the running stage.
-fn new_lease_size(config: &Config, campaign: &CampaignRow, threads: u32, serving: u32) -> u64 {
+fn new_lease_size(
+    config: &Config,
+    campaign: &CampaignRow,
+    threads: u32,
+    serving: u32,
+    frontier: Option<u64>,
+) -> u64 {
     let next_index = campaign.next_index.max(0) as u64;
     let mut budget_end = campaign
         .stage_end
@@ -344,7 +356,7 @@ fn new_lease_size(config: &Config, campaign: &CampaignRow, threads: u32, serving
         target_seconds: config.lease_target_seconds,
         next_index,
         resolved: campaign.indices.max(0) as u64,
-        limit: lease_limit(campaign),
+        limit: lease_limit(campaign, frontier),
         max_lease: match campaign.method {
             tslg_api::Method::Library => LIBRARY_MAX_LEASE,
             _ => MAX_LEASE,

@@ -13,9 +13,11 @@
 //! resolved prefix while the campaign runs (a quarter of it, at least one
 //! test), so a campaign whose rule waits on more than the prediction (the
 //! outside guard) is never stalled. An adaptive campaign's leases reach
-//! no further than that, nor past the end of its running stage (its last
-//! stage usually holds more tests than the stop needs); a library
-//! build's reach its budget.
+//! the end of its running stage: its prefix folds, and its rule is
+//! checked, only when the stage's last result arrives, so every test of
+//! the stage is used (a limit from the prediction inside the stage was
+//! never lifted: the campaign stalled). A library build's reach its
+//! budget.
 //!
 //! **How many** ([`lease_size`]): `size_time = target · T / c` with `c`
 //! the cost of one test on one thread and `T` the worker's threads: long
@@ -90,18 +92,37 @@ pub fn lease_size(input: &SizingInput) -> u64 {
 }
 
 /// How far campaign `row`'s leases may reach: the most its `next_index`
-/// may be (see the module's documentation).
-pub fn lease_limit(row: &CampaignRow) -> u64 {
+/// may be (see the module's documentation). `frontier` is where its
+/// recorded results end (`store::prefix::frontier`), read only for an
+/// adaptive campaign's estimation stage; without it, the stage's start.
+pub fn lease_limit(row: &CampaignRow, frontier: Option<u64>) -> u64 {
     let rule = row.fold_rule();
     let fold = row.fold();
+    let stage = match (row.stage_start, row.stage_end) {
+        (Some(start), Some(end)) => {
+            let start = start.max(0) as u64;
+            Some(RunningStage {
+                start,
+                end: end.max(0) as u64,
+                estimation: row.stage_kind.as_deref() == Some("estimate"),
+                frontier: frontier.unwrap_or(start).max(start),
+            })
+        }
+        _ => None,
+    };
     limit(&LimitInput {
         method: row.method,
         max_tests: row.max_tests.max(0) as u64,
-        stage_end: row.stage_end.map(|end| end.max(0) as u64),
+        stage,
         n_min: rule.n_min,
         min_events: rule.min_events,
         beta: rule.beta,
-        resolved: fold.indices,
+        // An adaptive campaign's row counts every index it resolved, its
+        // estimate only the estimation tests' (valid and invalid).
+        resolved: match row.method {
+            Method::Adaptive => fold.estimator.tests() + fold.invalid,
+            _ => fold.indices,
+        },
         tests: fold.estimator.tests(),
         events: fold.estimator.events(),
         relative_half_width: fold.relative_half_width(rule.z()),
@@ -113,12 +134,13 @@ pub fn lease_limit(row: &CampaignRow) -> u64 {
 pub struct LimitInput {
     pub method: Method,
     pub max_tests: u64,
-    /// An adaptive campaign's running stage's end.
-    pub stage_end: Option<u64>,
+    /// An adaptive campaign's running stage.
+    pub stage: Option<RunningStage>,
     pub n_min: u64,
     pub min_events: u64,
     pub beta: f64,
-    /// Indices of the resolved prefix, its valid tests and their events.
+    /// Indices of the resolved prefix (an adaptive campaign's: of its
+    /// estimation tests), its valid tests and their events.
     pub resolved: u64,
     pub tests: u64,
     pub events: u64,
@@ -126,14 +148,27 @@ pub struct LimitInput {
     pub relative_half_width: f64,
 }
 
+/// An adaptive campaign's running stage `start..end`, and where its
+/// recorded results end.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RunningStage {
+    pub start: u64,
+    pub end: u64,
+    /// An estimation stage, whose rule may stop the campaign inside it.
+    pub estimation: bool,
+    /// The first test (at least `start`) without a recorded result, or
+    /// before an open audit.
+    pub frontier: u64,
+}
+
 /// [`lease_limit`] of what a campaign's row says.
 pub fn limit(input: &LimitInput) -> u64 {
     let max = input.max_tests;
-    let stage_end = match input.method {
+    match input.method {
         Method::Enumerate | Method::Build => return max,
-        Method::Adaptive => Some(input.stage_end.map_or(0, |end| end.min(max))),
-        Method::Library | Method::Ndd => None,
-    };
+        Method::Adaptive => return stage_limit(input),
+        Method::Library | Method::Ndd => {}
+    }
     let resolved = input.resolved;
     let predicted = predicted_unleased(
         input.tests,
@@ -145,19 +180,65 @@ pub fn limit(input: &LimitInput) -> u64 {
     );
     let wanted = match predicted {
         // Valid tests to indices, at the prefix's share of valid tests.
-        Some(needed) => {
-            let needed = u128::from(needed.max(input.n_min));
-            let indices = match input.tests {
-                0 => needed,
-                tests => (needed * u128::from(resolved)).div_ceil(u128::from(tests)),
-            };
-            indices.min(u128::from(max)) as u64
-        }
+        Some(needed) => in_indices(needed.max(input.n_min), resolved, input.tests).min(max),
         None => input.n_min.max(resolved.saturating_mul(2)),
     };
     let step = (resolved / 4).max(1);
-    let reach = wanted.max(resolved.saturating_add(step)).min(max);
-    stage_end.map_or(reach, |end| reach.min(end))
+    wanted.max(resolved.saturating_add(step)).min(max)
+}
+
+/// An adaptive campaign's limit: the end of its running stage, whose
+/// tests all plan the next (`report/stages.rs`); nothing while the next is
+/// planned. An estimation stage's rule may stop the campaign inside it,
+/// and `report/stages.rs` resolves the stage as soon as the recorded
+/// results decide, so its leases reach what the estimate can still need,
+/// in estimation indices as a library campaign's: the prediction of the
+/// estimate before the stage, `n (rₙ/β)²`, else `max(n_min, 2 × resolved)`
+/// counting the stage's recorded results (a campaign's first estimation
+/// stage, often its last: one stopped 30 tests into a stage of 100, the
+/// other 70 run for nothing, measured). Always a step past the recorded
+/// results, an eighth of the stage, so the campaign goes on when the
+/// prediction fell short.
+fn stage_limit(input: &LimitInput) -> u64 {
+    let Some(stage) = input.stage else {
+        return 0;
+    };
+    let end = stage.end.min(input.max_tests);
+    if !stage.estimation {
+        return end;
+    }
+    let before = input.resolved;
+    let recorded = stage.frontier.saturating_sub(stage.start);
+    let wanted = match predicted_unleased(
+        input.tests,
+        input.events,
+        input.min_events,
+        input.relative_half_width,
+        input.beta,
+        0,
+    ) {
+        Some(needed) => in_indices(needed.max(input.n_min), before, input.tests),
+        None => input
+            .n_min
+            .max(before.saturating_add(recorded).saturating_mul(2)),
+    };
+    let step = stage.end.saturating_sub(stage.start).div_ceil(8).max(1);
+    stage
+        .start
+        .saturating_add(wanted.saturating_sub(before))
+        .max(stage.frontier.saturating_add(step))
+        .min(end)
+}
+
+/// `valid` tests in indices, at the share of valid tests a prefix of
+/// `indices` indices and `tests` valid tests had.
+fn in_indices(valid: u64, indices: u64, tests: u64) -> u64 {
+    match tests {
+        0 => valid,
+        tests => (u128::from(valid) * u128::from(indices))
+            .div_ceil(u128::from(tests))
+            .min(u128::from(u64::MAX)) as u64,
+    }
 }
 
 /// Tests still needed beyond `next_index`, predicted from a prefix of `n`
@@ -295,7 +376,7 @@ mod tests {
         LimitInput {
             method: Method::Ndd,
             max_tests: 10_000_000,
-            stage_end: None,
+            stage: None,
             n_min: 100,
             min_events: 10,
             beta: 0.2,
@@ -343,27 +424,70 @@ mod tests {
             }),
             150
         );
+        // An adaptive campaign's library or search stage: all of it (its
+        // results plan the next), whatever the estimate predicts.
+        let running = RunningStage {
+            start: 2000,
+            end: 2400,
+            estimation: false,
+            frontier: 2000,
+        };
         let stage = LimitInput {
             method: Method::Adaptive,
-            stage_end: Some(5000),
+            stage: Some(running),
             ..predicted
         };
-        assert_eq!(limit(&stage), 4000, "the prediction, within the stage");
+        assert_eq!(limit(&stage), 2400, "a search stage");
         assert_eq!(
             limit(&LimitInput {
-                stage_end: Some(1500),
-                ..stage
-            }),
-            1500
-        );
-        assert_eq!(
-            limit(&LimitInput {
-                stage_end: None,
+                stage: None,
                 ..stage
             }),
             0,
             "no stage runs while the next is planned"
         );
+        // An estimation stage: what the estimate before it predicts,
+        // 990 (0.22/0.2)² = 1197 valid tests, 1210 indices, 210 more, then
+        // a step past the recorded results (an eighth of the stage, 50).
+        let estimation = |frontier| LimitInput {
+            stage: Some(RunningStage {
+                estimation: true,
+                frontier,
+                ..running
+            }),
+            relative_half_width: 0.22,
+            ..stage
+        };
+        assert_eq!(limit(&estimation(2000)), 2210);
+        assert_eq!(limit(&estimation(2210)), 2260, "the prediction fell short");
+        assert_eq!(limit(&estimation(2390)), 2400, "within the stage");
+        assert_eq!(
+            limit(&LimitInput {
+                max_tests: 2100,
+                ..estimation(2000)
+            }),
+            2100
+        );
+        // The first estimation stage (no estimate before it, n_min 30, a
+        // stage of 100 from 667): n_min, then twice what is recorded.
+        let first = |frontier| LimitInput {
+            stage: Some(RunningStage {
+                start: 667,
+                end: 767,
+                estimation: true,
+                frontier,
+            }),
+            n_min: 30,
+            resolved: 0,
+            tests: 0,
+            events: 0,
+            relative_half_width: f64::INFINITY,
+            ..stage
+        };
+        assert_eq!(limit(&first(667)), 697);
+        assert_eq!(limit(&first(697)), 727);
+        assert_eq!(limit(&first(727)), 767);
+        assert_eq!(limit(&first(760)), 767);
         assert_eq!(
             limit(&LimitInput {
                 method: Method::Enumerate,

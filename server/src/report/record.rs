@@ -352,10 +352,11 @@ pub struct Recorded {
 
 /// Whether `campaign` has leased all it may now: its limit (what its stop
 /// can still need, or its running stage) is reached, so only results
-/// open work.
+/// open work. An estimation stage's limit is taken at the stage's start,
+/// its lowest: at worst a report wakes waiting requests needlessly.
 pub fn at_lease_limit(campaign: &CampaignRow) -> bool {
     campaign.status == CampaignStatus::Running
-        && campaign.next_index.max(0) as u64 >= crate::leasing::size::lease_limit(campaign)
+        && campaign.next_index.max(0) as u64 >= crate::leasing::size::lease_limit(campaign, None)
 }
 
 /// Thread-seconds a report cost, prorated to the tests it newly resolved:
