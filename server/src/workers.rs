@@ -4,7 +4,8 @@
 //! request, so a restarted coordinator knows them again within seconds.
 
 use std::collections::HashMap;
-use std::sync::Mutex;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use tslg_api::{LeaseRequest, UnhealthyProgram, WorkerView};
 
@@ -12,6 +13,11 @@ use tslg_api::{LeaseRequest, UnhealthyProgram, WorkerView};
 const LIVE: Duration = Duration::from_secs(60);
 /// Workers kept at most; the longest unseen goes first.
 const MAX_WORKERS: usize = 1024;
+/// A counted [`Fleet`] serves the claims of this long, unless a worker
+/// joins or changes meanwhile: workers leave on the scale of [`LIVE`],
+/// and counting up to [`MAX_WORKERS`] entries at every claim would cost
+/// the hot path tens of microseconds.
+const FLEET_FRESH: Duration = Duration::from_secs(1);
 
 struct Entry {
     threads: u32,
@@ -51,6 +57,12 @@ impl Fleet {
 #[derive(Default)]
 pub struct WorkerRegistry {
     workers: Mutex<HashMap<String, Entry>>,
+    /// The last [`Fleet`] counted, and when.
+    fleet: Mutex<Option<(Instant, Arc<Fleet>)>>,
+    /// Set when a worker joined, came back or changed its threads or
+    /// offers since the fleet was counted (after the change is in
+    /// `workers`, so a count that misses it is done again).
+    fleet_changed: AtomicBool,
 }
 
 impl WorkerRegistry {
@@ -98,10 +110,16 @@ impl WorkerRegistry {
                 last_release: None,
                 idle: false,
             });
+        let changed = entry.threads != request.threads
+            || entry.offers != request.offers
+            || entry.last_seen.elapsed() >= LIVE;
         entry.threads = request.threads;
         entry.offers = request.offers.clone();
         entry.unhealthy = request.unhealthy.clone();
         entry.last_seen = Instant::now();
+        if changed {
+            self.fleet_changed.store(true, Ordering::Release);
+        }
     }
 
     /// Whether `worker`'s last lease request waited and found nothing.
@@ -156,12 +174,29 @@ impl WorkerRegistry {
     pub fn heard(&self, worker: &str) {
         let mut workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
         if let Some(entry) = workers.get_mut(worker) {
+            if entry.last_seen.elapsed() >= LIVE {
+                self.fleet_changed.store(true, Ordering::Release);
+            }
             entry.last_seen = Instant::now();
         }
     }
 
-    /// The threads of the live workers (see [`Fleet`]).
-    pub fn fleet(&self) -> Fleet {
+    /// The threads of the live workers (see [`Fleet`]), counted at most
+    /// [`FLEET_FRESH`] ago and since the last change of a worker.
+    pub fn fleet(&self) -> Arc<Fleet> {
+        let mut kept = self.fleet.lock().unwrap_or_else(|p| p.into_inner());
+        let changed = self.fleet_changed.swap(false, Ordering::AcqRel);
+        if let Some((at, fleet)) = kept.as_ref() {
+            if !changed && at.elapsed() < FLEET_FRESH {
+                return Arc::clone(fleet);
+            }
+        }
+        let fleet = Arc::new(self.count_fleet());
+        *kept = Some((Instant::now(), Arc::clone(&fleet)));
+        fleet
+    }
+
+    fn count_fleet(&self) -> Fleet {
         let workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
         let mut fleet = Fleet::default();
         for entry in workers.values().filter(|e| e.last_seen.elapsed() < LIVE) {
@@ -211,5 +246,45 @@ impl WorkerRegistry {
             .collect();
         list.sort_by(|a, b| a.last_seen_seconds.total_cmp(&b.last_seen_seconds));
         list
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn request(worker: &str, threads: u32, offers: &[&str]) -> LeaseRequest {
+        LeaseRequest {
+            worker: worker.into(),
+            threads,
+            include_tests: false,
+            offers: offers.iter().map(|o| o.to_string()).collect(),
+            unhealthy: Vec::new(),
+            max_tests: None,
+            wait_seconds: None,
+            audits_only: false,
+        }
+    }
+
+    #[test]
+    fn the_fleet_counts_a_worker_that_joins_or_changes_at_once() {
+        let registry = WorkerRegistry::default();
+        registry.seen(&request("a", 4, &["p:cut-in:episode"]));
+        let fleet = registry.fleet();
+        assert_eq!(fleet.serving(None), 4);
+        assert_eq!(fleet.serving(Some("p:cut-in:episode")), 4);
+        assert_eq!(fleet.serving(Some("q:cut-in:episode")), 0);
+        // Kept while nothing changes.
+        registry.seen(&request("a", 4, &["p:cut-in:episode"]));
+        assert!(Arc::ptr_eq(&fleet, &registry.fleet()));
+        // A worker joining, or one changing its offers, is counted at the
+        // next claim, within the second the count is otherwise kept.
+        registry.seen(&request("b", 2, &["p:cut-in:episode"]));
+        assert_eq!(registry.fleet().serving(Some("p:cut-in:episode")), 6);
+        registry.seen(&request("a", 4, &["q:cut-in:episode"]));
+        let fleet = registry.fleet();
+        assert_eq!(fleet.serving(Some("p:cut-in:episode")), 2);
+        assert_eq!(fleet.serving(Some("q:cut-in:episode")), 4);
+        assert_eq!(fleet.serving(None), 6);
     }
 }

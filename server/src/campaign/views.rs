@@ -5,7 +5,7 @@
 
 use crate::campaign::history;
 use crate::error::ServiceError;
-use crate::leasing::size::predicted_unleased;
+use crate::leasing::size::tests_to_beta;
 use crate::state::AppState;
 use crate::store::audits::{self, AuditState};
 use crate::store::campaigns::{self, CampaignRow};
@@ -31,7 +31,7 @@ const PAIRED_RERUN: &str =
 /// `min_events` events (and at least 2); see [`crate::leasing::size`].
 fn predicted_tests(rule: &StoppingRule, point: &HistoryPoint) -> Option<u64> {
     let r = point.relative_half_width?;
-    let needed = predicted_unleased(point.tests, point.events, rule.min_events, r, rule.beta, 0)?;
+    let needed = tests_to_beta(point.tests, point.events, rule.min_events, r, rule.beta)?;
     Some(needed.max(rule.n_min).max(point.tests))
 }
 

@@ -10,7 +10,7 @@ use crate::config::Config;
 use crate::db::{now_ms, Database};
 use crate::error::ServiceError;
 use crate::store::audits;
-use crate::store::campaigns::CampaignRow;
+use crate::store::campaigns::{self, CampaignRow};
 use crate::store::leases::{self, Eligible, LeaseRow, Runs, Taker};
 use crate::store::prefix;
 use crate::workers::Fleet;
@@ -67,7 +67,7 @@ pub async fn claim(
     db: &Database,
     config: &Arc<Config>,
     ask: &Claim<'_>,
-    fleet: Fleet,
+    fleet: Arc<Fleet>,
 ) -> Result<Option<Claimed>, ServiceError> {
     let job = ClaimJob::new(config, ask, fleet);
     let config = Arc::clone(config);
@@ -92,7 +92,7 @@ static SEQUENTIAL: LazyLock<String> = LazyLock::new(|| {
 
 impl ClaimJob {
     /// The claim `ask` as the writer runs it, timed now.
-    pub fn new(config: &Config, ask: &Claim<'_>, fleet: Fleet) -> Self {
+    pub fn new(config: &Config, ask: &Claim<'_>, fleet: Arc<Fleet>) -> Self {
         let Claim {
             inline,
             offers,
@@ -203,7 +203,7 @@ pub struct ClaimJob {
     audits_only: bool,
     /// The threads of the live workers, which a campaign's leases are
     /// shared among.
-    fleet: Fleet,
+    fleet: Arc<Fleet>,
 }
 
 impl ClaimJob {
@@ -270,7 +270,8 @@ fn new_range(
     config: &Config,
     job: &ClaimJob,
 ) -> Result<Option<Claimed>, ServiceError> {
-    for campaign in leases::in_turn(conn, &job.eligible, CANDIDATES)? {
+    for id in leases::in_turn(conn, &job.eligible, CANDIDATES)? {
+        let campaign = campaigns::get(conn, id)?;
         let serving = job.fleet.serving(campaign.requires.as_deref());
         // An estimation stage's leases follow its recorded results.
         let frontier = match campaign.stage_kind.as_deref() {

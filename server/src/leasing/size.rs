@@ -174,15 +174,7 @@ pub fn limit(input: &LimitInput) -> u64 {
         Method::Library | Method::Ndd => {}
     }
     let resolved = input.resolved;
-    let predicted = predicted_unleased(
-        input.tests,
-        input.events,
-        input.min_events,
-        input.relative_half_width,
-        input.beta,
-        0,
-    );
-    let wanted = match predicted {
+    let wanted = match input.predicted() {
         // Valid tests to indices, at the prefix's share of valid tests;
         // halfway there: the prediction rests on few events at first
         // (`1/p̂` is off by about `1/√events`: a third at 10), and workers
@@ -219,14 +211,7 @@ fn stage_limit(input: &LimitInput) -> u64 {
     }
     let before = input.resolved;
     let recorded = stage.frontier.saturating_sub(stage.start);
-    let wanted = match predicted_unleased(
-        input.tests,
-        input.events,
-        input.min_events,
-        input.relative_half_width,
-        input.beta,
-        0,
-    ) {
+    let wanted = match input.predicted() {
         Some(needed) => in_indices(needed.max(input.n_min), before, input.tests),
         None => input
             .n_min
@@ -251,21 +236,28 @@ fn in_indices(valid: u64, indices: u64, tests: u64) -> u64 {
     }
 }
 
-/// Tests still needed beyond `next_index`, predicted from a prefix of `n`
-/// valid tests with `events` events and relative half-width `r`.
-pub fn predicted_unleased(
-    n: u64,
-    events: u64,
-    min_events: u64,
-    r: f64,
-    beta: f64,
-    next_index: u64,
-) -> Option<u64> {
+/// The valid tests that reach `β`, `n (r/β)²`, predicted from a prefix of
+/// `n` valid tests with `events` events and relative half-width `r` (the
+/// half-width shrinks as `1/√n`); none before `min_events` events (and
+/// at least 2).
+pub fn tests_to_beta(n: u64, events: u64, min_events: u64, r: f64, beta: f64) -> Option<u64> {
     if events < min_events.max(2) || !r.is_finite() {
         return None;
     }
-    let needed = (n as f64 * (r / beta).powi(2)).min(1e15) as u64;
-    Some(needed.saturating_sub(next_index))
+    Some((n as f64 * (r / beta).powi(2)).min(1e15) as u64)
+}
+
+impl LimitInput {
+    /// [`tests_to_beta`] of the prefix.
+    fn predicted(&self) -> Option<u64> {
+        tests_to_beta(
+            self.tests,
+            self.events,
+            self.min_events,
+            self.relative_half_width,
+            self.beta,
+        )
+    }
 }
 
 /// The smoothed per-thread cost after a report of `tests` tests that took
@@ -517,13 +509,10 @@ mod tests {
 
     #[test]
     fn the_prediction_scales_with_the_squared_precision_ratio() {
-        // n = 100 at r = 0.4 with β = 0.2 needs 400; 150 are leased.
-        assert_eq!(predicted_unleased(100, 12, 10, 0.4, 0.2, 150), Some(250));
-        assert_eq!(predicted_unleased(100, 1, 10, 0.4, 0.2, 150), None);
-        assert_eq!(
-            predicted_unleased(100, 12, 10, f64::INFINITY, 0.2, 150),
-            None
-        );
+        // n = 100 at r = 0.4 with β = 0.2 needs 400.
+        assert_eq!(tests_to_beta(100, 12, 10, 0.4, 0.2), Some(400));
+        assert_eq!(tests_to_beta(100, 1, 10, 0.4, 0.2), None);
+        assert_eq!(tests_to_beta(100, 12, 10, f64::INFINITY, 0.2), None);
         let c = update_cost(None, 1000, 0.5, 2).unwrap();
         assert!((c - 1e-3).abs() < 1e-15);
         let c2 = update_cost(Some(c), 1000, 1.0, 2).unwrap();

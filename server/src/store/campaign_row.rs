@@ -182,23 +182,6 @@ pub fn first(
     }
 }
 
-/// The first `most` rows of `sql`, as [`first`] reads one.
-pub fn rows(
-    conn: &Connection,
-    sql: &str,
-    params: impl Params,
-    most: usize,
-) -> Result<Vec<CampaignRow>, StoreError> {
-    let mut statement = conn.prepare_cached(sql)?;
-    let mut rows = statement.query(params)?;
-    let mut out = Vec::new();
-    while out.len() < most {
-        let Some(row) = rows.next()? else { break };
-        out.push(from_row(row)?);
-    }
-    Ok(out)
-}
-
 /// Column `i` of `row`, a text naming a value of `T` (a kebab-case enum).
 fn named<T: DeserializeOwned>(row: &Row<'_>, i: usize) -> rusqlite::Result<T> {
     let text: String = row.get(i)?;

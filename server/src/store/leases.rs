@@ -5,7 +5,7 @@
 
 use crate::db::sql;
 use crate::store::audits;
-use crate::store::campaign_row::{self, CampaignRow, COLUMNS as CAMPAIGN_COLUMNS};
+use crate::store::campaign_row::CampaignRow;
 use crate::store::error::StoreError;
 pub use crate::store::states::LeaseState;
 use crate::store::states::{CAMPAIGN_RUNNING, LEASE_ACTIVE, LEASE_CANCELLED, LEASE_DONE};
@@ -135,9 +135,11 @@ pub fn take_again(conn: &Connection, id: i64, taker: &Taker<'_>) -> Result<Lease
     get(conn, id)
 }
 
-/// The running campaigns `eligible` allows with tests left to lease, at
-/// most `most`, whose turn comes first (the claim takes the first that
-/// may lease more, `leasing/size.rs`). A campaign with many tests waiting for their
+/// The ids of the running campaigns `eligible` allows with tests left to
+/// lease, at most `most`, whose turn comes first (the claim reads them in
+/// that order and takes the first that may lease more, `leasing/size.rs`:
+/// usually the first, so only its row is read whole). A campaign with
+/// many tests waiting for their
 /// audits gets no new range until workers have run them: audits come
 /// first, and the work behind them cannot count before they are done. A
 /// campaign of a pair gets a new range only when it is not ahead of the
@@ -148,10 +150,10 @@ pub fn in_turn(
     conn: &Connection,
     eligible: &Eligible,
     most: usize,
-) -> Result<Vec<CampaignRow>, StoreError> {
+) -> Result<Vec<i64>, StoreError> {
     let filters = eligible.filters();
     let sql = format!(
-        "SELECT {CAMPAIGN_COLUMNS} FROM campaigns c WHERE status = {CAMPAIGN_RUNNING} \
+        "SELECT c.id FROM campaigns c WHERE status = {CAMPAIGN_RUNNING} \
          AND next_index < max_tests {filters} \
          AND (stage_end IS NULL OR next_index < stage_end) \
          AND (paired_with IS NULL OR next_index <= \
@@ -166,7 +168,8 @@ pub fn in_turn(
         .iter()
         .map(|v| v as &dyn rusqlite::ToSql)
         .collect();
-    campaign_row::rows(conn, &sql, values.as_slice(), most)
+    let ids: Vec<(i64,)> = sql::all(conn, &sql, values.as_slice())?;
+    Ok(ids.into_iter().map(|(id,)| id).collect())
 }
 
 /// Leases `campaign`'s tests `start..end` to `taker` and moves its turn to
