@@ -49,13 +49,49 @@ async fn a_user_defined_case_is_defined_listed_and_run_by_workers_offering_its_p
             file: file
                 .replace("name = \"cut-in-py\"", "name = \"other\"")
                 .replacen("step = 2", "step = 0", 1),
-            table,
+            table: table.clone(),
             table_name: None,
         })
         .await
         .unwrap_err()
         .to_string();
     assert!(bad.contains("step = 0 must be > 0"), "{bad}");
+    // 10¹² × 10²⁰ cells wrapped to 0 and aborted the coordinator; a 12 MB
+    // summary was stored and served by every list. Both are 422s now.
+    let other = file.replace("name = \"cut-in-py\"", "name = \"other\"");
+    for (file, expected) in [
+        (
+            other
+                .replacen("upper = 89\nstep = 2", "upper = 1e12\nstep = 1", 1)
+                .replacen("upper = 10\nstep = 0.4", "upper = 1e20\nstep = 1", 1),
+            "the grid has more than 10000000 scenarios",
+        ),
+        (
+            other
+                .lines()
+                .map(|line| match line.starts_with("summary = ") {
+                    true => format!("summary = \"{}\"", "a".repeat(12_000_000)),
+                    false => line.to_owned(),
+                })
+                .collect::<Vec<_>>()
+                .join("\n"),
+            "summary is 12000000 bytes; at most 2000 are kept",
+        ),
+    ] {
+        let refused = client
+            .create_case(&CreateCase {
+                file,
+                table: table.clone(),
+                table_name: None,
+            })
+            .await
+            .unwrap_err();
+        assert!(
+            matches!(&refused, tslg_client::CallError::Refused { status: 422, detail } if detail.contains(expected)),
+            "{refused}"
+        );
+    }
+    assert!(client.health().await.is_ok(), "the coordinator still runs");
 
     // A restart keeps it.
     drop(server);

@@ -172,6 +172,13 @@ fn wrong_tables_are_refused_with_the_line_and_the_reason() {
             "v1,range,v2,probability\n28,40,28,1\n".to_owned(),
             "`range` is not a number (this case's table is a matrix",
         ),
+        // Every cut-in at R ≤ 0: the built-in model has no density there
+        // to compare with (a panic and exit 101 before).
+        (
+            "cut-in",
+            ",-0.4,0\n-1,0.5,0\n0,0.25,0.25\n".to_owned(),
+            "no probability at a positive range (R > 0 m)",
+        ),
         ("car-following", states.to_owned(), "P(u | v) is missing"),
         (
             "car-following",
@@ -201,7 +208,8 @@ fn wrong_tables_are_refused_with_the_line_and_the_reason() {
         } else {
             o
         };
-        assert!(!o.status.success(), "{case}: {expected}");
+        // A refusal (1), not a panic (101).
+        assert_eq!(o.status.code(), Some(1), "{case}: {expected}");
         // Refused before anything is worked out or printed.
         assert!(o.stdout.is_empty(), "{case}: {}", text(&o.stdout));
         let err = text(&o.stderr);
@@ -256,5 +264,26 @@ async fn the_api_takes_a_table_for_every_case_and_records_how_far_it_is() {
     assert!(
         refused.contains("line 3 gives the same point as line 2"),
         "{refused}"
+    );
+    // A cut-in table with no positive range: a 422 that says so (was a 500).
+    let refused = client
+        .create_library(&CreateLibrary {
+            case: "cut-in".into(),
+            preset: None,
+            surrogate: serde_json::json!({"model": "idm"}),
+            exposure: ExposureRequest::Table {
+                name: "behind.csv".into(),
+                text: ",-0.4,0\n-1,0.5,0\n0,0.25,0.25\n".into(),
+            },
+            search: None,
+            threshold: None,
+        })
+        .await
+        .unwrap_err();
+    let message = refused.to_string();
+    assert!(message.contains("422"), "{message}");
+    assert!(
+        message.contains("behind.csv") && message.contains("positive range"),
+        "{message}"
     );
 }

@@ -239,6 +239,15 @@ fn a_wrong_case_file_table_or_program_fails_with_the_reason() {
             vec![],
             "range = 89 is not on the grid (1 to 87 in steps of 2)",
         ),
+        // 10¹² × 10²⁰ cells: the count wrapped to 0 and the build aborted.
+        (
+            case(&|t| {
+                t.replacen("upper = 89\nstep = 2", "upper = 1e12\nstep = 1", 1)
+                    .replacen("upper = 10\nstep = 0.4", "upper = 1e20\nstep = 1", 1)
+            }),
+            vec![],
+            "the grid has more than 10000000 scenarios",
+        ),
         (
             case(&failing("crash")),
             vec![],
@@ -256,7 +265,8 @@ fn a_wrong_case_file_table_or_program_fails_with_the_reason() {
         let mut args = vec!["library", "build", "--case-file", path.as_str(), "-o", out];
         args.extend(extra);
         let o = tslg(&args);
-        assert!(!o.status.success(), "{expected}");
+        // A refusal (1), not a panic (101) or an abort.
+        assert_eq!(o.status.code(), Some(1), "{expected}");
         let err = text(&o.stderr);
         assert!(err.contains(expected), "`{expected}` not in\n{err}");
         assert!(!Path::new(out).exists(), "a failed build writes no library");

@@ -15,6 +15,9 @@ use tslg_method::cases::user::file::CaseFile;
 use tslg_method::cases::user::registry::{self, UserCaseDefinition};
 use tslg_method::registry::CaseError;
 
+/// The longest `table_name`, in bytes (docs/api.md, limits).
+const MAX_TABLE_NAME: usize = 255;
+
 /// Every case, in the order the help texts list them.
 #[utoipa::path(get, path = "/api/v1/cases", responses((status = 200, body = Vec<CaseView>)))]
 pub async fn list() -> Json<Vec<CaseView>> {
@@ -37,6 +40,9 @@ pub async fn create(
     State(state): State<AppState>,
     ApiJson(req): ApiJson<CreateCase>,
 ) -> Result<impl IntoResponse, ServiceError> {
+    if let Some(name) = &req.table_name {
+        crate::validate::check_name("table_name", name, MAX_TABLE_NAME)?;
+    }
     let file = CaseFile::parse(&req.file)
         .map_err(|e| ServiceError::Unprocessable(format!("case file: {e}")))?;
     let definition = UserCaseDefinition {

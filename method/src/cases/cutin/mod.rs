@@ -32,6 +32,13 @@ pub enum CutInError {
     /// The exposure table was refused.
     #[error(transparent)]
     Table(#[from] TableError),
+    /// No probability at a positive range: a cut-in happens ahead of the
+    /// vehicle (R > 0), and the exposure model has no density elsewhere.
+    #[error(
+        "the exposure has no probability at a positive range (R > 0 m): a cut-in happens \
+         ahead of the vehicle"
+    )]
+    NoPositiveRange,
 }
 
 /// Parameters of the auxiliary objective `J(x) = mnpETTC(x) + w d(x, Ω)` (paper Table II).
@@ -80,6 +87,10 @@ impl CutIn {
         let d = exposure.grid().dimensions();
         if d != 2 {
             return Err(CutInError::Dimensions(d));
+        }
+        let grid = exposure.grid();
+        if !(0..grid.len()).any(|cell| grid.value(cell, 0) > 0.0 && exposure.p(cell) > 0.0) {
+            return Err(CutInError::NoPositiveRange);
         }
         Ok(Self {
             exposure,

@@ -27,6 +27,13 @@ use serde::Deserialize;
 pub const MAX_SCENARIOS: usize = 10_000_000;
 /// The most dimensions.
 pub const MAX_DIMENSIONS: usize = 8;
+/// The longest `summary`, in bytes: every `GET /api/v1/cases` returns it.
+pub const MAX_SUMMARY: usize = 2_000;
+/// The longest `command`, `exposure` and other free text of a case file,
+/// in bytes (names are 1 to 64 characters; see `valid_name`).
+pub const MAX_TEXT: usize = 1_000;
+/// The longest `event` and dimension `unit`, in bytes.
+pub const MAX_LABEL: usize = 64;
 
 /// One dimension of a user-defined grid.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -46,10 +53,38 @@ pub struct Dimension {
 }
 
 impl Dimension {
-    /// Its number of grid values.
-    pub fn count(&self) -> usize {
-        ((self.upper - self.lower) / self.step).round() as usize + 1
+    /// Its number of grid values, `(upper − lower)/step + 1`, or `None`
+    /// when that is more than a case may have ([`MAX_SCENARIOS`]): a cast
+    /// of 10²⁰ steps to `usize` saturates and `+ 1` then wraps to 0.
+    pub fn checked_count(&self) -> Option<usize> {
+        let steps = ((self.upper - self.lower) / self.step).round();
+        (steps.is_finite() && (0.0..MAX_SCENARIOS as f64).contains(&steps))
+            .then(|| steps as usize + 1)
     }
+
+    /// Its number of grid values, for a dimension that passed
+    /// [`CaseFile::parse`] (at most [`MAX_SCENARIOS`]).
+    pub fn count(&self) -> usize {
+        self.checked_count().unwrap_or(MAX_SCENARIOS + 1)
+    }
+}
+
+/// `text` when it is at most `max` bytes without control characters
+/// (a newline and a tab excepted where `lines` allows them).
+fn check_text(field: &str, text: &str, max: usize, lines: bool) -> Result<(), String> {
+    if text.len() > max {
+        return Err(format!(
+            "{field} is {} bytes; at most {max} are kept",
+            text.len()
+        ));
+    }
+    if text
+        .chars()
+        .any(|c| c.is_control() && !(lines && (c == '\n' || c == '\t')))
+    {
+        return Err(format!("{field} holds a control character"));
+    }
+    Ok(())
 }
 
 /// A user-defined grid case, as its file says.
@@ -130,6 +165,10 @@ impl CaseFile {
         if self.command.trim().is_empty() {
             return Err("command is empty: it says how to start the program".into());
         }
+        check_text("summary", &self.summary, MAX_SUMMARY, true)?;
+        check_text("event", &self.event, MAX_LABEL, false)?;
+        check_text("command", &self.command, MAX_TEXT, false)?;
+        check_text("exposure", &self.exposure, MAX_TEXT, false)?;
         if !(self.objective_weight.is_finite() && self.objective_weight >= 0.0) {
             return Err(format!(
                 "objective_weight = {} must be a finite number ≥ 0",
@@ -154,6 +193,7 @@ impl CaseFile {
             if self.dimensions[..k].iter().any(|e| e.name == d.name) {
                 return Err(format!("{at}: two dimensions have the same name"));
             }
+            check_text(&format!("{at}: unit"), &d.unit, MAX_LABEL, false)?;
             if ![d.lower, d.upper, d.step].iter().all(|x| x.is_finite()) {
                 return Err(format!(
                     "{at}: lower, upper and step must be finite numbers"
@@ -176,12 +216,17 @@ impl CaseFile {
                     d.step
                 ));
             }
-            scenarios = scenarios.saturating_mul(d.count());
-        }
-        if scenarios > MAX_SCENARIOS {
-            return Err(format!(
-                "the grid has {scenarios} scenarios; a case has at most {MAX_SCENARIOS}"
-            ));
+            let too_many = || {
+                format!(
+                    "the grid has more than {MAX_SCENARIOS} scenarios (the most a case has) \
+                     by {at}"
+                )
+            };
+            let count = d.checked_count().ok_or_else(too_many)?;
+            scenarios = scenarios
+                .checked_mul(count)
+                .filter(|&n| n <= MAX_SCENARIOS)
+                .ok_or_else(too_many)?;
         }
         Ok(())
     }
@@ -241,6 +286,81 @@ step = 0.4
         let header = GOOD.split("[[dimensions]]").next().unwrap();
         assert!(err(header).contains("missing field `dimensions`"));
         assert!(err(&format!("{header}dimensions = []\n")).contains("1 to 8 dimensions, not 0"));
-        assert!(err(&with("step = 0.4", "step = 0.000001")).contains("at most 10000000"));
+        assert!(err(&with("step = 0.4", "step = 0.000001"))
+            .contains("more than 10000000 scenarios (the most a case has) by dimension 2"));
+    }
+
+    /// 10¹² × 10²⁰ cells: the second count cast to `usize` saturated and
+    /// `+ 1` wrapped to 0 in release, so the product passed the check and
+    /// the coordinator tried to allocate terabytes (SIGABRT); 2⁶² cells
+    /// overflowed the `+ 1` in debug (a 500).
+    #[test]
+    fn grids_too_large_for_a_usize_are_refused_before_any_product() {
+        let err = |text: &str| CaseFile::parse(text).unwrap_err();
+        let huge = GOOD
+            .replacen("upper = 89\nstep = 2", "upper = 1e12\nstep = 1", 1)
+            .replacen("upper = 10\nstep = 0.4", "upper = 1e20\nstep = 1", 1);
+        assert!(
+            err(&huge).contains("by dimension 1 (`range`)"),
+            "{}",
+            err(&huge)
+        );
+        let wide = GOOD.replacen(
+            "lower = -20\nupper = 10\nstep = 0.4",
+            "lower = 0\nupper = 4611686018427387904\nstep = 1",
+            1,
+        );
+        assert!(
+            err(&wide).contains("by dimension 2 (`range_rate`)"),
+            "{}",
+            err(&wide)
+        );
+        // Each alone fits, the product does not: 4,000 × 4,000 = 1.6 × 10⁷.
+        let product = GOOD
+            .replacen("upper = 89\nstep = 2", "upper = 4000\nstep = 1", 1)
+            .replacen("upper = 10\nstep = 0.4", "upper = 3979\nstep = 1", 1);
+        assert!(
+            err(&product).contains("by dimension 2"),
+            "{}",
+            err(&product)
+        );
+        for d in CaseFile::parse(GOOD).unwrap().dimensions {
+            assert_eq!(d.checked_count(), Some(d.count()));
+        }
+    }
+
+    /// A 12 MB summary was stored and returned by every `GET /api/v1/cases`.
+    #[test]
+    fn free_text_has_a_length_limit_and_no_control_characters() {
+        let err = |text: &str| CaseFile::parse(text).unwrap_err();
+        let with_summary = |summary: &str| {
+            GOOD.replacen(
+                "program = ",
+                &format!(
+                    "summary = \"{}\"\nprogram = ",
+                    summary.replace('\n', "\\n").replace('\u{1b}', "\\u001b")
+                ),
+                1,
+            )
+        };
+        let long = "a".repeat(12_000_000);
+        assert!(err(&with_summary(&long)).contains("summary is 12000000 bytes; at most 2000"));
+        let fits = "b".repeat(MAX_SUMMARY);
+        assert_eq!(CaseFile::parse(&with_summary(&fits)).unwrap().summary, fits);
+        // Two lines are a summary; an escape sequence is not.
+        assert!(CaseFile::parse(&with_summary("one\ntwo")).is_ok());
+        assert!(err(&with_summary("red \u{1b}[31m")).contains("summary holds a control"));
+        let long_command = format!("command = \"{}\"", "x".repeat(MAX_TEXT + 1));
+        assert!(
+            err(&GOOD.replacen("command = \"python3 cutin_idm.py\"", &long_command, 1))
+                .contains("command is 1001 bytes")
+        );
+        let long_unit = format!("unit = \"{}\"", "m".repeat(MAX_LABEL + 1));
+        assert!(err(&GOOD.replacen("unit = \"m\"", &long_unit, 1))
+            .contains("dimension 1 (`range`): unit is 65 bytes"));
+        assert!(
+            err(&GOOD.replacen("program = ", "event = \"a\\nb\"\nprogram = ", 1))
+                .contains("event holds a control")
+        );
     }
 }
