@@ -108,7 +108,7 @@ pub struct ProgramCost {
 /// A worker as its lease requests describe it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
 pub struct WorkerView {
-    /// The worker's self-declared name.
+    /// The worker's name, as its credential was issued.
     pub name: String,
     /// Simulation threads it declared in its last lease request.
     pub threads: u32,
@@ -133,6 +133,12 @@ pub struct WorkerView {
     /// other workers contradict. A flagged worker gets no work.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub flagged: Option<String>,
+    /// When its credential was issued (`POST /api/v1/workers`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub registered_at: Option<String>,
+    /// When an operator revoked its credential: it gets no more work.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub revoked_at: Option<String>,
 }
 
 /// One test of a lease.

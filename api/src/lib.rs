@@ -14,6 +14,7 @@ mod lease;
 mod library;
 pub mod packed;
 mod pair;
+mod worker;
 
 pub use campaign::*;
 pub use campaign_kind::*;
@@ -22,6 +23,7 @@ pub use events::*;
 pub use lease::*;
 pub use library::*;
 pub use pair::*;
+pub use worker::*;
 
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;

@@ -5,11 +5,13 @@
 use reqwest::StatusCode;
 use serde::de::DeserializeOwned;
 use serde::Serialize;
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 use tslg_api::{
     CampaignPlan, CampaignView, CreateCampaign, CreateLibrary, HeartbeatAck, History, Lease,
     LeaseFence, LeaseRelease, LeaseRequest, LibraryUpload, LibraryView, Problem, ResultAck,
-    ResultReport,
+    ResultReport, WorkerCredential, WorkerRegistration, WORKER_SECRET_HEADER,
 };
 
 /// A failed call: worth retrying, or refused for good.
@@ -28,12 +30,17 @@ pub enum CallError {
     },
 }
 
-/// A coordinator's HTTP client, with its base URL and bearer token.
+/// A coordinator's HTTP client, with its base URL and bearer token, and
+/// the secrets of the workers it registered (shared by its clones).
 #[derive(Clone)]
 pub struct Client {
     http: reqwest::Client,
     base: String,
     token: Option<String>,
+    secrets: Arc<Mutex<HashMap<String, String>>>,
+    /// Registrations one at a time: two calls naming a new worker at once
+    /// register it once.
+    registering: Arc<tokio::sync::Mutex<()>>,
 }
 
 impl Client {
@@ -47,7 +54,65 @@ impl Client {
             http,
             base: base.trim_end_matches('/').to_owned(),
             token,
+            secrets: Arc::default(),
+            registering: Arc::default(),
         })
+    }
+
+    /// `POST /api/v1/workers`: registers a worker asking for `name`; the
+    /// credential is kept for the requests that name the worker issued
+    /// (which is `name`, or `name.k` when `name` was issued before).
+    pub async fn register(&self, name: &str) -> Result<WorkerCredential, CallError> {
+        let registration = WorkerRegistration { name: name.into() };
+        let issued: WorkerCredential = self.post("/api/v1/workers", &registration).await?;
+        self.use_credential(&issued.name, &issued.secret);
+        Ok(issued)
+    }
+
+    /// Sends `secret` with every request that names `worker`.
+    pub fn use_credential(&self, worker: &str, secret: &str) {
+        let mut secrets = self.secrets.lock().unwrap_or_else(|p| p.into_inner());
+        secrets.insert(worker.to_owned(), secret.to_owned());
+    }
+
+    /// The secret this client sends for `worker`, if it registered it (for
+    /// a request built by hand).
+    pub fn secret_of(&self, worker: &str) -> Option<String> {
+        let secrets = self.secrets.lock().unwrap_or_else(|p| p.into_inner());
+        secrets.get(worker).cloned()
+    }
+
+    /// `builder` carrying `worker`'s secret. A worker this client has no
+    /// credential for is registered first, under its name: when that name
+    /// was issued to another worker, the call is refused (409) rather
+    /// than made in another name.
+    async fn as_worker(
+        &self,
+        builder: reqwest::RequestBuilder,
+        worker: &str,
+    ) -> Result<reqwest::RequestBuilder, CallError> {
+        if let Some(secret) = self.secret_of(worker) {
+            return Ok(builder.header(WORKER_SECRET_HEADER, secret));
+        }
+        let _one = self.registering.lock().await;
+        let secret = match self.secret_of(worker) {
+            Some(secret) => secret,
+            None => {
+                let issued = self.register(worker).await?;
+                if issued.name != worker {
+                    return Err(CallError::Refused {
+                        status: 409,
+                        detail: format!(
+                            "worker name `{worker}` was issued before; the coordinator \
+                             registered this worker as `{}`: name it so",
+                            issued.name
+                        ),
+                    });
+                }
+                issued.secret
+            }
+        };
+        Ok(builder.header(WORKER_SECRET_HEADER, secret))
     }
 
     fn request(&self, method: reqwest::Method, path: &str) -> reqwest::RequestBuilder {
@@ -102,11 +167,11 @@ impl Client {
 
     /// A lease, or `None` when there is no work.
     pub async fn claim(&self, request: &LeaseRequest) -> Result<Option<Lease>, CallError> {
+        let builder = self
+            .request(reqwest::Method::POST, "/api/v1/leases")
+            .json(request);
         let response = self
-            .send(
-                self.request(reqwest::Method::POST, "/api/v1/leases")
-                    .json(request),
-            )
+            .send(self.as_worker(builder, &request.worker).await?)
             .await?;
         if response.status() == StatusCode::NO_CONTENT {
             return Ok(None);
@@ -124,26 +189,38 @@ impl Client {
         lease: i64,
         fence: &LeaseFence,
     ) -> Result<HeartbeatAck, CallError> {
-        self.post(&format!("/api/v1/leases/{lease}/heartbeat"), fence)
+        let builder = self
+            .request(
+                reqwest::Method::POST,
+                &format!("/api/v1/leases/{lease}/heartbeat"),
+            )
+            .json(fence);
+        self.json(self.as_worker(builder, &fence.worker).await?)
             .await
     }
 
     /// `POST /api/v1/leases/{lease}/release`: gives the rest of the lease back.
     pub async fn release(&self, lease: i64, release: &LeaseRelease) -> Result<(), CallError> {
-        self.send(
-            self.request(
+        let builder = self
+            .request(
                 reqwest::Method::POST,
                 &format!("/api/v1/leases/{lease}/release"),
             )
-            .json(release),
-        )
-        .await
-        .map(|_| ())
+            .json(release);
+        self.send(self.as_worker(builder, &release.worker).await?)
+            .await
+            .map(|_| ())
     }
 
     /// `POST /api/v1/leases/{lease}/results`: reports a range of outcomes.
     pub async fn report(&self, lease: i64, report: &ResultReport) -> Result<ResultAck, CallError> {
-        self.post(&format!("/api/v1/leases/{lease}/results"), report)
+        let builder = self
+            .request(
+                reqwest::Method::POST,
+                &format!("/api/v1/leases/{lease}/results"),
+            )
+            .json(report);
+        self.json(self.as_worker(builder, &report.worker).await?)
             .await
     }
 
@@ -154,15 +231,15 @@ impl Client {
         lease: i64,
         upload: &LibraryUpload,
     ) -> Result<(), CallError> {
-        self.send(
-            self.request(
+        let builder = self
+            .request(
                 reqwest::Method::POST,
                 &format!("/api/v1/leases/{lease}/library"),
             )
-            .json(upload),
-        )
-        .await
-        .map(|_| ())
+            .json(upload);
+        self.send(self.as_worker(builder, &upload.worker).await?)
+            .await
+            .map(|_| ())
     }
 
     /// `GET /api/v1/campaigns/{campaign}/plan`: what any test of it needs.

@@ -38,6 +38,7 @@ mod campaign;
 mod config;
 mod db;
 mod error;
+mod identity;
 mod leasing;
 mod report;
 mod routes;

@@ -52,6 +52,8 @@ pub struct Shared {
     pub replays: Arc<crate::report::replay_counts::ReplayCounts>,
     /// Wakes the lease requests that wait for work.
     pub work: crate::work_signal::WorkSignal,
+    /// The workers' credentials checked so far.
+    pub credentials: crate::identity::Credentials,
 }
 
 impl AppState {
@@ -69,6 +71,7 @@ impl AppState {
             sampler: Arc::default(),
             replays: Arc::default(),
             work: Default::default(),
+            credentials: Default::default(),
         }))
     }
 }

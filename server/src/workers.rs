@@ -242,6 +242,8 @@ impl WorkerRegistry {
                 invalid: e.invalid,
                 last_release_reason: e.last_release.clone(),
                 flagged: flag(name),
+                registered_at: None,
+                revoked_at: None,
             })
             .collect();
         list.sort_by(|a, b| a.last_seen_seconds.total_cmp(&b.last_seen_seconds));

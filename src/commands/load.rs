@@ -267,10 +267,15 @@ async fn refuse_live_workers(admin: &Client) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Whether `name` is one of the load test's simulated workers (`load-N`).
+/// Whether `name` is one of the load test's simulated workers (`load-N`,
+/// or `load-N.k` as registered after an earlier load test).
 fn is_simulated(name: &str) -> bool {
+    let number = |n: &str| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit());
     name.strip_prefix("load-")
-        .is_some_and(|n| !n.is_empty() && n.bytes().all(|b| b.is_ascii_digit()))
+        .is_some_and(|n| match n.split_once('.') {
+            Some((n, k)) => number(n) && number(k),
+            None => number(n),
+        })
 }
 
 fn print_table(r: &LoadReport) {
@@ -371,16 +376,19 @@ async fn load(worker: &Client, campaign_id: i64, shape: Shape) -> anyhow::Result
         .await?
         .tests()
         .ok_or_else(|| anyhow::anyhow!("campaign {campaign_id} is a library build, not tests"))?;
+    // Each simulated worker registers for its credential first, outside
+    // the timed part: `load-k`, or `load-k.j` on a coordinator where an
+    // earlier load test had that name.
+    let mut names = Vec::with_capacity(shape.workers);
+    for w in 0..shape.workers {
+        names.push(worker.register(&format!("load-{w}")).await?.name);
+    }
     let started = Instant::now();
-    let tasks: Vec<_> = (0..shape.workers)
-        .map(|w| {
+    let tasks: Vec<_> = names
+        .into_iter()
+        .map(|name| {
             let (client, prepared) = (worker.clone(), Arc::clone(&prepared));
-            tokio::spawn(simulated_worker(
-                client,
-                prepared,
-                format!("load-{w}"),
-                shape,
-            ))
+            tokio::spawn(simulated_worker(client, prepared, name, shape))
         })
         .collect();
     let mut logs = Vec::with_capacity(shape.workers);

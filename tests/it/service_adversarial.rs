@@ -500,7 +500,7 @@ async fn the_cause_of_an_internal_error_is_logged_and_never_sent() {
     let mut report = effort(&first, "w", 0.0, 1);
     report.to = first.end;
     report.events = real_events(&client, id, first.start, first.end).await;
-    let response = reqwest::Client::new()
+    let response = worker_http(&client, "w")
         .post(format!("{}/api/v1/leases/{}/results", server.url, first.id))
         .json(&report)
         .send()

@@ -266,7 +266,9 @@ async fn every_endpoint_answers_bad_input_with_a_problem_and_keeps_serving() {
     assert!(chunked.starts_with("HTTP/1.1 413"), "{chunked}");
     assert!(chunked.contains("application/problem+json"), "{chunked}");
 
-    // Unknown ids in good requests.
+    // Unknown ids in good requests of a registered worker.
+    client.register("w").await.unwrap();
+    let http = worker_http(&client, "w");
     for (path, body) in [
         ("/api/v1/campaigns/999999/cancel", json!({})),
         ("/api/v1/leases/999999/heartbeat", fence.clone()),

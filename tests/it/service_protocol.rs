@@ -55,7 +55,6 @@ async fn results_are_idempotent_fenced_on_the_attempt_and_leases_expire_and_retu
         &["--lease-ttl-seconds", "1", "--lease-size", "100"],
     );
     let client = server.client();
-    let http = reqwest::Client::new();
     let library = ready_library(&client, "idm", true).await;
     // β small enough that 100 tests do not stop the campaign.
     let request = campaign(Method::Library, library.id, "idm", 0.01, 3);
@@ -79,6 +78,8 @@ async fn results_are_idempotent_fenced_on_the_attempt_and_leases_expire_and_retu
         (lease.campaign_id, lease.start, lease.end, lease.attempt),
         (id, 0, 100, 1)
     );
+    // Reports by hand, in w1's name with w1's secret.
+    let http = worker_http(&client, "w1");
     // The inline tests are the campaign's draws, and we run them here.
     let case = open_case("cut-in", None, &ExposureSource::Builtin).unwrap();
     let lib = case

@@ -147,8 +147,9 @@ async fn every_acknowledged_result_survives_a_coordinator_kill_and_counts_once()
         task.await.unwrap();
     }
     let acked = std::mem::take(&mut *acked.lock().unwrap());
-    let server = ServerProcess::start_on(&database, &address, &["--lease-size", "100"]);
-    let client = server.client();
+    let _server = ServerProcess::start_on(&database, &address, &["--lease-size", "100"]);
+    // The same client, with the workers' secrets: credentials are stored.
+    let client = client.clone();
     // Each acknowledged report is on disk: sent again, all of it is a
     // duplicate, none of it new.
     for (lease, report) in &acked {

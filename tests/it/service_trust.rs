@@ -222,7 +222,7 @@ async fn a_lying_worker_is_caught_by_replication_and_the_answer_is_the_honest_on
         "the prefix waits for the audits: {held:?}"
     );
     // The liar goes on lying until it is refused.
-    let refusal = liar(server.client(), "liar", offer, Duration::from_secs(120)).await;
+    let refusal = liar(client.clone(), "liar", offer, Duration::from_secs(120)).await;
     assert!(refusal.contains("worker `liar` is flagged"), "{refusal}");
     assert!(
         refusal.contains("where two other workers found an event"),

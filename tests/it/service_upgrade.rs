@@ -123,6 +123,7 @@ async fn a_database_of_the_previous_release_is_migrated_and_one_of_a_newer_is_re
     } = MidCampaign::start(&database, &options).await;
     let client = server.client();
     let held = claim(&client, "old").await.expect("a lease");
+    let old_secret = client.secret_of("old").expect("registered");
     drop(worker);
     server.kill();
 
@@ -133,6 +134,7 @@ async fn a_database_of_the_previous_release_is_migrated_and_one_of_a_newer_is_re
 
     let server = ServerProcess::start(&database, &options);
     let client = server.client();
+    client.use_credential("old", &old_secret);
     let migrated = client.campaign(id).await.unwrap();
     assert_eq!(migrated.status, CampaignStatus::Running);
     assert!(migrated.indices >= 100_000);

@@ -54,12 +54,34 @@ async fn serve(worker: &mut Worker, config: &WorkerConfig) -> anyhow::Result<()>
     // every outage (it may come back upgraded): both speak one version of
     // the lease protocol.
     let mut version_checked = false;
+    let mut registered = false;
     while !worker.stopping() {
         if !version_checked {
             match same_release(&worker.client).await {
                 Ok(checked) => version_checked = checked?,
                 Err(e) => {
                     tracing::warn!(error = %e, "cannot reach the coordinator");
+                    worker.pause(trouble.next_wait(&mut rng)).await;
+                    continue;
+                }
+            }
+        }
+        if !registered {
+            match register(worker).await {
+                Ok(()) => registered = true,
+                Err(CallError::Refused {
+                    status: 401,
+                    detail,
+                }) => {
+                    anyhow::bail!("the coordinator refused this worker's token: {detail}");
+                }
+                Err(CallError::Refused { status, detail }) => {
+                    anyhow::bail!(
+                        "the coordinator refused to register this worker ({status}): {detail}"
+                    );
+                }
+                Err(e) => {
+                    tracing::warn!(error = %e, "cannot register with the coordinator");
                     worker.pause(trouble.next_wait(&mut rng)).await;
                     continue;
                 }
@@ -122,6 +144,22 @@ async fn serve(worker: &mut Worker, config: &WorkerConfig) -> anyhow::Result<()>
                 worker.pause(trouble.next_wait(&mut rng)).await;
             }
         }
+    }
+    Ok(())
+}
+
+/// Registers the worker for a credential of its own (docs/api.md, worker
+/// identity): its name is the one asked for, or `NAME.k` when that name
+/// was issued before (this worker's own, before a restart, included).
+async fn register(worker: &mut Worker) -> Result<(), CallError> {
+    let issued = worker.client.register(&worker.name).await?;
+    if issued.name != worker.name {
+        tracing::info!(
+            asked = %worker.name,
+            worker = %issued.name,
+            "the name asked for was issued before: registered under the next free one"
+        );
+        worker.name = issued.name;
     }
     Ok(())
 }

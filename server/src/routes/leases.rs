@@ -9,17 +9,17 @@ use crate::routes::latency::HoldClock;
 use crate::routes::problem::ApiJson;
 use crate::routes::ApiPath;
 use crate::state::AppState;
-use crate::store::{audits, campaigns, costs};
+use crate::store::campaigns;
 use crate::work_signal::FIRST_RECHECK;
 use axum::extract::State;
-use axum::http::StatusCode;
+use axum::http::{HeaderMap, StatusCode};
 use axum::response::{IntoResponse, Response};
 use axum::Json;
 use std::time::Duration;
 use tslg_api::{
     HeartbeatAck, Lease, LeaseFence, LeaseKey, LeaseRelease, LeaseRequest, LibraryUpload, Method,
-    Problem, ProgramCost, ResultAck, ResultReport, TestCase, WorkerList, MAX_CLAIM_WAIT_SECONDS,
-    MAX_INVALID_REASON,
+    Problem, ResultAck, ResultReport, TestCase, MAX_CLAIM_WAIT_SECONDS, MAX_INVALID_REASON,
+    WORKER_SECRET_HEADER,
 };
 use tslg_method::external::{check_program_name, ExternalMode};
 
@@ -30,7 +30,7 @@ const MAX_UNHEALTHY_REASON: usize = 4000;
 
 /// A worker's name: 1 to 128 bytes, no control characters; the problem
 /// otherwise (a body's name answers 422, a path's 400).
-fn worker_name_problem(worker: &str) -> Option<String> {
+pub(crate) fn worker_name_problem(worker: &str) -> Option<String> {
     (worker.is_empty() || worker.len() > 128 || worker.chars().any(char::is_control))
         .then(|| "worker must be 1 to 128 printable characters".to_string())
 }
@@ -39,16 +39,27 @@ fn check_worker(worker: &str) -> Result<(), ServiceError> {
     worker_name_problem(worker).map_or(Ok(()), |m| Err(ServiceError::Unprocessable(m)))
 }
 
+/// Admits a request naming `worker` when it carries that worker's secret
+/// (`crate::identity`; 403 otherwise).
+async fn admit(state: &AppState, headers: &HeaderMap, worker: &str) -> Result<(), ServiceError> {
+    let secret = headers
+        .get(WORKER_SECRET_HEADER)
+        .and_then(|v| v.to_str().ok());
+    state.credentials.verify(&state.db, worker, secret).await
+}
+
 /// Takes a range of tests of a running campaign; 204 when there is none.
-#[utoipa::path(post, path = "/api/v1/leases", request_body = LeaseRequest, responses(
+#[utoipa::path(post, path = "/api/v1/leases", request_body = LeaseRequest, params(("tslg-worker-secret" = String, Header, description = "The worker's secret (POST /api/v1/workers)")), responses(
     (status = 200, body = Lease), (status = 204, description = "No work right now (when the wait asked for ends)"),
     (status = 401, body = Problem), (status = 403, body = Problem),
     (status = 422, body = Problem)))]
 pub async fn claim(
     State(state): State<AppState>,
+    headers: HeaderMap,
     ApiJson(req): ApiJson<LeaseRequest>,
 ) -> Result<Response, ServiceError> {
     check_lease_request(&req)?;
+    admit(&state, &headers, &req.worker).await?;
     // A request that asks to wait is held until work may be there (its
     // campaign announced, or at every recheck): docs/api.md, long polling.
     let wait = req
@@ -277,62 +288,19 @@ fn check_programs(req: &LeaseRequest) -> Result<(), ServiceError> {
     Ok(())
 }
 
-/// The workers seen since the coordinator started, most recent first:
-/// their threads, the external programs they offer and those they report
-/// unhealthy.
-#[utoipa::path(get, path = "/api/v1/workers", responses((status = 200, body = WorkerList)))]
-pub async fn workers(State(state): State<AppState>) -> Result<Json<WorkerList>, ServiceError> {
-    let (flagged, costs) = state
-        .db
-        .read(|conn| Ok::<_, ServiceError>((audits::flagged(conn)?, costs::programs(conn)?)))
-        .await?;
-    Ok(Json(WorkerList {
-        workers: state.workers.list(&flagged),
-        costs: costs
-            .into_iter()
-            .map(|(program, seconds_per_test)| ProgramCost {
-                program,
-                seconds_per_test,
-            })
-            .collect(),
-    }))
-}
-
-/// Clears a worker's flag: it gets work again (its taken-back results stay
-/// taken back).
-#[utoipa::path(delete, path = "/api/v1/workers/{name}/flag", params(("name" = String, Path)),
-    responses((status = 204, description = "Cleared"), (status = 400, body = Problem),
-    (status = 401, body = Problem), (status = 404, body = Problem)))]
-pub async fn unflag(
-    State(state): State<AppState>,
-    ApiPath(name): ApiPath<String>,
-) -> Result<StatusCode, ServiceError> {
-    if let Some(message) = worker_name_problem(&name) {
-        return Err(ServiceError::BadRequest(message));
-    }
-    let worker = name.clone();
-    if !state
-        .db
-        .write(move |conn| audits::unflag(conn, &worker))
-        .await?
-    {
-        return Err(ServiceError::NotFound(format!(
-            "worker `{name}` is not flagged"
-        )));
-    }
-    tracing::warn!(worker = %name, "flag cleared by an operator");
-    Ok(StatusCode::NO_CONTENT)
-}
-
 /// Keeps a lease alive; `continue: false` means drop it.
-#[utoipa::path(post, path = "/api/v1/leases/{id}/heartbeat", params(("id" = i64, Path)),
+#[utoipa::path(post, path = "/api/v1/leases/{id}/heartbeat", params(("id" = i64, Path), ("tslg-worker-secret" = String, Header, description = "The worker's secret (POST /api/v1/workers)")),
     request_body = LeaseFence, responses(
-    (status = 200, body = HeartbeatAck), (status = 404, body = Problem), (status = 409, body = Problem)))]
+    (status = 200, body = HeartbeatAck), (status = 403, body = Problem), (status = 404, body = Problem),
+    (status = 409, body = Problem), (status = 422, body = Problem)))]
 pub async fn heartbeat(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
+    headers: HeaderMap,
     ApiJson(fence): ApiJson<LeaseFence>,
 ) -> Result<Json<HeartbeatAck>, ServiceError> {
+    check_worker(&fence.worker)?;
+    admit(&state, &headers, &fence.worker).await?;
     state.workers.heard(&fence.worker);
     Ok(Json(
         fence::heartbeat(&state.db, &state.config, id, &fence).await?,
@@ -341,21 +309,25 @@ pub async fn heartbeat(
 
 /// Gives an unfinished lease back, to be handed out again at once, saying
 /// why.
-#[utoipa::path(post, path = "/api/v1/leases/{id}/release", params(("id" = i64, Path)),
+#[utoipa::path(post, path = "/api/v1/leases/{id}/release", params(("id" = i64, Path), ("tslg-worker-secret" = String, Header, description = "The worker's secret (POST /api/v1/workers)")),
     request_body = LeaseRelease, responses(
-    (status = 204, description = "Released"), (status = 404, body = Problem), (status = 409, body = Problem),
+    (status = 204, description = "Released"), (status = 403, body = Problem),
+    (status = 404, body = Problem), (status = 409, body = Problem),
     (status = 422, body = Problem)))]
 pub async fn release(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
+    headers: HeaderMap,
     ApiJson(release): ApiJson<LeaseRelease>,
 ) -> Result<StatusCode, ServiceError> {
+    check_worker(&release.worker)?;
     let reason = release.reason.as_deref().unwrap_or("no reason given");
     if reason.len() > MAX_INVALID_REASON || reason.chars().any(|c| c.is_control() && c != '\n') {
         return Err(ServiceError::Unprocessable(format!(
             "the reason must be at most {MAX_INVALID_REASON} bytes without control characters"
         )));
     }
+    admit(&state, &headers, &release.worker).await?;
     let lease = fence::release(&state.db, id, &release.fence()).await?;
     // Its tests are another worker's now (or when the lease's rest is due).
     state.work.announce_one();
@@ -374,7 +346,7 @@ pub async fn release(
 /// `build` (or why the build failed): the library is ready (or failed)
 /// and the campaign done. A file that is not the library asked for is a
 /// 422 and changes nothing.
-#[utoipa::path(post, path = "/api/v1/leases/{id}/library", params(("id" = i64, Path)),
+#[utoipa::path(post, path = "/api/v1/leases/{id}/library", params(("id" = i64, Path), ("tslg-worker-secret" = String, Header, description = "The worker's secret (POST /api/v1/workers)")),
     request_body = LibraryUpload, responses(
     (status = 204, description = "Recorded"), (status = 403, body = Problem),
     (status = 404, body = Problem),
@@ -383,22 +355,25 @@ pub async fn release(
 pub async fn library(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
+    headers: HeaderMap,
     ApiJson(upload): ApiJson<LibraryUpload>,
 ) -> Result<StatusCode, ServiceError> {
     check_worker(&upload.worker)?;
+    admit(&state, &headers, &upload.worker).await?;
     crate::builds::whole::upload(&state, id, &upload).await?;
     Ok(StatusCode::NO_CONTENT)
 }
 
 /// Reports the outcomes of a range of the lease's tests.
-#[utoipa::path(post, path = "/api/v1/leases/{id}/results", params(("id" = i64, Path)),
+#[utoipa::path(post, path = "/api/v1/leases/{id}/results", params(("id" = i64, Path), ("tslg-worker-secret" = String, Header, description = "The worker's secret (POST /api/v1/workers)")),
     request_body = ResultReport, responses(
-    (status = 200, body = ResultAck), (status = 404, body = Problem),
+    (status = 200, body = ResultAck), (status = 403, body = Problem), (status = 404, body = Problem),
     (status = 409, description = "Not the lease's holder, or a conflicting result", body = Problem),
     (status = 422, body = Problem)))]
 pub async fn results(
     State(state): State<AppState>,
     ApiPath(id): ApiPath<i64>,
+    headers: HeaderMap,
     ApiJson(report): ApiJson<ResultReport>,
 ) -> Result<Json<ResultAck>, ServiceError> {
     check_worker(&report.worker)?;
@@ -424,6 +399,9 @@ pub async fn results(
         }
     }
     let checked = std::sync::Arc::new(check_report(&report)?);
+    // A malformed body is a 422 whoever sends it; a well-formed one in
+    // another worker's name a 403.
+    admit(&state, &headers, &report.worker).await?;
     let report = std::sync::Arc::new(report);
     let next = report
         .next_lease

@@ -14,7 +14,7 @@ mod extract;
 mod figures;
 mod health;
 mod latency;
-mod leases;
+pub(crate) mod leases;
 mod libraries;
 mod metrics;
 pub mod openapi;
@@ -22,6 +22,7 @@ mod problem;
 pub(crate) mod problem_io;
 #[cfg(test)]
 mod tests;
+mod workers;
 
 pub use extract::{ApiPath, ApiQuery};
 
@@ -43,9 +44,11 @@ pub fn router(state: AppState) -> Router {
         .route("/api/v1/campaigns/{id}/cancel", post(campaigns::cancel))
         .route("/api/v1/campaigns/{id}", delete(campaigns::delete))
         .route("/api/v1/libraries/{id}", delete(libraries::delete))
-        .route("/api/v1/workers/{name}/flag", delete(leases::unflag))
+        .route("/api/v1/workers/{name}/flag", delete(workers::unflag))
+        .route("/api/v1/workers/{name}", delete(workers::revoke))
         .route_layer(from_fn_with_state(state.clone(), auth::require_admin));
     let worker = Router::new()
+        .route("/api/v1/workers", post(workers::register))
         .route("/api/v1/leases", post(leases::claim))
         .route("/api/v1/leases/{id}/heartbeat", post(leases::heartbeat))
         .route("/api/v1/leases/{id}/release", post(leases::release))
@@ -69,7 +72,7 @@ pub fn router(state: AppState) -> Router {
             "/api/v1/campaigns/{id}/tests/{index}/openscenario",
             get(events::openscenario),
         )
-        .route("/api/v1/workers", get(leases::workers))
+        .route("/api/v1/workers", get(workers::list))
         .route(
             "/api/v1/campaigns/{id}/figures/estimate.svg",
             get(figures::estimate),

@@ -39,8 +39,10 @@ use utoipa::OpenApi;
         super::leases::release,
         super::leases::results,
         super::leases::library,
-        super::leases::workers,
-        super::leases::unflag,
+        super::workers::register,
+        super::workers::list,
+        super::workers::revoke,
+        super::workers::unflag,
         super::figures::estimate,
         super::figures::relative_half_width,
         super::figures::library_picture,
@@ -64,9 +66,16 @@ pub async fn document(State(state): State<AppState>) -> Json<Value> {
 fn role_of(path: &str, method: &str) -> Option<Role> {
     match (method, path) {
         (_, "/healthz" | "/api/v1/openapi.json") => None,
-        ("post", "/api/v1/libraries" | "/api/v1/campaigns" | "/api/v1/campaigns/{id}/cancel")
-        | ("delete", "/api/v1/workers/{name}/flag") => Some(Role::Admin),
+        (
+            "post",
+            "/api/v1/cases"
+            | "/api/v1/libraries"
+            | "/api/v1/campaigns"
+            | "/api/v1/campaigns/{id}/cancel",
+        )
+        | ("delete", _) => Some(Role::Admin),
         (_, p) if p.starts_with("/api/v1/leases") => Some(Role::Worker),
+        ("post", "/api/v1/workers") => Some(Role::Worker),
         ("get", "/api/v1/campaigns/{id}/plan" | "/api/v1/libraries/{id}/file") => {
             Some(Role::Worker)
         }
@@ -116,7 +125,10 @@ fn contract(mut doc: Value, config: &Config) -> Value {
                 codes.push(("422", "A well-formed body with invalid values"));
             }
             if lease_report {
-                codes.push(("403", "Not the key of this lease's attempt"));
+                codes.push((
+                    "403",
+                    "Not the named worker's secret, or not the key of this lease's attempt",
+                ));
                 codes.push((
                     "409",
                     "Not the lease's current holder, or a conflicting result",

@@ -5,6 +5,7 @@ pub mod audits;
 pub mod campaign_row;
 pub mod campaigns;
 pub mod costs;
+pub mod credentials;
 pub mod deletion;
 pub mod error;
 pub mod leases;

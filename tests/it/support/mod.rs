@@ -312,6 +312,23 @@ pub async fn finished(client: &Client, id: i64, limit: Duration) -> CampaignView
 }
 
 /// Asks for a lease as `worker` (one thread, no inline tests).
+/// A plain HTTP client that sends `worker`'s secret, as `client`
+/// registered it, with every request (for requests built by hand).
+pub fn worker_http(client: &Client, worker: &str) -> reqwest::Client {
+    let secret = client
+        .secret_of(worker)
+        .unwrap_or_else(|| panic!("worker `{worker}` is not registered by this client"));
+    let mut headers = reqwest::header::HeaderMap::new();
+    headers.insert(
+        tslg_api::WORKER_SECRET_HEADER,
+        reqwest::header::HeaderValue::from_str(&secret).unwrap(),
+    );
+    reqwest::Client::builder()
+        .default_headers(headers)
+        .build()
+        .unwrap()
+}
+
 pub async fn claim(client: &Client, worker: &str) -> Option<Lease> {
     client
         .claim(&LeaseRequest {

@@ -14,6 +14,8 @@ use tower::ServiceExt;
 struct App {
     router: Router,
     state: AppState,
+    /// The secrets of the workers registered, by name.
+    secrets: std::sync::Mutex<std::collections::HashMap<String, String>>,
     _dir: tempfile::TempDir,
 }
 
@@ -27,13 +29,24 @@ async fn app(configure: impl FnOnce(&mut Config)) -> App {
     App {
         router: super::router(state.clone()),
         state,
+        secrets: Default::default(),
         _dir: dir,
     }
 }
 
 impl App {
+    /// Calls the router; a lease request, heartbeat, release or report
+    /// naming a worker carries its secret (registered at first use, as
+    /// `tslg_client::Client` does).
     async fn call(&self, method: &str, uri: &str, body: Option<Value>) -> (StatusCode, Value) {
-        let request = Request::builder().method(method).uri(uri);
+        let mut request = Request::builder().method(method).uri(uri);
+        let worker = body
+            .as_ref()
+            .and_then(|b| b["worker"].as_str())
+            .filter(|_| uri.starts_with("/api/v1/leases"));
+        if let Some(worker) = worker {
+            request = request.header(tslg_api::WORKER_SECRET_HEADER, self.secret(worker).await);
+        }
         let request = match body {
             Some(body) => request
                 .header("content-type", "application/json")
@@ -50,6 +63,23 @@ impl App {
             status,
             serde_json::from_slice(&bytes).unwrap_or(Value::Null),
         )
+    }
+
+    /// `worker`'s secret, registering it at first use.
+    async fn secret(&self, worker: &str) -> String {
+        if let Some(secret) = self.secrets.lock().unwrap().get(worker) {
+            return secret.clone();
+        }
+        let issued = Box::pin(self.call("POST", "/api/v1/workers", Some(json!({"name": worker}))));
+        let (status, issued) = issued.await;
+        assert_eq!(status, StatusCode::CREATED, "{issued}");
+        assert_eq!(issued["name"], worker, "{issued}");
+        let secret = issued["secret"].as_str().unwrap().to_owned();
+        self.secrets
+            .lock()
+            .unwrap()
+            .insert(worker.into(), secret.clone());
+        secret
     }
 
     /// An NDD campaign of the external program `x` on cut-in, which only
@@ -527,3 +557,5 @@ async fn a_wait_that_finds_nothing_marks_its_worker_idle() {
     assert_eq!(status, StatusCode::OK, "{lease}");
     assert!(!app.state.workers.idle("w1"), "a lease");
 }
+
+mod identity;

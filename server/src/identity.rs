@@ -1,0 +1,168 @@
+//! Worker identities. A worker registers under the fleet's worker token and
+//! gets a secret of its own (256 bits from the operating system); every
+//! request that names a worker must present that worker's secret, so the
+//! shared token no longer lets one worker act as another: claim leases in
+//! its name, report on them, and have it flagged. Names are issued once
+//! (`store/credentials.rs`), so a flag, which is keyed by name, attaches to
+//! one credential.
+//!
+//! The coordinator keeps SHA-256(secret), compared in constant time; the
+//! credentials it has checked are kept in memory, so a request costs one
+//! hash and no read.
+
+use crate::db::Database;
+use crate::error::ServiceError;
+use crate::store::credentials::{self, CredentialRow};
+use sha2::{Digest, Sha256};
+use std::collections::HashMap;
+use std::sync::Mutex;
+use subtle::ConstantTimeEq;
+use tslg_api::{WorkerCredential, WORKER_SECRET_HEADER};
+
+/// The longest name a worker may ask for, leaving room for a `.k` suffix
+/// within the 128 bytes a worker's name may have.
+pub const MAX_REQUESTED_NAME: usize = 120;
+
+/// Credentials kept in memory at most (a cache of the table: past it, it
+/// starts again empty).
+const MAX_KEPT: usize = 100_000;
+
+/// The credentials checked so far, by name.
+#[derive(Default)]
+pub struct Credentials {
+    known: Mutex<HashMap<String, CredentialRow>>,
+}
+
+fn digest(secret: &str) -> String {
+    Sha256::digest(secret.as_bytes())
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
+}
+
+impl Credentials {
+    /// Issues a credential for a worker asking for `requested` (checked by
+    /// the caller): the name itself when it was never issued, else the
+    /// first free `requested.k`.
+    pub async fn register(
+        &self,
+        db: &Database,
+        requested: &str,
+    ) -> Result<WorkerCredential, ServiceError> {
+        let secret = format!(
+            "{:032x}{:032x}",
+            rand::random::<u128>(),
+            rand::random::<u128>()
+        );
+        let hash = digest(&secret);
+        let asked = requested.to_owned();
+        let row = db
+            .write(move |conn| credentials::issue(conn, &asked, &hash))
+            .await?
+            .ok_or_else(|| {
+                ServiceError::Conflict(format!(
+                    "worker name `{requested}` and its numbered variants are all issued; ask \
+                     for another name"
+                ))
+            })?;
+        let issued = WorkerCredential {
+            name: row.name.clone(),
+            secret,
+            issued_at: row.issued_at.clone(),
+        };
+        self.remember(row);
+        Ok(issued)
+    }
+
+    /// Admits a request naming `worker` when `secret` is its credential's
+    /// (403 otherwise: no secret, another worker's, an unknown name or a
+    /// revoked credential).
+    pub async fn verify(
+        &self,
+        db: &Database,
+        worker: &str,
+        secret: Option<&str>,
+    ) -> Result<(), ServiceError> {
+        // Bound first: a guard in the match's scrutinee would be held over
+        // the read below.
+        let kept = self.lock().get(worker).cloned();
+        let row = match kept {
+            Some(row) => Some(row),
+            None => {
+                let name = worker.to_owned();
+                let row = db.read(move |conn| credentials::get(conn, &name)).await?;
+                if let Some(row) = &row {
+                    self.remember(row.clone());
+                }
+                row
+            }
+        };
+        let refuse = |why: String| Err(ServiceError::Forbidden(why));
+        let Some(row) = row else {
+            return refuse(format!(
+                "worker `{worker}` is not registered: a worker registers with POST \
+                 /api/v1/workers and sends its secret in the `{WORKER_SECRET_HEADER}` header"
+            ));
+        };
+        if let Some(at) = &row.revoked_at {
+            return refuse(format!(
+                "worker `{worker}`'s credential was revoked at {at}: it gets no work"
+            ));
+        }
+        let Some(secret) = secret else {
+            return refuse(format!(
+                "a request naming worker `{worker}` must carry its secret in the \
+                 `{WORKER_SECRET_HEADER}` header"
+            ));
+        };
+        let given = digest(secret);
+        if !bool::from(given.as_bytes().ct_eq(row.secret_hash.as_bytes())) {
+            return refuse(format!(
+                "the `{WORKER_SECRET_HEADER}` given is not worker `{worker}`'s: a worker acts \
+                 only in its own name"
+            ));
+        }
+        Ok(())
+    }
+
+    /// Revokes `worker`'s credential and expires its active leases (each is
+    /// handed out again to another worker); false when it has none or it
+    /// was revoked already. Its results stay: revoking is not a flag.
+    pub async fn revoke(&self, db: &Database, worker: &str) -> Result<bool, ServiceError> {
+        let name = worker.to_owned();
+        let (revoked, row) = db
+            .write(move |conn| {
+                let revoked = credentials::revoke(conn, &name)?;
+                if revoked {
+                    crate::store::leases::expire_all_of(conn, &name)?;
+                }
+                Ok::<_, ServiceError>((revoked, credentials::get(conn, &name)?))
+            })
+            .await?;
+        if let Some(row) = row {
+            self.remember(row);
+        }
+        Ok(revoked)
+    }
+
+    /// When `worker`'s credential was issued and revoked, as far as this
+    /// process has seen it.
+    pub fn dates(&self, worker: &str) -> (Option<String>, Option<String>) {
+        self.lock()
+            .get(worker)
+            .map(|row| (Some(row.issued_at.clone()), row.revoked_at.clone()))
+            .unwrap_or_default()
+    }
+
+    fn remember(&self, row: CredentialRow) {
+        let mut known = self.lock();
+        if known.len() >= MAX_KEPT {
+            known.clear();
+        }
+        known.insert(row.name.clone(), row);
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, HashMap<String, CredentialRow>> {
+        self.known.lock().unwrap_or_else(|p| p.into_inner())
+    }
+}

@@ -1,0 +1,107 @@
+//! `/api/v1/workers`: the fleet. Workers register here for a credential of
+//! their own (`crate::identity`); readers list them; an operator revokes a
+//! credential or clears a flag.
+
+use crate::error::ServiceError;
+use crate::identity::MAX_REQUESTED_NAME;
+use crate::routes::leases::worker_name_problem;
+use crate::routes::problem::ApiJson;
+use crate::routes::ApiPath;
+use crate::state::AppState;
+use crate::store::{audits, costs};
+use axum::extract::State;
+use axum::http::StatusCode;
+use axum::Json;
+use tslg_api::{Problem, ProgramCost, WorkerCredential, WorkerList, WorkerRegistration};
+
+/// Registers a worker: a credential of its own, under the name asked for,
+/// or the first free `NAME.k` when that name was issued before (to another
+/// worker, or to this one before a restart). The secret is shown once.
+#[utoipa::path(post, path = "/api/v1/workers", request_body = WorkerRegistration, responses(
+    (status = 201, body = WorkerCredential), (status = 401, body = Problem),
+    (status = 409, body = Problem), (status = 422, body = Problem)))]
+pub async fn register(
+    State(state): State<AppState>,
+    ApiJson(req): ApiJson<WorkerRegistration>,
+) -> Result<(StatusCode, Json<WorkerCredential>), ServiceError> {
+    crate::validate::check_name("name", &req.name, MAX_REQUESTED_NAME)?;
+    let issued = state.credentials.register(&state.db, &req.name).await?;
+    tracing::info!(worker = %issued.name, asked = %req.name, "worker registered");
+    Ok((StatusCode::CREATED, Json(issued)))
+}
+
+/// The workers seen since the coordinator started, most recent first:
+/// their threads, the external programs they offer and those they report
+/// unhealthy, when their credentials were issued (and revoked), and the
+/// measured cost of a test of each program.
+#[utoipa::path(get, path = "/api/v1/workers", responses((status = 200, body = WorkerList)))]
+pub async fn list(State(state): State<AppState>) -> Result<Json<WorkerList>, ServiceError> {
+    let (flagged, costs) = state
+        .db
+        .read(|conn| Ok::<_, ServiceError>((audits::flagged(conn)?, costs::programs(conn)?)))
+        .await?;
+    let mut workers = state.workers.list(&flagged);
+    for worker in &mut workers {
+        (worker.registered_at, worker.revoked_at) = state.credentials.dates(&worker.name);
+    }
+    Ok(Json(WorkerList {
+        workers,
+        costs: costs
+            .into_iter()
+            .map(|(program, seconds_per_test)| ProgramCost {
+                program,
+                seconds_per_test,
+            })
+            .collect(),
+    }))
+}
+
+/// The worker named in a path, checked (400 otherwise).
+fn path_name(name: &str) -> Result<(), ServiceError> {
+    worker_name_problem(name).map_or(Ok(()), |m| Err(ServiceError::BadRequest(m)))
+}
+
+/// Revokes a worker's credential: every request in its name is refused
+/// from now on and its leases are handed out again. Its results stay (to
+/// take them back, it is a flag's work). Its name is not issued again.
+#[utoipa::path(delete, path = "/api/v1/workers/{name}", params(("name" = String, Path)),
+    responses((status = 204, description = "Revoked"), (status = 400, body = Problem),
+    (status = 401, body = Problem), (status = 404, body = Problem)))]
+pub async fn revoke(
+    State(state): State<AppState>,
+    ApiPath(name): ApiPath<String>,
+) -> Result<StatusCode, ServiceError> {
+    path_name(&name)?;
+    if !state.credentials.revoke(&state.db, &name).await? {
+        return Err(ServiceError::NotFound(format!(
+            "worker `{name}` has no credential in force"
+        )));
+    }
+    state.work.announce_one();
+    tracing::warn!(worker = %name, "credential revoked by an operator");
+    Ok(StatusCode::NO_CONTENT)
+}
+
+/// Clears a worker's flag: it gets work again (its taken-back results stay
+/// taken back).
+#[utoipa::path(delete, path = "/api/v1/workers/{name}/flag", params(("name" = String, Path)),
+    responses((status = 204, description = "Cleared"), (status = 400, body = Problem),
+    (status = 401, body = Problem), (status = 404, body = Problem)))]
+pub async fn unflag(
+    State(state): State<AppState>,
+    ApiPath(name): ApiPath<String>,
+) -> Result<StatusCode, ServiceError> {
+    path_name(&name)?;
+    let worker = name.clone();
+    if !state
+        .db
+        .write(move |conn| audits::unflag(conn, &worker))
+        .await?
+    {
+        return Err(ServiceError::NotFound(format!(
+            "worker `{name}` is not flagged"
+        )));
+    }
+    tracing::warn!(worker = %name, "flag cleared by an operator");
+    Ok(StatusCode::NO_CONTENT)
+}
