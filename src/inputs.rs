@@ -99,9 +99,12 @@ fn open_user_case(
     exposure: &ExposureSource,
 ) -> anyhow::Result<Arc<dyn ScenarioCase>> {
     let (file, dir) = read_case_file(path)?;
+    let max = tslg_worker::MAX_VUT_SECONDS;
     anyhow::ensure!(
-        args.vut_timeout_seconds.is_finite() && args.vut_timeout_seconds > 0.0,
-        "--vut-timeout {} must be a positive number of seconds",
+        args.vut_timeout_seconds.is_finite()
+            && args.vut_timeout_seconds > 0.0
+            && args.vut_timeout_seconds <= max,
+        "--vut-timeout {} must be in (0, {max}] seconds",
         args.vut_timeout_seconds
     );
     let table_path = dir.join(&file.exposure);

@@ -176,8 +176,14 @@ impl Grid {
         if axes.is_empty() {
             return Err(GridError::NoAxes);
         }
-        let total: u128 = axes.iter().map(|a| a.len() as u128).product();
+        // Checked: 130 axes of two values overflow even a u128 (a panic in
+        // debug, a wrap to 0 in release), and a library file names its axes.
+        let total = axes
+            .iter()
+            .try_fold(1u128, |n, a| n.checked_mul(a.len() as u128))
+            .unwrap_or(u128::MAX);
         let cells = usize::try_from(total).map_err(|_| GridError::TooLarge(total))?;
+        // Every stride divides `cells`, which fits: no product below overflows.
         let mut strides = vec![1; axes.len()];
         for k in (0..axes.len() - 1).rev() {
             strides[k] = strides[k + 1] * axes[k + 1].len();
@@ -315,6 +321,17 @@ mod tests {
         for c in 0..g.len() {
             assert_eq!(g.cell(&g.multi_index(c)), c);
         }
+    }
+
+    /// 130 axes of two values: 2¹³⁰ cells overflow a u128 (a panic in
+    /// debug, a wrap to 0 in release): refused as too large. A library
+    /// file's grid is read through here.
+    #[test]
+    fn a_product_past_any_integer_is_too_large() {
+        let axes = vec![Axis::uniform("a", 0.0, 1.0, 2).unwrap(); 130];
+        assert_eq!(Grid::new(axes).unwrap_err(), GridError::TooLarge(u128::MAX));
+        let axes = vec![Axis::uniform("a", 0.0, 1.0, 2).unwrap(); 65];
+        assert_eq!(Grid::new(axes).unwrap_err(), GridError::TooLarge(1 << 65));
     }
 
     #[test]

@@ -177,8 +177,8 @@ pub fn run(args: &LoadArgs) -> anyhow::Result<()> {
         "--lease-tests must be in 1..={MAX_LEASE_TESTS}"
     );
     anyhow::ensure!(
-        args.time_limit.is_finite() && args.time_limit > 0.0,
-        "--time-limit must be > 0"
+        args.time_limit.is_finite() && args.time_limit > 0.0 && args.time_limit <= 86_400.0,
+        "--time-limit must be in (0, 86400] seconds"
     );
     let admin = client(&args.server)?;
     let worker = client(&ServerArgs {

@@ -255,6 +255,12 @@ fn a_wrong_case_file_table_or_program_fails_with_the_reason() {
         ),
         (case(&failing("garbage")), vec![], "broke the protocol"),
         (case(&failing("bad-criticality")), vec![], "criticality 7"),
+        // A timeout no `Duration` holds: refused, not a panic.
+        (
+            case(&|t| t),
+            vec!["--vut-timeout", "1e20"],
+            "--vut-timeout 100000000000000000000 must be in (0, 86400] seconds",
+        ),
         (
             case(&failing("hang")),
             vec!["--vut-timeout", "1"],

@@ -3,6 +3,11 @@
 
 use clap::Parser;
 
+/// The longest per-test timeout and cooldown of a program, in seconds (a
+/// day): a `Duration` of 10²⁰ s panics, and an `Instant` that far ahead
+/// overflows.
+pub const MAX_VUT_SECONDS: f64 = 86_400.0;
+
 #[derive(Debug, Clone, Parser)]
 #[command(
     name = "tslg-worker",
@@ -138,16 +143,17 @@ impl WorkerConfig {
         anyhow::ensure!(
             self.vut_timeout_seconds.is_finite()
                 && self.vut_timeout_seconds > 0.0
-                && self.vut_timeout_seconds <= 86_400.0,
-            "--vut-timeout must be in (0, 86400] seconds"
+                && self.vut_timeout_seconds <= MAX_VUT_SECONDS,
+            "--vut-timeout must be in (0, {MAX_VUT_SECONDS}] seconds"
         );
         anyhow::ensure!(
             self.vut_max_failures >= 1,
             "--vut-max-failures must be at least 1"
         );
         anyhow::ensure!(
-            self.vut_cooldown_seconds.is_finite() && self.vut_cooldown_seconds >= 0.0,
-            "--vut-cooldown must be ≥ 0 seconds"
+            self.vut_cooldown_seconds.is_finite()
+                && (0.0..=MAX_VUT_SECONDS).contains(&self.vut_cooldown_seconds),
+            "--vut-cooldown must be in [0, {MAX_VUT_SECONDS}] seconds"
         );
         Ok(())
     }

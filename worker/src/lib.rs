@@ -17,6 +17,6 @@ mod run;
 mod sending;
 mod worker;
 
-pub use config::WorkerConfig;
+pub use config::{WorkerConfig, MAX_VUT_SECONDS};
 pub use run::run;
 pub use worker::WorkerSummary;

@@ -23,8 +23,40 @@ pub struct PictureMap {
     pub values: Vec<f64>,
 }
 
-/// `values` over `grid` summed onto its axes `x` and `y`:
-/// `m(a, b) = Σ_{cells with x = a, y = b} values(cell)`.
+/// The most bins a picture has along an axis: finer axes are binned, so
+/// a picture holds at most `MAX_BINS²` values and as many rectangles
+/// whatever the grid (a user case may have 10⁷ values on one axis, whose
+/// picture, x against itself, once asked for 8 TB).
+pub const MAX_BINS: usize = 240;
+
+/// An axis's values merged into at most [`MAX_BINS`] bins of consecutive
+/// values: `bin(i) = ⌊i · bins / n⌋`, each drawn at the mean of its values.
+struct Bins {
+    n: usize,
+    bins: usize,
+    centres: Vec<f64>,
+}
+
+impl Bins {
+    fn of(values: &[f64]) -> Self {
+        let n = values.len();
+        let bins = n.min(MAX_BINS);
+        let mut sums = vec![(0.0, 0usize); bins];
+        for (i, v) in values.iter().enumerate() {
+            let b = &mut sums[i * bins / n];
+            *b = (b.0 + v, b.1 + 1);
+        }
+        let centres = sums.iter().map(|(s, k)| s / *k as f64).collect();
+        Self { n, bins, centres }
+    }
+
+    fn bin(&self, i: usize) -> usize {
+        i * self.bins / self.n
+    }
+}
+
+/// `values` over `grid` summed onto its axes `x` and `y` (binned to at most
+/// [`MAX_BINS`] each): `m(a, b) = Σ_{cells with x in a, y in b} values(cell)`.
 pub fn project(
     grid: &Grid,
     values: impl Fn(usize) -> f64,
@@ -33,19 +65,21 @@ pub fn project(
     title: &str,
 ) -> PictureMap {
     let (ax, ay) = (&grid.axes()[x], &grid.axes()[y]);
-    let mut map = vec![0.0; ax.len() * ay.len()];
+    let (bx, by) = (Bins::of(ax.values()), Bins::of(ay.values()));
+    let mut map = vec![0.0; bx.bins * by.bins];
     for cell in 0..grid.len() {
         let v = values(cell);
         if v != 0.0 {
-            map[grid.axis_index(cell, x) * ay.len() + grid.axis_index(cell, y)] += v;
+            let (i, j) = (grid.axis_index(cell, x), grid.axis_index(cell, y));
+            map[bx.bin(i) * by.bins + by.bin(j)] += v;
         }
     }
     PictureMap {
         title: title.to_owned(),
         x_label: ax.name().to_owned(),
-        x_centres: ax.values().to_vec(),
+        x_centres: bx.centres,
         y_label: ay.name().to_owned(),
-        y_centres: ay.values().to_vec(),
+        y_centres: by.centres,
         values: map,
     }
 }
@@ -54,6 +88,27 @@ pub fn project(
 mod tests {
     use super::*;
     use crate::grid::Axis;
+
+    /// A fine axis against itself (a one-dimension user case): binned to
+    /// MAX_BINS² values, mass kept, on the diagonal only.
+    #[test]
+    fn a_fine_axis_is_binned_and_keeps_its_mass() {
+        let n = 1_000_000;
+        let grid = Grid::new(vec![Axis::uniform("x", 0.0, 1.0, n).unwrap()]).unwrap();
+        let map = project(&grid, |cell| cell as f64, 0, 0, "m");
+        assert_eq!(map.values.len(), MAX_BINS * MAX_BINS);
+        assert_eq!(map.x_centres.len(), MAX_BINS);
+        let total: f64 = map.values.iter().sum();
+        assert_eq!(total, (n * (n - 1) / 2) as f64);
+        for a in 0..MAX_BINS {
+            for b in 0..MAX_BINS {
+                assert_eq!(map.values[a * MAX_BINS + b] > 0.0, a == b);
+            }
+        }
+        // The first bin holds the values 0 to 4166 (n/240 = 4166.7): its
+        // centre is their mean.
+        assert_eq!(map.x_centres[0], 2083.0);
+    }
 
     #[test]
     fn projection_sums_over_the_other_axes() {

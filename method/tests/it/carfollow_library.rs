@@ -266,6 +266,28 @@ fn the_binary_library_file_round_trips_and_rejects_damage() {
     // allocating it.
     let err = PolicyLibraryFile::from_bytes_for(&bytes, b.dp.challenge.len(), 30).unwrap_err();
     assert!(err.to_string().contains("× 31 actions"), "{err}");
+    // A file whose header declares 2²⁸ values and holds none: the case
+    // (what the coordinator reads a worker's upload with) refuses it from
+    // its header, before allocating 2 GiB for the table.
+    let mut huge = file.header.clone();
+    (huge.states, huge.actions) = (1 << 28, 1);
+    let header = serde_json::to_vec(&huge).unwrap();
+    let mut crafted = bytes[..8].to_vec();
+    crafted.extend_from_slice(&(header.len() as u32).to_le_bytes());
+    crafted.extend_from_slice(&header);
+    crafted.extend_from_slice(&0u32.to_le_bytes());
+    let case = tslg_method::cases::open_case(
+        "car-following",
+        Some("paper"),
+        &tslg_method::registry::ExposureSource::Builtin,
+    )
+    .unwrap();
+    let err = case.library_summary(&crafted).unwrap_err().to_string();
+    assert!(
+        err.contains("its table has 268435456 states × 1 actions; this case has 45885 × 31"),
+        "{err}"
+    );
+    assert!(case.library_summary(&bytes).is_ok());
     // Another version is named as such, whatever its header holds.
     let mut future = file.clone();
     future.header.version = 2;

@@ -144,6 +144,7 @@ async fn receive_in_parts(
             .read(move |conn| -> Result<_, ServiceError> {
                 let lease = fence::get_unless_flagged(conn, lease_id, &report.worker)?;
                 fence::check_fence(&lease, &report.worker, report.attempt, report.key.as_str())?;
+                super::record::in_lease(&lease, &report)?;
                 let campaign = campaigns::get(conn, lease.campaign_id)?;
                 Ok((lease, campaign))
             })

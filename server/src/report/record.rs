@@ -243,8 +243,23 @@ pub(crate) fn held_lease(
 ) -> Result<(LeaseRow, CampaignRow), ServiceError> {
     let lease = fence::get_unless_flagged(conn, lease_id, &report.worker)?;
     check_fence(&lease, &report.worker, report.attempt, report.key.as_str())?;
+    in_lease(&lease, report)?;
     let campaign = campaigns::get(conn, lease.campaign_id)?;
     Ok((lease, campaign))
+}
+
+/// Refuses a report whose range is not inside its lease's, before any of
+/// it is replayed: the replay of a range past the lease (up to 2²² tests
+/// a report) cost the coordinator the CPU of tests nobody leased.
+pub(crate) fn in_lease(lease: &LeaseRow, report: &ResultReport) -> Result<(), ServiceError> {
+    let (start, end) = (lease.start_index as u64, lease.end_index as u64);
+    if report.from < start || report.to > end {
+        return Err(ServiceError::Unprocessable(format!(
+            "range {}..{} is not inside lease {}'s range {start}..{end}",
+            report.from, report.to, lease.id
+        )));
+    }
+    Ok(())
 }
 
 /// Stores the part `new_from..to` of a report that was not reported

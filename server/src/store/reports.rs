@@ -97,9 +97,11 @@ pub fn events_page(
     to: u64,
     limit: usize,
 ) -> Result<Vec<(u64, f64)>, StoreError> {
-    // Rows are read in batches; the first may hold events before `from`,
-    // each later one at least one event in range (`events > 0`).
-    let batch = limit.clamp(1, 4096) + 1;
+    // Rows are read in small batches; the first may hold events before
+    // `from`, each later one at least one event in range (`events > 0`).
+    // A row holds up to 65,536 events: batches of `limit + 1` rows
+    // unpacked up to 2.7 × 10⁸ events for one page of 10,000.
+    let batch = limit.clamp(1, 16) + 1;
     let mut events = Vec::new();
     let mut at = from;
     while events.len() < limit && at < to {

@@ -79,11 +79,20 @@ impl<'de> Deserialize<'de> for UserVehicle {
     }
 }
 
+/// The texts [`intern`] leaked.
+static INTERNED: Mutex<Vec<&'static str>> = Mutex::new(Vec::new());
+
+/// Whether `text` was interned (a test's probe for leaks).
+#[cfg(test)]
+pub(crate) fn interned(text: &str) -> bool {
+    let names = INTERNED.lock().unwrap_or_else(|p| p.into_inner());
+    names.contains(&text)
+}
+
 /// Interns a case name: descriptors and errors hold `&'static str`, and a
 /// process opens few distinct user cases.
 fn intern(name: &str) -> &'static str {
-    static NAMES: Mutex<Vec<&'static str>> = Mutex::new(Vec::new());
-    let mut names = NAMES.lock().unwrap_or_else(|p| p.into_inner());
+    let mut names = INTERNED.lock().unwrap_or_else(|p| p.into_inner());
     if let Some(&found) = names.iter().find(|&&n| n == name) {
         return found;
     }

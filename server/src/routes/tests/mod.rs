@@ -559,3 +559,107 @@ async fn a_wait_that_finds_nothing_marks_its_worker_idle() {
 }
 
 mod identity;
+
+/// A report past its lease's range is refused before any of it is
+/// replayed: replaying 2²² tests nobody leased cost the coordinator their
+/// CPU, and a mismatch among them flagged the worker for tests that were
+/// not its own.
+#[tokio::test]
+async fn a_report_past_its_lease_is_refused_before_its_replay() {
+    let app = app(|c| {
+        c.lease_size = Some(40);
+        c.replay_share = 1.0;
+    })
+    .await;
+    let id = app.idm_ndd_campaign().await;
+    let (_, lease) = app.claim_builtin("w").await;
+    let results = format!("/api/v1/leases/{}/results", lease["id"]);
+    let mut report = quiet_report("w", &lease);
+    let from = lease["resume_at"].as_u64().unwrap();
+    report["to"] = json!(from + (1 << 22));
+    let (status, problem) = app.call("POST", &results, Some(report)).await;
+    assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY, "{problem}");
+    let detail = problem["detail"].as_str().unwrap();
+    assert!(
+        detail.contains(&format!(
+            "range {from}..{} is not inside lease",
+            from + (1 << 22)
+        )),
+        "{detail}"
+    );
+    // Nothing was replayed, nobody is flagged, and the lease goes on.
+    let (_, workers) = app.call("GET", "/api/v1/workers", None).await;
+    assert!(workers["workers"][0].get("flagged").is_none(), "{workers}");
+    let (_, view) = app
+        .call("GET", &format!("/api/v1/campaigns/{id}"), None)
+        .await;
+    assert_eq!(view["indices"], 0);
+    let (status, heartbeat) = app
+        .call(
+            "POST",
+            &format!("/api/v1/leases/{}/heartbeat", lease["id"]),
+            Some(json!({"worker": "w", "attempt": lease["attempt"], "key": lease["key"]})),
+        )
+        .await;
+    assert_eq!(status, StatusCode::OK, "{heartbeat}");
+}
+
+/// Pages of events across many report rows (more than a batch of the
+/// store's read), with small limits, give every event once in order.
+#[tokio::test]
+async fn event_pages_cross_report_rows_in_order() {
+    let app = app(|c| c.lease_size = Some(1000)).await;
+    let id = app.idm_ndd_campaign().await;
+    let tests = app.state.samplers.cached(id).expect("built at creation");
+    let mut all: Vec<u64> = Vec::new();
+    for _ in 0..60 {
+        let (_, lease) = app.claim("w", 1000).await;
+        let (from, to) = (
+            lease["start"].as_u64().unwrap(),
+            lease["end"].as_u64().unwrap(),
+        );
+        let events: Vec<u64> = (from..to).filter(|&i| tests.run(i).event).collect();
+        all.extend(&events);
+        let mut report = quiet_report("w", &lease);
+        report["events"] = json!(events
+            .iter()
+            .map(|i| json!({"index": i, "weight": 1.0}))
+            .collect::<Vec<_>>());
+        let results = format!("/api/v1/leases/{}/results", lease["id"]);
+        let (status, ack) = app.call("POST", &results, Some(report)).await;
+        assert_eq!(status, StatusCode::OK, "{ack}");
+    }
+    let (_, view) = app
+        .call("GET", &format!("/api/v1/campaigns/{id}"), None)
+        .await;
+    let resolved = view["indices"].as_u64().unwrap();
+    all.retain(|&i| i < resolved);
+    assert!(
+        all.len() > 40,
+        "{} events: too few to cross rows",
+        all.len()
+    );
+    for limit in [1, 3, 17] {
+        let mut paged = Vec::new();
+        let mut after: Option<u64> = None;
+        loop {
+            let query = after.map_or(String::new(), |a| format!("&after={a}"));
+            let (status, page) = app
+                .call(
+                    "GET",
+                    &format!("/api/v1/campaigns/{id}/events?limit={limit}{query}"),
+                    None,
+                )
+                .await;
+            assert_eq!(status, StatusCode::OK, "{page}");
+            let events = page["events"].as_array().unwrap();
+            assert!(events.len() <= limit);
+            paged.extend(events.iter().map(|e| e["test_index"].as_u64().unwrap()));
+            match page["next_after"].as_u64() {
+                Some(next) => after = Some(next),
+                None => break,
+            }
+        }
+        assert_eq!(paged, all, "limit {limit}");
+    }
+}

@@ -81,8 +81,12 @@ impl LibraryBuilder for FollowScenarioCase {
     }
 
     fn library_summary(&self, file: &[u8]) -> Result<LibrarySummary, CaseError> {
-        let read = PolicyLibraryFile::from_bytes(file)
-            .map_err(|e| CaseError::PolicyFile(e.to_string()))?;
+        // Checked against this case's table before anything is allocated:
+        // a 292-byte header declaring 2²⁸ values made the coordinator
+        // allocate and fill 2 GiB per upload.
+        let read =
+            PolicyLibraryFile::from_bytes_for(file, self.case.grid.len(), self.case.world.actions)
+                .map_err(|e| CaseError::PolicyFile(e.to_string()))?;
         let h = read.header;
         Ok(LibrarySummary {
             case: h.case,
