@@ -139,6 +139,13 @@ pub struct WorkerView {
     /// When an operator revoked its credential: it gets no more work.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub revoked_at: Option<String>,
+    /// Audit runs it gave back or let expire, in all.
+    #[serde(default)]
+    pub audits_given_back: u64,
+    /// Of those, since it last ran an audit: the share of its own tests
+    /// audited doubles with each, and past three all of them are.
+    #[serde(default)]
+    pub audits_given_back_in_row: u64,
 }
 
 /// One test of a lease.

@@ -244,6 +244,8 @@ impl WorkerRegistry {
                 flagged: flag(name),
                 registered_at: None,
                 revoked_at: None,
+                audits_given_back: 0,
+                audits_given_back_in_row: 0,
             })
             .collect();
         list.sort_by(|a, b| a.last_seen_seconds.total_cmp(&b.last_seen_seconds));

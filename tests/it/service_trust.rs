@@ -356,3 +356,104 @@ async fn replay_metrics(url: &str) -> [f64; 5] {
         scraped(url, "tslg_replay_sampled_tests_total").await,
     ]
 }
+
+/// The evasive liar of issue 47: it reports its ranges with every event
+/// hidden and gives back every audit run it is handed (a lease of one
+/// test). Before, giving back cost nothing and its hidden events were
+/// caught only by the 1 % sample (escape about 0.99^k); now each run given
+/// back makes it owe an audit of its own results before its next range and
+/// doubles the share of its tests audited, all of them past three in a
+/// row: it is flagged, and the answer is the honest one bit for bit.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_liar_that_gives_back_its_audits_is_caught_and_the_answer_is_the_honest_one() {
+    let dir = scratch();
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &["--lease-size", "200"]);
+    let client = server.client();
+    let library = ready_library(&client, "idm", true).await;
+    let builtin = campaign(Method::Library, library.id, "idm", 0.2, 8);
+    let request = tslg_api::CreateCampaign {
+        vut: serde_json::json!({"external": "py-idm"}),
+        ..builtin.clone()
+    };
+    let id = client.create_campaign(&request).await.unwrap().id;
+    let offer = "py-idm:cut-in:step";
+    let first = client
+        .claim(&ask("dodger", &[offer]))
+        .await
+        .unwrap()
+        .unwrap();
+    let exec = format!(
+        "py-idm=python3 {}",
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("examples/python/idm_vut.py")
+            .display()
+    );
+    let _honest = [
+        WorkerProcess::start_with(&server.url, 1, "honest-1", &["--vut-exec", &exec]),
+        WorkerProcess::start_with(&server.url, 1, "honest-2", &["--vut-exec", &exec]),
+    ];
+    client
+        .report(first.id, &whole(&first, "dodger", Vec::new()))
+        .await
+        .unwrap();
+    let started = Instant::now();
+    let mut given_back = 0;
+    let refusal = loop {
+        assert!(
+            started.elapsed() < Duration::from_secs(180),
+            "the dodger was never caught ({given_back} audit runs given back)"
+        );
+        let lease = match client.claim(&ask("dodger", &[offer])).await {
+            Ok(Some(lease)) => lease,
+            Ok(None) => {
+                tokio::time::sleep(Duration::from_millis(20)).await;
+                continue;
+            }
+            Err(CallError::Refused {
+                status: 403,
+                detail,
+            }) => break detail,
+            Err(e) => panic!("{e}"),
+        };
+        let outcome = if lease.end - lease.start == 1 {
+            given_back += 1;
+            let fence = tslg_api::LeaseFence {
+                worker: "dodger".into(),
+                attempt: lease.attempt,
+                key: lease.key.clone(),
+            };
+            client
+                .release(lease.id, &fence.release(Some("not now".into())))
+                .await
+        } else {
+            client
+                .report(lease.id, &whole(&lease, "dodger", Vec::new()))
+                .await
+                .map(|_| ())
+        };
+        match outcome {
+            Ok(()) => {}
+            Err(CallError::Refused {
+                status: 403,
+                detail,
+            }) => break detail,
+            Err(CallError::Refused { status: 409, .. }) => {}
+            Err(e) => panic!("{e}"),
+        }
+    };
+    assert!(refusal.contains("worker `dodger` is flagged"), "{refusal}");
+    assert!(
+        given_back >= 1,
+        "the dodger was handed audit runs to give back"
+    );
+    let workers = client.workers().await.unwrap().workers;
+    let dodger = workers.iter().find(|w| w.name == "dodger").unwrap();
+    assert!(dodger.audits_given_back >= 1, "{dodger:?}");
+    let view = finished(&client, id, Duration::from_secs(240)).await;
+    assert_eq!(view.status, CampaignStatus::Converged, "{view:?}");
+    assert_same(&view, &in_process(Some("idm"), &builtin));
+    eprintln!(
+        "the dodger gave back {given_back} audit runs ({} counted) before it was flagged",
+        dodger.audits_given_back
+    );
+}

@@ -9,10 +9,11 @@ use super::size::{
 use crate::config::Config;
 use crate::db::{now_ms, Database};
 use crate::error::ServiceError;
-use crate::store::audits;
+use crate::report::dodging;
 use crate::store::campaigns::{self, CampaignRow};
 use crate::store::leases::{self, Eligible, LeaseRow, Runs, Taker};
 use crate::store::prefix;
+use crate::store::{audits, standing};
 use crate::workers::Fleet;
 use rusqlite::Connection;
 use std::sync::{Arc, LazyLock};
@@ -238,6 +239,14 @@ fn claim_in(
             campaign: None,
         }));
     }
+    // A worker that owes an audit of its own results runs audits, but
+    // takes no new work until that audit is decided.
+    if job.audits && !dodging::may_take_range(&standing::get(conn, &job.worker)?) {
+        return Ok(claim_audit(conn, job)?.map(|lease| Claimed {
+            lease,
+            campaign: None,
+        }));
+    }
     if let Some(id) = leases::find_expired(conn, &job.eligible, job.now, job.span_limit)? {
         let lease = leases::take_again(conn, id, &job.taker())?;
         tracing::info!(
@@ -302,6 +311,10 @@ fn claim_audit(conn: &Connection, job: &ClaimJob) -> Result<Option<LeaseRow>, Se
     let Some(audit) = audits::runnable(conn, &job.worker, &job.eligible.offered, job.now)? else {
         return Ok(None);
     };
+    // A run still active here was given back or let expire by its holder.
+    if let Some(old) = audit.lease_id {
+        dodging::replaced_run(conn, &leases::get(conn, old)?)?;
+    }
     let lease = leases::insert_audit_run(conn, &audit, &job.taker())?;
     tracing::info!(
         audit = audit.id,

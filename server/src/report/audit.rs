@@ -294,6 +294,7 @@ fn record_audit_run_in(
     let outcome = audits::encode(checked.outcomes.first().map(|o| o.1));
     let verdict = record_run(conn, &audit, &report.worker, &outcome)?;
     leases::finish(conn, lease.id)?;
+    crate::store::standing::ran_audit(conn, &report.worker)?;
     if let Verdict::Liar { liar, detail } = &verdict {
         flag_worker(conn, liar, detail, campaign.id, start)?;
     }

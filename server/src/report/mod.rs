@@ -1,13 +1,14 @@
 //! What happens to a worker's report, from the route that parsed it to the
 //! folded estimate: its shape checked ([`check`]), its tests run again
 //! ([`replay`], on the [`secret_sample`]) or audited by other workers
-//! ([`audit`]), recorded ([`record`]), and the campaign's resolved prefix
+//! ([`audit`], which a worker cannot dodge: [`dodging`]), recorded ([`record`]), and the campaign's resolved prefix
 //! folded ([`fold`], with the exploring tests the replay found kept in
 //! [`explored`]) or, for an adaptive campaign, its stages resolved
 //! ([`stages`]). [`receive`] runs them in order.
 
 pub mod audit;
 pub mod check;
+pub mod dodging;
 pub mod explored;
 pub mod fold;
 pub mod mismatch;

@@ -496,9 +496,15 @@ async fn audit_plan(
     checked: &CheckedReport,
 ) -> Result<AuditPlan, ServiceError> {
     let config = &state.config;
-    let chosen = state
-        .sampler
-        .pick(config.audit_share, checked.from, checked.to);
+    // A worker that gave audit runs back has more of its tests audited
+    // (report/dodging.rs).
+    let name = worker.to_owned();
+    let standing = state
+        .db
+        .read(move |conn| crate::store::standing::get(conn, &name))
+        .await?;
+    let share = crate::report::dodging::audit_share(config.audit_share, &standing);
+    let chosen = state.sampler.pick(share, checked.from, checked.to);
     let planned = audit::choose_audits(
         checked,
         checked.from,

@@ -8,7 +8,7 @@ use crate::routes::leases::worker_name_problem;
 use crate::routes::problem::ApiJson;
 use crate::routes::ApiPath;
 use crate::state::AppState;
-use crate::store::{audits, costs};
+use crate::store::{audits, costs, standing};
 use axum::extract::State;
 use axum::http::StatusCode;
 use axum::Json;
@@ -36,13 +36,23 @@ pub async fn register(
 /// measured cost of a test of each program.
 #[utoipa::path(get, path = "/api/v1/workers", responses((status = 200, body = WorkerList)))]
 pub async fn list(State(state): State<AppState>) -> Result<Json<WorkerList>, ServiceError> {
-    let (flagged, costs) = state
+    let (flagged, costs, standings) = state
         .db
-        .read(|conn| Ok::<_, ServiceError>((audits::flagged(conn)?, costs::programs(conn)?)))
+        .read(|conn| {
+            Ok::<_, ServiceError>((
+                audits::flagged(conn)?,
+                costs::programs(conn)?,
+                standing::all(conn)?,
+            ))
+        })
         .await?;
     let mut workers = state.workers.list(&flagged);
     for worker in &mut workers {
         (worker.registered_at, worker.revoked_at) = state.credentials.dates(&worker.name);
+        if let Some((_, in_row, all)) = standings.iter().find(|(w, _, _)| *w == worker.name) {
+            (worker.audits_given_back, worker.audits_given_back_in_row) =
+                (*all as u64, *in_row as u64);
+        }
     }
     Ok(Json(WorkerList {
         workers,

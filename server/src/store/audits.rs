@@ -77,6 +77,16 @@ pub fn insert(
     Ok(())
 }
 
+/// The id of `campaign`'s audit of test `index`, if there is one.
+pub fn id_at(conn: &Connection, campaign: i64, index: u64) -> Result<Option<i64>, StoreError> {
+    let id: Option<(i64,)> = sql::optional(
+        conn,
+        "SELECT id FROM audits WHERE campaign_id = ? AND test_index = ?",
+        params![campaign, index as i64],
+    )?;
+    Ok(id.map(|(id,)| id))
+}
+
 pub fn get(conn: &Connection, id: i64) -> Result<AuditRow, StoreError> {
     sql::optional(
         conn,

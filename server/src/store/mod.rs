@@ -14,6 +14,7 @@ pub mod near_misses;
 pub mod pairs;
 pub mod prefix;
 pub mod reports;
+pub mod standing;
 pub mod states;
 pub mod totals;
 pub mod user_cases;

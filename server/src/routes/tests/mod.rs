@@ -663,3 +663,4 @@ async fn event_pages_cross_report_rows_in_order() {
         assert_eq!(paged, all, "limit {limit}");
     }
 }
+mod dodging;
