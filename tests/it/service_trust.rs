@@ -162,6 +162,35 @@ async fn liar(client: Client, name: &str, offer: &str, limit: Duration) -> Strin
     panic!("the liar was never caught")
 }
 
+/// The program the liars and honest workers of these tests offer.
+const PY_IDM: &str = "py-idm:cut-in:step";
+
+/// A library campaign of the Python IDM (`py-idm`) on the IDM library, as
+/// the built-in IDM's campaign `builtin` (seed 8): its id and `builtin`.
+async fn py_idm_campaign(client: &Client) -> (i64, tslg_api::CreateCampaign) {
+    let library = ready_library(client, "idm", true).await;
+    let builtin = campaign(Method::Library, library.id, "idm", 0.2, 8);
+    let request = tslg_api::CreateCampaign {
+        vut: serde_json::json!({"external": "py-idm"}),
+        ..builtin.clone()
+    };
+    (client.create_campaign(&request).await.unwrap().id, builtin)
+}
+
+/// Two honest workers running the Python IDM.
+fn honest_workers(url: &str) -> [WorkerProcess; 2] {
+    let exec = format!(
+        "py-idm=python3 {}",
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("examples/python/idm_vut.py")
+            .display()
+    );
+    [
+        WorkerProcess::start_with(url, 1, "honest-1", &["--vut-exec", &exec]),
+        WorkerProcess::start_with(url, 1, "honest-2", &["--vut-exec", &exec]),
+    ]
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_lying_worker_is_caught_by_replication_and_the_answer_is_the_honest_one() {
     let dir = scratch();
@@ -170,28 +199,13 @@ async fn a_lying_worker_is_caught_by_replication_and_the_answer_is_the_honest_on
         &["--lease-size", "200", "--audit-share", "0.05"],
     );
     let client = server.client();
-    let library = ready_library(&client, "idm", true).await;
-    let builtin = campaign(Method::Library, library.id, "idm", 0.2, 8);
-    let request = tslg_api::CreateCampaign {
-        vut: serde_json::json!({"external": "py-idm"}),
-        ..builtin.clone()
-    };
-    let id = client.create_campaign(&request).await.unwrap().id;
+    let (id, builtin) = py_idm_campaign(&client).await;
     // The liar takes the first lease before anyone else is there.
-    let offer = "py-idm:cut-in:step";
+    let offer = PY_IDM;
     let lease = client.claim(&ask("liar", &[offer])).await.unwrap().unwrap();
     assert_eq!(lease.start, 0);
     // Two honest workers running the Python IDM come.
-    let exec = format!(
-        "py-idm=python3 {}",
-        Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("examples/python/idm_vut.py")
-            .display()
-    );
-    let _honest = [
-        WorkerProcess::start_with(&server.url, 1, "honest-1", &["--vut-exec", &exec]),
-        WorkerProcess::start_with(&server.url, 1, "honest-2", &["--vut-exec", &exec]),
-    ];
+    let _honest = honest_workers(&server.url);
     let started = Instant::now();
     while client
         .workers()
@@ -369,29 +383,14 @@ async fn a_liar_that_gives_back_its_audits_is_caught_and_the_answer_is_the_hones
     let dir = scratch();
     let server = ServerProcess::start(&dir.path().join("db.sqlite"), &["--lease-size", "200"]);
     let client = server.client();
-    let library = ready_library(&client, "idm", true).await;
-    let builtin = campaign(Method::Library, library.id, "idm", 0.2, 8);
-    let request = tslg_api::CreateCampaign {
-        vut: serde_json::json!({"external": "py-idm"}),
-        ..builtin.clone()
-    };
-    let id = client.create_campaign(&request).await.unwrap().id;
-    let offer = "py-idm:cut-in:step";
+    let (id, builtin) = py_idm_campaign(&client).await;
+    let offer = PY_IDM;
     let first = client
         .claim(&ask("dodger", &[offer]))
         .await
         .unwrap()
         .unwrap();
-    let exec = format!(
-        "py-idm=python3 {}",
-        Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("examples/python/idm_vut.py")
-            .display()
-    );
-    let _honest = [
-        WorkerProcess::start_with(&server.url, 1, "honest-1", &["--vut-exec", &exec]),
-        WorkerProcess::start_with(&server.url, 1, "honest-2", &["--vut-exec", &exec]),
-    ];
+    let _honest = honest_workers(&server.url);
     client
         .report(first.id, &whole(&first, "dodger", Vec::new()))
         .await

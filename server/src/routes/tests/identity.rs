@@ -8,27 +8,11 @@ use super::*;
 
 /// Calls the router with `secret` (or none) as the worker secret.
 async fn call_as(app: &App, uri: &str, body: Value, secret: Option<&str>) -> (StatusCode, Value) {
-    let mut request = Request::builder()
-        .method("POST")
-        .uri(uri)
-        .header("content-type", "application/json");
+    let mut request = Request::builder().method("POST").uri(uri);
     if let Some(secret) = secret {
         request = request.header(tslg_api::WORKER_SECRET_HEADER, secret);
     }
-    let response = app
-        .router
-        .clone()
-        .oneshot(request.body(Body::from(body.to_string())).unwrap())
-        .await
-        .unwrap();
-    let status = response.status();
-    let bytes = axum::body::to_bytes(response.into_body(), usize::MAX)
-        .await
-        .unwrap();
-    (
-        status,
-        serde_json::from_slice(&bytes).unwrap_or(Value::Null),
-    )
+    app.send(request, Some(body)).await
 }
 
 async fn indices(app: &App, id: i64) -> Value {

@@ -47,6 +47,15 @@ impl App {
         if let Some(worker) = worker {
             request = request.header(tslg_api::WORKER_SECRET_HEADER, self.secret(worker).await);
         }
+        self.send(request, body).await
+    }
+
+    /// Sends `request` with `body` (JSON) and reads the answer.
+    async fn send(
+        &self,
+        request: axum::http::request::Builder,
+        body: Option<Value>,
+    ) -> (StatusCode, Value) {
         let request = match body {
             Some(body) => request
                 .header("content-type", "application/json")
