@@ -375,9 +375,10 @@ async fn replay_metrics(url: &str) -> [f64; 5] {
 /// hidden and gives back every audit run it is handed (a lease of one
 /// test). Before, giving back cost nothing and its hidden events were
 /// caught only by the 1 % sample (escape about 0.99^k); now each run given
-/// back makes it owe an audit of its own results before its next range and
-/// doubles the share of its tests audited, all of them past three in a
-/// row: it is flagged, and the answer is the honest one bit for bit.
+/// back makes it owe an audit of one of its unresolved tests (it gets
+/// nothing until that is decided), doubles the share of its tests audited,
+/// and past three in a row puts all its unresolved tests under audit: it
+/// is flagged, and the answer is the honest one bit for bit.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_liar_that_gives_back_its_audits_is_caught_and_the_answer_is_the_honest_one() {
     let dir = scratch();
@@ -391,10 +392,14 @@ async fn a_liar_that_gives_back_its_audits_is_caught_and_the_answer_is_the_hones
         .unwrap()
         .unwrap();
     let _honest = honest_workers(&server.url);
-    client
-        .report(first.id, &whole(&first, "dodger", Vec::new()))
-        .await
-        .unwrap();
+    // The dodger keeps its first range (heartbeats, no report): the
+    // prefix waits at 0, so the campaign cannot end on what the honest
+    // workers find before the dodger has had its chances to lie.
+    let held = tslg_api::LeaseFence {
+        worker: "dodger".into(),
+        attempt: first.attempt,
+        key: first.key.clone(),
+    };
     let started = Instant::now();
     let mut given_back = 0;
     let refusal = loop {
@@ -402,6 +407,13 @@ async fn a_liar_that_gives_back_its_audits_is_caught_and_the_answer_is_the_hones
             started.elapsed() < Duration::from_secs(180),
             "the dodger was never caught ({given_back} audit runs given back)"
         );
+        match client.heartbeat(first.id, &held).await {
+            Err(CallError::Refused {
+                status: 403,
+                detail,
+            }) => break detail,
+            other => assert!(other.is_ok(), "{other:?}"),
+        }
         let lease = match client.claim(&ask("dodger", &[offer])).await {
             Ok(Some(lease)) => lease,
             Ok(None) => {

@@ -89,7 +89,14 @@ pub async fn release(db: &Database, id: i64, fence: &LeaseFence) -> Result<Lease
     db.write(move |conn| -> Result<_, ServiceError> {
         let lease = leases::get(conn, id)?;
         check_fence(&lease, &fence.worker, fence.attempt, fence.key.as_str())?;
-        leases::expire(conn, id, &fence.worker, fence.attempt)?;
+        if lease.audit_id.is_some() && lease.state == leases::LeaseState::Active {
+            // An audit's run given back: it goes to another worker, and it
+            // costs its worker (report/dodging.rs).
+            leases::cancel(conn, id)?;
+            crate::report::dodging::gave_back(conn, &fence.worker)?;
+        } else {
+            leases::expire(conn, id, &fence.worker, fence.attempt)?;
+        }
         Ok(leases::get(conn, id)?)
     })
     .await

@@ -6,12 +6,13 @@
 //!
 //! - makes the worker owe an audit of its own results: one of the tests it
 //!   reported and the prefix has not passed, drawn at random, is audited,
-//!   and until that audit is decided the worker gets no new range (it may
-//!   still run audits);
+//!   and until that audit is decided the worker gets no lease (and it is
+//!   never handed again the run it gave back);
 //! - doubles the share of its tests audited, `share · 2^d` for `d` runs
 //!   given back in a row, and past three in a row every test it reports is
-//!   audited, so its new results are held out of the prefix until another
-//!   worker has run them again.
+//!   audited, and so are all of its tests the prefix has not passed yet:
+//!   its results are held out of the prefix until another worker has run
+//!   them again.
 //!
 //! Running an audit ends the streak. An honest worker that gives a run back
 //! now and then (it is shutting down, its program is unhealthy) pays one
@@ -37,47 +38,86 @@ pub fn audit_share(base: f64, standing: &Standing) -> f64 {
     }
 }
 
-/// Whether a worker in `standing` may take a new range: not while an audit
-/// of its own results it owes is open.
-pub fn may_take_range(standing: &Standing) -> bool {
-    !standing.owed_open
+/// Whether a worker in `standing` owes an audit of its own results that is
+/// still open: it then gets no lease at all, neither a range nor an audit
+/// run (which it could give back again, keeping it from the honest
+/// workers), until other workers have decided it.
+pub fn owes(standing: &Standing) -> bool {
+    standing.owed_open
 }
 
+/// The most tests of its own a worker's run given back puts under audit
+/// at once (past [`MAX_DODGES_IN_ROW`], all of its unresolved tests, up
+/// to this many).
+const MAX_AUDITED_AT_ONCE: u64 = 4096;
+
 /// Counts the run of `old` (an audit's lease, about to be replaced by a
-/// new run) against its holder when it was given back or let expire: it
-/// is still active, so the worker neither reported nor lost it to a stop.
+/// new run) against its holder when it let it expire: it is still active,
+/// so the worker neither reported it, nor gave it back (counted then),
+/// nor lost it to a stop.
 pub fn replaced_run(conn: &Connection, old: &LeaseRow) -> Result<(), StoreError> {
     if old.state == LeaseState::Active && old.audit_id.is_some() {
-        dodged(conn, &old.worker)?;
+        gave_back(conn, &old.worker)?;
     }
     Ok(())
 }
 
-/// Counts an audit run `worker` gave back or let expire, and makes it owe
-/// an audit of one of its own unresolved tests (when it has one).
-fn dodged(conn: &Connection, worker: &str) -> Result<(), StoreError> {
-    let owed = match standing::unfolded_range(conn, worker)? {
-        Some((campaign, from, to)) => {
-            let index = rand::random_range(from..to);
-            let outcome = reports::outcomes(conn, campaign, index, index + 1)?
-                .first()
-                .map(|&(_, o)| o);
-            let audit = audits::NewAudit {
-                test_index: index,
-                reason: "sample",
-                first_outcome: audits::encode(outcome),
-            };
-            audits::insert(conn, campaign, worker, &[audit])?;
-            audits::id_at(conn, campaign, index)?
+/// Counts an audit run `worker` gave back or let expire, and puts tests of
+/// its own under audit: one unresolved test drawn at random, which it owes
+/// before its next range, or past [`MAX_DODGES_IN_ROW`] in a row all of
+/// them, so that none of its results passes a prefix unchecked.
+pub fn gave_back(conn: &Connection, worker: &str) -> Result<(), StoreError> {
+    let in_row = standing::get(conn, worker)?.dodged_in_row + 1;
+    let ranges = standing::unfolded_ranges(conn, worker, 64)?;
+    let mut owed = None;
+    if in_row > MAX_DODGES_IN_ROW {
+        let mut left = MAX_AUDITED_AT_ONCE;
+        for &(campaign, from, to) in &ranges {
+            let to = to.min(from + left);
+            put_under_audit(conn, campaign, worker, from..to)?;
+            owed = owed.or(audits::id_at(conn, campaign, from)?);
+            left -= to - from;
+            if left == 0 {
+                break;
+            }
         }
-        None => None,
-    };
+    } else if let Some(&(campaign, from, to)) = ranges.first() {
+        let index = rand::random_range(from..to);
+        put_under_audit(conn, campaign, worker, index..index + 1)?;
+        owed = audits::id_at(conn, campaign, index)?;
+    }
     tracing::warn!(
         worker,
+        in_row,
         ?owed,
-        "audit run given back or let expire: the worker owes an audit"
+        "audit run given back or let expire: tests of its own audited"
     );
     standing::dodged(conn, worker, owed)
+}
+
+/// Audits `worker`'s reported tests `range` of `campaign` (those audited
+/// already stay as they are).
+fn put_under_audit(
+    conn: &Connection,
+    campaign: i64,
+    worker: &str,
+    range: std::ops::Range<u64>,
+) -> Result<(), StoreError> {
+    let outcomes = reports::outcomes(conn, campaign, range.start, range.end)?;
+    let outcome_at = |i: u64| {
+        outcomes
+            .binary_search_by_key(&i, |o| o.0)
+            .ok()
+            .map(|k| outcomes[k].1)
+    };
+    let audits: Vec<audits::NewAudit> = range
+        .map(|index| audits::NewAudit {
+            test_index: index,
+            reason: "sample",
+            first_outcome: audits::encode(outcome_at(index)),
+        })
+        .collect();
+    audits::insert(conn, campaign, worker, &audits)
 }
 
 #[cfg(test)]

@@ -97,7 +97,9 @@ pub fn get(conn: &Connection, id: i64) -> Result<AuditRow, StoreError> {
 }
 
 /// An open audit that `worker` may run: of a running campaign whose program
-/// it offers, not run by it before, and without a live lease.
+/// it offers, not run by it before, without a live lease, and whose last
+/// run was not handed to it (a worker that gave a run back or let it
+/// expire does not get it again).
 pub fn runnable(
     conn: &Connection,
     worker: &str,
@@ -112,13 +114,14 @@ pub fn runnable(
            AND c.requires IN (SELECT value FROM json_each(?)) \
            AND a.first_worker <> ? AND COALESCE(a.replica_worker, '') <> ? \
            AND (a.lease_id IS NULL OR l.state <> {LEASE_ACTIVE} OR l.expires_at < ?) \
+           AND (a.lease_id IS NULL OR l.worker <> ?) \
          ORDER BY a.campaign_id, a.test_index LIMIT 1",
         columns.join(", ")
     );
     Ok(sql::optional(
         conn,
         &sql,
-        params![offered, worker, worker, now_ms],
+        params![offered, worker, worker, now_ms, worker],
     )?)
 }
 

@@ -403,6 +403,19 @@ pub fn expire_all_of(conn: &Connection, worker: &str) -> Result<(), StoreError> 
     Ok(())
 }
 
+/// Cancels lease `id` (an audit's run given back: the audit is run by
+/// another worker under a new lease).
+pub fn cancel(conn: &Connection, id: i64) -> Result<(), StoreError> {
+    sql::execute(
+        conn,
+        formatcp!(
+            "UPDATE leases SET state = {LEASE_CANCELLED} WHERE id = ? AND state = {LEASE_ACTIVE}"
+        ),
+        [id],
+    )?;
+    Ok(())
+}
+
 /// A one-test lease (an audit's run, a whole build), reported: done.
 pub fn finish(conn: &Connection, id: i64) -> Result<(), StoreError> {
     sql::execute(

@@ -70,23 +70,27 @@ pub fn ran_audit(conn: &Connection, worker: &str) -> Result<(), StoreError> {
     Ok(())
 }
 
-/// A test `worker` reported to a running campaign that its prefix has not
-/// passed and no audit covers: the latest such report's range, from which
-/// the caller draws one (`(campaign, from, to)`).
-pub fn unfolded_range(
+/// The ranges `worker` reported to running campaigns of programs that
+/// their prefixes have not passed (`(campaign, from, to)`, the part past
+/// the prefix), latest first, at most `limit` rows.
+pub fn unfolded_ranges(
     conn: &Connection,
     worker: &str,
-) -> Result<Option<(i64, u64, u64)>, StoreError> {
-    let row: Option<(i64, i64, i64)> = sql::optional(
+    limit: usize,
+) -> Result<Vec<(i64, u64, u64)>, StoreError> {
+    let rows: Vec<(i64, i64, i64)> = sql::all(
         conn,
         formatcp!(
             "SELECT r.campaign_id, MAX(r.from_index, c.indices), r.to_index \
              FROM reports r JOIN campaigns c ON c.id = r.campaign_id \
              WHERE r.worker = ? AND c.status = {CAMPAIGN_RUNNING} AND c.requires IS NOT NULL \
                AND r.to_index > c.indices \
-             ORDER BY r.campaign_id DESC, r.from_index DESC LIMIT 1"
+             ORDER BY r.campaign_id DESC, r.from_index DESC LIMIT ?"
         ),
-        [worker],
+        params![worker, limit as i64],
     )?;
-    Ok(row.map(|(c, from, to)| (c, from as u64, to as u64)))
+    Ok(rows
+        .into_iter()
+        .map(|(c, from, to)| (c, from as u64, to as u64))
+        .collect())
 }

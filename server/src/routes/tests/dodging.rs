@@ -50,6 +50,48 @@ async fn standing(app: &App, worker: &str) -> (u64, u64) {
     )
 }
 
+/// "b" then "c" run every open audit they may (reporting `events` as
+/// events, the rest quietly) until each is handed a range: "b" reports
+/// its range quietly, "c" with one heavy event (audited: it would carry a
+/// large share of the estimate), whose index is returned.
+async fn run_audits_then_report_an_event(app: &App, events: &[u64]) -> u64 {
+    for worker in ["b", "c"] {
+        loop {
+            let (status, lease) = app.claim(worker, 40).await;
+            assert_eq!(status, StatusCode::OK, "{lease}");
+            let from = lease["start"].as_u64().unwrap();
+            if span(&lease) == 1 {
+                let outcome = match events.contains(&from) {
+                    true => json!([{"index": from, "weight": 1.0}]),
+                    false => json!([]),
+                };
+                report(app, worker, &lease, outcome).await;
+                continue;
+            }
+            if worker == "c" {
+                report(
+                    app,
+                    worker,
+                    &lease,
+                    json!([{"index": from + 7, "weight": 1.0}]),
+                )
+                .await;
+                return from + 7;
+            }
+            report(app, worker, &lease, json!([])).await;
+            break;
+        }
+    }
+    unreachable!("c returns")
+}
+
+async fn open_audits(app: &App, id: i64) -> u64 {
+    let (_, view) = app
+        .call("GET", &format!("/api/v1/campaigns/{id}"), None)
+        .await;
+    view["audits"]["open"].as_u64().unwrap()
+}
+
 #[tokio::test]
 async fn a_worker_giving_back_audits_owes_one_and_past_three_has_all_its_tests_audited() {
     let app = app(|c| {
@@ -58,130 +100,64 @@ async fn a_worker_giving_back_audits_owes_one_and_past_three_has_all_its_tests_a
     })
     .await;
     let id = app.external_campaign().await;
+    // "d" holds the first range unreported: the prefix stays at 0, and
+    // every later result is unresolved.
+    let (_, _held) = app.claim("d", 40).await;
     let (_, b_range) = app.claim("b", 40).await;
     let (_, a_range) = app.claim("a", 40).await;
-    let (_, c_range) = app.claim("c", 40).await;
     // "b" reports an event, which as the campaign's first is audited (it
-    // would carry the whole estimate) and holds the prefix; "a" reports
-    // the next range quietly, unresolved behind it.
-    let b_from = b_range["start"].as_u64().unwrap();
+    // would carry the estimate); "a" reports its range quietly.
+    let b_event = b_range["start"].as_u64().unwrap() + 3;
     report(
         &app,
         "b",
         &b_range,
-        json!([{"index": b_from + 3, "weight": 1.0}]),
+        json!([{"index": b_event, "weight": 1.0}]),
     )
     .await;
     report(&app, "a", &a_range, json!([])).await;
-    let (_, view) = app
-        .call("GET", &format!("/api/v1/campaigns/{id}"), None)
-        .await;
-    assert_eq!(view["audits"]["open"], 1, "{view}");
+    assert_eq!(open_audits(&app, id).await, 1);
+    let mut events = vec![b_event];
 
-    // "a" is handed b's audit and gives it back: counted when the run is
-    // handed out again (here to "a" itself, which gives it back again).
-    let (_, audit) = app.claim("a", 40).await;
-    assert_eq!(
-        (span(&audit), audit["start"].as_u64()),
-        (1, Some(b_from + 3))
-    );
-    give_back(&app, "a", &audit).await;
-    assert_eq!(
-        standing(&app, "a").await,
-        (0, 0),
-        "not counted before it is handed out again"
-    );
-    let (_, again) = app.claim("a", 40).await;
-    assert_eq!(again["start"], audit["start"], "{again}");
-    assert_eq!(standing(&app, "a").await, (1, 1));
-    // It now owes an audit of one of its own 40 tests: one more is open.
-    let (_, view) = app
-        .call("GET", &format!("/api/v1/campaigns/{id}"), None)
-        .await;
-    assert_eq!(view["audits"]["open"], 2, "{view}");
-    give_back(&app, "a", &again).await;
-    // While it owes, "a" is handed audit runs or nothing, never a range.
-    for _ in 0..3 {
-        let (status, lease) = app.claim("a", 40).await;
-        if status == StatusCode::NO_CONTENT {
-            continue;
-        }
+    for round in 1..=4u64 {
+        // "a" is handed the open audit and gives it back: counted at once,
+        // and one of its own unresolved tests is audited (all of them past
+        // three in a row).
+        let (_, audit) = app.claim("a", 40).await;
+        let last = *events.last().unwrap();
         assert_eq!(
-            span(&lease),
-            1,
-            "no range while the audit it owes is open: {lease}"
+            (span(&audit), audit["start"].as_u64()),
+            (1, Some(last)),
+            "{audit}"
         );
-        give_back(&app, "a", &lease).await;
-    }
-    let (all, in_row) = standing(&app, "a").await;
-    assert!(in_row > 3 && all == in_row, "{all} {in_row}");
-
-    // "c" runs the audits open (b's event and a's own test) and agrees.
-    report(&app, "c", &c_range, json!([])).await;
-    loop {
-        let (status, lease) = app.claim("c", 40).await;
-        assert_eq!(status, StatusCode::OK, "{lease}");
-        if span(&lease) > 1 {
-            break;
-        }
-        let index = lease["start"].as_u64().unwrap();
-        let events = if index == b_from + 3 {
-            json!([{"index": index, "weight": 1.0}])
+        give_back(&app, "a", &audit).await;
+        assert_eq!(standing(&app, "a").await, (round, round));
+        // Owing, "a" is handed nothing: no range, no audit run.
+        let (status, nothing) = app.claim("a", 40).await;
+        assert_eq!(status, StatusCode::NO_CONTENT, "round {round}: {nothing}");
+        let open = open_audits(&app, id).await;
+        if round < 4 {
+            // The audit given back, and one test of a's.
+            assert_eq!(open, 2, "round {round}");
         } else {
-            json!([])
-        };
-        report(&app, "c", &lease, events).await;
+            // The audit given back, and a's 40 tests, less those audited
+            // (and agreed) in rounds 1 to 3.
+            assert!((37..=41).contains(&open), "{open} open");
+        }
+        // "b" and "c" run the open audits; "c" reports a range with a heavy
+        // event: the next audit for "a".
+        events.push(run_audits_then_report_an_event(&app, &events).await);
     }
-    let (_, view) = app
-        .call("GET", &format!("/api/v1/campaigns/{id}"), None)
-        .await;
-    // Each run given back (the last one counted when "c" was handed it)
-    // cost "a" an audit of one of its own tests, drawn at random (two
-    // draws may be the same test).
-    let (all, _) = standing(&app, "a").await;
-    assert_eq!(view["audits"]["open"], 0, "{view}");
-    let agreed = view["audits"]["agreed"].as_u64().unwrap();
-    assert!(
-        (2..=1 + all).contains(&agreed),
-        "{agreed} agreed, {all} given back: {view}"
-    );
-
-    // The audit it owed is decided: "a" gets a range again, and with more
-    // than three runs given back in a row, all of its 40 tests are audited.
+    // Running an audit ends the streak.
+    let (_, audit) = app.claim("a", 40).await;
+    let last = *events.last().unwrap();
+    assert_eq!(audit["start"].as_u64(), Some(last), "{audit}");
+    report(&app, "a", &audit, json!([{"index": last, "weight": 1.0}])).await;
+    assert_eq!(standing(&app, "a").await, (4, 0));
+    // And the share is the base again (0 here): a new range of a's is not
+    // audited.
     let (_, range) = app.claim("a", 40).await;
     assert_eq!(span(&range), 40, "{range}");
     report(&app, "a", &range, json!([])).await;
-    let (_, view) = app
-        .call("GET", &format!("/api/v1/campaigns/{id}"), None)
-        .await;
-    assert_eq!(view["audits"]["open"], 40, "{view}");
-    // Running an audit ends the streak: "c" reports a heavy event, "a"
-    // runs its audit and agrees.
-    // ("c" is handed the 40 audits of a's tests first, and agrees.)
-    let c_event = loop {
-        let (_, lease) = app.claim("c", 40).await;
-        if span(&lease) == 1 {
-            report(&app, "c", &lease, json!([])).await;
-            continue;
-        }
-        let event = lease["start"].as_u64().unwrap() + 7;
-        report(&app, "c", &lease, json!([{"index": event, "weight": 1.0}])).await;
-        break event;
-    };
-    let (_, audit) = app.claim("a", 40).await;
-    assert_eq!(
-        (span(&audit), audit["start"].as_u64()),
-        (1, Some(c_event)),
-        "{audit}"
-    );
-    report(
-        &app,
-        "a",
-        &audit,
-        json!([{"index": c_event, "weight": 1.0}]),
-    )
-    .await;
-    let (all, in_row) = standing(&app, "a").await;
-    assert_eq!(in_row, 0, "{all}");
-    assert!(all > 3, "{all}");
+    assert_eq!(open_audits(&app, id).await, 0);
 }
