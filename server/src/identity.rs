@@ -61,8 +61,8 @@ impl Credentials {
             .await?
             .ok_or_else(|| {
                 ServiceError::Conflict(format!(
-                    "worker name `{requested}` and its numbered variants are all issued; ask \
-                     for another name"
+                    "worker name `{requested}` and the numbered names after it are issued; \
+                     ask for another name"
                 ))
             })?;
         let issued = WorkerCredential {
@@ -154,8 +154,16 @@ impl Credentials {
             .unwrap_or_default()
     }
 
+    /// Keeps `row`, unless a revoked row of the same name is kept: a read
+    /// that began before a revocation must not bring the credential back.
     fn remember(&self, row: CredentialRow) {
         let mut known = self.lock();
+        if known
+            .get(&row.name)
+            .is_some_and(|kept| kept.revoked_at.is_some() && row.revoked_at.is_none())
+        {
+            return;
+        }
         if known.len() >= MAX_KEPT {
             known.clear();
         }

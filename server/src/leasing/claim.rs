@@ -239,10 +239,17 @@ fn claim_in(
             campaign: None,
         }));
     }
-    // A worker that owes an audit of its own results takes nothing until
-    // other workers have decided it (report/dodging.rs).
-    if job.audits && dodging::owes(&standing::get(conn, &job.worker)?) {
-        return Ok(None);
+    // A worker that owes an audit of its own results takes no range (of
+    // any campaign, whether or not its lease lists its tests) until other
+    // workers have decided it; it may run audits (report/dodging.rs).
+    if dodging::owes(&standing::get(conn, &job.worker)?) {
+        return Ok(match job.audits {
+            true => claim_audit(conn, job)?.map(|lease| Claimed {
+                lease,
+                campaign: None,
+            }),
+            false => None,
+        });
     }
     if let Some(id) = leases::find_expired(conn, &job.eligible, job.now, job.span_limit)? {
         let lease = leases::take_again(conn, id, &job.taker())?;
@@ -305,13 +312,11 @@ fn new_range(
 /// A one-test lease for an open audit `job`'s worker may run (see
 /// `report/audit.rs`): a new lease, or the audit's expired one taken over.
 fn claim_audit(conn: &Connection, job: &ClaimJob) -> Result<Option<LeaseRow>, ServiceError> {
-    if dodging::owes(&standing::get(conn, &job.worker)?) {
-        return Ok(None);
-    }
     let Some(audit) = audits::runnable(conn, &job.worker, &job.eligible.offered, job.now)? else {
         return Ok(None);
     };
-    // A run still active here was let expire by its holder.
+    // A run still active here was let expire by its holder (a live worker's
+    // heartbeats keep its audit runs: fence.rs).
     if let Some(old) = audit.lease_id {
         dodging::replaced_run(conn, &leases::get(conn, old)?)?;
     }

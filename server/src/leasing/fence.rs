@@ -72,7 +72,12 @@ pub async fn heartbeat(
                 ttl_seconds: 0.0,
             });
         }
-        let extended = leases::extend(conn, id, &fence.worker, fence.attempt, now_ms() + ttl)?;
+        let expires_at = now_ms() + ttl;
+        let extended = leases::extend(conn, id, &fence.worker, fence.attempt, expires_at)?;
+        // An audit's run waiting behind the chunk under way (taken with a
+        // report) lives as long as its worker does: a slow program's
+        // worker does not let it expire (which counts as giving it back).
+        leases::extend_audit_runs_of(conn, &fence.worker, expires_at)?;
         Ok(HeartbeatAck {
             proceed: extended,
             campaign_status: status,
@@ -85,11 +90,34 @@ pub async fn heartbeat(
 /// Gives a lease back unfinished: it expires now and is handed out again
 /// from its first unreported index.
 pub async fn release(db: &Database, id: i64, fence: &LeaseFence) -> Result<LeaseRow, ServiceError> {
+    release_as(db, id, fence, Giver::Worker).await
+}
+
+/// Who gives a lease back: its worker, or the coordinator, which took a
+/// lease it then could not hand out (not the worker's doing).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Giver {
+    Worker,
+    Coordinator,
+}
+
+/// [`release`], saying who gives the lease back: only a worker's giving
+/// back an audit's run counts against it.
+pub async fn release_as(
+    db: &Database,
+    id: i64,
+    fence: &LeaseFence,
+    giver: Giver,
+) -> Result<LeaseRow, ServiceError> {
     let fence = fence.clone();
     db.write(move |conn| -> Result<_, ServiceError> {
         let lease = leases::get(conn, id)?;
         check_fence(&lease, &fence.worker, fence.attempt, fence.key.as_str())?;
-        if lease.audit_id.is_some() && lease.state == leases::LeaseState::Active {
+        let audit_run = lease.audit_id.is_some() && lease.state == leases::LeaseState::Active;
+        if audit_run && giver == Giver::Coordinator {
+            // Handed out again under a new lease, counted against nobody.
+            leases::cancel(conn, id)?;
+        } else if audit_run {
             // An audit's run given back: it goes to another worker, and it
             // costs its worker (report/dodging.rs).
             leases::cancel(conn, id)?;

@@ -2,14 +2,18 @@
 //! the run back or let it expire; before, that cost it nothing, and a
 //! liar that hid events and gave back every audit was caught only by the
 //! 1 % sample of its own tests (escaping with probability about 0.99^k for
-//! k hidden events). Now each run given back or let expire:
+//! k hidden events). Now each run given back (counted at once) or let
+//! expire (counted when the run is handed out again; heartbeats keep a
+//! live worker's runs, `leasing/fence.rs`):
 //!
+//! - goes to other workers first (`store/audits.rs`, `runnable`);
 //! - makes the worker owe an audit of its own results: one of the tests it
-//!   reported and the prefix has not passed, drawn at random, is audited,
-//!   and until that audit is decided the worker gets no lease (and it is
-//!   never handed again the run it gave back);
+//!   reported and the prefix has not passed, drawn uniformly, is audited,
+//!   and until that audit is decided (at most [`standing::OWED_SECONDS`])
+//!   the worker gets no range; it may run audits, so workers owing each
+//!   other settle by running each other's;
 //! - doubles the share of its tests audited, `share · 2^d` for `d` runs
-//!   given back in a row, and past three in a row every test it reports is
+//!   given back in a row; past three in a row every test it reports is
 //!   audited, and so are all of its tests the prefix has not passed yet:
 //!   its results are held out of the prefix until another worker has run
 //!   them again.
@@ -68,23 +72,22 @@ pub fn replaced_run(conn: &Connection, old: &LeaseRow) -> Result<(), StoreError>
 /// them, so that none of its results passes a prefix unchecked.
 pub fn gave_back(conn: &Connection, worker: &str) -> Result<(), StoreError> {
     let in_row = standing::get(conn, worker)?.dodged_in_row + 1;
-    let ranges = standing::unfolded_ranges(conn, worker, 64)?;
+    let ranges = standing::unfolded_ranges(conn, worker, 4096)?;
     let mut owed = None;
     if in_row > MAX_DODGES_IN_ROW {
         let mut left = MAX_AUDITED_AT_ONCE;
         for &(campaign, from, to) in &ranges {
             let to = to.min(from + left);
             put_under_audit(conn, campaign, worker, from..to)?;
-            owed = owed.or(audits::id_at(conn, campaign, from)?);
+            owed = owed.or(audits::open_id_at(conn, campaign, from)?);
             left -= to - from;
             if left == 0 {
                 break;
             }
         }
-    } else if let Some(&(campaign, from, to)) = ranges.first() {
-        let index = rand::random_range(from..to);
+    } else if let Some((campaign, index)) = draw(&ranges) {
         put_under_audit(conn, campaign, worker, index..index + 1)?;
-        owed = audits::id_at(conn, campaign, index)?;
+        owed = audits::open_id_at(conn, campaign, index)?;
     }
     tracing::warn!(
         worker,
@@ -93,6 +96,23 @@ pub fn gave_back(conn: &Connection, worker: &str) -> Result<(), StoreError> {
         "audit run given back or let expire: tests of its own audited"
     );
     standing::dodged(conn, worker, owed)
+}
+
+/// A test drawn uniformly from `ranges` (`(campaign, from, to)`): a
+/// worker cannot tell which of its unresolved tests will be checked.
+fn draw(ranges: &[(i64, u64, u64)]) -> Option<(i64, u64)> {
+    let total: u64 = ranges.iter().map(|(_, from, to)| to - from).sum();
+    if total == 0 {
+        return None;
+    }
+    let mut at = rand::random_range(0..total);
+    for &(campaign, from, to) in ranges {
+        if at < to - from {
+            return Some((campaign, from + at));
+        }
+        at -= to - from;
+    }
+    None
 }
 
 /// Audits `worker`'s reported tests `range` of `campaign` (those audited

@@ -175,7 +175,7 @@ async fn lease_of(
     let made = make_lease(state, req, claimed).await;
     if let Err(e) = &made {
         tracing::warn!(lease = id, error = %e, "a lease taken could not be handed out; given back");
-        match fence::release(&state.db, id, &fence).await {
+        match fence::release_as(&state.db, id, &fence, fence::Giver::Coordinator).await {
             Ok(_) => state.work.announce_one(),
             Err(e) => {
                 tracing::warn!(lease = id, error = %e, "the lease could not be given back either")

@@ -77,11 +77,14 @@ pub fn insert(
     Ok(())
 }
 
-/// The id of `campaign`'s audit of test `index`, if there is one.
-pub fn id_at(conn: &Connection, campaign: i64, index: u64) -> Result<Option<i64>, StoreError> {
+/// The id of `campaign`'s audit of test `index`, if there is one open.
+pub fn open_id_at(conn: &Connection, campaign: i64, index: u64) -> Result<Option<i64>, StoreError> {
     let id: Option<(i64,)> = sql::optional(
         conn,
-        "SELECT id FROM audits WHERE campaign_id = ? AND test_index = ?",
+        formatcp!(
+            "SELECT id FROM audits WHERE campaign_id = ? AND test_index = ? \
+             AND state IN {AUDIT_OPEN}"
+        ),
         params![campaign, index as i64],
     )?;
     Ok(id.map(|(id,)| id))
@@ -97,9 +100,10 @@ pub fn get(conn: &Connection, id: i64) -> Result<AuditRow, StoreError> {
 }
 
 /// An open audit that `worker` may run: of a running campaign whose program
-/// it offers, not run by it before, without a live lease, and whose last
-/// run was not handed to it (a worker that gave a run back or let it
-/// expire does not get it again).
+/// it offers, not run by it before, and without a live lease; first those
+/// whose last run was not handed to it (a run it gave back goes to others
+/// first, and to it again only when nobody else takes it: with two
+/// workers, nobody else may).
 pub fn runnable(
     conn: &Connection,
     worker: &str,
@@ -114,8 +118,7 @@ pub fn runnable(
            AND c.requires IN (SELECT value FROM json_each(?)) \
            AND a.first_worker <> ? AND COALESCE(a.replica_worker, '') <> ? \
            AND (a.lease_id IS NULL OR l.state <> {LEASE_ACTIVE} OR l.expires_at < ?) \
-           AND (a.lease_id IS NULL OR l.worker <> ?) \
-         ORDER BY a.campaign_id, a.test_index LIMIT 1",
+         ORDER BY COALESCE(l.worker = ?, 0), a.campaign_id, a.test_index LIMIT 1",
         columns.join(", ")
     );
     Ok(sql::optional(

@@ -16,8 +16,9 @@ pub struct CredentialRow {
     pub revoked_at: Option<String>,
 }
 
-/// The most `NAME.k` a name is tried with before registration gives up.
-const MAX_SUFFIX: u32 = 10_000;
+/// The `NAME.k` tried past the count of those issued, before registration
+/// gives up (names a client registered directly, out of turn).
+const MAX_TRIES: u32 = 100;
 
 /// The credential of `name`, if one was issued.
 pub fn get(conn: &Connection, name: &str) -> Result<Option<CredentialRow>, StoreError> {
@@ -28,23 +29,35 @@ pub fn get(conn: &Connection, name: &str) -> Result<Option<CredentialRow>, Store
     )?)
 }
 
-/// Issues a credential under `requested`, or under the first `requested.k`
+/// Issues a credential under `requested`, or under the next `requested.k`
 /// (k = 2, 3, …) never issued: a name belongs to one credential for good.
-/// `None` when every suffix up to [`MAX_SUFFIX`] is taken.
+/// `k` starts past the count of `requested.*` issued, so a registration
+/// costs a count and an insert or two, however often the name was taken.
+/// `None` when [`MAX_TRIES`] names past that are all taken.
 pub fn issue(
     conn: &Connection,
     requested: &str,
     secret_hash: &str,
 ) -> Result<Option<CredentialRow>, StoreError> {
-    let candidates = std::iter::once(requested.to_owned())
-        .chain((2..=MAX_SUFFIX).map(|k| format!("{requested}.{k}")));
-    for name in candidates {
-        let inserted = sql::execute(
+    let insert = |name: &str| -> Result<bool, StoreError> {
+        Ok(sql::execute(
             conn,
             "INSERT OR IGNORE INTO worker_credentials (name, secret_hash) VALUES (?1, ?2)",
             params![name, secret_hash],
-        )?;
-        if inserted == 1 {
+        )? == 1)
+    };
+    if insert(requested)? {
+        return get(conn, requested);
+    }
+    // `requested.` up to (not including) `requested/`: '/' follows '.'.
+    let (taken,): (i64,) = sql::one(
+        conn,
+        "SELECT COUNT(*) FROM worker_credentials WHERE name > ?1 || '.' AND name < ?1 || '/'",
+        [requested],
+    )?;
+    for k in (taken as u32 + 2..).take(MAX_TRIES as usize) {
+        let name = format!("{requested}.{k}");
+        if insert(&name)? {
             return get(conn, &name);
         }
     }

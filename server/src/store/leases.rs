@@ -403,6 +403,24 @@ pub fn expire_all_of(conn: &Connection, worker: &str) -> Result<(), StoreError> 
     Ok(())
 }
 
+/// Keeps `worker`'s active audit runs until `expires_at` (its heartbeat
+/// says it is alive).
+pub fn extend_audit_runs_of(
+    conn: &Connection,
+    worker: &str,
+    expires_at: i64,
+) -> Result<(), StoreError> {
+    sql::execute(
+        conn,
+        formatcp!(
+            "UPDATE leases SET expires_at = MAX(expires_at, ?) WHERE worker = ? \
+             AND audit_id IS NOT NULL AND state = {LEASE_ACTIVE} AND expires_at > 0"
+        ),
+        params![expires_at, worker],
+    )?;
+    Ok(())
+}
+
 /// Cancels lease `id` (an audit's run given back: the audit is run by
 /// another worker under a new lease).
 pub fn cancel(conn: &Connection, id: i64) -> Result<(), StoreError> {

@@ -9,6 +9,11 @@ use const_format::formatcp;
 use rusqlite::{params, Connection};
 use serde::Deserialize;
 
+/// How long an audit a worker owes blocks its ranges, at most, in
+/// seconds: long enough for others to run it, and a worker whose audit
+/// nobody can run (it is alone with the program) waits no longer.
+pub const OWED_SECONDS: u32 = 120;
+
 /// A worker's standing in audits.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Deserialize)]
 pub struct Standing {
@@ -16,7 +21,8 @@ pub struct Standing {
     pub dodged_in_row: i64,
     /// Audit runs given back or let expire in all.
     pub dodged: i64,
-    /// The audit of its own results it owes, if that audit is still open.
+    /// The audit of its own results it owes, if that audit is still open
+    /// and was owed less than [`OWED_SECONDS`] ago.
     pub owed_open: bool,
 }
 
@@ -26,7 +32,9 @@ pub fn get(conn: &Connection, worker: &str) -> Result<Standing, StoreError> {
         conn,
         formatcp!(
             "SELECT s.dodged_in_row, s.dodged, \
-               COALESCE(a.state IN {AUDIT_OPEN} AND c.status = {CAMPAIGN_RUNNING}, 0) AS owed_open \
+               COALESCE(a.state IN {AUDIT_OPEN} AND c.status = {CAMPAIGN_RUNNING} \
+                 AND s.updated_at > strftime('%Y-%m-%dT%H:%M:%fZ', 'now', '-{OWED_SECONDS} seconds'), 0) \
+               AS owed_open \
              FROM worker_audit_standing s LEFT JOIN audits a ON a.id = s.owed_audit \
              LEFT JOIN campaigns c ON c.id = a.campaign_id WHERE s.worker = ?"
         ),
@@ -52,7 +60,7 @@ pub fn dodged(conn: &Connection, worker: &str, owed: Option<i64>) -> Result<(), 
         "INSERT INTO worker_audit_standing (worker, dodged_in_row, dodged, owed_audit) \
          VALUES (?1, 1, 1, ?2) \
          ON CONFLICT (worker) DO UPDATE SET dodged_in_row = dodged_in_row + 1, \
-           dodged = dodged + 1, owed_audit = COALESCE(?2, owed_audit), \
+           dodged = dodged + 1, owed_audit = ?2, \
            updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now')",
         params![worker, owed],
     )?;

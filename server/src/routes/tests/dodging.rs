@@ -132,8 +132,11 @@ async fn a_worker_giving_back_audits_owes_one_and_past_three_has_all_its_tests_a
         );
         give_back(&app, "a", &audit).await;
         assert_eq!(standing(&app, "a").await, (round, round));
-        // Owing, "a" is handed nothing: no range, no audit run.
-        let (status, nothing) = app.claim("a", 40).await;
+        // Owing, "a" is handed no range, also when its lease would list
+        // its tests (such a claim takes no audit runs either).
+        let inline = json!({"worker": "a", "threads": 1, "offers": ["x:cut-in:step"],
+                            "include_tests": true, "max_tests": 40});
+        let (status, nothing) = app.call("POST", "/api/v1/leases", Some(inline)).await;
         assert_eq!(status, StatusCode::NO_CONTENT, "round {round}: {nothing}");
         let open = open_audits(&app, id).await;
         if round < 4 {
@@ -160,4 +163,125 @@ async fn a_worker_giving_back_audits_owes_one_and_past_three_has_all_its_tests_a
     assert_eq!(span(&range), 40, "{range}");
     report(&app, "a", &range, json!([])).await;
     assert_eq!(open_audits(&app, id).await, 0);
+}
+
+/// Two workers alone with a program, each giving back one audit run of
+/// the other's: each owes an audit only the other may run. Owing blocks
+/// ranges, not audit runs, so each runs the other's and both work again
+/// (they blocked each other for good when owing blocked everything).
+#[tokio::test]
+async fn two_workers_owing_each_other_settle_by_running_the_audits() {
+    let app = app(|c| {
+        c.audit_share = 0.0;
+        c.lease_size = Some(40);
+    })
+    .await;
+    let id = app.external_campaign().await;
+    let (_, _held) = app.claim("d", 40).await;
+    let (_, a_range) = app.claim("a", 40).await;
+    let (_, b_range) = app.claim("b", 40).await;
+    let a_event = a_range["start"].as_u64().unwrap() + 1;
+    report(
+        &app,
+        "a",
+        &a_range,
+        json!([{"index": a_event, "weight": 1.0}]),
+    )
+    .await;
+    let b_event = b_range["start"].as_u64().unwrap() + 2;
+    report(
+        &app,
+        "b",
+        &b_range,
+        json!([{"index": b_event, "weight": 1.0}]),
+    )
+    .await;
+    // Each is handed the other's event and gives it back.
+    let (_, for_b) = app.claim("b", 40).await;
+    let (_, for_a) = app.claim("a", 40).await;
+    assert_eq!(
+        (for_a["start"].as_u64(), for_b["start"].as_u64()),
+        (Some(b_event), Some(a_event))
+    );
+    give_back(&app, "a", &for_a).await;
+    give_back(&app, "b", &for_b).await;
+    assert_eq!(
+        (standing(&app, "a").await, standing(&app, "b").await),
+        ((1, 1), (1, 1))
+    );
+    // Each runs what is open for it (the other's event and the other's
+    // owed test) and agrees, until it is handed a range again.
+    for worker in ["a", "b", "a", "b"] {
+        let (status, lease) = app.claim(worker, 40).await;
+        assert_eq!(status, StatusCode::OK, "{worker}: {lease}");
+        if span(&lease) == 40 {
+            continue;
+        }
+        let index = lease["start"].as_u64().unwrap();
+        let events = match [a_event, b_event].contains(&index) {
+            true => json!([{"index": index, "weight": 1.0}]),
+            false => json!([]),
+        };
+        report(&app, worker, &lease, events).await;
+    }
+    assert_eq!(open_audits(&app, id).await, 0);
+    let (_, range) = app.claim("a", 40).await;
+    assert_eq!(span(&range), 40, "{range}");
+    let (_, range) = app.claim("b", 40).await;
+    assert_eq!(span(&range), 40, "{range}");
+}
+
+/// A worker's heartbeat keeps its audit runs alive with its range: a slow
+/// program's worker that took an audit with a report runs it after the
+/// chunk under way, and must not be counted as letting it expire. One
+/// that stops heartbeating lets it expire, and is counted when the run is
+/// handed out again.
+#[tokio::test]
+async fn heartbeats_keep_a_workers_audit_runs_and_an_expired_run_counts() {
+    let app = app(|c| {
+        c.audit_share = 0.0;
+        c.lease_size = Some(40);
+        c.lease_ttl_seconds = 1.0;
+    })
+    .await;
+    app.external_campaign().await;
+    let (_, b_range) = app.claim("b", 40).await;
+    let (_, a_range) = app.claim("a", 40).await;
+    let b_event = b_range["start"].as_u64().unwrap() + 3;
+    report(
+        &app,
+        "b",
+        &b_range,
+        json!([{"index": b_event, "weight": 1.0}]),
+    )
+    .await;
+    let (_, audit) = app.claim("a", 40).await;
+    assert_eq!(audit["start"].as_u64(), Some(b_event), "{audit}");
+    let path = format!("/api/v1/leases/{}/heartbeat", a_range["id"]);
+    let fence = json!({"worker": "a", "attempt": a_range["attempt"], "key": a_range["key"]});
+    let heartbeat = || app.call("POST", &path, Some(fence.clone()));
+    // Past the TTL, kept by heartbeats of the range: "c" gets no audit run.
+    for _ in 0..3 {
+        tokio::time::sleep(std::time::Duration::from_millis(600)).await;
+        let (status, ack) = heartbeat().await;
+        assert_eq!(status, StatusCode::OK, "{ack}");
+    }
+    let (_, for_c) = app.claim("c", 40).await;
+    assert_eq!(span(&for_c), 40, "the audit run is a's: {for_c}");
+    assert_eq!(standing(&app, "a").await, (0, 0));
+    // Without heartbeats it expires; handed to "c", it counts against "a".
+    // (a's range and c's expired too, and are handed out first.)
+    tokio::time::sleep(std::time::Duration::from_millis(1200)).await;
+    let mut taken = Vec::new();
+    for _ in 0..3 {
+        let (_, lease) = app.claim("c", 40).await;
+        taken.push((lease["start"].as_u64().unwrap(), span(&lease)));
+    }
+    taken.sort_unstable();
+    let (a_from, c_from) = (
+        a_range["start"].as_u64().unwrap(),
+        for_c["start"].as_u64().unwrap(),
+    );
+    assert_eq!(taken, [(b_event, 1), (a_from, 40), (c_from, 40)]);
+    assert_eq!(standing(&app, "a").await, (1, 1));
 }
