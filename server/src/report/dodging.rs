@@ -55,6 +55,11 @@ pub fn owes(standing: &Standing) -> bool {
 /// to this many).
 const MAX_AUDITED_AT_ONCE: u64 = 4096;
 
+/// Draws of a test to owe before giving up (each lands on a test audited
+/// and decided before with at most the share of those among the worker's
+/// unresolved tests).
+const DRAWS: usize = 16;
+
 /// Counts the run of `old` (an audit's lease, about to be replaced by a
 /// new run) against its holder when it let it expire: it is still active,
 /// so the worker neither reported it, nor gave it back (counted then),
@@ -79,15 +84,27 @@ pub fn gave_back(conn: &Connection, worker: &str) -> Result<(), StoreError> {
         for &(campaign, from, to) in &ranges {
             let to = to.min(from + left);
             put_under_audit(conn, campaign, worker, from..to)?;
-            owed = owed.or(audits::open_id_at(conn, campaign, from)?);
+            if owed.is_none() {
+                owed = audits::open_of_in(conn, campaign, worker, from, to)?;
+            }
             left -= to - from;
             if left == 0 {
                 break;
             }
         }
-    } else if let Some((campaign, index)) = draw(&ranges) {
-        put_under_audit(conn, campaign, worker, index..index + 1)?;
-        owed = audits::open_id_at(conn, campaign, index)?;
+    } else {
+        // A test audited and decided before is drawn again (a few times):
+        // what is owed is an open audit.
+        for _ in 0..DRAWS {
+            let Some((campaign, index)) = draw(&ranges) else {
+                break;
+            };
+            put_under_audit(conn, campaign, worker, index..index + 1)?;
+            owed = audits::open_id_at(conn, campaign, index)?;
+            if owed.is_some() {
+                break;
+            }
+        }
     }
     tracing::warn!(
         worker,

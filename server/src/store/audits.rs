@@ -90,6 +90,26 @@ pub fn open_id_at(conn: &Connection, campaign: i64, index: u64) -> Result<Option
     Ok(id.map(|(id,)| id))
 }
 
+/// The id of an open audit of `worker`'s tests `from..to` of `campaign`,
+/// if there is one.
+pub fn open_of_in(
+    conn: &Connection,
+    campaign: i64,
+    worker: &str,
+    from: u64,
+    to: u64,
+) -> Result<Option<i64>, StoreError> {
+    let id: Option<(i64,)> = sql::optional(
+        conn,
+        formatcp!(
+            "SELECT id FROM audits WHERE campaign_id = ? AND test_index >= ? AND test_index < ? \
+             AND first_worker = ? AND state IN {AUDIT_OPEN} LIMIT 1"
+        ),
+        params![campaign, from as i64, to as i64, worker],
+    )?;
+    Ok(id.map(|(id,)| id))
+}
+
 pub fn get(conn: &Connection, id: i64) -> Result<AuditRow, StoreError> {
     sql::optional(
         conn,
