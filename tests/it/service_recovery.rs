@@ -257,3 +257,51 @@ async fn a_backup_taken_while_running_restores_to_the_same_answer() {
     assert_eq!(view.status, CampaignStatus::Converged);
     assert_same(&view, &in_process(None, &request));
 }
+
+/// A worker restarted with its `--credential-file` is the same worker:
+/// its name (not `NAME.2`), so its results, flags and audit standing stay
+/// its own. The file is written at the first start, mode 0600.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_worker_restarted_with_its_credential_file_keeps_its_name() {
+    let dir = scratch();
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &[]);
+    let client = server.client();
+    let file = dir.path().join("node.credential");
+    let args = ["--credential-file", file.to_str().unwrap()];
+    let names = || async {
+        let mut names: Vec<String> = client
+            .workers()
+            .await
+            .unwrap()
+            .workers
+            .into_iter()
+            .map(|w| w.name)
+            .collect();
+        names.sort();
+        names
+    };
+    let first = WorkerProcess::start_with(&server.url, 1, "node", &args);
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while names().await != ["node"] {
+        assert!(Instant::now() < deadline, "the worker never came");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    assert_eq!(first.terminate().code(), Some(0));
+    let stored: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&file).unwrap()).unwrap();
+    assert_eq!(stored["name"], "node");
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let mode = std::fs::metadata(&file).unwrap().permissions().mode();
+        assert_eq!(mode & 0o777, 0o600);
+    }
+    // Restarted: it works a campaign as "node" (a second registration
+    // would have made it "node.2", listed beside the first).
+    let mut request = campaign(Method::Ndd, 0, "idm", 0.5, 1);
+    request.library_id = None;
+    let id = client.create_campaign(&request).await.unwrap().id;
+    let _second = WorkerProcess::start_with(&server.url, 1, "node", &args);
+    let view = finished(&client, id, Duration::from_secs(120)).await;
+    assert_eq!(view.status, CampaignStatus::Converged, "{view:?}");
+    assert_eq!(names().await, ["node"]);
+}

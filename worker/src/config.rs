@@ -34,6 +34,13 @@ pub struct WorkerConfig {
     #[arg(long, env = "TSLG_WORKER_NAME")]
     pub name: Option<String>,
 
+    /// A file that keeps this worker's credential (the name the coordinator
+    /// issued and its secret, mode 0600): read at start when it exists, so
+    /// a restarted worker keeps its name, its results and its standing in
+    /// audits; written after registering when it does not.
+    #[arg(long, env = "TSLG_CREDENTIAL_FILE")]
+    pub credential_file: Option<std::path::PathBuf>,
+
     /// Longest pause between polls when there is no work (seconds), for a
     /// coordinator that answers a lease request at once (`--claim-wait-seconds
     /// 0`, or its `--max-claim-wait-seconds 0`).
@@ -91,6 +98,7 @@ impl WorkerConfig {
             threads: Some(threads),
             token: None,
             name: Some(name.into()),
+            credential_file: None,
             max_backoff_seconds: 0.5,
             claim_wait_seconds: 10.0,
             exit_when_idle_seconds: None,

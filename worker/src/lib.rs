@@ -6,6 +6,7 @@ mod backoff;
 mod building;
 mod chunks;
 mod config;
+mod credential_file;
 pub mod external;
 mod heartbeat;
 mod lease_work;

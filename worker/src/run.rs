@@ -9,6 +9,7 @@
 
 use crate::backoff::Backoff;
 use crate::config::{WorkerConfig, MIN_CLAIM_WAIT};
+use crate::credential_file;
 use crate::worker::{Worker, WorkerSummary};
 use rand::SeedableRng;
 use std::future::Future;
@@ -67,7 +68,7 @@ async fn serve(worker: &mut Worker, config: &WorkerConfig) -> anyhow::Result<()>
             }
         }
         if !registered {
-            match register(worker).await {
+            match register(worker, config).await? {
                 Ok(()) => registered = true,
                 Err(CallError::Refused {
                     status: 401,
@@ -150,18 +151,40 @@ async fn serve(worker: &mut Worker, config: &WorkerConfig) -> anyhow::Result<()>
 
 /// Registers the worker for a credential of its own (docs/api.md, worker
 /// identity): its name is the one asked for, or `NAME.k` when that name
-/// was issued before (this worker's own, before a restart, included).
-async fn register(worker: &mut Worker) -> Result<(), CallError> {
-    let issued = worker.client.register(&worker.name).await?;
+/// was issued before (this worker's own, before a restart, included). With
+/// `--credential-file`, a credential kept there is used instead, and a new
+/// one is kept there. `Err` for a file that cannot be read or written.
+async fn register(
+    worker: &mut Worker,
+    config: &WorkerConfig,
+) -> anyhow::Result<Result<(), CallError>> {
+    let file = config.credential_file.as_deref();
+    if let Some(stored) = file
+        .map(|path| credential_file::load(path, &config.server))
+        .transpose()?
+        .flatten()
+    {
+        tracing::info!(worker = %stored.name, issued_at = %stored.issued_at, "credential read from its file");
+        worker.client.use_credential(&stored.name, &stored.secret);
+        worker.name = stored.name;
+        return Ok(Ok(()));
+    }
+    let issued = match worker.client.register(&worker.name).await {
+        Ok(issued) => issued,
+        Err(e) => return Ok(Err(e)),
+    };
     if issued.name != worker.name {
         tracing::info!(
             asked = %worker.name,
             worker = %issued.name,
             "the name asked for was issued before: registered under the next free one"
         );
-        worker.name = issued.name;
     }
-    Ok(())
+    worker.name = issued.name.clone();
+    if let Some(path) = file {
+        credential_file::save(path, &config.server, &issued)?;
+    }
+    Ok(Ok(()))
 }
 
 /// Asks the coordinator for its release: `Err` when it cannot be reached,
