@@ -82,15 +82,17 @@ impl Client {
         secrets.get(worker).cloned()
     }
 
-    /// `builder` carrying `worker`'s secret. A worker this client has no
-    /// credential for is registered first, under its name: when that name
-    /// was issued to another worker, the call is refused (409) rather
-    /// than made in another name.
-    async fn as_worker(
+    /// `POST path` with `body`, in `worker`'s name: carrying its secret. A
+    /// worker this client has no credential for is registered first, under
+    /// its name: when that name was issued to another worker, the call is
+    /// refused (409) rather than made in another name.
+    async fn worker_post<B: Serialize>(
         &self,
-        builder: reqwest::RequestBuilder,
+        path: &str,
+        body: &B,
         worker: &str,
     ) -> Result<reqwest::RequestBuilder, CallError> {
+        let builder = self.request(reqwest::Method::POST, path).json(body);
         if let Some(secret) = self.secret_of(worker) {
             return Ok(builder.header(WORKER_SECRET_HEADER, secret));
         }
@@ -167,11 +169,11 @@ impl Client {
 
     /// A lease, or `None` when there is no work.
     pub async fn claim(&self, request: &LeaseRequest) -> Result<Option<Lease>, CallError> {
-        let builder = self
-            .request(reqwest::Method::POST, "/api/v1/leases")
-            .json(request);
         let response = self
-            .send(self.as_worker(builder, &request.worker).await?)
+            .send(
+                self.worker_post("/api/v1/leases", request, &request.worker)
+                    .await?,
+            )
             .await?;
         if response.status() == StatusCode::NO_CONTENT {
             return Ok(None);
@@ -189,38 +191,23 @@ impl Client {
         lease: i64,
         fence: &LeaseFence,
     ) -> Result<HeartbeatAck, CallError> {
-        let builder = self
-            .request(
-                reqwest::Method::POST,
-                &format!("/api/v1/leases/{lease}/heartbeat"),
-            )
-            .json(fence);
-        self.json(self.as_worker(builder, &fence.worker).await?)
+        let path = format!("/api/v1/leases/{lease}/heartbeat");
+        self.json(self.worker_post(&path, fence, &fence.worker).await?)
             .await
     }
 
     /// `POST /api/v1/leases/{lease}/release`: gives the rest of the lease back.
     pub async fn release(&self, lease: i64, release: &LeaseRelease) -> Result<(), CallError> {
-        let builder = self
-            .request(
-                reqwest::Method::POST,
-                &format!("/api/v1/leases/{lease}/release"),
-            )
-            .json(release);
-        self.send(self.as_worker(builder, &release.worker).await?)
+        let path = format!("/api/v1/leases/{lease}/release");
+        self.send(self.worker_post(&path, release, &release.worker).await?)
             .await
             .map(|_| ())
     }
 
     /// `POST /api/v1/leases/{lease}/results`: reports a range of outcomes.
     pub async fn report(&self, lease: i64, report: &ResultReport) -> Result<ResultAck, CallError> {
-        let builder = self
-            .request(
-                reqwest::Method::POST,
-                &format!("/api/v1/leases/{lease}/results"),
-            )
-            .json(report);
-        self.json(self.as_worker(builder, &report.worker).await?)
+        let path = format!("/api/v1/leases/{lease}/results");
+        self.json(self.worker_post(&path, report, &report.worker).await?)
             .await
     }
 
@@ -231,13 +218,8 @@ impl Client {
         lease: i64,
         upload: &LibraryUpload,
     ) -> Result<(), CallError> {
-        let builder = self
-            .request(
-                reqwest::Method::POST,
-                &format!("/api/v1/leases/{lease}/library"),
-            )
-            .json(upload);
-        self.send(self.as_worker(builder, &upload.worker).await?)
+        let path = format!("/api/v1/leases/{lease}/library");
+        self.send(self.worker_post(&path, upload, &upload.worker).await?)
             .await
             .map(|_| ())
     }

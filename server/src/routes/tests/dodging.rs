@@ -92,17 +92,25 @@ async fn open_audits(app: &App, id: i64) -> u64 {
     view["audits"]["open"].as_u64().unwrap()
 }
 
-#[tokio::test]
-async fn a_worker_giving_back_audits_owes_one_and_past_three_has_all_its_tests_audited() {
+/// A campaign of the program `x` with leases of 40 tests and no sampled
+/// audits (only those of heavy events and of runs given back), whose first
+/// range "d" holds unreported: the prefix stays at 0, and every later
+/// result is unresolved.
+async fn held_campaign() -> (App, i64) {
     let app = app(|c| {
         c.audit_share = 0.0;
         c.lease_size = Some(40);
     })
     .await;
     let id = app.external_campaign().await;
-    // "d" holds the first range unreported: the prefix stays at 0, and
-    // every later result is unresolved.
-    let (_, _held) = app.claim("d", 40).await;
+    let (status, held) = app.claim("d", 40).await;
+    assert_eq!((status, span(&held)), (StatusCode::OK, 40), "{held}");
+    (app, id)
+}
+
+#[tokio::test]
+async fn a_worker_giving_back_audits_owes_one_and_past_three_has_all_its_tests_audited() {
+    let (app, id) = held_campaign().await;
     let (_, b_range) = app.claim("b", 40).await;
     let (_, a_range) = app.claim("a", 40).await;
     // "b" reports an event, which as the campaign's first is audited (it
@@ -171,13 +179,7 @@ async fn a_worker_giving_back_audits_owes_one_and_past_three_has_all_its_tests_a
 /// (they blocked each other for good when owing blocked everything).
 #[tokio::test]
 async fn two_workers_owing_each_other_settle_by_running_the_audits() {
-    let app = app(|c| {
-        c.audit_share = 0.0;
-        c.lease_size = Some(40);
-    })
-    .await;
-    let id = app.external_campaign().await;
-    let (_, _held) = app.claim("d", 40).await;
+    let (app, id) = held_campaign().await;
     let (_, a_range) = app.claim("a", 40).await;
     let (_, b_range) = app.claim("b", 40).await;
     let a_event = a_range["start"].as_u64().unwrap() + 1;
