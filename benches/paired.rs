@@ -38,6 +38,7 @@ fn request(method: Method, library_id: Option<i64>, vut: &Value, seed: u64) -> C
         paired_with: None,
         outside: None,
         split: None,
+        vehicle_noise: false,
     }
 }
 

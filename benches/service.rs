@@ -36,6 +36,7 @@ fn request(tests: u64) -> CreateCampaign {
         paired_with: None,
         outside: None,
         split: None,
+        vehicle_noise: false,
     }
 }
 
@@ -141,6 +142,7 @@ async fn round_trips(count: usize, library: bool) -> anyhow::Result<(Vec<f64>, f
                 max_tests: Some(256),
                 wait_seconds: None,
                 audits_only: false,
+                noisy: Vec::new(),
             })
             .await?
             .expect("work");

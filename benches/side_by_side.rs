@@ -141,6 +141,7 @@ async fn through_service(seed: u64, threads: usize) -> anyhow::Result<Run> {
             paired_with: None,
             outside: None,
             split: None,
+            vehicle_noise: false,
         })
         .await?
         .id;

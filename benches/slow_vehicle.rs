@@ -258,6 +258,7 @@ fn campaign(method: Method, program: &str, library: Option<i64>) -> CreateCampai
         min_events: None,
         guard_outside: false,
         paired_with: None,
+        vehicle_noise: false,
     }
 }
 

@@ -102,6 +102,14 @@ pub struct CreateCampaign {
     #[serde(default)]
     #[schema(value_type = Option<Object>)]
     pub paired_with: Option<serde_json::Value>,
+    /// The vehicle under test is an external program whose runs of one
+    /// test may differ (thread timing, sensor noise, learned parts). Its
+    /// audits then compare workers by statistics instead of outcome by
+    /// outcome: a single disagreement flags nobody (docs/statistics.md,
+    /// "Noisy vehicles"). A program can also say so itself, with
+    /// `"deterministic": false` in its `hello`.
+    #[serde(default)]
+    pub vehicle_noise: bool,
 }
 
 fn default_epsilon() -> f64 {
@@ -213,6 +221,10 @@ pub struct CampaignView {
     /// Whether the campaign stops only under the outside guard.
     #[serde(default)]
     pub guard_outside: bool,
+    /// Whether its program's runs may differ, so that its audits compare
+    /// by statistics (see `CreateCampaign::vehicle_noise`).
+    #[serde(default)]
+    pub vehicle_noise: bool,
     /// Valid tests drawn outside the library (the ε share), and their
     /// events: the vehicle failing where its surrogate found nothing
     /// critical. Zero for the NDD and car-following.

@@ -65,6 +65,12 @@ pub struct LeaseRequest {
     /// runs before its next chunk instead of after its lease.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub audits_only: bool,
+    /// Of `offers`, those whose program said in its `hello` that its runs of
+    /// one test may differ (`"deterministic": false`). Once two workers
+    /// say so of a program, its campaigns are audited by statistics, as
+    /// with `vehicle_noise` (one worker alone cannot make them so).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub noisy: Vec<String>,
 }
 
 /// The longest a lease request may wait for work (`wait_seconds`), well
@@ -146,6 +152,21 @@ pub struct WorkerView {
     /// audited doubles with each, and past three all of them are.
     #[serde(default)]
     pub audits_given_back_in_row: u64,
+    /// Sampled audits of noisy programs (`vehicle_noise`) it ran with
+    /// another worker, flagged partners left out.
+    #[serde(default)]
+    pub noisy_audits_compared: u64,
+    /// Of those, the ones where it found an event and its partner none.
+    #[serde(default)]
+    pub noisy_own_events: u64,
+    /// Of those, the ones where its partner found an event and it none.
+    #[serde(default)]
+    pub noisy_partner_events: u64,
+    /// The evidence that its program behaves unlike the others' (an
+    /// e-value, 1 when nothing leans either way); it is flagged at 10⁴
+    /// (docs/statistics.md, "Noisy vehicles").
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub noisy_evidence: Option<f64>,
 }
 
 /// One test of a lease.

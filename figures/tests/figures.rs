@@ -55,6 +55,7 @@ fn view() -> CampaignView {
         pair: None,
         created_at: String::new(),
         updated_at: String::new(),
+        vehicle_noise: false,
     }
 }
 

@@ -57,6 +57,7 @@ pub mod case;
 pub mod cases;
 pub mod density;
 pub mod descriptor;
+pub mod discordance;
 pub mod estimator;
 pub mod exact;
 pub mod external;

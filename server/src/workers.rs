@@ -3,7 +3,7 @@
 //! report unhealthy. Kept in memory: workers announce themselves with every
 //! request, so a restarted coordinator knows them again within seconds.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -22,6 +22,8 @@ const FLEET_FRESH: Duration = Duration::from_secs(1);
 struct Entry {
     threads: u32,
     offers: Vec<String>,
+    /// Of `offers`, those whose program says its runs may differ.
+    noisy: Vec<String>,
     unhealthy: Vec<UnhealthyProgram>,
     last_seen: Instant,
     /// Tests of its reports accepted, and how many were invalid.
@@ -63,11 +65,15 @@ pub struct WorkerRegistry {
     /// offers since the fleet was counted (after the change is in
     /// `workers`, so a count that misses it is done again).
     fleet_changed: AtomicBool,
+    /// Programs (requirements) that two live workers said are noisy.
+    noisy: Mutex<HashSet<String>>,
 }
 
 impl WorkerRegistry {
     /// Records a lease request; logs programs turning unhealthy or healthy.
-    pub fn seen(&self, request: &LeaseRequest) {
+    /// Returns the programs this request made noisy: the second live
+    /// worker to say so ([`WorkerRegistry::is_noisy`]).
+    pub fn seen(&self, request: &LeaseRequest) -> Vec<String> {
         let mut workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
         let before: Vec<String> = workers
             .get(&request.worker)
@@ -103,6 +109,7 @@ impl WorkerRegistry {
             .or_insert_with(|| Entry {
                 threads: 0,
                 offers: Vec::new(),
+                noisy: Vec::new(),
                 unhealthy: Vec::new(),
                 last_seen: Instant::now(),
                 tests: 0,
@@ -115,14 +122,41 @@ impl WorkerRegistry {
             || entry.last_seen.elapsed() >= LIVE;
         entry.threads = request.threads;
         entry.offers = request.offers.clone();
+        entry.noisy = request.noisy.clone();
         entry.unhealthy = request.unhealthy.clone();
         entry.last_seen = Instant::now();
         if changed {
             self.fleet_changed.store(true, Ordering::Release);
         }
+        if request.noisy.is_empty() {
+            return Vec::new();
+        }
+        // One worker alone cannot turn a program's exact audits into
+        // statistical ones: two live workers must say it is noisy.
+        let mut confirmed = self.noisy.lock().unwrap_or_else(|p| p.into_inner());
+        let mut newly = Vec::new();
+        for program in &request.noisy {
+            let saying = workers
+                .values()
+                .filter(|e| e.last_seen.elapsed() < LIVE && e.noisy.contains(program))
+                .count();
+            if saying >= 2 && confirmed.insert(program.clone()) {
+                newly.push(program.clone());
+            }
+        }
+        newly
     }
 
     /// Whether `worker`'s last lease request waited and found nothing.
+    /// Whether two live workers said the program `requirement` is noisy
+    /// (since this coordinator started).
+    pub fn is_noisy(&self, requirement: &str) -> bool {
+        self.noisy
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .contains(requirement)
+    }
+
     pub fn idle(&self, worker: &str) -> bool {
         let workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
         workers.get(worker).is_some_and(|e| e.idle)
@@ -246,6 +280,10 @@ impl WorkerRegistry {
                 revoked_at: None,
                 audits_given_back: 0,
                 audits_given_back_in_row: 0,
+                noisy_audits_compared: 0,
+                noisy_own_events: 0,
+                noisy_partner_events: 0,
+                noisy_evidence: None,
             })
             .collect();
         list.sort_by(|a, b| a.last_seen_seconds.total_cmp(&b.last_seen_seconds));
@@ -267,6 +305,7 @@ mod tests {
             max_tests: None,
             wait_seconds: None,
             audits_only: false,
+            noisy: Vec::new(),
         }
     }
 

@@ -127,6 +127,7 @@ async fn drive(
         min_events: None,
         guard_outside: false,
         paired_with: None,
+        vehicle_noise: false,
     };
     // The service runs adaptive campaigns of grid cases; a sequential
     // case's probes the vehicle from grid states, which it cannot lease

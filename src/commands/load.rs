@@ -365,6 +365,7 @@ fn load_campaign(shape: &Shape) -> CreateCampaign {
         min_events: None,
         guard_outside: false,
         paired_with: None,
+        vehicle_noise: false,
         outside: None,
         split: None,
     }
@@ -451,6 +452,7 @@ async fn simulated_worker(
         max_tests: Some(shape.lease_tests),
         wait_seconds: None,
         audits_only: false,
+        noisy: Vec::new(),
     };
     let mut given = None;
     for round in 0..shape.requests {

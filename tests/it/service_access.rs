@@ -175,6 +175,7 @@ async fn tokens_open_only_their_part_of_the_api_and_never_reach_the_logs() {
         max_tests: None,
         wait_seconds: None,
         audits_only: false,
+        noisy: Vec::new(),
     };
     let lease = workers.claim(&ask("honest")).await.unwrap().unwrap();
     assert_eq!(lease.key.as_str().len(), 32);

@@ -421,6 +421,7 @@ async fn oversized_reports_are_refused_and_a_high_event_campaign_runs_through() 
             max_tests: Some(70_000),
             wait_seconds: None,
             audits_only: false,
+            noisy: Vec::new(),
         })
         .await
         .unwrap()

@@ -273,6 +273,7 @@ async fn an_upload_that_is_not_the_library_asked_for_changes_nothing() {
             max_tests: None,
             wait_seconds: None,
             audits_only: false,
+            noisy: Vec::new(),
         })
         .await
         .unwrap()

@@ -29,6 +29,7 @@ fn request(method: Method, library_id: i64, vut: &str, seed: u64) -> CreateCampa
         guard_outside: false,
         paired_with: None,
         split: None,
+        vehicle_noise: false,
     }
 }
 
@@ -146,6 +147,7 @@ async fn car_following_library_campaigns_agree_with_ndd_baselines_with_far_fewer
                 max_tests: None,
                 wait_seconds: None,
                 audits_only: false,
+                noisy: Vec::new(),
             })
             .await
             .unwrap();

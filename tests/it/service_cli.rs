@@ -167,6 +167,7 @@ async fn invalid_tests_use_indices_but_are_not_counted_as_tests() {
             max_tests: None,
             wait_seconds: None,
             audits_only: false,
+            noisy: Vec::new(),
         })
         .await
         .unwrap()

@@ -380,6 +380,7 @@ async fn only_workers_offering_a_program_get_its_tests() {
         max_tests: None,
         wait_seconds: None,
         audits_only: false,
+        noisy: Vec::new(),
     };
     for offers in [
         &[][..],

@@ -39,6 +39,7 @@ fn request(
         guard_outside: false,
         paired_with: None,
         split: None,
+        vehicle_noise: false,
     }
 }
 

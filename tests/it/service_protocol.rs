@@ -70,6 +70,7 @@ async fn results_are_idempotent_fenced_on_the_attempt_and_leases_expire_and_retu
             max_tests: None,
             wait_seconds: None,
             audits_only: false,
+            noisy: Vec::new(),
         })
         .await
         .unwrap()

@@ -138,6 +138,7 @@ async fn a_sumo_vehicle_is_a_surrogate_and_its_library_and_ndd_campaigns_agree()
         min_events: None,
         guard_outside: false,
         paired_with: None,
+        vehicle_noise: false,
     };
     let mut views = Vec::new();
     for (method, seed) in [(Method::Library, 1), (Method::Ndd, 2)] {

@@ -147,6 +147,7 @@ impl Worker {
             max_tests: None,
             wait_seconds: None,
             audits_only: false,
+            noisy: self.programs.noisy_offers(),
         }
     }
 

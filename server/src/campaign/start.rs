@@ -266,10 +266,23 @@ pub async fn start(state: &AppState, req: CreateCampaign) -> Result<CampaignRow,
         ExposureSource::Table { text, .. } => Some(text),
         ExposureSource::Builtin => None,
     };
-    let news: Vec<NewCampaign> = opened
+    let mut news: Vec<NewCampaign> = opened
         .iter()
         .map(|o| new_campaign(&req, o, rule, status, table.clone()))
         .collect();
+    // A program two live workers said is noisy is audited by statistics
+    // whether or not the request says so.
+    for new in &mut news {
+        if let Some(program) = &new.requires {
+            new.vehicle_noise |= state.workers.is_noisy(program);
+        }
+    }
+    if req.vehicle_noise && news.iter().all(|n| n.requires.is_none()) {
+        return Err(bad(
+            "vehicle_noise marks an external program whose runs of one test may differ; a \
+             built-in vehicle is deterministic, and the coordinator replays its tests exactly",
+        ));
+    }
     let rows = state
         .db
         .write(move |conn| -> Result<_, ServiceError> {
@@ -310,6 +323,7 @@ fn new_campaign(
     let requires = ExternalVut::from_spec(&opened.vut)
         .and_then(Result::ok)
         .map(|e| e.requirement(opened.case.name()));
+    let external = requires.is_some();
     NewCampaign {
         case_name: opened.case.name().to_owned(),
         preset: opened.case.preset(),
@@ -327,6 +341,8 @@ fn new_campaign(
         seed: req.seed,
         status,
         exact_probability: opened.exact_probability,
+        // A built-in vehicle of a pair stays exactly replayed.
+        vehicle_noise: req.vehicle_noise && external,
         first_stage: (req.method == Method::Adaptive).then(|| {
             (
                 0,

@@ -78,6 +78,7 @@ pub fn campaign_view(row: &CampaignRow) -> CampaignView {
         effective_events: has_events.then(|| fold.estimator.effective_events()),
         largest_weight_share: fold.estimator.largest_share(),
         guard_outside: row.guard_outside,
+        vehicle_noise: row.vehicle_noise,
         outside_tests: summary.outside_tests,
         outside_events: summary.outside_events,
         mismatched_events: summary.mismatched_events,
@@ -170,10 +171,18 @@ pub fn audit_counts(row: &CampaignRow, states: &[(AuditState, i64)]) -> (AuditCo
             counts.open
         ));
     }
-    if counts.undecided > 0 {
+    if counts.undecided > 0 && row.vehicle_noise {
+        warnings.push(format!(
+            "{} of {} audited tests gave another outcome when run again, as a noisy program's \
+             may; each first run stands, and workers are compared by statistics \
+             (GET /api/v1/workers)",
+            counts.undecided,
+            counts.undecided + counts.agreed
+        ));
+    } else if counts.undecided > 0 {
         warnings.push(format!(
             "{} audited tests got three different outcomes from three workers: is `{program}` \
-             deterministic for a given test?",
+             deterministic for a given test? If not, start its campaigns with vehicle_noise",
             counts.undecided
         ));
     }

@@ -18,8 +18,14 @@
 //!   two workers agree on it; when they disagree both results are held and
 //!   a third worker decides.
 //!
-//! A worker whose report the replay contradicts, or that ends in the
-//! minority of an audit, is flagged ([`flag_worker`]): every request of its
+//! A program whose runs of one test may differ (`vehicle_noise`) is
+//! audited by statistics instead ([`crate::report::noisy`]): one replica
+//! run per audit, the first run stands, and a worker is flagged only when
+//! its disagreements with the others lean to one side beyond doubt.
+//!
+//! A worker whose report the replay contradicts, that ends in the
+//! minority of an audit, or whose noisy program behaves unlike the
+//! others', is flagged ([`flag_worker`]): every request of its
 //! is refused, every result it reported to a campaign that has not been
 //! cancelled is taken back and leased to others, and a campaign that had
 //! stopped on such results runs again. So the answer is the one honest
@@ -78,7 +84,14 @@ pub fn choose_audits(
     for index in indices {
         audits.push(NewAudit {
             test_index: index,
-            reason: if heavy(index) { "weight" } else { "sample" },
+            // A test the sample chose is a sample's, heavy or not: the
+            // statistical audits of noisy programs count only tests chosen
+            // whatever their outcome (`report/noisy.rs`).
+            reason: if chosen.binary_search(&index).is_ok() {
+                "sample"
+            } else {
+                "weight"
+            },
             first_outcome: audits::encode(outcome_at(index)),
         });
     }
@@ -96,7 +109,8 @@ pub enum Verdict {
         liar: String,
         detail: String,
     },
-    /// Three runs, three outcomes: nobody is flagged.
+    /// Three runs, three outcomes, or two runs of a noisy program that
+    /// differ: nobody is flagged, and the first run stands.
     Undecided,
 }
 
@@ -292,7 +306,11 @@ fn record_audit_run_in(
         )));
     }
     let outcome = audits::encode(checked.outcomes.first().map(|o| o.1));
-    let verdict = record_run(conn, &audit, &report.worker, &outcome)?;
+    let verdict = if campaign.vehicle_noise {
+        crate::report::noisy::record_run(conn, &audit, &report.worker, &outcome)?
+    } else {
+        record_run(conn, &audit, &report.worker, &outcome)?
+    };
     leases::finish(conn, lease.id)?;
     crate::store::standing::ran_audit(conn, &report.worker)?;
     if let Verdict::Liar { liar, detail } = &verdict {
@@ -390,5 +408,9 @@ mod tests {
             [108]
         );
         assert!(choose_audits(&r, 100, 0.0, 1.0, &[]).is_empty());
+        // A heavy event the sample also chose is the sample's.
+        let audits = choose_audits(&r, 100, 10.0, 0.05, &[108]);
+        assert_eq!(audits.len(), 1);
+        assert_eq!((audits[0].test_index, audits[0].reason), (108, "sample"));
     }
 }

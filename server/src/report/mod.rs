@@ -12,6 +12,7 @@ pub mod dodging;
 pub mod explored;
 pub mod fold;
 pub mod mismatch;
+pub mod noisy;
 pub mod pair_fold;
 pub mod receive;
 pub mod record;

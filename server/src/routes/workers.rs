@@ -8,11 +8,12 @@ use crate::routes::leases::worker_name_problem;
 use crate::routes::problem::ApiJson;
 use crate::routes::ApiPath;
 use crate::state::AppState;
-use crate::store::{audits, costs, standing};
+use crate::store::{audits, costs, discordance, standing};
 use axum::extract::State;
 use axum::http::StatusCode;
 use axum::Json;
 use tslg_api::{Problem, ProgramCost, WorkerCredential, WorkerList, WorkerRegistration};
+use tslg_method::discordance::worker_evidence;
 
 /// Registers a worker: a credential of its own, under the name asked for,
 /// or the first free `NAME.k` when that name was issued before (to another
@@ -32,17 +33,20 @@ pub async fn register(
 
 /// The workers seen since the coordinator started, most recent first:
 /// their threads, the external programs they offer and those they report
-/// unhealthy, when their credentials were issued (and revoked), and the
-/// measured cost of a test of each program.
+/// unhealthy, when their credentials were issued (and revoked), their
+/// standing in audits (given back; for noisy programs, the evidence that
+/// theirs behaves unlike the others'), and the measured cost of a test of
+/// each program.
 #[utoipa::path(get, path = "/api/v1/workers", responses((status = 200, body = WorkerList)))]
 pub async fn list(State(state): State<AppState>) -> Result<Json<WorkerList>, ServiceError> {
-    let (flagged, costs, standings) = state
+    let (flagged, costs, standings, compared) = state
         .db
         .read(|conn| {
             Ok::<_, ServiceError>((
                 audits::flagged(conn)?,
                 costs::programs(conn)?,
                 standing::all(conn)?,
+                discordance::all(conn)?,
             ))
         })
         .await?;
@@ -52,6 +56,12 @@ pub async fn list(State(state): State<AppState>) -> Result<Json<WorkerList>, Ser
         if let Some((_, in_row, all)) = standings.iter().find(|(w, _, _)| *w == worker.name) {
             (worker.audits_given_back, worker.audits_given_back_in_row) =
                 (*all as u64, *in_row as u64);
+        }
+        if let Some((_, pairs, compared)) = compared.iter().find(|(w, _, _)| *w == worker.name) {
+            worker.noisy_audits_compared = *compared;
+            worker.noisy_own_events = pairs.iter().map(|p| p.own_event).sum();
+            worker.noisy_partner_events = pairs.iter().map(|p| p.partner_event).sum();
+            worker.noisy_evidence = Some(worker_evidence(pairs));
         }
     }
     Ok(Json(WorkerList {

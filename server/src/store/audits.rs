@@ -36,6 +36,9 @@ pub struct AuditRow {
     pub id: i64,
     pub campaign_id: i64,
     pub test_index: i64,
+    /// `sample` (chosen by the secret generator, whatever the outcome) or
+    /// `weight` (an event heavy in the estimate).
+    pub reason: String,
     pub state: AuditState,
     pub first_worker: String,
     pub first_outcome: String,
@@ -44,7 +47,7 @@ pub struct AuditRow {
     pub lease_id: Option<i64>,
 }
 
-const COLUMNS: &str = "id, campaign_id, test_index, state, first_worker, first_outcome, \
+const COLUMNS: &str = "id, campaign_id, test_index, reason, state, first_worker, first_outcome, \
     replica_worker, replica_outcome, lease_id";
 
 /// Stores the audits of a report of `worker` on `campaign`. A test whose

@@ -85,6 +85,9 @@ pub struct CampaignRow {
     /// The other campaign of a paired regression campaign
     /// ([`crate::store::pairs`]).
     pub paired_with: Option<i64>,
+    /// Its program is not bit-reproducible: audits compare by statistics
+    /// (`report/noisy.rs`).
+    pub vehicle_noise: bool,
     pub created_at: String,
     pub updated_at: String,
 }
@@ -103,7 +106,7 @@ pub const COLUMNS: &str = "id, case_name, preset, \
     outside_mismatches, \
     cost_per_test, worker_seconds, audits_waived, reported_s1, exact_probability, \
     stage_start, stage_end, stage_kind, library_tests, search_tests, stages, support, paired_with, created_at, \
-    updated_at";
+    updated_at, vehicle_noise";
 
 impl CampaignRow {
     pub fn seed(&self) -> u64 {
@@ -255,12 +258,13 @@ fn from_row(row: &Row<'_>) -> rusqlite::Result<CampaignRow> {
         paired_with: at(row, 48)?,
         created_at: at(row, 49)?,
         updated_at: at(row, 50)?,
+        vehicle_noise: at(row, 51)?,
     })
 }
 
 /// The number of columns [`from_row`] reads.
 #[cfg(test)]
-const READ: usize = 51;
+const READ: usize = 52;
 
 #[cfg(test)]
 mod tests {

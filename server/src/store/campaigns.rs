@@ -5,7 +5,9 @@ pub use crate::store::campaign_row::{CampaignRow, COLUMNS};
 use crate::db::sql;
 use crate::store::costs;
 use crate::store::error::StoreError;
-use crate::store::states::{CAMPAIGN_CANCELLED, CAMPAIGN_FAILED, CAMPAIGN_RUNNING};
+use crate::store::states::{
+    CAMPAIGN_CANCELLED, CAMPAIGN_FAILED, CAMPAIGN_PENDING, CAMPAIGN_RUNNING,
+};
 use const_format::formatcp;
 use rusqlite::{params, Connection};
 use tslg_api::{CampaignStatus, Method, Outside, Split};
@@ -30,6 +32,8 @@ pub struct NewCampaign {
     pub status: CampaignStatus,
     /// `P(A)` by enumeration, where the case could compute it.
     pub exact_probability: Option<f64>,
+    /// Its program's runs may differ: audits compare by statistics.
+    pub vehicle_noise: bool,
     /// An adaptive campaign's first stage: its tests `start..end` and kind.
     pub first_stage: Option<(u64, u64, &'static str)>,
 }
@@ -39,8 +43,8 @@ pub fn insert(conn: &Connection, new: &NewCampaign) -> Result<CampaignRow, Store
         "INSERT INTO campaigns (case_name, preset, method, library_id, exposure_name, \
          exposure_fingerprint, exposure_table, vut, requires, epsilon, outside, beta, confidence, \
          n_min, min_events, max_tests, seed, status, guard_outside, exact_probability, split, \
-         adaptive, stage_start, stage_end, stage_kind, enumerate, cost_per_test) \
-         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) \
+         adaptive, stage_start, stage_end, stage_kind, enumerate, cost_per_test, vehicle_noise) \
+         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) \
          RETURNING {COLUMNS}"
     );
     let adaptive = new.method == Method::Adaptive;
@@ -97,6 +101,7 @@ pub fn insert(conn: &Connection, new: &NewCampaign) -> Result<CampaignRow, Store
             first_stage.map(|s| s.2),
             enumerate,
             cost,
+            new.vehicle_noise,
         ],
     )?)
 }
@@ -170,6 +175,19 @@ pub fn set_status(
         params![status.as_str(), detail, id],
     )?;
     Ok(())
+}
+
+/// Marks the campaigns of program `requires` that have not stopped as
+/// noisy (audited by statistics from here on); returns how many changed.
+pub fn mark_noisy(conn: &Connection, requires: &str) -> Result<usize, StoreError> {
+    Ok(sql::execute(
+        conn,
+        formatcp!(
+            "UPDATE campaigns SET vehicle_noise = 1 WHERE requires = ? AND vehicle_noise = 0 \
+             AND status IN ({CAMPAIGN_RUNNING}, {CAMPAIGN_PENDING})"
+        ),
+        [requires],
+    )?)
 }
 
 /// Campaign `id` failed, saying why (its leases are cancelled apart).

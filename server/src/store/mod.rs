@@ -7,6 +7,7 @@ pub mod campaigns;
 pub mod costs;
 pub mod credentials;
 pub mod deletion;
+pub mod discordance;
 pub mod error;
 pub mod leases;
 pub mod libraries;

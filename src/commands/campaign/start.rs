@@ -42,6 +42,12 @@ pub struct CampaignStartArgs {
     /// draws; methods library and ndd (docs/statistics.md).
     #[arg(long, value_name = "VUT")]
     pub paired_with: Option<String>,
+    /// The program under test may give different outcomes for one test
+    /// (thread timing, sensor noise): audit it by statistics, so that a
+    /// single disagreement between workers flags nobody
+    /// (docs/statistics.md, "Noisy vehicles").
+    #[arg(long)]
+    pub vehicle_noise: bool,
     /// Wait until the campaign stops, showing progress.
     #[arg(long)]
     pub wait: bool,
@@ -91,6 +97,7 @@ pub fn start(args: &CampaignStartArgs) -> anyhow::Result<()> {
         min_events: Some(args.rule.min_events),
         guard_outside: args.rule.guard_outside,
         paired_with: args.paired_with.as_deref().map(vehicle_json).transpose()?,
+        vehicle_noise: args.vehicle_noise,
     };
     if let Some(limit) = args.fail_above {
         gate::check_limit(limit)?;

@@ -245,6 +245,7 @@ impl Vehicle<'_> {
             min_events: None,
             guard_outside: false,
             paired_with: None,
+            vehicle_noise: false,
         }
     }
 

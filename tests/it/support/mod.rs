@@ -282,6 +282,7 @@ pub fn campaign(
         split: None,
         guard_outside: false,
         paired_with: None,
+        vehicle_noise: false,
     }
 }
 
@@ -340,6 +341,7 @@ pub async fn claim(client: &Client, worker: &str) -> Option<Lease> {
             max_tests: None,
             wait_seconds: None,
             audits_only: false,
+            noisy: Vec::new(),
         })
         .await
         .expect("lease request")
@@ -622,6 +624,7 @@ pub fn ask(worker: &str, offers: &[&str]) -> tslg_api::LeaseRequest {
         max_tests: None,
         wait_seconds: None,
         audits_only: false,
+        noisy: Vec::new(),
     }
 }
 

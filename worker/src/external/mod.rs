@@ -176,6 +176,14 @@ impl Program {
             .collect()
     }
 
+    /// [`Program::offers`] if its runs of one test may differ, else nothing.
+    pub fn noisy_offers(&self) -> Vec<String> {
+        if self.capabilities.deterministic {
+            return Vec::new();
+        }
+        self.offers()
+    }
+
     /// Why the program is resting, while it is.
     pub fn unhealthy(&self) -> Option<UnhealthyProgram> {
         let health = lock(&self.health);
@@ -451,6 +459,14 @@ impl Programs {
     /// What the healthy programs offer, as the requirement strings of lease requests.
     pub fn offers(&self) -> Vec<String> {
         self.by_name.values().flat_map(|p| p.offers()).collect()
+    }
+
+    /// What the healthy programs that said their runs may differ offer.
+    pub fn noisy_offers(&self) -> Vec<String> {
+        self.by_name
+            .values()
+            .flat_map(|p| p.noisy_offers())
+            .collect()
     }
 
     /// The programs resting, with why.

@@ -81,6 +81,9 @@ pub struct Capabilities {
     pub name: Option<String>,
     /// The cases it drives and in which modes (step, episode).
     pub cases: BTreeMap<String, Vec<ExternalMode>>,
+    /// Whether two runs of one test give the same outcome (its `hello`
+    /// says `"deterministic": false` if not).
+    pub deterministic: bool,
 }
 
 enum Line {
@@ -237,9 +240,15 @@ impl ProgramProcess {
                 protocol,
                 name,
                 cases,
-            } if (OLDEST_PROTOCOL_VERSION..=PROTOCOL_VERSION).contains(&protocol) => {
-                Ok((process, Capabilities { name, cases }))
-            }
+                deterministic,
+            } if (OLDEST_PROTOCOL_VERSION..=PROTOCOL_VERSION).contains(&protocol) => Ok((
+                process,
+                Capabilities {
+                    name,
+                    cases,
+                    deterministic,
+                },
+            )),
             Reply::Hello { protocol, .. } => Err(Fault::Garbage {
                 detail: format!(
                     "it speaks protocol version {protocol}; this worker speaks versions \

@@ -37,6 +37,10 @@ pub enum Reply {
         name: Option<String>,
         /// The cases the program drives and in which modes.
         cases: BTreeMap<String, Vec<ExternalMode>>,
+        /// `false`: two runs of one test may differ (thread timing,
+        /// sensor noise, learned parts).
+        #[serde(default = "deterministic_by_default")]
+        deterministic: bool,
     },
     Ready,
     Control(Control),
@@ -45,6 +49,11 @@ pub enum Reply {
     Error {
         message: String,
     },
+}
+
+/// A program that does not say otherwise is taken to be deterministic.
+fn deterministic_by_default() -> bool {
+    true
 }
 
 impl Reply {
