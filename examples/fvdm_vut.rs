@@ -14,10 +14,17 @@
 //! more), `--sleep SECONDS` waits that long at the start of every test, as
 //! a simulator or a test track would take, and `--tally FILE` appends a
 //! byte to FILE for every test, so a benchmark can count the tests run
-//! (`benches/slow_vehicle.rs`).
+//! (`benches/slow_vehicle.rs`). Two more make it a vehicle that is not
+//! bit-reproducible (docs/statistics.md, "Noisy vehicles"): `--noise SIGMA`
+//! adds Gaussian noise of σ m/s² to every commanded acceleration, from
+//! fresh entropy each run (its hello then says `"deterministic": false`),
+//! and `--brake-harder A` brakes A m/s² harder whenever the FVDM brakes, a
+//! program that differs from the others'.
 //!
 //! The protocol (one JSON object per line) is docs/vut-protocol.md.
 
+use rand::rngs::ThreadRng;
+use rand_distr::{Distribution, Normal};
 use serde_json::{json, Value};
 use std::io::{BufRead, Write};
 
@@ -30,6 +37,12 @@ struct Settings {
     sleep: f64,
     /// Where a byte is appended for every test.
     tally: Option<std::fs::File>,
+    /// σ of the noise on every command (m/s²); 0: deterministic.
+    noise: f64,
+    /// How much harder than the FVDM it brakes (m/s²).
+    brake_harder: f64,
+    /// Entropy from the operating system, for the noise.
+    entropy: ThreadRng,
 }
 
 impl Settings {
@@ -37,6 +50,7 @@ impl Settings {
     fn parse(args: impl Iterator<Item = String>) -> Result<Self, String> {
         let mut settings = Settings {
             gain: 0.85,
+            entropy: rand::rng(),
             ..Settings::default()
         };
         let mut args = args;
@@ -52,6 +66,8 @@ impl Settings {
             match flag.as_str() {
                 "--gain" => settings.gain = number()?,
                 "--sleep" => settings.sleep = number()?,
+                "--noise" => settings.noise = number()?,
+                "--brake-harder" => settings.brake_harder = number()?,
                 "--tally" => {
                     let file = std::fs::OpenOptions::new()
                         .create(true)
@@ -62,7 +78,8 @@ impl Settings {
                 }
                 other => {
                     return Err(format!(
-                        "unknown option {other}; options: --gain, --sleep, --tally"
+                        "unknown option {other}; options: --gain, --sleep, --tally, --noise, \
+                         --brake-harder"
                     ))
                 }
             }
@@ -79,13 +96,22 @@ impl Settings {
             std::thread::sleep(std::time::Duration::from_secs_f64(self.sleep));
         }
     }
-}
 
-/// `a = k (V₁ + V₂ tanh(C₁ (R − L) − C₂) − v)` with the built-in defaults
-/// but for `k`.
-fn fvdm(k: f64, speed: f64, gap: f64) -> f64 {
-    let optimal_speed = 6.75 + 7.91 * (0.13 * (gap - 5.0) - 1.57).tanh();
-    k * (optimal_speed - speed)
+    /// The command at `speed` and `gap`: the FVDM, `a = k (V₁ + V₂ tanh(C₁
+    /// (R − L) − C₂) − v)` with the built-in defaults but for `k`, braking
+    /// `--brake-harder` more, plus the noise.
+    fn command(&mut self, speed: f64, gap: f64) -> f64 {
+        let optimal_speed = 6.75 + 7.91 * (0.13 * (gap - 5.0) - 1.57).tanh();
+        let mut a = self.gain * (optimal_speed - speed);
+        if a < 0.0 {
+            a -= self.brake_harder;
+        }
+        if self.noise > 0.0 {
+            let normal = Normal::new(0.0, self.noise).expect("σ is finite and positive");
+            a += normal.sample(&mut self.entropy);
+        }
+        a
+    }
 }
 
 fn number(v: &Value) -> f64 {
@@ -95,7 +121,7 @@ fn number(v: &Value) -> f64 {
 /// The cut-in at `(range, range_rate)`: the leader keeps its speed; each
 /// step the acceleration is clipped to its bounds and to what keeps the
 /// speed in bounds, then the gap and the speed advance.
-fn crashes(k: f64, world: &Value, scenario: &Value) -> bool {
+fn crashes(settings: &mut Settings, world: &Value, scenario: &Value) -> bool {
     let (dt, v0) = (number(&world["dt"]), number(&world["initial_speed"]));
     let (a, v) = (&world["acceleration"], &world["speed"]);
     let accident_gap = number(&world["accident_gap"]);
@@ -108,7 +134,8 @@ fn crashes(k: f64, world: &Value, scenario: &Value) -> bool {
     let steps = world["steps"].as_u64().unwrap_or(0);
     hit(gap)
         || (0..steps).any(|_| {
-            let accel = fvdm(k, speed, gap)
+            let accel = settings
+                .command(speed, gap)
                 .clamp(number(&a[0]), number(&a[1]))
                 .clamp((number(&v[0]) - speed) / dt, (number(&v[1]) - speed) / dt);
             gap += (lead_speed - speed) * dt - accel * dt * dt / 2.0;
@@ -120,7 +147,8 @@ fn crashes(k: f64, world: &Value, scenario: &Value) -> bool {
 fn respond(settings: &mut Settings, message: &Value, world: &mut Value) -> Value {
     match message["type"].as_str() {
         Some("hello") => json!({"type": "hello", "protocol": 1, "name": "rs-fvdm",
-                                "cases": {"cut-in": ["step", "episode"]}}),
+                                "cases": {"cut-in": ["step", "episode"]},
+                                "deterministic": settings.noise == 0.0}),
         Some("reset") => {
             settings.start_test();
             *world = message["world"].clone();
@@ -134,16 +162,13 @@ fn respond(settings: &mut Settings, message: &Value, world: &mut Value) -> Value
                 return json!({"type": "error", "message": "no vehicle ahead"});
             };
             let a = &world["acceleration"];
-            let accel = fvdm(
-                settings.gain,
-                number(&message["ego"]["speed"]),
-                number(&lead["gap"]),
-            )
-            .clamp(number(&a[0]), number(&a[1]));
+            let accel = settings
+                .command(number(&message["ego"]["speed"]), number(&lead["gap"]))
+                .clamp(number(&a[0]), number(&a[1]));
             json!({"type": "control", "acceleration": accel})
         }
         Some("episode") => {
-            json!({"type": "outcome", "event": crashes(settings.gain, world, &message["scenario"])})
+            json!({"type": "outcome", "event": crashes(settings, world, &message["scenario"])})
         }
         _ => json!({"type": "error", "message": format!("unexpected message {message}")}),
     }

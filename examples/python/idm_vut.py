@@ -6,9 +6,20 @@ step mode, for the cut-in and car-following cases. Standard library only.
 
 then start a campaign with "vut": {"external": "py-idm"}. The protocol
 (one JSON object per line on stdin and stdout) is docs/vut-protocol.md.
+
+Options, for trying the service with a vehicle that is not
+bit-reproducible (docs/statistics.md, "Noisy vehicles"):
+
+    --noise SIGMA        add Gaussian noise (m/s^2) to every command, from
+                         fresh entropy each run; hello then says
+                         "deterministic": false
+    --brake-harder A     brake A m/s^2 harder than the IDM whenever it brakes
+                         (a program that differs from the others')
 """
+import argparse
 import json
 import math
+import random
 import sys
 
 # The built-in IDM's parameters: the cut-in calibration (paper Table III)
@@ -29,12 +40,13 @@ def idm(p, speed, lead_speed, gap):
     return p["alpha"] * (1.0 - (speed / p["v0"]) ** p["delta"] - interaction * interaction)
 
 
-def respond(message, state):
+def respond(message, state, options):
     """The reply to one message; `state` is what this test remembers."""
     kind = message["type"]
     if kind == "hello":
         return {"type": "hello", "protocol": 1, "name": "py-idm",
-                "cases": {case: ["step"] for case in PARAMS}}
+                "cases": {case: ["step"] for case in PARAMS},
+                "deterministic": options.noise == 0.0}
     if kind == "reset":
         if message["case"] not in PARAMS or message["mode"] != "step":
             return {"type": "error", "message": f"cannot drive {message['case']} in {message['mode']} mode"}
@@ -44,15 +56,26 @@ def respond(message, state):
     if kind == "step":
         lead = next(v for v in message["vehicles"] if "gap" in v)
         a = idm(state, message["ego"]["speed"], lead["speed"], lead["gap"])
+        if a < 0.0:
+            a -= options.brake_harder
+        if options.noise > 0.0:
+            a += options.entropy.gauss(0.0, options.noise)
         low, high = state["limits"]
         return {"type": "control", "acceleration": min(max(a, low), high)}
     return {"type": "error", "message": f"unexpected message {kind}"}
 
 
 def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--noise", type=float, default=0.0, metavar="SIGMA")
+    parser.add_argument("--brake-harder", type=float, default=0.0, metavar="A")
+    options = parser.parse_args()
+    if options.noise < 0.0 or options.brake_harder < 0.0:
+        parser.error("--noise and --brake-harder must be >= 0")
+    options.entropy = random.Random()  # seeded from os.urandom
     state = {}
     for line in sys.stdin:  # the worker closes stdin to stop us
-        print(json.dumps(respond(json.loads(line), state)), flush=True)
+        print(json.dumps(respond(json.loads(line), state, options)), flush=True)
 
 
 if __name__ == "__main__":

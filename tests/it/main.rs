@@ -28,6 +28,7 @@ mod service_highway;
 mod service_load;
 mod service_long_poll;
 mod service_next_lease;
+mod service_noise;
 mod service_outside;
 mod service_paired;
 mod service_protocol;
