@@ -243,13 +243,18 @@ pub fn vehicle_spec(
         .with_context(|| format!("invalid {what} `{text}`"))
 }
 
-/// A vehicle specification's short name: its model or its program.
+/// A vehicle specification's short name: its model or its program, and
+/// the noise on its commands when it has some (`idm (noise 1.5)`).
 pub fn vehicle_name(spec: &serde_json::Value) -> String {
-    spec.get("model")
+    let name = spec
+        .get("model")
         .or_else(|| spec.get("external"))
         .and_then(|m| m.as_str())
-        .unwrap_or("?")
-        .to_owned()
+        .unwrap_or("?");
+    match spec.get("noise").and_then(|n| n.as_f64()) {
+        Some(noise) if noise > 0.0 => format!("{name} (noise {noise})"),
+        _ => name.to_owned(),
+    }
 }
 
 /// The rule of `args`; `exploring_share` sets the default `n_min`

@@ -5,6 +5,7 @@
 use crate::external::{DriverError, ExternalMode, ExternalVehicle};
 use crate::grid::Grid;
 use crate::mass::GridMass;
+use crate::noise::NoiseRng;
 
 /// One surrogate-model run at a scenario, as library search needs it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -70,6 +71,22 @@ pub trait Case: Sync {
             self.is_event(vehicle, cell),
             self.criticality(vehicle, cell),
         )
+    }
+
+    /// Whether `vehicle`'s runs of one scenario may differ (a built-in
+    /// model with `noise`, [`crate::noise`]). Its outcome is then a draw,
+    /// `P(A|x)` is no longer 0 or 1, and every run is of one test: with
+    /// the test's noise stream, [`Case::noisy_run`]. Cases that cannot
+    /// run noise refuse such a vehicle when a campaign opens.
+    fn is_noisy(&self, _vehicle: &Self::Vehicle) -> bool {
+        false
+    }
+
+    /// [`Case::event_and_criticality`] of one run of `vehicle` in `cell`
+    /// whose noise is drawn from `noise` (the test's stream); the same as
+    /// it for a deterministic vehicle.
+    fn noisy_run(&self, vehicle: &Self::Vehicle, cell: usize, _noise: NoiseRng) -> (bool, f64) {
+        self.event_and_criticality(vehicle, cell)
     }
 
     /// The constants an external program is told at each reset (time

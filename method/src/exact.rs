@@ -1,4 +1,7 @@
-//! Exact answers on the grid for deterministic vehicles (SPEC §3, §8).
+//! Exact answers on the grid (SPEC §3, §8): by enumeration for
+//! deterministic vehicles; for a noisy one (`P(A|x)` strictly between 0 and
+//! 1 near its failure boundary) `P(A|x)` per cell is a seeded Monte Carlo
+//! whose standard error is stated ([`event_rates`]).
 //!
 //! - `P(A) = Σ_x P(A|x) P(x)` by enumeration;
 //! - the per-test variance of the importance-sampling estimator with
@@ -38,6 +41,121 @@ pub fn event_cells<C: Case>(case: &C, vehicle: &C::Vehicle) -> Vec<usize> {
 /// `P(A)` from the event cells.
 pub fn event_probability<C: Case>(case: &C, events: &[usize]) -> f64 {
     events.iter().map(|&c| case.exposure().p(c)).sum()
+}
+
+/// Runs per cell of a noisy vehicle's Monte Carlo `P(A|x)`.
+pub const NOISY_RUNS_PER_CELL: u32 = 1000;
+
+/// The campaign seed of the exact answers' noise streams: run `j` of cell
+/// `c` is test `c · runs + j` of it ([`crate::noise::noise_rng`]), so the
+/// Monte Carlo is one fixed computation.
+const EXACT_NOISE_SEED: u64 = 0x6578_6163_74;
+
+/// `P(A|x)` on the cells of positive exposure where it is positive.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EventRates {
+    /// `(cell, P(A|x))`, in increasing cell order.
+    pub cells: Vec<(usize, f64)>,
+    /// How a noisy vehicle's rates were obtained; `None` when they are
+    /// exact (a deterministic vehicle: 1 on its event cells).
+    pub monte_carlo: Option<MonteCarlo>,
+}
+
+/// A Monte Carlo `P(A) = Σ P(x) P(A|x)` of a noisy vehicle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MonteCarlo {
+    /// Runs of every cell of positive exposure.
+    pub runs_per_cell: u32,
+    /// Cells whose runs differed (some with the event, some without).
+    pub varying_cells: usize,
+    /// The standard error of `P(A)`: `√(Σ P(x)² p̂(1 − p̂)/(m − 1))`
+    /// over the cells, `p̂` the share of `m` runs with the event. A cell
+    /// whose `m` runs all agree adds nothing: its rate is taken as 0 or 1,
+    /// which holds where the noise cannot move the outcome (far from the
+    /// failure boundary) and is off by less than about `3/m` elsewhere.
+    pub standard_error: f64,
+}
+
+/// `P(A|x)` of `vehicle` on every cell of positive exposure where it is
+/// positive: 1 on a deterministic vehicle's event cells; for a noisy one
+/// ([`Case::is_noisy`]), the share of [`NOISY_RUNS_PER_CELL`] runs with
+/// the event, each with its own noise stream, cells in parallel.
+pub fn event_rates<C: Case>(case: &C, vehicle: &C::Vehicle) -> EventRates {
+    if !case.is_noisy(vehicle) {
+        return EventRates {
+            cells: event_cells(case, vehicle)
+                .into_iter()
+                .map(|c| (c, 1.0))
+                .collect(),
+            monte_carlo: None,
+        };
+    }
+    let exposure = case.exposure();
+    let runs = NOISY_RUNS_PER_CELL;
+    let counted: Vec<(usize, u32)> = (0..case.grid().len())
+        .into_par_iter()
+        .filter(|&cell| exposure.p(cell) > 0.0)
+        .map(|cell| {
+            let first = cell as u64 * u64::from(runs);
+            let events = (0..u64::from(runs))
+                .filter(|j| {
+                    let noise = crate::noise::noise_rng(EXACT_NOISE_SEED, first + j);
+                    case.noisy_run(vehicle, cell, noise).0
+                })
+                .count() as u32;
+            (cell, events)
+        })
+        .filter(|&(_, events)| events > 0)
+        .collect();
+    let m = f64::from(runs);
+    let variance: f64 = counted
+        .iter()
+        .map(|&(cell, k)| {
+            let (p, rate) = (exposure.p(cell), f64::from(k) / m);
+            p * p * rate * (1.0 - rate) / (m - 1.0)
+        })
+        .sum();
+    EventRates {
+        monte_carlo: Some(MonteCarlo {
+            runs_per_cell: runs,
+            varying_cells: counted.iter().filter(|&&(_, k)| k < runs).count(),
+            standard_error: variance.sqrt(),
+        }),
+        cells: counted
+            .into_iter()
+            .map(|(cell, k)| (cell, f64::from(k) / m))
+            .collect(),
+    }
+}
+
+/// `P(A) = Σ_x P(x) P(A|x)` from the rates.
+pub fn rate_probability<C: Case>(case: &C, rates: &EventRates) -> f64 {
+    rates
+        .cells
+        .iter()
+        .map(|&(c, rate)| case.exposure().p(c) * rate)
+        .sum()
+}
+
+/// The per-test variance of library sampling with rates `P(A|x)`: each
+/// test's term is `w A` with `w = P/q` and `A` a draw of rate `P(A|x)`, so
+/// `E[(w A)²] = Σ_x P(x)² P(A|x)/q(x)` and `σ² = E[(w A)²] − P(A)²` (for
+/// rates of 0 and 1, [`library_variance`]).
+pub fn rate_library_variance<C: Case>(
+    case: &C,
+    rates: &EventRates,
+    q: &LibraryDistribution,
+) -> f64 {
+    let mu = rate_probability(case, rates);
+    let second: f64 = rates
+        .cells
+        .iter()
+        .map(|&(c, rate)| {
+            let p = case.exposure().p(c);
+            p * p * rate / q.q(c).max(PROBABILITY_FLOOR)
+        })
+        .sum();
+    second - mu * mu
 }
 
 /// The analytic per-test variance `σ²` of library sampling.
@@ -105,6 +223,8 @@ pub struct ExactReport {
     pub library_tests: f64,
     /// Tests the NDD needs: `z² (1 − P(A))/(β² P(A))`.
     pub ndd_tests: f64,
+    /// For a noisy vehicle, how its `P(A|x)` were obtained.
+    pub monte_carlo: Option<MonteCarlo>,
 }
 
 impl ExactReport {
@@ -122,13 +242,14 @@ pub fn exact_report<C: Case>(
     beta: f64,
     z: f64,
 ) -> ExactReport {
-    let events = event_cells(case, vehicle);
-    let probability = event_probability(case, &events);
-    let library_variance = library_variance(case, &events, q);
+    let rates = event_rates(case, vehicle);
+    let probability = rate_probability(case, &rates);
+    let library_variance = rate_library_variance(case, &rates, q);
     ExactReport {
         probability,
         library_variance,
         library_tests: expected_library_tests(library_variance, probability, beta, z),
         ndd_tests: expected_ndd_tests(probability, beta, z),
+        monte_carlo: rates.monte_carlo,
     }
 }

@@ -66,6 +66,7 @@ pub mod library;
 pub mod long_table;
 pub mod mass;
 pub mod ndd_table;
+pub mod noise;
 pub mod number;
 pub mod objective;
 pub mod openscenario;

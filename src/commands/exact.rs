@@ -20,6 +20,11 @@ pub struct ExactArgs {
     /// Confidence level.
     #[arg(long, default_value_t = 0.9)]
     pub confidence: f64,
+    /// A vehicle to report beside the case's built-in ones (a name or a
+    /// JSON specification, e.g. '{"model": "idm", "noise": 1.5}' for a
+    /// noisy IDM, whose P(A|x) per cell is a Monte Carlo); repeatable.
+    #[arg(long, value_name = "VUT")]
+    pub vut: Vec<String>,
 }
 
 /// P(A) by enumeration of the grid, where the case has one and it is
@@ -120,8 +125,11 @@ fn print_table(case: &dyn ScenarioCase, args: &ExactArgs) -> anyhow::Result<()> 
             vehicles.extend(exec.split_once('=').map(|(name, _)| name.to_owned()));
         }
     }
-    for name in &vehicles {
-        let vut = vehicle_spec(case, name, "vehicle")?;
+    vehicles.extend(args.vut.iter().cloned());
+    let mut notes = Vec::new();
+    for text in &vehicles {
+        let vut = vehicle_spec(case, text, "vehicle")?;
+        let name = vehicle_name(&vut);
         let r = case
             .exact_report(
                 &vut,
@@ -140,6 +148,20 @@ fn print_table(case: &dyn ScenarioCase, args: &ExactArgs) -> anyhow::Result<()> 
             r.ndd_tests,
             crate::output::ratio(r.ratio())
         );
+        if let Some(mc) = r.monte_carlo {
+            notes.push(format!(
+                "{name}: its runs of one scenario differ, so P(A|x) per cell is a seeded Monte \
+                 Carlo of {} runs ({} cells varied); P(A) has standard error {:.2e} ({:.2}% of \
+                 it), cells whose runs all agreed taken as 0 or 1",
+                mc.runs_per_cell,
+                mc.varying_cells,
+                mc.standard_error,
+                100.0 * mc.standard_error / r.probability
+            ));
+        }
+    }
+    for note in notes {
+        outln!("{note}");
     }
     Ok(())
 }

@@ -420,3 +420,32 @@ fn car_following_tests_run_in_batches_are_the_tests_run_one_by_one() {
         }
     }
 }
+
+#[test]
+fn a_noisy_vehicles_exact_answer_is_a_seeded_monte_carlo_with_its_error() {
+    use crate::exact::{event_rates, rate_probability, NOISY_RUNS_PER_CELL};
+    let typed = CutIn::builtin(CutInPreset::default());
+    let idm = crate::vehicle::VehicleModel::builtin("idm").unwrap();
+    let noisy: crate::vehicle::VehicleModel =
+        serde_json::from_value(json!({"model": "idm", "noise": 1.5})).unwrap();
+    // A deterministic vehicle's rates are its event cells, exactly.
+    let plain = event_rates(&typed, &idm);
+    assert!(plain.monte_carlo.is_none());
+    assert_eq!(
+        plain.cells.iter().map(|c| c.0).collect::<Vec<_>>(),
+        event_cells(&typed, &idm)
+    );
+    let rates = event_rates(&typed, &noisy);
+    let mc = rates.monte_carlo.expect("a noisy vehicle's rates are a Monte Carlo");
+    assert_eq!(mc.runs_per_cell, NOISY_RUNS_PER_CELL);
+    let p = rate_probability(&typed, &rates);
+    let p_plain = rate_probability(&typed, &plain);
+    // The noise moves outcomes near the boundary only: some cells vary, and
+    // the rate stays of the plain model's order.
+    assert!(mc.varying_cells > 0);
+    assert!(rates.cells.iter().any(|&(_, r)| r > 0.0 && r < 1.0));
+    assert!(mc.standard_error < 0.02 * p, "{mc:?} at {p:e}");
+    assert!(p > 0.5 * p_plain && p < 2.0 * p_plain, "{p:e} vs {p_plain:e}");
+    // One fixed computation: the same again.
+    assert_eq!(event_rates(&typed, &noisy), rates);
+}

@@ -39,6 +39,10 @@ enum Follower {
 impl BatchFollower {
     /// The batch form of `vehicle`, when it has one.
     pub fn of(vehicle: &VehicleModel) -> Option<Self> {
+        if vehicle.is_noisy() {
+            // Each test of a noisy model draws its own noise: one by one.
+            return None;
+        }
         match vehicle.spec() {
             VehicleSpec::Idm(p) => Some(BatchFollower(Follower::Idm {
                 alpha: p.alpha,

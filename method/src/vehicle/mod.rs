@@ -25,6 +25,7 @@ pub(crate) use parameters::check;
 pub use parameters::{ParamError, MAX_PARAMETER_MAGNITUDE, MIN_PARAMETER_MAGNITUDE};
 pub use switching_acc::{SwitchingAccParams, SwitchingAccState};
 
+use crate::noise::{CommandNoise, NoiseRng};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
@@ -76,10 +77,61 @@ pub enum VehicleSpec {
     AccAeb(AccAebParams),
 }
 
+/// A vehicle model as written, with the noise on its commands
+/// (`{"model": "idm", "noise": 0.5}`), before validation.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct WrittenVehicle {
+    #[serde(flatten)]
+    spec: VehicleSpec,
+    /// σ (m/s²) of the Gaussian noise added to every commanded
+    /// acceleration, before the world's bounds: a vehicle that is not
+    /// bit-reproducible ([`crate::noise`]); 0, the default, for none.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    noise: f64,
+}
+
+fn is_zero(value: &f64) -> bool {
+    *value == 0.0
+}
+
 /// A validated vehicle model. Deserialising one validates it.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(try_from = "VehicleSpec", into = "VehicleSpec")]
-pub struct VehicleModel(VehicleSpec);
+#[serde(try_from = "WrittenVehicle", into = "WrittenVehicle")]
+pub struct VehicleModel {
+    spec: VehicleSpec,
+    noise: f64,
+}
+
+/// The largest noise σ a vehicle takes (m/s²): beyond any actuator, and
+/// far beyond what keeps a cut-in's outcome tied to its scenario.
+pub const MAX_NOISE: f64 = 10.0;
+
+impl TryFrom<WrittenVehicle> for VehicleModel {
+    type Error = ParamError;
+    fn try_from(written: WrittenVehicle) -> Result<Self, ParamError> {
+        let model = Self::try_from(written.spec)?;
+        check(
+            model.name(),
+            "noise",
+            written.noise,
+            |v| (0.0..=MAX_NOISE).contains(&v),
+            "must be in [0, 10] (m/s²)",
+        )?;
+        Ok(Self {
+            noise: written.noise,
+            ..model
+        })
+    }
+}
+
+impl From<VehicleModel> for WrittenVehicle {
+    fn from(model: VehicleModel) -> Self {
+        Self {
+            spec: model.spec,
+            noise: model.noise,
+        }
+    }
+}
 
 /// Names of the built-in models, in the order `tslg exact` reports them.
 pub const BUILTIN_MODELS: [&str; 4] = ["idm", "fvdm", "switching-acc", "acc-aeb"];
@@ -93,13 +145,7 @@ impl TryFrom<VehicleSpec> for VehicleModel {
             VehicleSpec::SwitchingAcc(p) => p.validate(),
             VehicleSpec::AccAeb(p) => p.validate(),
         }?;
-        Ok(Self(spec))
-    }
-}
-
-impl From<VehicleModel> for VehicleSpec {
-    fn from(model: VehicleModel) -> Self {
-        model.0
+        Ok(Self { spec, noise: 0.0 })
     }
 }
 
@@ -118,12 +164,12 @@ impl VehicleModel {
             "acc-aeb" => VehicleSpec::AccAeb(AccAebParams::default()),
             other => return Err(UnknownModel(other.to_owned())),
         };
-        Ok(Self(spec))
+        Ok(Self { spec, noise: 0.0 })
     }
 
     /// The model's name as used on the command line and in files.
     pub fn name(&self) -> &'static str {
-        match self.0 {
+        match self.spec {
             VehicleSpec::Idm(_) => "idm",
             VehicleSpec::Fvdm(_) => "fvdm",
             VehicleSpec::SwitchingAcc(_) => "switching-acc",
@@ -133,15 +179,44 @@ impl VehicleModel {
 
     /// The model as written, with its parameters.
     pub fn spec(&self) -> &VehicleSpec {
-        &self.0
+        &self.spec
     }
 
-    /// A controller with fresh memory, for one test.
+    /// σ of the noise on its commands (m/s²); 0 for a deterministic model.
+    pub fn noise(&self) -> f64 {
+        self.noise
+    }
+
+    /// Whether two runs of one scenario may differ.
+    pub fn is_noisy(&self) -> bool {
+        self.noise > 0.0
+    }
+
+    /// The same model without noise (a surrogate's view of it).
+    pub fn without_noise(&self) -> Self {
+        Self {
+            noise: 0.0,
+            ..*self
+        }
+    }
+
+    /// A controller with fresh memory, for one test of a deterministic
+    /// model; a noisy one takes its noise from [`VehicleModel::noisy_controller`].
     pub fn controller(&self) -> Controller {
         Controller {
-            spec: self.0,
+            spec: self.spec,
             acc_state: SwitchingAccState::default(),
             delivered: None,
+            noise: None,
+        }
+    }
+
+    /// A controller for one test whose noise, if the model has any, is
+    /// drawn from `stream` (the test's own, [`crate::noise::noise_rng`]).
+    pub fn noisy_controller(&self, stream: NoiseRng) -> Controller {
+        Controller {
+            noise: self.is_noisy().then(|| CommandNoise::new(self.noise, stream)),
+            ..self.controller()
         }
     }
 }
@@ -154,19 +229,33 @@ pub struct Controller {
     /// The acceleration the actuator delivered at the last step (for a
     /// model with an actuator lag).
     delivered: Option<f64>,
+    /// The noise on its commands, for a noisy model.
+    noise: Option<CommandNoise>,
 }
 
 impl Controller {
     /// The acceleration over the next step of `dt` seconds, clipped to
-    /// `clip = (a_min, a_max)`. A model with an actuator lag τ delivers a
-    /// first-order response to its command `c`:
-    /// `a ← a + (c − a)(1 − e^{−Δt/τ})`, starting from the first command.
+    /// `clip = (a_min, a_max)`. A noisy model adds `σ Z` (`Z` standard
+    /// normal, from the test's noise stream) to each command before the
+    /// clip. A model with an actuator lag τ delivers a first-order response
+    /// to its command `c`: `a ← a + (c − a)(1 − e^{−Δt/τ})`, starting from
+    /// the first command.
     pub fn acceleration(&mut self, obs: &FollowerObservation, clip: (f64, f64), dt: f64) -> f64 {
         let (command, lag) = match &self.spec {
             VehicleSpec::Idm(p) => (p.acceleration(obs), 0.0),
             VehicleSpec::Fvdm(p) => (p.acceleration(obs), 0.0),
-            VehicleSpec::SwitchingAcc(p) => return self.acc_state.acceleration(p, obs, clip),
+            VehicleSpec::SwitchingAcc(p) => {
+                let command = self.acc_state.acceleration(p, obs, clip);
+                return match &mut self.noise {
+                    Some(noise) => (command + noise.draw()).clamp(clip.0, clip.1),
+                    None => command,
+                };
+            }
             VehicleSpec::AccAeb(p) => (p.acceleration(obs), p.actuator_lag),
+        };
+        let command = match &mut self.noise {
+            Some(noise) => command + noise.draw(),
+            None => command,
         };
         let command = command.clamp(clip.0, clip.1);
         if lag <= 0.0 {

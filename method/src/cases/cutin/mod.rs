@@ -19,6 +19,7 @@ use crate::case::{Case, SurrogateEvaluation};
 use crate::external::{DriverError, ExternalFollower, ExternalVehicle, NOMINAL_LENGTH};
 use crate::mass::GridMass;
 use crate::ndd_table::{parse_table, NddTable, TableError};
+use crate::noise::NoiseRng;
 use crate::objective::BoxDistance;
 use crate::vehicle::VehicleModel;
 use thiserror::Error;
@@ -192,6 +193,21 @@ impl Case for CutIn {
 
     fn event_and_criticality(&self, vehicle: &VehicleModel, cell: usize) -> (bool, f64) {
         let run = self.run(vehicle, cell);
+        (run.accident, run.mnp_ettc)
+    }
+
+    fn is_noisy(&self, vehicle: &VehicleModel) -> bool {
+        vehicle.is_noisy()
+    }
+
+    fn noisy_run(&self, vehicle: &VehicleModel, cell: usize, noise: NoiseRng) -> (bool, f64) {
+        let grid = self.exposure.grid();
+        let Ok(run) = self.settings.run_with(
+            &mut vehicle.noisy_controller(noise),
+            grid.value(cell, 0),
+            grid.value(cell, 1),
+            self.objective.u_i,
+        );
         (run.accident, run.mnp_ettc)
     }
 

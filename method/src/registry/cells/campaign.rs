@@ -4,6 +4,7 @@
 
 use crate::case::Case;
 use crate::external::{DriverError, ExternalVehicle, ExternalVut, TestStart};
+use crate::noise::noise_rng;
 use crate::registry::vut::{runner, CampaignVehicle, Runner};
 use crate::registry::{CampaignTests, PlannedTest, TestOutcome};
 use crate::sampling::TestDistribution;
@@ -36,9 +37,21 @@ impl<C> CellCampaign<C>
 where
     C: Case,
 {
-    /// The built-in `vehicle`'s outcome of `draw`, each cell simulated
-    /// once and remembered.
-    fn replay_draw(&self, vehicle: &C::Vehicle, draw: &crate::sampling::Draw) -> TestOutcome {
+    /// The built-in `vehicle`'s outcome of test `index`, drawn as `draw`:
+    /// each cell simulated once and remembered, or, for a noisy vehicle,
+    /// the test run with its own noise stream (bit for bit the worker's).
+    fn replay_draw(
+        &self,
+        vehicle: &C::Vehicle,
+        index: u64,
+        draw: &crate::sampling::Draw,
+    ) -> TestOutcome {
+        if self.case.is_noisy(vehicle) {
+            return TestOutcome {
+                event: self.builtin_run(vehicle, index, draw.cell).0,
+                weight: draw.weight,
+            };
+        }
         let outcomes = self.outcomes.get_or_init(|| {
             (0..self.case.grid().len())
                 .map(|_| AtomicU8::new(NOT_RUN))
@@ -55,6 +68,19 @@ where
         TestOutcome {
             event,
             weight: draw.weight,
+        }
+    }
+}
+
+impl<C: Case> CellCampaign<C> {
+    /// The built-in `vehicle`'s event and criticality in `cell` as test
+    /// `index`: a noisy vehicle's noise from the test's stream.
+    fn builtin_run(&self, vehicle: &C::Vehicle, index: u64, cell: usize) -> (bool, f64) {
+        if self.case.is_noisy(vehicle) {
+            self.case
+                .noisy_run(vehicle, cell, noise_rng(self.seed, index))
+        } else {
+            self.case.event_and_criticality(vehicle, cell)
         }
     }
 }
@@ -81,6 +107,9 @@ where
             world: &self.world,
         };
         let event = match runner(&self.vehicle, program, start)? {
+            Runner::Builtin(vehicle) if self.case.is_noisy(vehicle) => {
+                self.builtin_run(vehicle, index, draw.cell).0
+            }
             Runner::Builtin(vehicle) => self.case.is_event(vehicle, draw.cell),
             Runner::Program(program, mode) => self.case.external_event(program, mode, draw.cell)?,
         };
@@ -97,7 +126,13 @@ where
         let draws = self.distribution.draws(self.seed, from, to);
         let cells: Vec<usize> = draws.iter().map(|d| d.cell).collect();
         let mut events = vec![false; cells.len()];
-        self.case.events(vehicle, &cells, &mut events);
+        if self.case.is_noisy(vehicle) {
+            for ((event, &cell), index) in events.iter_mut().zip(&cells).zip(from..to) {
+                *event = self.builtin_run(vehicle, index, cell).0;
+            }
+        } else {
+            self.case.events(vehicle, &cells, &mut events);
+        }
         Some(
             draws
                 .iter()
@@ -131,7 +166,7 @@ where
             return None;
         };
         let draw = self.distribution.draw(self.seed, index);
-        let outcome = self.replay_draw(vehicle, &draw);
+        let outcome = self.replay_draw(vehicle, index, &draw);
         Some((outcome, self.distribution.explored(&draw)))
     }
 
@@ -140,8 +175,8 @@ where
             return None;
         };
         let mut outcomes = Vec::with_capacity(to.saturating_sub(from) as usize);
-        self.distribution.draw_each(self.seed, from..to, |_, draw| {
-            let outcome = self.replay_draw(vehicle, &draw);
+        self.distribution.draw_each(self.seed, from..to, |index, draw| {
+            let outcome = self.replay_draw(vehicle, index, &draw);
             outcomes.push((outcome, self.distribution.explored(&draw)));
         });
         Some(outcomes)
@@ -153,8 +188,8 @@ where
         };
         let mut outcomes = Vec::with_capacity(indices.len());
         self.distribution
-            .draw_each(self.seed, indices.iter().copied(), |_, draw| {
-                outcomes.push(self.replay_draw(vehicle, &draw));
+            .draw_each(self.seed, indices.iter().copied(), |index, draw| {
+                outcomes.push(self.replay_draw(vehicle, index, &draw));
             });
         Some(outcomes)
     }
@@ -200,7 +235,7 @@ where
         };
         match runner(&self.vehicle, program, start)? {
             Runner::Builtin(vehicle) => {
-                let (event, criticality) = self.case.event_and_criticality(vehicle, cell);
+                let (event, criticality) = self.builtin_run(vehicle, index, cell);
                 Ok((event, Some(criticality)))
             }
             Runner::Program(program, mode) => self

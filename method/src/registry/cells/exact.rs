@@ -3,7 +3,7 @@
 use super::Registered;
 use crate::case::Case;
 use crate::estimator::z_for_confidence;
-use crate::exact::{event_cells, event_probability, exact_report, ExactReport};
+use crate::exact::{event_rates, exact_report, rate_probability, ExactReport};
 use crate::registry::CaseError;
 use crate::registry::ExactAnswers;
 use crate::sampling::{LibraryDistribution, OutsideSpread, Split};
@@ -22,9 +22,9 @@ where
 
     fn exact_event_probability(&self, spec: &serde_json::Value) -> Result<f64, CaseError> {
         let vehicle = self.builtin(spec, "an exact answer")?;
-        self.unfailed(event_probability(
+        self.unfailed(rate_probability(
             self.case.as_ref(),
-            &event_cells(self.case.as_ref(), &vehicle),
+            &event_rates(self.case.as_ref(), &vehicle),
         ))
     }
 
