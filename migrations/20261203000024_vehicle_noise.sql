@@ -6,6 +6,11 @@
 -- the other workers (an e-value, docs/statistics.md) is flagged.
 ALTER TABLE campaigns ADD COLUMN vehicle_noise INTEGER NOT NULL DEFAULT 0;
 
+-- An audit a worker owes for giving back an audit run (report/dodging.rs):
+-- drawn among its unresolved tests, so not by the secret sample alone, and
+-- left out of the statistics of noisy programs.
+ALTER TABLE audits ADD COLUMN owed INTEGER NOT NULL DEFAULT 0;
+
 CREATE TABLE worker_discordance (
     worker         TEXT NOT NULL,
     partner        TEXT NOT NULL,

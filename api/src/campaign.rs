@@ -106,8 +106,9 @@ pub struct CreateCampaign {
     /// test may differ (thread timing, sensor noise, learned parts). Its
     /// audits then compare workers by statistics instead of outcome by
     /// outcome: a single disagreement flags nobody (docs/statistics.md,
-    /// "Noisy vehicles"). A program can also say so itself, with
-    /// `"deterministic": false` in its `hello`.
+    /// "Noisy vehicles"). A program that says so itself, with
+    /// `"deterministic": false` in its `hello`, makes a campaign without
+    /// this field warn; the workers' word does not set it.
     #[serde(default)]
     pub vehicle_noise: bool,
 }

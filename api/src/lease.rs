@@ -66,9 +66,9 @@ pub struct LeaseRequest {
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub audits_only: bool,
     /// Of `offers`, those whose program said in its `hello` that its runs of
-    /// one test may differ (`"deterministic": false`). Once two workers
-    /// say so of a program, its campaigns are audited by statistics, as
-    /// with `vehicle_noise` (one worker alone cannot make them so).
+    /// one test may differ (`"deterministic": false`). A campaign of the
+    /// program without `vehicle_noise` then warns; no audit changes on a
+    /// worker's word.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub noisy: Vec<String>,
 }

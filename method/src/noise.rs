@@ -97,6 +97,9 @@ mod tests {
         let var = draws.iter().map(|d| (d - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
         assert!(mean.abs() < 4.5 * 1.5 / (n as f64).sqrt(), "{mean}");
         // The standard error of s² is about σ²√(2/n).
-        assert!((var - 2.25).abs() < 4.5 * 2.25 * (2.0 / n as f64).sqrt(), "{var}");
+        assert!(
+            (var - 2.25).abs() < 4.5 * 2.25 * (2.0 / n as f64).sqrt(),
+            "{var}"
+        );
     }
 }

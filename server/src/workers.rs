@@ -3,7 +3,7 @@
 //! report unhealthy. Kept in memory: workers announce themselves with every
 //! request, so a restarted coordinator knows them again within seconds.
 
-use std::collections::{HashMap, HashSet};
+use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -65,15 +65,11 @@ pub struct WorkerRegistry {
     /// offers since the fleet was counted (after the change is in
     /// `workers`, so a count that misses it is done again).
     fleet_changed: AtomicBool,
-    /// Programs (requirements) that two live workers said are noisy.
-    noisy: Mutex<HashSet<String>>,
 }
 
 impl WorkerRegistry {
     /// Records a lease request; logs programs turning unhealthy or healthy.
-    /// Returns the programs this request made noisy: the second live
-    /// worker to say so ([`WorkerRegistry::is_noisy`]).
-    pub fn seen(&self, request: &LeaseRequest) -> Vec<String> {
+    pub fn seen(&self, request: &LeaseRequest) {
         let mut workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
         let before: Vec<String> = workers
             .get(&request.worker)
@@ -128,33 +124,25 @@ impl WorkerRegistry {
         if changed {
             self.fleet_changed.store(true, Ordering::Release);
         }
-        if request.noisy.is_empty() {
-            return Vec::new();
-        }
-        // One worker alone cannot turn a program's exact audits into
-        // statistical ones: two live workers must say it is noisy.
-        let mut confirmed = self.noisy.lock().unwrap_or_else(|p| p.into_inner());
-        let mut newly = Vec::new();
-        for program in &request.noisy {
-            let saying = workers
-                .values()
-                .filter(|e| e.last_seen.elapsed() < LIVE && e.noisy.contains(program))
-                .count();
-            if saying >= 2 && confirmed.insert(program.clone()) {
-                newly.push(program.clone());
-            }
-        }
-        newly
     }
 
     /// Whether `worker`'s last lease request waited and found nothing.
-    /// Whether two live workers said the program `requirement` is noisy
-    /// (since this coordinator started).
-    pub fn is_noisy(&self, requirement: &str) -> bool {
-        self.noisy
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .contains(requirement)
+    /// The live workers whose program `requirement` said in its hello that
+    /// its runs of one test may differ. Shown, never acted on: a worker's
+    /// word must not turn a program's exact audits into statistical ones
+    /// (a liar would then go unchecked); the campaign's `vehicle_noise`
+    /// does.
+    pub fn saying_noisy(&self, requirement: &str) -> Vec<String> {
+        let workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
+        let mut names: Vec<String> = workers
+            .iter()
+            .filter(|(_, e)| {
+                e.last_seen.elapsed() < LIVE && e.noisy.iter().any(|n| n == requirement)
+            })
+            .map(|(name, _)| name.clone())
+            .collect();
+        names.sort();
+        names
     }
 
     pub fn idle(&self, worker: &str) -> bool {

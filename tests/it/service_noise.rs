@@ -58,10 +58,8 @@ async fn honest_workers_of_a_noisy_program_are_not_flagged_and_their_campaigns_c
     );
     let client = server.client();
     let library = ready_library(&client, "idm", true).await;
-    // The library campaign does not say its vehicle is noisy: the program
-    // does, in its hello, on two workers.
     let plain = client
-        .create_campaign(&py_idm(Method::Library, library.id, 3, false))
+        .create_campaign(&py_idm(Method::Library, library.id, 3, true))
         .await
         .unwrap()
         .id;
@@ -94,6 +92,21 @@ async fn honest_workers_of_a_noisy_program_are_not_flagged_and_their_campaigns_c
         assert!(worker.flagged.is_none(), "{worker:?}");
         assert!(worker.noisy_evidence.unwrap_or(1.0) < 1e4, "{worker:?}");
     }
+    // The program says in its hello that it is noisy; a campaign that
+    // does not say so is told, and not switched by the workers' word.
+    let unmarked = client
+        .create_campaign(&py_idm(Method::Ndd, library.id, 5, false))
+        .await
+        .unwrap()
+        .id;
+    let view = wait_for(&client, unmarked, Duration::from_secs(60), |v| {
+        v.warnings
+            .iter()
+            .any(|w| w.contains("says its runs of one test may differ"))
+    })
+    .await;
+    assert!(!view.vehicle_noise, "{view:?}");
+    client.cancel_campaign(unmarked).await.unwrap();
 }
 
 /// `--vut-exec` for the FVDM in Rust (`examples/fvdm_vut`) with actuator

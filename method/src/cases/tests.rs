@@ -436,7 +436,9 @@ fn a_noisy_vehicles_exact_answer_is_a_seeded_monte_carlo_with_its_error() {
         event_cells(&typed, &idm)
     );
     let rates = event_rates(&typed, &noisy);
-    let mc = rates.monte_carlo.expect("a noisy vehicle's rates are a Monte Carlo");
+    let mc = rates
+        .monte_carlo
+        .expect("a noisy vehicle's rates are a Monte Carlo");
     assert_eq!(mc.runs_per_cell, NOISY_RUNS_PER_CELL);
     let p = rate_probability(&typed, &rates);
     let p_plain = rate_probability(&typed, &plain);
@@ -445,7 +447,10 @@ fn a_noisy_vehicles_exact_answer_is_a_seeded_monte_carlo_with_its_error() {
     assert!(mc.varying_cells > 0);
     assert!(rates.cells.iter().any(|&(_, r)| r > 0.0 && r < 1.0));
     assert!(mc.standard_error < 0.02 * p, "{mc:?} at {p:e}");
-    assert!(p > 0.5 * p_plain && p < 2.0 * p_plain, "{p:e} vs {p_plain:e}");
+    assert!(
+        p > 0.5 * p_plain && p < 2.0 * p_plain,
+        "{p:e} vs {p_plain:e}"
+    );
     // One fixed computation: the same again.
     assert_eq!(event_rates(&typed, &noisy), rates);
 }

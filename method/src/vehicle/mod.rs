@@ -215,7 +215,9 @@ impl VehicleModel {
     /// drawn from `stream` (the test's own, [`crate::noise::noise_rng`]).
     pub fn noisy_controller(&self, stream: NoiseRng) -> Controller {
         Controller {
-            noise: self.is_noisy().then(|| CommandNoise::new(self.noise, stream)),
+            noise: self
+                .is_noisy()
+                .then(|| Box::new(CommandNoise::new(self.noise, stream))),
             ..self.controller()
         }
     }
@@ -229,8 +231,9 @@ pub struct Controller {
     /// The acceleration the actuator delivered at the last step (for a
     /// model with an actuator lag).
     delivered: Option<f64>,
-    /// The noise on its commands, for a noisy model.
-    noise: Option<CommandNoise>,
+    /// The noise on its commands, for a noisy model (boxed: a stream is
+    /// some 300 bytes, and deterministic controllers stay small).
+    noise: Option<Box<CommandNoise>>,
 }
 
 impl Controller {

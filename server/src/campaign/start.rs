@@ -266,17 +266,10 @@ pub async fn start(state: &AppState, req: CreateCampaign) -> Result<CampaignRow,
         ExposureSource::Table { text, .. } => Some(text),
         ExposureSource::Builtin => None,
     };
-    let mut news: Vec<NewCampaign> = opened
+    let news: Vec<NewCampaign> = opened
         .iter()
         .map(|o| new_campaign(&req, o, rule, status, table.clone()))
         .collect();
-    // A program two live workers said is noisy is audited by statistics
-    // whether or not the request says so.
-    for new in &mut news {
-        if let Some(program) = &new.requires {
-            new.vehicle_noise |= state.workers.is_noisy(program);
-        }
-    }
     if req.vehicle_noise && news.iter().all(|n| n.requires.is_none()) {
         return Err(bad(
             "vehicle_noise marks an external program whose runs of one test may differ; a \

@@ -204,12 +204,22 @@ pub async fn live_view(state: &AppState, row: &CampaignRow) -> Result<CampaignVi
     if let Some(waiting) = waiting_for_workers(state, row) {
         view.warnings.push(waiting);
     }
-    if row.requires.is_some() {
+    if let Some(program) = &row.requires {
         let id = row.id;
         let states = state.db.read(move |conn| audits::counts(conn, id)).await?;
         let (counts, warnings) = audit_counts(row, &states);
         view.audits = Some(counts);
         view.warnings.extend(warnings);
+        let saying = state.workers.saying_noisy(program);
+        if !row.vehicle_noise && !saying.is_empty() && !row.status.is_final() {
+            view.warnings.push(format!(
+                "`{program}` says its runs of one test may differ (\"deterministic\": false, on \
+                 {}): its audits here compare outcome by outcome, so honest workers may be \
+                 flagged where runs differ; start its campaigns with vehicle_noise \
+                 (docs/statistics.md, \"Noisy vehicles\")",
+                saying.join(", ")
+            ));
+        }
     }
     if let Some(partner) = row.paired_with {
         // The pair and the other campaign as one read sees them.

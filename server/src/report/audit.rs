@@ -92,6 +92,7 @@ pub fn choose_audits(
             } else {
                 "weight"
             },
+            owed: false,
             first_outcome: audits::encode(outcome_at(index)),
         });
     }

@@ -152,6 +152,7 @@ fn put_under_audit(
             test_index: index,
             reason: "sample",
             first_outcome: audits::encode(outcome_at(index)),
+            owed: true,
         })
         .collect();
     audits::insert(conn, campaign, worker, &audits)

@@ -22,13 +22,13 @@ use crate::store::discordance;
 use rusqlite::Connection;
 use tslg_method::discordance::{worker_evidence, FLAG_AT};
 
-/// Whether a stored outcome (`audits::encode`) is an event; `None` for an
-/// invalid test, which says nothing about the vehicle.
-fn is_event(outcome: &str) -> Option<bool> {
-    match outcome {
-        "invalid" => None,
-        other => Some(other.starts_with("event:")),
-    }
+/// Whether a stored outcome (`audits::encode`) is an event. An invalid
+/// run counts as no event: under "same program" a pair of one event and
+/// one invalid run is either worker's event alike, and a worker that
+/// turned its events into invalid tests (which the estimate skips) would
+/// otherwise hide them for free.
+fn is_event(outcome: &str) -> bool {
+    outcome.starts_with("event:")
 }
 
 /// Records the replica run of `worker` with `outcome` on `audit` of a
@@ -63,12 +63,11 @@ pub fn record_run(
     } else {
         Verdict::Undecided
     };
-    let (Some(first_event), Some(replica_event)) =
-        (is_event(&audit.first_outcome), is_event(outcome))
-    else {
-        return Ok(settled);
-    };
-    if audit.reason != "sample" {
+    let (first_event, replica_event) = (is_event(&audit.first_outcome), is_event(outcome));
+    // Only audits the secret sample chose, whatever the outcome: not an
+    // event's for its weight, nor one a worker owed for a run it gave back
+    // (drawn among its unresolved tests).
+    if audit.reason != "sample" || audit.owed {
         return Ok(settled);
     }
     discordance::record(
@@ -81,9 +80,14 @@ pub fn record_run(
     if first_event == replica_event {
         return Ok(settled);
     }
+    // The stronger evidence of the two, when both reach the level.
+    let mut suspects = Vec::new();
     for suspect in [audit.first_worker.as_str(), worker] {
         let (partners, compared) = discordance::partners_of(conn, suspect)?;
-        let evidence = worker_evidence(&partners);
+        suspects.push((worker_evidence(&partners), suspect, partners, compared));
+    }
+    suspects.sort_by(|a, b| b.0.total_cmp(&a.0));
+    if let Some((evidence, suspect, partners, compared)) = suspects.into_iter().next() {
         if evidence >= FLAG_AT {
             let own: u64 = partners.iter().map(|p| p.own_event).sum();
             let theirs: u64 = partners.iter().map(|p| p.partner_event).sum();
@@ -103,4 +107,121 @@ pub fn record_run(
         }
     }
     Ok(settled)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::db::{Database, Durability};
+    use crate::store::audits::{AuditRow, NewAudit};
+    use crate::store::error::StoreError;
+
+    /// A campaign, and a function that stores an audit of `first`'s
+    /// outcome at a fresh test and runs it as `replica` with `outcome`.
+    fn audit_and_run(
+        conn: &rusqlite::Connection,
+        index: u64,
+        (first, first_outcome): (&str, &str),
+        (replica, outcome): (&str, &str),
+        reason: &'static str,
+        owed: bool,
+    ) -> Result<Verdict, ServiceError> {
+        audits::insert(
+            conn,
+            1,
+            first,
+            &[NewAudit {
+                test_index: index,
+                reason,
+                first_outcome: first_outcome.into(),
+                owed,
+            }],
+        )?;
+        let id = audits::open_id_at(conn, 1, index)?.expect("the audit is open");
+        let audit: AuditRow = audits::get(conn, id)?;
+        record_run(conn, &audit, replica, outcome)
+    }
+
+    const EVENT: &str = "event:3ff0000000000000";
+
+    #[tokio::test]
+    async fn a_worker_is_flagged_when_its_sampled_disagreements_lean_one_way_against_two_partners()
+    {
+        let dir = tempfile::tempdir().unwrap();
+        let url = format!("sqlite://{}", dir.path().join("db.sqlite").display());
+        let db = Database::open(&url, Durability::Full).await.unwrap();
+        db.write(|conn| -> Result<(), ServiceError> {
+            conn.execute_batch(
+                "INSERT INTO campaigns (case_name, preset, method, exposure_name, \
+                 exposure_fingerprint, vut, epsilon, beta, confidence, n_min, min_events, \
+                 max_tests, seed, status, next_index, requires, vehicle_noise) \
+                 VALUES ('cut-in', 'paper-code', 'library', 'builtin', 'fp', \
+                 '{\"external\":\"p\"}', 0.1, 0.2, 0.9, 100, 10, 1000000, 7, 'running', \
+                 0, 'p:cut-in:step', 1)",
+            )
+            .map_err(StoreError::from)?;
+            let mut index = 0;
+            let mut run = |first: (&str, &str), replica: (&str, &str), reason, owed| {
+                index += 1;
+                audit_and_run(conn, index, first, replica, reason, owed)
+            };
+            // Neither a weight audit nor an owed one counts, whatever it says.
+            for _ in 0..20 {
+                assert_eq!(
+                    run(("a", "none"), ("b", EVENT), "weight", false)?,
+                    Verdict::Undecided
+                );
+                assert_eq!(
+                    run(("a", "none"), ("c", EVENT), "sample", true)?,
+                    Verdict::Undecided
+                );
+            }
+            assert_eq!(discordance::partners_of(conn, "a")?.1, 0);
+            // Agreement is counted but proves nothing.
+            assert_eq!(
+                run(("a", "none"), ("b", "none"), "sample", false)?,
+                Verdict::Agreed
+            );
+            // `a` on the no-event side: 17 against `b` (invalid counts as
+            // no event) and 16 against `c` is not enough (leaving `b` out,
+            // 16 pairs give E(0, 16) = 9.2e3)...
+            for _ in 0..17 {
+                assert_eq!(
+                    run(("a", "invalid"), ("b", EVENT), "sample", false)?,
+                    Verdict::Undecided
+                );
+            }
+            for _ in 0..16 {
+                assert_eq!(
+                    run(("c", EVENT), ("a", "none"), "sample", false)?,
+                    Verdict::Undecided
+                );
+            }
+            let (pairs, compared) = discordance::partners_of(conn, "a")?;
+            assert_eq!(compared, 34);
+            assert!(worker_evidence(&pairs) < FLAG_AT);
+            // ... the 17th against `c` is: `a` is flagged, not `c`, whose
+            // one partner proves nothing either way.
+            match run(("c", EVENT), ("a", "none"), "sample", false)? {
+                Verdict::Liar { liar, detail } => {
+                    assert_eq!(liar, "a");
+                    assert!(detail.contains("of 35 sampled audits"), "{detail}");
+                    assert!(
+                        detail.contains("in 0 of them, its partners in 34"),
+                        "{detail}"
+                    );
+                }
+                other => panic!("{other:?}"),
+            }
+            let (c_pairs, _) = discordance::partners_of(conn, "c")?;
+            assert!(worker_evidence(&c_pairs) < 2.0, "{c_pairs:?}");
+            // An operator who clears the flag clears the counts.
+            discordance::forget(conn, "a")?;
+            assert_eq!(discordance::partners_of(conn, "a")?, (Vec::new(), 0));
+            assert!(discordance::partners_of(conn, "b")?.0.is_empty());
+            Ok(())
+        })
+        .await
+        .unwrap();
+    }
 }

@@ -137,34 +137,12 @@ fn check_lease_request(req: &LeaseRequest) -> Result<(), ServiceError> {
 /// Hands a checked lease request a range of tests, `None` when there is
 /// no work right now.
 async fn grant(state: &AppState, req: &LeaseRequest) -> Result<Option<Lease>, ServiceError> {
-    seen(state, req).await?;
+    state.workers.seen(req);
     let fleet = state.workers.fleet();
     match claiming::claim(&state.db, &state.config, &claim_of(req), fleet).await? {
         Some(claimed) => lease_of(state, req, claimed).await.map(Some),
         None => Ok(None),
     }
-}
-
-/// Notes a lease request's worker as live; a program that two live
-/// workers now say is noisy has its campaigns audited by statistics from
-/// here on (`report/noisy.rs`).
-async fn seen(state: &AppState, req: &LeaseRequest) -> Result<(), ServiceError> {
-    for program in state.workers.seen(req) {
-        let marked = state
-            .db
-            .write({
-                let program = program.clone();
-                move |conn| campaigns::mark_noisy(conn, &program)
-            })
-            .await?;
-        tracing::warn!(
-            %program,
-            campaigns = marked,
-            "two workers say this program's runs of one test may differ: its campaigns are \
-             audited by statistics"
-        );
-    }
-    Ok(())
 }
 
 /// The store's claim of a lease request.
@@ -291,6 +269,13 @@ fn check_programs(req: &LeaseRequest) -> Result<(), ServiceError> {
         if serde_json::from_value::<ExternalMode>(mode.into()).is_err() {
             return bad(format!("offer `{offer}`: the mode must be step or episode"));
         }
+    }
+    if req.noisy.len() > req.offers.len() {
+        return bad(format!(
+            "noisy lists {} entries, more than offers ({})",
+            req.noisy.len(),
+            req.offers.len()
+        ));
     }
     if let Some(stray) = req.noisy.iter().find(|n| !req.offers.contains(n)) {
         return bad(format!(
@@ -437,7 +422,7 @@ pub async fn results(
         .map(|next| claiming::ClaimJob::new(&state.config, &claim_of(next), state.workers.fleet()));
     let (mut ack, claimed) = receive::receive(&state, id, &report, &checked, next).await?;
     if let Some(next) = &report.next_lease {
-        seen(&state, next).await?;
+        state.workers.seen(next);
         if let Some(claimed) = claimed {
             // The report is recorded: a lease that cannot be finished now
             // must not turn its acknowledgement into an error (the worker

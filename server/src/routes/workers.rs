@@ -115,7 +115,13 @@ pub async fn unflag(
     let worker = name.clone();
     if !state
         .db
-        .write(move |conn| audits::unflag(conn, &worker))
+        .write(move |conn| {
+            let cleared = audits::unflag(conn, &worker)?;
+            if cleared {
+                discordance::forget(conn, &worker)?;
+            }
+            Ok::<_, ServiceError>(cleared)
+        })
         .await?
     {
         return Err(ServiceError::NotFound(format!(

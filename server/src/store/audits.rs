@@ -5,8 +5,8 @@ use crate::db::sql;
 use crate::store::error::StoreError;
 pub use crate::store::states::AuditState;
 use crate::store::states::{
-    AUDIT_AGREED, AUDIT_OPEN, AUDIT_PAST, AUDIT_REPLICA, AUDIT_TIEBREAK, AUDIT_VOID,
-    CAMPAIGN_RUNNING, LEASE_ACTIVE,
+    AUDIT_AGREED, AUDIT_OPEN, AUDIT_PAST, AUDIT_REPLICA, AUDIT_TIEBREAK, AUDIT_UNDECIDED,
+    AUDIT_VOID, CAMPAIGN_RUNNING, LEASE_ACTIVE,
 };
 use const_format::formatcp;
 use rusqlite::{params, Connection};
@@ -29,6 +29,8 @@ pub struct NewAudit {
     pub test_index: u64,
     pub reason: &'static str,
     pub first_outcome: String,
+    /// Owed by a worker that gave back an audit run (`report/dodging.rs`).
+    pub owed: bool,
 }
 
 #[derive(Debug, Clone, serde::Deserialize)]
@@ -39,6 +41,9 @@ pub struct AuditRow {
     /// `sample` (chosen by the secret generator, whatever the outcome) or
     /// `weight` (an event heavy in the estimate).
     pub reason: String,
+    /// Owed by a worker that gave back an audit run: not chosen by the
+    /// secret sample alone.
+    pub owed: bool,
     pub state: AuditState,
     pub first_worker: String,
     pub first_outcome: String,
@@ -47,7 +52,8 @@ pub struct AuditRow {
     pub lease_id: Option<i64>,
 }
 
-const COLUMNS: &str = "id, campaign_id, test_index, reason, state, first_worker, first_outcome, \
+const COLUMNS: &str =
+    "id, campaign_id, test_index, reason, owed, state, first_worker, first_outcome, \
     replica_worker, replica_outcome, lease_id";
 
 /// Stores the audits of a report of `worker` on `campaign`. A test whose
@@ -61,9 +67,10 @@ pub fn insert(
     for audit in audits {
         sql::execute(
             conn,
-            formatcp!("INSERT INTO audits (campaign_id, test_index, reason, state, first_worker, first_outcome) \
-             VALUES (?, ?, ?, {AUDIT_REPLICA}, ?, ?) \
+            formatcp!("INSERT INTO audits (campaign_id, test_index, reason, owed, state, first_worker, first_outcome) \
+             VALUES (?, ?, ?, ?, {AUDIT_REPLICA}, ?, ?) \
              ON CONFLICT (campaign_id, test_index) DO UPDATE SET reason = excluded.reason, \
+               owed = excluded.owed, \
                state = {AUDIT_REPLICA}, first_worker = excluded.first_worker, \
                first_outcome = excluded.first_outcome, replica_worker = NULL, \
                replica_outcome = NULL, third_worker = NULL, third_outcome = NULL, lease_id = NULL \
@@ -72,6 +79,7 @@ pub fn insert(
                 campaign,
                 audit.test_index as i64,
                 audit.reason,
+                audit.owed,
                 worker,
                 audit.first_outcome
             ],
@@ -253,14 +261,16 @@ pub fn flag(
 }
 
 /// Takes a flagged worker's runs out of the audits: the audits of its
-/// first runs are void (its results are taken back), and a tie it made
-/// waits for another second run.
+/// first runs are void (its results are taken back, and the tests run
+/// again may be audited afresh), and a tie it made waits for another
+/// second run.
 pub fn void_runs_of(conn: &Connection, worker: &str) -> Result<(), StoreError> {
     sql::execute(
         conn,
         formatcp!(
             "UPDATE audits SET state = {AUDIT_VOID}, lease_id = NULL \
-         WHERE first_worker = ? AND state IN ({AUDIT_REPLICA}, {AUDIT_TIEBREAK}, {AUDIT_AGREED})"
+         WHERE first_worker = ? AND state IN ({AUDIT_REPLICA}, {AUDIT_TIEBREAK}, {AUDIT_AGREED}, \
+           {AUDIT_UNDECIDED})"
         ),
         [worker],
     )?;

@@ -5,9 +5,7 @@ pub use crate::store::campaign_row::{CampaignRow, COLUMNS};
 use crate::db::sql;
 use crate::store::costs;
 use crate::store::error::StoreError;
-use crate::store::states::{
-    CAMPAIGN_CANCELLED, CAMPAIGN_FAILED, CAMPAIGN_PENDING, CAMPAIGN_RUNNING,
-};
+use crate::store::states::{CAMPAIGN_CANCELLED, CAMPAIGN_FAILED, CAMPAIGN_RUNNING};
 use const_format::formatcp;
 use rusqlite::{params, Connection};
 use tslg_api::{CampaignStatus, Method, Outside, Split};
@@ -175,19 +173,6 @@ pub fn set_status(
         params![status.as_str(), detail, id],
     )?;
     Ok(())
-}
-
-/// Marks the campaigns of program `requires` that have not stopped as
-/// noisy (audited by statistics from here on); returns how many changed.
-pub fn mark_noisy(conn: &Connection, requires: &str) -> Result<usize, StoreError> {
-    Ok(sql::execute(
-        conn,
-        formatcp!(
-            "UPDATE campaigns SET vehicle_noise = 1 WHERE requires = ? AND vehicle_noise = 0 \
-             AND status IN ({CAMPAIGN_RUNNING}, {CAMPAIGN_PENDING})"
-        ),
-        [requires],
-    )?)
 }
 
 /// Campaign `id` failed, saying why (its leases are cancelled apart).

@@ -76,3 +76,15 @@ pub fn all(conn: &Connection) -> Result<Vec<(String, Vec<Discordant>, u64)>, Sto
     }
     Ok(out)
 }
+
+/// Forgets every pair of `worker` (an operator cleared its flag: its
+/// evidence starts afresh, and a cleared liar's past runs do not count for
+/// or against the others).
+pub fn forget(conn: &Connection, worker: &str) -> Result<(), StoreError> {
+    sql::execute(
+        conn,
+        "DELETE FROM worker_discordance WHERE worker = ?1 OR partner = ?1",
+        [worker],
+    )?;
+    Ok(())
+}

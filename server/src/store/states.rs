@@ -89,6 +89,8 @@ pub const AUDIT_TIEBREAK: &str = "'tiebreak'";
 pub const AUDIT_AGREED: &str = "'agreed'";
 /// `AuditState::Void`.
 pub const AUDIT_VOID: &str = "'void'";
+/// `AuditState::Undecided`.
+pub const AUDIT_UNDECIDED: &str = "'undecided'";
 /// `AuditState::Past`.
 pub const AUDIT_PAST: &str = "'past'";
 /// The states in which an audit waits for a run and holds the campaign's
@@ -117,7 +119,7 @@ mod tests {
     /// Each literal is its enum's name, as the rows store it.
     #[test]
     fn every_literal_is_its_enum_s_name() {
-        let pairs: [(&str, String); 17] = [
+        let pairs: [(&str, String); 18] = [
             (CAMPAIGN_PENDING, quoted(CampaignStatus::Pending.as_str())),
             (CAMPAIGN_RUNNING, quoted(CampaignStatus::Running.as_str())),
             (
@@ -132,6 +134,7 @@ mod tests {
             (AUDIT_TIEBREAK, quoted(AuditState::Tiebreak.as_str())),
             (AUDIT_AGREED, quoted(AuditState::Agreed.as_str())),
             (AUDIT_VOID, quoted(AuditState::Void.as_str())),
+            (AUDIT_UNDECIDED, quoted(AuditState::Undecided.as_str())),
             (AUDIT_PAST, quoted(AuditState::Past.as_str())),
             (LIBRARY_BUILDING, quoted(LibraryStatus::Building.as_str())),
             (LIBRARY_READY, quoted(LibraryStatus::Ready.as_str())),

@@ -175,10 +175,11 @@ where
             return None;
         };
         let mut outcomes = Vec::with_capacity(to.saturating_sub(from) as usize);
-        self.distribution.draw_each(self.seed, from..to, |index, draw| {
-            let outcome = self.replay_draw(vehicle, index, &draw);
-            outcomes.push((outcome, self.distribution.explored(&draw)));
-        });
+        self.distribution
+            .draw_each(self.seed, from..to, |index, draw| {
+                let outcome = self.replay_draw(vehicle, index, &draw);
+                outcomes.push((outcome, self.distribution.explored(&draw)));
+            });
         Some(outcomes)
     }
 
