@@ -57,6 +57,12 @@ pub struct AdaptiveSettings {
     pub explore_every: u64,
     /// Tests of an estimation stage: a multiple of `explore_every`.
     pub stage_tests: u64,
+    /// The vehicle's runs of one scenario may differ (a noisy model or
+    /// program): every run of a cell counts, a failure in any run puts it
+    /// in the support and a near miss in any run seeds the search, and a
+    /// library cell that passed stays in the support ("passed once" is not
+    /// "never fails").
+    pub noisy: bool,
 }
 
 impl Default for AdaptiveSettings {
@@ -71,6 +77,7 @@ impl Default for AdaptiveSettings {
             exposure_floor: 1e-4,
             explore_every: 10,
             stage_tests: 100,
+            noisy: false,
         }
     }
 }
@@ -280,31 +287,38 @@ impl<'a, C: Case> Planner<'a, C> {
         }
     }
 
-    /// Records a test in `knowledge`; a cell's outcome is the same every
-    /// time it is run, so only its first test counts. A seed (a failure, or
-    /// a near miss within `near_miss`) adds its untested neighbours outside
-    /// the library, with exposure, to the search's candidates.
+    /// Records a test in `knowledge`. A deterministic vehicle's cell gives
+    /// the same outcome every time it is run, so only its first test
+    /// counts; a noisy vehicle's cell keeps its lowest criticality over
+    /// all its runs (0 once it failed). A seed (a failure, or a near miss
+    /// within `near_miss`) adds its untested neighbours outside the
+    /// library, with exposure, to the search's candidates.
     pub fn observe(&self, knowledge: &mut Knowledge, o: &Observation) {
-        if knowledge.criticality[o.cell].is_some() {
+        let before = knowledge.criticality[o.cell];
+        if before.is_some() && !self.settings.noisy {
             return;
         }
-        let criticality = if o.event { 0.0 } else { o.criticality };
+        let run = if o.event { 0.0 } else { o.criticality };
+        let criticality = before.map_or(run, |b| b.min(run));
         knowledge.criticality[o.cell] = Some(criticality);
         let exposure = self.case.exposure();
-        if o.event {
+        let newly_failed = o.event && before != Some(0.0);
+        if newly_failed {
             knowledge.failures.push(o.cell);
             knowledge.failure_mass += exposure.p(o.cell);
         }
-        // A failure joins the support; a library cell that passed leaves it.
+        // A failure joins the support; a library cell that passed leaves
+        // it, unless the vehicle is noisy (it may fail there another time).
         let at = knowledge.support.binary_search(&o.cell);
         match (o.event, at) {
             (true, Err(k)) => knowledge.support.insert(k, o.cell),
-            (false, Ok(k)) => {
+            (false, Ok(k)) if !self.settings.noisy => {
                 knowledge.support.remove(k);
             }
             _ => {}
         }
-        if criticality <= self.settings.near_miss {
+        let seeds_now = before.is_none_or(|b| b > self.settings.near_miss);
+        if criticality <= self.settings.near_miss && seeds_now {
             for n in self.case.grid().neighbours(o.cell) {
                 if knowledge.criticality[n].is_none()
                     && !self.in_library[n]
@@ -372,7 +386,8 @@ impl<'a, C: Case> Planner<'a, C> {
 
     /// The cells an estimation stage samples besides its exploring share:
     /// the failures found and the library's cells not yet tested (a tested
-    /// cell that passed needs no test: the vehicles are deterministic).
+    /// cell that passed needs no test when the vehicle is deterministic; a
+    /// noisy vehicle's library cells all stay).
     pub fn support(&self, knowledge: &Knowledge) -> Vec<usize> {
         knowledge.support.clone()
     }
@@ -706,6 +721,10 @@ pub fn run_adaptive<C: Case>(
     if rule.guard_outside {
         return Err(AdaptiveError::Guard);
     }
+    let settings = AdaptiveSettings {
+        noisy: settings.noisy || case.is_noisy(vehicle),
+        ..settings
+    };
     let planner = Planner::new(case, library, epsilon, settings)?;
     let mut state = planner.start(rule, seed);
     loop {
@@ -716,8 +735,12 @@ pub fn run_adaptive<C: Case>(
         let results: Vec<TestResult> = (stage.start..stage.end())
             .into_par_iter()
             .map(|i| {
-                let (event, criticality) =
-                    case.event_and_criticality(vehicle, stage.test(seed, i).0);
+                let cell = stage.test(seed, i).0;
+                let (event, criticality) = if case.is_noisy(vehicle) {
+                    case.noisy_run(vehicle, cell, crate::noise::noise_rng(seed, i))
+                } else {
+                    case.event_and_criticality(vehicle, cell)
+                };
                 TestResult::Done { event, criticality }
             })
             .collect();

@@ -92,6 +92,12 @@ pub struct ValidateArgs {
     /// on every cell with exposure, which gives its exact P(A); repeatable.
     #[arg(long, value_name = "NAME=COMMAND")]
     pub vut_exec: Vec<String>,
+    /// Noisy pairings (cut-in): for each σ given (m/s², comma-separated),
+    /// the first surrogate's library tested on its own model and on the
+    /// other built-in vehicle with noise σ on every command, against a
+    /// Monte Carlo P(A) (docs/statistics.md, "Noisy vehicles").
+    #[arg(long, value_delimiter = ',', value_name = "SIGMA")]
+    pub noise: Vec<f64>,
 }
 
 /// A way of running a pairing's campaigns.
@@ -121,7 +127,10 @@ struct Setup {
     case: Arc<dyn ScenarioCase>,
     case_name: String,
     surrogate: &'static str,
+    /// The vehicle's name as shown (with its noise, if any).
     vut: String,
+    /// The built-in model's specification (`None` for a program).
+    spec: Option<serde_json::Value>,
     /// An external program's outcomes on every cell (`--vut-exec`); `None`
     /// for a built-in model.
     table: Option<Arc<ProgramTable>>,
@@ -136,9 +145,10 @@ struct Setup {
 impl Setup {
     /// The vehicle's specification.
     fn vut_spec(&self) -> serde_json::Value {
-        match &self.table {
-            Some(table) => table.spec.clone(),
-            None => serde_json::json!({ "model": self.vut }),
+        match (&self.table, &self.spec) {
+            (Some(table), _) => table.spec.clone(),
+            (None, Some(spec)) => spec.clone(),
+            (None, None) => serde_json::json!({ "model": self.vut }),
         }
     }
 
@@ -327,10 +337,34 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
     let case = open_case(case_name, preset, &exposure(args)?)?;
     // Held-out programs, tested with the library of the case's first
     // surrogate.
-    let mut vehicles: Vec<(&'static str, String, Option<Arc<ProgramTable>>)> = pairs
+    type Vehicle = (&'static str, serde_json::Value, Option<Arc<ProgramTable>>);
+    let mut vehicles: Vec<Vehicle> = pairs
         .iter()
-        .map(|&(surrogate, vut)| (surrogate, vut.to_owned(), None))
+        .map(|&(surrogate, vut)| (surrogate, serde_json::json!({ "model": vut }), None))
         .collect();
+    if !args.noise.is_empty() && case_name != "cut-in" {
+        eprintln!("{case_name}: built-in noisy vehicles run on cut-in; --noise skipped");
+    } else {
+        // The first surrogate's library, on each built-in vehicle of the
+        // case's pairings, with each noise.
+        let mut models: Vec<&str> = Vec::new();
+        for &(_, model) in pairs {
+            if !models.contains(&model) {
+                models.push(model);
+            }
+        }
+        for &sigma in &args.noise {
+            anyhow::ensure!(
+                sigma > 0.0 && sigma <= tslg_method::vehicle::MAX_NOISE,
+                "--noise {sigma}: σ must be in (0, {}] m/s²",
+                tslg_method::vehicle::MAX_NOISE
+            );
+            for model in &models {
+                let spec = serde_json::json!({ "model": model, "noise": sigma });
+                vehicles.push((pairs[0].0, spec, None));
+            }
+        }
+    }
     for exec in &args.vut_exec {
         let Some(table) = held_out::tabulate(case.as_ref(), exec)? else {
             eprintln!("{case_name}: `{exec}` does not drive this case in step mode; skipped");
@@ -340,7 +374,8 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
             "{case_name}: program `{}` on every cell: exact P(A) {:.4e}",
             table.name, table.probability
         );
-        vehicles.push((pairs[0].0, table.name.clone(), Some(Arc::new(table))));
+        let spec = table.spec.clone();
+        vehicles.push((pairs[0].0, spec, Some(Arc::new(table))));
     }
     let mut setups = Vec::new();
     for (surrogate, vut, table) in vehicles {
@@ -355,7 +390,11 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
             .file;
         let truth = match &table {
             Some(t) => t.probability,
-            None => case.exact_event_probability(&serde_json::json!({ "model": vut }))?,
+            None => case.exact_event_probability(&vut)?,
+        };
+        let name = match &table {
+            Some(t) => t.name.clone(),
+            None => crate::inputs::vehicle_name(&vut),
         };
         let mut variants = Vec::new();
         if args.methods.contains(&ValidateMethod::Plain) {
@@ -400,7 +439,8 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
                         case: Arc::clone(&case),
                         case_name: case_name.to_owned(),
                         surrogate,
-                        vut: vut.clone(),
+                        vut: name.clone(),
+                        spec: table.is_none().then(|| vut.clone()),
                         table: table.clone(),
                         library: library.clone(),
                         epsilon,

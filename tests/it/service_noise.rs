@@ -191,3 +191,39 @@ async fn a_worker_whose_noisy_program_brakes_harder_is_flagged_by_its_disagreeme
         }
     }
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_noisy_builtin_vehicle_runs_as_in_process_and_both_vehicles_of_a_pair_share_its_noise() {
+    let dir = scratch();
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &[]);
+    let _workers = two_workers(&server.url);
+    let client = server.client();
+    let library = ready_library(&client, "idm", true).await;
+    let noisy = serde_json::json!({"model": "idm", "noise": 1.5});
+    let request = tslg_api::CreateCampaign {
+        vut: noisy.clone(),
+        ..campaign(Method::Library, library.id, "idm", 0.2, 7)
+    };
+    let id = client.create_campaign(&request).await.unwrap().id;
+    let view = finished(&client, id, Duration::from_secs(120)).await;
+    assert_eq!(view.status, CampaignStatus::Converged, "{view:?}");
+    // Each test's noise is its own stream: the workers, the coordinator's
+    // replay and this process run the same tests to the last bit.
+    assert_same(&view, &in_process(Some("idm"), &request));
+    // The reference is the Monte Carlo P(A), not the plain IDM's.
+    let reference = view.exact_probability.expect("a Monte Carlo reference");
+    assert!((reference - exact("idm")).abs() > 1e-5, "{reference:e}");
+    // A pair of the noisy IDM with itself: common random numbers give
+    // both vehicles the same noise on every test, so no test differs.
+    let pair = tslg_api::CreateCampaign {
+        method: Method::Ndd,
+        paired_with: Some(noisy.clone()),
+        max_tests: 200_000,
+        ..request.clone()
+    };
+    let id = client.create_campaign(&pair).await.unwrap().id;
+    let view = finished(&client, id, Duration::from_secs(120)).await;
+    let pair = view.pair.expect("a pair's view");
+    assert!(pair.events_a > 0, "{pair:?}");
+    assert_eq!((pair.events_a, pair.discordant), (pair.events_b, 0), "{pair:?}");
+}

@@ -62,9 +62,15 @@ impl<C: Case + 'static> AdaptiveCellCampaign<C> {
         state.stage_of(index).map(|stage| stage.test(seed, index))
     }
 
-    /// The built-in vehicle's event and criticality in `cell`.
-    fn run_builtin(&self, vehicle: &C::Vehicle, cell: usize) -> (bool, f64) {
+    /// The built-in vehicle's event and criticality in `cell` as test
+    /// `index`: each cell run once and remembered, or, for a noisy vehicle,
+    /// the test run with its own noise stream (as the worker ran it).
+    fn run_builtin(&self, vehicle: &C::Vehicle, index: u64, cell: usize) -> (bool, f64) {
         let case = self.planner.case();
+        if case.is_noisy(vehicle) {
+            let seed = self.state().seed();
+            return case.noisy_run(vehicle, cell, crate::noise::noise_rng(seed, index));
+        }
         let runs = self
             .runs
             .get_or_init(|| (0..case.grid().len()).map(|_| OnceLock::new()).collect());
@@ -123,7 +129,7 @@ where
             return None;
         };
         let (cell, weight) = self.test(index)?;
-        let (event, _) = self.run_builtin(vehicle, cell);
+        let (event, _) = self.run_builtin(vehicle, index, cell);
         Some(TestOutcome { event, weight })
     }
 
@@ -154,13 +160,13 @@ where
         let CampaignVehicle::Builtin(vehicle) = &self.vehicle else {
             return None;
         };
-        let cells: Vec<usize> = (from..to)
-            .map(|i| self.test(i).map(|(cell, _)| cell))
+        let cells: Vec<(u64, usize)> = (from..to)
+            .map(|i| self.test(i).map(|(cell, _)| (i, cell)))
             .collect::<Option<_>>()?;
         Some(
             cells
                 .par_iter()
-                .map(|&cell| self.run_builtin(vehicle, cell))
+                .map(|&(index, cell)| self.run_builtin(vehicle, index, cell))
                 .collect(),
         )
     }

@@ -180,7 +180,10 @@ fn open(
             file,
             &vut,
             req.epsilon,
-            AdaptiveSettings::default(),
+            AdaptiveSettings {
+                noisy: req.vehicle_noise,
+                ..AdaptiveSettings::default()
+            },
             rule,
             req.seed,
         )?),

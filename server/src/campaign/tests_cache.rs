@@ -116,7 +116,10 @@ fn build(row: &CampaignRow, file: Option<&[u8]>) -> anyhow::Result<Arc<dyn Campa
             file,
             &vut,
             row.epsilon,
-            AdaptiveSettings::default(),
+            AdaptiveSettings {
+                noisy: row.vehicle_noise,
+                ..AdaptiveSettings::default()
+            },
             &row.rule(),
             row.seed(),
         )?);

@@ -35,6 +35,15 @@ where
         progress: &Progress,
     ) -> Result<BuiltLibrary, CaseError> {
         let vehicle = self.builtin(surrogate, "a library's surrogate")?;
+        if self.case.is_noisy(&vehicle) {
+            return Err(CaseError::Request {
+                case: self.case.name(),
+                reason: "a library's surrogate must be deterministic: its criticality of a \
+                         scenario is its library's, not a draw; drop the surrogate's noise \
+                         (the vehicle under test may have some)"
+                    .into(),
+            });
+        }
         let spec = serde_json::to_value(&vehicle).expect("vehicle specifications serialise");
         let request = LibraryRequest {
             threshold: request.threshold.unwrap_or_default(),

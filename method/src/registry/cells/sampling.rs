@@ -7,6 +7,7 @@ use crate::adaptive::{run_adaptive, AdaptiveError, AdaptiveSettings, Planner};
 use crate::case::Case;
 use crate::estimator::StoppingRule;
 use crate::registry::adaptive_tests::AdaptiveCellCampaign;
+use crate::registry::vut::CampaignVehicle;
 use crate::registry::CampaignSampler;
 use crate::registry::{AdaptiveRun, CampaignTests, CaseError};
 use crate::sampling::{
@@ -96,6 +97,12 @@ where
         }
         let vehicle = self.campaign_vehicle(vut)?;
         let library = self.library(file)?;
+        let noisy_builtin =
+            matches!(&vehicle, CampaignVehicle::Builtin(v) if self.case.is_noisy(v));
+        let settings = AdaptiveSettings {
+            noisy: settings.noisy || noisy_builtin,
+            ..settings
+        };
         let planner = Planner::shared(Arc::clone(&self.case), &library, epsilon, settings)?;
         Ok(Arc::new(AdaptiveCellCampaign::new(
             planner, vehicle, settings, *rule, seed,

@@ -49,7 +49,18 @@ impl FollowScenarioCase {
     }
 
     fn vehicle(&self, spec: &serde_json::Value) -> Result<VehicleModel, CaseError> {
-        CarFollowing::vehicle(spec).map_err(|reason| CaseError::Vehicle { case: NAME, reason })
+        let vehicle = CarFollowing::vehicle(spec)
+            .map_err(|reason| CaseError::Vehicle { case: NAME, reason })?;
+        if vehicle.is_noisy() {
+            return Err(CaseError::Vehicle {
+                case: NAME,
+                reason: "a built-in model's noise runs on the grid cases (cut-in); a \
+                         car-following test draws its leader's actions per decision, and no \
+                         noise stream is defined beside them: run a noisy program instead"
+                    .into(),
+            });
+        }
+        Ok(vehicle)
     }
 
     /// A built-in model or an external program in step mode.
