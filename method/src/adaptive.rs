@@ -308,9 +308,11 @@ impl<'a, C: Case> Planner<'a, C> {
             knowledge.failure_mass += exposure.p(o.cell);
         }
         // A failure joins the support; a library cell that passed leaves
-        // it, unless the vehicle is noisy (it may fail there another time).
+        // it. A noisy vehicle's cell may fail another time: a near miss
+        // joins too, and a library cell that passed stays.
+        let joins = o.event || (self.settings.noisy && criticality <= self.settings.near_miss);
         let at = knowledge.support.binary_search(&o.cell);
-        match (o.event, at) {
+        match (joins, at) {
             (true, Err(k)) => knowledge.support.insert(k, o.cell),
             (false, Ok(k)) if !self.settings.noisy => {
                 knowledge.support.remove(k);
@@ -352,6 +354,9 @@ impl<'a, C: Case> Planner<'a, C> {
     pub fn next(&self, knowledge: &Knowledge) -> Stage {
         let frontier = self.frontier(knowledge);
         if !frontier.is_empty() {
+            if self.settings.noisy {
+                return Stage::Search(frontier.iter().flat_map(|&c| [c, c]).collect());
+            }
             return Stage::Search(frontier);
         }
         let support = self.support(knowledge);

@@ -115,6 +115,11 @@ pub struct TestStart<'a> {
     pub mode: ExternalMode,
     /// The test's index in its campaign.
     pub index: u64,
+    /// A seed of the test's own ([`crate::noise::noise_seed`] of the
+    /// campaign's seed and the index): a program that draws its noise from
+    /// it runs one test the same way every time, and both vehicles of a
+    /// paired test get the same one (common random numbers).
+    pub noise_seed: u64,
     /// The case's constants: time step, horizon, bounds, lanes.
     pub world: &'a serde_json::Value,
 }

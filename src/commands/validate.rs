@@ -93,9 +93,9 @@ pub struct ValidateArgs {
     #[arg(long, value_name = "NAME=COMMAND")]
     pub vut_exec: Vec<String>,
     /// Noisy pairings (cut-in): for each σ given (m/s², comma-separated),
-    /// the first surrogate's library tested on its own model and on the
-    /// other built-in vehicle with noise σ on every command, against a
-    /// Monte Carlo P(A) (docs/statistics.md, "Noisy vehicles").
+    /// the first surrogate's library (the IDM's) tested on each surrogate
+    /// model (IDM, FVDM) with noise σ on every command, against a Monte
+    /// Carlo P(A) (docs/statistics.md, "Noisy vehicles").
     #[arg(long, value_delimiter = ',', value_name = "SIGMA")]
     pub noise: Vec<f64>,
 }
@@ -348,9 +348,9 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
         // The first surrogate's library, on each built-in vehicle of the
         // case's pairings, with each noise.
         let mut models: Vec<&str> = Vec::new();
-        for &(_, model) in pairs {
-            if !models.contains(&model) {
-                models.push(model);
+        for &(surrogate, _) in pairs {
+            if !models.contains(&surrogate) {
+                models.push(surrogate);
             }
         }
         for &sigma in &args.noise {

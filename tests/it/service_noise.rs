@@ -225,5 +225,9 @@ async fn a_noisy_builtin_vehicle_runs_as_in_process_and_both_vehicles_of_a_pair_
     let view = finished(&client, id, Duration::from_secs(120)).await;
     let pair = view.pair.expect("a pair's view");
     assert!(pair.events_a > 0, "{pair:?}");
-    assert_eq!((pair.events_a, pair.discordant), (pair.events_b, 0), "{pair:?}");
+    assert_eq!(
+        (pair.events_a, pair.discordant),
+        (pair.events_b, 0),
+        "{pair:?}"
+    );
 }

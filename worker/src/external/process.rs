@@ -495,6 +495,7 @@ print(json.dumps({"type": "hello", "protocol": 1, "name": str(os.getpid()), "cas
             case: "cut-in",
             mode: ExternalMode::Step,
             index: 0,
+            noise_seed: 0,
             world: &world,
         };
         let reset = Request::Reset {

@@ -81,6 +81,7 @@ mod tests {
             case: "cut-in",
             mode: ExternalMode::Step,
             index: 7,
+            noise_seed: 99,
             world: &world,
         };
         let reset = serde_json::to_value(Request::Reset {
@@ -91,7 +92,7 @@ mod tests {
         assert_eq!(
             reset,
             json!({"type": "reset", "campaign": 3, "case": "cut-in", "mode": "step",
-                   "index": 7, "world": {"dt": 0.1}})
+                   "index": 7, "noise_seed": 99, "world": {"dt": 0.1}})
         );
         let step = Observation {
             step: 0,

@@ -170,6 +170,8 @@ impl UserCase {
                 case: self.name,
                 mode: ExternalMode::Episode,
                 index: cell as u64,
+                // Run once per cell, remembered: a fixed seed per cell.
+                noise_seed: crate::noise::noise_seed(0, cell as u64),
                 world: &self.world,
             };
             let run = vehicle.host.converse(&vehicle.program, &|vut| {

@@ -104,6 +104,7 @@ where
             case: self.case.name(),
             mode: Default::default(),
             index,
+            noise_seed: crate::noise::noise_seed(self.seed, index),
             world: &self.world,
         };
         let event = match runner(&self.vehicle, program, start)? {
@@ -232,6 +233,7 @@ where
             case: self.case.name(),
             mode: Default::default(),
             index,
+            noise_seed: crate::noise::noise_seed(self.seed, index),
             world: &self.world,
         };
         match runner(&self.vehicle, program, start)? {

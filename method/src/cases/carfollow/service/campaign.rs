@@ -123,6 +123,7 @@ impl CampaignTests for FollowCampaign {
             case: NAME,
             mode: Default::default(),
             index,
+            noise_seed: crate::noise::noise_seed(self.seed, index),
             world: &self.world,
         };
         let test = match runner(&self.vut, program, start)? {
