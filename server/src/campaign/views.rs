@@ -156,6 +156,19 @@ pub fn audit_counts(row: &CampaignRow, states: &[(AuditState, i64)]) -> (AuditCo
         .as_deref()
         .and_then(|r| r.split(':').next())
         .unwrap_or("the program");
+    let warnings = audit_warnings(&counts, program, row.vehicle_noise, row.status.is_final());
+    (counts, warnings)
+}
+
+/// What a campaign's audit `counts` mean for its user, in words: `program`
+/// is its program's name, `vehicle_noise` whether its audits compare by
+/// statistics, `stopped` whether it has stopped.
+fn audit_warnings(
+    counts: &AuditCounts,
+    program: &str,
+    vehicle_noise: bool,
+    stopped: bool,
+) -> Vec<String> {
     let mut warnings = Vec::new();
     if counts.waived > 0 {
         warnings.push(format!(
@@ -164,14 +177,26 @@ pub fn audit_counts(row: &CampaignRow, states: &[(AuditState, i64)]) -> (AuditCo
             counts.waived
         ));
     }
-    if counts.open > 0 && !row.status.is_final() {
+    if counts.open > 0 && !stopped {
         warnings.push(format!(
             "{} tests wait to be run again by another worker offering `{program}`; the estimate \
              stops at the first of them until they are",
             counts.open
         ));
     }
-    if counts.undecided > 0 && row.vehicle_noise {
+    if counts.settled >= 2 && !vehicle_noise {
+        // One liar is flagged once; repeated verdicts against workers are
+        // what a program whose runs differ produces in a fleet of honest
+        // workers. Only the campaign's owner can say which it is.
+        warnings.push(format!(
+            "{} audited tests of `{program}` were decided against a worker by a third run: if \
+             its runs of one test may differ (thread timing, sensor noise), those workers were \
+             honest; start its campaigns with vehicle_noise (docs/statistics.md, \"Noisy \
+             vehicles\")",
+            counts.settled
+        ));
+    }
+    if counts.undecided > 0 && vehicle_noise {
         warnings.push(format!(
             "{} of {} audited tests gave another outcome when run again, as a noisy program's \
              may; each first run stands, and workers are compared by statistics \
@@ -186,7 +211,7 @@ pub fn audit_counts(row: &CampaignRow, states: &[(AuditState, i64)]) -> (AuditCo
             counts.undecided
         ));
     }
-    (counts, warnings)
+    warnings
 }
 
 /// A campaign's view with its current rate, the time left and, for an
@@ -353,5 +378,40 @@ pub fn library_view(row: &LibraryRow) -> LibraryView {
         status_detail: None,
         progress: None,
         created_at: row.created_at.clone(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn counts(agreed: u64, settled: u64, undecided: u64) -> AuditCounts {
+        AuditCounts {
+            open: 0,
+            agreed,
+            settled,
+            undecided,
+            void: 0,
+            waived: 0,
+        }
+    }
+
+    #[test]
+    fn audits_that_differ_are_worded_for_noisy_and_exact_campaigns() {
+        // A noisy program's differing runs are expected: said as a share.
+        let noisy = audit_warnings(&counts(97, 0, 3), "py", true, false);
+        assert_eq!(noisy.len(), 1);
+        assert!(noisy[0].starts_with("3 of 100 audited tests"), "{noisy:?}");
+        // Under exact audits, one verdict against a worker is a liar
+        // caught; two or more say the program may be noisy.
+        assert!(audit_warnings(&counts(50, 1, 0), "py", false, false).is_empty());
+        let repeated = audit_warnings(&counts(50, 2, 0), "py", false, false);
+        assert!(
+            repeated[0].contains("start its campaigns with vehicle_noise"),
+            "{repeated:?}"
+        );
+        assert!(audit_warnings(&counts(50, 2, 0), "py", true, false).is_empty());
+        let three = audit_warnings(&counts(50, 0, 1), "py", false, false);
+        assert!(three[0].contains("three different outcomes"), "{three:?}");
     }
 }
