@@ -113,10 +113,7 @@ async fn honest_workers_of_a_noisy_program_are_not_flagged_and_their_campaigns_c
 /// noise σ 1.5 m/s² and `extra` options; campaigns run it in episode mode,
 /// one message a test.
 fn noisy_fvdm(extra: &str) -> String {
-    let bin = Path::new(env!("CARGO_BIN_EXE_tslg"))
-        .parent()
-        .unwrap()
-        .join("examples/fvdm_vut");
+    let bin = example_binary("fvdm_vut");
     format!("rs-fvdm={} --noise 1.5 {extra}", bin.display())
 }
 

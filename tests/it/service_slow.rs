@@ -156,11 +156,7 @@ async fn a_campaign_that_needs_100_tests_never_has_much_more_out_on_lease_among_
 /// The debug build's `examples/fvdm_vut` with `args`, as `--vut-exec`'s
 /// `slow=COMMAND`.
 fn slow_program(args: &str) -> String {
-    let bin = Path::new(env!("CARGO_BIN_EXE_tslg"))
-        .parent()
-        .unwrap()
-        .join("examples/fvdm_vut");
-    format!("slow={} {args}", bin.display())
+    format!("slow={} {args}", example_binary("fvdm_vut").display())
 }
 
 /// Tests the program has started, counted in its tally file.

@@ -25,13 +25,24 @@ fn campaigns(
     let mu = event_probability(case, &event_cells(case, &v));
     let z = z_for_confidence(0.9);
     let ndd = z * z * (1.0 - mu) / (0.2f64.powi(2) * mu);
+    (seeded_runs(case, &library, &v, seeds), mu, ndd)
+}
+
+/// The adaptive campaigns of seeds `0..seeds` of `vehicle` on `library`,
+/// β 0.2, ε 0.1, the default settings.
+fn seeded_runs(
+    case: &CutIn,
+    library: &tslg_method::library::Library,
+    vehicle: &tslg_method::vehicle::VehicleModel,
+    seeds: u64,
+) -> Vec<AdaptiveResult> {
     let rule = StoppingRule::new(0.2, 1_000_000);
-    let runs = (0..seeds)
+    (0..seeds)
         .map(|seed| {
             run_adaptive(
                 case,
-                &v,
-                &library,
+                vehicle,
+                library,
                 0.1,
                 AdaptiveSettings::default(),
                 &rule,
@@ -39,8 +50,7 @@ fn campaigns(
             )
             .unwrap()
         })
-        .collect();
-    (runs, mu, ndd)
+        .collect()
 }
 
 fn median_tests(runs: &[AdaptiveResult]) -> f64 {
@@ -303,21 +313,7 @@ fn adaptive_campaigns_of_a_noisy_vehicle_cover_its_monte_carlo_rate() {
     let noisy: tslg_method::vehicle::VehicleModel =
         serde_json::from_value(serde_json::json!({"model": "idm", "noise": 1.5})).unwrap();
     let mu = rate_probability(&case, &event_rates(&case, &noisy));
-    let rule = StoppingRule::new(0.2, 1_000_000);
-    let runs: Vec<AdaptiveResult> = (0..100)
-        .map(|seed| {
-            run_adaptive(
-                &case,
-                &noisy,
-                &library,
-                0.1,
-                AdaptiveSettings::default(),
-                &rule,
-                seed,
-            )
-            .unwrap()
-        })
-        .collect();
+    let runs = seeded_runs(&case, &library, &noisy, 100);
     let coverage = runs.iter().filter(|r| r.result.covers(mu)).count() as f64 / 100.0;
     let mean = runs.iter().map(|r| r.result.estimate).sum::<f64>() / 100.0;
     let z = z_for_confidence(0.9);

@@ -665,3 +665,13 @@ pub fn honest_events(
         })
         .collect()
 }
+
+/// The debug build's example program `name` (`examples/NAME.rs`), built
+/// with the tests.
+pub fn example_binary(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_BIN_EXE_tslg"))
+        .parent()
+        .expect("the binaries' folder")
+        .join("examples")
+        .join(name)
+}
