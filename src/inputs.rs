@@ -251,9 +251,12 @@ pub fn vehicle_name(spec: &serde_json::Value) -> String {
         .or_else(|| spec.get("external"))
         .and_then(|m| m.as_str())
         .unwrap_or("?");
-    match spec.get("noise").and_then(|n| n.as_f64()) {
-        Some(noise) if noise > 0.0 => format!("{name} (noise {noise})"),
-        _ => name.to_owned(),
+    match spec
+        .get("noise")
+        .filter(|_| tslg_method::noise::spec_is_noisy(spec))
+    {
+        Some(noise) => format!("{name} (noise {noise})"),
+        None => name.to_owned(),
     }
 }
 

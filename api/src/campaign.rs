@@ -253,8 +253,10 @@ pub struct CampaignView {
     pub guarded_ci_high: Option<f64>,
     /// `P(A)` by enumeration of the grid: present for a built-in vehicle on
     /// a grid case of at most [`EXACT_MAX_SCENARIOS`] scenarios (cut-in,
-    /// highway-exit `coarse`), computed when the campaign was created. It
-    /// lets a user check the campaign's interval against the truth.
+    /// highway-exit `coarse`), computed when the campaign was created; for
+    /// a noisy built-in vehicle a seeded Monte Carlo of 1,000 runs a cell
+    /// (grids of at most 10,000 scenarios). It lets a user check the
+    /// campaign's interval against the truth.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub exact_probability: Option<f64>,
     /// An adaptive campaign's stages so far; `None` for other methods.

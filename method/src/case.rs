@@ -40,8 +40,10 @@ pub trait Case: Sync {
         (0, 1)
     }
 
-    /// Whether `vehicle` has the event `A` in scenario `cell`. Vehicles are
-    /// deterministic, so `P(A|x)` is this as 0 or 1.
+    /// Whether `vehicle` has the event `A` in scenario `cell`, for a
+    /// deterministic vehicle (`P(A|x)` is this as 0 or 1); a noisy one
+    /// ([`Case::is_noisy`]) runs here without its noise: its tests go
+    /// through [`Case::noisy_run`].
     fn is_event(&self, vehicle: &Self::Vehicle, cell: usize) -> bool;
 
     /// [`Case::is_event`] for many cells: `events[i]` for `cells[i]` (of

@@ -44,6 +44,25 @@ pub fn noise_seed(seed: u64, index: u64) -> u64 {
     noise_rng(seed, index).next_u64()
 }
 
+/// Whether a vehicle specification (normalised or as written) has noise
+/// on its commands: `"noise"` above 0.
+pub fn spec_is_noisy(spec: &serde_json::Value) -> bool {
+    spec.get("noise")
+        .and_then(|n| n.as_f64())
+        .is_some_and(|n| n > 0.0)
+}
+
+/// Why a noisy vehicle cannot be a library's surrogate.
+pub const NOISY_SURROGATE: &str = "a library's surrogate must be deterministic: its \
+    criticality of a scenario is its library's, not a draw; drop the surrogate's noise (the \
+    vehicle under test may have some)";
+
+/// The most scenarios on which a coordinator works out a noisy vehicle's
+/// Monte Carlo `P(A)` when a campaign starts ([`crate::exact::event_rates`]
+/// runs every cell 1,000 times; some 2 s on cut-in's 3,420 cells): beyond
+/// it the campaign has no reference value, and `tslg exact` gives one.
+pub const NOISY_EXACT_MAX_SCENARIOS: usize = 10_000;
+
 /// The noise on one test's commands: `σ Z` per command.
 #[derive(Debug, Clone)]
 pub struct CommandNoise {

@@ -149,14 +149,16 @@ fn print_table(case: &dyn ScenarioCase, args: &ExactArgs) -> anyhow::Result<()> 
             crate::output::ratio(r.ratio())
         );
         if let Some(mc) = r.monte_carlo {
+            let share = if r.probability > 0.0 {
+                format!(" ({:.2}% of it)", 100.0 * mc.standard_error / r.probability)
+            } else {
+                String::new()
+            };
             notes.push(format!(
                 "{name}: its runs of one scenario differ, so P(A|x) per cell is a seeded Monte \
-                 Carlo of {} runs ({} cells varied); P(A) has standard error {:.2e} ({:.2}% of \
-                 it), cells whose runs all agreed taken as 0 or 1",
-                mc.runs_per_cell,
-                mc.varying_cells,
-                mc.standard_error,
-                100.0 * mc.standard_error / r.probability
+                 Carlo of {} runs ({} cells varied); P(A) has standard error {:.2e}{share}, \
+                 cells whose runs all agreed taken as 0 or 1",
+                mc.runs_per_cell, mc.varying_cells, mc.standard_error
             ));
         }
     }

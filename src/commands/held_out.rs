@@ -60,6 +60,15 @@ pub fn tabulate(case: &dyn ScenarioCase, exec: &str) -> anyhow::Result<Option<Pr
         programs.stop();
         return Ok(None);
     }
+    if programs.noisy_offers().contains(&requirement) {
+        programs.stop();
+        anyhow::bail!(
+            "--vut-exec {name}: the program says its runs of one test may differ \
+             (\"deterministic\": false); a held-out program is run once per cell to give its exact \
+             P(A), which one run of a noisy program does not (validate noisy vehicles with \
+             --noise: docs/statistics.md, \"Noisy vehicles\")"
+        );
+    }
     let program = Arc::clone(programs.get(&name).expect("started"));
     let spec = serde_json::json!({"external": name, "mode": "step"});
     let tests = case.campaign(None, &spec, 0.0, OutsideSpread::Uniform, Split::Random, 0)?;

@@ -310,11 +310,18 @@ fn validate_compares_the_methods_in_one_csv() {
     let dir = tempfile::tempdir().unwrap();
     // The FVDM again, as an external program in step mode (examples/fvdm_vut.rs):
     // a held-out vehicle, run once on every cell.
-    let program = std::path::Path::new(env!("CARGO_BIN_EXE_tslg"))
-        .parent()
-        .unwrap()
-        .join("examples/fvdm_vut");
+    let program = crate::support::example_binary("fvdm_vut");
     let exec = format!("rs-fvdm={}", program.display());
+    // The same program with noise is not a held-out vehicle: one run per
+    // cell is not its P(A).
+    let noisy = format!("rs-noisy={} --noise 1.5", program.display());
+    let out = tslg(&["validate", "--cases", "cut-in", "--vut-exec", &noisy]);
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("says its runs of one test may differ"),
+        "{}",
+        stderr(&out)
+    );
     let out = tslg(&[
         "validate",
         "--cases",
@@ -325,6 +332,8 @@ fn validate_compares_the_methods_in_one_csv() {
         "20",
         "--vut-exec",
         &exec,
+        "--noise",
+        "1.5",
         "--out",
         dir.path().to_str().unwrap(),
     ]);
@@ -341,8 +350,16 @@ fn validate_compares_the_methods_in_one_csv() {
             .find(|c| c[2] == "idm" && c[3] == vut && c[4] == method)
             .unwrap_or_else(|| panic!("no idm → {vut} {method} in {csv}"))
     };
-    // Six pairings and the program, two methods.
-    assert_eq!(csv.lines().count(), 1 + 7 * 2, "{csv}");
+    // Six pairings, the noisy IDM and FVDM, and the program; two methods.
+    assert_eq!(csv.lines().count(), 1 + 9 * 2, "{csv}");
+    // The noisy IDM's reference is its Monte Carlo P(A), above the plain
+    // IDM's (its noise makes boundary cells fail now and then): a larger
+    // rate needs fewer NDD tests.
+    let number = |c: &[String], k: usize| c[k].parse::<f64>().unwrap();
+    assert!(
+        number(&row("idm (noise 1.5)", "adaptive"), 8) < 0.9 * number(&row("idm", "adaptive"), 8),
+        "{csv}"
+    );
     // The program drives as the built-in FVDM does: the same exact P(A)
     // (the NDD column is computed from it) and the same campaigns.
     for method in ["plain", "adaptive"] {
@@ -352,7 +369,6 @@ fn validate_compares_the_methods_in_one_csv() {
             "{csv}"
         );
     }
-    let number = |c: &[String], k: usize| c[k].parse::<f64>().unwrap();
     let plain = row("fvdm", "plain");
     let adaptive = row("fvdm", "adaptive");
     assert!(number(&plain, 6) < 0.6, "{csv}");

@@ -213,8 +213,8 @@ pub fn run_campaign_tests(
     )
 }
 
-/// [`run_campaign_with`] for a typed case and vehicle, and the surrogate
-/// of the library `distribution` samples from, when known.
+/// [`run_campaign_with`] for a typed case and deterministic vehicle, and
+/// the surrogate of the library `distribution` samples from, when known.
 pub fn run_campaign<C: crate::case::Case>(
     case: &C,
     vehicle: &C::Vehicle,
@@ -223,6 +223,10 @@ pub fn run_campaign<C: crate::case::Case>(
     rule: &StoppingRule,
     seed: u64,
 ) -> CampaignResult {
+    debug_assert!(
+        !case.is_noisy(vehicle),
+        "run_campaign takes deterministic vehicles: a noisy one's tests run through CampaignTests"
+    );
     let surrogate_event = surrogate.map(|s| move |cell| case.is_event(s, cell));
     run_campaign_with(
         &|cell| case.is_event(vehicle, cell),

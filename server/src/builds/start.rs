@@ -38,6 +38,12 @@ pub async fn start(state: &AppState, req: CreateLibrary) -> Result<LibraryRow, S
         )?;
         case.check_request(&request)?;
         let surrogate = case.normalise_vehicle(&tslg_api::vehicle_spec(&checked.surrogate))?;
+        if tslg_method::noise::spec_is_noisy(&surrogate) {
+            return Err(tslg_method::registry::CaseError::Request {
+                case: case.descriptor().name,
+                reason: tslg_method::noise::NOISY_SURROGATE.into(),
+            });
+        }
         let placement = placement(place, case.as_ref(), &request, &surrogate)
             .map_err(tslg_method::registry::CaseError::Unsupported)?;
         Ok::<_, tslg_method::registry::CaseError>((case, surrogate, placement))

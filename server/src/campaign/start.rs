@@ -195,7 +195,13 @@ fn open(
     // Built-in vehicles on small grids only: an external program does not
     // run on the coordinator, car-following has no grid to enumerate, and a
     // large grid would hold the request for seconds.
-    let exact_probability = (case.total_scenarios() <= EXACT_MAX_SCENARIOS)
+    // A noisy vehicle's is a Monte Carlo of 1,000 runs a cell: smaller grids.
+    let limit = if tslg_method::noise::spec_is_noisy(&vut) {
+        tslg_method::noise::NOISY_EXACT_MAX_SCENARIOS
+    } else {
+        EXACT_MAX_SCENARIOS
+    };
+    let exact_probability = (case.total_scenarios() <= limit)
         .then(|| case.exact_event_probability(&vut).ok())
         .flatten();
     Ok(Opened {

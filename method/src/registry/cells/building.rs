@@ -38,10 +38,7 @@ where
         if self.case.is_noisy(&vehicle) {
             return Err(CaseError::Request {
                 case: self.case.name(),
-                reason: "a library's surrogate must be deterministic: its criticality of a \
-                         scenario is its library's, not a draw; drop the surrogate's noise \
-                         (the vehicle under test may have some)"
-                    .into(),
+                reason: crate::noise::NOISY_SURROGATE.into(),
             });
         }
         let spec = serde_json::to_value(&vehicle).expect("vehicle specifications serialise");
@@ -93,6 +90,12 @@ where
         &self,
         surrogate: &serde_json::Value,
     ) -> Result<Arc<dyn CampaignTests>, CaseError> {
+        if crate::noise::spec_is_noisy(surrogate) {
+            return Err(CaseError::Request {
+                case: self.case.name(),
+                reason: crate::noise::NOISY_SURROGATE.into(),
+            });
+        }
         Ok(Arc::new(CellCampaign {
             world: self.case.external_world(),
             case: Arc::clone(&self.case),

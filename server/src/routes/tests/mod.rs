@@ -673,3 +673,69 @@ async fn event_pages_cross_report_rows_in_order() {
     }
 }
 mod dodging;
+
+/// A noisy vehicle is a vehicle under test, never a library's surrogate,
+/// wherever the library would be built; and `vehicle_noise` marks
+/// programs, not built-in vehicles (whose noise the coordinator replays).
+#[tokio::test]
+async fn noisy_surrogates_and_noise_marks_on_builtin_vehicles_are_refused() {
+    for builds in [
+        crate::config::BuildPlace::Coordinator,
+        crate::config::BuildPlace::Workers,
+    ] {
+        let app = app(|c| c.library_builds = builds).await;
+        let (status, problem) = app
+            .call(
+                "POST",
+                "/api/v1/libraries",
+                Some(
+                    json!({"case": "cut-in", "surrogate": {"model": "idm", "noise": 1.5},
+                            "search": {"method": "exhaustive"}}),
+                ),
+            )
+            .await;
+        assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY, "{problem}");
+        let detail = problem["detail"].as_str().unwrap();
+        assert!(
+            detail.contains("surrogate must be deterministic"),
+            "{detail}"
+        );
+    }
+    let app = app(|_| {}).await;
+    let (status, problem) = app
+        .call(
+            "POST",
+            "/api/v1/campaigns",
+            Some(
+                json!({"case": "cut-in", "method": "ndd", "vut": {"model": "idm", "noise": 1.5},
+                        "vehicle_noise": true}),
+            ),
+        )
+        .await;
+    assert_eq!(status, StatusCode::UNPROCESSABLE_ENTITY, "{problem}");
+    assert!(
+        problem["detail"]
+            .as_str()
+            .unwrap()
+            .contains("built-in vehicle is deterministic"),
+        "{problem}"
+    );
+    // A noisy built-in vehicle itself is welcome, with its Monte Carlo
+    // reference.
+    let (status, view) = app
+        .call(
+            "POST",
+            "/api/v1/campaigns",
+            Some(json!({"case": "cut-in", "method": "ndd", "vut": {"model": "idm", "noise": 1.5}})),
+        )
+        .await;
+    assert_eq!(status, StatusCode::CREATED, "{view}");
+    assert_eq!(
+        (&view["vut"]["model"], &view["vut"]["noise"]),
+        (&json!("idm"), &json!(1.5))
+    );
+    assert!(
+        view["exact_probability"].as_f64().unwrap() > 1.1e-3,
+        "{view}"
+    );
+}
