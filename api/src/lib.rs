@@ -14,6 +14,7 @@ mod lease;
 mod library;
 pub mod packed;
 mod pair;
+mod queue;
 mod worker;
 
 pub use campaign::*;
@@ -23,6 +24,7 @@ pub use events::*;
 pub use lease::*;
 pub use library::*;
 pub use pair::*;
+pub use queue::*;
 pub use worker::*;
 
 use serde::{Deserialize, Serialize};

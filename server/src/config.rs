@@ -94,6 +94,12 @@ pub struct Config {
     #[arg(long, env = "TSLG_CLAIM_RECHECK", default_value_t = 5.0)]
     pub claim_recheck_seconds: f64,
 
+    /// The time in which the workers `GET /api/v1/queue` wants (and the
+    /// gauge `tslg_workers_wanted`) would finish the running campaigns'
+    /// predicted work, in seconds: what an autoscaler scales by.
+    #[arg(long, env = "TSLG_QUEUE_TARGET", default_value_t = 300.0)]
+    pub queue_target_seconds: f64,
+
     /// Largest request body accepted, in bytes (uploaded tables included).
     #[arg(long, env = "TSLG_MAX_BODY", default_value_t = 16 * 1024 * 1024)]
     pub max_body_bytes: usize,
@@ -164,6 +170,11 @@ impl Config {
             self.lease_target_seconds.is_finite() && self.lease_target_seconds > 0.0,
             "--lease-target-seconds {} must be > 0",
             self.lease_target_seconds
+        );
+        anyhow::ensure!(
+            self.queue_target_seconds.is_finite() && self.queue_target_seconds >= 1.0,
+            "--queue-target-seconds {} must be at least 1",
+            self.queue_target_seconds
         );
         anyhow::ensure!(
             self.lease_size != Some(0),

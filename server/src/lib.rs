@@ -40,6 +40,7 @@ mod db;
 mod error;
 mod identity;
 mod leasing;
+mod queue;
 mod report;
 mod routes;
 mod state;

@@ -43,9 +43,34 @@ struct Entry {
 pub struct Fleet {
     pub threads: u32,
     pub offering: HashMap<String, u32>,
+    /// The live workers, and those offering each program.
+    pub workers: u32,
+    pub offering_workers: HashMap<String, u32>,
 }
 
 impl Fleet {
+    /// Counts a live worker of `threads` threads offering `offers`.
+    pub fn add(&mut self, threads: u32, offers: impl IntoIterator<Item = String>) {
+        self.threads = self.threads.saturating_add(threads);
+        self.workers = self.workers.saturating_add(1);
+        let offers: std::collections::BTreeSet<String> = offers.into_iter().collect();
+        for offer in offers {
+            let t = self.offering.entry(offer.clone()).or_default();
+            *t = t.saturating_add(threads);
+            let w = self.offering_workers.entry(offer).or_default();
+            *w = w.saturating_add(1);
+        }
+    }
+
+    /// Live workers able to run a campaign that `requires` a program (all
+    /// of them for a built-in vehicle).
+    pub fn serving_workers(&self, requires: Option<&str>) -> u32 {
+        match requires {
+            None => self.workers,
+            Some(program) => self.offering_workers.get(program).copied().unwrap_or(0),
+        }
+    }
+
     /// Threads able to run a campaign that `requires` a program (or none:
     /// a built-in vehicle, which every worker runs).
     pub fn serving(&self, requires: Option<&str>) -> u32 {
@@ -222,11 +247,7 @@ impl WorkerRegistry {
         let workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
         let mut fleet = Fleet::default();
         for entry in workers.values().filter(|e| e.last_seen.elapsed() < LIVE) {
-            fleet.threads = fleet.threads.saturating_add(entry.threads);
-            for offer in &entry.offers {
-                let threads = fleet.offering.entry(offer.clone()).or_default();
-                *threads = threads.saturating_add(entry.threads);
-            }
+            fleet.add(entry.threads, entry.offers.iter().cloned());
         }
         fleet
     }

@@ -20,6 +20,7 @@ mod metrics;
 pub mod openapi;
 mod problem;
 pub(crate) mod problem_io;
+mod queue;
 #[cfg(test)]
 mod tests;
 mod workers;
@@ -73,6 +74,7 @@ pub fn router(state: AppState) -> Router {
             get(events::openscenario),
         )
         .route("/api/v1/workers", get(workers::list))
+        .route("/api/v1/queue", get(queue::get))
         .route(
             "/api/v1/campaigns/{id}/figures/estimate.svg",
             get(figures::estimate),

@@ -43,6 +43,7 @@ use utoipa::OpenApi;
         super::workers::list,
         super::workers::revoke,
         super::workers::unflag,
+        super::queue::get,
         super::figures::estimate,
         super::figures::relative_half_width,
         super::figures::library_picture,

@@ -254,6 +254,24 @@ pub async fn exposition(state: &AppState) -> Result<Vec<u8>, ServiceError> {
         })
         .collect();
     let registry = scrape_registry(&snapshot, live, known);
+    let queue = crate::queue::of_rows(
+        &running,
+        &state.workers.fleet(),
+        state.config.queue_target_seconds,
+    );
+    let wanted = gauge_vec(
+        &registry,
+        "tslg_workers_wanted",
+        "Workers that would finish the running campaigns' predicted work within \
+         --queue-target-seconds, per program (builtin: the built-in vehicles); 0 when idle \
+         (GET /api/v1/queue).",
+        "program",
+    );
+    for d in &queue.programs {
+        wanted
+            .with_label_values(&[d.program.as_str()])
+            .set(i64::from(d.workers_wanted));
+    }
     // Every running campaign counts toward the omitted ones; only the
     // newest have views built.
     crate::telemetry::campaign_metrics::register(&registry, &views, running.len());

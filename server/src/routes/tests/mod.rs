@@ -673,6 +673,7 @@ async fn event_pages_cross_report_rows_in_order() {
     }
 }
 mod dodging;
+mod queue;
 
 /// A noisy vehicle is a vehicle under test, never a library's surrogate,
 /// wherever the library would be built; and `vehicle_noise` marks

@@ -1,0 +1,146 @@
+//! `GET /api/v1/queue` and the gauge `tslg_workers_wanted`: nothing wanted
+//! while idle, at least one for a campaign that nobody serves, the work
+//! sized once it is predicted, and nothing again once it stops.
+
+use super::*;
+
+async fn queue(app: &App) -> Value {
+    let (status, queue) = app.call("GET", "/api/v1/queue", None).await;
+    assert_eq!(status, StatusCode::OK, "{queue}");
+    queue
+}
+
+fn program<'a>(queue: &'a Value, name: &str) -> &'a Value {
+    queue["programs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["program"] == name)
+        .unwrap_or_else(|| panic!("no {name} in {queue}"))
+}
+
+/// The gauge's value for `program`, from `/metrics`.
+async fn gauge(app: &App, program: &str) -> Option<i64> {
+    let body = crate::telemetry::metrics::exposition(&app.state)
+        .await
+        .unwrap();
+    let text = String::from_utf8(body).unwrap();
+    let series = format!("tslg_workers_wanted{{program=\"{program}\"}} ");
+    text.lines()
+        .find_map(|l| l.strip_prefix(&series))
+        .map(|v| v.trim().parse().unwrap())
+}
+
+#[tokio::test]
+async fn the_queue_wants_nobody_when_idle_and_workers_for_the_work_that_waits() {
+    let app = app(|c| c.queue_target_seconds = 60.0).await;
+    let q = queue(&app).await;
+    assert_eq!(q["workers_wanted"], 0, "{q}");
+    assert_eq!(q["target_seconds"], 60.0);
+    assert_eq!(q["programs"], json!([]));
+
+    // A program's campaign that no worker offers: one worker wanted.
+    let (status, view) = app
+        .call(
+            "POST",
+            "/api/v1/campaigns",
+            Some(json!({"case": "cut-in", "method": "ndd", "beta": 0.05,
+                        "vut": {"external": "rig", "mode": "episode"}})),
+        )
+        .await;
+    assert_eq!(status, StatusCode::CREATED, "{view}");
+    let q = queue(&app).await;
+    let rig = program(&q, "rig:cut-in:episode");
+    assert_eq!(
+        (
+            &rig["campaigns"],
+            &rig["workers"],
+            &rig["unpredicted"],
+            &rig["workers_wanted"]
+        ),
+        (&json!(1), &json!(0), &json!(1), &json!(1)),
+        "{q}"
+    );
+    assert_eq!(gauge(&app, "rig:cut-in:episode").await, Some(1));
+
+    // A built-in vehicle's campaign, served by a worker of 2 threads that
+    // reports its first lease: its cost is then known, and the rest of
+    // its predicted tests are sized in workers.
+    let (status, view) = app
+        .call(
+            "POST",
+            "/api/v1/campaigns",
+            Some(json!({"case": "cut-in", "method": "ndd", "beta": 0.02,
+                        "vut": {"model": "fvdm"}})),
+        )
+        .await;
+    assert_eq!(status, StatusCode::CREATED, "{view}");
+    // Leases until the campaign is predicted (its first leases are one
+    // test a thread, until a report measures the cost).
+    let tests = app
+        .state
+        .samplers
+        .cached(view["id"].as_i64().unwrap())
+        .unwrap();
+    for _ in 0..30 {
+        let ask = json!({"worker": "w", "threads": 2, "max_tests": 5000});
+        let (status, lease) = app.call("POST", "/api/v1/leases", Some(ask)).await;
+        assert_eq!(status, StatusCode::OK, "{lease}");
+        let (start, end) = (
+            lease["start"].as_u64().unwrap(),
+            lease["end"].as_u64().unwrap(),
+        );
+        let events: Vec<Value> = (start..end)
+            .filter_map(|i| {
+                let o = tests.run(i);
+                o.event.then(|| json!({"index": i, "weight": o.weight}))
+            })
+            .collect();
+        let mut report = quiet_report("w", &lease);
+        report["events"] = json!(events);
+        report["compute_seconds"] = json!(0.01);
+        report["threads"] = json!(2);
+        let (status, ack) = app
+            .call(
+                "POST",
+                &format!("/api/v1/leases/{}/results", lease["id"]),
+                Some(report),
+            )
+            .await;
+        assert_eq!(status, StatusCode::OK, "{ack}");
+        if program(&queue(&app).await, "builtin")["unpredicted"] == 0 {
+            break;
+        }
+    }
+    let q = queue(&app).await;
+    let builtin = program(&q, "builtin");
+    assert_eq!(
+        (&builtin["workers"], &builtin["threads"]),
+        (&json!(1), &json!(2)),
+        "{q}"
+    );
+    let needed = builtin["tests_needed"].as_f64().unwrap();
+    let seconds = builtin["worker_seconds"].as_f64().unwrap();
+    let cost = seconds / needed;
+    assert!(needed > 0.0 && cost > 0.0, "{q}");
+    // ⌈S / (T · threads per worker)⌉, at least 1.
+    let expected = (seconds / (60.0 * 2.0)).ceil().max(1.0);
+    assert_eq!(builtin["workers_wanted"].as_f64().unwrap(), expected, "{q}");
+    assert_eq!(gauge(&app, "builtin").await, Some(expected as i64));
+    // The worker offers no program: the rig still wants its one.
+    assert_eq!(program(&q, "rig:cut-in:episode")["workers_wanted"], 1);
+    assert_eq!(q["workers_wanted"].as_f64().unwrap(), expected + 1.0, "{q}");
+
+    // Both stopped: nothing is wanted, and the gauge says 0 for the
+    // program the worker serves.
+    for id in [view["id"].as_i64().unwrap(), 1] {
+        let (status, _) = app
+            .call("POST", &format!("/api/v1/campaigns/{id}/cancel"), None)
+            .await;
+        assert_eq!(status, StatusCode::OK);
+    }
+    let q = queue(&app).await;
+    assert_eq!(q["workers_wanted"], 0, "{q}");
+    assert_eq!(program(&q, "builtin")["workers_wanted"], 0, "{q}");
+    assert_eq!(gauge(&app, "builtin").await, Some(0));
+}
