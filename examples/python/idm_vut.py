@@ -40,7 +40,11 @@ def idm(p, speed, lead_speed, gap):
     return p["alpha"] * (1.0 - (speed / p["v0"]) ** p["delta"] - interaction * interaction)
 
 
-def respond(message, state, options):
+# The plain IDM: no noise, no harder braking.
+PLAIN = argparse.Namespace(noise=0.0, brake_harder=0.0, entropy=None)
+
+
+def respond(message, state, options=PLAIN):
     """The reply to one message; `state` is what this test remembers."""
     kind = message["type"]
     if kind == "hello":

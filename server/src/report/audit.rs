@@ -37,6 +37,7 @@ use crate::report::check::CheckedReport;
 use crate::report::fold::{fold_prefix, KnownExplored};
 use crate::report::mismatch::{describe, Mismatch};
 use crate::report::record::{at_lease_limit, check_effort, held_lease, stopped_ack, Recorded};
+use crate::report::verdict::Verdict;
 use crate::store::audits::{self, AuditRow, AuditState, NewAudit, RunColumn};
 use crate::store::leases::LeaseState;
 use crate::store::pairs;
@@ -97,22 +98,6 @@ pub fn choose_audits(
         });
     }
     audits
-}
-
-/// What an audit run decided.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Verdict {
-    /// Two runs agree, or a run is still needed.
-    Pending,
-    Agreed,
-    /// `liar` is in the minority of three.
-    Liar {
-        liar: String,
-        detail: String,
-    },
-    /// Three runs, three outcomes, or two runs of a noisy program that
-    /// differ: nobody is flagged, and the first run stands.
-    Undecided,
 }
 
 /// Records the run of `worker` with `outcome` on `audit` (whose current

@@ -20,3 +20,4 @@ pub mod replay;
 pub mod replay_counts;
 pub mod secret_sample;
 pub mod stages;
+pub mod verdict;

@@ -16,7 +16,7 @@
 //! e-value [`FLAG_AT`] is flagged as a liar is, its results taken back.
 
 use crate::error::ServiceError;
-use crate::report::audit::Verdict;
+use crate::report::verdict::Verdict;
 use crate::store::audits::{self, AuditRow, AuditState, RunColumn};
 use crate::store::discordance;
 use rusqlite::Connection;
