@@ -382,6 +382,12 @@ impl Client {
             .await
     }
 
+    /// `GET /api/v1/queue`: the workers the running campaigns want.
+    pub async fn queue(&self) -> Result<tslg_api::QueueView, CallError> {
+        self.json(self.request(reqwest::Method::GET, "/api/v1/queue"))
+            .await
+    }
+
     /// `POST /api/v1/campaigns/{id}/cancel`.
     pub async fn cancel_campaign(&self, id: i64) -> Result<CampaignView, CallError> {
         self.post(

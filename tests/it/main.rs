@@ -33,6 +33,7 @@ mod service_outside;
 mod service_paired;
 mod service_protocol;
 mod service_recovery;
+mod service_scale;
 mod service_slow;
 mod service_sumo;
 mod service_trust;
