@@ -12,15 +12,7 @@ fn span(lease: &Value) -> u64 {
 async fn report(app: &App, worker: &str, lease: &Value, events: Value) -> Value {
     let mut report = quiet_report(worker, lease);
     report["events"] = events;
-    let (status, ack) = app
-        .call(
-            "POST",
-            &format!("/api/v1/leases/{}/results", lease["id"]),
-            Some(report),
-        )
-        .await;
-    assert_eq!(status, StatusCode::OK, "{ack}");
-    ack
+    accepted(app, lease, report).await
 }
 
 async fn give_back(app: &App, worker: &str, lease: &Value) {

@@ -145,6 +145,20 @@ fn quiet_report(worker: &str, lease: &Value) -> Value {
            "threads": 1})
 }
 
+/// Posts `report` on `lease` and returns the acknowledgement, which must
+/// be a 200.
+async fn accepted(app: &App, lease: &Value, report: Value) -> Value {
+    let (status, ack) = app
+        .call(
+            "POST",
+            &format!("/api/v1/leases/{}/results", lease["id"]),
+            Some(report),
+        )
+        .await;
+    assert_eq!(status, StatusCode::OK, "{ack}");
+    ack
+}
+
 #[tokio::test]
 async fn reports_beyond_the_limits_or_damaged_are_refused_precisely() {
     // Leases of a fixed size: a first lease is otherwise one test.

@@ -100,14 +100,7 @@ async fn the_queue_wants_nobody_when_idle_and_workers_for_the_work_that_waits() 
         report["events"] = json!(events);
         report["compute_seconds"] = json!(0.01);
         report["threads"] = json!(2);
-        let (status, ack) = app
-            .call(
-                "POST",
-                &format!("/api/v1/leases/{}/results", lease["id"]),
-                Some(report),
-            )
-            .await;
-        assert_eq!(status, StatusCode::OK, "{ack}");
+        accepted(&app, &lease, report).await;
         if program(&queue(&app).await, "builtin")["unpredicted"] == 0 {
             break;
         }
