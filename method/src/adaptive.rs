@@ -740,12 +740,7 @@ pub fn run_adaptive<C: Case>(
         let results: Vec<TestResult> = (stage.start..stage.end())
             .into_par_iter()
             .map(|i| {
-                let cell = stage.test(seed, i).0;
-                let (event, criticality) = if case.is_noisy(vehicle) {
-                    case.noisy_run(vehicle, cell, crate::noise::noise_rng(seed, i))
-                } else {
-                    case.event_and_criticality(vehicle, cell)
-                };
+                let (event, criticality) = case.test_run(vehicle, stage.test(seed, i).0, seed, i);
                 TestResult::Done { event, criticality }
             })
             .collect();

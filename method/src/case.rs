@@ -91,6 +91,18 @@ pub trait Case: Sync {
         self.event_and_criticality(vehicle, cell)
     }
 
+    /// The event and criticality of `vehicle` in `cell` as test `index` of
+    /// the campaign seeded `seed`: a noisy vehicle's noise from the test's
+    /// own stream ([`crate::noise::noise_rng`]), so every run of the test
+    /// is the same.
+    fn test_run(&self, vehicle: &Self::Vehicle, cell: usize, seed: u64, index: u64) -> (bool, f64) {
+        if self.is_noisy(vehicle) {
+            self.noisy_run(vehicle, cell, crate::noise::noise_rng(seed, index))
+        } else {
+            self.event_and_criticality(vehicle, cell)
+        }
+    }
+
     /// The constants an external program is told at each reset (time
     /// step, horizon, bounds, lanes).
     fn external_world(&self) -> serde_json::Value;

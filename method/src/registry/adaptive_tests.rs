@@ -68,8 +68,7 @@ impl<C: Case + 'static> AdaptiveCellCampaign<C> {
     fn run_builtin(&self, vehicle: &C::Vehicle, index: u64, cell: usize) -> (bool, f64) {
         let case = self.planner.case();
         if case.is_noisy(vehicle) {
-            let seed = self.state().seed();
-            return case.noisy_run(vehicle, cell, crate::noise::noise_rng(seed, index));
+            return case.test_run(vehicle, cell, self.state().seed(), index);
         }
         let runs = self
             .runs

@@ -4,7 +4,6 @@
 
 use crate::case::Case;
 use crate::external::{DriverError, ExternalVehicle, ExternalVut, TestStart};
-use crate::noise::noise_rng;
 use crate::registry::vut::{runner, CampaignVehicle, Runner};
 use crate::registry::{CampaignTests, PlannedTest, TestOutcome};
 use crate::sampling::TestDistribution;
@@ -48,7 +47,7 @@ where
     ) -> TestOutcome {
         if self.case.is_noisy(vehicle) {
             return TestOutcome {
-                event: self.builtin_run(vehicle, index, draw.cell).0,
+                event: self.case.test_run(vehicle, draw.cell, self.seed, index).0,
                 weight: draw.weight,
             };
         }
@@ -68,19 +67,6 @@ where
         TestOutcome {
             event,
             weight: draw.weight,
-        }
-    }
-}
-
-impl<C: Case> CellCampaign<C> {
-    /// The built-in `vehicle`'s event and criticality in `cell` as test
-    /// `index`: a noisy vehicle's noise from the test's stream.
-    fn builtin_run(&self, vehicle: &C::Vehicle, index: u64, cell: usize) -> (bool, f64) {
-        if self.case.is_noisy(vehicle) {
-            self.case
-                .noisy_run(vehicle, cell, noise_rng(self.seed, index))
-        } else {
-            self.case.event_and_criticality(vehicle, cell)
         }
     }
 }
@@ -109,7 +95,7 @@ where
         };
         let event = match runner(&self.vehicle, program, start)? {
             Runner::Builtin(vehicle) if self.case.is_noisy(vehicle) => {
-                self.builtin_run(vehicle, index, draw.cell).0
+                self.case.test_run(vehicle, draw.cell, self.seed, index).0
             }
             Runner::Builtin(vehicle) => self.case.is_event(vehicle, draw.cell),
             Runner::Program(program, mode) => self.case.external_event(program, mode, draw.cell)?,
@@ -129,7 +115,7 @@ where
         let mut events = vec![false; cells.len()];
         if self.case.is_noisy(vehicle) {
             for ((event, &cell), index) in events.iter_mut().zip(&cells).zip(from..to) {
-                *event = self.builtin_run(vehicle, index, cell).0;
+                *event = self.case.test_run(vehicle, cell, self.seed, index).0;
             }
         } else {
             self.case.events(vehicle, &cells, &mut events);
@@ -238,7 +224,7 @@ where
         };
         match runner(&self.vehicle, program, start)? {
             Runner::Builtin(vehicle) => {
-                let (event, criticality) = self.builtin_run(vehicle, index, cell);
+                let (event, criticality) = self.case.test_run(vehicle, cell, self.seed, index);
                 Ok((event, Some(criticality)))
             }
             Runner::Program(program, mode) => self
