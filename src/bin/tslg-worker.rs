@@ -1,17 +1,19 @@
 //! `tslg-worker`: runs the tests a coordinator hands out (see `tslg_worker`).
 
 use clap::Parser;
-use std::process::ExitCode;
 
 #[tokio::main]
-async fn main() -> ExitCode {
+async fn main() {
     tslg::service::init_tracing();
     let config = tslg_worker::WorkerConfig::parse();
-    match tslg::service::worker_main(config).await {
-        Ok(()) => ExitCode::SUCCESS,
+    let code = match tslg::service::worker_main(config).await {
+        Ok(()) => 0,
         Err(e) => {
             eprintln!("error: {e:#}");
-            ExitCode::FAILURE
+            1
         }
-    }
+    };
+    // Exits without waiting for a library build its shutdown gave back
+    // (dropping the runtime would wait for its thread).
+    std::process::exit(code)
 }

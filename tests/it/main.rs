@@ -25,6 +25,7 @@ mod service_events;
 mod service_external;
 mod service_fairness;
 mod service_highway;
+mod service_leaving;
 mod service_load;
 mod service_long_poll;
 mod service_next_lease;

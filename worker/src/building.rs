@@ -8,6 +8,7 @@ use crate::sending::LeaseLink;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
+use tokio::sync::watch;
 use tslg_api::{Lease, LibraryUpload};
 use tslg_client::Client;
 
@@ -18,13 +19,16 @@ const MAX_REASON: usize = 2000;
 /// and uploads it; a build the coordinator no longer wants (cancelled, or
 /// the lease lost) is dropped. A build that fails is uploaded as a failure
 /// with its reason: it is deterministic and would fail the same way on any
-/// worker.
+/// worker. A build cut off by the worker's shutdown (its programs stopped,
+/// or the shutdown's grace over while it runs: `abandon`) is given back for
+/// another worker, not uploaded as a failure.
 pub async fn build_whole(
     client: &Client,
     pool: &Arc<rayon::ThreadPool>,
     lease: &Lease,
     link: &LeaseLink,
     build: Arc<WholeBuild>,
+    mut abandon: watch::Receiver<bool>,
 ) -> anyhow::Result<()> {
     let proceed = Arc::new(AtomicBool::new(true));
     let beating = tokio::spawn(heartbeat(
@@ -41,15 +45,31 @@ pub async fn build_whole(
     );
     let started = Instant::now();
     let pool = Arc::clone(pool);
-    let built = tokio::task::spawn_blocking(move || pool.install(|| build.run())).await;
+    let running = tokio::task::spawn_blocking(move || pool.install(|| build.run()));
+    let built = tokio::select! {
+        built = running => built,
+        () = async { let _ = abandon.wait_for(|a| *a).await; } => {
+            // The build thread is left to the process's exit.
+            beating.abort();
+            link.give_back("the worker is shutting down: its grace ended during a library build")
+                .await;
+            return Ok(());
+        }
+    };
     beating.abort();
     let seconds = started.elapsed().as_secs_f64();
     if !proceed.load(Ordering::Relaxed) {
         tracing::info!(lease = lease.id, "library build no longer wanted");
         return Ok(());
     }
+    let stopping = *link.stop.borrow();
     let upload = match built? {
         Ok(file) => LibraryUpload::of_file(&link.fence, seconds, &file),
+        Err(_) if stopping => {
+            // Its programs were stopped under it: not the build's failure.
+            link.give_back("the worker is shutting down").await;
+            return Ok(());
+        }
         Err(reason) => {
             LibraryUpload::of_failure(&link.fence, seconds, truncate(&reason, MAX_REASON))
         }

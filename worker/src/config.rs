@@ -59,6 +59,17 @@ pub struct WorkerConfig {
     #[arg(long, env = "TSLG_EXIT_WHEN_IDLE")]
     pub exit_when_idle_seconds: Option<f64>,
 
+    /// On SIGTERM or Ctrl-C, how long the tests already running may take
+    /// to finish (seconds). They are reported; when the grace is over the
+    /// programs still running a test are killed and their tests given back
+    /// to the coordinator, which hands them to another worker. Either way
+    /// the worker gives back every test it did not run and exits 0. Keep
+    /// it below the platform's own limit (Kubernetes'
+    /// `terminationGracePeriodSeconds`, SLURM's `KillWait`, both 30 s by
+    /// default), leaving a few seconds for the last reports.
+    #[arg(long, env = "TSLG_GRACE_SECONDS", default_value_t = 20.0)]
+    pub grace_seconds: f64,
+
     /// An external vehicle under test, `NAME=COMMAND` (repeatable):
     /// campaigns with `"vut": {"external": "NAME"}` run COMMAND, split into
     /// words like a shell does, over the protocol of docs/vut-protocol.md.
@@ -102,6 +113,7 @@ impl WorkerConfig {
             max_backoff_seconds: 0.5,
             claim_wait_seconds: 10.0,
             exit_when_idle_seconds: None,
+            grace_seconds: 20.0,
             vut_exec: Vec::new(),
             vut_timeout_seconds: 60.0,
             vut_max_failures: 5,
@@ -162,6 +174,15 @@ impl WorkerConfig {
             self.vut_cooldown_seconds.is_finite()
                 && (0.0..=MAX_VUT_SECONDS).contains(&self.vut_cooldown_seconds),
             "--vut-cooldown must be in [0, {MAX_VUT_SECONDS}] seconds"
+        );
+        anyhow::ensure!(
+            self.grace_seconds.is_finite() && (0.0..=MAX_VUT_SECONDS).contains(&self.grace_seconds),
+            "--grace-seconds must be in [0, {MAX_VUT_SECONDS}] seconds"
+        );
+        anyhow::ensure!(
+            self.exit_when_idle_seconds
+                .is_none_or(|s| s.is_finite() && (0.0..=MAX_VUT_SECONDS).contains(&s)),
+            "--exit-when-idle-seconds must be in [0, {MAX_VUT_SECONDS}] seconds"
         );
         Ok(())
     }

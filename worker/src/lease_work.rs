@@ -138,7 +138,15 @@ impl Worker {
         let prepared = match self.cache.get(&self.client, lease.campaign_id).await {
             Ok(Prepared::Tests(p)) => p,
             Ok(Prepared::Build(build)) => {
-                return build_whole(&self.client, &self.pool, &lease, &link, build).await;
+                return build_whole(
+                    &self.client,
+                    &self.pool,
+                    &lease,
+                    &link,
+                    build,
+                    self.abandon.clone(),
+                )
+                .await;
             }
             Err(e) => {
                 let error = match e {

@@ -34,6 +34,9 @@ pub struct Worker {
     pub cache: Cache,
     pub programs: Arc<Programs>,
     pub stop: watch::Receiver<bool>,
+    /// Turns true when the shutdown's grace is over: work still running
+    /// is given back rather than waited for.
+    pub abandon: watch::Receiver<bool>,
     pub summary: WorkerSummary,
     /// The last lease's final reports, still being sent.
     pub tail: Option<Tail>,
@@ -74,11 +77,23 @@ impl Worker {
             .map_err(anyhow::Error::msg)?;
         let programs = Arc::new(programs);
         let (tx, stop) = watch::channel(false);
+        let (grace_over, abandon) = watch::channel(false);
         let stopping = Arc::clone(&programs);
+        let grace = Duration::from_secs_f64(config.grace_seconds);
         tokio::spawn(async move {
             shutdown.await;
             stopping.stop();
             let _ = tx.send(true);
+            // The tests running may finish within the grace; then their
+            // programs are killed and the tests given back. (The task ends
+            // with the runtime when the worker is done sooner.)
+            tokio::time::sleep(grace).await;
+            tracing::warn!(
+                grace_seconds = grace.as_secs_f64(),
+                "the shutdown's grace is over: the tests still running are given back"
+            );
+            stopping.abort();
+            let _ = grace_over.send(true);
         });
         Ok(Worker {
             client: Client::new(&config.server, config.token.clone())?,
@@ -90,6 +105,7 @@ impl Worker {
             ),
             programs,
             stop,
+            abandon,
             summary: WorkerSummary::default(),
             tail: None,
             next_lease: None,

@@ -173,10 +173,31 @@ impl WorkerProcess {
 
     /// SIGTERM, then waits for the worker to exit by itself.
     pub fn terminate(mut self) -> std::process::ExitStatus {
+        self.signal_term();
+        self.0.wait().expect("wait")
+    }
+
+    /// Sends SIGTERM, as Kubernetes or `scancel` do, without waiting.
+    pub fn signal_term(&self) {
         let _ = Command::new("kill")
             .args(["-TERM", &self.0.id().to_string()])
             .status();
-        self.0.wait().expect("wait")
+    }
+
+    /// Waits for the worker to exit by itself; fails (and kills it) when
+    /// it has not after `limit`, a guard against a hang, not a speed check.
+    pub async fn exit_status(&mut self, limit: Duration) -> std::process::ExitStatus {
+        let started = Instant::now();
+        loop {
+            if let Some(status) = self.0.try_wait().expect("try_wait") {
+                return status;
+            }
+            assert!(
+                started.elapsed() < limit,
+                "the worker did not exit within {limit:?}"
+            );
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
     }
 }
 

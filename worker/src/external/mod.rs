@@ -13,6 +13,7 @@
 //! `cooldown`, and offers it again once a fresh process answers the
 //! handshake.
 
+mod halt;
 mod process;
 mod protocol;
 mod spawner;
@@ -23,7 +24,6 @@ use protocol::{Reply, Request};
 use std::collections::BTreeMap;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::str::FromStr;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 use tslg_api::UnhealthyProgram;
@@ -115,7 +115,7 @@ pub struct Program {
     capabilities: Capabilities,
     idle: Mutex<Vec<ProgramProcess>>,
     health: Mutex<Health>,
-    stopped: AtomicBool,
+    halt: halt::Halt,
 }
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -149,7 +149,7 @@ impl Program {
             capabilities,
             idle: Mutex::new(vec![process]),
             health: Mutex::new(Health::default()),
-            stopped: AtomicBool::new(false),
+            halt: halt::Halt::default(),
         })
     }
 
@@ -253,9 +253,21 @@ impl Program {
         }
     }
 
-    /// Stops running tests: what is asked for now is skipped (shutdown).
+    /// Stops running tests: what is asked for now is skipped (shutdown);
+    /// the tests running finish.
     pub fn stop(&self) {
-        self.stopped.store(true, Ordering::Relaxed);
+        self.halt.stop();
+    }
+
+    /// Cuts off the tests running (the shutdown's grace is over): their
+    /// processes are killed and the tests end [`ProgramRun::Skipped`].
+    pub fn abort(&self) {
+        self.halt.abort();
+    }
+
+    /// Whether the worker is shutting down (no test starts any more).
+    pub fn is_stopped(&self) -> bool {
+        self.halt.stopped()
     }
 
     /// Runs test `index` of `tests` (campaign `campaign`) with this
@@ -288,7 +300,7 @@ impl Program {
     /// Runs one test with `test` on a process from the pool (or a new
     /// one), retrying once; failures count toward the program's health.
     fn run(&self, campaign: i64, test: &TestRun<'_>) -> ProgramRun {
-        if self.stopped.load(Ordering::Relaxed) || lock(&self.health).unhealthy.is_some() {
+        if self.halt.stopped() || lock(&self.health).unhealthy.is_some() {
             return ProgramRun::Skipped;
         }
         let mut last = String::new();
@@ -297,10 +309,14 @@ impl Program {
             let deadline = Instant::now() + self.settings.timeout;
             let mut process = match self.checkout(deadline) {
                 Ok(process) => process,
+                Err(_) if self.halt.aborted() => return ProgramRun::Skipped,
                 Err(fault) => {
                     last = format!("the program {fault}");
                     continue;
                 }
+            };
+            let Some(running) = self.halt.running(process.group()) else {
+                return ProgramRun::Skipped;
             };
             let mut session = Session {
                 process: &mut process,
@@ -310,6 +326,12 @@ impl Program {
             };
             let result = catch_unwind(AssertUnwindSafe(|| test(&mut session)));
             let fault = session.fault.take();
+            drop(running);
+            if result.as_ref().is_ok_and(|r| r.is_err()) && self.halt.aborted() {
+                // Killed by the shutdown, not by a fault of its own: the
+                // test is given back, and the program's health is untouched.
+                return ProgramRun::Skipped;
+            }
             match result {
                 Ok(Ok((outcome, criticality))) => {
                     lock(&self.idle).push(process);
@@ -490,6 +512,15 @@ impl Programs {
         }
     }
 
+    /// Cuts off every program's running tests (the shutdown's grace is
+    /// over): the running chunk ends at the first of them, and the lease
+    /// gives the rest back.
+    pub fn abort(&self) {
+        for program in self.by_name.values() {
+            program.abort();
+        }
+    }
+
     /// Tries every rested program again (blocking).
     pub fn probe_rested(&self) {
         for program in self.by_name.values() {
@@ -520,6 +551,9 @@ impl tslg_method::external::ProgramHost for Programs {
         }) {
             ProgramRun::Done(outcome, criticality) => Ok((outcome.event, criticality)),
             ProgramRun::Invalid(reason) => Err(reason),
+            ProgramRun::Skipped if program.is_stopped() => Err(format!(
+                "the program `{name}` was stopped: the worker is shutting down"
+            )),
             ProgramRun::Skipped => Err(format!(
                 "the program `{name}` is resting after repeated failures: {}",
                 program.unhealthy().map_or_else(String::new, |u| u.reason)

@@ -164,7 +164,7 @@ impl Watchdog {
 
 /// SIGKILL to every process of the group.
 #[allow(unsafe_code)]
-fn kill_group(group: i32) {
+pub(super) fn kill_group(group: i32) {
     // SAFETY: kill(2) with a negative pid signals a process group; it takes
     // no pointers and cannot violate memory safety.
     unsafe {
@@ -334,6 +334,11 @@ impl ProgramProcess {
             reply if reply.kind() == expected => Ok(reply),
             other => Err(unexpected(expected, &other)),
         }
+    }
+
+    /// The process group of the program and what it started.
+    pub fn group(&self) -> i32 {
+        self.group
     }
 
     /// Whether the program has printed nothing since its last reply; a

@@ -1,0 +1,157 @@
+//! Workers that leave cleanly (issue 48), as pods and batch jobs do: on
+//! SIGTERM a worker lets the test running finish within `--grace-seconds`
+//! and reports it, or, when the grace is over, kills its program and gives
+//! the test back; either way it gives back what it did not run and exits
+//! 0. With `--exit-when-idle-seconds` a batch job's worker leaves by itself
+//! when there is no work.
+
+use crate::support::*;
+use std::path::Path;
+use std::time::{Duration, Instant};
+use tslg_api::{CampaignStatus, CreateCampaign, Method};
+
+/// The FVDM as a program whose every test sleeps `sleep` seconds first and
+/// appends a byte to `tally` as it starts, so the test knows a test runs.
+fn slow_program(sleep: f64, tally: &Path) -> String {
+    format!(
+        "slow={} --sleep {sleep} --tally {}",
+        example_binary("fvdm_vut").display(),
+        tally.display()
+    )
+}
+
+fn on_the_program(plain: &CreateCampaign) -> CreateCampaign {
+    CreateCampaign {
+        vut: serde_json::json!({"external": "slow", "mode": "episode"}),
+        ..plain.clone()
+    }
+}
+
+/// Waits until `tally` says a test has started.
+async fn a_test_started(tally: &Path) {
+    let started = Instant::now();
+    while std::fs::metadata(tally).map_or(0, |m| m.len()) == 0 {
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "no test started"
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+}
+
+/// Tests started, by the tally.
+fn started(tally: &Path) -> u64 {
+    std::fs::metadata(tally).map_or(0, |m| m.len())
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sigterm_during_a_test_lets_it_finish_within_the_grace_and_reports_it() {
+    let dir = scratch();
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &[]);
+    let client = server.client();
+    let library = ready_library(&client, "idm", false).await;
+    let tally = dir.path().join("tally");
+    let exec = slow_program(2.0, &tally);
+    let plain = campaign(Method::Ndd, library.id, "fvdm", 0.2, 5);
+    let id = client
+        .create_campaign(&on_the_program(&plain))
+        .await
+        .unwrap()
+        .id;
+    let mut worker = WorkerProcess::start_with(
+        &server.url,
+        1,
+        "pod-1",
+        &["--vut-exec", &exec, "--grace-seconds", "120"],
+    );
+    a_test_started(&tally).await;
+    worker.signal_term();
+    let status = worker.exit_status(Duration::from_secs(90)).await;
+    assert!(status.success(), "exit status {status}");
+    // The test that was running when the signal came was finished and
+    // reported; nothing else started, nothing was reported invalid.
+    let ran = started(&tally);
+    let view = client.campaign(id).await.unwrap();
+    assert_eq!(view.status, CampaignStatus::Running);
+    assert_eq!(view.indices, ran, "every test started was reported");
+    assert_eq!(view.tests, view.indices, "no invalid test");
+    // Whatever the worker held is free at once (the TTL is 30 s): the
+    // next worker's lease starts where the reports end.
+    let lease = client
+        .claim(&ask("pod-2", &["slow:cut-in:episode"]))
+        .await
+        .unwrap()
+        .expect("the rest of the campaign, at once");
+    assert_eq!(lease.resume_at, view.indices);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sigterm_past_the_grace_kills_the_program_and_gives_its_test_back() {
+    let dir = scratch();
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &[]);
+    let client = server.client();
+    let library = ready_library(&client, "idm", false).await;
+    let tally = dir.path().join("tally");
+    // A test that would take ten minutes; the grace is one second.
+    let exec = slow_program(600.0, &tally);
+    let plain = campaign(Method::Ndd, library.id, "fvdm", 0.2, 5);
+    let id = client
+        .create_campaign(&on_the_program(&plain))
+        .await
+        .unwrap()
+        .id;
+    let mut worker = WorkerProcess::start_with(
+        &server.url,
+        1,
+        "pod-1",
+        &["--vut-exec", &exec, "--grace-seconds", "1"],
+    );
+    a_test_started(&tally).await;
+    worker.signal_term();
+    let status = worker.exit_status(Duration::from_secs(90)).await;
+    assert!(status.success(), "exit status {status}");
+    // Not reported at all: not as a result, not as an invalid test.
+    let view = client.campaign(id).await.unwrap();
+    assert_eq!((view.indices, view.tests), (0, 0), "{view:?}");
+    // The program was killed, not left sleeping.
+    let left = std::process::Command::new("pgrep")
+        .args(["-f", &tally.display().to_string()])
+        .output()
+        .unwrap();
+    assert!(
+        left.stdout.is_empty(),
+        "the program still runs: {}",
+        String::from_utf8_lossy(&left.stdout)
+    );
+    // Its lease was given back, not left to expire: the next worker gets
+    // the same tests at once, as the lease's second attempt.
+    let lease = client
+        .claim(&ask("pod-2", &["slow:cut-in:episode"]))
+        .await
+        .unwrap()
+        .expect("the lease given back");
+    assert_eq!((lease.resume_at, lease.attempt), (0, 2));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_batch_jobs_worker_runs_a_campaign_to_its_stop_and_leaves_when_idle() {
+    let dir = scratch();
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &[]);
+    let client = server.client();
+    let library = ready_library(&client, "idm", false).await;
+    let request = campaign(Method::Library, library.id, "fvdm", 0.2, 5);
+    let id = client.create_campaign(&request).await.unwrap().id;
+    let mut worker =
+        WorkerProcess::start_with(&server.url, 2, "job-1", &["--exit-when-idle-seconds", "2"]);
+    let status = worker.exit_status(Duration::from_secs(180)).await;
+    assert!(status.success(), "exit status {status}");
+    // It left only once nothing was left to do.
+    let view = client.campaign(id).await.unwrap();
+    assert_eq!(view.status, CampaignStatus::Converged, "{view:?}");
+    assert_same(&view, &in_process(Some("idm"), &request));
+    // A job with nothing to do at all leaves too.
+    let mut idle =
+        WorkerProcess::start_with(&server.url, 1, "job-2", &["--exit-when-idle-seconds", "1"]);
+    let status = idle.exit_status(Duration::from_secs(60)).await;
+    assert!(status.success(), "exit status {status}");
+}
