@@ -36,6 +36,7 @@ mod service_protocol;
 mod service_recovery;
 mod service_scale;
 mod service_slow;
+mod service_slurm;
 mod service_sumo;
 mod service_trust;
 mod service_upgrade;

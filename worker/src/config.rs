@@ -73,7 +73,14 @@ pub struct WorkerConfig {
     /// An external vehicle under test, `NAME=COMMAND` (repeatable):
     /// campaigns with `"vut": {"external": "NAME"}` run COMMAND, split into
     /// words like a shell does, over the protocol of docs/vut-protocol.md.
-    #[arg(long = "vut-exec", value_name = "NAME=COMMAND")]
+    /// From the environment (a batch job's, a pod's): `TSLG_VUT_EXEC`, one
+    /// `NAME=COMMAND` per line.
+    #[arg(
+        long = "vut-exec",
+        value_name = "NAME=COMMAND",
+        env = "TSLG_VUT_EXEC",
+        value_delimiter = '\n'
+    )]
     pub vut_exec: Vec<String>,
 
     /// Time limit of one test (and of the handshake) of an external

@@ -71,7 +71,14 @@ impl Worker {
             max_failures: config.vut_max_failures,
             cooldown: Duration::from_secs_f64(config.vut_cooldown_seconds),
         };
-        let specs = config.vut_exec.clone();
+        // Blank lines of TSLG_VUT_EXEC (a YAML block's last newline) are
+        // no programs.
+        let specs: Vec<String> = config
+            .vut_exec
+            .iter()
+            .filter(|spec| !spec.trim().is_empty())
+            .cloned()
+            .collect();
         let programs = tokio::task::spawn_blocking(move || Programs::start(&specs, &settings))
             .await?
             .map_err(anyhow::Error::msg)?;
