@@ -12,11 +12,13 @@ FROM debian:bookworm-slim
 RUN apt-get update \
     && apt-get install -y --no-install-recommends ca-certificates python3 \
     && rm -rf /var/lib/apt/lists/* \
-    && useradd --system --create-home --home-dir /var/lib/tslg tslg \
+    && groupadd --system --gid 10001 tslg \
+    && useradd --system --uid 10001 --gid 10001 --create-home --home-dir /var/lib/tslg tslg \
     && mkdir -p /var/lib/tslg/data && chown tslg /var/lib/tslg/data
 COPY --from=build /src/target/release/tslg /src/target/release/tslg-server /src/target/release/tslg-worker /usr/local/bin/
 COPY --from=build /src/examples /usr/local/share/tslg/examples
-USER tslg
+# A numeric user, so that Kubernetes' runAsNonRoot can check it.
+USER 10001:10001
 WORKDIR /var/lib/tslg
 ENV TSLG_BIND=0.0.0.0:8080 \
     TSLG_DATABASE_URL=sqlite:///var/lib/tslg/data/tslg.sqlite

@@ -9,6 +9,7 @@ mod module_graph;
 
 mod browser_dashboard;
 mod cli;
+mod deploy_kubernetes;
 mod docs_commands;
 mod reproduce;
 mod service_access;

@@ -272,6 +272,15 @@ pub async fn exposition(state: &AppState) -> Result<Vec<u8>, ServiceError> {
             .with_label_values(&[d.program.as_str()])
             .set(i64::from(d.workers_wanted));
     }
+    // The sum, always present (0 when idle, when the per-program gauge has
+    // no series): what one HorizontalPodAutoscaler of all workers reads.
+    gauge(
+        &registry,
+        "tslg_fleet_workers_wanted",
+        "Workers wanted over all programs: the sum of tslg_workers_wanted (GET /api/v1/queue's \
+         workers_wanted).",
+        i64::from(queue.workers_wanted),
+    );
     // Every running campaign counts toward the omitted ones; only the
     // newest have views built.
     crate::telemetry::campaign_metrics::register(&registry, &views, running.len());

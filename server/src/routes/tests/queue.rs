@@ -21,14 +21,27 @@ fn program<'a>(queue: &'a Value, name: &str) -> &'a Value {
 
 /// The gauge's value for `program`, from `/metrics`.
 async fn gauge(app: &App, program: &str) -> Option<i64> {
+    series(
+        app,
+        &format!("tslg_workers_wanted{{program=\"{program}\"}} "),
+    )
+    .await
+}
+
+/// The value of the series `name` (its labels included), from `/metrics`.
+async fn series(app: &App, name: &str) -> Option<i64> {
     let body = crate::telemetry::metrics::exposition(&app.state)
         .await
         .unwrap();
     let text = String::from_utf8(body).unwrap();
-    let series = format!("tslg_workers_wanted{{program=\"{program}\"}} ");
     text.lines()
-        .find_map(|l| l.strip_prefix(&series))
+        .find_map(|l| l.strip_prefix(name))
         .map(|v| v.trim().parse().unwrap())
+}
+
+/// The gauge of the sum over programs.
+async fn fleet_gauge(app: &App) -> Option<i64> {
+    series(app, "tslg_fleet_workers_wanted ").await
 }
 
 #[tokio::test]
@@ -38,6 +51,7 @@ async fn the_queue_wants_nobody_when_idle_and_workers_for_the_work_that_waits() 
     assert_eq!(q["workers_wanted"], 0, "{q}");
     assert_eq!(q["target_seconds"], 60.0);
     assert_eq!(q["programs"], json!([]));
+    assert_eq!(fleet_gauge(&app).await, Some(0), "present, 0, when idle");
 
     // A program's campaign that no worker offers: one worker wanted.
     let (status, view) = app
@@ -123,6 +137,7 @@ async fn the_queue_wants_nobody_when_idle_and_workers_for_the_work_that_waits() 
     // The worker offers no program: the rig still wants its one.
     assert_eq!(program(&q, "rig:cut-in:episode")["workers_wanted"], 1);
     assert_eq!(q["workers_wanted"].as_f64().unwrap(), expected + 1.0, "{q}");
+    assert_eq!(fleet_gauge(&app).await, Some(expected as i64 + 1));
 
     // Both stopped: nothing is wanted, and the gauge says 0 for the
     // program the worker serves.
@@ -136,4 +151,5 @@ async fn the_queue_wants_nobody_when_idle_and_workers_for_the_work_that_waits() 
     assert_eq!(q["workers_wanted"], 0, "{q}");
     assert_eq!(program(&q, "builtin")["workers_wanted"], 0, "{q}");
     assert_eq!(gauge(&app, "builtin").await, Some(0));
+    assert_eq!(fleet_gauge(&app).await, Some(0));
 }
