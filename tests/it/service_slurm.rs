@@ -1,6 +1,8 @@
 //! Workers as SLURM jobs (issue 48), on a real single-node SLURM that
-//! `scripts/slurm-local` starts on this machine: `deploy/slurm/tslg-worker.sbatch`
-//! submitted as a job array runs an NDD campaign of a program (named in
+//! `scripts/slurm-local` starts on this machine: the coordinator runs as a
+//! long job (`deploy/slurm/tslg-coordinator.sbatch`, which writes its URL
+//! to a file), `deploy/slurm/tslg-worker.sbatch` submitted as a job array
+//! runs an NDD campaign of a program (named in
 //! `TSLG_VUT_EXEC`) and a library campaign to their stop, bit-identical to
 //! the in-process runs; `scancel` mid-campaign stops the workers cleanly
 //! (their leases come back at once, the answer does not change), and
@@ -44,11 +46,11 @@ impl LocalSlurm {
         command
     }
 
-    /// The array tasks queued or running, `JOB_TASK STATE` each.
+    /// The jobs and array tasks queued or running (`JOB` or `JOB_TASK`).
     fn tasks(&self) -> Vec<String> {
         let out = self
             .command("squeue")
-            .args(["-h", "-r", "-o", "%i %T"])
+            .args(["-h", "-r", "-o", "%i"])
             .output()
             .expect("squeue");
         assert!(out.status.success(), "squeue: {out:?}");
@@ -58,11 +60,11 @@ impl LocalSlurm {
             .collect()
     }
 
-    /// Waits until no task is queued or running.
-    async fn drained(&self, limit: Duration) {
+    /// Waits until no task that `counts` picks is queued or running.
+    async fn drained(&self, limit: Duration, counts: impl Fn(&str) -> bool) {
         let started = Instant::now();
         loop {
-            let tasks = self.tasks();
+            let tasks: Vec<String> = self.tasks().into_iter().filter(|t| counts(t)).collect();
             if tasks.is_empty() {
                 return;
             }
@@ -84,14 +86,18 @@ impl Drop for LocalSlurm {
     }
 }
 
+/// The folder of the service binaries (`TSLG_BIN`).
+fn binaries() -> &'static Path {
+    Path::new(env!("CARGO_BIN_EXE_tslg-worker"))
+        .parent()
+        .expect("the binaries' folder")
+}
+
 /// What the worker jobs read from the environment sbatch passes them.
 fn worker_environment(command: &mut Command, server: &str, program: &str) {
-    let binaries = Path::new(env!("CARGO_BIN_EXE_tslg-worker"))
-        .parent()
-        .expect("the binaries' folder");
     command
         .env("TSLG_SERVER", server)
-        .env("TSLG_BIN", binaries)
+        .env("TSLG_BIN", binaries())
         .env("TSLG_VUT_EXEC", format!("{program}\n"))
         .env("TSLG_EXIT_WHEN_IDLE", "3")
         .env("TSLG_MAX_BACKOFF", "0.3");
@@ -102,7 +108,7 @@ fn logs(dir: &Path) -> String {
     let mut text = String::new();
     for entry in std::fs::read_dir(dir).unwrap().flatten() {
         let name = entry.file_name().to_string_lossy().into_owned();
-        if name.starts_with("tslg-worker-") {
+        if name.starts_with("tslg-") {
             text += &format!(
                 "== {name}\n{}\n",
                 std::fs::read_to_string(entry.path()).unwrap()
@@ -146,11 +152,50 @@ async fn a_slurm_job_array_runs_campaigns_to_the_in_process_answer_and_survives_
     };
     let jobs = dir.path().join("jobs");
     std::fs::create_dir(&jobs).unwrap();
-    let server = ServerProcess::start(
-        &dir.path().join("db.sqlite"),
-        &["--queue-target-seconds", "2"],
-    );
-    let client = server.client();
+    // The coordinator as a long job; its URL comes from the file it writes.
+    let data = dir.path().join("data");
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let out = slurm
+        .command("sbatch")
+        .current_dir(&jobs)
+        .args(["--parsable", "--cpus-per-task=1"])
+        .arg(repo_path("deploy/slurm/tslg-coordinator.sbatch"))
+        .env("TSLG_DATA_DIR", &data)
+        .env("TSLG_BIN", binaries())
+        .env("TSLG_PORT", port.to_string())
+        .env("TSLG_HOST", "127.0.0.1")
+        .env("TSLG_QUEUE_TARGET", "2")
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "sbatch: {out:?}");
+    let coordinator = String::from_utf8_lossy(&out.stdout).trim().to_owned();
+    let started = Instant::now();
+    let url = loop {
+        if let Ok(url) = std::fs::read_to_string(data.join("coordinator-url")) {
+            break url.trim().to_owned();
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "no coordinator URL: {:?}\n{}",
+            slurm.tasks(),
+            logs(&jobs)
+        );
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    };
+    assert_eq!(url, format!("http://127.0.0.1:{port}"));
+    let client = tslg_client::Client::new(&url, None).unwrap();
+    while client.health().await.is_err() {
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "the coordinator job does not answer\n{}",
+            logs(&jobs)
+        );
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
     let library = ready_library(&client, "idm", false).await;
     // The FVDM as a program whose tests take 2 ms each (the built-in
     // FVDM's outcomes, test for test).
@@ -171,11 +216,12 @@ async fn a_slurm_job_array_runs_campaigns_to_the_in_process_answer_and_survives_
         .current_dir(&jobs)
         .args(["--parsable", "--array=1-2", "--cpus-per-task=1"])
         .arg(repo_path("deploy/slurm/tslg-worker.sbatch"));
-    worker_environment(&mut sbatch, &server.url, &program);
+    worker_environment(&mut sbatch, &url, &program);
     let out = sbatch.output().unwrap();
     assert!(out.status.success(), "sbatch: {out:?}");
     let job = String::from_utf8_lossy(&out.stdout).trim().to_owned();
 
+    let workers_job = |task: &str| task.starts_with(&format!("{job}_"));
     // scancel once both workers have reported work, mid-campaign.
     let started = Instant::now();
     loop {
@@ -197,23 +243,46 @@ async fn a_slurm_job_array_runs_campaigns_to_the_in_process_answer_and_survives_
     }
     let status = slurm.command("scancel").arg(&job).status().unwrap();
     assert!(status.success());
-    slurm.drained(Duration::from_secs(90)).await;
+    slurm
+        .drained(Duration::from_secs(90), |task| workers_job(task))
+        .await;
     let view = client.campaign(ndd_id).await.unwrap();
     assert_eq!(view.status, CampaignStatus::Running, "cancelled too late");
-    // Each worker left by its SIGTERM path: it said so, and gave back the
-    // lease it held rather than leaving it to expire.
+    // Each worker left by its SIGTERM path and said so; what it held was
+    // given back, not left to expire: the first lease anyone takes now
+    // resumes where the reported tests end.
     let text = logs(&jobs);
     assert_eq!(
         text.matches("worker stopped").count(),
         2,
         "both workers stopped cleanly:\n{text}"
     );
-    let workers = client.workers().await.unwrap().workers;
-    let released = workers
-        .iter()
-        .filter(|w| w.last_release_reason.as_deref() == Some("the worker is shutting down"))
-        .count();
-    assert!(released >= 1, "{workers:?}");
+    let probe = client
+        .claim(&ask("probe", &["slow:cut-in:episode"]))
+        .await
+        .unwrap()
+        .expect("work left");
+    assert_eq!(probe.resume_at, view.indices, "{probe:?} {view:?}");
+    client
+        .release(
+            probe.id,
+            &tslg_api::LeaseRelease {
+                worker: "probe".into(),
+                attempt: probe.attempt,
+                key: probe.key.clone(),
+                reason: Some("probing".into()),
+            },
+        )
+        .await
+        .unwrap();
+    let record = slurm
+        .command("scontrol")
+        .args(["show", "job", &job])
+        .output()
+        .unwrap();
+    // Exit 0, not a signal's death (ExitCode=STATUS:SIGNAL).
+    let record = String::from_utf8_lossy(&record.stdout);
+    assert_eq!(record.matches("ExitCode=0:0").count(), 2, "{record}");
 
     // Now scaled from the queue: scripts/slurm-scale submits what
     // workers_wanted asks for, at most two.
@@ -225,7 +294,7 @@ async fn a_slurm_job_array_runs_campaigns_to_the_in_process_answer_and_survives_
         .env("SLURM_CONF", &slurm.conf)
         .args(["--interval", "1", "--max", "2", "--", "--cpus-per-task=1"])
         .stdout(Stdio::piped());
-    worker_environment(&mut scale, &server.url, &program);
+    worker_environment(&mut scale, &url, &program);
     let scaler = Scaler(Some(scale.spawn().unwrap()));
     let ndd_view = finished(&client, ndd_id, Duration::from_secs(400)).await;
     let library_view = finished(&client, library_id, Duration::from_secs(200)).await;
@@ -237,8 +306,19 @@ async fn a_slurm_job_array_runs_campaigns_to_the_in_process_answer_and_survives_
     assert_same(&library_view, &in_process(Some("idm"), &library_campaign));
     // Nothing is wanted any more, and the workers leave by themselves.
     assert_eq!(client.queue().await.unwrap().workers_wanted, 0);
-    slurm.drained(Duration::from_secs(90)).await;
+    slurm
+        .drained(Duration::from_secs(90), |task| task != coordinator)
+        .await;
     let said = scaler.stop();
     assert!(said.contains("submitted job array"), "{said}");
-    eprintln!("scripts/slurm-scale said:\n{said}");
+    eprintln!("scripts/slurm-scale said:\n{said}\n{}", logs(&jobs));
+    // The coordinator's job ends on scancel as on its time limit: it stops
+    // by itself, its database kept for the next job.
+    let status = slurm.command("scancel").arg(&coordinator).status().unwrap();
+    assert!(status.success());
+    slurm.drained(Duration::from_secs(90), |_| true).await;
+    let log =
+        std::fs::read_to_string(jobs.join(format!("tslg-coordinator-{coordinator}.out"))).unwrap();
+    assert!(log.contains("shutdown requested"), "{log}");
+    assert!(data.join("tslg.sqlite").exists());
 }
