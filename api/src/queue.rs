@@ -28,16 +28,18 @@ pub struct ProgramDemand {
     pub program: String,
     /// Its running campaigns.
     pub campaigns: u32,
-    /// The tests its running campaigns are still predicted to need (those
-    /// with a prediction).
+    /// The tests its running campaigns are still predicted to need; a
+    /// campaign without a prediction yet counts the fewest it still needs
+    /// (as many again as it has run, its `n_min`, or its way to
+    /// `min_events` at its event rate, whichever is most).
     pub tests_needed: u64,
     /// Those tests' cost in worker-thread seconds, from the measured cost
     /// per test; absent while no campaign of it has a measured cost.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub worker_seconds: Option<f64>,
-    /// Running campaigns without a prediction yet (too few tests, or no
-    /// cost measured): each wants at least the workers serving it now, or
-    /// one.
+    /// Running campaigns without a prediction yet (too few tests or
+    /// events, or no cost measured): each wants at least the workers
+    /// serving it now, or one.
     pub unpredicted: u32,
     /// Live workers offering it (all live workers for `builtin`).
     pub workers: u32,

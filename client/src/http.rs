@@ -196,6 +196,18 @@ impl Client {
             .await
     }
 
+    /// `POST /api/v1/workers/{worker}/leave`: the worker is leaving (after
+    /// giving its leases back); it is out of the live fleet at once.
+    pub async fn leave(&self, worker: &str) -> Result<(), CallError> {
+        let path = format!("/api/v1/workers/{worker}/leave");
+        self.send(
+            self.worker_post(&path, &serde_json::json!({}), worker)
+                .await?,
+        )
+        .await
+        .map(|_| ())
+    }
+
     /// `POST /api/v1/leases/{lease}/release`: gives the rest of the lease back.
     pub async fn release(&self, lease: i64, release: &LeaseRelease) -> Result<(), CallError> {
         let path = format!("/api/v1/leases/{lease}/release");

@@ -6,11 +6,20 @@
 //! tests cost `S = Σ (predicted − tests) · c` worker-thread seconds, `c` the
 //! measured cost of one test on one thread. Workers of `t` threads each
 //! finish it within the target `T` when there are `⌈S / (T t)⌉` of them.
-//! A campaign without a prediction yet (its first tests, or no cost
-//! measured) wants at least the workers serving it now, or one: an
-//! autoscaler must not scale down a fleet whose work it cannot yet size,
-//! nor leave a campaign nobody serves. No running campaign: 0, so a fleet
-//! can scale to zero.
+//! A campaign without a prediction yet (fewer events than its rule's
+//! `min_events`) still needs at least the largest of: as many tests again
+//! as it has run (its work so far is no more than half of it), the tests
+//! to its `n_min`, and, once it has events, the tests its event rate says
+//! it takes to reach `min_events`, `(min_events − events) · n / events`.
+//! Those count as its tests needed (`· c` worker-thread seconds, once `c`
+//! is measured), so while its work cannot be sized the fleet grows with it:
+//! an autoscaler polling every few seconds doubles it about every `T ln 2`
+//! seconds where a rule of "the workers it has" would keep the first
+//! worker until the prediction comes (measured in docs/benchmarks.md,
+//! "Autoscaling"). It also wants at least the workers serving it now, or
+//! one: an autoscaler must not scale down a fleet whose work it cannot yet
+//! size, nor leave a campaign nobody serves. No running campaign: 0, so a
+//! fleet can scale to zero.
 
 use crate::store::campaigns::CampaignRow;
 use crate::workers::Fleet;
@@ -27,6 +36,9 @@ pub struct RunningCampaign {
     pub requires: Option<String>,
     /// Tests still predicted to be needed, when predicted.
     pub tests_needed: Option<u64>,
+    /// The fewest tests it still needs while it has no prediction (see
+    /// the module).
+    pub at_least: u64,
     /// Seconds one test takes on one thread, when measured.
     pub cost_per_test: Option<f64>,
 }
@@ -38,9 +50,35 @@ impl RunningCampaign {
         Self {
             requires: row.requires.clone(),
             tests_needed: predicted_tests.map(|p| p.saturating_sub(row.tests.max(0) as u64)),
+            at_least: tests_at_least(row),
             cost_per_test: row.cost_per_test.filter(|c| c.is_finite() && *c > 0.0),
         }
     }
+}
+
+/// The fewest tests a running campaign without a prediction still needs
+/// (see the module).
+fn tests_at_least(row: &CampaignRow) -> u64 {
+    let rule = row.fold_rule();
+    least_tests(
+        row.tests.max(0) as u64,
+        row.events.max(0) as u64,
+        rule.n_min,
+        rule.min_events,
+    )
+}
+
+/// [`tests_at_least`] of a campaign with `tests` valid tests and `events`
+/// events under a rule of `n_min` and `min_events` (a prediction needs at
+/// least 2 events).
+fn least_tests(tests: u64, events: u64, n_min: u64, min_events: u64) -> u64 {
+    let to_min_events = if events > 0 {
+        let missing = min_events.max(2).saturating_sub(events) as f64;
+        (missing * tests as f64 / events as f64).ceil() as u64
+    } else {
+        0
+    };
+    tests.max(n_min.saturating_sub(tests)).max(to_min_events)
 }
 
 /// The demand of the running campaigns `rows` (each predicted as its view
@@ -102,7 +140,14 @@ pub fn demand(campaigns: &[RunningCampaign], fleet: &Fleet, target_seconds: f64)
                 d.tests_needed += tests;
                 d.unpredicted += 1;
             }
-            (None, _) => d.unpredicted += 1,
+            // The least it still needs (see the module).
+            (None, Some(cost)) => {
+                d.tests_needed += campaign.at_least;
+                d.worker_seconds =
+                    Some(d.worker_seconds.unwrap_or(0.0) + campaign.at_least as f64 * cost);
+                d.unpredicted += 1;
+            }
+            (None, None) => d.unpredicted += 1,
         }
     }
     // Threads a new worker brings: the fleet's average, 1 with no fleet.
@@ -165,6 +210,7 @@ mod tests {
         RunningCampaign {
             requires: requires.map(str::to_owned),
             tests_needed: tests,
+            at_least: 0,
             cost_per_test: cost,
         }
     }
@@ -225,6 +271,54 @@ mod tests {
         let d = wanted_for(&view, BUILTIN);
         assert_eq!((d.workers, d.threads, d.workers_wanted), (3, 6, 1));
         assert_eq!(view.workers_wanted, 1, "{view:?}");
+    }
+
+    #[test]
+    fn a_campaign_not_yet_predicted_wants_workers_for_the_least_work_it_still_has() {
+        // At least 600 tests of 0.5 s left: 300 thread-seconds; with
+        // 1-thread workers and a 60 s target, 5.
+        let rig: &[&str] = &["rig:cut-in:episode"];
+        let campaign = RunningCampaign {
+            at_least: 600,
+            ..running(Some("rig:cut-in:episode"), None, Some(0.5))
+        };
+        let view = demand(std::slice::from_ref(&campaign), &fleet(&[(1, rig)]), 60.0);
+        let d = wanted_for(&view, "rig:cut-in:episode");
+        assert_eq!(
+            (
+                d.unpredicted,
+                d.tests_needed,
+                d.worker_seconds,
+                d.workers_wanted
+            ),
+            (1, 600, Some(300.0), 5)
+        );
+        // As it runs on, the want grows with it: twice the least work,
+        // twice the workers.
+        let further = RunningCampaign {
+            at_least: 1_200,
+            ..campaign.clone()
+        };
+        let view = demand(&[further], &fleet(&[(1, rig); 5]), 60.0);
+        assert_eq!(wanted_for(&view, "rig:cut-in:episode").workers_wanted, 10);
+        // Never below the workers serving it while it cannot be sized.
+        let view = demand(&[campaign], &fleet(&[(1, rig); 7]), 60.0);
+        assert_eq!(wanted_for(&view, "rig:cut-in:episode").workers_wanted, 7);
+    }
+
+    #[test]
+    fn the_least_work_of_an_unpredicted_campaign_is_its_tests_its_floor_or_its_way_to_min_events() {
+        // No test yet: the floor n_min.
+        assert_eq!(least_tests(0, 0, 30, 10), 30);
+        // No event in 500 tests: as many again.
+        assert_eq!(least_tests(500, 0, 30, 10), 500);
+        // 3 events in 100 tests: 7 more at 3 per 100 is 234 tests.
+        assert_eq!(least_tests(100, 3, 30, 10), 234);
+        // 9 events in 4,000: 445 to the tenth, fewer than as many again.
+        assert_eq!(least_tests(4_000, 9, 30, 10), 4_000);
+        // min_events below 2 still needs 2 events for a prediction.
+        assert_eq!(least_tests(10, 1, 0, 0), 10);
+        assert_eq!(least_tests(40, 1, 0, 1), 40);
     }
 
     #[test]

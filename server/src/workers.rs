@@ -34,6 +34,16 @@ struct Entry {
     /// Its last lease request waited and found nothing: it is idle, and
     /// its next wait rechecks at the long ceiling from the start.
     idle: bool,
+    /// It said it is leaving (`POST /api/v1/workers/{name}/leave`): not
+    /// live from then on, until it asks for work again.
+    left: bool,
+}
+
+impl Entry {
+    /// Heard from within [`LIVE`], and not gone by its own word.
+    fn is_live(&self) -> bool {
+        !self.left && self.last_seen.elapsed() < LIVE
+    }
 }
 
 /// The threads of the live workers: all of them, and those of the
@@ -137,10 +147,11 @@ impl WorkerRegistry {
                 invalid: 0,
                 last_release: None,
                 idle: false,
+                left: false,
             });
-        let changed = entry.threads != request.threads
-            || entry.offers != request.offers
-            || entry.last_seen.elapsed() >= LIVE;
+        let changed =
+            entry.threads != request.threads || entry.offers != request.offers || !entry.is_live();
+        entry.left = false;
         entry.threads = request.threads;
         entry.offers = request.offers.clone();
         entry.noisy = request.noisy.clone();
@@ -161,9 +172,7 @@ impl WorkerRegistry {
         let workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
         let mut names: Vec<String> = workers
             .iter()
-            .filter(|(_, e)| {
-                e.last_seen.elapsed() < LIVE && e.noisy.iter().any(|n| n == requirement)
-            })
+            .filter(|(_, e)| e.is_live() && e.noisy.iter().any(|n| n == requirement))
             .map(|(name, _)| name.clone())
             .collect();
         names.sort();
@@ -204,14 +213,23 @@ impl WorkerRegistry {
         }
     }
 
+    /// Takes `worker` out of the live fleet at once (it said it is
+    /// leaving: a stopped pod, a batch job at its end), rather than a
+    /// minute after its last request: autoscalers read the fleet.
+    pub fn left(&self, worker: &str) {
+        let mut workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(entry) = workers.get_mut(worker) {
+            entry.left = true;
+            self.fleet_changed.store(true, Ordering::Release);
+        }
+    }
+
     /// The live workers offering `requirement` (`NAME:case:mode`).
     pub fn live_offering(&self, requirement: &str) -> Vec<String> {
         let workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
         workers
             .iter()
-            .filter(|(_, e)| {
-                e.last_seen.elapsed() < LIVE && e.offers.iter().any(|o| o == requirement)
-            })
+            .filter(|(_, e)| e.is_live() && e.offers.iter().any(|o| o == requirement))
             .map(|(name, _)| name.clone())
             .collect()
     }
@@ -246,7 +264,7 @@ impl WorkerRegistry {
     fn count_fleet(&self) -> Fleet {
         let workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
         let mut fleet = Fleet::default();
-        for entry in workers.values().filter(|e| e.last_seen.elapsed() < LIVE) {
+        for entry in workers.values().filter(|e| e.is_live()) {
             fleet.add(entry.threads, entry.offers.iter().cloned());
         }
         fleet
@@ -255,10 +273,7 @@ impl WorkerRegistry {
     /// Workers heard from within the last minute, and all workers known.
     pub fn counts(&self) -> (usize, usize) {
         let workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
-        let live = workers
-            .values()
-            .filter(|e| e.last_seen.elapsed() < LIVE)
-            .count();
+        let live = workers.values().filter(|e| e.is_live()).count();
         (live, workers.len())
     }
 
@@ -278,7 +293,7 @@ impl WorkerRegistry {
                 name: name.clone(),
                 threads: e.threads,
                 last_seen_seconds: e.last_seen.elapsed().as_secs_f64(),
-                live: e.last_seen.elapsed() < LIVE,
+                live: e.is_live(),
                 offers: e.offers.clone(),
                 unhealthy: e.unhealthy.clone(),
                 tests: e.tests,

@@ -39,6 +39,17 @@ async fn a_test_started(tally: &Path) {
     }
 }
 
+/// The queue's entry of the program: its live workers and those wanted.
+async fn program_demand(client: &tslg_client::Client) -> (u32, u32) {
+    let queue = client.queue().await.unwrap();
+    let d = queue
+        .programs
+        .iter()
+        .find(|d| d.program == "slow:cut-in:episode")
+        .unwrap_or_else(|| panic!("{queue:?}"));
+    (d.workers, d.workers_wanted)
+}
+
 /// Tests started, by the tally.
 fn started(tally: &Path) -> u64 {
     std::fs::metadata(tally).map_or(0, |m| m.len())
@@ -75,6 +86,9 @@ async fn sigterm_during_a_test_lets_it_finish_within_the_grace_and_reports_it() 
     assert_eq!(view.status, CampaignStatus::Running);
     assert_eq!(view.indices, ran, "every test started was reported");
     assert_eq!(view.tests, view.indices, "no invalid test");
+    // It said it left: out of the fleet at once, and the campaign it
+    // leaves behind wants a worker.
+    assert_eq!(program_demand(&client).await, (0, 1));
     // Whatever the worker held is free at once (the TTL is 30 s): the
     // next worker's lease starts where the reports end.
     let lease = client
@@ -113,6 +127,7 @@ async fn sigterm_past_the_grace_kills_the_program_and_gives_its_test_back() {
     // Not reported at all: not as a result, not as an invalid test.
     let view = client.campaign(id).await.unwrap();
     assert_eq!((view.indices, view.tests), (0, 0), "{view:?}");
+    assert_eq!(program_demand(&client).await, (0, 1));
     // The program was killed, not left sleeping.
     let left = std::process::Command::new("pgrep")
         .args(["-f", &tally.display().to_string()])

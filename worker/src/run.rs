@@ -33,6 +33,20 @@ pub async fn run(
     );
     serve(&mut worker, &config).await?;
     worker.finish().await;
+    // Out of the fleet at once: the queue an autoscaler reads stops
+    // counting this worker (otherwise a minute after its last request). A
+    // worker that never registered was never counted; a coordinator that
+    // does not answer soon only counts it a minute longer.
+    if worker.client.secret_of(&worker.name).is_some() {
+        let leaving = worker.client.leave(&worker.name);
+        match tokio::time::timeout(std::time::Duration::from_secs(5), leaving).await {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => {
+                tracing::warn!(error = %e, "could not tell the coordinator this worker leaves")
+            }
+            Err(_) => tracing::warn!("the coordinator did not answer this worker's leaving in 5 s"),
+        }
+    }
     let WorkerSummary {
         leases,
         tests,

@@ -41,7 +41,11 @@ fn check_worker(worker: &str) -> Result<(), ServiceError> {
 
 /// Admits a request naming `worker` when it carries that worker's secret
 /// (`crate::identity`; 403 otherwise).
-async fn admit(state: &AppState, headers: &HeaderMap, worker: &str) -> Result<(), ServiceError> {
+pub(crate) async fn admit(
+    state: &AppState,
+    headers: &HeaderMap,
+    worker: &str,
+) -> Result<(), ServiceError> {
     let secret = headers
         .get(WORKER_SECRET_HEADER)
         .and_then(|v| v.to_str().ok());

@@ -50,6 +50,7 @@ pub fn router(state: AppState) -> Router {
         .route_layer(from_fn_with_state(state.clone(), auth::require_admin));
     let worker = Router::new()
         .route("/api/v1/workers", post(workers::register))
+        .route("/api/v1/workers/{name}/leave", post(workers::leave))
         .route("/api/v1/leases", post(leases::claim))
         .route("/api/v1/leases/{id}/heartbeat", post(leases::heartbeat))
         .route("/api/v1/leases/{id}/release", post(leases::release))

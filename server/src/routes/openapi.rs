@@ -40,6 +40,7 @@ use utoipa::OpenApi;
         super::leases::results,
         super::leases::library,
         super::workers::register,
+        super::workers::leave,
         super::workers::list,
         super::workers::revoke,
         super::workers::unflag,

@@ -4,13 +4,13 @@
 
 use crate::error::ServiceError;
 use crate::identity::MAX_REQUESTED_NAME;
-use crate::routes::leases::worker_name_problem;
+use crate::routes::leases::{admit, worker_name_problem};
 use crate::routes::problem::ApiJson;
 use crate::routes::ApiPath;
 use crate::state::AppState;
 use crate::store::{audits, costs, discordance, standing};
 use axum::extract::State;
-use axum::http::StatusCode;
+use axum::http::{HeaderMap, StatusCode};
 use axum::Json;
 use tslg_api::{Problem, ProgramCost, WorkerCredential, WorkerList, WorkerRegistration};
 use tslg_method::discordance::worker_evidence;
@@ -29,6 +29,27 @@ pub async fn register(
     let issued = state.credentials.register(&state.db, &req.name).await?;
     tracing::info!(worker = %issued.name, asked = %req.name, "worker registered");
     Ok((StatusCode::CREATED, Json(issued)))
+}
+
+/// A worker says it is leaving (stopped by SIGTERM, or a batch job ending
+/// when idle), after giving its leases back: it is out of the live fleet
+/// at once, not a minute after its last request, so `GET /api/v1/queue`
+/// and the sizing of leases stop counting it. Asking for work again brings
+/// it back.
+#[utoipa::path(post, path = "/api/v1/workers/{name}/leave",
+    params(("name" = String, Path), ("tslg-worker-secret" = String, Header, description = "The worker's secret (POST /api/v1/workers)")),
+    responses((status = 204, description = "Out of the live fleet"), (status = 400, body = Problem),
+    (status = 401, body = Problem), (status = 403, body = Problem)))]
+pub async fn leave(
+    State(state): State<AppState>,
+    headers: HeaderMap,
+    ApiPath(name): ApiPath<String>,
+) -> Result<StatusCode, ServiceError> {
+    path_name(&name)?;
+    admit(&state, &headers, &name).await?;
+    state.workers.left(&name);
+    tracing::info!(worker = %name, "worker left");
+    Ok(StatusCode::NO_CONTENT)
 }
 
 /// The workers seen since the coordinator started, most recent first:

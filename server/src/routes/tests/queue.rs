@@ -153,3 +153,51 @@ async fn the_queue_wants_nobody_when_idle_and_workers_for_the_work_that_waits() 
     assert_eq!(gauge(&app, "builtin").await, Some(0));
     assert_eq!(fleet_gauge(&app).await, Some(0));
 }
+
+#[tokio::test]
+async fn a_worker_that_leaves_is_out_of_the_fleet_at_once_and_back_when_it_asks_again() {
+    let app = app(|c| c.queue_target_seconds = 60.0).await;
+    app.external_campaign().await;
+    let ask =
+        json!({"worker": "pod-7", "threads": 2, "offers": ["x:cut-in:step"], "max_tests": 10});
+    let (status, lease) = app.call("POST", "/api/v1/leases", Some(ask.clone())).await;
+    assert_eq!(status, StatusCode::OK, "{lease}");
+    let x = |q: &Value| program(q, "x:cut-in:step")["workers"].clone();
+    assert_eq!(x(&queue(&app).await), 1);
+    // Without its secret, or with another's: refused, and still counted.
+    let leave = axum::http::Request::builder()
+        .method("POST")
+        .uri("/api/v1/workers/pod-7/leave");
+    let (status, problem) = app.send(leave, None).await;
+    assert_eq!(status, StatusCode::FORBIDDEN, "{problem}");
+    let other = app.secret("pod-8").await;
+    let leave = axum::http::Request::builder()
+        .method("POST")
+        .uri("/api/v1/workers/pod-7/leave")
+        .header(tslg_api::WORKER_SECRET_HEADER, other);
+    let (status, _) = app.send(leave, None).await;
+    assert_eq!(status, StatusCode::FORBIDDEN);
+    assert_eq!(x(&queue(&app).await), 1);
+    // With it: gone from the fleet, the queue and the live list at once.
+    let leave = axum::http::Request::builder()
+        .method("POST")
+        .uri("/api/v1/workers/pod-7/leave")
+        .header(tslg_api::WORKER_SECRET_HEADER, app.secret("pod-7").await);
+    let (status, _) = app.send(leave, None).await;
+    assert_eq!(status, StatusCode::NO_CONTENT);
+    let q = queue(&app).await;
+    assert_eq!(x(&q), 0, "{q}");
+    assert_eq!(program(&q, "x:cut-in:step")["workers_wanted"], 1, "{q}");
+    let (_, list) = app.call("GET", "/api/v1/workers", None).await;
+    let pod = list["workers"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|w| w["name"] == "pod-7")
+        .unwrap();
+    assert_eq!(pod["live"], false, "{list}");
+    // Asking for work again brings it back.
+    let (status, _) = app.call("POST", "/api/v1/leases", Some(ask)).await;
+    assert!(status.is_success());
+    assert_eq!(x(&queue(&app).await), 1);
+}
