@@ -30,11 +30,13 @@
 //! default 30 s) and `TSLG_AUTOSCALE_TARGETS` (T, default `5,30`) choose
 //! the rows; `TSLG_AUTOSCALE_TRACE=1` prints the queue at every step.
 
-use std::path::{Path, PathBuf};
+mod common;
+
+use std::path::PathBuf;
 use std::time::{Duration, Instant};
 use tokio::sync::watch;
 use tokio::task::JoinHandle;
-use tslg_api::{CreateCampaign, Method};
+use tslg_api::Method;
 use tslg_client::Client;
 
 /// The most workers either fleet has.
@@ -42,20 +44,6 @@ const FLEET: usize = 8;
 /// The program's gain: the FVDM at an eighth of its sensitivity fails
 /// often enough for a short NDD campaign.
 const HOT_GAIN: f64 = 0.1;
-
-fn example() -> PathBuf {
-    let exe = std::env::current_exe().expect("the bench's path");
-    let path = exe
-        .parent()
-        .and_then(Path::parent)
-        .expect("target/release")
-        .join("examples/fvdm_vut");
-    assert!(
-        path.exists(),
-        "build the example first: cargo build --release --example fvdm_vut"
-    );
-    path
-}
 
 fn number(var: &str, default: f64) -> f64 {
     std::env::var(var).map_or(default, |v| {
@@ -123,7 +111,7 @@ impl Service {
         config.exit_when_idle_seconds = exit_when_idle;
         config.vut_exec = vec![format!(
             "hot={} --sleep {} --gain {HOT_GAIN} --tally {}",
-            example().display(),
+            common::fvdm_vut_example().display(),
             self.sleep,
             self.tally.display()
         )];
@@ -181,27 +169,6 @@ impl Service {
         }
         let _ = self.stop.send(true);
         let _ = self.coordinator.await;
-    }
-}
-
-fn campaign(seed: u64) -> CreateCampaign {
-    CreateCampaign {
-        case: "cut-in".into(),
-        method: Method::Ndd,
-        library_id: None,
-        vut: serde_json::json!({"external": "hot", "mode": "episode"}),
-        epsilon: 0.1,
-        outside: None,
-        split: None,
-        beta: 0.2,
-        confidence: 0.9,
-        max_tests: 1_000_000,
-        seed,
-        n_min: None,
-        min_events: None,
-        guard_outside: false,
-        paired_with: None,
-        vehicle_noise: false,
     }
 }
 
@@ -279,7 +246,10 @@ async fn measure(sizing: Sizing, sleep: f64, gap: f64) -> anyhow::Result<Row> {
             }
         }
         let started = Instant::now();
-        let id = client.create_campaign(&campaign(seed)).await?.id;
+        let id = client
+            .create_campaign(&common::program_campaign(Method::Ndd, "hot", None, seed))
+            .await?
+            .id;
         loop {
             if let Some(down) = autoscaled {
                 scale(&mut service, &client, down).await?;

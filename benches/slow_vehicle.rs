@@ -27,6 +27,8 @@
 //! what it said half-way through the run over the time the run then
 //! really took.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 use tslg_api::{CampaignView, CreateCampaign, Method};
@@ -50,21 +52,6 @@ fn authors_table() -> Option<tslg_api::ExposureRequest> {
         name: "cutin_ndd_spmd.csv".into(),
         text,
     })
-}
-
-/// The Rust example built in release mode, next to this benchmark.
-fn example() -> PathBuf {
-    let exe = std::env::current_exe().expect("the bench's path");
-    let path = exe
-        .parent()
-        .and_then(Path::parent)
-        .expect("target/release")
-        .join("examples/fvdm_vut");
-    assert!(
-        path.exists(),
-        "build the example first: cargo build --release --example fvdm_vut"
-    );
-    path
 }
 
 fn list<T: std::str::FromStr>(var: &str, default: &str) -> Vec<T> {
@@ -119,7 +106,7 @@ impl Fleet {
                 served.await.expect("the coordinator");
             }
         })];
-        let exe = example();
+        let exe = common::fvdm_vut_example();
         for k in 0..workers {
             let mut config = tslg_worker::WorkerConfig::local(&url, 1, format!("slow-{k}"));
             let tally = |name: &str| dir.path().join(format!("{name}.tally"));
@@ -241,27 +228,6 @@ async fn idm_library(client: &Client, exposure: &tslg_api::ExposureRequest) -> a
     Ok(view.id)
 }
 
-fn campaign(method: Method, program: &str, library: Option<i64>) -> CreateCampaign {
-    CreateCampaign {
-        case: "cut-in".into(),
-        method,
-        library_id: library,
-        vut: serde_json::json!({"external": program, "mode": "episode"}),
-        epsilon: 0.1,
-        outside: None,
-        split: None,
-        beta: 0.2,
-        confidence: 0.9,
-        max_tests: 1_000_000,
-        seed: 2,
-        n_min: None,
-        min_events: None,
-        guard_outside: false,
-        paired_with: None,
-        vehicle_noise: false,
-    }
-}
-
 async fn measure(sleep: f64, workers: usize) -> anyhow::Result<Vec<Row>> {
     let fleet = Fleet::start(sleep, workers).await?;
     let client = Client::new(&fleet.url, None)?;
@@ -284,7 +250,11 @@ async fn measure(sleep: f64, workers: usize) -> anyhow::Result<Vec<Row>> {
             wall,
             first_result,
             time_left,
-        } = run(&client, &campaign(method, program, library)).await?;
+        } = run(
+            &client,
+            &common::program_campaign(method, program, library, 2),
+        )
+        .await?;
         let ran = fleet.settled_tally(program, sleep).await - before;
         let used = view.indices;
         let stages = view.adaptive.as_ref().map_or(0, |a| a.stages);

@@ -12,8 +12,11 @@ pub struct QueueView {
     /// The time the wanted workers would finish the predicted work in
     /// (`--queue-target-seconds`).
     pub target_seconds: f64,
-    /// The sum of `workers_wanted` over the programs (built-in vehicles
-    /// included): one number for a fleet that runs every program.
+    /// The workers of a fleet that runs every program listed (built-in
+    /// vehicles included): the programs' work adds up, and the workers
+    /// kept for campaigns not yet sized count once (they serve them all),
+    /// so it is at least each program's `workers_wanted` and at most their
+    /// sum.
     pub workers_wanted: u32,
     /// One entry per program with running campaigns, and per program a
     /// live worker offers (wanting 0 when it has no work).

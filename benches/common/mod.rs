@@ -40,3 +40,47 @@ pub async fn idm_library(client: &tslg_client::Client) -> anyhow::Result<i64> {
     }
     Ok(view.id)
 }
+
+/// `examples/fvdm_vut.rs` built in release mode, next to the bench that
+/// runs (the FVDM as an external program; `--sleep d` makes it slow).
+pub fn fvdm_vut_example() -> std::path::PathBuf {
+    let exe = std::env::current_exe().expect("the bench's path");
+    let path = exe
+        .parent()
+        .and_then(std::path::Path::parent)
+        .expect("target/release")
+        .join("examples/fvdm_vut");
+    assert!(
+        path.exists(),
+        "build the example first: cargo build --release --example fvdm_vut"
+    );
+    path
+}
+
+/// A cut-in campaign of `method` on the external program `program` in
+/// episode mode (β 0.2, c 0.9, ε 0.1), with `library` and `seed`.
+pub fn program_campaign(
+    method: tslg_api::Method,
+    program: &str,
+    library: Option<i64>,
+    seed: u64,
+) -> tslg_api::CreateCampaign {
+    tslg_api::CreateCampaign {
+        case: "cut-in".into(),
+        method,
+        library_id: library,
+        vut: serde_json::json!({"external": program, "mode": "episode"}),
+        epsilon: 0.1,
+        outside: None,
+        split: None,
+        beta: 0.2,
+        confidence: 0.9,
+        max_tests: 1_000_000,
+        seed,
+        n_min: None,
+        min_events: None,
+        guard_outside: false,
+        paired_with: None,
+        vehicle_noise: false,
+    }
+}

@@ -59,13 +59,12 @@ impl RunningCampaign {
 /// The fewest tests a running campaign without a prediction still needs
 /// (see the module).
 fn tests_at_least(row: &CampaignRow) -> u64 {
-    let rule = row.fold_rule();
-    least_tests(
-        row.tests.max(0) as u64,
-        row.events.max(0) as u64,
-        rule.n_min,
-        rule.min_events,
-    )
+    // The campaign's own rule: a campaign of a pair never reaches its
+    // fold's `min_events` (its pair stops it), which would be no bound.
+    let rule = row.rule();
+    let tests = row.tests.max(0) as u64;
+    least_tests(tests, row.events.max(0) as u64, rule.n_min, rule.min_events)
+        .min(rule.max_tests.saturating_sub(tests))
 }
 
 /// [`tests_at_least`] of a campaign with `tests` valid tests and `events`
@@ -82,8 +81,14 @@ fn least_tests(tests: u64, events: u64, n_min: u64, min_events: u64) -> u64 {
 }
 
 /// The demand of the running campaigns `rows` (each predicted as its view
-/// predicts it) on `fleet`, for the target `target_seconds`.
-pub fn of_rows(rows: &[CampaignRow], fleet: &Fleet, target_seconds: f64) -> QueueView {
+/// predicts it) on `fleet`, for the target `target_seconds`, of the
+/// program `only` when given ([`demand_of`]).
+pub fn of_rows(
+    rows: &[CampaignRow],
+    fleet: &Fleet,
+    target_seconds: f64,
+    only: Option<&str>,
+) -> QueueView {
     let running: Vec<RunningCampaign> = rows
         .iter()
         .map(|row| {
@@ -93,11 +98,20 @@ pub fn of_rows(rows: &[CampaignRow], fleet: &Fleet, target_seconds: f64) -> Queu
             )
         })
         .collect();
-    demand(&running, fleet, target_seconds)
+    demand_of(&running, fleet, target_seconds, only)
 }
 
-/// The demand of `campaigns` on `fleet`, for the target `target_seconds`.
-pub fn demand(campaigns: &[RunningCampaign], fleet: &Fleet, target_seconds: f64) -> QueueView {
+/// The demand of `campaigns` on `fleet`, for the target `target_seconds`;
+/// of the program `only` alone when given (`NAME`, every case and mode of
+/// it, a whole `NAME:case:mode`, or `builtin`): its entries and their
+/// total, what one Deployment or job name that runs that program scales by
+/// (`GET /api/v1/queue?program=NAME`).
+pub fn demand_of(
+    campaigns: &[RunningCampaign],
+    fleet: &Fleet,
+    target_seconds: f64,
+    only: Option<&str>,
+) -> QueueView {
     let mut programs: BTreeMap<String, ProgramDemand> = BTreeMap::new();
     let entry = |programs: &mut BTreeMap<String, ProgramDemand>, key: &str| {
         let (workers, threads) = match key {
@@ -133,16 +147,16 @@ pub fn demand(campaigns: &[RunningCampaign], fleet: &Fleet, target_seconds: f64)
         d.campaigns += 1;
         match (campaign.tests_needed, campaign.cost_per_test) {
             (Some(tests), Some(cost)) => {
-                d.tests_needed += tests;
+                d.tests_needed = d.tests_needed.saturating_add(tests);
                 d.worker_seconds = Some(d.worker_seconds.unwrap_or(0.0) + tests as f64 * cost);
             }
             (Some(tests), None) => {
-                d.tests_needed += tests;
+                d.tests_needed = d.tests_needed.saturating_add(tests);
                 d.unpredicted += 1;
             }
             // The least it still needs (see the module).
             (None, Some(cost)) => {
-                d.tests_needed += campaign.at_least;
+                d.tests_needed = d.tests_needed.saturating_add(campaign.at_least);
                 d.worker_seconds =
                     Some(d.worker_seconds.unwrap_or(0.0) + campaign.at_least as f64 * cost);
                 d.unpredicted += 1;
@@ -156,24 +170,59 @@ pub fn demand(campaigns: &[RunningCampaign], fleet: &Fleet, target_seconds: f64)
     } else {
         1.0
     };
-    for d in programs.values_mut() {
-        d.workers_wanted = wanted(d, fleet_threads_per_worker, target_seconds);
-    }
-    let programs: Vec<ProgramDemand> = programs.into_values().collect();
+    let wants: Vec<(ProgramDemand, Want)> = programs
+        .into_values()
+        .map(|mut d| {
+            let want = wanted(&d, fleet_threads_per_worker, target_seconds);
+            d.workers_wanted = want.workers();
+            (d, want)
+        })
+        .filter(|(d, _)| only.is_none_or(|name| is_program(&d.program, name)))
+        .collect();
+    // The programs' work adds up; their floors (the workers serving a
+    // campaign not yet sized) are the same workers when one fleet serves
+    // several programs, so they do not.
+    let work = wants
+        .iter()
+        .map(|(_, w)| w.work)
+        .fold(0u32, u32::saturating_add);
+    let largest = wants
+        .iter()
+        .map(|(d, _)| d.workers_wanted)
+        .max()
+        .unwrap_or(0);
     QueueView {
         target_seconds,
-        workers_wanted: programs
-            .iter()
-            .map(|d| d.workers_wanted)
-            .fold(0u32, u32::saturating_add),
-        programs,
+        workers_wanted: work.max(largest),
+        programs: wants.into_iter().map(|(d, _)| d).collect(),
+    }
+}
+
+/// Whether the demand key `key` (`NAME:case:mode`, or `builtin`) is the
+/// program `name`: that key itself, or any case and mode of `NAME`.
+fn is_program(key: &str, name: &str) -> bool {
+    key == name || key.split(':').next() == Some(name)
+}
+
+/// What one program's campaigns want.
+struct Want {
+    /// Workers for its work: the (least) predicted work within the
+    /// target, at least 1 while it has a campaign.
+    work: u32,
+    /// The workers serving a campaign not yet sized, kept.
+    floor: u32,
+}
+
+impl Want {
+    fn workers(&self) -> u32 {
+        self.work.max(self.floor)
     }
 }
 
 /// The workers `d` wants (see the module).
-fn wanted(d: &ProgramDemand, fleet_threads_per_worker: f64, target_seconds: f64) -> u32 {
+fn wanted(d: &ProgramDemand, fleet_threads_per_worker: f64, target_seconds: f64) -> Want {
     if d.campaigns == 0 {
-        return 0;
+        return Want { work: 0, floor: 0 };
     }
     let per_worker = if d.workers > 0 {
         f64::from(d.threads) / f64::from(d.workers)
@@ -186,17 +235,21 @@ fn wanted(d: &ProgramDemand, fleet_threads_per_worker: f64, target_seconds: f64)
             .ceil()
             .min(f64::from(u32::MAX))
     }) as u32;
-    let not_sized = if d.unpredicted > 0 {
-        d.workers.max(1)
-    } else {
-        0
-    };
-    predicted.max(not_sized).max(1)
+    let floor = if d.unpredicted > 0 { d.workers } else { 0 };
+    Want {
+        work: predicted.max(1),
+        floor,
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The whole queue's demand.
+    fn demand(campaigns: &[RunningCampaign], fleet: &Fleet, target_seconds: f64) -> QueueView {
+        demand_of(campaigns, fleet, target_seconds, None)
+    }
 
     fn fleet(workers: &[(u32, &[&str])]) -> Fleet {
         let mut fleet = Fleet::default();
@@ -319,6 +372,63 @@ mod tests {
         // min_events below 2 still needs 2 events for a prediction.
         assert_eq!(least_tests(10, 1, 0, 0), 10);
         assert_eq!(least_tests(40, 1, 0, 1), 40);
+    }
+
+    #[test]
+    fn workers_kept_for_unsized_campaigns_count_once_but_work_adds_up() {
+        // Four workers run the built-in vehicles and the program x: an
+        // unsized campaign of each keeps the four, not eight.
+        let x: &[&str] = &["x:cut-in:step"];
+        let four = fleet(&[(1, x); 4]);
+        let unsized_both = [
+            running(None, None, None),
+            running(Some("x:cut-in:step"), None, None),
+        ];
+        let view = demand(&unsized_both, &four, 60.0);
+        assert_eq!(wanted_for(&view, BUILTIN).workers_wanted, 4);
+        assert_eq!(wanted_for(&view, "x:cut-in:step").workers_wanted, 4);
+        assert_eq!(view.workers_wanted, 4, "{view:?}");
+        // Predicted work of both adds up: 600 and 300 thread-seconds in
+        // 60 s on 1-thread workers are 10 and 5 workers.
+        let sized_both = [
+            running(None, Some(6_000), Some(0.1)),
+            running(Some("x:cut-in:step"), Some(3_000), Some(0.1)),
+        ];
+        assert_eq!(demand(&sized_both, &four, 60.0).workers_wanted, 15);
+        // A campaign of a pair never predicts, and its fold's min_events
+        // is unbounded: its least work stays bounded by its max_tests.
+        assert_eq!(least_tests(1_000, 3, 30, u64::MAX), u64::MAX);
+        let paired = RunningCampaign {
+            at_least: u64::MAX,
+            ..running(Some("x:cut-in:step"), None, Some(0.1))
+        };
+        let view = demand(&[paired.clone(), paired], &four, 60.0);
+        assert_eq!(wanted_for(&view, "x:cut-in:step").tests_needed, u64::MAX);
+    }
+
+    #[test]
+    fn one_programs_demand_is_its_entries_of_every_case_and_mode() {
+        let campaigns = [
+            running(Some("av:cut-in:step"), Some(600), Some(1.0)),
+            running(Some("av:highway-exit:episode"), Some(600), Some(1.0)),
+            running(Some("other:cut-in:step"), Some(6_000), Some(1.0)),
+            running(None, Some(60_000), Some(0.001)),
+        ];
+        let none = Fleet::default();
+        // 600 s each in 60 s on 1-thread workers: 10 + 10.
+        let av = demand_of(&campaigns, &none, 60.0, Some("av"));
+        assert_eq!(av.programs.len(), 2, "{av:?}");
+        assert_eq!(av.workers_wanted, 20);
+        let one = demand_of(&campaigns, &none, 60.0, Some("av:cut-in:step"));
+        assert_eq!((one.programs.len(), one.workers_wanted), (1, 10));
+        let builtin = demand_of(&campaigns, &none, 60.0, Some(BUILTIN));
+        assert_eq!((builtin.programs.len(), builtin.workers_wanted), (1, 1));
+        // A program with nothing running and nobody offering it: nothing,
+        // and 0 for an autoscaler to read.
+        let absent = demand_of(&campaigns, &none, 60.0, Some("nobody"));
+        assert_eq!((absent.programs.len(), absent.workers_wanted), (0, 0));
+        // The whole queue: 10 + 10 + 100 + 1.
+        assert_eq!(demand(&campaigns, &none, 60.0).workers_wanted, 121);
     }
 
     #[test]

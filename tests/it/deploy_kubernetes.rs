@@ -47,8 +47,10 @@ fn every_variable_a_manifest_sets_is_read_by_the_binary_it_runs() {
         let out = Command::new(binary).arg("--help").output().unwrap();
         let help = String::from_utf8_lossy(&out.stdout);
         for variable in variables {
+            // `[env: NAME]` or `[env: NAME=value]`: the whole name.
             assert!(
-                help.contains(&format!("env: {variable}")),
+                help.contains(&format!("env: {variable}]"))
+                    || help.contains(&format!("env: {variable}=")),
                 "{binary} does not read {variable}"
             );
         }
@@ -66,30 +68,42 @@ async fn the_manifests_validate_and_their_autoscalers_read_what_the_coordinator_
     let dir = scratch();
     let server = ServerProcess::start(&dir.path().join("db.sqlite"), &[]);
     let client = server.client();
-    // A campaign of the example program's name, which no worker serves:
-    // the queue has its entry.
+    // A campaign of the example program's name, which no worker serves,
+    // and one of a built-in vehicle: the queue has an entry of each.
     let request = CreateCampaign {
         library_id: None,
         vut: serde_json::json!({"external": "my-av", "mode": "episode"}),
         ..campaign(Method::Ndd, 0, "idm", 0.2, 1)
     };
     client.create_campaign(&request).await.unwrap();
-    let queue = reqwest::get(format!("{}/api/v1/queue", server.url))
-        .await
-        .unwrap()
-        .text()
-        .await
-        .unwrap();
-    let metrics = client.metrics().await.unwrap();
-    let (queue_file, metrics_file) = (dir.path().join("queue.json"), dir.path().join("metrics"));
-    std::fs::write(&queue_file, &queue).unwrap();
-    std::fs::write(&metrics_file, &metrics).unwrap();
+    let builtin = CreateCampaign {
+        library_id: None,
+        ..campaign(Method::Ndd, 0, "idm", 0.2, 1)
+    };
+    client.create_campaign(&builtin).await.unwrap();
+    let answer = |query: &'static str| {
+        let url = format!("{}/api/v1/queue{query}", server.url);
+        async move { reqwest::get(url).await.unwrap().text().await.unwrap() }
+    };
+    let files = [
+        ("queue.json", answer("").await),
+        ("builtin.json", answer("?program=builtin").await),
+        ("my-av.json", answer("?program=my-av").await),
+        ("metrics", client.metrics().await.unwrap()),
+    ];
+    for (name, text) in &files {
+        std::fs::write(dir.path().join(name), text).unwrap();
+    }
+    let file = |name: &str| dir.path().join(name).display().to_string();
     let out = Command::new(&python)
         .arg(repo_path("scripts/check-kubernetes"))
-        .arg("--queue")
-        .arg(&queue_file)
-        .arg("--metrics")
-        .arg(&metrics_file)
+        .args(["--queue", &file("queue.json")])
+        .args([
+            "--program-queue",
+            &format!("builtin={}", file("builtin.json")),
+        ])
+        .args(["--program-queue", &format!("my-av={}", file("my-av.json"))])
+        .args(["--metrics", &file("metrics")])
         .output()
         .unwrap();
     let said = String::from_utf8_lossy(&out.stdout);

@@ -149,6 +149,7 @@ async fn tokens_open_only_their_part_of_the_api_and_never_reach_the_logs() {
     // Working: the worker (or admin) token.
     for (method, path) in [
         (Http::POST, "/api/v1/leases".to_owned()),
+        (Http::POST, "/api/v1/workers/w1/leave".to_owned()),
         (Http::GET, format!("/api/v1/campaigns/{id}/plan")),
         (Http::GET, format!("/api/v1/libraries/{}/file", library.id)),
     ] {

@@ -55,40 +55,77 @@ fn started(tally: &Path) -> u64 {
     std::fs::metadata(tally).map_or(0, |m| m.len())
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn sigterm_during_a_test_lets_it_finish_within_the_grace_and_reports_it() {
+/// A worker whose program is in a test that takes `sleep` seconds, with
+/// `grace` seconds to finish it once stopped: the coordinator, the
+/// campaign, the tally of tests the program started, and the worker.
+struct InATest {
+    client: tslg_client::Client,
+    campaign: i64,
+    tally: std::path::PathBuf,
+    worker: WorkerProcess,
+    _server: ServerProcess,
+    _dir: tempfile::TempDir,
+}
+
+async fn in_a_test(sleep: f64, grace: &str) -> InATest {
     let dir = scratch();
     let server = ServerProcess::start(&dir.path().join("db.sqlite"), &[]);
     let client = server.client();
     let library = ready_library(&client, "idm", false).await;
     let tally = dir.path().join("tally");
-    let exec = slow_program(2.0, &tally);
+    let exec = slow_program(sleep, &tally);
     let plain = campaign(Method::Ndd, library.id, "fvdm", 0.2, 5);
-    let id = client
+    let campaign = client
         .create_campaign(&on_the_program(&plain))
         .await
         .unwrap()
         .id;
-    let mut worker = WorkerProcess::start_with(
+    let worker = WorkerProcess::start_with(
         &server.url,
         1,
         "pod-1",
-        &["--vut-exec", &exec, "--grace-seconds", "120"],
+        &["--vut-exec", &exec, "--grace-seconds", grace],
     );
     a_test_started(&tally).await;
-    worker.signal_term();
-    let status = worker.exit_status(Duration::from_secs(90)).await;
-    assert!(status.success(), "exit status {status}");
+    InATest {
+        client,
+        campaign,
+        tally,
+        worker,
+        _server: server,
+        _dir: dir,
+    }
+}
+
+impl InATest {
+    /// Waits for the stopped worker to exit, and checks it exits 0.
+    async fn exits_cleanly(&mut self) {
+        let status = self.worker.exit_status(Duration::from_secs(90)).await;
+        assert!(status.success(), "exit status {status}");
+    }
+}
+
+/// A pod's worker SIGTERMed while its program is in a test ([`in_a_test`]).
+async fn sigterm_during_a_test(sleep: f64, grace: &str) -> InATest {
+    let mut pod = in_a_test(sleep, grace).await;
+    pod.worker.signal_term();
+    pod.exits_cleanly().await;
+    pod
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sigterm_during_a_test_lets_it_finish_within_the_grace_and_reports_it() {
+    let stopped = sigterm_during_a_test(2.0, "120").await;
+    let (client, id, ran) = (&stopped.client, stopped.campaign, started(&stopped.tally));
     // The test that was running when the signal came was finished and
     // reported; nothing else started, nothing was reported invalid.
-    let ran = started(&tally);
     let view = client.campaign(id).await.unwrap();
     assert_eq!(view.status, CampaignStatus::Running);
     assert_eq!(view.indices, ran, "every test started was reported");
     assert_eq!(view.tests, view.indices, "no invalid test");
     // It said it left: out of the fleet at once, and the campaign it
     // leaves behind wants a worker.
-    assert_eq!(program_demand(&client).await, (0, 1));
+    assert_eq!(program_demand(client).await, (0, 1));
     // Whatever the worker held is free at once (the TTL is 30 s): the
     // next worker's lease starts where the reports end.
     let lease = client
@@ -101,33 +138,13 @@ async fn sigterm_during_a_test_lets_it_finish_within_the_grace_and_reports_it() 
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn sigterm_past_the_grace_kills_the_program_and_gives_its_test_back() {
-    let dir = scratch();
-    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &[]);
-    let client = server.client();
-    let library = ready_library(&client, "idm", false).await;
-    let tally = dir.path().join("tally");
     // A test that would take ten minutes; the grace is one second.
-    let exec = slow_program(600.0, &tally);
-    let plain = campaign(Method::Ndd, library.id, "fvdm", 0.2, 5);
-    let id = client
-        .create_campaign(&on_the_program(&plain))
-        .await
-        .unwrap()
-        .id;
-    let mut worker = WorkerProcess::start_with(
-        &server.url,
-        1,
-        "pod-1",
-        &["--vut-exec", &exec, "--grace-seconds", "1"],
-    );
-    a_test_started(&tally).await;
-    worker.signal_term();
-    let status = worker.exit_status(Duration::from_secs(90)).await;
-    assert!(status.success(), "exit status {status}");
+    let stopped = sigterm_during_a_test(600.0, "1").await;
+    let (client, id, tally) = (&stopped.client, stopped.campaign, &stopped.tally);
     // Not reported at all: not as a result, not as an invalid test.
     let view = client.campaign(id).await.unwrap();
     assert_eq!((view.indices, view.tests), (0, 0), "{view:?}");
-    assert_eq!(program_demand(&client).await, (0, 1));
+    assert_eq!(program_demand(client).await, (0, 1));
     // The program was killed, not left sleeping.
     let left = std::process::Command::new("pgrep")
         .args(["-f", &tally.display().to_string()])
@@ -164,9 +181,83 @@ async fn a_batch_jobs_worker_runs_a_campaign_to_its_stop_and_leaves_when_idle() 
     let view = client.campaign(id).await.unwrap();
     assert_eq!(view.status, CampaignStatus::Converged, "{view:?}");
     assert_same(&view, &in_process(Some("idm"), &request));
+    // It said it left: no longer live, at once.
+    let workers = client.workers().await.unwrap().workers;
+    let job = workers.iter().find(|w| w.name == "job-1").expect("listed");
+    assert!(!job.live && job.tests > 0, "{job:?}");
+    assert_eq!(client.queue().await.unwrap().workers_wanted, 0);
     // A job with nothing to do at all leaves too.
     let mut idle =
         WorkerProcess::start_with(&server.url, 1, "job-2", &["--exit-when-idle-seconds", "1"]);
     let status = idle.exit_status(Duration::from_secs(60)).await;
     assert!(status.success(), "exit status {status}");
+}
+
+/// Whether a process whose command line holds `marker` still runs (a
+/// killed one may take a moment to go).
+async fn still_running(marker: &str) -> bool {
+    for _ in 0..50 {
+        let out = std::process::Command::new("pgrep")
+            .args(["-f", marker])
+            .output()
+            .unwrap();
+        if out.stdout.is_empty() {
+            return false;
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    true
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_batch_system_signalling_every_process_costs_no_invalid_test() {
+    // SLURM's scancel and preemption send SIGTERM to every process of the
+    // job: the worker and, in the same instant, its program in a test.
+    let mut job = in_a_test(600.0, "120").await;
+    let _ = std::process::Command::new("pkill")
+        .args(["-TERM", "-f", &job.tally.display().to_string()])
+        .status();
+    job.worker.signal_term();
+    job.exits_cleanly().await;
+    let (client, id, tally) = (&job.client, job.campaign, &job.tally);
+    // The test its program was in is given back, not reported invalid,
+    // and no other test started after the signal.
+    let view = client.campaign(id).await.unwrap();
+    assert_eq!(
+        (view.indices, view.tests, view.invalid),
+        (0, 0, 0),
+        "{view:?}"
+    );
+    assert_eq!(started(tally), 1);
+    let lease = client
+        .claim(&ask("job-10", &["slow:cut-in:episode"]))
+        .await
+        .unwrap()
+        .expect("the test given back");
+    assert_eq!((lease.resume_at, lease.attempt), (0, 2));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_worker_that_leaves_takes_its_programs_helpers_with_it() {
+    // A program that starts a helper of its own (a simulator's server, say)
+    // before it serves: the helper is in the program's process group.
+    let dir = scratch();
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &[]);
+    let marker = "sleep 3131.25";
+    let exec = format!(
+        "helped=sh -c '{marker} & exec {}'",
+        example_binary("fvdm_vut").display()
+    );
+    let mut worker = WorkerProcess::start_with(
+        &server.url,
+        1,
+        "job-11",
+        &["--vut-exec", &exec, "--exit-when-idle-seconds", "1"],
+    );
+    let status = worker.exit_status(Duration::from_secs(60)).await;
+    assert!(status.success(), "exit status {status}");
+    assert!(
+        !still_running(marker).await,
+        "the program's helper outlived the worker"
+    );
 }

@@ -86,6 +86,10 @@ impl Drop for LocalSlurm {
     }
 }
 
+/// The coordinator job's tokens (its node is shared).
+const ADMIN: &str = "adm-slurm-5c1e";
+const WORKER: &str = "wrk-slurm-7a3d";
+
 /// The folder of the service binaries (`TSLG_BIN`).
 fn binaries() -> &'static Path {
     Path::new(env!("CARGO_BIN_EXE_tslg-worker"))
@@ -97,6 +101,7 @@ fn binaries() -> &'static Path {
 fn worker_environment(command: &mut Command, server: &str, program: &str) {
     command
         .env("TSLG_SERVER", server)
+        .env("TSLG_WORKER_TOKEN", WORKER)
         .env("TSLG_BIN", binaries())
         .env("TSLG_VUT_EXEC", format!("{program}\n"))
         .env("TSLG_EXIT_WHEN_IDLE", "3")
@@ -165,6 +170,8 @@ async fn a_slurm_job_array_runs_campaigns_to_the_in_process_answer_and_survives_
         .args(["--parsable", "--cpus-per-task=1"])
         .arg(repo_path("deploy/slurm/tslg-coordinator.sbatch"))
         .env("TSLG_DATA_DIR", &data)
+        .env("TSLG_ADMIN_TOKEN", ADMIN)
+        .env("TSLG_WORKER_TOKEN", WORKER)
         .env("TSLG_BIN", binaries())
         .env("TSLG_PORT", port.to_string())
         .env("TSLG_HOST", "127.0.0.1")
@@ -187,7 +194,7 @@ async fn a_slurm_job_array_runs_campaigns_to_the_in_process_answer_and_survives_
         tokio::time::sleep(Duration::from_millis(100)).await;
     };
     assert_eq!(url, format!("http://127.0.0.1:{port}"));
-    let client = tslg_client::Client::new(&url, None).unwrap();
+    let client = tslg_client::Client::new(&url, Some(ADMIN.into())).unwrap();
     while client.health().await.is_err() {
         assert!(
             started.elapsed() < Duration::from_secs(60),

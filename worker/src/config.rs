@@ -63,10 +63,11 @@ pub struct WorkerConfig {
     /// to finish (seconds). They are reported; when the grace is over the
     /// programs still running a test are killed and their tests given back
     /// to the coordinator, which hands them to another worker. Either way
-    /// the worker gives back every test it did not run and exits 0. Keep
-    /// it below the platform's own limit (Kubernetes'
+    /// the worker gives back every test it did not run and exits 0, at
+    /// most 8 s after the grace (its last reports). Keep grace + 8 s below
+    /// the platform's own limit (Kubernetes'
     /// `terminationGracePeriodSeconds`, SLURM's `KillWait`, both 30 s by
-    /// default), leaving a few seconds for the last reports.
+    /// default).
     #[arg(long, env = "TSLG_GRACE_SECONDS", default_value_t = 20.0)]
     pub grace_seconds: f64,
 

@@ -17,6 +17,10 @@ use std::sync::Arc;
 use std::time::Instant;
 use tslg_client::{CallError, Client};
 
+/// How long a worker whose shutdown grace is over still tries to deliver
+/// its last reports and give its leases back.
+const LAST_WORDS: std::time::Duration = std::time::Duration::from_secs(8);
+
 /// Runs a worker until `shutdown` completes (or, with
 /// `exit_when_idle_seconds`, until there has been no work that long).
 pub async fn run(
@@ -31,8 +35,34 @@ pub async fn run(
         server = %config.server,
         "worker started"
     );
-    serve(&mut worker, &config).await?;
-    worker.finish().await;
+    // The work, then the last reports; but once the shutdown's grace is
+    // over, at most LAST_WORDS more, whatever the coordinator does: a
+    // platform's kill deadline (Kubernetes' terminationGracePeriodSeconds,
+    // SLURM's KillWait) must find the worker gone, not stuck in a retry.
+    // Reports cut off here are not lost: their lease expires and is run
+    // again.
+    let mut abandon = worker.abandon.clone();
+    let served = tokio::select! {
+        served = async {
+            serve(&mut worker, &config).await?;
+            worker.finish().await;
+            anyhow::Ok(())
+        } => served,
+        () = async {
+            let _ = abandon.wait_for(|a| *a).await;
+            tokio::time::sleep(LAST_WORDS).await;
+        } => {
+            tracing::warn!(
+                seconds = LAST_WORDS.as_secs_f64(),
+                "the coordinator did not take the last reports after the grace: leaving without them"
+            );
+            Ok(())
+        }
+    };
+    // The programs' idle processes and their helpers end with the worker
+    // (an exiting process does not drop them).
+    worker.programs.shutdown();
+    served?;
     // Out of the fleet at once: the queue an autoscaler reads stops
     // counting this worker (otherwise a minute after its last request). A
     // worker that never registered was never counted; a coordinator that

@@ -62,7 +62,11 @@ fn read_snapshot(
 }
 
 fn gauge_vec(registry: &Registry, name: &str, help: &str, label: &str) -> IntGaugeVec {
-    let gauge = IntGaugeVec::new(Opts::new(name, help), &[label]).expect("valid gauge");
+    labelled_gauges(registry, name, help, &[label])
+}
+
+fn labelled_gauges(registry: &Registry, name: &str, help: &str, labels: &[&str]) -> IntGaugeVec {
+    let gauge = IntGaugeVec::new(Opts::new(name, help), labels).expect("valid gauge");
     registry
         .register(Box::new(gauge.clone()))
         .expect("registered once");
@@ -258,27 +262,30 @@ pub async fn exposition(state: &AppState) -> Result<Vec<u8>, ServiceError> {
         &running,
         &state.workers.fleet(),
         state.config.queue_target_seconds,
+        None,
     );
-    let wanted = gauge_vec(
+    let wanted = labelled_gauges(
         &registry,
         "tslg_workers_wanted",
         "Workers that would finish the running campaigns' predicted work within \
-         --queue-target-seconds, per program (builtin: the built-in vehicles); 0 when idle \
-         (GET /api/v1/queue).",
-        "program",
+         --queue-target-seconds, per program (NAME:case:mode; builtin: the built-in vehicles) \
+         and its vehicle (the program's NAME, a valid Kubernetes label value for an HPA's \
+         selector); 0 when idle (GET /api/v1/queue).",
+        &["program", "vehicle"],
     );
     for d in &queue.programs {
+        let vehicle = d.program.split(':').next().unwrap_or(&d.program);
         wanted
-            .with_label_values(&[d.program.as_str()])
+            .with_label_values(&[d.program.as_str(), vehicle])
             .set(i64::from(d.workers_wanted));
     }
-    // The sum, always present (0 when idle, when the per-program gauge has
-    // no series): what one HorizontalPodAutoscaler of all workers reads.
+    // The total, always present (0 when idle, when the per-program gauge
+    // has no series): what one HorizontalPodAutoscaler of all workers reads.
     gauge(
         &registry,
         "tslg_fleet_workers_wanted",
-        "Workers wanted over all programs: the sum of tslg_workers_wanted (GET /api/v1/queue's \
-         workers_wanted).",
+        "Workers wanted over all programs (GET /api/v1/queue's workers_wanted): the programs' \
+         work adds up, the workers kept for campaigns not yet sized are counted once.",
         i64::from(queue.workers_wanted),
     );
     // Every running campaign counts toward the omitted ones; only the

@@ -30,7 +30,7 @@ impl Halt {
         self.aborted.store(true, Ordering::SeqCst);
         let busy = self.busy.lock().unwrap_or_else(|p| p.into_inner());
         for &group in busy.iter() {
-            super::process::kill_group(group);
+            kill_group(group);
         }
     }
 
@@ -45,8 +45,9 @@ impl Halt {
         self.aborted.load(Ordering::SeqCst)
     }
 
-    /// Marks `group` as running a test until the guard drops; `None` when
-    /// the program was aborted meanwhile (the test is not run). The group is
+    /// Marks `group` as running a test (or starting: its handshake) until
+    /// the guard drops; `None` when the program was aborted meanwhile (the
+    /// test is not run). The group is
     /// registered before the flag is read, and [`Halt::abort`] sets the flag
     /// before it reads the groups, so a test is either seen and killed or
     /// never started.
@@ -57,6 +58,16 @@ impl Halt {
             .insert(group);
         let guard = Running { halt: self, group };
         (!self.aborted()).then_some(guard)
+    }
+}
+
+/// SIGKILL to every process of the group.
+#[allow(unsafe_code)]
+pub fn kill_group(group: i32) {
+    // SAFETY: kill(2) with a negative pid signals a process group; it takes
+    // no pointers and cannot violate memory safety.
+    unsafe {
+        libc::kill(-group, libc::SIGKILL);
     }
 }
 

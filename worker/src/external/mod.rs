@@ -133,6 +133,7 @@ impl Program {
             &settings.worker,
             settings.timeout,
             deadline,
+            None,
         )
         .map_err(|f| format!("--vut-exec {}: the program {f}", spec.name))?;
         // A case the program names that this worker does not know may be a
@@ -235,6 +236,7 @@ impl Program {
             &self.settings.worker,
             self.settings.timeout,
             deadline,
+            Some(&self.halt),
         )
         .map(|(process, _)| process)
     }
@@ -268,6 +270,13 @@ impl Program {
     /// Whether the worker is shutting down (no test starts any more).
     pub fn is_stopped(&self) -> bool {
         self.halt.stopped()
+    }
+
+    /// Ends the processes waiting for a test (the worker exits): each is
+    /// killed with its process group, helpers it started included.
+    pub fn shutdown(&self) {
+        self.halt.stop();
+        lock(&self.idle).clear();
     }
 
     /// Runs test `index` of `tests` (campaign `campaign`) with this
@@ -305,11 +314,18 @@ impl Program {
         }
         let mut last = String::new();
         for _ in 0..TRIES {
+            if self.halt.stopped() && !last.is_empty() {
+                // The first try failed while the worker stops: a batch
+                // system's SIGTERM reaches every process of the job, the
+                // program's too. Not a fault of its own, and no test starts
+                // now: given back.
+                return ProgramRun::Skipped;
+            }
             // The whole try, a new process's handshake included.
             let deadline = Instant::now() + self.settings.timeout;
             let mut process = match self.checkout(deadline) {
                 Ok(process) => process,
-                Err(_) if self.halt.aborted() => return ProgramRun::Skipped,
+                Err(_) if self.halt.stopped() => return ProgramRun::Skipped,
                 Err(fault) => {
                     last = format!("the program {fault}");
                     continue;
@@ -327,9 +343,11 @@ impl Program {
             let result = catch_unwind(AssertUnwindSafe(|| test(&mut session)));
             let fault = session.fault.take();
             drop(running);
-            if result.as_ref().is_ok_and(|r| r.is_err()) && self.halt.aborted() {
-                // Killed by the shutdown, not by a fault of its own: the
-                // test is given back, and the program's health is untouched.
+            if result.as_ref().is_ok_and(|r| r.is_err()) && self.halt.stopped() {
+                // Failed while the worker stops (killed past the grace, or
+                // by a batch system's SIGTERM to every process of the job):
+                // not a fault of its own, so the test is given back and the
+                // program's health is untouched.
                 return ProgramRun::Skipped;
             }
             match result {
@@ -509,6 +527,14 @@ impl Programs {
     pub fn stop(&self) {
         for program in self.by_name.values() {
             program.stop();
+        }
+    }
+
+    /// Ends every program's idle processes and their helpers (the worker
+    /// exits; its process's exit would not drop them).
+    pub fn shutdown(&self) {
+        for program in self.by_name.values() {
+            program.shutdown();
         }
     }
 

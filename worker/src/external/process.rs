@@ -7,6 +7,7 @@
 //! the process kills the group (the program and anything it started); a
 //! worker killed outright takes the program with it ([`super::spawner`]).
 
+use super::halt::{kill_group, Halt};
 use super::protocol::{Reply, Request, MAX_LINE};
 use super::spawner;
 use std::collections::{BTreeMap, VecDeque};
@@ -162,16 +163,6 @@ impl Watchdog {
     }
 }
 
-/// SIGKILL to every process of the group.
-#[allow(unsafe_code)]
-pub(super) fn kill_group(group: i32) {
-    // SAFETY: kill(2) with a negative pid signals a process group; it takes
-    // no pointers and cannot violate memory safety.
-    unsafe {
-        libc::kill(-group, libc::SIGKILL);
-    }
-}
-
 /// One running process of a program, with its pipes.
 pub struct ProgramProcess {
     /// The per-test time limit, for the reason of a timeout.
@@ -187,13 +178,15 @@ pub struct ProgramProcess {
 impl ProgramProcess {
     /// Starts `command` (program and arguments) and does the handshake
     /// by `deadline`; `timeout` is the per-test limit the reason of a
-    /// timeout names.
+    /// timeout names. With `halt`, the process counts as running from its
+    /// start, so a shutdown past its grace kills it in its handshake too.
     pub fn start(
         command: &[String],
         dir: Option<&std::path::Path>,
         worker: &str,
         timeout: Duration,
         deadline: Instant,
+        halt: Option<&Halt>,
     ) -> Result<(Self, Capabilities), Fault> {
         let (program, args) = command
             .split_first()
@@ -211,6 +204,17 @@ impl ProgramProcess {
         let mut child = spawner::spawn(command, deadline)
             .map_err(|e| Fault::Spawn(format!("{program}: {e}")))?;
         let group = child.id() as i32;
+        let _starting = match halt.map(|h| h.running(group)) {
+            Some(None) => {
+                kill_group(group);
+                let _ = child.kill();
+                let _ = child.wait();
+                return Err(Fault::Spawn(format!(
+                    "{program}: not started, the worker is shutting down"
+                )));
+            }
+            starting => starting.flatten(),
+        };
         let watchdog = Arc::new(Watchdog::default());
         let watching = Arc::clone(&watchdog);
         std::thread::spawn(move || watching.watch(group));
@@ -480,7 +484,15 @@ print(json.dumps({"type": "hello", "protocol": 1, "name": str(os.getpid()), "cas
 
     fn start(command: &[String]) -> (ProgramProcess, Capabilities) {
         let timeout = Duration::from_secs(10);
-        ProgramProcess::start(command, None, "test", timeout, Instant::now() + timeout).unwrap()
+        ProgramProcess::start(
+            command,
+            None,
+            "test",
+            timeout,
+            Instant::now() + timeout,
+            None,
+        )
+        .unwrap()
     }
 
     /// Whether process `pid` is gone (or a zombie nobody has reaped yet).

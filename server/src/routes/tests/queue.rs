@@ -21,11 +21,10 @@ fn program<'a>(queue: &'a Value, name: &str) -> &'a Value {
 
 /// The gauge's value for `program`, from `/metrics`.
 async fn gauge(app: &App, program: &str) -> Option<i64> {
-    series(
-        app,
-        &format!("tslg_workers_wanted{{program=\"{program}\"}} "),
-    )
-    .await
+    // The vehicle label is the program's NAME (a Kubernetes label value).
+    let vehicle = program.split(':').next().unwrap();
+    let name = format!("tslg_workers_wanted{{program=\"{program}\",vehicle=\"{vehicle}\"}} ");
+    series(app, &name).await
 }
 
 /// The value of the series `name` (its labels included), from `/metrics`.
@@ -200,4 +199,26 @@ async fn a_worker_that_leaves_is_out_of_the_fleet_at_once_and_back_when_it_asks_
     let (status, _) = app.call("POST", "/api/v1/leases", Some(ask)).await;
     assert!(status.is_success());
     assert_eq!(x(&queue(&app).await), 1);
+}
+
+#[tokio::test]
+async fn the_queue_of_one_program_is_its_entries_and_bad_names_are_refused() {
+    let app = app(|c| c.queue_target_seconds = 60.0).await;
+    app.external_campaign().await;
+    let (status, x) = app.call("GET", "/api/v1/queue?program=x", None).await;
+    assert_eq!(status, StatusCode::OK, "{x}");
+    assert_eq!(x["programs"].as_array().unwrap().len(), 1, "{x}");
+    assert_eq!(x["workers_wanted"], 1, "{x}");
+    let (_, none) = app.call("GET", "/api/v1/queue?program=nobody", None).await;
+    assert_eq!(none["workers_wanted"], 0, "{none}");
+    assert_eq!(none["programs"], json!([]));
+    for bad in [
+        "/api/v1/queue?program=",
+        "/api/v1/queue?program=%07",
+        "/api/v1/queue?size=3",
+    ] {
+        let (status, problem) = app.call("GET", bad, None).await;
+        assert_eq!(status, StatusCode::BAD_REQUEST, "{bad}: {problem}");
+        assert!(problem["detail"].as_str().is_some(), "{problem}");
+    }
 }
