@@ -50,6 +50,17 @@ async fn program_demand(client: &tslg_client::Client) -> (u32, u32) {
     (d.workers, d.workers_wanted)
 }
 
+/// Asserts that `worker` gets the campaign's first test at once, as its
+/// lease's second attempt: the first was given back, not left to expire.
+async fn given_back_from_the_start(client: &tslg_client::Client, worker: &str) {
+    let lease = client
+        .claim(&ask(worker, &["slow:cut-in:episode"]))
+        .await
+        .unwrap()
+        .expect("the lease given back");
+    assert_eq!((lease.resume_at, lease.attempt), (0, 2));
+}
+
 /// Tests started, by the tally.
 fn started(tally: &Path) -> u64 {
     std::fs::metadata(tally).map_or(0, |m| m.len())
@@ -157,12 +168,7 @@ async fn sigterm_past_the_grace_kills_the_program_and_gives_its_test_back() {
     );
     // Its lease was given back, not left to expire: the next worker gets
     // the same tests at once, as the lease's second attempt.
-    let lease = client
-        .claim(&ask("pod-2", &["slow:cut-in:episode"]))
-        .await
-        .unwrap()
-        .expect("the lease given back");
-    assert_eq!((lease.resume_at, lease.attempt), (0, 2));
+    given_back_from_the_start(client, "pod-2").await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -229,12 +235,7 @@ async fn a_batch_system_signalling_every_process_costs_no_invalid_test() {
         "{view:?}"
     );
     assert_eq!(started(tally), 1);
-    let lease = client
-        .claim(&ask("job-10", &["slow:cut-in:episode"]))
-        .await
-        .unwrap()
-        .expect("the test given back");
-    assert_eq!((lease.resume_at, lease.attempt), (0, 2));
+    given_back_from_the_start(client, "job-10").await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
