@@ -267,11 +267,23 @@ async fn history_is_log_downsampled_and_each_point_is_the_estimate_of_its_prefix
     let few: tslg_api::History = get(&format!("{url}?points=20")).await.json().await.unwrap();
     let bad = get(&format!("{url}?points=1")).await;
     let unknown = get(&format!("{url}?size=3")).await;
-    assert!(
-        few.points.len() <= 20 && few.points.len() >= 10,
-        "{}",
-        few.points.len()
-    );
+    // The first stored point at or after each of 20 log-spaced targets
+    // between the first and the last (fewer where the stored points are
+    // coarser than the targets), the last included.
+    let (first, last) = (full[0].indices.max(1) as f64, view.indices as f64);
+    let mut expected: Vec<u64> = (0..20)
+        .filter_map(|k| {
+            let target = first * (last / first).powf(k as f64 / 19.0);
+            full.iter()
+                .map(|p| p.indices)
+                .find(|&i| i as f64 >= target * (1.0 - 1e-12))
+        })
+        .collect();
+    expected.push(view.indices);
+    expected.dedup();
+    let chosen: Vec<u64> = few.points.iter().map(|p| p.indices).collect();
+    assert!(few.points.len() <= 20, "{}", few.points.len());
+    assert_eq!(chosen, expected);
     assert_eq!(few.points.first(), full.first());
     assert_eq!(few.points.last().unwrap().indices, view.indices);
     assert!(few.points.windows(2).all(|w| w[0].indices < w[1].indices));
