@@ -76,6 +76,7 @@ pub mod prefix;
 pub mod progress;
 pub mod registry;
 pub mod sampling;
+pub mod sequence;
 pub mod test_stream;
 pub mod tolerance;
 pub mod vehicle;
