@@ -227,6 +227,12 @@ pub struct RuleArgs {
     /// cases; pair it with `--outside ndd`).
     #[arg(long)]
     pub guard_outside: bool,
+    /// The interval the rule reads and the answer reports: `wald` (valid at
+    /// the stop) or `anytime` (a confidence sequence, valid at every number
+    /// of tests: watch, stop, extend or gate at any time; about three
+    /// times the tests). Grid cases' library and NDD campaigns.
+    #[arg(long, default_value = "wald")]
+    pub interval: tslg_method::estimator::Interval,
 }
 
 /// A value given by its name on the wire (`running`, `ready`).

@@ -275,6 +275,7 @@ pub fn stopping_rule(
         min_events: args.min_events,
         max_tests: args.max_tests,
         guard_outside: args.guard_outside,
+        interval: args.interval,
     };
     rule.validate().context("invalid stopping rule")?;
     Ok(rule)

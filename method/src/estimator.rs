@@ -228,6 +228,51 @@ pub struct StoppingRule {
     /// is at most β times the estimate. Library campaigns of grid cases only.
     #[serde(default)]
     pub guard_outside: bool,
+    /// Which interval the rule reads: the normal (Wald) interval, valid at
+    /// a fixed number of tests, or a confidence sequence, valid at every
+    /// number of tests at once ([`crate::anytime`]).
+    #[serde(default)]
+    pub interval: Interval,
+}
+
+/// The interval a campaign reports and stops on (docs/statistics.md,
+/// "What each interval promises").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Interval {
+    /// `μ̂ ± z s/√n`: covers at the nominal level at a number of tests
+    /// fixed in advance, and approximately at the rule's stop. Looking at
+    /// it along the way and acting on what it shows is not covered.
+    #[default]
+    Wald,
+    /// A betting confidence sequence ([`crate::sequence`]): it holds at
+    /// every number of tests at once, so watching, stopping early,
+    /// extending and gating at any time keep its promise. It costs about
+    /// three times the tests.
+    Anytime,
+}
+
+impl Interval {
+    /// The name on the command line and in the API.
+    pub fn name(self) -> &'static str {
+        match self {
+            Interval::Wald => "wald",
+            Interval::Anytime => "anytime",
+        }
+    }
+}
+
+impl std::str::FromStr for Interval {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "wald" => Ok(Interval::Wald),
+            "anytime" => Ok(Interval::Anytime),
+            other => Err(format!(
+                "unknown interval `{other}`; intervals are wald, anytime"
+            )),
+        }
+    }
 }
 
 /// Defaults chosen from coverage measurements (`tslg validate`); see
@@ -282,6 +327,7 @@ impl StoppingRule {
             min_events: DEFAULT_MIN_EVENTS,
             max_tests,
             guard_outside: false,
+            interval: Interval::Wald,
         }
     }
 
@@ -460,6 +506,7 @@ mod tests {
             min_events: 2,
             max_tests: 100,
             guard_outside: false,
+            interval: Default::default(),
         };
         let mut e = ImportanceEstimator::default();
         e.push(0.5, true);
@@ -486,6 +533,7 @@ mod tests {
             min_events: 2,
             max_tests: 6,
             guard_outside: false,
+            interval: Default::default(),
         };
         let z = rule.z();
         let mut e = ImportanceEstimator::default();

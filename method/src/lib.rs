@@ -34,6 +34,8 @@
 //! - `estimator`: the importance-sampling estimator and stopping rule;
 //!   `prefix`: folding results in test order; `outside`: the bound on the
 //!   failure mass outside a library.
+//! - `sequence`: confidence sequences by betting; `anytime`: a campaign's
+//!   interval that holds at every number of tests.
 //! - `paired`: paired regressions; `exact`: exact answers by enumeration;
 //!   `warnings`: what an answer's numbers warn of.
 //!
@@ -52,6 +54,7 @@
 
 pub mod adaptive;
 pub mod alias;
+pub mod anytime;
 pub mod campaign;
 pub mod case;
 pub mod cases;

@@ -383,6 +383,7 @@ mod tests {
             min_events: 10,
             max_tests: 100_000,
             guard_outside: false,
+            interval: Default::default(),
         };
         // Vehicle a fails on every 7th test, b on every 11th; test 5 of
         // each 50 could not run.

@@ -170,30 +170,8 @@ impl PrefixFold {
         exploration: Option<Exploration<'_>>,
         observe: &mut dyn FnMut(&PrefixFold),
     ) -> Result<Option<Decision>, FoldError> {
-        let from = self.indices;
-        let mut previous = None;
-        for &(index, outcome) in outcomes {
-            if index < from || index >= to {
-                return Err(FoldError::OutOfSpan { index, from, to });
-            }
-            if previous.is_some_and(|p| index <= p) {
-                return Err(FoldError::Unordered(index));
-            }
-            if let SparseOutcome::Event(weight) = outcome {
-                if !(weight.is_finite() && weight >= 0.0) {
-                    return Err(FoldError::BadWeight { index, weight });
-                }
-            }
-            previous = Some(index);
-        }
         let explored = exploration.map_or(&[][..], |e| e.explored);
-        let mut previous = None;
-        for &index in explored {
-            if index < from || index >= to || previous.is_some_and(|p| index <= p) {
-                return Err(FoldError::Explored { index, from, to });
-            }
-            previous = Some(index);
-        }
+        check_span(self.indices, to, outcomes, explored)?;
         if self.indices >= rule.max_tests {
             return Ok(Some(Decision::Exhausted));
         }
@@ -326,7 +304,7 @@ impl PrefixFold {
         self.converged(rule, z) && self.guard_holds(rule, mass)
     }
 
-    fn guard_holds(&self, rule: &StoppingRule, mass: Option<&OutsideMass>) -> bool {
+    pub(crate) fn guard_holds(&self, rule: &StoppingRule, mass: Option<&OutsideMass>) -> bool {
         let (Some(mass), true) = (mass, rule.guard_outside) else {
             return true;
         };
@@ -518,6 +496,40 @@ impl PrefixFold {
     }
 }
 
+/// Checks a span `from..to` handed to a fold: its outcomes and exploring
+/// tests inside it and in strictly increasing order, event weights finite
+/// and `≥ 0`.
+pub(crate) fn check_span(
+    from: u64,
+    to: u64,
+    outcomes: &[(u64, SparseOutcome)],
+    explored: &[u64],
+) -> Result<(), FoldError> {
+    let mut previous = None;
+    for &(index, outcome) in outcomes {
+        if index < from || index >= to {
+            return Err(FoldError::OutOfSpan { index, from, to });
+        }
+        if previous.is_some_and(|p| index <= p) {
+            return Err(FoldError::Unordered(index));
+        }
+        if let SparseOutcome::Event(weight) = outcome {
+            if !(weight.is_finite() && weight >= 0.0) {
+                return Err(FoldError::BadWeight { index, weight });
+            }
+        }
+        previous = Some(index);
+    }
+    let mut previous = None;
+    for &index in explored {
+        if index < from || index >= to || previous.is_some_and(|p| index <= p) {
+            return Err(FoldError::Explored { index, from, to });
+        }
+        previous = Some(index);
+    }
+    Ok(())
+}
+
 /// The tally a fold of `0..to` keeps of its exploring tests, from the
 /// span's `explored` tests and its stored `outcomes` (both sorted): the
 /// valid exploring tests, their events and those events' weights summed in
@@ -611,6 +623,7 @@ mod tests {
             min_events: rng.random_range(0..5),
             max_tests: rng.random_range(200..len),
             guard_outside,
+            interval: Default::default(),
         }
     }
 
@@ -1000,6 +1013,7 @@ mod tests {
             min_events: 5,
             max_tests: 5000,
             guard_outside: false,
+            interval: Default::default(),
         };
         let z = rule.z();
         let outcomes = sparse(&tests, 0, 2000);
@@ -1038,6 +1052,7 @@ mod tests {
             min_events: 1,
             max_tests: 100,
             guard_outside: false,
+            interval: Default::default(),
         };
         let z = rule.z();
         let events: Vec<_> = (0..10).map(|i| (i, SparseOutcome::Event(1.0))).collect();
@@ -1057,6 +1072,7 @@ mod tests {
             min_events: 1,
             max_tests: 5,
             guard_outside: false,
+            interval: Default::default(),
         };
         let z = rule.z();
         let mut fold = PrefixFold::default();

@@ -174,6 +174,7 @@ mod tests {
             outside_share: Some(0.0),
             outside_upper: Some(0.01),
             guarded_ci_high: Some(1.115e-2),
+            interval: Default::default(),
         }
     }
 

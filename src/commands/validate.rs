@@ -432,6 +432,7 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
                         min_events,
                         max_tests: args.max_tests,
                         guard_outside,
+                        interval: Default::default(),
                     };
                     rule.validate()?;
                     setups.push(Setup {

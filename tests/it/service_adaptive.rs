@@ -35,6 +35,7 @@ fn adaptive_in_process(request: &CreateCampaign, vut: &str) -> AdaptiveRun {
         min_events: 10,
         max_tests: request.max_tests,
         guard_outside: false,
+        interval: Default::default(),
     };
     case.adaptive_campaign(
         &library.file,

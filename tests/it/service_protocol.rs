@@ -236,6 +236,7 @@ async fn results_are_idempotent_fenced_on_the_attempt_and_leases_expire_and_retu
         min_events: 10,
         max_tests: 10_000_000,
         guard_outside: false,
+        interval: Default::default(),
     };
     let sparse: Vec<_> = events
         .iter()

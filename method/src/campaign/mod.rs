@@ -9,7 +9,8 @@ pub(crate) mod result;
 
 pub use result::CampaignResult;
 
-use crate::estimator::StoppingRule;
+use crate::anytime::{AnytimeFold, TermBounds};
+use crate::estimator::{Interval, StoppingRule};
 use crate::outside::OutsideMass;
 use crate::prefix::{Exploration, PrefixFold, SparseOutcome};
 use crate::registry::CampaignTests;
@@ -73,6 +74,7 @@ pub fn run_campaign_with(
             surrogate_misses: &misses,
             strata: distribution.strata(),
         }),
+        distribution.term_bounds(),
         rule,
     )
 }
@@ -106,6 +108,7 @@ pub fn run_outcome_campaign(
                 .collect()
         },
         explorer,
+        None,
         rule,
     )
 }
@@ -116,18 +119,28 @@ const SPAN: u64 = 1024;
 
 /// [`run_outcome_campaign`] with the outcomes of a span of tests at once:
 /// `span(from, to)` lists the tests of `from..to` with an event or invalid,
-/// in any order.
+/// in any order. An anytime rule ([`Interval::Anytime`]) needs `bounds`,
+/// its terms' largest values.
 pub fn run_span_campaign(
     span: &(dyn Fn(u64, u64) -> Vec<(u64, SparseOutcome)> + Sync),
     explorer: Option<Explorer<'_>>,
+    bounds: Option<TermBounds>,
     rule: &StoppingRule,
 ) -> CampaignResult {
     let z = rule.z();
     let mass = explorer.map(|e| e.mass);
-    let mut fold = PrefixFold::with_strata(explorer.and_then(|e| e.strata));
+    let strata = explorer.and_then(|e| e.strata);
+    let mut fold = match rule.interval {
+        Interval::Wald => Fold::Wald(PrefixFold::with_strata(strata)),
+        Interval::Anytime => Fold::Anytime(Box::new(AnytimeFold::new(
+            rule,
+            strata,
+            bounds.expect("an anytime campaign's input was checked to have bounded terms"),
+        ))),
+    };
     let mut batch = FIRST_BATCH;
     loop {
-        let from = fold.indices;
+        let from = fold.indices();
         let to = (from + batch).min(rule.max_tests);
         let mut events = span(from, to);
         events.sort_by_key(|&(i, _)| i);
@@ -143,13 +156,33 @@ pub fn run_span_campaign(
             mass: e.mass,
             surrogate_misses: e.surrogate_misses,
         });
-        let stop = fold
-            .advance(rule, z, to, &events, exploration)
-            .expect("weights of a valid distribution are finite and ≥ 0");
+        let stop = match &mut fold {
+            Fold::Wald(fold) => fold.advance(rule, z, to, &events, exploration),
+            Fold::Anytime(fold) => fold.advance(rule, to, &events, exploration),
+        }
+        .expect("weights of a valid distribution are finite and ≥ 0");
         if let Some(status) = stop {
-            return CampaignResult::from_fold(status, &fold, rule, mass);
+            return match &fold {
+                Fold::Wald(fold) => CampaignResult::from_fold(status, fold, rule, mass),
+                Fold::Anytime(fold) => CampaignResult::from_anytime(status, fold, rule, mass),
+            };
         }
         batch = (batch * 2).min(MAX_BATCH);
+    }
+}
+
+/// An in-process campaign's fold, by the interval its rule reads.
+enum Fold {
+    Wald(PrefixFold),
+    Anytime(Box<AnytimeFold>),
+}
+
+impl Fold {
+    fn indices(&self) -> u64 {
+        match self {
+            Fold::Wald(fold) => fold.indices,
+            Fold::Anytime(fold) => fold.fold.indices,
+        }
     }
 }
 
@@ -209,6 +242,7 @@ pub fn run_campaign_tests(
             surrogate_misses: &misses,
             strata: tests.strata(),
         }),
+        tests.term_bounds(),
         rule,
     )
 }

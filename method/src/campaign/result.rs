@@ -1,7 +1,8 @@
 //! The state of a campaign's estimate: the summary of its prefix fold that
 //! every view, file and answer reports.
 
-use crate::estimator::{Decision, StoppingRule};
+use crate::anytime::AnytimeFold;
+use crate::estimator::{Decision, Interval, StoppingRule};
 use crate::outside::OutsideMass;
 use crate::prefix::PrefixFold;
 use serde::{Deserialize, Serialize};
@@ -51,6 +52,10 @@ pub struct CampaignResult {
     /// library ([`crate::outside`]); `None` where the campaign has no
     /// library outside to bound (the NDD, car-following).
     pub outside_upper: Option<f64>,
+    /// Which interval `ci_low..ci_high` is: the normal one, or the
+    /// confidence sequence's ([`crate::anytime`]).
+    #[serde(default)]
+    pub interval: Interval,
     /// The interval's upper end with the outside part of the estimate
     /// ([`crate::prefix::PrefixFold::outside_estimate`]) replaced by its
     /// bound: `max(ci_high, ci_high − μ̂_out + U)`.
@@ -102,7 +107,48 @@ impl CampaignResult {
                 .then(|| (outside_part / fold.estimate()).min(1.0)),
             outside_upper,
             guarded_ci_high: outside_upper.map(|u| ci_high.max(ci_high - outside_part + u)),
+            interval: Interval::Wald,
         }
+    }
+
+    /// The summary of an anytime fold: its interval is the sequence's
+    /// `[L, U]`, the half-width `(U − L)/2`. A stratified campaign's upper
+    /// end already holds the exploring stratum's own bound `U_out`, which
+    /// is also its outside bound; a campaign without strata keeps the
+    /// Clopper–Pearson bound of `mass`.
+    pub fn from_anytime(
+        status: Decision,
+        fold: &AnytimeFold,
+        rule: &StoppingRule,
+        mass: Option<&OutsideMass>,
+    ) -> Self {
+        let outside_upper = match fold.outside_upper() {
+            Some(upper) => Some(upper),
+            None => mass.map(|m| {
+                m.upper(
+                    fold.fold.outside.tests,
+                    fold.fold.outside.events,
+                    rule.confidence,
+                )
+            }),
+        };
+        let mut result = Self::with_outside_upper(status, &fold.fold, rule.z(), outside_upper);
+        let bounds = fold.bounds();
+        result.ci_low = bounds.low;
+        result.ci_high = bounds.high;
+        result.half_width = (bounds.high - bounds.low) / 2.0;
+        result.relative_half_width = if result.estimate > 0.0 {
+            result.half_width / result.estimate
+        } else {
+            f64::INFINITY
+        };
+        let outside_part = fold.fold.outside_estimate();
+        result.guarded_ci_high = outside_upper.map(|u| match fold.outside_upper() {
+            Some(_) => bounds.high,
+            None => bounds.high.max(bounds.high - outside_part + u),
+        });
+        result.interval = Interval::Anytime;
+        result
     }
 
     /// Whether the interval contains `value`.

@@ -101,6 +101,11 @@ pub trait CampaignTests: Send + Sync {
     fn strata(&self) -> Option<f64> {
         None
     }
+    /// The largest terms of an anytime campaign's sequences
+    /// ([`crate::anytime`]); `None` where this case has no anytime interval.
+    fn term_bounds(&self) -> Option<crate::anytime::TermBounds> {
+        None
+    }
     /// The fill that bounds the failure mass outside the library
     /// ([`crate::outside`]); `None` for the NDD and for cases whose
     /// exploration is per decision (car-following).

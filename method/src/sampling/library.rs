@@ -3,6 +3,7 @@
 use super::draw::Draw;
 use super::share::{check_epsilon, stratified_explores, OutsideSpread, SamplingError, Split};
 use crate::alias::AliasTable;
+use crate::anytime::TermBounds;
 use crate::library::Library;
 use crate::mass::GridMass;
 use crate::outside::OutsideMass;
@@ -29,6 +30,8 @@ pub struct LibraryDistribution {
     /// The worst-case fill of the outside cells, built when first asked for
     /// (only the coordinator and in-process runs need it).
     outside_mass: std::sync::OnceLock<OutsideMass>,
+    /// The largest terms of an anytime campaign's sequences, likewise.
+    term_bounds: std::sync::OnceLock<TermBounds>,
 }
 
 impl LibraryDistribution {
@@ -95,6 +98,7 @@ impl LibraryDistribution {
             outside_cells,
             outside_ndd,
             outside_mass: Default::default(),
+            term_bounds: Default::default(),
         })
     }
 
@@ -112,6 +116,32 @@ impl LibraryDistribution {
                 (OutsideSpread::Ndd, _) => OutsideMass::Proportional {
                     total: outside.map(|c| self.exposure.p(c)).sum(),
                 },
+            }
+        })
+    }
+
+    /// The largest term each sequence of an anytime campaign can see
+    /// ([`crate::anytime`]): under the stratified split a library test's
+    /// `(1 − ε) w` and an exploring test's `ε w` (`P(X \ Φ)` under the NDD
+    /// spread, `P(x) N_out` at most under the uniform one), each the
+    /// largest over its cells of the weight [`Self::draw`] computes; under
+    /// the random split the largest weight `w` of all.
+    pub fn term_bounds(&self) -> TermBounds {
+        *self.term_bounds.get_or_init(|| {
+            let weight = |cell: usize| self.exposure.p(cell) / self.q(cell).max(PROBABILITY_FLOOR);
+            let largest =
+                |cells: &mut dyn Iterator<Item = usize>| cells.map(weight).fold(0.0f64, f64::max);
+            let inside = largest(&mut self.cells.iter().copied());
+            let outside = largest(&mut (0..self.in_library.len()).filter(|&c| !self.contains(c)));
+            match self.strata() {
+                Some(epsilon) => TermBounds::Stratified {
+                    inside: ((1.0 - epsilon) * inside).max(f64::MIN_POSITIVE),
+                    outside: (epsilon * outside).max(f64::MIN_POSITIVE),
+                },
+                None if self.epsilon > 0.0 => {
+                    TermBounds::Single(inside.max(outside).max(f64::MIN_POSITIVE))
+                }
+                None => TermBounds::Single(inside.max(f64::MIN_POSITIVE)),
             }
         })
     }

@@ -20,6 +20,7 @@ pub use share::{
 };
 pub use support::SupportDistribution;
 
+use crate::anytime::TermBounds;
 use crate::outside::OutsideMass;
 pub use crate::test_stream::{long_test_rng, test_rng, TestRng, TestStreams};
 
@@ -125,6 +126,17 @@ impl TestDistribution {
             TestDistribution::Library(d) => d.strata(),
             TestDistribution::Ndd(_) | TestDistribution::Enumeration(_) => None,
             TestDistribution::Support(d) => Some(d.epsilon()).filter(|&e| e > 0.0),
+        }
+    }
+
+    /// The largest terms of an anytime campaign's sequences
+    /// ([`crate::anytime`]): 1 for the NDD, the library's per stratum;
+    /// `None` for an adaptive stage or an enumeration.
+    pub fn term_bounds(&self) -> Option<TermBounds> {
+        match self {
+            TestDistribution::Library(d) => Some(d.term_bounds()),
+            TestDistribution::Ndd(_) => Some(TermBounds::Single(1.0)),
+            TestDistribution::Support(_) | TestDistribution::Enumeration(_) => None,
         }
     }
 

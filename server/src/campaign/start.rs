@@ -59,6 +59,7 @@ pub fn rule_of(req: &CreateCampaign) -> Result<StoppingRule, ServiceError> {
         min_events: req.min_events.unwrap_or(DEFAULT_MIN_EVENTS),
         max_tests: req.max_tests,
         guard_outside: req.guard_outside,
+        interval: Default::default(),
     };
     rule.validate().map_err(|e| bad(e.to_string()))?;
     if req.guard_outside && req.method == Method::Ndd {

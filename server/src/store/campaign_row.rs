@@ -121,6 +121,7 @@ impl CampaignRow {
             min_events: self.min_events as u64,
             max_tests: self.max_tests as u64,
             guard_outside: self.guard_outside,
+            interval: Default::default(),
         }
     }
 

@@ -466,6 +466,7 @@ pub fn rule_of(request: &CreateCampaign) -> StoppingRule {
         min_events: request.min_events.unwrap_or(10),
         max_tests: request.max_tests,
         guard_outside: request.guard_outside,
+        interval: Default::default(),
     }
 }
 

@@ -203,6 +203,10 @@ where
         self.distribution.outside_mass()
     }
 
+    fn term_bounds(&self) -> Option<crate::anytime::TermBounds> {
+        self.distribution.term_bounds()
+    }
+
     fn run_cell(
         &self,
         index: u64,
