@@ -35,6 +35,7 @@ fn request(method: Method, library_id: Option<i64>, vut: &Value, seed: u64) -> C
         n_min: None,
         min_events: None,
         guard_outside: false,
+        interval: Default::default(),
         paired_with: None,
         outside: None,
         split: None,

@@ -33,6 +33,7 @@ fn request(tests: u64) -> CreateCampaign {
         n_min: None,
         min_events: None,
         guard_outside: false,
+        interval: Default::default(),
         paired_with: None,
         outside: None,
         split: None,

@@ -138,6 +138,7 @@ async fn through_service(seed: u64, threads: usize) -> anyhow::Result<Run> {
             n_min: None,
             min_events: None,
             guard_outside: false,
+            interval: Default::default(),
             paired_with: None,
             outside: None,
             split: None,

@@ -93,6 +93,15 @@ pub struct CreateCampaign {
     /// about `2.3/(ε β P(A))` tests with `outside: ndd` at 90 %.
     #[serde(default)]
     pub guard_outside: bool,
+    /// The interval the campaign stops on and reports: `wald` (the
+    /// default; valid at the stop) or `anytime` (a confidence sequence,
+    /// valid at every number of tests, so that watching, stopping early
+    /// and gating keep its promise; about three times the tests). Library
+    /// and NDD campaigns of grid cases; a library campaign's anytime
+    /// interval bounds the failure mass outside the library too, and its
+    /// `outside` defaults to `ndd`.
+    #[serde(default)]
+    pub interval: crate::IntervalKind,
     /// A paired regression campaign: a second vehicle (as `vut`) tested on
     /// the same tests, and the difference of the rates (`vut`'s minus this
     /// one's) estimated from the same draws. It stops when the difference
@@ -222,6 +231,11 @@ pub struct CampaignView {
     /// Whether the campaign stops only under the outside guard.
     #[serde(default)]
     pub guard_outside: bool,
+    /// Which interval `ci_low..ci_high` is: `wald`, valid at the stop, or
+    /// `anytime`, a confidence sequence valid at every number of tests
+    /// (its `half_width` is `(ci_high − ci_low)/2`).
+    #[serde(default)]
+    pub interval: crate::IntervalKind,
     /// Whether its program's runs may differ, so that its audits compare
     /// by statistics (see `CreateCampaign::vehicle_noise`).
     #[serde(default)]

@@ -99,6 +99,32 @@ impl Outside {
     }
 }
 
+/// The interval a campaign stops on and reports (docs/statistics.md,
+/// "What each interval promises").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, ToSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum IntervalKind {
+    /// The normal interval `μ̂ ± z σ̂/√n`: valid at the campaign's stop,
+    /// not when acted on along the way.
+    #[default]
+    Wald,
+    /// A confidence sequence: it holds at every number of tests at once,
+    /// so watching, stopping early, extending and gating at any time keep
+    /// its promise (about three times the tests). Library and NDD
+    /// campaigns of grid cases.
+    Anytime,
+}
+
+impl IntervalKind {
+    /// The interval's name on the wire (`wald`, `anytime`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            IntervalKind::Wald => "wald",
+            IntervalKind::Anytime => "anytime",
+        }
+    }
+}
+
 /// A campaign's state.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
 #[serde(rename_all = "kebab-case")]

@@ -80,6 +80,7 @@ pub fn program_campaign(
         n_min: None,
         min_events: None,
         guard_outside: false,
+        interval: Default::default(),
         paired_with: None,
         vehicle_noise: false,
     }

@@ -53,6 +53,22 @@ pub fn split(split: tslg_api::Split) -> tslg_method::sampling::Split {
     }
 }
 
+/// The interval a campaign reads, from the wire.
+pub fn interval(kind: tslg_api::IntervalKind) -> tslg_method::estimator::Interval {
+    match kind {
+        tslg_api::IntervalKind::Wald => tslg_method::estimator::Interval::Wald,
+        tslg_api::IntervalKind::Anytime => tslg_method::estimator::Interval::Anytime,
+    }
+}
+
+/// The interval a campaign reads, for the wire.
+pub fn wire_interval(interval: tslg_method::estimator::Interval) -> tslg_api::IntervalKind {
+    match interval {
+        tslg_method::estimator::Interval::Wald => tslg_api::IntervalKind::Wald,
+        tslg_method::estimator::Interval::Anytime => tslg_api::IntervalKind::Anytime,
+    }
+}
+
 /// The wire form of a split.
 pub fn wire_split(split: tslg_method::sampling::Split) -> tslg_api::Split {
     match split {

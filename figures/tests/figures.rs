@@ -40,6 +40,7 @@ fn view() -> CampaignView {
         effective_events: None,
         largest_weight_share: None,
         guard_outside: false,
+        interval: Default::default(),
         outside_tests: 0,
         outside_events: 0,
         mismatched_events: 0,

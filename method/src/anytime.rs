@@ -113,6 +113,20 @@ impl AnytimeFold {
         outcomes: &[(u64, SparseOutcome)],
         exploration: Option<Exploration<'_>>,
     ) -> Result<Option<Decision>, FoldError> {
+        self.advance_observed(rule, to, outcomes, exploration, &mut |_, _| {})
+    }
+
+    /// [`AnytimeFold::advance`], showing `observe` the prefix and the
+    /// interval at each point where the sequences settled (a history can
+    /// follow a long report's course). The final state is not shown.
+    pub fn advance_observed(
+        &mut self,
+        rule: &StoppingRule,
+        to: u64,
+        outcomes: &[(u64, SparseOutcome)],
+        exploration: Option<Exploration<'_>>,
+        observe: &mut dyn FnMut(&PrefixFold, SequenceBounds),
+    ) -> Result<Option<Decision>, FoldError> {
         let explored = exploration.map_or(&[][..], |e| e.explored);
         check_span(self.fold.indices, to, outcomes, explored)?;
         if self.fold.indices >= rule.max_tests {
@@ -168,6 +182,9 @@ impl AnytimeFold {
             }
             if decision.is_some() {
                 return Ok(decision);
+            }
+            if settled {
+                observe(&self.fold, self.bounds());
             }
         }
         Ok((self.fold.indices >= rule.max_tests).then_some(Decision::Exhausted))

@@ -126,6 +126,7 @@ async fn drive(
         n_min: None,
         min_events: None,
         guard_outside: false,
+        interval: Default::default(),
         paired_with: None,
         vehicle_noise: false,
     };

@@ -13,8 +13,9 @@ use serde::Serialize;
 use std::path::PathBuf;
 use tslg_method::adaptive::AdaptiveSettings;
 use tslg_method::campaign::{run_campaign_tests, CampaignResult};
-use tslg_method::estimator::StoppingRule;
+use tslg_method::estimator::{Interval, StoppingRule};
 use tslg_method::registry::{AdaptiveRun, ScenarioCase};
+use tslg_method::sampling::default_outside;
 use tslg_method::warnings::{warnings, Dialect, WarningContext};
 
 #[derive(Debug, Args)]
@@ -171,15 +172,25 @@ fn set_up(args: &EvaluateArgs) -> anyhow::Result<Setup> {
         descriptor.exploring_share(args.method == MethodArg::Library, args.exploration.epsilon),
     )?;
     anyhow::ensure!(
+        rule.interval == Interval::Wald
+            || (descriptor.is_grid() && args.method != MethodArg::Adaptive),
+        "--interval anytime applies to the library and ndd campaigns of the grid cases: {}",
+        if descriptor.is_grid() {
+            "an adaptive campaign's stages have no confidence sequence yet"
+        } else {
+            "a car-following test's weight has no known largest value to bet against"
+        }
+    );
+    anyhow::ensure!(
         !rule.guard_outside || descriptor.is_grid(),
         "--guard-outside applies to the grid cases: a {} campaign explores per decision, and \
          no bound on its outside mass is defined",
         descriptor.name
     );
-    let outside = args
-        .exploration
-        .outside
-        .map_or(descriptor.default_outside, OutsideArg::spread);
+    let outside = args.exploration.outside.map_or(
+        default_outside(descriptor.default_outside, &rule),
+        OutsideArg::spread,
+    );
     let file = library
         .filter(|_| args.method != MethodArg::Ndd)
         .map(|(bytes, _)| bytes);
@@ -366,8 +377,13 @@ fn print(report: &Report, rule: &StoppingRule) {
 fn print_estimate(result: &CampaignResult, rule: &StoppingRule) {
     outln!("events             {}", result.events);
     outln!("estimate           {:.4e}", result.estimate);
+    let label = match result.interval {
+        Interval::Wald => "interval      ",
+        // A confidence sequence: it holds at every number of tests at once.
+        Interval::Anytime => "anytime       ",
+    };
     outln!(
-        "{:.0}% interval       [{:.4e}, {:.4e}]",
+        "{:.0}% {label}[{:.4e}, {:.4e}]",
         100.0 * rule.confidence,
         result.ci_low,
         result.ci_high

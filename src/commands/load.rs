@@ -364,6 +364,7 @@ fn load_campaign(shape: &Shape) -> CreateCampaign {
         n_min: Some(planned.clamp(DEFAULT_N_MIN, max_tests)),
         min_events: None,
         guard_outside: false,
+        interval: Default::default(),
         paired_with: None,
         vehicle_noise: false,
         outside: None,

@@ -15,6 +15,7 @@ mod reproduce;
 mod service_access;
 mod service_adaptive;
 mod service_adversarial;
+mod service_anytime;
 mod service_bad_input;
 mod service_builds;
 mod service_carfollow;

@@ -27,6 +27,7 @@ fn request(method: Method, library_id: i64, vut: &str, seed: u64) -> CreateCampa
         n_min: None,
         min_events: None,
         guard_outside: false,
+        interval: Default::default(),
         paired_with: None,
         split: None,
         vehicle_noise: false,

@@ -37,6 +37,7 @@ fn request(
         n_min: None,
         min_events: None,
         guard_outside: false,
+        interval: Default::default(),
         paired_with: None,
         split: None,
         vehicle_noise: false,

@@ -137,6 +137,7 @@ async fn a_user_defined_case_is_defined_listed_and_run_by_workers_offering_its_p
         n_min: None,
         min_events: None,
         guard_outside: false,
+        interval: Default::default(),
         paired_with: None,
         vehicle_noise: false,
     };
@@ -377,6 +378,7 @@ async fn a_program_surrogates_library_is_built_by_workers_and_is_the_offline_one
             n_min: None,
             min_events: None,
             guard_outside: false,
+            interval: Default::default(),
             paired_with: None,
             vehicle_noise: false,
         })

@@ -15,8 +15,8 @@ pub use draw::Draw;
 pub use library::LibraryDistribution;
 pub use ndd::NddDistribution;
 pub use share::{
-    check_epsilon, stratified_explores, OutsideSpread, SamplingError, Split, MAX_EPSILON,
-    MIN_EPSILON,
+    check_epsilon, default_outside, stratified_explores, OutsideSpread, SamplingError, Split,
+    MAX_EPSILON, MIN_EPSILON,
 };
 pub use support::SupportDistribution;
 

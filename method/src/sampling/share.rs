@@ -28,6 +28,26 @@ impl std::str::FromStr for OutsideSpread {
     }
 }
 
+/// The spread a library campaign gets when none is asked for: the NDD
+/// spread when its rule guards the outside or reads an anytime interval,
+/// the case's default otherwise. The NDD spread is the only one whose
+/// outside weights are bounded by `P(X \ Φ)`, so the only one under which
+/// a bound on the outside failure mass reaches `βμ` in about
+/// `ln(1/(1 − c))/(βμ)` exploring tests; under the uniform spread an
+/// exploring test's weight is `P(x) N_out`, and the bound has to allow for
+/// a failure in the most exposed outside cell (docs/statistics.md,
+/// "The guard's floor").
+pub fn default_outside(
+    case_default: OutsideSpread,
+    rule: &crate::estimator::StoppingRule,
+) -> OutsideSpread {
+    if rule.guard_outside || rule.interval == crate::estimator::Interval::Anytime {
+        OutsideSpread::Ndd
+    } else {
+        case_default
+    }
+}
+
 /// How a library campaign's tests are split between the library and the
 /// scenarios outside it (docs/statistics.md, "Strata").
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]

@@ -79,7 +79,7 @@ pub fn read(
     let mut points: Vec<HistoryPoint> = rows
         .into_iter()
         .map(
-            |(indices, tests, events, s1, s2, outside_tests, outside_s1)| {
+            |(indices, tests, events, s1, s2, outside_tests, outside_s1, low, high)| {
                 let fold = PrefixFold {
                     estimator: ImportanceEstimator::from_sums(tests as u64, events as u64, s1, s2),
                     indices: indices as u64,
@@ -91,13 +91,13 @@ pub fn read(
                     },
                     strata: row.strata_epsilon,
                 };
-                point(&fold, z)
+                point_of(&fold, z, low.zip(high))
             },
         )
         .collect();
     let current = row.fold();
     if current.indices > points.last().map_or(0, |p| p.indices) {
-        points.push(point(&current, z));
+        points.push(point_of(&current, z, row.sequence()));
     }
     Ok(log_downsample(points, max))
 }
@@ -121,6 +121,21 @@ pub fn point(fold: &PrefixFold, z: f64) -> HistoryPoint {
         ci_low: if e.tests() > 0 { ci_low } else { 0.0 },
         ci_high: if e.tests() > 0 { ci_high } else { 0.0 },
     }
+}
+
+/// [`point`] with the interval of a confidence sequence, `[low, high]`,
+/// where the campaign reads one (an anytime campaign): its half-width is
+/// `(high − low)/2`.
+pub fn point_of(fold: &PrefixFold, z: f64, sequence: Option<(f64, f64)>) -> HistoryPoint {
+    let mut point = point(fold, z);
+    if let (Some((low, high)), true) = (sequence, fold.estimator.tests() > 0) {
+        point.ci_low = low;
+        point.ci_high = high;
+        point.half_width = (high - low) / 2.0;
+        point.relative_half_width =
+            (point.estimate > 0.0).then(|| point.half_width / point.estimate);
+    }
+    point
 }
 
 #[cfg(test)]

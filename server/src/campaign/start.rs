@@ -10,7 +10,9 @@ use crate::store::libraries::{self, LibraryRow};
 use crate::store::pairs;
 use crate::validate::check_name;
 use std::sync::Arc;
-use tslg_api::{CampaignStatus, CreateCampaign, LibraryStatus, Method, EXACT_MAX_SCENARIOS};
+use tslg_api::{
+    CampaignStatus, CreateCampaign, IntervalKind, LibraryStatus, Method, EXACT_MAX_SCENARIOS,
+};
 use tslg_client::wire;
 use tslg_method::adaptive::AdaptiveSettings;
 use tslg_method::cases::open_case;
@@ -18,7 +20,7 @@ use tslg_method::cases::{descriptor, descriptors};
 use tslg_method::estimator::{default_n_min, StoppingRule, DEFAULT_MIN_EVENTS};
 use tslg_method::external::ExternalVut;
 use tslg_method::registry::{CampaignTests, CaseError, ExposureSource, ScenarioCase};
-use tslg_method::sampling::{check_epsilon, OutsideSpread, Split};
+use tslg_method::sampling::{check_epsilon, default_outside, OutsideSpread, Split};
 
 fn bad(message: impl Into<String>) -> ServiceError {
     ServiceError::Unprocessable(message.into())
@@ -59,7 +61,7 @@ pub fn rule_of(req: &CreateCampaign) -> Result<StoppingRule, ServiceError> {
         min_events: req.min_events.unwrap_or(DEFAULT_MIN_EVENTS),
         max_tests: req.max_tests,
         guard_outside: req.guard_outside,
-        interval: Default::default(),
+        interval: wire::interval(req.interval),
     };
     rule.validate().map_err(|e| bad(e.to_string()))?;
     if req.guard_outside && req.method == Method::Ndd {
@@ -98,6 +100,24 @@ pub fn rule_of(req: &CreateCampaign) -> Result<StoppingRule, ServiceError> {
             "paired_with estimates the difference of two rates; guard_outside bounds one \
              campaign's outside mass, and no guard is defined for a difference: run the \
              guarded campaigns separately",
+        ));
+    }
+    if req.interval == IntervalKind::Anytime
+        && !(case.is_grid() && matches!(req.method, Method::Library | Method::Ndd))
+    {
+        return Err(bad(format!(
+            "interval `anytime` applies to the library and ndd campaigns of the grid cases              ({}): {}",
+            grid_cases(),
+            if !case.is_grid() {
+                "a car-following test's weight has no known largest value to bet against"
+            } else {
+                "an adaptive campaign's stages and a library build have no confidence                  sequence yet"
+            }
+        )));
+    }
+    if req.interval == IntervalKind::Anytime && req.paired_with.is_some() {
+        return Err(bad(
+            "paired_with stops on the difference of two rates at its looks; interval              `anytime` is a sequence for one rate: run the two campaigns apart",
         ));
     }
     if req.guard_outside && !case.is_grid() {
@@ -173,7 +193,7 @@ fn open(
     let vut = case.normalise_vehicle(&tslg_api::vehicle_spec(&req.vut))?;
     let outside = match req.outside {
         Some(o) => wire::outside_spread(o),
-        None => case.default_outside(),
+        None => default_outside(case.default_outside(), rule),
     };
     let split = req.split.map_or(Split::default(), wire::split);
     let tests = match (req.method, file) {

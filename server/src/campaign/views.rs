@@ -40,11 +40,23 @@ fn predicted_tests(rule: &StoppingRule, point: &HistoryPoint) -> Option<u64> {
 pub fn campaign_view(row: &CampaignRow) -> CampaignView {
     let rule = row.rule();
     let fold = row.fold();
-    let point = history::point(&fold, rule.z());
+    let point = history::point_of(&fold, rule.z(), row.sequence());
     let has_events = row.events > 0;
     let started = row.indices > 0;
-    let summary =
+    let mut summary =
         CampaignResult::with_outside_upper(Decision::Continue, &fold, rule.z(), row.outside_upper);
+    if let Some((low, high)) = row.sequence() {
+        // The sequence's upper end holds the exploring stratum's own bound
+        // already (`CampaignResult::from_anytime`).
+        summary.ci_low = low;
+        summary.ci_high = high;
+        summary.half_width = point.half_width;
+        summary.relative_half_width = point.relative_half_width.unwrap_or(f64::INFINITY);
+        summary.interval = rule.interval;
+        if fold.strata.is_some() {
+            summary.guarded_ci_high = summary.outside_upper.map(|_| high);
+        }
+    }
     CampaignView {
         id: row.id,
         case: row.case_name.clone(),
@@ -78,6 +90,7 @@ pub fn campaign_view(row: &CampaignRow) -> CampaignView {
         effective_events: has_events.then(|| fold.estimator.effective_events()),
         largest_weight_share: fold.estimator.largest_share(),
         guard_outside: row.guard_outside,
+        interval: tslg_client::wire::wire_interval(rule.interval),
         vehicle_noise: row.vehicle_noise,
         outside_tests: summary.outside_tests,
         outside_events: summary.outside_events,

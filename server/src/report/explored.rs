@@ -34,6 +34,8 @@ pub struct ExploredRanges {
     /// Tests the folds drew again because no kept set covered them, since
     /// the coordinator started (`tslg_fold_drawn_tests_total`).
     drawn: AtomicU64,
+    /// The anytime campaigns' folds, kept between reports likewise.
+    pub anytime: crate::report::anytime::AnytimeFolds,
 }
 
 #[derive(Default)]
@@ -113,6 +115,7 @@ impl ExploredRanges {
 
     /// Drops every set of a campaign that has stopped.
     pub fn forget(&self, campaign: i64) {
+        self.anytime.forget(campaign);
         let mut kept = self.lock();
         if let Some(sets) = kept.campaigns.remove(&campaign) {
             kept.indices -= sets.values().map(|s| weight(s)).sum::<usize>();

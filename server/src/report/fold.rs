@@ -10,6 +10,7 @@
 
 use crate::campaign::history;
 use crate::error::ServiceError;
+use crate::report::anytime::{self, AnytimeSpan};
 use crate::report::check::CheckedReport;
 use crate::report::explored::{exploring_in, ExploredRanges};
 use crate::report::replay::Explored;
@@ -19,7 +20,7 @@ use crate::store::reports;
 use rusqlite::Connection;
 use std::sync::Arc;
 use tslg_api::{CampaignStatus, Method};
-use tslg_method::estimator::{Decision, StoppingRule};
+use tslg_method::estimator::{Decision, Interval, StoppingRule};
 use tslg_method::outside::OutsideMass;
 use tslg_method::prefix::{outside_tally, Exploration, FoldError, PrefixFold, SparseOutcome};
 use tslg_method::registry::CampaignTests;
@@ -29,8 +30,9 @@ pub struct Folded {
     /// The state after the fold.
     pub fold: PrefixFold,
     /// History points inside the fold worth storing, then the last one
-    /// when it is worth storing or the campaign stopped.
-    pub course: Vec<PrefixFold>,
+    /// when it is worth storing or the campaign stopped; with an anytime
+    /// campaign's interval there.
+    pub course: Vec<(PrefixFold, Option<(f64, f64)>)>,
     /// `Some` when the rule stopped the campaign.
     pub decision: Option<Decision>,
 }
@@ -57,12 +59,12 @@ pub fn fold_step(
         &mut |state| {
             if history::worth_storing(last_stored, state.indices) {
                 last_stored = Some(state.indices);
-                course.push(*state);
+                course.push((*state, None));
             }
         },
     )?;
     if decision.is_some() || history::worth_storing(last_stored, fold.indices) {
-        course.push(fold);
+        course.push((fold, None));
     }
     Ok(Folded {
         fold,
@@ -77,7 +79,7 @@ const SERIAL_DRAWS: u64 = 1 << 16;
 /// The tests of `from..to` that draw outside the library (one random
 /// number each, about 0.1 µs), on rayon's threads when there are many:
 /// the writer waits for them, as for any of its statements.
-fn explored_tests(tests: &Arc<dyn CampaignTests>, from: u64, to: u64) -> Vec<u64> {
+pub(crate) fn explored_tests(tests: &Arc<dyn CampaignTests>, from: u64, to: u64) -> Vec<u64> {
     use rayon::prelude::*;
     if to.saturating_sub(from) <= SERIAL_DRAWS {
         return (from..to).filter(|&i| tests.explores(i)).collect();
@@ -199,6 +201,7 @@ fn fold_charging(
     }
     let from = fold.indices;
     let outcomes = outcomes_to_fold(conn, campaign.id, from, frontier, fresh)?;
+    let all_tests = tests.clone();
     let tests = tests.filter(|t| t.outside_mass().is_some());
     // A library campaign's tests say whether its estimate stratifies (ε in
     // force under the stratified split); persisted with the sums.
@@ -224,10 +227,26 @@ fn fold_charging(
         surrogate_misses: &misses,
     });
     let rule = campaign.fold_rule();
-    let mut folded = fold_step(fold, &rule, frontier, &outcomes, exploration, last_stored)
-        .map_err(|e| {
-            anyhow::anyhow!("stored outcomes of campaign {} rejected: {e}", campaign.id)
-        })?;
+    let (mut folded, anytime) = if rule.interval == Interval::Anytime {
+        let span = AnytimeSpan {
+            frontier,
+            outcomes: &outcomes,
+            explored: &explored,
+            mass,
+            misses: &misses,
+            last_stored,
+        };
+        let kept = known.kept.map(|k| &k.anytime);
+        let (folded, anytime) =
+            anytime::fold(conn, campaign, &rule, all_tests.as_ref(), kept, span)?;
+        (folded, Some(anytime))
+    } else {
+        let folded = fold_step(fold, &rule, frontier, &outcomes, exploration, last_stored)
+            .map_err(|e| {
+                anyhow::anyhow!("stored outcomes of campaign {} rejected: {e}", campaign.id)
+            })?;
+        (folded, None)
+    };
     if campaign.paired_with.is_some() {
         // A campaign of a pair stops with its pair (`store/pairs.rs`), even
         // at max_tests: until the other campaign has resolved as many
@@ -240,14 +259,30 @@ fn fold_charging(
         (Some(kept), Some(_)) => kept.forget(campaign.id),
         _ => known.settle(campaign.id, folded.fold.indices),
     }
-    let upper = mass.map(|m| {
-        m.upper(
-            folded.fold.outside.tests,
-            folded.fold.outside.events,
-            campaign.confidence,
-        )
+    // An anytime campaign's exploring stratum bounds its own mean at every
+    // n; the others keep the Clopper–Pearson bound.
+    let upper = match anytime.as_ref().and_then(|a| a.outside_upper()) {
+        Some(upper) => Some(upper),
+        None => mass.map(|m| {
+            m.upper(
+                folded.fold.outside.tests,
+                folded.fold.outside.events,
+                campaign.confidence,
+            )
+        }),
+    };
+    let sequence = anytime.map(|a| {
+        let bounds = a.bounds();
+        (bounds.low, bounds.high)
     });
-    write(conn, campaign, &rule, &folded, upper, charge.take())
+    write(
+        conn,
+        campaign,
+        &rule,
+        &folded,
+        (upper, sequence),
+        charge.take(),
+    )
 }
 
 /// The outcomes of `from..to`: those of the report just recorded, `fresh`
@@ -313,7 +348,7 @@ fn write(
     campaign: &CampaignRow,
     rule: &StoppingRule,
     folded: &Folded,
-    upper: Option<f64>,
+    (upper, sequence): (Option<f64>, Option<(f64, f64)>),
     charge: Option<Charge>,
 ) -> Result<Option<CampaignStatus>, ServiceError> {
     let fold = &folded.fold;
@@ -324,6 +359,7 @@ fn write(
         &prefix::FoldState {
             fold,
             upper,
+            sequence,
             status,
             detail: detail.as_deref(),
         },

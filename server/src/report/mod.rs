@@ -6,6 +6,7 @@
 //! [`explored`]) or, for an adaptive campaign, its stages resolved
 //! ([`stages`]). [`receive`] runs them in order.
 
+pub mod anytime;
 pub mod audit;
 pub mod check;
 pub mod dodging;

@@ -225,7 +225,7 @@ fn write(
             outside: OutsideTally::default(),
             ..fold
         };
-        prefix::store_history(conn, campaign.id, &[point])?;
+        prefix::store_history(conn, campaign.id, &[(point, None)])?;
     }
     if p.finished.is_none() {
         return Ok(None);

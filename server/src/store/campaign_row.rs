@@ -15,7 +15,7 @@ use rusqlite::types::FromSql;
 use rusqlite::{Connection, Params, Row};
 use serde::de::{DeserializeOwned, IntoDeserializer};
 use tslg_api::{CampaignStatus, ExposureRequest, Method, Outside, Split};
-use tslg_method::estimator::{ImportanceEstimator, StoppingRule};
+use tslg_method::estimator::{ImportanceEstimator, Interval, StoppingRule};
 use tslg_method::outside::OutsideTally;
 use tslg_method::prefix::PrefixFold;
 use tslg_method::registry::ExposureSource;
@@ -88,6 +88,11 @@ pub struct CampaignRow {
     /// Its program is not bit-reproducible: audits compare by statistics
     /// (`report/noisy.rs`).
     pub vehicle_noise: bool,
+    /// The interval the rule reads (`wald`, `anytime`).
+    pub interval: String,
+    /// An anytime campaign's confidence sequence as of its last fold.
+    pub sequence_low: Option<f64>,
+    pub sequence_high: Option<f64>,
     pub created_at: String,
     pub updated_at: String,
 }
@@ -106,7 +111,7 @@ pub const COLUMNS: &str = "id, case_name, preset, \
     outside_mismatches, \
     cost_per_test, worker_seconds, audits_waived, reported_s1, exact_probability, \
     stage_start, stage_end, stage_kind, library_tests, search_tests, stages, support, paired_with, created_at, \
-    updated_at, vehicle_noise";
+    updated_at, vehicle_noise, interval, sequence_low, sequence_high";
 
 impl CampaignRow {
     pub fn seed(&self) -> u64 {
@@ -121,8 +126,22 @@ impl CampaignRow {
             min_events: self.min_events as u64,
             max_tests: self.max_tests as u64,
             guard_outside: self.guard_outside,
-            interval: Default::default(),
+            interval: self.interval(),
         }
+    }
+
+    /// The interval its rule reads; a name this build does not know reads
+    /// as `wald` (none is written but by [`crate::store::campaigns::insert`]).
+    pub fn interval(&self) -> Interval {
+        self.interval.parse().unwrap_or_default()
+    }
+
+    /// An anytime campaign's confidence sequence `[low, high]` as of its
+    /// last fold; `None` for a Wald campaign and before its first fold.
+    pub fn sequence(&self) -> Option<(f64, f64)> {
+        (self.interval() == Interval::Anytime)
+            .then(|| self.sequence_low.zip(self.sequence_high))
+            .flatten()
     }
 
     /// The rule the campaign's own fold applies: its rule, except that a
@@ -260,12 +279,15 @@ fn from_row(row: &Row<'_>) -> rusqlite::Result<CampaignRow> {
         created_at: at(row, 49)?,
         updated_at: at(row, 50)?,
         vehicle_noise: at(row, 51)?,
+        interval: at(row, 52)?,
+        sequence_low: at(row, 53)?,
+        sequence_high: at(row, 54)?,
     })
 }
 
 /// The number of columns [`from_row`] reads.
 #[cfg(test)]
-const READ: usize = 52;
+const READ: usize = 55;
 
 #[cfg(test)]
 mod tests {

@@ -82,6 +82,8 @@ pub struct FoldState<'a> {
     pub fold: &'a PrefixFold,
     /// The bound on the failure mass outside the library, where there is one.
     pub upper: Option<f64>,
+    /// An anytime campaign's confidence sequence `[low, high]`.
+    pub sequence: Option<(f64, f64)>,
     pub status: CampaignStatus,
     /// Why the campaign stopped, when it did.
     pub detail: Option<&'a str>,
@@ -99,6 +101,7 @@ pub fn store_fold(
     let FoldState {
         fold,
         upper,
+        sequence,
         status,
         detail,
     } = *state;
@@ -113,7 +116,7 @@ pub fn store_fold(
         conn,
         "UPDATE campaigns SET indices = ?, tests = ?, events = ?, invalid = ?, s1 = ?, s2 = ?, \
          largest = ?, outside_tests = ?, outside_events = ?, outside_s1 = ?, outside_upper = ?, \
-         outside_mismatches = ?, strata_epsilon = ?, \
+         outside_mismatches = ?, strata_epsilon = ?, sequence_low = ?, sequence_high = ?, \
          status = ?, status_detail = COALESCE(?, status_detail), \
          cost_per_test = CASE WHEN ? THEN ? ELSE cost_per_test END, \
          worker_seconds = worker_seconds + ?, reported_s1 = reported_s1 + ?, \
@@ -132,6 +135,8 @@ pub fn store_fold(
             upper,
             fold.outside.mismatches as i64,
             fold.strata,
+            sequence.map(|s| s.0),
+            sequence.map(|s| s.1),
             status.as_str(),
             detail,
             charged,
@@ -199,14 +204,15 @@ pub fn store_stages(
 pub fn store_history(
     conn: &Connection,
     campaign: i64,
-    course: &[PrefixFold],
+    course: &[(PrefixFold, Option<(f64, f64)>)],
 ) -> Result<(), StoreError> {
     if !course.is_empty() {
         let mut statement = conn.prepare_cached(
             "INSERT OR REPLACE INTO history (campaign_id, indices, tests, events, s1, s2, \
-             outside_tests, outside_s1) VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+             outside_tests, outside_s1, sequence_low, sequence_high) \
+             VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
         )?;
-        for state in course {
+        for (state, sequence) in course {
             let (s1, s2) = state.estimator.sums();
             statement.execute(params![
                 campaign,
@@ -216,7 +222,9 @@ pub fn store_history(
                 s1,
                 s2,
                 state.outside.tests as i64,
-                state.outside.s1
+                state.outside.s1,
+                sequence.map(|s| s.0),
+                sequence.map(|s| s.1)
             ])?;
         }
     }

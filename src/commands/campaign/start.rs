@@ -96,6 +96,7 @@ pub fn start(args: &CampaignStartArgs) -> anyhow::Result<()> {
         n_min: args.rule.n_min,
         min_events: Some(args.rule.min_events),
         guard_outside: args.rule.guard_outside,
+        interval: tslg_client::wire::wire_interval(args.rule.interval),
         paired_with: args.paired_with.as_deref().map(vehicle_json).transpose()?,
         vehicle_noise: args.vehicle_noise,
     };

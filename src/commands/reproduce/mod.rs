@@ -244,6 +244,7 @@ impl Vehicle<'_> {
             n_min: None,
             min_events: None,
             guard_outside: false,
+            interval: Default::default(),
             paired_with: None,
             vehicle_noise: false,
         }

@@ -302,6 +302,7 @@ pub fn campaign(
         outside: Default::default(),
         split: None,
         guard_outside: false,
+        interval: Default::default(),
         paired_with: None,
         vehicle_noise: false,
     }
@@ -432,7 +433,7 @@ pub fn in_process_with_invalid(
     let case = open_case(&request.case, preset, &ExposureSource::Builtin).unwrap();
     let outside = match request.outside {
         Some(o) => o.as_str().parse().unwrap(),
-        None => case.default_outside(),
+        None => tslg_method::sampling::default_outside(case.default_outside(), &rule_of(request)),
     };
     let split = request
         .split
@@ -466,7 +467,7 @@ pub fn rule_of(request: &CreateCampaign) -> StoppingRule {
         min_events: request.min_events.unwrap_or(10),
         max_tests: request.max_tests,
         guard_outside: request.guard_outside,
-        interval: Default::default(),
+        interval: tslg_client::wire::interval(request.interval),
     }
 }
 

@@ -1,0 +1,111 @@
+//! Anytime intervals through the service (issue 49): a campaign created
+//! with `interval: anytime` stops on its confidence sequence, and the
+//! coordinator's answer equals the in-process run's to the last bit, also
+//! when the coordinator is killed and folds the sequences again from its
+//! database. Campaigns the sequence does not cover are refused.
+
+use crate::support::*;
+use std::time::{Duration, Instant};
+use tslg_api::{CampaignStatus, IntervalKind, Method};
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn anytime_campaigns_stop_on_their_sequence_and_survive_a_coordinator_restart() {
+    let dir = scratch();
+    let database = dir.path().join("db.sqlite");
+    let flags = ["--lease-size", "20000"];
+    let server = ServerProcess::start(&database, &flags);
+    let address = server.address.clone();
+    let _worker = WorkerProcess::start(&server.url, 2, "w1");
+    let client = server.client();
+    let library = ready_library(&client, "idm", true).await;
+    let exact = exact("idm");
+    let requests = [Method::Ndd, Method::Library].map(|method| {
+        let mut request = campaign(method, library.id, "idm", 0.3, 3);
+        request.interval = IntervalKind::Anytime;
+        request
+    });
+    let ids = [
+        client.create_campaign(&requests[0]).await.unwrap().id,
+        client.create_campaign(&requests[1]).await.unwrap().id,
+    ];
+    // The library campaign's spread defaults to `ndd` (the only one whose
+    // exploring weights are bounded by P(X \ Φ)).
+    let created = client.campaign(ids[1]).await.unwrap();
+    assert_eq!(created.outside, tslg_api::Outside::Ndd);
+    assert_eq!(created.interval, IntervalKind::Anytime);
+    // Killed while the NDD campaign runs: the restarted coordinator has no
+    // sequences in memory and folds them again from the stored outcomes.
+    let started = Instant::now();
+    loop {
+        let view = client.campaign(ids[0]).await.unwrap();
+        if view.indices >= 40_000 {
+            assert_eq!(view.status, CampaignStatus::Running, "killed too late");
+            break;
+        }
+        assert!(started.elapsed() < Duration::from_secs(120), "{view:?}");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    server.kill();
+    let server = ServerProcess::start_on(&database, &address, &flags);
+    let client = server.client();
+    for (id, request) in ids.into_iter().zip(&requests) {
+        let view = finished(&client, id, Duration::from_secs(300)).await;
+        assert_eq!(view.status, CampaignStatus::Converged, "{view:?}");
+        assert_eq!(view.interval, IntervalKind::Anytime);
+        let (low, high) = (view.ci_low.unwrap(), view.ci_high.unwrap());
+        assert!(
+            low <= exact && exact <= high,
+            "[{low:e}, {high:e}] misses {exact:e}"
+        );
+        // Stopped on the sequence: (U − L)/2 ≤ β μ̂.
+        let half = view.half_width.unwrap();
+        assert_eq!(half.to_bits(), ((high - low) / 2.0).to_bits());
+        assert!(half <= 0.3 * view.estimate.unwrap());
+        let surrogate = (request.method == Method::Library).then_some("idm");
+        let reference = in_process(surrogate, request);
+        assert_eq!(
+            reference.interval,
+            tslg_method::estimator::Interval::Anytime
+        );
+        assert_same(&view, &reference);
+        // The history's points carry the sequence's interval.
+        let history = client.history(id).await.unwrap();
+        let last = history.points.last().unwrap();
+        assert_eq!((last.ci_low, last.ci_high), (low, high));
+        assert!(history.points.len() >= 10, "{}", history.points.len());
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn anytime_is_refused_where_no_sequence_is_defined() {
+    let dir = scratch();
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &[]);
+    let client = server.client();
+    let library = ready_library(&client, "idm", false).await;
+    let mut adaptive = campaign(Method::Adaptive, library.id, "idm", 0.2, 1);
+    adaptive.interval = IntervalKind::Anytime;
+    let mut paired = campaign(Method::Ndd, library.id, "idm", 0.2, 1);
+    paired.interval = IntervalKind::Anytime;
+    paired.paired_with = Some(serde_json::json!({ "model": "fvdm" }));
+    for (request, says) in [
+        (adaptive, "adaptive campaign's stages"),
+        (paired, "paired_with stops on the difference"),
+    ] {
+        let error = client
+            .create_campaign(&request)
+            .await
+            .unwrap_err()
+            .to_string();
+        assert!(error.contains(says), "{error}");
+    }
+    let mut carfollow = campaign(Method::Ndd, library.id, "idm", 0.2, 1);
+    carfollow.case = "car-following".into();
+    carfollow.library_id = None;
+    carfollow.interval = IntervalKind::Anytime;
+    let error = client
+        .create_campaign(&carfollow)
+        .await
+        .unwrap_err()
+        .to_string();
+    assert!(error.contains("no known largest value"), "{error}");
+}
