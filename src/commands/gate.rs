@@ -7,6 +7,12 @@
 //!   spent, cancelled, failed): no claim either way,
 //! - 1 on any other error (the coordinator unreachable, a bad request).
 //!
+//! A campaign with an anytime interval (`--interval anytime`, a confidence
+//! sequence that holds at every number of tests at once) is judged while it
+//! runs: the command exits [`ABOVE`] as soon as the interval's lower end is
+//! above `P`, and 0 as soon as its upper bound is below `P`. A Wald
+//! interval is only judged at the stop, where its promise holds.
+//!
 //! The upper bound is the guarded one where the campaign has it (a library
 //! campaign of a grid case: `guarded_ci_high`, which also bounds what the
 //! library's surrogate may have missed; docs/statistics.md), else the
@@ -82,6 +88,35 @@ pub fn judge(view: &CampaignView, limit: f64) -> Result<String, GateFailed> {
             ),
         }),
     }
+}
+
+/// The verdict on a running anytime campaign, once its interval lies
+/// wholly on one side of `limit`: its lower end above (failed, [`ABOVE`])
+/// or its upper bound below (passed); `None` while it straddles `limit`,
+/// and always for a Wald campaign or a pair.
+pub fn early(view: &CampaignView, limit: f64) -> Option<Result<String, GateFailed>> {
+    if view.interval != tslg_api::IntervalKind::Anytime
+        || view.pair.is_some()
+        || view.status != CampaignStatus::Running
+    {
+        return None;
+    }
+    let (low, upper) = (view.ci_low?, upper_bound(view)?);
+    if low > limit {
+        return Some(Err(GateFailed {
+            code: ABOVE,
+            message: format!(
+                "gate failed early: campaign {}'s anytime interval lies above {limit} after {}                  tests (lower end {low:.3e})",
+                view.id, view.tests
+            ),
+        }));
+    }
+    (upper < limit).then(|| {
+        Ok(format!(
+            "gate passed early: campaign {}'s anytime interval lies below {limit} after {} tests              (upper bound {upper:.3e})",
+            view.id, view.tests
+        ))
+    })
 }
 
 /// Checks that `limit` is a probability a gate can compare against.

@@ -28,7 +28,13 @@ fn message(view: &CampaignView) -> String {
     let r = view
         .relative_half_width
         .map_or("∞".into(), |r| format!("{r:.3}"));
-    let mut text = format!("r {r} → β {}  {} events", view.beta, view.events);
+    // Which interval r is read on: a Wald interval holds at the stop, an
+    // anytime one (a confidence sequence) at every number of tests.
+    let kind = match view.interval {
+        tslg_api::IntervalKind::Wald => "",
+        tslg_api::IntervalKind::Anytime => " (anytime)",
+    };
+    let mut text = format!("r {r}{kind} → β {}  {} events", view.beta, view.events);
     if let Some(rate) = view.tests_per_second {
         text.push_str(&format!("  {rate:.0} tests/s"));
     }

@@ -191,7 +191,7 @@ pub fn describe(view: &CampaignView) -> String {
         .collect();
     format!(
         "campaign {} ({} {}, vehicle {}): {}{}\n  tests {} (events {}, invalid {}), stop index {}\n  \
-         estimate {}  interval [{}, {}]  relative half-width {} (β {}, confidence {}){exact}{health}{outside}{adaptive}{pair}{warnings}",
+         estimate {}  {}interval [{}, {}]  relative half-width {} (β {}, confidence {}){exact}{health}{outside}{adaptive}{pair}{warnings}",
         view.id,
         view.case,
         view.method.as_str(),
@@ -203,6 +203,10 @@ pub fn describe(view: &CampaignView) -> String {
         view.invalid,
         view.indices,
         sci(view.estimate),
+        match view.interval {
+            tslg_api::IntervalKind::Wald => "",
+            tslg_api::IntervalKind::Anytime => "anytime ",
+        },
         sci(view.ci_low),
         sci(view.ci_high),
         view.relative_half_width.map_or("-".into(), |r| format!("{r:.3}")),

@@ -6,7 +6,7 @@
 
 use crate::support::*;
 use std::time::{Duration, Instant};
-use tslg_api::{CampaignStatus, IntervalKind, Method};
+use tslg_api::{CampaignStatus, CampaignView, IntervalKind, Method};
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn anytime_campaigns_stop_on_their_sequence_and_survive_a_coordinator_restart() {
@@ -108,4 +108,56 @@ async fn anytime_is_refused_where_no_sequence_is_defined() {
         .unwrap_err()
         .to_string();
     assert!(error.contains("no known largest value"), "{error}");
+}
+
+/// `--fail-above` on an anytime campaign decides as soon as the interval
+/// lies wholly on one side of the limit, in both directions, long before
+/// the campaign could reach its β; the campaign the command started is
+/// cancelled. A Wald campaign is judged only at its stop.
+#[test]
+fn an_anytime_gate_decides_early_in_both_directions() {
+    let dir = scratch();
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &[]);
+    let _worker = WorkerProcess::start(&server.url, 1, "w1");
+    let url = server.url.as_str();
+    // β 0.01 needs about 10⁸ NDD tests of the IDM (P(A) 9.3e-4): the gate
+    // must decide on the way.
+    let gate = |limit: &str| {
+        tslg(&[
+            "campaign",
+            "start",
+            "--server",
+            url,
+            "--method",
+            "ndd",
+            "--vut",
+            "idm",
+            "--beta",
+            "0.01",
+            "--interval",
+            "anytime",
+            "--wait",
+            "--json",
+            "--fail-above",
+            limit,
+        ])
+    };
+    for (limit, code, said) in [
+        ("1e-4", 3, "gate failed early"),
+        ("0.01", 0, "gate passed early"),
+    ] {
+        let o = gate(limit);
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(code), "{limit}: {stderr}");
+        assert!(stderr.contains(said), "{stderr}");
+        let view: CampaignView = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(view.status, CampaignStatus::Cancelled, "{view:?}");
+        assert!(view.tests < 5_000_000, "decided after {} tests", view.tests);
+        let (low, high) = (view.ci_low.unwrap(), view.ci_high.unwrap());
+        let limit: f64 = limit.parse().unwrap();
+        assert!(
+            low > limit || high < limit,
+            "[{low:e}, {high:e}] vs {limit}"
+        );
+    }
 }

@@ -31,7 +31,9 @@ pub enum CampaignCommand {
         server: ServerArgs,
         /// The gate of `campaign start --wait --fail-above P`: exit 3 when
         /// the campaign converged with its upper bound above P, 4 when it
-        /// stopped without converging.
+        /// stopped without converging. An anytime campaign is judged while
+        /// it runs (exit 3 as soon as its interval lies above P, 0 as soon
+        /// as below) and left running.
         #[arg(long, value_name = "P", allow_negative_numbers = true)]
         fail_above: Option<f64>,
         /// Print JSON.

@@ -54,7 +54,9 @@ pub struct CampaignStartArgs {
     /// With --wait, a gate for continuous integration: exit 3 when the
     /// campaign converged with its upper bound (the guarded one where the
     /// campaign has it) above this probability, 4 when it stopped without
-    /// converging, 0 when it converged at or below it.
+    /// converging, 0 when it converged at or below it. With `--interval
+    /// anytime` the gate decides as soon as the interval lies wholly above
+    /// (3) or below (0) the limit, and the campaign is cancelled.
     #[arg(
         long,
         value_name = "P",
@@ -113,23 +115,42 @@ pub fn start(args: &CampaignStartArgs) -> anyhow::Result<()> {
             return print(&view, args.json);
         }
         eprintln!("campaign {} started; waiting for it to stop", view.id);
-        let view = watch(&client, view.id).await?;
+        let (view, early) = watch(&client, view.id, args.fail_above).await?;
+        // The gate decided: the campaign this command started stops too.
+        let view = match early {
+            Some(_) => client.cancel_campaign(view.id).await?,
+            None => view,
+        };
         print(&view, args.json)?;
-        judge(&view, args.fail_above)
+        judge(&view, args.fail_above, early)
     })
 }
 
-/// The gate's verdict when a limit is given (`--fail-above`).
-fn judge(view: &tslg_api::CampaignView, limit: Option<f64>) -> anyhow::Result<()> {
-    if let Some(limit) = limit {
-        eprintln!("{}", gate::judge(view, limit)?);
+/// The gate's verdict when a limit is given (`--fail-above`): the early
+/// one of an anytime campaign, or the one at the stop.
+fn judge(
+    view: &tslg_api::CampaignView,
+    limit: Option<f64>,
+    early: Option<Result<String, gate::GateFailed>>,
+) -> anyhow::Result<()> {
+    match (early, limit) {
+        (Some(verdict), _) => eprintln!("{}", verdict?),
+        (None, Some(limit)) => eprintln!("{}", gate::judge(view, limit)?),
+        (None, None) => {}
     }
     Ok(())
 }
 
 /// Polls a campaign until it stops, showing a progress bar on stderr, and
 /// why it waits when no worker serves it (once each time it starts to).
-pub async fn watch(client: &Client, id: i64) -> anyhow::Result<tslg_api::CampaignView> {
+/// With a gate's `limit`, an anytime campaign is judged at every poll, and
+/// the watch ends with the verdict as soon as its interval lies wholly on
+/// one side of the limit ([`gate::early`]).
+pub async fn watch(
+    client: &Client,
+    id: i64,
+    limit: Option<f64>,
+) -> anyhow::Result<(tslg_api::CampaignView, Option<EarlyVerdict>)> {
     let bars = CampaignBars::new(&["campaign"]);
     let mut waiting: Vec<String> = Vec::new();
     loop {
@@ -146,7 +167,10 @@ pub async fn watch(client: &Client, id: i64) -> anyhow::Result<tslg_api::Campaig
         waiting = now;
         bars.update(0, &view);
         if view.status.is_final() {
-            return Ok(view);
+            return Ok((view, None));
+        }
+        if let Some(verdict) = limit.and_then(|limit| gate::early(&view, limit)) {
+            return Ok((view, Some(verdict)));
         }
         tokio::time::sleep(Duration::from_millis(250)).await;
     }
@@ -165,8 +189,13 @@ pub fn watch_command(
     }
     let client = client(server)?;
     block_on(async {
-        let view = watch(&client, id).await?;
+        // A campaign watched, not started, here is left running when the
+        // gate decides early.
+        let (view, early) = watch(&client, id, fail_above).await?;
         print(&view, json)?;
-        judge(&view, fail_above)
+        judge(&view, fail_above, early)
     })
 }
+
+/// A gate's verdict reached before the campaign stopped.
+pub type EarlyVerdict = Result<String, gate::GateFailed>;
