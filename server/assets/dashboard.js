@@ -102,7 +102,8 @@ function campaignRow(c) {
     num('tests', c.tests, fmt.count(c.tests)),
     num('events', c.events, fmt.count(c.events)),
     num('estimate', c.estimate, fmt.sci(c.estimate)),
-    el('td', { 'data-field': 'interval' }, fmt.interval(c)),
+    el('td', { 'data-field': 'interval' },
+      fmt.interval(c) + (c.interval === 'anytime' ? ' (anytime)' : '')),
     halfWidth,
     num('tests_per_second', c.tests_per_second, fmt.rate(c.tests_per_second)),
     num('seconds_left', c.seconds_left, fmt.seconds(c.seconds_left)));
@@ -169,6 +170,7 @@ async function campaignPage() {
   set('invalid', fmt.count(c.invalid), c.invalid);
   set('estimate', fmt.sci(c.estimate), c.estimate);
   set('interval', fmt.interval(c));
+  set('interval-kind', c.interval === 'anytime' ? 'anytime interval' : 'interval (Wald)');
   set('relative-half-width', fmt.ratio(c.relative_half_width), c.relative_half_width);
   set('beta', c.beta);
   set('rate', fmt.rate(c.tests_per_second), c.tests_per_second);

@@ -289,6 +289,26 @@ async fn the_dashboard_follows_a_running_campaign_and_agrees_with_the_api() {
         json!(""),
         "an NDD campaign has no outside"
     );
+    // Which interval the page shows: this campaign's holds at its stop.
+    let kind = "document.getElementById('interval-kind').textContent";
+    assert_eq!(eval(&browser, kind).await, json!("interval (Wald)"));
+    // An anytime campaign's page says its interval holds at every n.
+    let anytime = CreateCampaign {
+        interval: tslg_api::IntervalKind::Anytime,
+        ..campaign(Method::Ndd, library.id, "idm", 0.3, 5)
+    };
+    let anytime = client.create_campaign(&anytime).await.unwrap().id;
+    finished(&client, anytime, Duration::from_secs(120)).await;
+    browser
+        .goto(&format!("{}/campaigns/{anytime}?refresh=300", server.url))
+        .await
+        .unwrap();
+    until(
+        &browser,
+        &format!("{kind} === 'anytime interval'"),
+        "the anytime campaign's label",
+    )
+    .await;
 
     // A library campaign of a vehicle its surrogate does not cover: the
     // page shows the outside bound, the guarded interval and the warning.
