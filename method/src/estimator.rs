@@ -262,6 +262,12 @@ impl Interval {
     }
 }
 
+impl std::fmt::Display for Interval {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
 impl std::str::FromStr for Interval {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {

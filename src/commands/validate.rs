@@ -19,15 +19,15 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::sync::Arc;
 use tslg_method::adaptive::AdaptiveSettings;
-use tslg_method::campaign::{run_campaign_tests, CampaignResult};
+use tslg_method::campaign::{run_campaign_tests_watched, CampaignResult};
 use tslg_method::cases::open_case;
-use tslg_method::estimator::{default_n_min, Decision, StoppingRule};
+use tslg_method::estimator::{default_n_min, Decision, Interval, StoppingRule};
 use tslg_method::library::SearchMethod;
 use tslg_method::prefix::PrefixFold;
 use tslg_method::registry::{
     BuildRequest, CampaignTests, CaseError, ExposureSource, LibrarySearch, ScenarioCase,
 };
-use tslg_method::sampling::{OutsideSpread, Split};
+use tslg_method::sampling::{default_outside, OutsideSpread, Split};
 
 #[derive(Debug, clap::Args)]
 pub struct ValidateArgs {
@@ -68,6 +68,13 @@ pub struct ValidateArgs {
     /// ndd), adaptive (docs/adaptive-design.md). Writes methods.csv.
     #[arg(long, value_delimiter = ',', value_enum, default_values_t = [ValidateMethod::Plain])]
     pub methods: Vec<ValidateMethod>,
+    /// The intervals to compare (comma-separated): wald (valid at the
+    /// stop), anytime (a confidence sequence, valid at every n). Each row
+    /// also reports `coverage every n`: the share of replicates whose
+    /// interval held the exact P(A) at every settlement from n_min to the
+    /// stop. Adaptive campaigns have no anytime interval and are skipped.
+    #[arg(long, value_delimiter = ',', default_values_t = [Interval::Wald])]
+    pub interval: Vec<Interval>,
     /// A quick run: 50 replicates (unless given) and highway-exit's coarse preset.
     #[arg(long)]
     pub quick: bool,
@@ -172,11 +179,26 @@ impl Setup {
         })
     }
 
-    /// The campaign seeded `seed`.
-    fn campaign(&self, seed: u64) -> anyhow::Result<CampaignResult> {
+    /// The campaign seeded `seed`, and whether its interval held the exact
+    /// P(A) at every settlement from n_min to the stop (`None` for an
+    /// adaptive campaign, which is not watched).
+    fn campaign(&self, seed: u64) -> anyhow::Result<(CampaignResult, Option<bool>)> {
         if self.method != ValidateMethod::Adaptive {
             let tests = self.tests(seed)?;
-            return Ok(run_campaign_tests(tests.as_ref(), &self.rule, &|_| false));
+            let mut held = true;
+            let (truth, n_min) = (self.truth, self.rule.n_min);
+            let mut watch = |tests: u64, low: f64, high: f64| {
+                if tests >= n_min {
+                    held &= low <= truth && truth <= high;
+                }
+            };
+            let result = run_campaign_tests_watched(
+                tests.as_ref(),
+                &self.rule,
+                &|_| false,
+                Some(&mut watch),
+            );
+            return Ok((result, Some(held)));
         }
         let run = match &self.table {
             Some(table) => {
@@ -203,7 +225,7 @@ impl Setup {
                     .result
             }
         };
-        Ok(run)
+        Ok((run, None))
     }
 }
 
@@ -220,9 +242,19 @@ pub struct Row {
     rule: StoppingRule,
     truth: f64,
     runs: Vec<CampaignResult>,
+    /// Per run: whether its interval held the exact P(A) at every
+    /// settlement from n_min to the stop (`None`: not watched, adaptive).
+    held: Vec<Option<bool>>,
 }
 
 impl Row {
+    /// The share of runs whose interval held at every settlement from
+    /// n_min to the stop; `None` where the runs were not watched.
+    fn coverage_every_n(&self) -> Option<f64> {
+        let held: Option<Vec<bool>> = self.held.iter().copied().collect();
+        held.map(|h| h.iter().filter(|&&x| x).count() as f64 / h.len().max(1) as f64)
+    }
+
     fn coverage(&self, covers: impl Fn(&CampaignResult) -> bool) -> f64 {
         self.runs.iter().filter(|r| covers(r)).count() as f64 / self.runs.len() as f64
     }
@@ -424,7 +456,14 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
                 .iter()
                 .flat_map(|n| args.splits.iter().map(move |s| (n, s)))
             {
-                for &min_events in &args.min_events {
+                for (&min_events, &interval) in args
+                    .min_events
+                    .iter()
+                    .flat_map(|m| args.interval.iter().map(move |i| (m, i)))
+                {
+                    if interval == Interval::Anytime && method == ValidateMethod::Adaptive {
+                        continue;
+                    }
                     let rule = StoppingRule {
                         beta: args.beta,
                         confidence: args.confidence,
@@ -432,9 +471,15 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
                         min_events,
                         max_tests: args.max_tests,
                         guard_outside,
-                        interval: Default::default(),
+                        interval,
                     };
                     rule.validate()?;
+                    // A plain campaign gets the spread a campaign of this
+                    // rule gets by default (ndd for an anytime interval).
+                    let outside = match method {
+                        ValidateMethod::Plain => default_outside(case.default_outside(), &rule),
+                        _ => outside,
+                    };
                     setups.push(Setup {
                         method,
                         case: Arc::clone(&case),
@@ -572,10 +617,12 @@ fn coverage_curve(setup: &Setup, replicates: u64, to: u64) -> anyhow::Result<Vec
 
 /// Runs the campaigns of seeds `0..replicates`.
 fn replicate(setup: &Setup, replicates: u64) -> anyhow::Result<Row> {
-    let runs = (0..replicates)
+    let (runs, held) = (0..replicates)
         .into_par_iter()
         .map(|seed| setup.campaign(seed))
-        .collect::<anyhow::Result<Vec<_>>>()?;
+        .collect::<anyhow::Result<Vec<_>>>()?
+        .into_iter()
+        .unzip();
     Ok(Row {
         method: setup.method,
         exposure: setup.case.exposure_name().to_owned(),
@@ -588,10 +635,11 @@ fn replicate(setup: &Setup, replicates: u64) -> anyhow::Result<Row> {
         rule: setup.rule,
         truth: setup.truth,
         runs,
+        held,
     })
 }
 
-const HEADER: [&str; 19] = [
+const HEADER: [&str; 21] = [
     "case",
     "surrogate",
     "vehicle",
@@ -611,6 +659,8 @@ const HEADER: [&str; 19] = [
     "bias (± s.e.)",
     "flag",
     "method",
+    "interval",
+    "coverage every n",
 ];
 
 fn cells(row: &Row) -> Vec<String> {
@@ -644,6 +694,9 @@ fn cells(row: &Row) -> Vec<String> {
         format!("{:+.3} ± {:.3}", bias, se),
         flag,
         row.method.name().into(),
+        row.rule.interval.name().into(),
+        row.coverage_every_n()
+            .map_or("-".into(), |c| format!("{c:.3}")),
     ]
 }
 
@@ -663,7 +716,9 @@ pub fn markdown(rows: &[Row]) -> String {
         let _ = writeln!(
             out,
             "\nNominal coverage {:.2}; LOW marks coverage below {:.3} (c − 2.33 √(c(1 − c)/R)). \
-             Bias is mean estimate / exact − 1 at the stop.",
+             Bias is mean estimate / exact − 1 at the stop. Coverage every n: the share of \
+             replicates whose interval held the exact P(A) at every settlement (every n up to \
+             32, then every 3 %) from n_min to the stop.",
             first.rule.confidence,
             first.floor()
         );
@@ -697,8 +752,9 @@ fn ndd_tests(row: &Row) -> f64 {
 }
 
 /// The cells of one pairing and method: `case, exposure, surrogate, vut,
-/// method, replicates, coverage, median_tests, ndd_tests`.
-fn method_cells(row: &Row) -> [String; 9] {
+/// method, replicates, coverage, median_tests, ndd_tests, interval,
+/// coverage_every_n`.
+fn method_cells(row: &Row) -> [String; 11] {
     [
         row.case.clone(),
         row.exposure.clone(),
@@ -709,13 +765,17 @@ fn method_cells(row: &Row) -> [String; 9] {
         format!("{:.4}", row.answer_coverage()),
         row.tests_quantile(0.5).to_string(),
         format!("{:.0}", ndd_tests(row)),
+        row.rule.interval.name().into(),
+        row.coverage_every_n()
+            .map_or("-".into(), |c| format!("{c:.4}")),
     ]
 }
 
 /// One line per pairing and method ([`method_cells`]).
 fn methods_csv(rows: &[Row]) -> String {
     let mut out = String::from(
-        "case,exposure,surrogate,vut,method,replicates,coverage,median_tests,ndd_tests\n",
+        "case,exposure,surrogate,vut,method,replicates,coverage,median_tests,ndd_tests,interval,\
+         coverage_every_n\n",
     );
     for row in rows {
         let _ = writeln!(out, "{}", method_cells(row).join(","));
@@ -727,8 +787,9 @@ fn methods_csv(rows: &[Row]) -> String {
 /// tests to the median.
 fn methods_markdown(rows: &[Row], args: &ValidateArgs) -> String {
     let mut out = String::from(
-        "| case | exposure | surrogate | vehicle | method | R | coverage | median tests | NDD tests | NDD / median |\n\
-         |---|---|---|---|---|---|---|---|---|---|\n",
+        "| case | exposure | surrogate | vehicle | method | R | coverage | median tests | NDD tests | \
+         interval | coverage every n | NDD / median |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for row in rows {
         let ratio = ndd_tests(row) / row.tests_quantile(0.5).max(1) as f64;

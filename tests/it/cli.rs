@@ -342,7 +342,10 @@ fn validate_compares_the_methods_in_one_csv() {
     let mut lines = csv.lines();
     assert_eq!(
         lines.next(),
-        Some("case,exposure,surrogate,vut,method,replicates,coverage,median_tests,ndd_tests")
+        Some(
+            "case,exposure,surrogate,vut,method,replicates,coverage,median_tests,ndd_tests,\
+             interval,coverage_every_n"
+        )
     );
     let row = |vut: &str, method: &str| -> Vec<String> {
         csv.lines()

@@ -10,11 +10,12 @@ pub(crate) mod result;
 pub use result::CampaignResult;
 
 use crate::anytime::{AnytimeFold, TermBounds};
-use crate::estimator::{Interval, StoppingRule};
+use crate::estimator::{Decision, Interval, StoppingRule};
 use crate::outside::OutsideMass;
 use crate::prefix::{Exploration, PrefixFold, SparseOutcome};
 use crate::registry::CampaignTests;
 use crate::sampling::TestDistribution;
+use crate::sequence::next_settlement;
 use rayon::prelude::*;
 
 /// First batch size; batches double up to [`MAX_BATCH`].
@@ -127,6 +128,23 @@ pub fn run_span_campaign(
     bounds: Option<TermBounds>,
     rule: &StoppingRule,
 ) -> CampaignResult {
+    run_span_campaign_watched(span, explorer, bounds, rule, None)
+}
+
+/// What a watched campaign is shown: at each settlement
+/// ([`crate::sequence::next_settlement`]), its valid tests and interval.
+pub type Watch<'a> = &'a mut dyn FnMut(u64, f64, f64);
+
+/// [`run_span_campaign`], showing `watch` the interval at every settlement
+/// point up to the stop (the points at which an anytime interval is
+/// defined, and where `tslg validate` checks both intervals).
+pub fn run_span_campaign_watched(
+    span: &(dyn Fn(u64, u64) -> Vec<(u64, SparseOutcome)> + Sync),
+    explorer: Option<Explorer<'_>>,
+    bounds: Option<TermBounds>,
+    rule: &StoppingRule,
+    mut watch: Option<Watch<'_>>,
+) -> CampaignResult {
     let z = rule.z();
     let mass = explorer.map(|e| e.mass);
     let strata = explorer.and_then(|e| e.strata);
@@ -151,21 +169,56 @@ pub fn run_span_campaign(
                 .collect(),
             None => Vec::new(),
         };
-        let exploration = explorer.map(|e| Exploration {
-            explored: &explored,
-            mass: e.mass,
-            surrogate_misses: e.surrogate_misses,
-        });
-        let stop = match &mut fold {
-            Fold::Wald(fold) => fold.advance(rule, z, to, &events, exploration),
-            Fold::Anytime(fold) => fold.advance(rule, to, &events, exploration),
+        // Watched, the batch is folded piece by piece, cut at settlements.
+        let mut cuts = vec![to];
+        if watch.is_some() {
+            cuts.clear();
+            let mut at = next_settlement(from);
+            while at < to {
+                cuts.push(at);
+                at = next_settlement(at);
+            }
+            cuts.push(to);
         }
-        .expect("weights of a valid distribution are finite and ≥ 0");
-        if let Some(status) = stop {
-            return match &fold {
-                Fold::Wald(fold) => CampaignResult::from_fold(status, fold, rule, mass),
-                Fold::Anytime(fold) => CampaignResult::from_anytime(status, fold, rule, mass),
+        for end in cuts {
+            let start = fold.indices();
+            let piece_events: Vec<_> = events
+                .iter()
+                .copied()
+                .filter(|&(i, _)| start <= i && i < end)
+                .collect();
+            let piece_explored: Vec<u64> = explored
+                .iter()
+                .copied()
+                .filter(|&i| start <= i && i < end)
+                .collect();
+            let exploration = explorer.map(|e| Exploration {
+                explored: &piece_explored,
+                mass: e.mass,
+                surrogate_misses: e.surrogate_misses,
+            });
+            let stop = match &mut fold {
+                Fold::Wald(fold) => fold.advance(rule, z, end, &piece_events, exploration),
+                Fold::Anytime(fold) => fold.advance(rule, end, &piece_events, exploration),
+            }
+            .expect("weights of a valid distribution are finite and ≥ 0");
+            let result = match &fold {
+                Fold::Wald(fold) => {
+                    CampaignResult::from_fold(stop.unwrap_or(Decision::Continue), fold, rule, mass)
+                }
+                Fold::Anytime(fold) => CampaignResult::from_anytime(
+                    stop.unwrap_or(Decision::Continue),
+                    fold,
+                    rule,
+                    mass,
+                ),
             };
+            if let Some(watch) = watch.as_mut() {
+                watch(result.tests, result.ci_low, result.ci_high);
+            }
+            if stop.is_some() {
+                return result;
+            }
         }
         batch = (batch * 2).min(MAX_BATCH);
     }
@@ -195,6 +248,17 @@ pub fn run_campaign_tests(
     tests: &dyn CampaignTests,
     rule: &StoppingRule,
     invalid: &(dyn Fn(u64) -> bool + Sync),
+) -> CampaignResult {
+    run_campaign_tests_watched(tests, rule, invalid, None)
+}
+
+/// [`run_campaign_tests`], showing `watch` the interval at every settlement
+/// ([`run_span_campaign_watched`]).
+pub fn run_campaign_tests_watched(
+    tests: &dyn CampaignTests,
+    rule: &StoppingRule,
+    invalid: &(dyn Fn(u64) -> bool + Sync),
+    watch: Option<Watch<'_>>,
 ) -> CampaignResult {
     let explores = |i| tests.explores(i);
     let misses = |i| tests.surrogate_misses(i);
@@ -234,7 +298,7 @@ pub fn run_campaign_tests(
             })
             .collect()
     };
-    run_span_campaign(
+    run_span_campaign_watched(
         &span,
         tests.outside_mass().map(|mass| Explorer {
             explores: &explores,
@@ -244,6 +308,7 @@ pub fn run_campaign_tests(
         }),
         tests.term_bounds(),
         rule,
+        watch,
     )
 }
 
