@@ -185,11 +185,20 @@ impl Setup {
     fn campaign(&self, seed: u64) -> anyhow::Result<(CampaignResult, Option<bool>)> {
         if self.method != ValidateMethod::Adaptive {
             let tests = self.tests(seed)?;
+            // The interval the method answers with, as `Row::answer_coverage`.
             let mut held = true;
-            let (truth, n_min) = (self.truth, self.rule.n_min);
-            let mut watch = |tests: u64, low: f64, high: f64| {
-                if tests >= n_min {
-                    held &= low <= truth && truth <= high;
+            let (truth, n_min, guarded) = (
+                self.truth,
+                self.rule.n_min,
+                self.method == ValidateMethod::Guarded,
+            );
+            let mut watch = |result: &CampaignResult| {
+                if result.tests >= n_min {
+                    held &= if guarded {
+                        result.guarded_covers(truth)
+                    } else {
+                        result.covers(truth)
+                    };
                 }
             };
             let result = run_campaign_tests_watched(
@@ -717,8 +726,9 @@ pub fn markdown(rows: &[Row]) -> String {
             out,
             "\nNominal coverage {:.2}; LOW marks coverage below {:.3} (c − 2.33 √(c(1 − c)/R)). \
              Bias is mean estimate / exact − 1 at the stop. Coverage every n: the share of \
-             replicates whose interval held the exact P(A) at every settlement (every n up to \
-             32, then every 3 %) from n_min to the stop.",
+             replicates whose interval (the guarded one for a guarded campaign) held the exact \
+             P(A) at every settlement (every n up to 32, then every 3 %) from n_min to the \
+             stop.",
             first.rule.confidence,
             first.floor()
         );

@@ -1099,6 +1099,45 @@ fn validate_flags_the_mismatched_pair_and_the_guard_restores_coverage() {
     );
 }
 
+/// `tslg validate --interval wald,anytime`: each pairing once per
+/// interval, with the share of campaigns whose interval held at every n.
+/// The IDM library on the FVDM: the plain Wald interval misses along the
+/// way; the anytime one (guarded by construction) holds, at more tests.
+#[test]
+fn validate_compares_the_wald_and_the_anytime_interval_at_every_n() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = tslg(&[
+        "validate",
+        "--cases",
+        "cut-in",
+        "--replicates",
+        "20",
+        "--interval",
+        "wald,anytime",
+        "--out",
+        dir.path().to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let csv = std::fs::read_to_string(dir.path().join("methods.csv")).unwrap();
+    let row = |surrogate: &str, vut: &str, interval: &str| -> Vec<String> {
+        csv.lines()
+            .map(|l| l.split(',').map(str::to_owned).collect::<Vec<_>>())
+            .find(|c| c[2] == surrogate && c[3] == vut && c[9] == interval)
+            .unwrap_or_else(|| panic!("no {surrogate} → {vut} {interval} in {csv}"))
+    };
+    assert_eq!(csv.lines().count(), 1 + 6 * 2, "{csv}");
+    let number = |c: &[String], k: usize| c[k].parse::<f64>().unwrap();
+    let (wald, anytime) = (row("idm", "fvdm", "wald"), row("idm", "fvdm", "anytime"));
+    assert!(number(&wald, 10) < 0.5, "{csv}");
+    assert!(number(&anytime, 10) >= 0.85, "{csv}");
+    assert!(number(&anytime, 7) > 10.0 * number(&wald, 7), "{csv}");
+    // Every anytime row holds at every n at about its level or above.
+    for line in csv.lines().skip(1).filter(|l| l.contains(",anytime,")) {
+        let c: Vec<String> = line.split(',').map(str::to_owned).collect();
+        assert!(number(&c, 10) >= 0.85, "{line}");
+    }
+}
+
 /// `tslg evaluate --paired-with`: a 5-cell regression of the IDM measured
 /// on the same NDD tests, the difference of the rates beside the exact one.
 #[test]

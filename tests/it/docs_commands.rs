@@ -37,6 +37,7 @@ const NOT_RUN: &[(&str, &str, &str)] = &[
     ("docs/reproduction.md", "reproduce --quick", "README's same line runs"),
     ("docs/adaptive-design.md", "--replicates", "the study behind the design: minutes to hours of CPU each"),
     ("docs/statistics.md", "--replicates 2000", "the coverage study: minutes of CPU each"),
+    ("docs/statistics.md", "--interval wald,anytime", "the Wald/anytime study: minutes of CPU; cli.rs runs validate --interval"),
     ("docs/statistics.md", "cargo bench", "a benchmark (scripts/bench)"),
     ("docs/benchmarks.md", "scripts/bench", "benchmarks: minutes on a quiet machine, never in CI"),
     ("docs/benchmarks.md", "cargo bench", "benchmarks: minutes on a quiet machine, never in CI"),

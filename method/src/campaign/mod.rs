@@ -132,8 +132,9 @@ pub fn run_span_campaign(
 }
 
 /// What a watched campaign is shown: at each settlement
-/// ([`crate::sequence::next_settlement`]), its valid tests and interval.
-pub type Watch<'a> = &'a mut dyn FnMut(u64, f64, f64);
+/// ([`crate::sequence::next_settlement`]), its state as a result (tests,
+/// interval, guarded upper end).
+pub type Watch<'a> = &'a mut dyn FnMut(&CampaignResult);
 
 /// [`run_span_campaign`], showing `watch` the interval at every settlement
 /// point up to the stop (the points at which an anytime interval is
@@ -214,7 +215,7 @@ pub fn run_span_campaign_watched(
                 ),
             };
             if let Some(watch) = watch.as_mut() {
-                watch(result.tests, result.ci_low, result.ci_high);
+                watch(&result);
             }
             if stop.is_some() {
                 return result;
