@@ -22,6 +22,7 @@
 //! bounds the failure mass outside the library: `U_out − μ̂_out ≤ β μ̂`.
 
 use crate::estimator::{Decision, StoppingRule};
+use crate::outside::OutsideMass;
 use crate::prefix::{check_span, Exploration, FoldError, PrefixFold, SparseOutcome};
 use crate::sequence::{next_settlement, BettingSequence, SequenceBounds};
 use serde::{Deserialize, Serialize};
@@ -237,6 +238,22 @@ impl AnytimeFold {
             Some(upper) => upper - fold.outside_estimate() <= rule.beta * estimate,
             None => fold.guard_holds(rule, exploration.map(|e| e.mass)),
         }
+    }
+}
+
+/// The bound on the failure mass outside the library a campaign reports:
+/// an anytime campaign's exploring-stratum upper end where it has one
+/// (valid at every n), else the Clopper–Pearson bound of `mass` on `fold`'s
+/// exploring tests ([`crate::outside`]); `None` without a library outside.
+pub fn outside_bound(
+    anytime: Option<&AnytimeFold>,
+    fold: &PrefixFold,
+    mass: Option<&OutsideMass>,
+    confidence: f64,
+) -> Option<f64> {
+    match anytime.and_then(AnytimeFold::outside_upper) {
+        Some(upper) => Some(upper),
+        None => mass.map(|m| m.upper(fold.outside.tests, fold.outside.events, confidence)),
     }
 }
 

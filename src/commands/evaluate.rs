@@ -182,6 +182,14 @@ fn set_up(args: &EvaluateArgs) -> anyhow::Result<Setup> {
         }
     );
     anyhow::ensure!(
+        rule.interval == Interval::Wald
+            || args.method != MethodArg::Library
+            || args.exploration.split == crate::args::SplitArg::Stratified,
+        "--interval anytime reads one sequence per stratum of a library campaign, which needs \
+         --split stratified (the default): under the random split the outside has no bound \
+         that holds at every n"
+    );
+    anyhow::ensure!(
         !rule.guard_outside || descriptor.is_grid(),
         "--guard-outside applies to the grid cases: a {} campaign explores per decision, and \
          no bound on its outside mass is defined",

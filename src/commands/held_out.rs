@@ -166,6 +166,10 @@ impl CampaignTests for TabulatedTests {
         self.inner.outside_mass()
     }
 
+    fn term_bounds(&self) -> Option<tslg_method::anytime::TermBounds> {
+        self.inner.term_bounds()
+    }
+
     fn surrogate_misses(&self, index: u64) -> bool {
         self.inner.surrogate_misses(index)
     }

@@ -72,7 +72,8 @@ pub struct ValidateArgs {
     /// stop), anytime (a confidence sequence, valid at every n). Each row
     /// also reports `coverage every n`: the share of replicates whose
     /// interval held the exact P(A) at every settlement from n_min to the
-    /// stop. Adaptive campaigns have no anytime interval and are skipped.
+    /// stop. Adaptive campaigns and the random split have no anytime
+    /// interval and are skipped.
     #[arg(long, value_delimiter = ',', default_values_t = [Interval::Wald])]
     pub interval: Vec<Interval>,
     /// A quick run: 50 replicates (unless given) and highway-exit's coarse preset.
@@ -470,7 +471,11 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
                     .iter()
                     .flat_map(|m| args.interval.iter().map(move |i| (m, i)))
                 {
-                    if interval == Interval::Anytime && method == ValidateMethod::Adaptive {
+                    // No sequence for adaptive stages, nor for the random
+                    // split (its outside has no bound valid at every n).
+                    if interval == Interval::Anytime
+                        && (method == ValidateMethod::Adaptive || split.split() == Split::Random)
+                    {
                         continue;
                     }
                     let rule = StoppingRule {

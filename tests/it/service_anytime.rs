@@ -87,9 +87,13 @@ async fn anytime_is_refused_where_no_sequence_is_defined() {
     let mut paired = campaign(Method::Ndd, library.id, "idm", 0.2, 1);
     paired.interval = IntervalKind::Anytime;
     paired.paired_with = Some(serde_json::json!({ "model": "fvdm" }));
+    let mut random = campaign(Method::Library, library.id, "idm", 0.2, 1);
+    random.interval = IntervalKind::Anytime;
+    random.split = Some(tslg_api::Split::Random);
     for (request, says) in [
         (adaptive, "adaptive campaign's stages"),
         (paired, "paired_with stops on the difference"),
+        (random, "needs split `stratified`"),
     ] {
         let error = client
             .create_campaign(&request)

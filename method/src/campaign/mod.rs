@@ -158,6 +158,8 @@ pub fn run_span_campaign_watched(
         ))),
     };
     let mut batch = FIRST_BATCH;
+    // The next settlement a watch is shown, on the chain from 0.
+    let mut next_watch = next_settlement(0);
     loop {
         let from = fold.indices();
         let to = (from + batch).min(rule.max_tests);
@@ -174,10 +176,9 @@ pub fn run_span_campaign_watched(
         let mut cuts = vec![to];
         if watch.is_some() {
             cuts.clear();
-            let mut at = next_settlement(from);
-            while at < to {
-                cuts.push(at);
-                at = next_settlement(at);
+            while next_watch < to {
+                cuts.push(next_watch);
+                next_watch = next_settlement(next_watch);
             }
             cuts.push(to);
         }

@@ -1,7 +1,7 @@
 //! The state of a campaign's estimate: the summary of its prefix fold that
 //! every view, file and answer reports.
 
-use crate::anytime::AnytimeFold;
+use crate::anytime::{outside_bound, AnytimeFold};
 use crate::estimator::{Decision, Interval, StoppingRule};
 use crate::outside::OutsideMass;
 use crate::prefix::PrefixFold;
@@ -122,16 +122,7 @@ impl CampaignResult {
         rule: &StoppingRule,
         mass: Option<&OutsideMass>,
     ) -> Self {
-        let outside_upper = match fold.outside_upper() {
-            Some(upper) => Some(upper),
-            None => mass.map(|m| {
-                m.upper(
-                    fold.fold.outside.tests,
-                    fold.fold.outside.events,
-                    rule.confidence,
-                )
-            }),
-        };
+        let outside_upper = outside_bound(Some(fold), &fold.fold, mass, rule.confidence);
         let mut result = Self::with_outside_upper(status, &fold.fold, rule.z(), outside_upper);
         let bounds = fold.bounds();
         result.ci_low = bounds.low;

@@ -115,6 +115,16 @@ pub fn rule_of(req: &CreateCampaign) -> Result<StoppingRule, ServiceError> {
             }
         )));
     }
+    if req.interval == IntervalKind::Anytime
+        && req.method == Method::Library
+        && req.split == Some(tslg_api::Split::Random)
+    {
+        return Err(bad(
+            "interval `anytime` reads one sequence per stratum of a library campaign, which \
+             needs split `stratified` (the default): under the random split the outside has no \
+             bound that holds at every n",
+        ));
+    }
     if req.interval == IntervalKind::Anytime && req.paired_with.is_some() {
         return Err(bad(
             "paired_with stops on the difference of two rates at its looks; interval              `anytime` is a sequence for one rate: run the two campaigns apart",

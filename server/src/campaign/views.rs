@@ -53,9 +53,14 @@ pub fn campaign_view(row: &CampaignRow) -> CampaignView {
         summary.half_width = point.half_width;
         summary.relative_half_width = point.relative_half_width.unwrap_or(f64::INFINITY);
         summary.interval = rule.interval;
-        if fold.strata.is_some() {
-            summary.guarded_ci_high = summary.outside_upper.map(|_| high);
-        }
+        // As `CampaignResult::from_anytime`: a stratified campaign's upper
+        // end holds its outside bound; otherwise the bound replaces the
+        // outside part of the estimate.
+        let outside_part = fold.outside_estimate();
+        summary.guarded_ci_high = summary.outside_upper.map(|u| match fold.strata {
+            Some(_) => high,
+            None => high.max(high - outside_part + u),
+        });
     }
     CampaignView {
         id: row.id,

@@ -20,6 +20,7 @@ use crate::store::reports;
 use rusqlite::Connection;
 use std::sync::Arc;
 use tslg_api::{CampaignStatus, Method};
+use tslg_method::anytime::outside_bound;
 use tslg_method::estimator::{Decision, Interval, StoppingRule};
 use tslg_method::outside::OutsideMass;
 use tslg_method::prefix::{outside_tally, Exploration, FoldError, PrefixFold, SparseOutcome};
@@ -261,16 +262,7 @@ fn fold_charging(
     }
     // An anytime campaign's exploring stratum bounds its own mean at every
     // n; the others keep the Clopper–Pearson bound.
-    let upper = match anytime.as_ref().and_then(|a| a.outside_upper()) {
-        Some(upper) => Some(upper),
-        None => mass.map(|m| {
-            m.upper(
-                folded.fold.outside.tests,
-                folded.fold.outside.events,
-                campaign.confidence,
-            )
-        }),
-    };
+    let upper = outside_bound(anytime.as_ref(), &folded.fold, mass, campaign.confidence);
     let sequence = anytime.map(|a| {
         let bounds = a.bounds();
         (bounds.low, bounds.high)

@@ -116,9 +116,14 @@ pub fn start(args: &CampaignStartArgs) -> anyhow::Result<()> {
         }
         eprintln!("campaign {} started; waiting for it to stop", view.id);
         let (view, early) = watch(&client, view.id, args.fail_above).await?;
-        // The gate decided: the campaign this command started stops too.
+        // The gate decided: the campaign this command started stops too
+        // (unless it stopped on its own meanwhile: then it is shown as it
+        // ended, and the verdict stands).
         let view = match early {
-            Some(_) => client.cancel_campaign(view.id).await?,
+            Some(_) => match client.cancel_campaign(view.id).await {
+                Ok(view) => view,
+                Err(_) => client.campaign(view.id).await?,
+            },
             None => view,
         };
         print(&view, args.json)?;
