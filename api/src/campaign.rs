@@ -236,6 +236,12 @@ pub struct CampaignView {
     /// (its `half_width` is `(ci_high − ci_low)/2`).
     #[serde(default)]
     pub interval: crate::IntervalKind,
+    /// The test from which nearly every test explores outside the library:
+    /// an anytime library campaign switches there once its library stratum
+    /// is known to half of β (docs/statistics.md, "The allocation"). Absent
+    /// until it switches.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub explore_from: Option<u64>,
     /// Whether its program's runs may differ, so that its audits compare
     /// by statistics (see `CreateCampaign::vehicle_noise`).
     #[serde(default)]

@@ -216,6 +216,12 @@ pub struct Lease {
     /// The worker sizes its first chunk from it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub seconds_per_test: Option<f64>,
+    /// The test from which nearly every test of the campaign explores
+    /// outside its library (the campaign switched: docs/statistics.md, "The
+    /// allocation"); the worker draws its tests accordingly. Absent until
+    /// the campaign switches.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub explore_from: Option<u64>,
 }
 
 /// `POST /api/v1/leases/{id}/heartbeat`.

@@ -41,6 +41,7 @@ fn view() -> CampaignView {
         largest_weight_share: None,
         guard_outside: false,
         interval: Default::default(),
+        explore_from: None,
         outside_tests: 0,
         outside_events: 0,
         mismatched_events: 0,

@@ -105,6 +105,28 @@ impl AnytimeFold {
         self.outside.as_ref().map(|(_, s)| s.bounds().high)
     }
 
+    /// Whether a stratified campaign should switch now to exploring nearly
+    /// every test ([`crate::sampling::allocated_explores`]): the rule's
+    /// floors are met (`n ≥ n_min`, `min_events` events in the library
+    /// stratum, both strata tested) and the library stratum's interval is
+    /// within half of β, `(U_in − L_in)/2 ≤ (β/2) μ̂`. From then on what the
+    /// campaign waits for is the exploring stratum's bound, and tests
+    /// spent in the library would only narrow what is narrow already.
+    /// Always `false` for a single stream.
+    pub fn switch_due(&self, rule: &StoppingRule) -> bool {
+        if self.outside.is_none() {
+            return false;
+        }
+        let fold = &self.fold;
+        let inside = self.first.bounds();
+        let inside_events = fold.estimator.events() - fold.outside.events;
+        fold.estimator.tests() >= rule.n_min
+            && inside_events >= rule.min_events
+            && fold.strata_ready()
+            && fold.estimate() > 0.0
+            && (inside.high - inside.low) / 2.0 <= rule.beta / 2.0 * fold.estimate()
+    }
+
     /// Folds the tests `self.fold.indices..to` as [`PrefixFold::advance`]
     /// does, stopping where the rule, read on the sequences, first holds.
     pub fn advance(

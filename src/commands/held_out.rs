@@ -170,6 +170,14 @@ impl CampaignTests for TabulatedTests {
         self.inner.term_bounds()
     }
 
+    fn explore_from(&self) -> Option<u64> {
+        self.inner.explore_from()
+    }
+
+    fn set_explore_from(&self, from: Option<u64>) -> bool {
+        self.inner.set_explore_from(from)
+    }
+
     fn surrogate_misses(&self, index: u64) -> bool {
         self.inner.surrogate_misses(index)
     }

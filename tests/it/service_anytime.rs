@@ -61,8 +61,26 @@ async fn anytime_campaigns_stop_on_their_sequence_and_survive_a_coordinator_rest
         let half = view.half_width.unwrap();
         assert_eq!(half.to_bits(), ((high - low) / 2.0).to_bits());
         assert!(half <= 0.3 * view.estimate.unwrap());
-        let surrogate = (request.method == Method::Library).then_some("idm");
-        let reference = in_process(surrogate, request);
+        // The library campaign switched to exploring nearly every test once
+        // its library stratum was known; the NDD campaign has no strata.
+        let reference = match request.method {
+            Method::Library => {
+                let from = view.explore_from.expect("the library campaign switched");
+                // At the first test not yet leased when the library
+                // stratum was known: here the end of the first lease.
+                assert!(
+                    from < view.indices,
+                    "switched at {from} of {}",
+                    view.indices
+                );
+                assert!(view.outside_tests > view.tests / 3, "{view:?}");
+                in_process_switched("idm", request, Some(from))
+            }
+            _ => {
+                assert_eq!(view.explore_from, None);
+                in_process(None, request)
+            }
+        };
         assert_eq!(
             reference.interval,
             tslg_method::estimator::Interval::Anytime

@@ -45,6 +45,17 @@ pub fn lease_tests(
             )
         })?),
     };
+    // A campaign that switched draws nearly every test outside its library
+    // from the lease's `explore_from` on: the worker draws as the
+    // coordinator does (the switch is made once and never moved).
+    if let Some(from) = lease.explore_from {
+        if !prepared.tests.set_explore_from(Some(from)) {
+            return Err(format!(
+                "lease {} of campaign {} switches at test {from}, which its tests cannot",
+                lease.id, lease.campaign_id
+            ));
+        }
+    }
     // An adaptive campaign's lease names each test's cell and weight.
     let near_miss = prepared.near_miss;
     let planned: Option<Arc<Planned>> = lease.tests.as_ref().map(|tests| {

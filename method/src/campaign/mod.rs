@@ -35,6 +35,20 @@ pub struct Explorer<'a> {
     /// The exploring share a stratified campaign's estimate stratifies on
     /// ([`PrefixFold::strata`]).
     pub strata: Option<f64>,
+    /// The campaign's switch, if made, and how to make it
+    /// ([`crate::sampling::allocated_explores`]): an anytime campaign
+    /// switches after the first batch at whose end the library stratum is
+    /// known ([`AnytimeFold::switch_due`]), from the next test on.
+    pub switch: Option<Switcher<'a>>,
+}
+
+/// Reads and sets a campaign's switch.
+#[derive(Clone, Copy)]
+pub struct Switcher<'a> {
+    /// The switch, if made.
+    pub get: &'a (dyn Fn() -> Option<u64> + Sync),
+    /// Makes it at a test index.
+    pub set: &'a (dyn Fn(u64) + Sync),
 }
 
 /// Runs one campaign on a case given as its event test `is_event(cell)`
@@ -49,6 +63,10 @@ pub fn run_campaign_with(
     seed: u64,
 ) -> CampaignResult {
     let explores = |i| distribution.explores(seed, i);
+    let switch_get = || distribution.explore_from();
+    let switch_set = |from| {
+        distribution.set_explore_from(Some(from));
+    };
     let misses = |i| surrogate_event.is_some_and(|f| !f(distribution.draw(seed, i).cell));
     // Spans of tests in parallel, each drawn several streams at a time
     // ([`TestDistribution::draw_each`]).
@@ -74,6 +92,10 @@ pub fn run_campaign_with(
             mass,
             surrogate_misses: &misses,
             strata: distribution.strata(),
+            switch: Some(Switcher {
+                get: &switch_get,
+                set: &switch_set,
+            }),
         }),
         distribution.term_bounds(),
         rule,
@@ -222,6 +244,14 @@ pub fn run_span_campaign_watched(
                 return result;
             }
         }
+        // Switch once the library stratum is known: from the next test on,
+        // nearly every test explores. The tests drawn so far keep their
+        // strata; the next batch is drawn after the switch.
+        if let (Fold::Anytime(anytime), Some(switch)) = (&fold, explorer.and_then(|e| e.switch)) {
+            if (switch.get)().is_none() && anytime.switch_due(rule) {
+                (switch.set)(to);
+            }
+        }
         batch = (batch * 2).min(MAX_BATCH);
     }
 }
@@ -264,6 +294,10 @@ pub fn run_campaign_tests_watched(
 ) -> CampaignResult {
     let explores = |i| tests.explores(i);
     let misses = |i| tests.surrogate_misses(i);
+    let switch_get = || tests.explore_from();
+    let switch_set = |from| {
+        tests.set_explore_from(Some(from));
+    };
     let one = |i| {
         if invalid(i) {
             return Some(SparseOutcome::Invalid);
@@ -307,6 +341,10 @@ pub fn run_campaign_tests_watched(
             mass,
             surrogate_misses: &misses,
             strata: tests.strata(),
+            switch: Some(Switcher {
+                get: &switch_get,
+                set: &switch_set,
+            }),
         }),
         tests.term_bounds(),
         rule,

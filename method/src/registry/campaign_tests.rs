@@ -101,6 +101,17 @@ pub trait CampaignTests: Send + Sync {
     fn strata(&self) -> Option<f64> {
         None
     }
+    /// The test from which nearly every test explores, once the campaign
+    /// switched (docs/statistics.md, "The allocation"); `None` before and
+    /// for campaigns that never switch.
+    fn explore_from(&self) -> Option<u64> {
+        None
+    }
+    /// Sets (or clears) the switch, as the coordinator's row or a lease
+    /// says; `false` where the campaign cannot switch (and `from` is set).
+    fn set_explore_from(&self, from: Option<u64>) -> bool {
+        from.is_none()
+    }
     /// The largest terms of an anytime campaign's sequences
     /// ([`crate::anytime`]); `None` where this case has no anytime interval.
     fn term_bounds(&self) -> Option<crate::anytime::TermBounds> {

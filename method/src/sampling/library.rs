@@ -1,7 +1,9 @@
 //! The ε-greedy library distribution.
 
 use super::draw::Draw;
-use super::share::{check_epsilon, stratified_explores, OutsideSpread, SamplingError, Split};
+use super::share::{
+    allocated_explores, check_epsilon, OutsideSpread, SamplingError, Split, SwitchCell,
+};
 use crate::alias::AliasTable;
 use crate::anytime::TermBounds;
 use crate::library::Library;
@@ -32,6 +34,9 @@ pub struct LibraryDistribution {
     outside_mass: std::sync::OnceLock<OutsideMass>,
     /// The largest terms of an anytime campaign's sequences, likewise.
     term_bounds: std::sync::OnceLock<TermBounds>,
+    /// The test from which nearly every test explores
+    /// ([`allocated_explores`]); stratified split only.
+    switch: SwitchCell,
 }
 
 impl LibraryDistribution {
@@ -99,6 +104,7 @@ impl LibraryDistribution {
             outside_ndd,
             outside_mass: Default::default(),
             term_bounds: Default::default(),
+            switch: SwitchCell::default(),
         })
     }
 
@@ -149,12 +155,29 @@ impl LibraryDistribution {
     /// Whether test `index` of a campaign with seed `seed` explores: draws
     /// its scenario outside the library. Under the random split the first
     /// number of its stream falls below ε; under the stratified split the
-    /// index alone decides ([`stratified_explores`]).
+    /// index and the switch decide ([`allocated_explores`]).
     pub fn explores(&self, seed: u64, index: u64) -> bool {
         match self.split {
             Split::Random => self.explore(&mut test_rng(seed, index)),
-            Split::Stratified => stratified_explores(self.epsilon, index),
+            Split::Stratified => allocated_explores(self.epsilon, self.switch.get(), index),
         }
+    }
+
+    /// The test from which nearly every test explores, once switched.
+    pub fn explore_from(&self) -> Option<u64> {
+        self.switch.get()
+    }
+
+    /// Sets the switch ([`allocated_explores`]): tests from `from` on
+    /// explore with [`super::share::LATE_SHARE`]. Tests before it draw as
+    /// they did. Only a stratified campaign with an outside switches;
+    /// `false` (and nothing set) otherwise.
+    pub fn set_explore_from(&self, from: Option<u64>) -> bool {
+        if self.strata().is_none() {
+            return from.is_none();
+        }
+        self.switch.set(from);
+        true
     }
 
     fn explore<R: Rng + ?Sized>(&self, rng: &mut R) -> bool {
@@ -246,7 +269,10 @@ impl LibraryDistribution {
     pub fn draw_from(&self, rng: &mut TestRng, index: u64) -> Draw {
         let cell = match self.split {
             Split::Random => self.sample(rng),
-            Split::Stratified => self.sample_stratum(rng, stratified_explores(self.epsilon, index)),
+            Split::Stratified => self.sample_stratum(
+                rng,
+                allocated_explores(self.epsilon, self.switch.get(), index),
+            ),
         };
         Draw {
             cell,

@@ -15,8 +15,8 @@ pub use draw::Draw;
 pub use library::LibraryDistribution;
 pub use ndd::NddDistribution;
 pub use share::{
-    check_epsilon, default_outside, stratified_explores, OutsideSpread, SamplingError, Split,
-    MAX_EPSILON, MIN_EPSILON,
+    allocated_explores, check_epsilon, default_outside, stratified_explores, OutsideSpread,
+    SamplingError, Split, LATE_SHARE, MAX_EPSILON, MIN_EPSILON,
 };
 pub use support::SupportDistribution;
 
@@ -126,6 +126,24 @@ impl TestDistribution {
             TestDistribution::Library(d) => d.strata(),
             TestDistribution::Ndd(_) | TestDistribution::Enumeration(_) => None,
             TestDistribution::Support(d) => Some(d.epsilon()).filter(|&e| e > 0.0),
+        }
+    }
+
+    /// The test from which nearly every test explores, once a library
+    /// campaign switched ([`LibraryDistribution::set_explore_from`]).
+    pub fn explore_from(&self) -> Option<u64> {
+        match self {
+            TestDistribution::Library(d) => d.explore_from(),
+            _ => None,
+        }
+    }
+
+    /// Sets the switch of a stratified library campaign; `false` where
+    /// there is none to set (and `from` is not `None`).
+    pub fn set_explore_from(&self, from: Option<u64>) -> bool {
+        match self {
+            TestDistribution::Library(d) => d.set_explore_from(from),
+            _ => from.is_none(),
         }
     }
 

@@ -97,6 +97,67 @@ pub fn stratified_explores(epsilon: f64, index: u64) -> bool {
     epsilon > 0.0 && ((index + 1) as f64 * epsilon).floor() > (index as f64 * epsilon).floor()
 }
 
+/// The exploring share of a library campaign from its switch on (issue 49,
+/// docs/statistics.md "The allocation"): once the library stratum is known
+/// to its share of β, nearly every further test explores, because the bound
+/// on the failure mass outside the library is what the campaign still
+/// waits for.
+pub const LATE_SHARE: f64 = 0.95;
+
+/// Whether test `index` explores under the stratified split with share ε
+/// before the switch `from` and [`LATE_SHARE`] from it on:
+/// [`stratified_explores`] on each side, counted from each side's start.
+/// The stratum of every test is fixed by its index and the switch, and the
+/// switch by what was folded before it, so it never depends on the test's
+/// own outcome.
+pub fn allocated_explores(epsilon: f64, from: Option<u64>, index: u64) -> bool {
+    match from {
+        Some(from) if index >= from => stratified_explores(LATE_SHARE, index - from),
+        _ => stratified_explores(epsilon, index),
+    }
+}
+
+/// A campaign's switch, set once: `None` until it is made. Shared by the
+/// copies of a distribution that one campaign's readers hold, and copied
+/// by value when a distribution is cloned.
+#[derive(Debug)]
+pub struct SwitchCell(std::sync::atomic::AtomicU64);
+
+impl Default for SwitchCell {
+    /// No switch made.
+    fn default() -> Self {
+        SwitchCell(std::sync::atomic::AtomicU64::new(Self::NONE))
+    }
+}
+
+impl SwitchCell {
+    const NONE: u64 = u64::MAX;
+
+    /// The switch, if made.
+    pub fn get(&self) -> Option<u64> {
+        match self.0.load(std::sync::atomic::Ordering::Acquire) {
+            Self::NONE => None,
+            from => Some(from),
+        }
+    }
+
+    /// Sets (or, with `None`, clears) the switch.
+    pub fn set(&self, from: Option<u64>) {
+        self.0.store(
+            from.unwrap_or(Self::NONE),
+            std::sync::atomic::Ordering::Release,
+        );
+    }
+}
+
+impl Clone for SwitchCell {
+    fn clone(&self) -> Self {
+        let cell = SwitchCell::default();
+        cell.set(self.get());
+        cell
+    }
+}
+
 /// The smallest positive ε: a smaller share explores so rarely (one test
 /// in a million) that no campaign sees it, and tiny values only make the
 /// outside weights `P(x)/(ε/N)` overflow.

@@ -307,3 +307,56 @@ fn the_pooled_variance_covers_where_the_within_strata_one_collapses() {
     assert!(within < 0.6, "within-strata coverage {within}");
     eprintln!("coverage at n = {n}: pooled {pooled}, within strata {within}");
 }
+
+/// The allocation (issue 49): a switch leaves every test before it as it
+/// was, and from it on nearly every test explores, with the weight `P/q`
+/// of the nominal ε, so each stratum's own terms keep their meaning.
+#[test]
+fn a_switch_keeps_the_tests_before_it_and_explores_nearly_every_test_after() {
+    let (case, lib) = setup();
+    let q = LibraryDistribution::new(
+        &lib,
+        case.exposure(),
+        0.1,
+        OutsideSpread::Ndd,
+        Split::Stratified,
+    )
+    .unwrap();
+    let before: Vec<_> = (0..3000)
+        .map(|i| (q.draw(7, i), q.explores(7, i)))
+        .collect();
+    assert!(q.set_explore_from(Some(1000)));
+    for (i, (draw, explores)) in before.iter().enumerate().take(1000) {
+        let i = i as u64;
+        assert_eq!(
+            (q.draw(7, i), q.explores(7, i)),
+            (*draw, *explores),
+            "test {i}"
+        );
+    }
+    let exploring = (1000..3000).filter(|&i| q.explores(7, i)).count();
+    assert_eq!(
+        exploring, 1900,
+        "⌊2000 · 0.95⌋ tests explore after the switch"
+    );
+    for i in 1000..3000 {
+        let draw = q.draw(7, i);
+        assert_eq!(!q.contains(draw.cell), q.explores(7, i), "test {i}");
+        // The weight is P/q of the nominal mixture, whichever stratum drew it.
+        assert_eq!(
+            draw.weight.to_bits(),
+            (case.exposure().p(draw.cell) / q.q(draw.cell)).to_bits()
+        );
+    }
+    // A random split has no switch to set.
+    let random = LibraryDistribution::new(
+        &lib,
+        case.exposure(),
+        0.1,
+        OutsideSpread::Ndd,
+        Split::Random,
+    )
+    .unwrap();
+    assert!(!random.set_explore_from(Some(5)));
+    assert_eq!(random.explore_from(), None);
+}

@@ -29,11 +29,11 @@ impl SamplerCache {
         row: &CampaignRow,
     ) -> Result<Arc<dyn CampaignTests>, ServiceError> {
         if let Some(sampler) = self.lock().get(&row.id) {
-            return Ok(Arc::clone(sampler));
+            return Ok(switched(Arc::clone(sampler), row));
         }
         let tests = load(db, row).await?;
         self.lock().insert(row.id, Arc::clone(&tests));
-        Ok(tests)
+        Ok(switched(tests, row))
     }
 
     /// The campaign's tests, from the cache or built for this caller alone
@@ -44,8 +44,8 @@ impl SamplerCache {
         row: &CampaignRow,
     ) -> Result<Arc<dyn CampaignTests>, ServiceError> {
         match self.cached(row.id) {
-            Some(tests) => Ok(tests),
-            None => load(db, row).await,
+            Some(tests) => Ok(switched(tests, row)),
+            None => Ok(switched(load(db, row).await?, row)),
         }
     }
 
@@ -77,6 +77,18 @@ impl SamplerCache {
             .lock()
             .unwrap_or_else(|poisoned| poisoned.into_inner())
     }
+}
+
+/// `tests` with the switch `row` records (issue 49): a campaign switches
+/// once, in the fold's transaction, and every reader that sees the row
+/// after it sees its switch. It is never cleared here: a request holding a
+/// row read before the switch must not undo it for the others (its own
+/// tests lie below the switch, where both draw alike).
+pub fn switched(tests: Arc<dyn CampaignTests>, row: &CampaignRow) -> Arc<dyn CampaignTests> {
+    if let Some(from) = row.explore_from() {
+        tests.set_explore_from(Some(from));
+    }
+    tests
 }
 
 /// Builds campaign `row`'s tests off the async runtime, caught up with its

@@ -96,6 +96,7 @@ pub fn campaign_view(row: &CampaignRow) -> CampaignView {
         largest_weight_share: fold.estimator.largest_share(),
         guard_outside: row.guard_outside,
         interval: tslg_client::wire::wire_interval(rule.interval),
+        explore_from: row.explore_from(),
         vehicle_noise: row.vehicle_noise,
         outside_tests: summary.outside_tests,
         outside_events: summary.outside_events,

@@ -8,16 +8,15 @@
 //! stop does not depend on which was used.
 
 use crate::error::ServiceError;
-use crate::report::fold::{explored_tests, Folded};
 use crate::store::campaigns::CampaignRow;
 use crate::store::reports;
 use rusqlite::Connection;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use tslg_method::anytime::{AnytimeFold, TermBounds};
-use tslg_method::estimator::StoppingRule;
+use tslg_method::estimator::{Decision, StoppingRule};
 use tslg_method::outside::OutsideMass;
-use tslg_method::prefix::{Exploration, SparseOutcome};
+use tslg_method::prefix::{Exploration, PrefixFold, SparseOutcome};
 use tslg_method::registry::CampaignTests;
 
 /// The anytime folds kept between reports, by campaign. Each is taken out
@@ -61,6 +60,20 @@ pub struct AnytimeSpan<'a> {
     pub mass: Option<&'a OutsideMass>,
     pub misses: &'a (dyn Fn(u64) -> bool + Sync),
     pub last_stored: Option<u64>,
+    /// The exploring tests of `from..to`, drawn again (for a fold folded
+    /// again from the stored outcomes).
+    pub draw_explored: &'a DrawExplored,
+}
+
+/// Draws the exploring tests of `from..to` of a campaign's tests.
+pub type DrawExplored = dyn Fn(&Arc<dyn CampaignTests>, u64, u64) -> Vec<u64>;
+
+/// What one anytime fold gave: the history points worth storing, with the
+/// sequence's interval at each, and the decision if the rule stopped.
+pub struct AnytimeFolded {
+    pub course: Vec<(PrefixFold, Option<(f64, f64)>)>,
+    pub decision: Option<Decision>,
+    pub anytime: AnytimeFold,
 }
 
 /// Folds `span` onto campaign `campaign`'s anytime fold (kept in `kept`,
@@ -74,11 +87,11 @@ pub fn fold(
     tests: Option<&Arc<dyn CampaignTests>>,
     kept: Option<&AnytimeFolds>,
     span: AnytimeSpan<'_>,
-) -> Result<(Folded, AnytimeFold), ServiceError> {
+) -> Result<AnytimeFolded, ServiceError> {
     let from = campaign.indices as u64;
     let mut anytime = match kept.and_then(|k| k.take(campaign.id, from)) {
         Some(fold) => fold,
-        None => again(conn, campaign, rule, tests, span.mass, span.misses)?,
+        None => again(conn, campaign, rule, tests, &span)?,
     };
     let exploration = span.mass.map(|mass| Exploration {
         explored: span.explored,
@@ -112,14 +125,11 @@ pub fn fold(
     if let (Some(kept), None) = (kept, decision) {
         kept.keep(campaign.id, anytime.clone());
     }
-    Ok((
-        Folded {
-            fold: anytime.fold,
-            course,
-            decision,
-        },
+    Ok(AnytimeFolded {
+        course,
+        decision,
         anytime,
-    ))
+    })
 }
 
 /// The fold of campaign `campaign`'s stored prefix `0..indices`, folded
@@ -129,9 +139,9 @@ fn again(
     campaign: &CampaignRow,
     rule: &StoppingRule,
     tests: Option<&Arc<dyn CampaignTests>>,
-    mass: Option<&OutsideMass>,
-    misses: &(dyn Fn(u64) -> bool + Sync),
+    span: &AnytimeSpan<'_>,
 ) -> Result<AnytimeFold, ServiceError> {
+    let (mass, misses) = (span.mass, span.misses);
     let indices = campaign.indices as u64;
     let bounds = match tests {
         Some(tests) => tests.term_bounds().ok_or_else(|| {
@@ -143,7 +153,7 @@ fn again(
     let mut fold = AnytimeFold::new(rule, strata, bounds);
     let outcomes = reports::outcomes(conn, campaign.id, 0, indices)?;
     let explored = match (tests, mass) {
-        (Some(tests), Some(_)) => explored_tests(tests, 0, indices),
+        (Some(tests), Some(_)) => (span.draw_explored)(tests, 0, indices),
         _ => Vec::new(),
     };
     let exploration = mass.map(|mass| Exploration {

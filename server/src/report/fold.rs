@@ -80,7 +80,7 @@ const SERIAL_DRAWS: u64 = 1 << 16;
 /// The tests of `from..to` that draw outside the library (one random
 /// number each, about 0.1 µs), on rayon's threads when there are many:
 /// the writer waits for them, as for any of its statements.
-pub(crate) fn explored_tests(tests: &Arc<dyn CampaignTests>, from: u64, to: u64) -> Vec<u64> {
+fn explored_tests(tests: &Arc<dyn CampaignTests>, from: u64, to: u64) -> Vec<u64> {
     use rayon::prelude::*;
     if to.saturating_sub(from) <= SERIAL_DRAWS {
         return (from..to).filter(|&i| tests.explores(i)).collect();
@@ -236,11 +236,18 @@ fn fold_charging(
             mass,
             misses: &misses,
             last_stored,
+            draw_explored: &explored_tests,
         };
         let kept = known.kept.map(|k| &k.anytime);
-        let (folded, anytime) =
-            anytime::fold(conn, campaign, &rule, all_tests.as_ref(), kept, span)?;
-        (folded, Some(anytime))
+        let folded = anytime::fold(conn, campaign, &rule, all_tests.as_ref(), kept, span)?;
+        (
+            Folded {
+                fold: folded.anytime.fold,
+                course: folded.course,
+                decision: folded.decision,
+            },
+            Some(folded.anytime),
+        )
     } else {
         let folded = fold_step(fold, &rule, frontier, &outcomes, exploration, last_stored)
             .map_err(|e| {
@@ -263,6 +270,14 @@ fn fold_charging(
     // An anytime campaign's exploring stratum bounds its own mean at every
     // n; the others keep the Clopper–Pearson bound.
     let upper = outside_bound(anytime.as_ref(), &folded.fold, mass, campaign.confidence);
+    // An anytime library campaign switches once its library stratum is
+    // known (issue 49): from the first test not yet handed out on, nearly
+    // every test explores. The tests handed out keep their strata.
+    if let Some(a) = anytime.as_ref() {
+        if folded.decision.is_none() && campaign.explore_from.is_none() && a.switch_due(&rule) {
+            prefix::set_explore_from(conn, campaign.id, folded.fold.indices)?;
+        }
+    }
     let sequence = anytime.map(|a| {
         let bounds = a.bounds();
         (bounds.low, bounds.high)

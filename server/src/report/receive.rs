@@ -305,7 +305,9 @@ fn decide(
         config,
     } = *shared;
     let (lease, campaign) = record::held_lease(conn, lease_id, report)?;
-    let tests = samplers.cached(campaign.id);
+    let tests = samplers
+        .cached(campaign.id)
+        .map(|tests| crate::campaign::tests_cache::switched(tests, &campaign));
     let Some(tests) = tests.filter(|t| t.external().is_none()) else {
         return Ok(Decided::Declined);
     };

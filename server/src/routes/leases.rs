@@ -246,6 +246,7 @@ async fn make_lease(
         heartbeat_seconds: ttl / 3.0,
         tests,
         seconds_per_test: campaign.cost_per_test,
+        explore_from: campaign.explore_from(),
     })
 }
 

@@ -93,6 +93,9 @@ pub struct CampaignRow {
     /// An anytime campaign's confidence sequence as of its last fold.
     pub sequence_low: Option<f64>,
     pub sequence_high: Option<f64>,
+    /// The test from which nearly every test explores, once the campaign
+    /// switched (`tslg_method::sampling::allocated_explores`).
+    pub explore_from: Option<i64>,
     pub created_at: String,
     pub updated_at: String,
 }
@@ -111,7 +114,7 @@ pub const COLUMNS: &str = "id, case_name, preset, \
     outside_mismatches, \
     cost_per_test, worker_seconds, audits_waived, reported_s1, exact_probability, \
     stage_start, stage_end, stage_kind, library_tests, search_tests, stages, support, paired_with, created_at, \
-    updated_at, vehicle_noise, interval, sequence_low, sequence_high";
+    updated_at, vehicle_noise, interval, sequence_low, sequence_high, explore_from";
 
 impl CampaignRow {
     pub fn seed(&self) -> u64 {
@@ -134,6 +137,11 @@ impl CampaignRow {
     /// as `wald` (none is written but by [`crate::store::campaigns::insert`]).
     pub fn interval(&self) -> Interval {
         self.interval.parse().unwrap_or_default()
+    }
+
+    /// The switch, as the campaign's tests take it.
+    pub fn explore_from(&self) -> Option<u64> {
+        self.explore_from.map(|from| from as u64)
     }
 
     /// An anytime campaign's confidence sequence `[low, high]` as of its
@@ -282,12 +290,13 @@ fn from_row(row: &Row<'_>) -> rusqlite::Result<CampaignRow> {
         interval: at(row, 52)?,
         sequence_low: at(row, 53)?,
         sequence_high: at(row, 54)?,
+        explore_from: at(row, 55)?,
     })
 }
 
 /// The number of columns [`from_row`] reads.
 #[cfg(test)]
-const READ: usize = 55;
+const READ: usize = 56;
 
 #[cfg(test)]
 mod tests {

@@ -231,6 +231,19 @@ pub fn store_history(
     Ok(())
 }
 
+/// Campaign `campaign` switches to exploring nearly every test from its
+/// first test not yet handed out (`next_index`, at least `folded`), once:
+/// a switch made is never moved.
+pub fn set_explore_from(conn: &Connection, campaign: i64, folded: u64) -> Result<(), StoreError> {
+    sql::execute(
+        conn,
+        "UPDATE campaigns SET explore_from = MAX(next_index, ?) \
+         WHERE id = ? AND explore_from IS NULL",
+        params![folded as i64, campaign],
+    )?;
+    Ok(())
+}
+
 /// A stopped campaign's leases cancelled, and its audits of tests past the
 /// stop index `stop` set aside (they check tests that no longer count).
 pub(crate) fn close_stopped(conn: &Connection, campaign: i64, stop: u64) -> Result<(), StoreError> {

@@ -412,6 +412,45 @@ pub fn in_process(surrogate: Option<&str>, request: &CreateCampaign) -> Campaign
     in_process_with_file(library.map(|l| l.file).as_deref(), None, request)
 }
 
+/// [`in_process`] switched at `explore_from` as the service's campaign was
+/// (an anytime library campaign's switch depends on when its leases were
+/// handed out; given it, the run is the same to the bit).
+pub fn in_process_switched(
+    surrogate: &str,
+    request: &CreateCampaign,
+    explore_from: Option<u64>,
+) -> CampaignResult {
+    let case = open_case("cut-in", None, &ExposureSource::Builtin).unwrap();
+    let library = case
+        .build_library(
+            &serde_json::json!({ "model": surrogate }),
+            &BuildRequest {
+                threshold: None,
+                search: Some(LibrarySearch::Cells(SearchMethod::Exhaustive)),
+            },
+        )
+        .unwrap();
+    let outside = match request.outside {
+        Some(o) => o.as_str().parse().unwrap(),
+        None => tslg_method::sampling::default_outside(case.default_outside(), &rule_of(request)),
+    };
+    let split = request
+        .split
+        .map_or(Default::default(), tslg_client::wire::split);
+    let tests = case
+        .campaign(
+            Some(&library.file),
+            &request.vut,
+            request.epsilon,
+            outside,
+            split,
+            request.seed,
+        )
+        .unwrap();
+    assert!(tests.set_explore_from(explore_from));
+    run_campaign_tests(tests.as_ref(), &rule_of(request), &|_| false)
+}
+
 /// The campaign `request` run in this process on the library `file` (the
 /// NDD when `None`) of the case's `preset`.
 pub fn in_process_with_file(

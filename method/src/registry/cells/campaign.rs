@@ -207,6 +207,14 @@ where
         self.distribution.term_bounds()
     }
 
+    fn explore_from(&self) -> Option<u64> {
+        self.distribution.explore_from()
+    }
+
+    fn set_explore_from(&self, from: Option<u64>) -> bool {
+        self.distribution.set_explore_from(from)
+    }
+
     fn run_cell(
         &self,
         index: u64,
