@@ -395,21 +395,26 @@ pub async fn real_events(
         .collect()
 }
 
-/// The same campaign run in this process (built-in exposure, exhaustive
-/// cut-in library of `surrogate` when `library`).
-pub fn in_process(surrogate: Option<&str>, request: &CreateCampaign) -> CampaignResult {
-    let case = open_case("cut-in", None, &ExposureSource::Builtin).unwrap();
-    let library = surrogate.map(|s| {
-        case.build_library(
-            &serde_json::json!({ "model": s }),
+/// The exhaustive cut-in library of `surrogate` on the built-in exposure.
+fn exhaustive_library(surrogate: &str) -> Vec<u8> {
+    open_case("cut-in", None, &ExposureSource::Builtin)
+        .unwrap()
+        .build_library(
+            &serde_json::json!({ "model": surrogate }),
             &BuildRequest {
                 threshold: None,
                 search: Some(LibrarySearch::Cells(SearchMethod::Exhaustive)),
             },
         )
         .unwrap()
-    });
-    in_process_with_file(library.map(|l| l.file).as_deref(), None, request)
+        .file
+}
+
+/// The same campaign run in this process (built-in exposure, exhaustive
+/// cut-in library of `surrogate` when `library`).
+pub fn in_process(surrogate: Option<&str>, request: &CreateCampaign) -> CampaignResult {
+    let library = surrogate.map(exhaustive_library);
+    in_process_with_file(library.as_deref(), None, request)
 }
 
 /// [`in_process`] switched at `explore_from` as the service's campaign was
@@ -420,33 +425,7 @@ pub fn in_process_switched(
     request: &CreateCampaign,
     explore_from: Option<u64>,
 ) -> CampaignResult {
-    let case = open_case("cut-in", None, &ExposureSource::Builtin).unwrap();
-    let library = case
-        .build_library(
-            &serde_json::json!({ "model": surrogate }),
-            &BuildRequest {
-                threshold: None,
-                search: Some(LibrarySearch::Cells(SearchMethod::Exhaustive)),
-            },
-        )
-        .unwrap();
-    let outside = match request.outside {
-        Some(o) => o.as_str().parse().unwrap(),
-        None => tslg_method::sampling::default_outside(case.default_outside(), &rule_of(request)),
-    };
-    let split = request
-        .split
-        .map_or(Default::default(), tslg_client::wire::split);
-    let tests = case
-        .campaign(
-            Some(&library.file),
-            &request.vut,
-            request.epsilon,
-            outside,
-            split,
-            request.seed,
-        )
-        .unwrap();
+    let tests = campaign_tests(Some(&exhaustive_library(surrogate)), None, request);
     assert!(tests.set_explore_from(explore_from));
     run_campaign_tests(tests.as_ref(), &rule_of(request), &|_| false)
 }
@@ -469,6 +448,18 @@ pub fn in_process_with_invalid(
     request: &CreateCampaign,
     invalid: &(dyn Fn(u64) -> bool + Sync),
 ) -> CampaignResult {
+    let tests = campaign_tests(file, preset, request);
+    run_campaign_tests(tests.as_ref(), &rule_of(request), invalid)
+}
+
+/// The tests of campaign `request` as the coordinator builds them, on the
+/// library `file` (the NDD when `None`) of the case's `preset`, with the
+/// coordinator's default spread.
+fn campaign_tests(
+    file: Option<&[u8]>,
+    preset: Option<&str>,
+    request: &CreateCampaign,
+) -> std::sync::Arc<dyn tslg_method::registry::CampaignTests> {
     let case = open_case(&request.case, preset, &ExposureSource::Builtin).unwrap();
     let outside = match request.outside {
         Some(o) => o.as_str().parse().unwrap(),
@@ -477,17 +468,15 @@ pub fn in_process_with_invalid(
     let split = request
         .split
         .map_or(Default::default(), tslg_client::wire::split);
-    let tests = case
-        .campaign(
-            file,
-            &request.vut,
-            request.epsilon,
-            outside,
-            split,
-            request.seed,
-        )
-        .unwrap();
-    run_campaign_tests(tests.as_ref(), &rule_of(request), invalid)
+    case.campaign(
+        file,
+        &request.vut,
+        request.epsilon,
+        outside,
+        split,
+        request.seed,
+    )
+    .unwrap()
 }
 
 /// The stopping rule of `request` with the coordinator's defaults.
