@@ -34,6 +34,7 @@
 use crate::db::{now_ms, Database};
 use crate::error::ServiceError;
 use crate::report::check::CheckedReport;
+use crate::report::explored::ExploredRanges;
 use crate::report::fold::{fold_prefix, KnownExplored};
 use crate::report::mismatch::{describe, Mismatch};
 use crate::report::record::{at_lease_limit, check_effort, held_lease, stopped_ack, Recorded};
@@ -253,19 +254,23 @@ fn take_back(conn: &Connection, id: i64, worker: &str) -> Result<bool, ServiceEr
 pub async fn record_audit_run(
     db: &Database,
     tests: Option<Arc<dyn CampaignTests>>,
+    kept: Option<Arc<ExploredRanges>>,
     lease_id: i64,
     report: &Arc<ResultReport>,
     checked: &Arc<CheckedReport>,
 ) -> Result<Recorded, ServiceError> {
     let (report, checked) = (Arc::clone(report), Arc::clone(checked));
-    db.write(move |conn| record_audit_run_in(conn, tests, lease_id, &report, &checked))
-        .await
+    db.write(move |conn| {
+        record_audit_run_in(conn, tests, kept.as_deref(), lease_id, &report, &checked)
+    })
+    .await
 }
 
 /// [`record_audit_run`] on the writer connection.
 fn record_audit_run_in(
     conn: &Connection,
     tests: Option<Arc<dyn CampaignTests>>,
+    kept: Option<&ExploredRanges>,
     lease_id: i64,
     report: &ResultReport,
     checked: &CheckedReport,
@@ -304,7 +309,14 @@ fn record_audit_run_in(
     }
     // The flag may have reset the campaign: fold from what is stored now.
     let campaign = campaigns::get(conn, campaign.id)?;
-    let own = fold_prefix(conn, &campaign, tests, KnownExplored::default(), None, None)?;
+    // What the coordinator keeps for folds (the exploring tests of reports
+    // it ran, an anytime campaign's sequences), so that the fold an audit
+    // unblocks does not draw or fold again what it kept.
+    let known = KnownExplored {
+        replayed: None,
+        kept,
+    };
+    let own = fold_prefix(conn, &campaign, tests, known, None, None)?;
     let (stopped, partner_stopped) = crate::report::pair_fold::fold_after(conn, &campaign, own)?;
     Ok(Recorded {
         ack: ResultAck {

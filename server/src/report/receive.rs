@@ -163,7 +163,8 @@ async fn receive_in_parts(
     };
     let library_tests = || tests.clone().filter(|_| campaign.method.uses_library());
     let recorded = if lease.audit_id.is_some() {
-        audit::record_audit_run(&state.db, library_tests(), lease_id, report, checked)
+        let kept = Some(state.samplers.explored());
+        audit::record_audit_run(&state.db, library_tests(), kept, lease_id, report, checked)
             .await
             .map(|recorded| (recorded, None))
     } else {
