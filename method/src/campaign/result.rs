@@ -123,23 +123,42 @@ impl CampaignResult {
         mass: Option<&OutsideMass>,
     ) -> Self {
         let outside_upper = outside_bound(Some(fold), &fold.fold, mass, rule.confidence);
-        let mut result = Self::with_outside_upper(status, &fold.fold, rule.z(), outside_upper);
         let bounds = fold.bounds();
-        result.ci_low = bounds.low;
-        result.ci_high = bounds.high;
-        result.half_width = (bounds.high - bounds.low) / 2.0;
-        result.relative_half_width = if result.estimate > 0.0 {
-            result.half_width / result.estimate
+        Self::with_outside_upper(status, &fold.fold, rule.z(), outside_upper).on_sequence(
+            &fold.fold,
+            (bounds.low, bounds.high),
+            fold.outside_upper().is_some(),
+        )
+    }
+
+    /// This summary read on a confidence sequence's interval `[low, high]`
+    /// of `fold` (an anytime campaign, in process or as a coordinator
+    /// stored it): the half-width is `(high − low)/2`. When the sequence
+    /// holds the exploring stratum's own bound (`outside_in_sequence`, a
+    /// stratified campaign), `high` is the guarded upper end already;
+    /// otherwise the outside bound replaces the outside part of the
+    /// estimate, as for a Wald interval.
+    pub fn on_sequence(
+        mut self,
+        fold: &PrefixFold,
+        (low, high): (f64, f64),
+        outside_in_sequence: bool,
+    ) -> Self {
+        self.ci_low = low;
+        self.ci_high = high;
+        self.half_width = (high - low) / 2.0;
+        self.relative_half_width = if self.estimate > 0.0 {
+            self.half_width / self.estimate
         } else {
             f64::INFINITY
         };
-        let outside_part = fold.fold.outside_estimate();
-        result.guarded_ci_high = outside_upper.map(|u| match fold.outside_upper() {
-            Some(_) => bounds.high,
-            None => bounds.high.max(bounds.high - outside_part + u),
+        let outside_part = fold.outside_estimate();
+        self.guarded_ci_high = self.outside_upper.map(|u| match outside_in_sequence {
+            true => high,
+            false => high.max(high - outside_part + u),
         });
-        result.interval = Interval::Anytime;
-        result
+        self.interval = Interval::Anytime;
+        self
     }
 
     /// Whether the interval contains `value`.

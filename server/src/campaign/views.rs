@@ -43,25 +43,14 @@ pub fn campaign_view(row: &CampaignRow) -> CampaignView {
     let point = history::point_of(&fold, rule.z(), row.sequence());
     let has_events = row.events > 0;
     let started = row.indices > 0;
-    let mut summary =
+    let summary =
         CampaignResult::with_outside_upper(Decision::Continue, &fold, rule.z(), row.outside_upper);
-    if let Some((low, high)) = row.sequence() {
-        // The sequence's upper end holds the exploring stratum's own bound
-        // already (`CampaignResult::from_anytime`).
-        summary.ci_low = low;
-        summary.ci_high = high;
-        summary.half_width = point.half_width;
-        summary.relative_half_width = point.relative_half_width.unwrap_or(f64::INFINITY);
-        summary.interval = rule.interval;
-        // As `CampaignResult::from_anytime`: a stratified campaign's upper
-        // end holds its outside bound; otherwise the bound replaces the
-        // outside part of the estimate.
-        let outside_part = fold.outside_estimate();
-        summary.guarded_ci_high = summary.outside_upper.map(|u| match fold.strata {
-            Some(_) => high,
-            None => high.max(high - outside_part + u),
-        });
-    }
+    // An anytime campaign's stored sequence, whose upper end holds the
+    // exploring stratum's own bound where it has strata.
+    let summary = match row.sequence() {
+        Some(sequence) => summary.on_sequence(&fold, sequence, fold.strata.is_some()),
+        None => summary,
+    };
     CampaignView {
         id: row.id,
         case: row.case_name.clone(),
