@@ -183,6 +183,17 @@ pub fn stratified_library_variance<C: Case>(
     q: &LibraryDistribution,
 ) -> f64 {
     let epsilon = q.epsilon();
+    let [inside, outside] = stratum_variances(case, events, q);
+    (1.0 - epsilon) * inside + epsilon * outside
+}
+
+/// Each stratum's per-test variance of the wire terms `w A`, `w = P/q`
+/// the mixture weight: `[Var_{q_in}(w A), Var_{q_out}(w A)]` (0 for a
+/// stratum of share 0). With `n_in` and `n_out` tests of the strata, in
+/// whatever proportion (the allocation of issue 49), the stratified
+/// estimate has `Var(μ̂) = (1 − ε)² Var_in/n_in + ε² Var_out/n_out`.
+pub fn stratum_variances<C: Case>(case: &C, events: &[usize], q: &LibraryDistribution) -> [f64; 2] {
+    let epsilon = q.epsilon();
     // Σ over events of q(x)·x and q(x)·x² per stratum, x = P/q.
     let (mut first, mut second) = ([0.0f64; 2], [0.0f64; 2]);
     for &c in events {
@@ -192,14 +203,15 @@ pub fn stratified_library_variance<C: Case>(
         second[stratum] += p * p / q.q(c).max(PROBABILITY_FLOOR);
     }
     let shares = [1.0 - epsilon, epsilon];
-    (0..2)
-        .filter(|&h| shares[h] > 0.0)
-        .map(|h| {
-            // Under q_h = q/π_h: E[x] = Σ q x/π_h, E[x²] = Σ q x²/π_h.
+    // Under q_h = q/π_h: E[x] = Σ q x/π_h, E[x²] = Σ q x²/π_h.
+    std::array::from_fn(|h| {
+        if shares[h] > 0.0 {
             let mean = first[h] / shares[h];
-            shares[h] * (second[h] / shares[h] - mean * mean)
-        })
-        .sum()
+            second[h] / shares[h] - mean * mean
+        } else {
+            0.0
+        }
+    })
 }
 
 /// `z² σ² / (β² μ²)`: expected library tests to relative half-width β.

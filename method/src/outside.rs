@@ -125,6 +125,10 @@ pub struct OutsideTally {
     pub events: u64,
     /// `S₁,out = Σ wᵢyᵢ` over them.
     pub s1: f64,
+    /// `S₂,out = Σ (wᵢyᵢ)²` over them: the exploring stratum's variance
+    /// for the within-strata half-width ([`crate::prefix::PrefixFold::within_strata`]).
+    #[serde(default)]
+    pub s2: f64,
     /// Those events in scenarios where the library's surrogate has no
     /// event: the vehicle fails where the surrogate does not.
     #[serde(default)]
@@ -145,6 +149,7 @@ impl OutsideTally {
         if weight > 0.0 {
             self.events += 1;
             self.s1 += weight;
+            self.s2 += weight * weight;
             self.mismatches += u64::from(surrogate_misses());
         }
     }

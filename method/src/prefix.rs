@@ -106,6 +106,12 @@ pub struct PrefixFold {
     /// ([`PrefixFold::estimate`]); `None`: the plain mean `S₁/n`.
     #[serde(default)]
     pub strata: Option<f64>,
+    /// Whether a stratified campaign's half-width reads the within-strata
+    /// variance ([`PrefixFold::half_width`]) rather than the pooled one: a
+    /// guarded Wald campaign's, whose allocation leaves the proportional
+    /// split once its library stratum is known ([`PrefixFold::switch_due`]).
+    #[serde(default)]
+    pub within_strata: bool,
 }
 
 /// The stratified estimate `(1 − ε) S₁,in/n_in + ε S₁,out/n_out` of `n`
@@ -204,6 +210,18 @@ impl PrefixFold {
         }
     }
 
+    /// An empty fold for a campaign of `rule` whose estimate stratifies on
+    /// `strata`: a guarded Wald campaign's reads the within-strata variance
+    /// ([`PrefixFold::within_strata`]).
+    pub fn for_rule(rule: &StoppingRule, strata: Option<f64>) -> Self {
+        Self {
+            within_strata: strata.is_some()
+                && rule.guard_outside
+                && rule.interval == crate::estimator::Interval::Wald,
+            ..Self::with_strata(strata)
+        }
+    }
+
     /// Adds one valid test with weight `weight` and outcome `event`, drawn
     /// outside the library when `explored`: the one-test step of
     /// [`PrefixFold::advance`] without the rule, for a curve that checks
@@ -251,8 +269,76 @@ impl PrefixFold {
     /// exploring stratum has no event yet: on the IDM's built-in library,
     /// which leaves 1.3 % of its failure mass outside, it covers 0.31 at
     /// n = 100 where the pooled one covers always (docs/statistics.md).
+    ///
+    /// A guarded campaign ([`PrefixFold::within_strata`]) reads the
+    /// stratified estimate's own variance instead,
+    /// `z √((1 − ε)² v_in/n_in + ε² v_out/n_out)` with `v_h` the sample
+    /// variance of stratum `h`'s wire terms: once the campaign switches
+    /// to exploring nearly every test the allocation is far from
+    /// proportional, and the pooled variance understates the library
+    /// stratum's part by about `(n_in/((1 − ε) n))²`. What the exploring
+    /// stratum has not yet shown is the guard's to bound
+    /// ([`PrefixFold::stops`]). Infinite until each stratum has 2 tests.
     pub fn half_width(&self, z: f64) -> f64 {
-        self.estimator.half_width(z)
+        match (self.strata, self.within_strata) {
+            (Some(epsilon), true) => z * self.within_strata_variance(epsilon).sqrt(),
+            _ => self.estimator.half_width(z),
+        }
+    }
+
+    /// The strata's sums `((n_in, S₁,in, S₂,in), (n_out, S₁,out, S₂,out))`
+    /// of the wire terms `wᵢyᵢ`.
+    fn strata_sums(&self) -> ((u64, f64, f64), (u64, f64, f64)) {
+        let (s1, s2) = self.estimator.sums();
+        let out = &self.outside;
+        let n_in = self.estimator.tests().saturating_sub(out.tests);
+        (
+            (n_in, (s1 - out.s1).max(0.0), (s2 - out.s2).max(0.0)),
+            (out.tests, out.s1, out.s2),
+        )
+    }
+
+    /// `Var(μ̂) ≈ (1 − ε)² v_in/n_in + ε² v_out/n_out` (infinite until each
+    /// stratum has 2 tests).
+    fn within_strata_variance(&self, epsilon: f64) -> f64 {
+        let (inside, outside) = self.strata_sums();
+        let part = |share: f64, (n, s1, s2): (u64, f64, f64)| {
+            if n < 2 {
+                return f64::INFINITY;
+            }
+            let n = n as f64;
+            share * share * ((s2 - s1 * s1 / n) / (n - 1.0)).max(0.0) / n
+        };
+        part(1.0 - epsilon, inside) + part(epsilon, outside)
+    }
+
+    /// Whether a guarded Wald campaign should switch now to exploring
+    /// nearly every test ([`crate::sampling::allocated_explores`]): the
+    /// rule's floors are met (`n ≥ n_min`, `min_events` events in the
+    /// library stratum, both strata tested, `μ̂ > 0`) and the library
+    /// stratum's half-width is within half of β,
+    /// `z (1 − ε) √(v_in/n_in) ≤ (β/2) μ̂`. From then on the campaign waits
+    /// for the guard, which only exploring tests move. Always `false` for
+    /// other campaigns.
+    pub fn switch_due(&self, rule: &StoppingRule, z: f64) -> bool {
+        let (Some(epsilon), true) = (self.strata, self.within_strata) else {
+            return false;
+        };
+        let (inside, _) = self.strata_sums();
+        let (n_in, s1, s2) = inside;
+        let mean = self.estimate();
+        let inside_events = self.estimator.events() - self.outside.events;
+        if n_in < 2
+            || self.estimator.tests() < rule.n_min
+            || inside_events < rule.min_events
+            || !self.strata_ready()
+            || mean <= 0.0
+        {
+            return false;
+        }
+        let n = n_in as f64;
+        let variance = ((s2 - s1 * s1 / n) / (n - 1.0)).max(0.0);
+        z * (1.0 - epsilon) * (variance / n).sqrt() <= rule.beta / 2.0 * mean
     }
 
     /// `rₙ = half_width/μ̂ₙ`; infinite while `μ̂ₙ = 0`.
@@ -453,13 +539,17 @@ impl PrefixFold {
         if mean <= 0.0 {
             return false;
         }
-        if n >= 2 {
-            let (s1, s2) = self.estimator.sums();
-            let g = ((n as f64 * s2 - s1 * s1) / (n as f64 - 1.0)).max(0.0);
-            let least_half_width = pass.z * g.sqrt() / (n + extra) as f64;
-            if least_half_width > rule.beta * mean * (1.0 + BOUND_SLACK) {
-                return false;
+        let least_half_width = match (self.strata, self.within_strata) {
+            (Some(epsilon), true) => self.least_within_half_width(epsilon, pass.z, extra),
+            _ if n >= 2 => {
+                let (s1, s2) = self.estimator.sums();
+                let g = ((n as f64 * s2 - s1 * s1) / (n as f64 - 1.0)).max(0.0);
+                pass.z * g.sqrt() / (n + extra) as f64
             }
+            _ => 0.0,
+        };
+        if least_half_width > rule.beta * mean * (1.0 + BOUND_SLACK) {
+            return false;
         }
         match (pass.mass, rule.guard_outside) {
             (Some(mass), true) => {
@@ -468,6 +558,27 @@ impl PrefixFold {
             }
             _ => true,
         }
+    }
+
+    /// A lower bound on the within-strata half-width over the next
+    /// `extra` library tests without the event (`n_in` from `n₀` to
+    /// `n₁ = n₀ + extra`, the exploring stratum fixed): the library part
+    /// `(1 − ε)² (n S₂ − S₁²)/(n²(n − 1))` has a non-decreasing numerator,
+    /// so it is at least `(1 − ε)² (n₀ S₂ − S₁²)/(n₁²(n₁ − 1))`; exact at
+    /// `extra = 0`.
+    fn least_within_half_width(&self, epsilon: f64, z: f64, extra: u64) -> f64 {
+        let ((n_in, s1, s2), outside) = self.strata_sums();
+        if n_in + extra < 2 || outside.0 < 2 {
+            return f64::INFINITY;
+        }
+        let out_part = {
+            let (n, s1, s2) = (outside.0 as f64, outside.1, outside.2);
+            epsilon * epsilon * ((s2 - s1 * s1 / n) / (n - 1.0)).max(0.0) / n
+        };
+        let (n0, n1) = (n_in as f64, (n_in + extra) as f64);
+        let in_part =
+            (1.0 - epsilon).powi(2) * (n0 * s2 - s1 * s1).max(0.0) / (n1 * n1 * (n1 - 1.0));
+        z * (in_part + out_part).sqrt()
     }
 
     fn fold_one(
@@ -684,6 +795,7 @@ mod tests {
                         if w > 0.0 {
                             fold.outside.events += 1;
                             fold.outside.s1 += w;
+                            fold.outside.s2 += w * w;
                             fold.outside.mismatches += u64::from(index % 3 == 0);
                         }
                     }
@@ -813,15 +925,27 @@ mod tests {
 
     /// The stratified reference, written from the formulas alone: after
     /// each test the estimate `(1 − ε) S₁,in/n_in + ε S₁,out/n_out`, the
-    /// pooled half-width and the guard `U ≤ β μ̂ + ε S₁,out/n_out` are
-    /// computed afresh from the lists of terms.
+    /// pooled half-width (or with `within` the within-strata one,
+    /// `z √((1 − ε)² v_in/n_in + ε² v_out/n_out)`) and the guard
+    /// `U ≤ β μ̂ + ε S₁,out/n_out` are computed afresh from the lists of
+    /// terms.
     fn step_by_step_stratified(
         rule: &StoppingRule,
         z: f64,
-        epsilon: f64,
+        (epsilon, within): (f64, bool),
         tests: &[(Option<Option<f64>>, bool)],
         mass: &OutsideMass,
     ) -> u64 {
+        let part = |share: f64, terms: &[f64]| {
+            let n = terms.len() as f64;
+            let s1: f64 = terms.iter().sum();
+            let s2: f64 = terms.iter().map(|x| x * x).sum();
+            if n < 2.0 {
+                f64::INFINITY
+            } else {
+                share * share * ((s2 - s1 * s1 / n) / (n - 1.0)).max(0.0) / n
+            }
+        };
         let (mut inside, mut outside) = (Vec::new(), Vec::new());
         for (index, &(t, explores)) in tests.iter().enumerate() {
             let indices = index as u64 + 1;
@@ -846,7 +970,9 @@ mod tests {
             } else {
                 0.0
             };
-            let half = if n >= 2.0 {
+            let half = if within {
+                z * (part(1.0 - epsilon, &inside) + part(epsilon, &outside)).sqrt()
+            } else if n >= 2.0 {
                 z * ((s2 - s1 * s1 / n) / (n - 1.0) / n).max(0.0).sqrt()
             } else {
                 f64::INFINITY
@@ -870,17 +996,23 @@ mod tests {
     fn stratified_folds_in_any_chunking_stop_where_the_formulas_say() {
         let mut guard_mattered = 0;
         let mut stops_in_zero_runs = 0;
+        let mut within_stops = 0;
         for seed in 0..400u64 {
             let mut rng = ChaCha8Rng::seed_from_u64(7000 + seed);
             let len = 4000;
             let epsilon = [0.05, 0.1, 0.3, 0.5][seed as usize % 4];
+            // Guarded campaigns read the within-strata variance on every
+            // other seed, half of them after a switch to exploring nearly
+            // every test (the allocation: strata far from proportional).
+            let within = seed % 4 == 2 || seed % 4 == 0 && seed % 8 == 0;
+            let switch = (within && seed % 3 == 0).then(|| rng.random_range(0..len as u64 / 2));
             // Library tests are events often, exploring ones rarely (a
             // library that covers most of the failures).
             let p_in = rng.random_range(0.05..0.9);
             let p_out = rng.random_range(0.0..[0.05, 0.6][seed as usize % 3 / 2]);
             let tests: Vec<(Option<Option<f64>>, bool)> = (0..len as u64)
                 .map(|i| {
-                    let explores = crate::sampling::stratified_explores(epsilon, i);
+                    let explores = crate::sampling::allocated_explores(epsilon, switch, i);
                     let p = if explores { p_out } else { p_in };
                     (random_outcome(&mut rng, p), explores)
                 })
@@ -896,26 +1028,34 @@ mod tests {
                 ..random_rule(&mut rng, len as u64, guard_outside)
             };
             let z = rule.z();
-            let reference = step_by_step_stratified(&rule, z, epsilon, &tests, &mass);
+            let reference = step_by_step_stratified(&rule, z, (epsilon, within), &tests, &mass);
             if guard_outside {
                 let plain = StoppingRule {
                     guard_outside: false,
                     ..rule
                 };
-                let unguarded = step_by_step_stratified(&plain, z, epsilon, &tests, &mass);
+                let unguarded =
+                    step_by_step_stratified(&plain, z, (epsilon, within), &tests, &mass);
                 guard_mattered += usize::from(unguarded != reference);
             }
             let explored: Vec<u64> = (0..len as u64).filter(|&i| tests[i as usize].1).collect();
             let plain_tests: Vec<Option<Option<f64>>> = tests.iter().map(|t| t.0).collect();
             let fold = fold_in_random_spans(
-                PrefixFold::with_strata(Some(epsilon)),
+                PrefixFold {
+                    within_strata: within,
+                    ..PrefixFold::with_strata(Some(epsilon))
+                },
                 &mut rng,
                 &rule,
                 &plain_tests,
                 &explored,
                 &mass,
             );
-            assert_eq!(fold.indices, reference, "seed {seed} (ε {epsilon})");
+            assert_eq!(
+                fold.indices, reference,
+                "seed {seed} (ε {epsilon}, within strata {within})"
+            );
+            within_stops += usize::from(within && fold.indices < len as u64);
             let last = plain_tests[fold.indices as usize - 1];
             stops_in_zero_runs += usize::from(!matches!(last, Some(Some(_))));
         }
@@ -928,6 +1068,7 @@ mod tests {
             guard_mattered > 10,
             "the guard changed {guard_mattered} stops"
         );
+        assert!(within_stops > 40, "{within_stops} within-strata stops");
     }
 
     #[test]

@@ -63,6 +63,13 @@ async fn a_mismatched_surrogate_is_flagged_and_the_guard_keeps_testing_until_the
     assert_eq!(view.status, CampaignStatus::Converged);
     assert!(view.guard_outside);
     assert!(view.tests > 1000, "{view:?}");
+    // The library stratum was known long before the outside: the campaign
+    // switched to exploring nearly every test.
+    assert!(
+        view.explore_from
+            .is_some_and(|from| from < view.indices / 2),
+        "{view:?}"
+    );
     assert!(view.mismatched_events > 0 && view.mismatched_events <= view.outside_events);
     assert!(view.outside_share.unwrap() > 0.5, "{view:?}");
     assert!(view
@@ -84,7 +91,10 @@ async fn a_mismatched_surrogate_is_flagged_and_the_guard_keeps_testing_until_the
         .as_deref()
         .unwrap()
         .contains("outside the library bounded"));
-    assert_same(&view, &in_process(Some("idm"), &request));
+    assert_same(
+        &view,
+        &in_process_switched("idm", &request, view.explore_from),
+    );
 
     // A surrogate that fails wherever the vehicle does (the FVDM's library
     // testing the IDM): whatever failures of the vehicle the guarded
@@ -112,7 +122,10 @@ async fn a_mismatched_surrogate_is_flagged_and_the_guard_keeps_testing_until_the
         "{:?}",
         view.warnings
     );
-    assert_same(&view, &in_process(Some("fvdm"), &request));
+    assert_same(
+        &view,
+        &in_process_switched("fvdm", &request, view.explore_from),
+    );
 
     // The guard needs a library outside to bound.
     let ndd = CreateCampaign {
@@ -148,7 +161,9 @@ async fn a_campaign_started_before_the_outside_bound_is_counted_again_from_its_f
     drop(worker);
     server.kill();
 
-    // What the migration leaves for a campaign of the previous release.
+    // What the migration of the outside bound leaves for a campaign of the
+    // release before it. (Its `S₂,out` stays: a campaign from before that
+    // column keeps the pooled variance and the proportional split.)
     let mut conn = SqliteConnectOptions::new()
         .filename(&database)
         .connect()
@@ -170,7 +185,10 @@ async fn a_campaign_started_before_the_outside_bound_is_counted_again_from_its_f
     let _worker = WorkerProcess::start(&server.url, 1, "w2");
     let view = finished(&client, id, Duration::from_secs(300)).await;
     assert_eq!(view.status, CampaignStatus::Converged);
-    assert_same(&view, &in_process(Some("idm"), &request));
+    assert_same(
+        &view,
+        &in_process_switched("idm", &request, view.explore_from),
+    );
 }
 
 /// Reports that arrive out of order: the last range first, held behind
@@ -211,7 +229,10 @@ async fn ranges_folded_after_later_ones_count_the_same_exploring_tests_without_d
     }
     let view = finished(&client, id, Duration::from_secs(60)).await;
     assert!(view.outside_tests > 1_000, "{view:?}");
-    assert_same(&view, &in_process(Some("idm"), &request));
+    assert_same(
+        &view,
+        &in_process_switched("idm", &request, view.explore_from),
+    );
     assert_eq!(
         scraped(&server.url, "tslg_fold_drawn_tests_total").await,
         0.0

@@ -36,9 +36,10 @@ pub struct Explorer<'a> {
     /// ([`PrefixFold::strata`]).
     pub strata: Option<f64>,
     /// The campaign's switch, if made, and how to make it
-    /// ([`crate::sampling::allocated_explores`]): an anytime campaign
-    /// switches after the first batch at whose end the library stratum is
-    /// known ([`AnytimeFold::switch_due`]), from the next test on.
+    /// ([`crate::sampling::allocated_explores`]): an anytime or guarded
+    /// campaign switches after the first batch at whose end the library
+    /// stratum is known ([`AnytimeFold::switch_due`],
+    /// [`PrefixFold::switch_due`]), from the next test on.
     pub switch: Option<Switcher<'a>>,
 }
 
@@ -172,7 +173,7 @@ pub fn run_span_campaign_watched(
     let mass = explorer.map(|e| e.mass);
     let strata = explorer.and_then(|e| e.strata);
     let mut fold = match rule.interval {
-        Interval::Wald => Fold::Wald(PrefixFold::with_strata(strata)),
+        Interval::Wald => Fold::Wald(PrefixFold::for_rule(rule, strata)),
         Interval::Anytime => Fold::Anytime(Box::new(AnytimeFold::new(
             rule,
             strata,
@@ -247,8 +248,12 @@ pub fn run_span_campaign_watched(
         // Switch once the library stratum is known: from the next test on,
         // nearly every test explores. The tests drawn so far keep their
         // strata; the next batch is drawn after the switch.
-        if let (Fold::Anytime(anytime), Some(switch)) = (&fold, explorer.and_then(|e| e.switch)) {
-            if (switch.get)().is_none() && anytime.switch_due(rule) {
+        if let Some(switch) = explorer.and_then(|e| e.switch) {
+            let due = match &fold {
+                Fold::Wald(fold) => fold.switch_due(rule, z),
+                Fold::Anytime(anytime) => anytime.switch_due(rule),
+            };
+            if (switch.get)().is_none() && due {
                 (switch.set)(to);
             }
         }

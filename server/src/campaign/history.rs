@@ -79,7 +79,7 @@ pub fn read(
     let mut points: Vec<HistoryPoint> = rows
         .into_iter()
         .map(
-            |(indices, tests, events, s1, s2, outside_tests, outside_s1, low, high)| {
+            |(indices, tests, events, s1, s2, outside_tests, outside_s1, low, high, outside_s2)| {
                 let fold = PrefixFold {
                     estimator: ImportanceEstimator::from_sums(tests as u64, events as u64, s1, s2),
                     indices: indices as u64,
@@ -87,9 +87,13 @@ pub fn read(
                     outside: OutsideTally {
                         tests: outside_tests as u64,
                         s1: outside_s1,
+                        s2: outside_s2.unwrap_or(0.0),
                         ..OutsideTally::default()
                     },
                     strata: row.strata_epsilon,
+                    within_strata: row.strata_epsilon.is_some()
+                        && row.tracks_within_strata()
+                        && outside_s2.is_some(),
                 };
                 point_of(&fold, z, low.zip(high))
             },

@@ -208,6 +208,7 @@ fn fold_charging(
     // force under the stratified split); persisted with the sums.
     if let Some(tests) = &tests {
         fold.strata = tests.strata();
+        fold.within_strata = fold.strata.is_some() && campaign.tracks_within_strata();
     }
     let mut explored = Vec::new();
     if let Some(tests) = &tests {
@@ -270,13 +271,15 @@ fn fold_charging(
     // An anytime campaign's exploring stratum bounds its own mean at every
     // n; the others keep the Clopper–Pearson bound.
     let upper = outside_bound(anytime.as_ref(), &folded.fold, mass, campaign.confidence);
-    // An anytime library campaign switches once its library stratum is
-    // known (issue 49): from the first test not yet handed out on, nearly
-    // every test explores. The tests handed out keep their strata.
-    if let Some(a) = anytime.as_ref() {
-        if folded.decision.is_none() && campaign.explore_from.is_none() && a.switch_due(&rule) {
-            prefix::set_explore_from(conn, campaign.id, folded.fold.indices)?;
-        }
+    // An anytime or guarded library campaign switches once its library
+    // stratum is known (issue 49): from the first test not yet handed out
+    // on, nearly every test explores. The tests handed out keep their strata.
+    let switch_due = match anytime.as_ref() {
+        Some(a) => a.switch_due(&rule),
+        None => folded.fold.switch_due(&rule, rule.z()),
+    };
+    if folded.decision.is_none() && campaign.explore_from.is_none() && switch_due {
+        prefix::set_explore_from(conn, campaign.id, folded.fold.indices)?;
     }
     let sequence = anytime.map(|a| {
         let bounds = a.bounds();

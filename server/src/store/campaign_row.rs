@@ -61,6 +61,9 @@ pub struct CampaignRow {
     pub outside_tests: i64,
     pub outside_events: i64,
     pub outside_s1: f64,
+    /// `S₂,out`; NULL on campaigns created before it was tracked
+    /// (migrations/…27_outside_s2.sql), which keep the pooled variance.
+    pub outside_s2: Option<f64>,
     pub outside_mismatches: i64,
     /// `U` for the prefix; NULL until the exploring tests are counted, and
     /// for campaigns without a library outside (NDD, car-following).
@@ -114,7 +117,7 @@ pub const COLUMNS: &str = "id, case_name, preset, \
     outside_mismatches, \
     cost_per_test, worker_seconds, audits_waived, reported_s1, exact_probability, \
     stage_start, stage_end, stage_kind, library_tests, search_tests, stages, support, paired_with, created_at, \
-    updated_at, vehicle_noise, interval, sequence_low, sequence_high, explore_from";
+    updated_at, vehicle_noise, interval, sequence_low, sequence_high, explore_from, outside_s2";
 
 impl CampaignRow {
     pub fn seed(&self) -> u64 {
@@ -183,10 +186,19 @@ impl CampaignRow {
                 tests: self.outside_tests as u64,
                 events: self.outside_events as u64,
                 s1: self.outside_s1,
+                s2: self.outside_s2.unwrap_or(0.0),
                 mismatches: self.outside_mismatches as u64,
             },
             strata: self.strata_epsilon,
+            within_strata: self.strata_epsilon.is_some() && self.tracks_within_strata(),
         }
+    }
+
+    /// Whether a stratified fold of this campaign reads the within-strata
+    /// variance ([`PrefixFold::within_strata`]): a guarded Wald campaign
+    /// that tracked `S₂,out` from its start.
+    pub fn tracks_within_strata(&self) -> bool {
+        self.guard_outside && self.interval() == Interval::Wald && self.outside_s2.is_some()
     }
 
     pub fn exposure_source(&self) -> ExposureSource {
@@ -291,12 +303,13 @@ fn from_row(row: &Row<'_>) -> rusqlite::Result<CampaignRow> {
         sequence_low: at(row, 53)?,
         sequence_high: at(row, 54)?,
         explore_from: at(row, 55)?,
+        outside_s2: at(row, 56)?,
     })
 }
 
 /// The number of columns [`from_row`] reads.
 #[cfg(test)]
-const READ: usize = 56;
+const READ: usize = 57;
 
 #[cfg(test)]
 mod tests {

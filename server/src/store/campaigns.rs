@@ -42,8 +42,8 @@ pub fn insert(conn: &Connection, new: &NewCampaign) -> Result<CampaignRow, Store
          exposure_fingerprint, exposure_table, vut, requires, epsilon, outside, beta, confidence, \
          n_min, min_events, max_tests, seed, status, guard_outside, exact_probability, split, \
          adaptive, stage_start, stage_end, stage_kind, enumerate, cost_per_test, vehicle_noise, \
-         interval) \
-         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?) \
+         interval, outside_s2) \
+         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, 0) \
          RETURNING {COLUMNS}"
     );
     let adaptive = new.method == Method::Adaptive;
@@ -150,14 +150,25 @@ pub fn cancel(conn: &Connection, id: i64) -> Result<CampaignRow, StoreError> {
 /// A stored history point: `(indices, tests, events, s1, s2,
 /// outside_tests, outside_s1, sequence_low, sequence_high)`, as the fold
 /// wrote it (the sequence's interval only for an anytime campaign).
-pub type HistoryRow = (i64, i64, i64, f64, f64, i64, f64, Option<f64>, Option<f64>);
+pub type HistoryRow = (
+    i64,
+    i64,
+    i64,
+    f64,
+    f64,
+    i64,
+    f64,
+    Option<f64>,
+    Option<f64>,
+    Option<f64>,
+);
 
 /// The stored history points of campaign `id`, in index order.
 pub fn history_rows(conn: &Connection, id: i64) -> Result<Vec<HistoryRow>, StoreError> {
     Ok(sql::all(
         conn,
         "SELECT indices, tests, events, s1, s2, outside_tests, outside_s1, sequence_low, \
-         sequence_high FROM history \
+         sequence_high, outside_s2 FROM history \
          WHERE campaign_id = ? ORDER BY indices",
         [id],
     )?)

@@ -117,6 +117,7 @@ pub fn store_fold(
         "UPDATE campaigns SET indices = ?, tests = ?, events = ?, invalid = ?, s1 = ?, s2 = ?, \
          largest = ?, outside_tests = ?, outside_events = ?, outside_s1 = ?, outside_upper = ?, \
          outside_mismatches = ?, strata_epsilon = ?, sequence_low = ?, sequence_high = ?, \
+         outside_s2 = CASE WHEN outside_s2 IS NULL THEN NULL ELSE ? END, \
          status = ?, status_detail = COALESCE(?, status_detail), \
          cost_per_test = CASE WHEN ? THEN ? ELSE cost_per_test END, \
          worker_seconds = worker_seconds + ?, reported_s1 = reported_s1 + ?, \
@@ -137,6 +138,7 @@ pub fn store_fold(
             fold.strata,
             sequence.map(|s| s.0),
             sequence.map(|s| s.1),
+            fold.outside.s2,
             status.as_str(),
             detail,
             charged,
@@ -209,8 +211,8 @@ pub fn store_history(
     if !course.is_empty() {
         let mut statement = conn.prepare_cached(
             "INSERT OR REPLACE INTO history (campaign_id, indices, tests, events, s1, s2, \
-             outside_tests, outside_s1, sequence_low, sequence_high) \
-             VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+             outside_tests, outside_s1, sequence_low, sequence_high, outside_s2) \
+             VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
         )?;
         for (state, sequence) in course {
             let (s1, s2) = state.estimator.sums();
@@ -224,7 +226,8 @@ pub fn store_history(
                 state.outside.tests as i64,
                 state.outside.s1,
                 sequence.map(|s| s.0),
-                sequence.map(|s| s.1)
+                sequence.map(|s| s.1),
+                state.within_strata.then_some(state.outside.s2)
             ])?;
         }
     }
