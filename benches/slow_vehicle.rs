@@ -5,7 +5,9 @@
 //! campaign (the FVDM program tested with the IDM's exhaustive cut-in
 //! library, on the authors' exposure table where it is found, as in the
 //! issue that asked for this bench; else on the built-in exposure, where
-//! that campaign needs about 10⁴ tests), an adaptive campaign (the same)
+//! that campaign needs about 10⁴ tests), the same guarded and with an
+//! anytime interval (both switch to exploring mid-campaign, issue 49),
+//! an adaptive campaign (the same)
 //! and an NDD campaign of a
 //! vehicle that fails often (the FVDM with a lower gain, so that it stops
 //! within about 2,000 tests), each against the ideal: the tests it used
@@ -20,7 +22,8 @@
 //!
 //! `TSLG_SLOW_SLEEPS` (seconds, comma-separated; default `0.01,0.05`),
 //! `TSLG_SLOW_WORKERS` (default `1,4,8,16`) and `TSLG_SLOW_CAMPAIGNS`
-//! (default `library,adaptive,ndd`) choose the rows.
+//! (default `library,adaptive,ndd`; also `guarded`, `anytime`) choose the
+//! rows.
 //!
 //! The last column checks the time left the service shows
 //! (`seconds_left`, as the dashboard and `tslg campaign watch` show it):
@@ -237,6 +240,8 @@ async fn measure(sleep: f64, workers: usize) -> anyhow::Result<Vec<Row>> {
     let chosen: Vec<String> = list("TSLG_SLOW_CAMPAIGNS", "library,adaptive,ndd");
     for (kind, method, program) in [
         ("library", Method::Library, "slow"),
+        ("guarded", Method::Library, "slow"),
+        ("anytime", Method::Library, "slow"),
         ("adaptive", Method::Adaptive, "slow"),
         ("ndd", Method::Ndd, "hot"),
     ] {
@@ -252,7 +257,17 @@ async fn measure(sleep: f64, workers: usize) -> anyhow::Result<Vec<Row>> {
             time_left,
         } = run(
             &client,
-            &common::program_campaign(method, program, library, 2),
+            &tslg_api::CreateCampaign {
+                // The allocation of issue 49: both switch to exploring
+                // nearly every test once the library stratum is known.
+                guard_outside: kind == "guarded",
+                interval: if kind == "anytime" {
+                    tslg_api::IntervalKind::Anytime
+                } else {
+                    Default::default()
+                },
+                ..common::program_campaign(method, program, library, 2)
+            },
         )
         .await?;
         let ran = fleet.settled_tally(program, sleep).await - before;

@@ -224,7 +224,9 @@ pub struct RuleArgs {
     /// Also require the failure mass outside the library to be bounded:
     /// its upper confidence bound may exceed the outside part of the
     /// estimate by at most β × the estimate (library campaigns of grid
-    /// cases; pair it with `--outside ndd`).
+    /// cases). The outside spread then defaults to `ndd`, and once the
+    /// library stratum is known 95 % of the tests explore: about
+    /// ln(1/(1 − c))/(βμ) tests when no failure lies outside.
     #[arg(long)]
     pub guard_outside: bool,
     /// The interval the rule reads and the answer reports: `wald` (valid at

@@ -140,6 +140,12 @@ pub fn stratified_estimate(epsilon: f64, s1: f64, n: u64, s1_out: f64, n_out: u6
     inside + outside
 }
 
+/// The relative rounding of a sum of up to 10⁷ terms in `f64`
+/// (`n · 2⁻⁵³ ≈ 1.1 × 10⁻⁹`, Higham's bound), and of the grid enumeration
+/// an estimate is compared with: the least relative half-width of a
+/// within-strata interval ([`PrefixFold::half_width`]).
+pub const ROUNDING: f64 = 1e-9;
+
 /// Slack on the bound of [`PrefixFold::may_stop_between`]: the bound is
 /// computed in other operations than the rule, so it must not exclude an
 /// index the rule (with its own rounding) accepts.
@@ -279,9 +285,18 @@ impl PrefixFold {
     /// stratum's part by about `(n_in/((1 − ε) n))²`. What the exploring
     /// stratum has not yet shown is the guard's to bound
     /// ([`PrefixFold::stops`]). Infinite until each stratum has 2 tests.
+    ///
+    /// The within-strata half-width is 0 where every library test has the
+    /// same term and no exploring test failed (a library that holds
+    /// exactly the vehicle's failures): the interval is then the estimate
+    /// alone, and it is at least [`ROUNDING`] × `μ̂` so that it still holds
+    /// the value its terms sum to in exact arithmetic.
     pub fn half_width(&self, z: f64) -> f64 {
         match (self.strata, self.within_strata) {
-            (Some(epsilon), true) => z * self.within_strata_variance(epsilon).sqrt(),
+            (Some(epsilon), true) => {
+                let half = z * self.within_strata_variance(epsilon).sqrt();
+                half.max(ROUNDING * self.estimate())
+            }
             _ => self.estimator.half_width(z),
         }
     }
@@ -405,6 +420,29 @@ impl PrefixFold {
                 upper <= rule.beta * self.estimate() + self.outside_estimate()
             }
         }
+    }
+
+    /// The valid tests a guarded campaign needs, all told, before its
+    /// guard `U − μ̂_out ≤ β μ̂` can hold, from the bound `upper` on its
+    /// `m` exploring tests so far: with the events fixed the bound falls
+    /// about as `1/m` (`ln(1/(1 − c))/m` with none), so it needs
+    /// `m* = m U/(β μ̂ + μ̂_out)` exploring tests, `share` of each further
+    /// test exploring ([`crate::sampling::LATE_SHARE`] once switched).
+    /// `None` without the guard, an estimate or an exploring test; the
+    /// tests so far when it holds already.
+    pub fn tests_to_guard(&self, rule: &StoppingRule, upper: f64, share: f64) -> Option<u64> {
+        let target = rule.beta * self.estimate() + self.outside_estimate();
+        let m = self.outside.tests;
+        let positive = |x: f64| x > 0.0;
+        if !rule.guard_outside || !positive(target) || m == 0 || !positive(share) {
+            return None;
+        }
+        let n = self.estimator.tests();
+        if upper <= target {
+            return Some(n);
+        }
+        let more = (m as f64 * upper / target - m as f64) / share;
+        Some((n as f64 + more).min(1e15).ceil() as u64)
     }
 
     /// This fold after `k` more tests without the event, `explored` being
@@ -1069,6 +1107,76 @@ mod tests {
             "the guard changed {guard_mattered} stops"
         );
         assert!(within_stops > 40, "{within_stops} within-strata stops");
+    }
+
+    /// A library that holds exactly the vehicle's failures gives every
+    /// library test the same term: the within-strata interval has no
+    /// width but the rounding of the sums, and must still hold the exact
+    /// mean (which it missed in 200 of 200 campaigns on the authors' table
+    /// before the floor).
+    #[test]
+    fn an_exact_stratum_s_interval_holds_its_exact_value_despite_rounding() {
+        let z = 1.645;
+        let (mut missed_unfloored, mut tried) = (0, 0);
+        for k in 1..200u32 {
+            let term = 8.6621e-4 / 0.9 * (1.0 + f64::from(k) * 1e-3);
+            let mut fold = PrefixFold {
+                within_strata: true,
+                ..PrefixFold::with_strata(Some(0.1))
+            };
+            for i in 0..14_150u64 {
+                let explores = crate::sampling::stratified_explores(0.1, i);
+                fold.push(if explores { 0.0 } else { term }, !explores, explores);
+            }
+            let exact = 0.9 * term;
+            let (low, high) = fold.interval(z);
+            assert!(
+                low <= exact && exact <= high,
+                "k {k}: [{low:e}, {high:e}] vs {exact:e}"
+            );
+            tried += 1;
+            let mean = fold.estimate();
+            missed_unfloored += usize::from(mean != exact);
+        }
+        // The rounding is real: without the floor many of these would miss.
+        assert!(
+            missed_unfloored > tried / 4,
+            "{missed_unfloored} of {tried}"
+        );
+    }
+
+    #[test]
+    fn the_tests_a_guard_needs_scale_with_its_bound_over_its_target() {
+        let rule = StoppingRule {
+            guard_outside: true,
+            ..random_rule(&mut ChaCha8Rng::seed_from_u64(1), 1 << 40, true)
+        };
+        let mass = OutsideMass::Proportional { total: 1.0 };
+        // 1,000 tests, 100 exploring without an event, μ̂ = 1e-3: the bound
+        // 1 − (1 − c)^{1/100} must fall to β μ̂.
+        let mut fold = PrefixFold::with_strata(Some(0.1));
+        for i in 0..1000u64 {
+            fold.push(
+                if i % 10 == 1 { 0.0 } else { 1e-3 / 0.9 },
+                i % 10 != 1,
+                i % 10 == 1,
+            );
+        }
+        let upper = mass.upper(100, 0, rule.confidence);
+        let target = rule.beta * fold.estimate();
+        let needed = fold.tests_to_guard(&rule, upper, 0.95).unwrap();
+        let exploring = 100.0 + (needed - 1000) as f64 * 0.95;
+        // At that many exploring tests the exact bound is within a few
+        // percent of the target (it falls a little faster than 1/m).
+        let there = mass.upper(exploring as u64, 0, rule.confidence);
+        assert!((there / target - 1.0).abs() < 0.05, "{there} vs {target}");
+        // Without the guard, or once it holds, nothing more to say.
+        let plain = StoppingRule {
+            guard_outside: false,
+            ..rule
+        };
+        assert_eq!(fold.tests_to_guard(&plain, upper, 0.95), None);
+        assert_eq!(fold.tests_to_guard(&rule, 0.5 * target, 0.95), Some(1000));
     }
 
     #[test]

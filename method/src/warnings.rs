@@ -45,6 +45,14 @@ impl Dialect {
         }
     }
 
+    /// How to spread the exploring tests by exposure, in this dialect.
+    pub fn ndd_advice(self) -> &'static str {
+        match self {
+            Dialect::Api => "`\"outside\": \"ndd\"`",
+            Dialect::Cli => "`--outside ndd`",
+        }
+    }
+
     /// The name of the test budget, in this dialect.
     pub fn max_tests(self) -> &'static str {
         match self {
@@ -58,6 +66,7 @@ impl Dialect {
     pub fn translate(self, text: &str) -> String {
         text.replace(Dialect::Api.guard_advice(), self.guard_advice())
             .replace(Dialect::Api.max_tests(), self.max_tests())
+            .replace(Dialect::Api.ndd_advice(), self.ndd_advice())
     }
 }
 
@@ -73,6 +82,9 @@ pub struct WarningContext {
     /// A library campaign with ε = 0: no test explores outside the
     /// library.
     pub unexplored: bool,
+    /// Its exploring tests are spread uniformly over the outside cells
+    /// (`outside: uniform`), not by exposure.
+    pub uniform_spread: bool,
 }
 
 /// The warnings `result` deserves under `context`: empty unless the tests
@@ -121,14 +133,29 @@ pub fn warnings(result: &CampaignResult, context: WarningContext) -> Vec<String>
         let unseen = high - result.ci_high;
         let short = unseen > context.beta * result.estimate;
         if context.guard_outside && short && result.status == Decision::Exhausted {
+            let remedy = if context.uniform_spread && result.outside_events > 0 {
+                // U = F(p_U) with F the exposure of the most exposed share
+                // p of the outside cells: p_U tends to the share of
+                // failing cells, not to 0, so U does not fall below F(p̂).
+                format!(
+                    "Under the uniform outside spread the bound lets every failure found lie in \
+                     the most exposed outside cells: with {:.2}% of the exploring tests failing \
+                     it stays near {upper:.3e} however many tests run. Use {}, the guard's \
+                     default, whose bound falls as 1/(exploring tests)",
+                    100.0 * result.outside_events as f64 / result.outside_tests.max(1) as f64,
+                    context.dialect.ndd_advice()
+                )
+            } else {
+                format!(
+                    "Raise {}, or use a library that covers this vehicle's failures",
+                    context.dialect.max_tests()
+                )
+            };
             found.push(format!(
                 "the outside bound never came within β × the estimate: up to {upper:.3e} of \
                  failure mass may lie outside the library ({} exploring tests, {} events); the \
-                 guarded upper end is {high:.3e}. Raise {}, or use a library that covers \
-                 this vehicle's failures",
-                result.outside_tests,
-                result.outside_events,
-                context.dialect.max_tests()
+                 guarded upper end is {high:.3e}. {remedy}",
+                result.outside_tests, result.outside_events,
             ));
         }
         let converged = result.relative_half_width <= context.beta;
@@ -184,6 +211,7 @@ mod tests {
             guard_outside,
             dialect,
             unexplored: false,
+            uniform_spread: false,
         }
     }
 
@@ -271,6 +299,41 @@ mod tests {
             ..exhausted
         };
         assert!(warnings(&bounded, context(true, Dialect::Cli)).is_empty());
+        // Under the uniform spread, with failures found outside, more tests
+        // do not help: the remedy is the spread, in the reader's names.
+        let uniform = CampaignResult {
+            outside_events: 18,
+            ..exhausted
+        };
+        for (dialect, advice) in [
+            (Dialect::Cli, "`--outside ndd`"),
+            (Dialect::Api, "`\"outside\": \"ndd\"`"),
+        ] {
+            let spread = WarningContext {
+                uniform_spread: true,
+                ..context(true, dialect)
+            };
+            let found = warnings(&uniform, spread);
+            assert_eq!(found.len(), 1, "{found:?}");
+            assert!(
+                found[0].contains("with 9.00% of the exploring tests failing")
+                    && found[0].contains(advice)
+                    && !found[0].contains("max-tests")
+                    && !found[0].contains("max_tests"),
+                "{}",
+                found[0]
+            );
+            if dialect == Dialect::Api {
+                let cli = warnings(
+                    &uniform,
+                    WarningContext {
+                        dialect: Dialect::Cli,
+                        ..spread
+                    },
+                );
+                assert_eq!(Dialect::Cli.translate(&found[0]), cli[0]);
+            }
+        }
     }
 
     #[test]

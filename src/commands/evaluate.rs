@@ -301,6 +301,7 @@ fn report(
                 dialect: Dialect::Cli,
                 unexplored: matches!(args.method, MethodArg::Library)
                     && args.exploration.epsilon == 0.0,
+                uniform_spread: setup.outside == tslg_method::sampling::OutsideSpread::Uniform,
             },
         ),
     }

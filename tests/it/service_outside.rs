@@ -189,6 +189,19 @@ async fn a_campaign_started_before_the_outside_bound_is_counted_again_from_its_f
         &view,
         &in_process_switched("idm", &request, view.explore_from),
     );
+    // What the view predicted at 40,000 tests counts the guard's tests,
+    // not only the interval's (which had nearly reached β by then).
+    let predicted = before.predicted_tests.unwrap() as f64;
+    eprintln!(
+        "predicted {predicted} at {}, stopped at {}",
+        before.tests, view.tests
+    );
+    assert!(
+        (0.7..1.5).contains(&(predicted / view.tests as f64)),
+        "predicted {predicted} at {} tests, stopped at {}",
+        before.tests,
+        view.tests
+    );
 }
 
 /// Reports that arrive out of order: the last range first, held behind

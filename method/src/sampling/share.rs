@@ -36,7 +36,7 @@ impl std::str::FromStr for OutsideSpread {
 /// `ln(1/(1 − c))/(βμ)` exploring tests; under the uniform spread an
 /// exploring test's weight is `P(x) N_out`, and the bound has to allow for
 /// a failure in the most exposed outside cell (docs/statistics.md,
-/// "The guard's floor").
+/// "The model-free floor" and "The guard's allocation").
 pub fn default_outside(
     case_default: OutsideSpread,
     rule: &crate::estimator::StoppingRule,

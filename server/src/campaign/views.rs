@@ -29,10 +29,31 @@ const PAIRED_RERUN: &str =
 
 /// `n (rₙ/β)²` valid tests, at least `n_min`, once the prefix has
 /// `min_events` events (and at least 2); see [`crate::leasing::size`].
-fn predicted_tests(rule: &StoppingRule, point: &HistoryPoint) -> Option<u64> {
+/// A guarded campaign needs as many more as its guard does
+/// ([`tslg_method::prefix::PrefixFold::tests_to_guard`]), which is most of
+/// them once the library stratum is known.
+fn predicted_tests(rule: &StoppingRule, point: &HistoryPoint, row: &CampaignRow) -> Option<u64> {
     let r = point.relative_half_width?;
     let needed = tests_to_beta(point.tests, point.events, rule.min_events, r, rule.beta)?;
-    Some(needed.max(rule.n_min).max(point.tests))
+    let fold = row.fold();
+    // Campaigns that switch (guarded Wald ones that track the strata, and
+    // anytime ones) explore nearly every test from the switch on.
+    let switches = fold.within_strata
+        || (fold.strata.is_some() && row.interval() == tslg_method::estimator::Interval::Anytime);
+    let share = if switches {
+        tslg_method::sampling::LATE_SHARE
+    } else {
+        row.epsilon
+    };
+    let guard = row
+        .outside_upper
+        .and_then(|upper| fold.tests_to_guard(rule, upper, share));
+    Some(
+        needed
+            .max(guard.unwrap_or(0))
+            .max(rule.n_min)
+            .max(point.tests),
+    )
 }
 
 /// A campaign as the API shows it, from its row alone (no rate, audits or
@@ -80,7 +101,7 @@ pub fn campaign_view(row: &CampaignRow) -> CampaignView {
         ci_low: (row.tests > 1).then_some(point.ci_low),
         ci_high: (row.tests > 1).then_some(point.ci_high),
         // A campaign of a pair stops with its pair, not at its own β.
-        predicted_tests: predicted_tests(&row.fold_rule(), &point),
+        predicted_tests: predicted_tests(&row.fold_rule(), &point, row),
         effective_events: has_events.then(|| fold.estimator.effective_events()),
         largest_weight_share: fold.estimator.largest_share(),
         guard_outside: row.guard_outside,
@@ -118,6 +139,7 @@ pub fn campaign_view(row: &CampaignRow) -> CampaignView {
                     guard_outside: row.guard_outside,
                     dialect: Dialect::Api,
                     unexplored: row.method == Method::Library && row.epsilon == 0.0,
+                    uniform_spread: row.outside == tslg_api::Outside::Uniform,
                 },
             );
             match row.paired_with {
