@@ -309,20 +309,26 @@ fn the_pooled_variance_covers_where_the_within_strata_one_collapses() {
     eprintln!("coverage at n = {n}: pooled {pooled}, within strata {within}");
 }
 
+/// The library's distribution at ε 0.1, spread by exposure outside it
+/// (the spread of guarded and anytime campaigns), stratified.
+fn ndd_spread_q(case: &CutIn, lib: &Library) -> LibraryDistribution {
+    LibraryDistribution::new(
+        lib,
+        case.exposure(),
+        0.1,
+        OutsideSpread::Ndd,
+        Split::Stratified,
+    )
+    .unwrap()
+}
+
 /// The allocation (issue 49): a switch leaves every test before it as it
 /// was, and from it on nearly every test explores, with the weight `P/q`
 /// of the nominal ε, so each stratum's own terms keep their meaning.
 #[test]
 fn a_switch_keeps_the_tests_before_it_and_explores_nearly_every_test_after() {
     let (case, lib) = setup();
-    let q = LibraryDistribution::new(
-        &lib,
-        case.exposure(),
-        0.1,
-        OutsideSpread::Ndd,
-        Split::Stratified,
-    )
-    .unwrap();
+    let q = ndd_spread_q(&case, &lib);
     let before: Vec<_> = (0..3000)
         .map(|i| (q.draw(7, i), q.explores(7, i)))
         .collect();
@@ -376,14 +382,7 @@ fn after_a_switch_the_estimate_is_unbiased_and_the_within_strata_variance_is_exa
     let (n, switch, seeds) = (4_000u64, 1_000u64, 400u64);
     let z = z_for_confidence(0.9);
     for name in ["idm", "fvdm"] {
-        let q = LibraryDistribution::new(
-            &lib,
-            case.exposure(),
-            0.1,
-            OutsideSpread::Ndd,
-            Split::Stratified,
-        )
-        .unwrap();
+        let q = ndd_spread_q(&case, &lib);
         assert!(q.set_explore_from(Some(switch)));
         let events = event_cells(&case, &vehicle(name));
         let is_event: std::collections::HashSet<usize> = events.iter().copied().collect();
