@@ -2,6 +2,10 @@
 //! which case, how a library is searched, how a campaign explores outside
 //! its library, and its stopping rule. A command's own arguments live in
 //! its module under `commands/`.
+//!
+//! Numeric flags take a leading minus (`--beta -0.1`), so that the range
+//! check answers with what the range is, not clap with "unexpected
+//! argument '-0'".
 
 use clap::{Args, ValueEnum};
 use std::path::PathBuf;
@@ -37,7 +41,12 @@ pub struct CaseArgs {
     pub vut_exec: Vec<String>,
     /// Seconds a program may take for one scenario before it is killed and
     /// tried once more (user-defined cases; as `tslg-worker --vut-timeout`).
-    #[arg(long = "vut-timeout", env = "TSLG_VUT_TIMEOUT", default_value_t = 60.0)]
+    #[arg(
+        long = "vut-timeout",
+        env = "TSLG_VUT_TIMEOUT",
+        default_value_t = 60.0,
+        allow_negative_numbers = true
+    )]
     pub vut_timeout_seconds: f64,
     /// An exposure table in the case's format (docs/bring-your-own.md;
     /// `tslg table --case CASE` prints the built-in model in it): cut-in the
@@ -75,13 +84,13 @@ pub struct SearchArgs {
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Learning rate of temporal-difference learning.
-    #[arg(long, default_value_t = 0.1)]
+    #[arg(long, default_value_t = 0.1, allow_negative_numbers = true)]
     pub alpha: f64,
     /// Threshold γ = m·μ_S/N(X) with this m (grid cases; default 1).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub threshold_m: Option<f64>,
     /// An absolute threshold γ instead (grid cases).
-    #[arg(long, conflicts_with = "threshold_m")]
+    #[arg(long, conflicts_with = "threshold_m", allow_negative_numbers = true)]
     pub gamma: Option<f64>,
 }
 
@@ -168,7 +177,7 @@ impl OutsideArg {
 #[derive(Debug, Clone, Copy, Args)]
 pub struct ExplorationArgs {
     /// Share ε of library tests drawn outside the library.
-    #[arg(long, default_value_t = 0.1)]
+    #[arg(long, default_value_t = 0.1, allow_negative_numbers = true)]
     pub epsilon: f64,
     /// How ε is spread outside the library: `uniform` (the paper's) or `ndd`
     /// (in proportion to P(x), so weights outside the library stay bounded).
@@ -205,21 +214,29 @@ impl SplitArg {
 #[derive(Debug, Clone, Args)]
 pub struct RuleArgs {
     /// Stop when the relative half-width of the interval is at most β.
-    #[arg(long, default_value_t = 0.2)]
+    #[arg(long, default_value_t = 0.2, allow_negative_numbers = true)]
     pub beta: f64,
     /// Two-sided confidence level of the interval.
-    #[arg(long, default_value_t = 0.9)]
+    #[arg(long, default_value_t = 0.9, allow_negative_numbers = true)]
     pub confidence: f64,
     /// Never stop before this many tests. Default: 30, and for a library
     /// campaign of a grid case max(30, ⌈10/ε⌉), so that about ten exploring
     /// tests are expected first (docs/statistics.md).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub n_min: Option<u64>,
     /// Never stop before this many events.
-    #[arg(long, default_value_t = tslg_method::estimator::DEFAULT_MIN_EVENTS)]
+    #[arg(
+        long,
+        default_value_t = tslg_method::estimator::DEFAULT_MIN_EVENTS,
+        allow_negative_numbers = true
+    )]
     pub min_events: u64,
     /// Give up after this many tests (status `exhausted`).
-    #[arg(long, default_value_t = tslg_api::DEFAULT_MAX_TESTS)]
+    #[arg(
+        long,
+        default_value_t = tslg_api::DEFAULT_MAX_TESTS,
+        allow_negative_numbers = true
+    )]
     pub max_tests: u64,
     /// Also require the failure mass outside the library to be bounded:
     /// its upper confidence bound may exceed the outside part of the

@@ -243,20 +243,46 @@ pub fn vehicle_spec(
         .with_context(|| format!("invalid {what} `{text}`"))
 }
 
-/// A vehicle specification's short name: its model or its program, and
-/// the noise on its commands when it has some (`idm (noise 1.5)`).
+/// A vehicle specification's short name: its model or its program, the
+/// parameters it sets (for a cut-in or car-following model those that
+/// differ from its defaults: `idm (v0 25)`), and the noise on its commands
+/// when it has some (`idm (noise 1.5)`).
 pub fn vehicle_name(spec: &serde_json::Value) -> String {
+    // A built-in model: its name and the parameters that differ from its
+    // defaults, so that `{"model": "idm", "v0": 25}` does not read `idm`.
+    if let Ok(model) = serde_json::from_value::<tslg_method::vehicle::VehicleModel>(spec.clone()) {
+        return model.label();
+    }
     let name = spec
         .get("model")
         .or_else(|| spec.get("external"))
         .and_then(|m| m.as_str())
         .unwrap_or("?");
-    match spec
+    // Another case's model (highway exit's): the parameters it sets that
+    // differ from the model's own defaults, when this build knows them.
+    let defaults = serde_json::from_value::<tslg_method::cases::highway::ExitVehicle>(
+        serde_json::json!({ "model": name }),
+    )
+    .ok()
+    .and_then(|v| serde_json::to_value(v).ok());
+    let mut parts: Vec<String> = spec
+        .as_object()
+        .into_iter()
+        .flatten()
+        .filter(|(key, _)| !["model", "external", "mode", "noise"].contains(&key.as_str()))
+        .filter(|(key, value)| defaults.as_ref().and_then(|d| d.get(*key)) != Some(*value))
+        .filter_map(|(key, value)| Some(format!("{key} {}", value.as_f64()?)))
+        .collect();
+    if let Some(noise) = spec
         .get("noise")
         .filter(|_| tslg_method::noise::spec_is_noisy(spec))
     {
-        Some(noise) => format!("{name} (noise {noise})"),
-        None => name.to_owned(),
+        parts.push(format!("noise {noise}"));
+    }
+    if parts.is_empty() {
+        name.to_owned()
+    } else {
+        format!("{name} ({})", parts.join(", "))
     }
 }
 

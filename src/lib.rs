@@ -24,6 +24,7 @@ mod inputs;
 pub mod service;
 
 pub use commands::gate::GateFailed;
+pub use output::error_text;
 
 use args::ServerArgs;
 use clap::{Parser, Subcommand};
@@ -68,7 +69,8 @@ pub enum Command {
     /// Print the exact P(A) of each built-in vehicle and the expected number of tests.
     Exact(exact::ExactArgs),
     /// Start a local coordinator and workers, build a library and run a library
-    /// campaign and the NDD baseline through them; print both beside the exact answer.
+    /// campaign, an adaptive campaign (grid cases) and the NDD baseline through
+    /// them; print them beside the exact answer, and what to take away.
     Demo(demo::DemoArgs),
     /// Start, watch or cancel campaigns on a running coordinator.
     #[command(subcommand)]

@@ -12,7 +12,7 @@ fn main() -> ExitCode {
                 ExitCode::from(gate.code)
             }
             None => {
-                eprintln!("error: {e:#}");
+                eprintln!("error: {}", tslg::error_text(&e));
                 ExitCode::FAILURE
             }
         },

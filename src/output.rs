@@ -43,8 +43,52 @@ pub fn ratio(r: f64) -> String {
     format!("{r:.decimals$}")
 }
 
+/// An error and its causes, joined by `: ` as `{:#}` joins them, without a
+/// cause that only repeats what the text already ends with (sqlx's
+/// database error and its SQLite source read the same:
+/// `(code: 14) unable to open database file`, twice).
+pub fn error_text(error: &anyhow::Error) -> String {
+    let mut text = String::new();
+    for cause in error.chain() {
+        let part = cause.to_string();
+        if text.is_empty() {
+            text = part;
+        } else if !text.ends_with(&part) {
+            text.push_str(": ");
+            text.push_str(&part);
+        }
+    }
+    text
+}
+
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn a_cause_that_repeats_the_text_is_said_once() {
+        #[derive(Debug)]
+        struct Database(std::io::Error);
+        impl std::fmt::Display for Database {
+            fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                write!(f, "error returned from database: {}", self.0)
+            }
+        }
+        impl std::error::Error for Database {
+            fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+                Some(&self.0)
+            }
+        }
+        let cause = std::io::Error::other("(code: 14) unable to open database file");
+        let error = anyhow::Error::new(Database(cause)).context("cannot open the database x");
+        assert_eq!(
+            super::error_text(&error),
+            "cannot open the database x: error returned from database: (code: 14) unable to \
+             open database file"
+        );
+        // Distinct causes are all kept, as `{:#}` keeps them.
+        let chained = anyhow::anyhow!("no such file").context("cannot read t.csv");
+        assert_eq!(super::error_text(&chained), format!("{chained:#}"));
+    }
+
     #[test]
     fn ratios_keep_three_significant_digits() {
         let shown: Vec<String> = [1.4284, 0.03304, 686.2, 8889.4, 12.345, 1.0, 0.0]

@@ -26,6 +26,7 @@
 
 use crate::campaign::CampaignResult;
 use crate::estimator::Decision;
+use crate::number::Count;
 
 /// Whose names the advice uses.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -116,12 +117,12 @@ pub fn warnings(result: &CampaignResult, context: WarningContext) -> Vec<String>
             )
         };
         found.push(format!(
-            "surrogate mismatch: the vehicle failed in {} exploring tests whose scenario the \
-             library's surrogate passes ({} events outside the library in all, {:.0}% of the \
+            "surrogate mismatch: the vehicle failed in {} whose scenario the \
+             library's surrogate passes ({} outside the library in all, {:.0}% of the \
              estimate): the library does not cover where this vehicle fails, and the interval \
              rests on the few exploring tests{bound}. {remedy}",
-            result.mismatched_events,
-            result.outside_events,
+            Count(result.mismatched_events, "exploring test"),
+            Count(result.outside_events, "event"),
             100.0 * result.outside_share.unwrap_or(0.0),
             bound = match result.guarded_ci_high {
                 Some(high) => format!(" (the guarded upper end is {high:.3e})"),
@@ -153,9 +154,10 @@ pub fn warnings(result: &CampaignResult, context: WarningContext) -> Vec<String>
             };
             found.push(format!(
                 "the outside bound never came within β × the estimate: up to {upper:.3e} of \
-                 failure mass may lie outside the library ({} exploring tests, {} events); the \
+                 failure mass may lie outside the library ({} exploring tests, {}); the \
                  guarded upper end is {high:.3e}. {remedy}",
-                result.outside_tests, result.outside_events,
+                result.outside_tests,
+                Count(result.outside_events, "event"),
             ));
         }
         let converged = result.relative_half_width <= context.beta;
@@ -164,10 +166,11 @@ pub fn warnings(result: &CampaignResult, context: WarningContext) -> Vec<String>
         if !context.guard_outside && short && converged && unexplained {
             found.push(format!(
                 "the interval does not bound what the library leaves out: its exploring tests \
-                 found {} events outside it, and up to {upper:.3e} of failure mass may lie there \
+                 found {} outside it, and up to {upper:.3e} of failure mass may lie there \
                  ({} exploring tests), more than β × the estimate; the guarded upper end is \
                  {high:.3e}. Rerun with {advice} to test until it is bounded",
-                result.outside_events, result.outside_tests
+                Count(result.outside_events, "event"),
+                result.outside_tests
             ));
         }
     }
@@ -264,7 +267,9 @@ mod tests {
         };
         let cli = warnings(&result, context(false, Dialect::Cli));
         assert_eq!(cli.len(), 1, "{cli:?}");
-        assert!(cli[0].starts_with("surrogate mismatch: the vehicle failed in 2 exploring tests"));
+        assert!(
+            cli[0].starts_with("surrogate mismatch: the vehicle failed in 2 exploring tests whose")
+        );
         assert!(
             cli[0].contains("--guard-outside --outside ndd"),
             "{}",

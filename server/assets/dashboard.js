@@ -33,7 +33,16 @@ const fmt = {
     return `${(s / 86400).toFixed(1)} d`;
   },
   interval: (c) => (c.ci_low == null ? '–' : `[${fmt.sci(c.ci_low)}, ${fmt.sci(c.ci_high)}]`),
-  vehicle: (v) => (v.model ?? (v.external ? `external ${v.external}` : JSON.stringify(v))),
+  // The model or program and the parameters the campaign sets (the CLI
+  // shows those that differ from the model's defaults).
+  vehicle: (v) => {
+    const name = v.model ?? (v.external ? `external ${v.external}` : JSON.stringify(v));
+    const set = Object.entries(v)
+      .filter(([k, x]) => !['model', 'external', 'mode'].includes(k) && typeof x === 'number'
+        && !(k === 'noise' && x === 0))
+      .map(([k, x]) => `${k} ${x}`);
+    return set.length ? `${name} (${set.join(', ')})` : name;
+  },
 };
 
 // Share of the way to β: tests done of those predicted, since the

@@ -10,7 +10,7 @@ async fn main() -> ExitCode {
     match tslg::service::server_main(config).await {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", tslg::error_text(&e));
             ExitCode::FAILURE
         }
     }

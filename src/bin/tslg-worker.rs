@@ -9,7 +9,7 @@ async fn main() {
     let code = match tslg::service::worker_main(config).await {
         Ok(()) => 0,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", tslg::error_text(&e));
             1
         }
     };

@@ -22,7 +22,7 @@ pub struct DemoArgs {
     #[arg(long)]
     pub vut: Option<String>,
     /// Target relative half-width.
-    #[arg(long, default_value_t = 0.2)]
+    #[arg(long, default_value_t = 0.2, allow_negative_numbers = true)]
     pub beta: f64,
     #[command(flatten)]
     pub exploration: ExplorationArgs,
@@ -214,7 +214,7 @@ fn print_table(args: &DemoArgs, views: &[CampaignView], report: Option<&ExactRep
     let interval = |v: &CampaignView| (v.ci_low.unwrap_or(f64::NAN), v.ci_high.unwrap_or(f64::NAN));
     outln!(
         "\nvehicle under test {}, β {}, confidence 0.9, ε {}, seed {}\n",
-        demo_vut(args).unwrap_or_default(),
+        crate::inputs::vehicle_name(&by_library.vut),
         args.beta,
         args.exploration.epsilon,
         args.seed
@@ -289,6 +289,7 @@ fn print_table(args: &DemoArgs, views: &[CampaignView], report: Option<&ExactRep
             "acceleration ratio (NDD tests / library tests): {at_least}{} measured",
             crate::output::ratio(measured)
         );
+        print_takeaway(views, None);
         return;
     };
     let exact = report.probability;
@@ -320,6 +321,49 @@ fn print_table(args: &DemoArgs, views: &[CampaignView], report: Option<&ExactRep
         crate::output::ratio(report.ratio()),
         report.ndd_tests,
         report.library_tests
+    );
+    print_takeaway(views, Some(exact));
+}
+
+/// The demo's last line: what a user should take away. Where an adaptive
+/// campaign ran it is the answer the demo teaches (it learns where this
+/// vehicle fails instead of trusting the surrogate); the library
+/// campaign's speed-up is only as good as the library's cover, which the
+/// line says when its interval missed the exact value.
+fn print_takeaway(views: &[CampaignView], exact: Option<f64>) {
+    let by_library = &views[0];
+    let by_ndd = &views[views.len() - 1];
+    let Some(adaptive) = views.iter().find(|v| v.method == Method::Adaptive) else {
+        return;
+    };
+    let holds = |v: &CampaignView| match (exact, v.ci_low, v.ci_high) {
+        (Some(p), Some(lo), Some(hi)) => Some(lo <= p && p <= hi),
+        _ => None,
+    };
+    let (lo, hi) = (
+        adaptive.ci_low.unwrap_or(f64::NAN),
+        adaptive.ci_high.unwrap_or(f64::NAN),
+    );
+    let verdict = match holds(adaptive) {
+        Some(true) => ", and it holds the exact value",
+        Some(false) => ", and it misses the exact value (one run in ten does, by design)",
+        None => "",
+    };
+    let library = match holds(by_library) {
+        Some(false) => {
+            "; the library campaign's speed-up is not an answer here: its interval misses, \
+             because the library does not hold this vehicle's failures"
+        }
+        _ => {
+            "; the library campaign's speed-up holds only where the library holds the \
+              vehicle's failures"
+        }
+    };
+    outln!(
+        "\ntake away: the adaptive campaign answered P(A) in [{lo:.3e}, {hi:.3e}] after {} \
+         tests, {}× fewer than the NDD baseline{verdict}{library}.",
+        adaptive.indices,
+        crate::output::ratio(by_ndd.tests as f64 / adaptive.indices.max(1) as f64),
     );
 }
 

@@ -78,7 +78,26 @@ struct Report {
     /// The exact P(A) by enumeration, where the case has one this size.
     exact: Option<f64>,
     covers_exact: Option<bool>,
+    /// The vehicle sets parameters that differ from its model's defaults,
+    /// and its exact P(A) on this preset equals the defaults' to the bit:
+    /// they change no accident here (the README's `{"model": "idm",
+    /// "v0": 25}` on paper-code). `None` where it was not checked.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    parameters_inert: Option<bool>,
     warnings: Vec<String>,
+}
+
+/// Whether `vut`'s parameters that differ from its model's defaults leave
+/// the exact P(A) of the preset unchanged (to the bit); `None` without an
+/// exact answer or such parameters.
+fn parameters_inert(case: &dyn ScenarioCase, vut: &serde_json::Value, exact: f64) -> Option<bool> {
+    let name = vut.get("model")?.as_str()?;
+    let defaults = serde_json::json!({ "model": name });
+    if crate::inputs::vehicle_name(vut) == crate::inputs::vehicle_name(&defaults) {
+        return None;
+    }
+    let plain = case.normalise_vehicle(&defaults).ok()?;
+    Some(exact_answer(case, &plain)?.to_bits() == exact.to_bits())
 }
 
 /// What an adaptive campaign spent finding the vehicle's failures, and
@@ -293,6 +312,7 @@ fn report(
         search,
         exact,
         covers_exact: exact.map(|p| result.covers(p)),
+        parameters_inert: exact.and_then(|p| parameters_inert(setup.case.as_ref(), &setup.vut, p)),
         warnings: warnings(
             &result,
             WarningContext {
@@ -315,6 +335,13 @@ fn print(report: &Report, rule: &StoppingRule) {
         "vehicle under test {}",
         crate::inputs::vehicle_name(&report.vut)
     );
+    if report.parameters_inert == Some(true) {
+        outln!(
+            "                   (these parameters change no accident of preset {}: the exact P(A) \
+             equals the defaults', to the last bit)",
+            report.preset
+        );
+    }
     outln!("status             {}", result.status.as_str());
     match &report.search {
         Some(search) => {
@@ -355,9 +382,9 @@ fn print(report: &Report, rule: &StoppingRule) {
     }
     if let (Some(upper), Some(high)) = (result.outside_upper, result.guarded_ci_high) {
         outln!(
-            "outside library    {} exploring tests, {} events; failure mass there ≤ {upper:.4e}",
+            "outside library    {} exploring tests, {}; failure mass there ≤ {upper:.4e}",
             result.outside_tests,
-            result.outside_events
+            tslg_method::number::Count(result.outside_events, "event")
         );
         let covers = report
             .exact

@@ -12,13 +12,13 @@ pub struct ExactArgs {
     #[arg(long)]
     pub surrogate: Option<String>,
     /// ε of the library distribution.
-    #[arg(long, default_value_t = 0.1)]
+    #[arg(long, default_value_t = 0.1, allow_negative_numbers = true)]
     pub epsilon: f64,
     /// Target relative half-width.
-    #[arg(long, default_value_t = 0.2)]
+    #[arg(long, default_value_t = 0.2, allow_negative_numbers = true)]
     pub beta: f64,
     /// Confidence level.
-    #[arg(long, default_value_t = 0.9)]
+    #[arg(long, default_value_t = 0.9, allow_negative_numbers = true)]
     pub confidence: f64,
     /// A vehicle to report beside the case's built-in ones (a name or a
     /// JSON specification, e.g. '{"model": "idm", "noise": 1.5}' for a

@@ -13,6 +13,7 @@ use std::io::IsTerminal;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 use tslg_api::{CampaignView, LibraryView};
+use tslg_method::number::Count;
 use tslg_method::progress::Progress;
 
 fn style() -> ProgressStyle {
@@ -21,6 +22,13 @@ fn style() -> ProgressStyle {
     )
     .expect("a valid template")
     .progress_chars("=> ")
+}
+
+/// Before the first state is known there is nothing to draw a bar of: a
+/// bar of 0 of 0 is drawn full (indicatif's fraction of an empty length
+/// is 1), which read as a campaign already done.
+fn waiting_style() -> ProgressStyle {
+    ProgressStyle::with_template("{prefix:<9} {msg}").expect("a valid template")
 }
 
 /// What follows the bar: r against β, events, rate and time left.
@@ -34,7 +42,11 @@ fn message(view: &CampaignView) -> String {
         tslg_api::IntervalKind::Wald => "",
         tslg_api::IntervalKind::Anytime => " (anytime)",
     };
-    let mut text = format!("r {r}{kind} → β {}  {} events", view.beta, view.events);
+    let mut text = format!(
+        "r {r}{kind} → β {}  {}",
+        view.beta,
+        Count(view.events, "event")
+    );
     if let Some(rate) = view.tests_per_second {
         text.push_str(&format!("  {rate:.0} tests/s"));
     }
@@ -73,8 +85,9 @@ impl CampaignBars {
         let bars = labels
             .iter()
             .map(|label| {
-                let bar = group.add(ProgressBar::new(0).with_style(style()));
+                let bar = group.add(ProgressBar::new(0).with_style(waiting_style()));
                 bar.set_prefix(label.to_string());
+                bar.set_message("waiting for its first state");
                 (label.to_string(), bar)
             })
             .collect();
@@ -106,6 +119,9 @@ impl CampaignBars {
             .unwrap_or(view.max_tests)
             .max(view.tests)
             .max(1);
+        if bar.length() == Some(0) {
+            bar.set_style(style());
+        }
         bar.set_length(target);
         bar.set_position(view.tests);
         bar.set_message(message(view));
@@ -114,31 +130,62 @@ impl CampaignBars {
             bar.finish();
             if !self.shown {
                 eprintln!("{}", progress_line(label, view));
+            } else if self.bars.iter().all(|(_, b)| b.is_finished()) {
+                // The bars leave the cursor at the end of their last line:
+                // what is printed next starts on a line of its own.
+                eprintln!();
             }
         }
     }
 }
 
-/// A spinner, then a bar, for a library build on the coordinator.
+/// A spinner, then a bar, for a library build on the coordinator, with
+/// the coordinator's word on what the build waits for (no worker to lease
+/// its surrogate runs to) printed above it, once each time it starts to
+/// wait (also when stderr is not a terminal: a silent wait looks hung).
 pub struct BuildBar {
     bar: ProgressBar,
+    said: std::cell::RefCell<Option<String>>,
 }
 
 impl BuildBar {
     pub fn new(id: i64) -> Self {
-        let bar = counting_bar(
-            &format!("library {id}"),
-            "{prefix} [{bar:30.cyan/blue}] {human_pos}/{human_len} {msg} ({elapsed})",
-        );
+        let bar = counting_bar(&format!("library {id}"));
+        bar.set_message("queued");
         bar.enable_steady_tick(Duration::from_millis(200));
-        Self { bar }
+        Self {
+            bar,
+            said: Default::default(),
+        }
     }
 
     pub fn update(&self, view: &LibraryView) {
+        // Only a wait is news; the counts the detail also gives are the bar's.
+        let detail = view
+            .status_detail
+            .clone()
+            .filter(|d| d.starts_with("waiting"));
+        if detail.is_some() && *self.said.borrow() != detail {
+            let text = format!(
+                "library {}: {}",
+                view.id,
+                detail.as_deref().unwrap_or_default()
+            );
+            if self.bar.is_hidden() {
+                eprintln!("{text}");
+            } else {
+                self.bar.println(text);
+            }
+        }
+        *self.said.borrow_mut() = detail;
         match view.progress {
             Some(p) => {
-                self.bar.set_length(p.total);
-                self.bar.set_position(p.done);
+                show_counts(
+                    &self.bar,
+                    "{prefix} [{bar:30.cyan/blue}] {human_pos}/{human_len} {msg} ({elapsed})",
+                    p.done,
+                    p.total,
+                );
                 self.bar.set_message(search_unit(&view.case));
             }
             None => self.bar.set_message("queued"),
@@ -169,10 +216,7 @@ fn search_unit(case: &str) -> &'static str {
 /// reports to (hidden when stderr is not a terminal).
 pub fn with_progress<T>(label: &str, work: impl FnOnce(&Progress) -> T) -> T {
     let progress = Progress::default();
-    let bar = counting_bar(
-        label,
-        "{prefix} [{bar:30.cyan/blue}] {human_pos}/{human_len} ({elapsed}, ~{eta} left)",
-    );
+    let bar = counting_bar(label);
     /// Stops the drawing thread however `work` ends, a panic included
     /// (the scope would otherwise wait for that thread forever).
     struct Finish<'a>(&'a AtomicBool);
@@ -186,8 +230,12 @@ pub fn with_progress<T>(label: &str, work: impl FnOnce(&Progress) -> T) -> T {
         scope.spawn(|| {
             while !finished.load(Ordering::Relaxed) {
                 let (done, total) = progress.get();
-                bar.set_length(total);
-                bar.set_position(done);
+                show_counts(
+                    &bar,
+                    "{prefix} [{bar:30.cyan/blue}] {human_pos}/{human_len} ({elapsed}, ~{eta} left)",
+                    done,
+                    total,
+                );
                 std::thread::sleep(Duration::from_millis(100));
             }
         });
@@ -198,18 +246,32 @@ pub fn with_progress<T>(label: &str, work: impl FnOnce(&Progress) -> T) -> T {
     result
 }
 
-/// A bar drawn with `template` on stderr, hidden when it is not a terminal.
-fn counting_bar(prefix: &str, template: &str) -> ProgressBar {
+/// A bar on stderr, hidden when it is not a terminal, that shows only its
+/// prefix and message until [`show_counts`] gives it a length.
+fn counting_bar(prefix: &str) -> ProgressBar {
     let bar = if std::io::stderr().is_terminal() {
         ProgressBar::new(0)
     } else {
         ProgressBar::hidden()
     };
-    bar.set_style(
-        ProgressStyle::with_template(template)
-            .expect("a valid template")
-            .progress_chars("=> "),
-    );
+    bar.set_style(waiting_style());
     bar.set_prefix(prefix.to_owned());
     bar
+}
+
+/// `done` of `total` on `bar`, drawn with `template` from the first
+/// positive total on (see [`waiting_style`]).
+fn show_counts(bar: &ProgressBar, template: &str, done: u64, total: u64) {
+    if total == 0 {
+        return;
+    }
+    if bar.length() == Some(0) {
+        bar.set_style(
+            ProgressStyle::with_template(template)
+                .expect("a valid template")
+                .progress_chars("=> "),
+        );
+    }
+    bar.set_length(total);
+    bar.set_position(done);
 }

@@ -129,12 +129,12 @@ pub fn describe(view: &CampaignView) -> String {
     };
     let outside = match view.outside_upper {
         Some(upper) => format!(
-            "\n  outside the library: {} exploring tests (ε {}, {} split), {} events; failure mass \
+            "\n  outside the library: {} exploring tests (ε {}, {} split), {}; failure mass \
              there ≤ {upper:.3e} ({:.0}% bound), guarded interval [{}, {}]{}",
             view.outside_tests,
             view.epsilon,
             view.split.as_str(),
-            view.outside_events,
+            tslg_method::number::Count(view.outside_events, "event"),
             view.confidence * 100.0,
             sci(view.ci_low),
             sci(view.guarded_ci_high),

@@ -40,10 +40,10 @@ pub struct ValidateArgs {
     #[arg(long)]
     pub replicates: Option<u64>,
     /// Target relative half-width β.
-    #[arg(long, default_value_t = 0.2)]
+    #[arg(long, default_value_t = 0.2, allow_negative_numbers = true)]
     pub beta: f64,
     /// Confidence of the interval.
-    #[arg(long, default_value_t = 0.9)]
+    #[arg(long, default_value_t = 0.9, allow_negative_numbers = true)]
     pub confidence: f64,
     /// The values of n_min to compare (comma-separated); default: a
     /// campaign's default, max(30, ⌈10/ε⌉) for these library campaigns.
@@ -53,7 +53,7 @@ pub struct ValidateArgs {
     #[arg(long, value_delimiter = ',', default_values_t = [tslg_method::estimator::DEFAULT_MIN_EVENTS])]
     pub min_events: Vec<u64>,
     /// ε of the plain library campaigns (spread as the case does by default).
-    #[arg(long, default_value_t = 0.1)]
+    #[arg(long, default_value_t = 0.1, allow_negative_numbers = true)]
     pub epsilon: f64,
     /// The splits of the tests between the library and the outside to
     /// compare (comma-separated): stratified, random.

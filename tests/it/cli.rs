@@ -833,6 +833,15 @@ fn the_default_demo_tests_a_vehicle_that_is_not_the_surrogate_three_ways() {
         text.contains("exact P(A) by enumeration: 5.3608e-3"),
         "{text}"
     );
+    // It ends on what to take away: the adaptive campaign's answer, and
+    // what the library campaign's speed-up rests on.
+    let last = text.trim_end().lines().last().unwrap();
+    assert!(
+        last.starts_with("take away: the adaptive campaign answered P(A) in [")
+            && last.contains("fewer than the NDD baseline")
+            && last.contains("the library campaign's speed-up"),
+        "{last}"
+    );
 }
 
 #[test]
@@ -895,11 +904,116 @@ fn the_demo_refuses_bad_settings_before_it_starts() {
         ),
         (&["--surrogate", "nope"][..], "invalid surrogate `nope`"),
         (&["--epsilon", "2"][..], "--epsilon: ε = 2 must be 0 or in"),
+        // A leading minus is a value, answered by the range check.
+        (
+            &["--beta", "-0.1"][..],
+            "--beta = -0.1 must be in [0.0001, 0.99]",
+        ),
     ] {
         let o = tslg(&[&["demo"][..], args].concat());
         assert!(!o.status.success(), "{args:?}");
         assert!(stdout(&o).is_empty(), "{args:?}: {}", stdout(&o));
         assert!(stderr(&o).contains(reason), "{args:?}: {}", stderr(&o));
+    }
+}
+
+/// In a terminal (a pseudo-terminal from `script`), the demo's bars show no
+/// bar before the first state (a bar of 0 of 0 was drawn full) and end
+/// with a newline, so that the summary starts on a line of its own.
+#[test]
+fn in_a_terminal_the_bars_start_empty_and_end_on_their_own_line() {
+    let command = format!("{} demo", env!("CARGO_BIN_EXE_tslg"));
+    let o = std::process::Command::new("script")
+        .args(["-qec", &command, "/dev/null"])
+        .output()
+        .expect("script (util-linux) runs the demo in a pseudo-terminal");
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("waiting for its first state"), "{text}");
+    assert!(text.contains("converged"), "the bars were drawn: {text}");
+    assert!(!text.contains(" 0/0 "), "a full bar of 0/0 tests: {text}");
+    // After the last frame of the bars, a newline comes before anything else.
+    let after = &text[text.rfind("converged").unwrap()..]["converged".len()..];
+    let next = after.trim_start_matches([' ', '\r']);
+    assert!(
+        next.starts_with('\n'),
+        "no newline after the bars: {after:?}"
+    );
+}
+
+/// A vehicle is named with the parameters that differ from its model's
+/// defaults, and a parameter that changes no accident of the preset is
+/// said to (the README's `{"model": "idm", "v0": 25}` read `idm`, and gave
+/// exactly the plain IDM's answer without a word).
+#[test]
+fn a_vehicle_is_named_with_its_parameters_and_inert_ones_are_said_so() {
+    let run = |vut: &str| {
+        let o = tslg(&[
+            "evaluate",
+            "--vut",
+            vut,
+            "--method",
+            "ndd",
+            "--max-tests",
+            "500",
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        stdout(&o)
+    };
+    let inert = run(r#"{"model": "idm", "v0": 25}"#);
+    assert!(
+        inert.contains("vehicle under test idm (v0 25)\n"),
+        "{inert}"
+    );
+    assert!(
+        inert.contains("these parameters change no accident of preset paper-code"),
+        "{inert}"
+    );
+    let active = run(r#"{"model": "idm", "s0": 4}"#);
+    assert!(
+        active.contains("vehicle under test idm (s0 4)\n"),
+        "{active}"
+    );
+    assert!(!active.contains("change no accident"), "{active}");
+    let lag = run(r#"{"model": "acc-aeb", "actuator_lag": 0.3}"#);
+    assert!(
+        lag.contains("vehicle under test acc-aeb (actuator_lag 0.3)"),
+        "{lag}"
+    );
+    let plain = run("idm");
+    assert!(plain.contains("vehicle under test idm\n"), "{plain}");
+    assert!(!plain.contains("change no accident"), "{plain}");
+}
+
+/// Numeric flags take a leading minus, so that the range check says what
+/// the range is (clap alone said "unexpected argument '-0' found").
+#[test]
+fn a_negative_number_is_a_value_that_the_range_check_refuses() {
+    for args in [
+        &[
+            "evaluate", "--vut", "idm", "--method", "ndd", "--beta", "-0.1",
+        ][..],
+        &["validate", "--quick", "--beta", "-0.1"][..],
+        &["exact", "--beta", "-0.1"][..],
+        &[
+            "evaluate",
+            "--vut",
+            "idm",
+            "--method",
+            "ndd",
+            "--confidence",
+            "-0.9",
+        ][..],
+        &["evaluate", "--vut", "idm", "--epsilon", "-0.5"][..],
+    ] {
+        let o = tslg(args);
+        assert!(!o.status.success(), "{args:?}");
+        let text = stderr(&o);
+        assert!(!text.contains("unexpected argument"), "{args:?}: {text}");
+        assert!(
+            text.contains("-0.") && text.contains("must be"),
+            "{args:?}: {text}"
+        );
     }
 }
 

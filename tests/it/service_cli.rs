@@ -368,3 +368,59 @@ fn a_waiting_command_says_why_the_campaign_does_not_move() {
         .unwrap_or_else(|_| panic!("{}", String::from_utf8_lossy(&done.stdout)));
     assert_eq!(view.status.as_str(), "converged");
 }
+
+/// `library create --wait` on a coordinator that leases builds to workers,
+/// with none, says what the build waits for (it used to print nothing for
+/// as long as it waited), and finishes once a worker comes.
+#[test]
+fn a_waiting_library_build_says_it_waits_for_a_worker() {
+    use std::io::{BufRead, BufReader};
+    let dir = scratch();
+    let server = ServerProcess::start(
+        &dir.path().join("db.sqlite"),
+        &["--library-builds", "workers"],
+    );
+    let url = server.url.as_str();
+    let mut waiting = Command::new(env!("CARGO_BIN_EXE_tslg"))
+        .args([
+            "library",
+            "create",
+            "--server",
+            url,
+            "--search",
+            "exhaustive",
+        ])
+        .args(["--wait", "--json"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let (lines, said) = std::sync::mpsc::channel();
+    let stderr = waiting.stderr.take().unwrap();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stderr).lines() {
+            let _ = lines.send(line.unwrap());
+        }
+    });
+    let why = loop {
+        let line = said
+            .recv_timeout(std::time::Duration::from_secs(60))
+            .expect("the command says what the build waits for");
+        if line.contains("waiting") {
+            break line;
+        }
+    };
+    assert!(
+        why.starts_with("library 1: waiting for a worker: the coordinator leases this build's"),
+        "{why}"
+    );
+    let _worker = WorkerProcess::start(url, 1, "w1");
+    let done = waiting.wait_with_output().unwrap();
+    assert!(done.status.success());
+    let view: LibraryView = serde_json::from_slice(&done.stdout)
+        .unwrap_or_else(|_| panic!("{}", String::from_utf8_lossy(&done.stdout)));
+    assert_eq!(view.status.as_str(), "ready");
+    // It said so once, not at every poll.
+    let again: Vec<String> = said.try_iter().filter(|l| l.contains("waiting")).collect();
+    assert!(again.is_empty(), "{again:?}");
+}

@@ -487,6 +487,14 @@ async fn library_pictures_and_pages_are_served_and_unknown_ids_are_404() {
             html.contains("<script src=\"/assets/dashboard.js\">"),
             "{page}"
         );
+        // Without JavaScript the page says so and where the API has the
+        // same, and claims no empty list it has not read.
+        assert!(
+            html.contains("<noscript><p class=\"noscript\">This dashboard needs JavaScript"),
+            "{page}"
+        );
+        assert!(!html.contains("no campaigns yet"), "{page}");
+        assert!(!html.contains("no libraries yet"), "{page}");
     }
     let script = get(&format!("{base}/assets/dashboard.js")).await;
     assert_eq!(

@@ -24,6 +24,17 @@ fn builtin_table(dir: &Path, case: &str, preset: &str) -> (String, String) {
     let o = tslg(&["table", "--case", case, "--preset", preset]);
     assert!(o.status.success(), "{}", text(&o.stderr));
     let content = text(&o.stdout);
+    // Labels are the shortest text of their grid values (no
+    // `-14.399999999999999`), probabilities in scientific notation (no
+    // `0.00000000000000012040820585651798`).
+    for line in content.lines().filter(|l| !l.starts_with('#')) {
+        for field in line.split(',').filter(|f| f.parse::<f64>().is_ok()) {
+            if field.contains('e') {
+                continue;
+            }
+            assert!(field.len() <= 8, "{case}: `{field}` in `{line}`");
+        }
+    }
     (write(dir, &format!("{case}.csv"), &content), content)
 }
 

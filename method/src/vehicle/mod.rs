@@ -182,6 +182,40 @@ impl VehicleModel {
         &self.spec
     }
 
+    /// The parameters that differ from the model's defaults, by name, in
+    /// the order the model writes them (`[("v0", 25.0)]` for
+    /// `{"model": "idm", "v0": 25}`); the noise is not a parameter here.
+    pub fn differing_parameters(&self) -> Vec<(String, f64)> {
+        let written = |spec: &VehicleSpec| match serde_json::to_value(spec) {
+            Ok(serde_json::Value::Object(map)) => map,
+            _ => serde_json::Map::new(),
+        };
+        let default = Self::builtin(self.name()).expect("a built-in model's own name");
+        let (mine, theirs) = (written(&self.spec), written(&default.spec));
+        mine.iter()
+            .filter(|(key, value)| theirs.get(*key) != Some(*value))
+            .filter_map(|(key, value)| Some((key.clone(), value.as_f64()?)))
+            .collect()
+    }
+
+    /// Its name with the parameters that differ from the defaults, and its
+    /// noise: `idm`, `idm (v0 25)`, `acc-aeb (actuator_lag 0.3, noise 0.5)`.
+    pub fn label(&self) -> String {
+        let mut parts: Vec<String> = self
+            .differing_parameters()
+            .into_iter()
+            .map(|(key, value)| format!("{key} {}", crate::number::Num(value)))
+            .collect();
+        if self.is_noisy() {
+            parts.push(format!("noise {}", crate::number::Num(self.noise)));
+        }
+        if parts.is_empty() {
+            self.name().to_owned()
+        } else {
+            format!("{} ({})", self.name(), parts.join(", "))
+        }
+    }
+
     /// σ of the noise on its commands (m/s²); 0 for a deterministic model.
     pub fn noise(&self) -> f64 {
         self.noise
@@ -285,6 +319,26 @@ mod tests {
             lead_speed,
             gap,
         }
+    }
+
+    #[test]
+    fn a_label_names_the_parameters_that_differ_from_the_defaults() {
+        let model = |json: &str| serde_json::from_str::<VehicleModel>(json).unwrap();
+        assert_eq!(model(r#"{"model": "idm"}"#).label(), "idm");
+        assert_eq!(
+            model(r#"{"model": "idm", "v0": 25}"#).label(),
+            "idm (v0 25)"
+        );
+        // A default given explicitly is no difference.
+        let v0 = IdmParams::default().v0;
+        assert_eq!(
+            model(&format!(r#"{{"model": "idm", "v0": {v0}}}"#)).label(),
+            "idm"
+        );
+        assert_eq!(
+            model(r#"{"model": "acc-aeb", "actuator_lag": 0.3, "noise": 0.5}"#).label(),
+            "acc-aeb (actuator_lag 0.3, noise 0.5)"
+        );
     }
 
     #[test]

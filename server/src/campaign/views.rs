@@ -186,24 +186,39 @@ pub fn audit_counts(row: &CampaignRow, states: &[(AuditState, i64)]) -> (AuditCo
         .as_deref()
         .and_then(|r| r.split(':').next())
         .unwrap_or("the program");
-    let warnings = audit_warnings(&counts, program, row.vehicle_noise, row.status.is_final());
+    let handed = (row.next_index as u64, row.indices as u64);
+    let warnings = audit_warnings(
+        &counts,
+        program,
+        (row.vehicle_noise, row.status.is_final()),
+        handed,
+    );
     (counts, warnings)
 }
 
 /// What a campaign's audit `counts` mean for its user, in words: `program`
 /// is its program's name, `vehicle_noise` whether its audits compare by
-/// statistics, `stopped` whether it has stopped.
+/// statistics, `stopped` whether it has stopped, `handed` the tests handed
+/// out to workers and those its estimate used. Audits are chosen among
+/// every test a worker ran, also those past the stop, so a short campaign
+/// can have more chosen than it used: the warning says of how many.
 fn audit_warnings(
     counts: &AuditCounts,
     program: &str,
-    vehicle_noise: bool,
-    stopped: bool,
+    (vehicle_noise, stopped): (bool, bool),
+    (handed_out, used): (u64, u64),
 ) -> Vec<String> {
     let mut warnings = Vec::new();
     if counts.waived > 0 {
+        let past = if handed_out > used && used > 0 {
+            format!(", {used} of them before the stop,")
+        } else {
+            String::new()
+        };
         warnings.push(format!(
-            "{} tests chosen for an audit were not run again: no other worker offering \
-             `{program}` was live; run two or more workers offering it to have them checked",
+            "{} of the {handed_out} tests handed out to workers{past} were chosen for an audit \
+             and not run again: no other worker offering `{program}` was live; run two or more \
+             workers offering it to have them checked",
             counts.waived
         ));
     }
@@ -429,19 +444,40 @@ mod tests {
     #[test]
     fn audits_that_differ_are_worded_for_noisy_and_exact_campaigns() {
         // A noisy program's differing runs are expected: said as a share.
-        let noisy = audit_warnings(&counts(97, 0, 3), "py", true, false);
+        let noisy = audit_warnings(&counts(97, 0, 3), "py", (true, false), (1000, 1000));
         assert_eq!(noisy.len(), 1);
         assert!(noisy[0].starts_with("3 of 100 audited tests"), "{noisy:?}");
         // Under exact audits, one verdict against a worker is a liar
         // caught; two or more say the program may be noisy.
-        assert!(audit_warnings(&counts(50, 1, 0), "py", false, false).is_empty());
-        let repeated = audit_warnings(&counts(50, 2, 0), "py", false, false);
+        assert!(audit_warnings(&counts(50, 1, 0), "py", (false, false), (1000, 1000)).is_empty());
+        let repeated = audit_warnings(&counts(50, 2, 0), "py", (false, false), (1000, 1000));
         assert!(
             repeated[0].contains("start its campaigns with vehicle_noise"),
             "{repeated:?}"
         );
-        assert!(audit_warnings(&counts(50, 2, 0), "py", true, false).is_empty());
-        let three = audit_warnings(&counts(50, 0, 1), "py", false, false);
+        assert!(audit_warnings(&counts(50, 2, 0), "py", (true, false), (1000, 1000)).is_empty());
+        let three = audit_warnings(&counts(50, 0, 1), "py", (false, false), (1000, 1000));
         assert!(three[0].contains("three different outcomes"), "{three:?}");
+    }
+
+    /// A 100-test campaign whose workers ran 1,024 tests had 117 audits
+    /// waived, and said "117 tests chosen for an audit": more than it had.
+    #[test]
+    fn waived_audits_are_counted_against_the_tests_handed_out() {
+        let waived = AuditCounts {
+            waived: 117,
+            ..counts(0, 0, 0)
+        };
+        let said = audit_warnings(&waived, "py", (false, true), (1024, 100));
+        assert_eq!(said.len(), 1);
+        assert!(
+            said[0].starts_with(
+                "117 of the 1024 tests handed out to workers, 100 of them before the stop, were \
+                 chosen for an audit and not run again"
+            ),
+            "{said:?}"
+        );
+        let running = audit_warnings(&waived, "py", (false, false), (1024, 1024));
+        assert!(running[0].starts_with("117 of the 1024 tests handed out to workers were"));
     }
 }

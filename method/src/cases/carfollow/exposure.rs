@@ -137,6 +137,7 @@ impl FollowExposure {
     /// The exposure written as tables that [`FollowExposure::from_tables`]
     /// reads back to it.
     pub fn to_tables(&self, world: &FollowWorld, grid: &StateGrid) -> String {
+        use crate::number::Label;
         let mut text = String::from(
             "# P(s): initial states (BV speed m/s, bumper range m, range rate m/s)\n\
              speed,range,range_rate,probability\n",
@@ -145,8 +146,10 @@ impl FollowExposure {
             if p > 0.0 {
                 let x = grid.state(s);
                 text.push_str(&format!(
-                    "{},{},{},{p}\n",
-                    x.bv_speed, x.range, x.range_rate
+                    "{},{},{},{p:e}\n",
+                    Label(x.bv_speed),
+                    Label(x.range),
+                    Label(x.range_rate)
                 ));
             }
         }
@@ -158,7 +161,7 @@ impl FollowExposure {
             let v = grid.speed.0 + i as f64 * grid.step;
             for (k, &p) in row.iter().enumerate() {
                 if p > 0.0 {
-                    text.push_str(&format!("{v},{},{p}\n", world.action(k)));
+                    text.push_str(&format!("{},{},{p:e}\n", Label(v), Label(world.action(k))));
                 }
             }
         }

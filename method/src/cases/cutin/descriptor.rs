@@ -119,6 +119,7 @@ pub fn open(
 /// The built-in exposure of `preset` in the authors' layout: a header of
 /// range-rate labels, then one line per range with its probabilities.
 pub fn builtin_table(preset: Option<&str>) -> Result<String, CaseError> {
+    use crate::number::Label;
     let preset: CutInPreset = match preset {
         None => CutInPreset::default(),
         Some(p) => p.parse().map_err(CaseError::Preset)?,
@@ -128,14 +129,16 @@ pub fn builtin_table(preset: Option<&str>) -> Result<String, CaseError> {
     let grid = mass.grid();
     let (ranges, rates) = (&grid.axes()[0], &grid.axes()[1]);
     let mut text = String::new();
+    // Labels as the shortest text of their grid value, probabilities in
+    // scientific notation (both read back to the same f64).
     for k in 0..rates.len() {
-        text.push_str(&format!(",{}", rates.value(k)));
+        text.push_str(&format!(",{}", Label(rates.value(k))));
     }
     text.push('\n');
     for i in 0..ranges.len() {
-        text.push_str(&format!("{}", ranges.value(i)));
+        text.push_str(&format!("{}", Label(ranges.value(i))));
         for k in 0..rates.len() {
-            text.push_str(&format!(",{}", mass.p(i * rates.len() + k)));
+            text.push_str(&format!(",{:e}", mass.p(i * rates.len() + k)));
         }
         text.push('\n');
     }

@@ -128,6 +128,7 @@ pub fn exposure_from_table(text: &str, grid: Grid) -> Result<(GridMass, f64), Ta
 /// The built-in model's `P(v₁, R, v₂)` on `grid`'s speeds and ranges, as a
 /// table [`exposure_from_table`] reads back to the built-in exposure.
 pub fn builtin_table(model: &super::ExitExposureModel, grid: &Grid) -> String {
+    use crate::number::Label;
     let [v1, range, v2] = axes(grid);
     let value = |a: &KeyAxis<'_>, k: usize| a.start + k as f64 * a.step;
     let mut points = Vec::new();
@@ -145,7 +146,8 @@ pub fn builtin_table(model: &super::ExitExposureModel, grid: &Grid) -> String {
     );
     for (a, b, c, d) in points {
         if d > 0.0 {
-            text.push_str(&format!("{a},{b},{c},{}\n", d / total));
+            let (a, b, c) = (Label(a), Label(b), Label(c));
+            text.push_str(&format!("{a},{b},{c},{:e}\n", d / total));
         }
     }
     text
