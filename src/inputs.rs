@@ -333,3 +333,15 @@ pub fn surrogate_or_default<'a>(
         None => case_descriptor(case)?.default_surrogate,
     })
 }
+
+/// Refuses to replace any of `paths` that exists unless `force`: a command
+/// that writes results says so before it does the work, not after.
+pub fn check_overwrite(paths: &[std::path::PathBuf], force: bool) -> anyhow::Result<()> {
+    if force {
+        return Ok(());
+    }
+    if let Some(existing) = paths.iter().find(|p| p.exists()) {
+        anyhow::bail!("{} exists; pass --force to replace it", existing.display());
+    }
+    Ok(())
+}

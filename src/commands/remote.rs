@@ -5,6 +5,7 @@ use crate::args::{CaseArgs, ServerArgs};
 use tslg_api::CampaignView;
 use tslg_api::ExposureRequest;
 use tslg_client::Client;
+use tslg_method::number::Count;
 use tslg_method::warnings::Dialect;
 
 pub fn client(args: &ServerArgs) -> anyhow::Result<Client> {
@@ -48,6 +49,25 @@ pub fn tests_shown(view: &CampaignView) -> u64 {
         view.indices
     } else {
         view.tests
+    }
+}
+
+/// The campaign's tests, named: all it used (the progress line's count),
+/// and of them the valid ones its estimate reads (an adaptive campaign's
+/// estimation tests), its events and its invalid tests.
+fn counts(view: &CampaignView) -> String {
+    let used = Count(view.indices, "test");
+    let events = Count(view.events, "event");
+    match &view.adaptive {
+        Some(_) => format!(
+            "{used} run, {} of them estimation tests ({events}, {} invalid)",
+            view.tests + view.invalid,
+            view.invalid
+        ),
+        None => format!(
+            "{used} used ({} valid, {events}, {} invalid)",
+            view.tests, view.invalid
+        ),
     }
 }
 
@@ -190,7 +210,7 @@ pub fn describe(view: &CampaignView) -> String {
         .map(|w| format!("\n  warning: {}", Dialect::Cli.translate(w)))
         .collect();
     format!(
-        "campaign {} ({} {}, vehicle {}): {}{}\n  tests {} (events {}, invalid {}), stop index {}\n  \
+        "campaign {} ({} {}, vehicle {}): {}{}\n  {}\n  \
          estimate {}  {}interval [{}, {}]  relative half-width {} (β {}, confidence {}){exact}{health}{outside}{adaptive}{pair}{warnings}",
         view.id,
         view.case,
@@ -198,10 +218,7 @@ pub fn describe(view: &CampaignView) -> String {
         crate::inputs::vehicle_name(&view.vut),
         view.status.as_str(),
         view.status_detail.as_ref().map_or(String::new(), |d| format!(" — {d}")),
-        view.tests,
-        view.events,
-        view.invalid,
-        view.indices,
+        counts(view),
         sci(view.estimate),
         match view.interval {
             tslg_api::IntervalKind::Wald => "",

@@ -86,6 +86,10 @@ pub struct ValidateArgs {
     /// --curve-to) to this directory.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Replace the files in `--out` if they exist (without it the command
+    /// refuses before it runs).
+    #[arg(long)]
+    pub force: bool,
     /// An exposure table in the layout of the authors' cut-in table (cut-in
     /// only); default: each case's built-in exposure.
     #[arg(long)]
@@ -322,6 +326,15 @@ impl Row {
 pub fn run(args: &ValidateArgs) -> anyhow::Result<()> {
     let replicates = args.replicates.unwrap_or(if args.quick { 50 } else { 200 });
     anyhow::ensure!(replicates >= 2, "--replicates must be at least 2");
+    if let Some(dir) = &args.out {
+        let names: &[&str] = if args.curve_to.is_some() {
+            &["curve.md", "curve.csv"]
+        } else {
+            &["validation.md", "validation.csv", "methods.csv"]
+        };
+        let paths: Vec<PathBuf> = names.iter().map(|n| dir.join(n)).collect();
+        crate::inputs::check_overwrite(&paths, args.force)?;
+    }
     if let Some(to) = args.curve_to {
         return curves(args, replicates, to);
     }

@@ -985,6 +985,51 @@ fn a_vehicle_is_named_with_its_parameters_and_inert_ones_are_said_so() {
     assert!(!plain.contains("change no accident"), "{plain}");
 }
 
+/// Commands that write files refuse to replace one without `--force`,
+/// before they do their work.
+#[test]
+fn files_written_are_not_replaced_without_force() {
+    let dir = tempfile::tempdir().unwrap();
+    let library = dir.path().join("idm.tslg.json");
+    let path = library.to_str().unwrap();
+    let build = |force: bool| {
+        let mut args = vec!["library", "build", "--search", "exhaustive", "--out", path];
+        if force {
+            args.push("--force");
+        }
+        tslg(&args)
+    };
+    assert!(build(false).status.success());
+    let first = std::fs::read(&library).unwrap();
+    std::fs::write(&library, b"mine").unwrap();
+    let refused = build(false);
+    assert!(!refused.status.success());
+    assert!(
+        stderr(&refused).contains("idm.tslg.json exists; pass --force to replace it"),
+        "{}",
+        stderr(&refused)
+    );
+    assert!(stdout(&refused).is_empty(), "no work before the refusal");
+    assert_eq!(std::fs::read(&library).unwrap(), b"mine");
+    assert!(build(true).status.success());
+    assert_eq!(std::fs::read(&library).unwrap(), first);
+    // validate --out: refused before the replicates run.
+    std::fs::write(dir.path().join("validation.md"), "mine").unwrap();
+    let out = dir.path().to_str().unwrap();
+    let refused = tslg(&["validate", "--quick", "--out", out]);
+    assert!(!refused.status.success());
+    assert!(
+        stderr(&refused).contains("validation.md exists; pass --force to replace it"),
+        "{}",
+        stderr(&refused)
+    );
+    assert!(
+        !stderr(&refused).contains("[1/"),
+        "it ran: {}",
+        stderr(&refused)
+    );
+}
+
 /// Numeric flags take a leading minus, so that the range check says what
 /// the range is (clap alone said "unexpected argument '-0' found").
 #[test]

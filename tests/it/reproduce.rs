@@ -139,4 +139,26 @@ fn reproduce_runs_the_cases_and_tables_them_beside_the_paper() {
             other => panic!("unexpected case {other}"),
         }
     }
+    // A ratio is shown with its coverage where a library interval missed
+    // the exact P(A): a speed-up for a wrong answer is not one.
+    for vehicle in ["idm", "acc-aeb"] {
+        let plain: Vec<_> = rows
+            .iter()
+            .filter(|r| r["case"] == "cut-in" && r["vehicle"] == vehicle)
+            .filter(|r| r["campaign"] == "library")
+            .collect();
+        let covering = plain
+            .iter()
+            .filter(|r| {
+                let p = number(r, "exact_probability");
+                number(r, "ci_low") <= p && p <= number(r, "ci_high")
+            })
+            .count();
+        let line = markdown
+            .lines()
+            .find(|l| l.starts_with("| cut-in |") && l.contains(&format!(" | {vehicle} | ")))
+            .unwrap_or_else(|| panic!("a row of {vehicle} in {markdown}"));
+        let marked = format!("(covers {covering} of {})", plain.len());
+        assert_eq!(line.contains(&marked), covering < plain.len(), "{line}");
+    }
 }

@@ -53,6 +53,17 @@ fn adaptive_in_process(request: &CreateCampaign, vut: &str) -> AdaptiveRun {
 fn assert_same_adaptive(view: &CampaignView, own: &AdaptiveRun) {
     let r = &own.result;
     assert_eq!(view.indices, r.indices, "tests in all");
+    // The stop is said in the counts the view shows: all tests used, and
+    // of them the estimation tests (once "after test index 733").
+    if view.status.as_str() == "converged" {
+        let detail = view.status_detail.as_deref().unwrap_or_default();
+        let said = format!(
+            "after {} tests ({} estimation tests;",
+            view.indices,
+            view.tests + view.invalid
+        );
+        assert!(detail.contains(&said), "{detail}");
+    }
     assert_eq!(
         (view.tests, view.events),
         (r.tests, r.events),

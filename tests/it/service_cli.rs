@@ -69,7 +69,11 @@ fn library_create_and_campaign_start_status_cancel_drive_a_coordinator() {
     let o = tslg(&["campaign", "status", &view.id.to_string(), "--server", url]);
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(
-        text.contains("converged") && text.contains(&format!("stop index {}", view.indices)),
+        text.contains("converged")
+            && text.contains(&format!(
+                "{} tests used ({} valid",
+                view.indices, view.tests
+            )),
         "{text}"
     );
     let health = format!(

@@ -331,9 +331,9 @@ fn outcome(
         Some(Decision::Converged) => (
             CampaignStatus::Converged,
             Some(format!(
-                "relative half-width ≤ β = {} after test index {}{}",
+                "relative half-width ≤ β = {} after {} tests{}",
                 rule.beta,
-                fold.indices - 1,
+                fold.indices,
                 if rule.guard_outside {
                     ", with the failure mass outside the library bounded"
                 } else {

@@ -99,10 +99,7 @@ fn fold(conn: &Connection, campaign: &CampaignRow) -> Result<Option<CampaignStat
         ),
     };
     for (id, partner) in [(a.id, b.id), (b.id, a.id)] {
-        let detail = format!(
-            "paired with campaign {partner}: {why} after test index {}",
-            indices - 1
-        );
+        let detail = format!("paired with campaign {partner}: {why} after {indices} tests");
         campaigns::set_status(conn, id, status, &detail)?;
         // Its leases stop; its open audits wait (they run only for a
         // running campaign) in case the pair runs again

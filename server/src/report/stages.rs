@@ -188,10 +188,10 @@ fn write(
                 Decision::Converged => (
                     CampaignStatus::Converged,
                     format!(
-                        "relative half-width ≤ β = {} after test index {} ({} estimation \
+                        "relative half-width ≤ β = {} after {} tests ({} estimation \
                          tests; {} library and {} search tests found where the vehicle fails)",
                         campaign.beta,
-                        done.result.indices - 1,
+                        done.result.indices,
                         fold.indices,
                         done.library_tests,
                         done.search_tests

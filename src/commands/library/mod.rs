@@ -85,9 +85,13 @@ pub struct BuildArgs {
     /// format for car-following; docs/library-format.md).
     #[arg(long, short)]
     pub out: PathBuf,
+    /// Replace `--out` if it exists (without it the command refuses).
+    #[arg(long)]
+    pub force: bool,
 }
 
 fn build(args: &BuildArgs) -> anyhow::Result<()> {
+    crate::inputs::check_overwrite(std::slice::from_ref(&args.out), args.force)?;
     let case = open(&args.case)?;
     let descriptor = case.descriptor().clone();
     let surrogate = vehicle_spec(

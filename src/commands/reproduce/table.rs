@@ -65,6 +65,19 @@ impl Row {
         self.ndd_tests / self.median_library_tests().max(1) as f64
     }
 
+    /// The ratio as the table shows it, with the coverage beside it when
+    /// a library interval missed the exact `P(A)`: a speed-up for a wrong
+    /// answer is not one (`1.238e2 (covers 0 of 3: not an answer)`).
+    pub fn ratio_text(&self) -> String {
+        let ratio = format!("{:.3e}", self.ratio());
+        let runs = self.library_runs.len();
+        match self.covering() {
+            Some((0, _)) => format!("{ratio} (covers 0 of {runs}: not an answer)"),
+            Some((plain, _)) if plain < runs => format!("{ratio} (covers {plain} of {runs})"),
+            _ => ratio,
+        }
+    }
+
     /// How many library intervals contain the exact `P(A)`: plain, guarded.
     fn covering(&self) -> Option<(usize, usize)> {
         let p = self.exact?.probability;
@@ -133,7 +146,7 @@ pub fn markdown(rows: &[Row], replicates: u64, budget: u64) -> String {
         let (adaptive_tests, adaptive_ratio) = row.adaptive_summary();
         let _ = writeln!(
             out,
-            "| {} | {} of {} ({}) | {} | {} | {} | {} ({}–{}) | {} | {} | {adaptive_tests} | {} | {} | {:.3e} | {adaptive_ratio} | {} | {} / {} ({:.0}) |",
+            "| {} | {} of {} ({}) | {} | {} | {} | {} ({}–{}) | {} | {} | {adaptive_tests} | {} | {} | {} | {adaptive_ratio} | {} | {} / {} ({:.0}) |",
             row.case,
             row.library_size,
             row.total_scenarios,
@@ -150,7 +163,7 @@ pub fn markdown(rows: &[Row], replicates: u64, budget: u64) -> String {
                 .map_or("-".into(), |v| v.tests.to_string()),
             count(row.ndd_tests),
             row.ndd_source.as_str(),
-            row.ratio(),
+            row.ratio_text(),
             row.exact.map_or("-".into(), |e| format!("{:.3e}", e.ratio())),
             paper.library_tests,
             count(paper.ndd_tests),
