@@ -3,7 +3,8 @@
 //! number of valid tests `n` on a log axis, as in the paper's result figures.
 //! Points with `n = 0` have no place on a log axis and are left out.
 
-use crate::axis::{linear_top, log_range, log_ticks};
+use crate::axis::{linear_top, log_range, log_ticks, MAX_DECADES};
+use crate::legend::{corner, share, Stretch};
 use crate::style::{axis_format, count, number, BAND, ESTIMATE, FONT, GUARD, LIMIT, SIZE};
 use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
 use plotters::prelude::*;
@@ -50,7 +51,8 @@ pub fn estimate_svg(view: &CampaignView, points: &[HistoryPoint]) -> Result<Stri
             .map(|p| p.estimate)
             .chain(plotted(points).last().map(|p| p.ci_high))
             .chain(exact),
-        1.15,
+        // Room above the data for the legend (`legend::corner`).
+        1.45,
     );
     let guarded = view
         .guarded_ci_high
@@ -71,6 +73,24 @@ pub fn estimate_svg(view: &CampaignView, points: &[HistoryPoint]) -> Result<Stri
     let line: Vec<(f64, f64)> = plotted(points)
         .map(|p| (p.tests as f64, clip(p.estimate)))
         .collect();
+    // What the legend must not cover: the band's columns, the estimate,
+    // and the guarded and exact lines across the whole width.
+    let at = |x: f64| share(x, (x0, x1), true);
+    let on_y = |y: f64| share(y, (0.0, y1), false);
+    let mut data: Vec<Stretch> = plotted(points)
+        .map(|p| Stretch {
+            x: at(p.tests as f64),
+            low: on_y(clip(p.ci_low).min(clip(p.estimate))),
+            high: on_y(clip(p.ci_high).max(clip(p.estimate))),
+        })
+        .collect();
+    for level in guarded.map(|g| g.min(y1)).into_iter().chain(exact) {
+        data.extend((0..=20).map(|k| Stretch {
+            x: k as f64 / 20.0,
+            low: on_y(level),
+            high: on_y(level),
+        }));
+    }
     let title = format!(
         "Campaign {}: estimate of P(A), {} ({} tests)",
         view.id,
@@ -83,6 +103,10 @@ pub fn estimate_svg(view: &CampaignView, points: &[HistoryPoint]) -> Result<Stri
         0.0..y1,
         (0.0, y1),
         "P(A)",
+        corner(
+            &data,
+            2 + usize::from(guarded.is_some()) + usize::from(exact.is_some()),
+        ),
         |chart| {
             let interval = format!("{:.0}% interval", view.confidence * 100.0);
             chart
@@ -151,11 +175,28 @@ pub fn relative_half_width_svg(
         1.5,
         view.beta,
     );
+    // Room above the curve for the legend (`legend::corner`): the top
+    // raised by a third of the axis's span.
+    let high = (high * (high / low).powf(1.0 / 3.0)).min(low * 10f64.powf(MAX_DECADES));
     let title = format!(
         "Campaign {}: relative half-width, β = {}",
         view.id, view.beta
     );
     let beta = view.beta;
+    let on_y = |y: f64| share(y, (low, high), true);
+    let mut data: Vec<Stretch> = line
+        .iter()
+        .map(|&(x, r)| Stretch {
+            x: share(x, (x0, x1), true),
+            low: on_y(r),
+            high: on_y(r),
+        })
+        .collect();
+    data.extend((0..=20).map(|k| Stretch {
+        x: k as f64 / 20.0,
+        low: on_y(beta),
+        high: on_y(beta),
+    }));
     draw(
         &title,
         (x0..x1).log_scale(),
@@ -164,6 +205,7 @@ pub fn relative_half_width_svg(
             .with_key_points(log_ticks(low, high)),
         (low, high),
         "relative half-width",
+        corner(&data, 2),
         |chart| {
             chart
                 .draw_series(DashedLineSeries::new(
@@ -200,6 +242,7 @@ fn draw<XR, YR, X, Y>(
     y: YR,
     (low, high): (f64, f64),
     y_label: &str,
+    legend: SeriesLabelPosition,
     series: impl for<'a> FnOnce(&mut Chart<'a, X, Y>) -> Result<(), FigureError>,
 ) -> Result<String, FigureError>
 where
@@ -236,7 +279,7 @@ where
         series(&mut chart)?;
         chart
             .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
+            .position(legend)
             .background_style(WHITE.mix(0.85))
             .border_style(BLACK.mix(0.4))
             .label_font((FONT, 13))

@@ -124,7 +124,9 @@ fn draw_map(
         format!("{} (all 0)", map.title)
     };
     let width = area.dim_in_pixel().0;
-    let (area, bar) = area.split_horizontally(width * 84 / 100);
+    // The bar's labels (`7.31e-10`, 11 px) need about 50 px beside it: a
+    // 46 px label area let the longer ones run into the bar.
+    let (area, bar) = area.split_horizontally(width * 80 / 100);
     if high > 0.0 {
         colour_bar(&bar, low, high)?;
     }
@@ -180,7 +182,7 @@ fn colour_bar(
         .margin_top(40)
         .margin_bottom(50)
         .margin_right(6)
-        .y_label_area_size(46)
+        .y_label_area_size(64)
         .build_cartesian_2d(0.0..1.0, 0.0..1.0)
         .map_err(fail)?;
     let labels = if span > 0.0 { 5 } else { 1 };

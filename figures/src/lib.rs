@@ -10,6 +10,7 @@
 pub mod axis;
 pub mod campaign;
 pub mod heatmap;
+mod legend;
 mod style;
 
 pub use campaign::FigureError;

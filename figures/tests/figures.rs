@@ -423,5 +423,115 @@ fn a_half_width_within_a_decade_still_has_ticks_to_read_it_by() {
     let svg = relative_half_width_svg(&v, &points).unwrap();
     let doc = Document::parse(&svg).unwrap();
     let ticks = y_ticks(&doc);
-    assert_eq!(ticks, ["0.050", "0.100", "0.200"]);
+    // The axis reaches a third of its span above the curve, for the
+    // legend: 0.5 is the next tick of 1, 2 and 5.
+    assert_eq!(ticks, ["0.050", "0.100", "0.200", "0.500"]);
+}
+
+/// The legend's box (its translucent white background) as `(x0, y0, x1, y1)`.
+fn legend_box(doc: &Document) -> (f64, f64, f64, f64) {
+    let rect = doc
+        .descendants()
+        .find(|n| n.has_tag_name("rect") && n.attribute("opacity") == Some("0.85"))
+        .expect("a legend");
+    let at = |name: &str| rect.attribute(name).unwrap().parse::<f64>().unwrap();
+    let (x, y) = (at("x"), at("y"));
+    (x, y, x + at("width"), y + at("height"))
+}
+
+/// Every vertex of the band and of the estimate or half-width line.
+fn data_vertices(doc: &Document) -> Vec<(f64, f64)> {
+    // The legend's own keys are lines of two points.
+    let mut vertices: Vec<(f64, f64)> = lines(doc, "#1F5DA6")
+        .into_iter()
+        .filter(|l| l.len() > 2)
+        .flatten()
+        .collect();
+    for band in doc
+        .descendants()
+        .filter(|n| n.has_tag_name("polygon") && n.attribute("fill") == Some("#A0C4E8"))
+    {
+        vertices.extend(
+            band.attribute("points")
+                .unwrap()
+                .split_whitespace()
+                .map(|xy| {
+                    let (x, y) = xy.split_once(',').unwrap();
+                    (x.parse::<f64>().unwrap(), y.parse::<f64>().unwrap())
+                }),
+        );
+    }
+    vertices
+}
+
+/// The legend covers none of the data: a legend fixed in the upper right
+/// covered the interval band of a campaign whose estimate settles high
+/// (issue 50), and the relative half-width's curve early on.
+#[test]
+fn the_legend_covers_no_data() {
+    // Three histories: an estimate that settles high on the right (the
+    // dashboard's NDD campaign), one that falls from a high start (a
+    // library campaign's heavy early events), and the falling 1/√n one.
+    let rising: Vec<HistoryPoint> = (1..=60u64)
+        .map(|k| {
+            let n = (10.0 * 1.15f64.powi(k as i32)).round() as u64;
+            let estimate = 5e-3 * (1.0 - (-(k as f64) / 15.0).exp());
+            let r = 2.0 * (10.0 / n as f64).sqrt();
+            HistoryPoint {
+                tests: n,
+                indices: n,
+                events: k,
+                estimate,
+                half_width: r * estimate,
+                relative_half_width: Some(r),
+                ci_low: estimate * (1.0 - r),
+                ci_high: estimate * (1.0 + r),
+            }
+        })
+        .collect();
+    let falling: Vec<HistoryPoint> = rising
+        .iter()
+        .map(|p| {
+            let estimate = 5e-3 * (1.0 + 20.0 / p.events as f64);
+            let r = p.relative_half_width.unwrap();
+            HistoryPoint {
+                estimate,
+                half_width: r * estimate,
+                ci_low: estimate * (1.0 - r),
+                ci_high: estimate * (1.0 + r),
+                ..*p
+            }
+        })
+        .collect();
+    let exact = CampaignView {
+        exact_probability: Some(5e-3),
+        ..view()
+    };
+    for (name, points) in [
+        ("rising", rising),
+        ("falling", falling),
+        ("1/√n", history()),
+    ] {
+        for (figure, svg) in [
+            ("estimate", estimate_svg(&exact, &points).unwrap()),
+            (
+                "half-width",
+                relative_half_width_svg(&exact, &points).unwrap(),
+            ),
+        ] {
+            let doc = Document::parse(&svg).unwrap();
+            let (x0, y0, x1, y1) = legend_box(&doc);
+            let vertices = data_vertices(&doc);
+            assert!(vertices.len() > 20, "{name} {figure}");
+            let covered: Vec<_> = vertices
+                .iter()
+                .filter(|&&(x, y)| x0 < x && x < x1 && y0 < y && y < y1)
+                .collect();
+            assert!(
+                covered.is_empty(),
+                "{name} {figure}: {covered:?} in {:?}",
+                (x0, y0, x1, y1)
+            );
+        }
+    }
 }
