@@ -1030,6 +1030,48 @@ fn files_written_are_not_replaced_without_force() {
     );
 }
 
+/// An error says each cause once (`tslg backup` of a database it cannot
+/// open repeated SQLite's "(code: 14) unable to open database file").
+#[test]
+fn an_error_says_its_cause_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("copy.sqlite");
+    let o = tslg(&[
+        "backup",
+        "--database-url",
+        "sqlite:///nonexistent-dir/db.sqlite",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    let text = stderr(&o);
+    assert_eq!(
+        text.matches("unable to open database file").count(),
+        1,
+        "{text}"
+    );
+}
+
+/// Commands that reach a coordinator take it from `TSLG_SERVER` or their
+/// default: their usage line does not ask for `--server`.
+#[test]
+fn the_coordinator_address_is_not_shown_as_required() {
+    for command in [
+        &["campaign", "start", "--help"][..],
+        &["campaign", "list", "--help"],
+        &["library", "create", "--help"],
+    ] {
+        let o = tslg(command);
+        let usage = stdout(&o)
+            .lines()
+            .find(|l| l.starts_with("Usage:"))
+            .unwrap_or_default()
+            .to_owned();
+        assert!(usage.contains("[OPTIONS]"), "{command:?}: {usage}");
+        assert!(!usage.contains("--server"), "{command:?}: {usage}");
+    }
+}
+
 /// Numeric flags take a leading minus, so that the range check says what
 /// the range is (clap alone said "unexpected argument '-0' found").
 #[test]
