@@ -253,25 +253,28 @@ pub fn vehicle_name(spec: &serde_json::Value) -> String {
     if let Ok(model) = serde_json::from_value::<tslg_method::vehicle::VehicleModel>(spec.clone()) {
         return model.label();
     }
-    let name = spec
+    // Another case's model (highway exit's) or a program: the parameters
+    // it sets that differ from the model's own defaults, when this build
+    // knows them.
+    let defaults = spec
         .get("model")
-        .or_else(|| spec.get("external"))
-        .and_then(|m| m.as_str())
-        .unwrap_or("?");
-    // Another case's model (highway exit's): the parameters it sets that
-    // differ from the model's own defaults, when this build knows them.
-    let defaults = serde_json::from_value::<tslg_method::cases::highway::ExitVehicle>(
-        serde_json::json!({ "model": name }),
-    )
-    .ok()
-    .and_then(|v| serde_json::to_value(v).ok());
-    let mut parts: Vec<String> = spec
-        .as_object()
+        .and_then(|name| {
+            serde_json::from_value::<tslg_method::cases::highway::ExitVehicle>(
+                serde_json::json!({ "model": name }),
+            )
+            .ok()
+        })
+        .and_then(|v| serde_json::to_value(v).ok());
+    let mut parts: Vec<String> = tslg_api::given_parameters(spec)
         .into_iter()
-        .flatten()
-        .filter(|(key, _)| !["model", "external", "mode", "noise"].contains(&key.as_str()))
-        .filter(|(key, value)| defaults.as_ref().and_then(|d| d.get(*key)) != Some(*value))
-        .filter_map(|(key, value)| Some(format!("{key} {}", value.as_f64()?)))
+        .filter(|(key, value)| {
+            defaults
+                .as_ref()
+                .and_then(|d| d.get(key))
+                .and_then(|d| d.as_f64())
+                != Some(*value)
+        })
+        .map(|(key, value)| format!("{key} {value}"))
         .collect();
     if let Some(noise) = spec
         .get("noise")
@@ -279,6 +282,11 @@ pub fn vehicle_name(spec: &serde_json::Value) -> String {
     {
         parts.push(format!("noise {noise}"));
     }
+    let name = spec
+        .get("model")
+        .or_else(|| spec.get("external"))
+        .and_then(|m| m.as_str())
+        .unwrap_or("?");
     if parts.is_empty() {
         name.to_owned()
     } else {

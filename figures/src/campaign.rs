@@ -92,8 +92,9 @@ pub fn estimate_svg(view: &CampaignView, points: &[HistoryPoint]) -> Result<Stri
         }));
     }
     let title = format!(
-        "Campaign {}: estimate of P(A), {} ({} tests)",
+        "Campaign {}, {}: estimate of P(A), {} ({} tests)",
         view.id,
+        tslg_api::vehicle_label(&view.vut),
         view.status.as_str(),
         count(view.tests as f64)
     );
@@ -179,8 +180,10 @@ pub fn relative_half_width_svg(
     // raised by a third of the axis's span.
     let high = (high * (high / low).powf(1.0 / 3.0)).min(low * 10f64.powf(MAX_DECADES));
     let title = format!(
-        "Campaign {}: relative half-width, β = {}",
-        view.id, view.beta
+        "Campaign {}, {}: relative half-width, β = {}",
+        view.id,
+        tslg_api::vehicle_label(&view.vut),
+        view.beta
     );
     let beta = view.beta;
     let on_y = |y: f64| share(y, (low, high), true);

@@ -121,6 +121,11 @@ fn the_estimate_figure_holds_the_line_and_the_band_of_every_plotted_point() {
     let doc = Document::parse(&svg).expect("valid XML");
     assert_eq!(doc.root_element().tag_name().name(), "svg");
     let texts = texts(&doc);
+    // The title names the campaign's vehicle.
+    assert!(
+        texts.iter().any(|t| t.starts_with("Campaign 7, idm: estimate of P(A)")),
+        "{texts:?}"
+    );
     for label in ["estimate", "90% interval", "tests", "P(A)"] {
         assert!(
             texts.iter().any(|t| t == label),

@@ -235,7 +235,7 @@ async fn the_dashboard_follows_a_running_campaign_and_agrees_with_the_api() {
     // points is capped, so it does not tell).
     let title = "document.querySelector('#estimate-figure svg text')?.textContent.trim()";
     let first = until(&browser, title, "the estimate has a title").await;
-    let running = format!("Campaign {id}: estimate of P(A), running");
+    let running = format!("Campaign {id}, fvdm: estimate of P(A), running");
     assert!(first.as_str().unwrap().starts_with(&running), "{first}");
     until(
         &browser,
