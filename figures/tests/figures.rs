@@ -76,19 +76,24 @@ fn history() -> Vec<HistoryPoint> {
     for k in 1..=40u64 {
         let n = (10.0 * 1.2f64.powi(k as i32)).round() as u64;
         let r = 2.0 * (10.0 / n as f64).sqrt();
-        let estimate = 1e-4 * (1.0 + 0.3 / k as f64);
-        points.push(HistoryPoint {
-            tests: n,
-            indices: n,
-            events: k,
-            estimate,
-            half_width: r * estimate,
-            relative_half_width: Some(r),
-            ci_low: estimate * (1.0 - r),
-            ci_high: estimate * (1.0 + r),
-        });
+        points.push(point(n, k, 1e-4 * (1.0 + 0.3 / k as f64), r));
     }
     points
+}
+
+/// A point of `n` tests and `events` events with the estimate and its
+/// relative half-width `r`.
+fn point(n: u64, events: u64, estimate: f64, r: f64) -> HistoryPoint {
+    HistoryPoint {
+        tests: n,
+        indices: n,
+        events,
+        estimate,
+        half_width: r * estimate,
+        relative_half_width: Some(r),
+        ci_low: estimate * (1.0 - r),
+        ci_high: estimate * (1.0 + r),
+    }
 }
 
 fn texts(doc: &Document) -> Vec<String> {
@@ -123,7 +128,9 @@ fn the_estimate_figure_holds_the_line_and_the_band_of_every_plotted_point() {
     let texts = texts(&doc);
     // The title names the campaign's vehicle.
     assert!(
-        texts.iter().any(|t| t.starts_with("Campaign 7, idm: estimate of P(A)")),
+        texts
+            .iter()
+            .any(|t| t.starts_with("Campaign 7, idm: estimate of P(A)")),
         "{texts:?}"
     );
     for label in ["estimate", "90% interval", "tests", "P(A)"] {
@@ -481,31 +488,14 @@ fn the_legend_covers_no_data() {
         .map(|k| {
             let n = (10.0 * 1.15f64.powi(k as i32)).round() as u64;
             let estimate = 5e-3 * (1.0 - (-(k as f64) / 15.0).exp());
-            let r = 2.0 * (10.0 / n as f64).sqrt();
-            HistoryPoint {
-                tests: n,
-                indices: n,
-                events: k,
-                estimate,
-                half_width: r * estimate,
-                relative_half_width: Some(r),
-                ci_low: estimate * (1.0 - r),
-                ci_high: estimate * (1.0 + r),
-            }
+            point(n, k, estimate, 2.0 * (10.0 / n as f64).sqrt())
         })
         .collect();
     let falling: Vec<HistoryPoint> = rising
         .iter()
         .map(|p| {
             let estimate = 5e-3 * (1.0 + 20.0 / p.events as f64);
-            let r = p.relative_half_width.unwrap();
-            HistoryPoint {
-                estimate,
-                half_width: r * estimate,
-                ci_low: estimate * (1.0 - r),
-                ci_high: estimate * (1.0 + r),
-                ..*p
-            }
+            point(p.tests, p.events, estimate, p.relative_half_width.unwrap())
         })
         .collect();
     let exact = CampaignView {

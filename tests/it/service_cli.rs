@@ -330,37 +330,25 @@ fn a_campaign_gates_a_pipeline_on_its_upper_bound() {
 /// a worker comes.
 #[test]
 fn a_waiting_command_says_why_the_campaign_does_not_move() {
-    use std::io::{BufRead, BufReader};
     let dir = scratch();
     let server = ServerProcess::start(&dir.path().join("db.sqlite"), &[]);
     let url = server.url.as_str();
     let o = tslg(&["library", "create", "--server", url, "--wait", "--json"]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let library: LibraryView = serde_json::from_slice(&o.stdout).unwrap();
-    let mut waiting = Command::new(env!("CARGO_BIN_EXE_tslg"))
-        .args([
-            "campaign", "start", "--server", url, "--vut", "idm", "--wait", "--json",
-        ])
-        .args(["--library-id", &library.id.to_string()])
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    let (lines, said) = std::sync::mpsc::channel();
-    let stderr = waiting.stderr.take().unwrap();
-    std::thread::spawn(move || {
-        for line in BufReader::new(stderr).lines() {
-            let _ = lines.send(line.unwrap());
-        }
-    });
-    let why = loop {
-        let line = said
-            .recv_timeout(std::time::Duration::from_secs(60))
-            .expect("the command says why it waits");
-        if line.contains("no worker") {
-            break line;
-        }
-    };
+    let (waiting, said) = waiting_command(&[
+        "campaign",
+        "start",
+        "--server",
+        url,
+        "--vut",
+        "idm",
+        "--wait",
+        "--json",
+        "--library-id",
+        &library.id.to_string(),
+    ]);
+    let why = line_with(&said, "no worker", "the command says why it waits");
     assert!(
         why.starts_with("campaign 1: no worker: no worker has asked for work"),
         "{why}"
@@ -378,42 +366,27 @@ fn a_waiting_command_says_why_the_campaign_does_not_move() {
 /// as long as it waited), and finishes once a worker comes.
 #[test]
 fn a_waiting_library_build_says_it_waits_for_a_worker() {
-    use std::io::{BufRead, BufReader};
     let dir = scratch();
     let server = ServerProcess::start(
         &dir.path().join("db.sqlite"),
         &["--library-builds", "workers"],
     );
     let url = server.url.as_str();
-    let mut waiting = Command::new(env!("CARGO_BIN_EXE_tslg"))
-        .args([
-            "library",
-            "create",
-            "--server",
-            url,
-            "--search",
-            "exhaustive",
-        ])
-        .args(["--wait", "--json"])
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    let (lines, said) = std::sync::mpsc::channel();
-    let stderr = waiting.stderr.take().unwrap();
-    std::thread::spawn(move || {
-        for line in BufReader::new(stderr).lines() {
-            let _ = lines.send(line.unwrap());
-        }
-    });
-    let why = loop {
-        let line = said
-            .recv_timeout(std::time::Duration::from_secs(60))
-            .expect("the command says what the build waits for");
-        if line.contains("waiting") {
-            break line;
-        }
-    };
+    let (waiting, said) = waiting_command(&[
+        "library",
+        "create",
+        "--server",
+        url,
+        "--search",
+        "exhaustive",
+        "--wait",
+        "--json",
+    ]);
+    let why = line_with(
+        &said,
+        "waiting",
+        "the command says what the build waits for",
+    );
     assert!(
         why.starts_with("library 1: waiting for a worker: the coordinator leases this build's"),
         "{why}"
@@ -427,4 +400,36 @@ fn a_waiting_library_build_says_it_waits_for_a_worker() {
     // It said so once, not at every poll.
     let again: Vec<String> = said.try_iter().filter(|l| l.contains("waiting")).collect();
     assert!(again.is_empty(), "{again:?}");
+}
+
+/// `tslg args` started with its output piped, and the lines of its stderr
+/// as they come.
+fn waiting_command(args: &[&str]) -> (std::process::Child, std::sync::mpsc::Receiver<String>) {
+    use std::io::{BufRead, BufReader};
+    let mut child = Command::new(env!("CARGO_BIN_EXE_tslg"))
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let (lines, said) = std::sync::mpsc::channel();
+    let stderr = child.stderr.take().unwrap();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stderr).lines() {
+            let _ = lines.send(line.unwrap());
+        }
+    });
+    (child, said)
+}
+
+/// The first line of `said` that contains `needle` (within a minute).
+fn line_with(said: &std::sync::mpsc::Receiver<String>, needle: &str, what: &str) -> String {
+    loop {
+        let line = said
+            .recv_timeout(std::time::Duration::from_secs(60))
+            .expect(what);
+        if line.contains(needle) {
+            return line;
+        }
+    }
 }
