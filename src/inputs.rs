@@ -248,50 +248,7 @@ pub fn vehicle_spec(
 /// differ from its defaults: `idm (v0 25)`), and the noise on its commands
 /// when it has some (`idm (noise 1.5)`).
 pub fn vehicle_name(spec: &serde_json::Value) -> String {
-    // A built-in model: its name and the parameters that differ from its
-    // defaults, so that `{"model": "idm", "v0": 25}` does not read `idm`.
-    if let Ok(model) = serde_json::from_value::<tslg_method::vehicle::VehicleModel>(spec.clone()) {
-        return model.label();
-    }
-    // Another case's model (highway exit's) or a program: the parameters
-    // it sets that differ from the model's own defaults, when this build
-    // knows them.
-    let defaults = spec
-        .get("model")
-        .and_then(|name| {
-            serde_json::from_value::<tslg_method::cases::highway::ExitVehicle>(
-                serde_json::json!({ "model": name }),
-            )
-            .ok()
-        })
-        .and_then(|v| serde_json::to_value(v).ok());
-    let mut parts: Vec<String> = tslg_api::given_parameters(spec)
-        .into_iter()
-        .filter(|(key, value)| {
-            defaults
-                .as_ref()
-                .and_then(|d| d.get(key))
-                .and_then(|d| d.as_f64())
-                != Some(*value)
-        })
-        .map(|(key, value)| format!("{key} {value}"))
-        .collect();
-    if let Some(noise) = spec
-        .get("noise")
-        .filter(|_| tslg_method::noise::spec_is_noisy(spec))
-    {
-        parts.push(format!("noise {noise}"));
-    }
-    let name = spec
-        .get("model")
-        .or_else(|| spec.get("external"))
-        .and_then(|m| m.as_str())
-        .unwrap_or("?");
-    if parts.is_empty() {
-        name.to_owned()
-    } else {
-        format!("{name} ({})", parts.join(", "))
-    }
+    tslg_method::cases::vehicle_label(spec)
 }
 
 /// The rule of `args`; `exploring_share` sets the default `n_min`

@@ -167,6 +167,11 @@ pub struct CampaignView {
     /// The vehicle under test as given at creation (`{"model": …}` or `{"external": …}`).
     #[schema(value_type = Object)]
     pub vut: serde_json::Value,
+    /// The vehicle under test named for people: its model or program and
+    /// the parameters that differ from the model's defaults
+    /// (`idm (v0 25)`); `vut` holds every parameter.
+    #[serde(default)]
+    pub vut_label: String,
     /// Exploration share ε: the probability mass of tests drawn outside the library.
     pub epsilon: f64,
     /// How the ε share is spread outside the library.

@@ -15,7 +15,6 @@ mod library;
 pub mod packed;
 mod pair;
 mod queue;
-mod vehicle;
 mod worker;
 
 pub use campaign::*;
@@ -26,7 +25,6 @@ pub use lease::*;
 pub use library::*;
 pub use pair::*;
 pub use queue::*;
-pub use vehicle::*;
 pub use worker::*;
 
 use serde::{Deserialize, Serialize};

@@ -160,6 +160,9 @@ pub struct LibraryView {
     /// The surrogate model as given at creation.
     #[schema(value_type = Object)]
     pub surrogate: serde_json::Value,
+    /// The surrogate named for people, as a campaign's `vut_label`.
+    #[serde(default)]
+    pub surrogate_label: String,
     /// `N(Φ)`, once ready.
     pub size: Option<u64>,
     /// `N(X)`, the scenarios of the grid.

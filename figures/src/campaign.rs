@@ -94,7 +94,7 @@ pub fn estimate_svg(view: &CampaignView, points: &[HistoryPoint]) -> Result<Stri
     let title = format!(
         "Campaign {}, {}: estimate of P(A), {} ({} tests)",
         view.id,
-        tslg_api::vehicle_label(&view.vut),
+        view.vut_label,
         view.status.as_str(),
         count(view.tests as f64)
     );
@@ -178,12 +178,12 @@ pub fn relative_half_width_svg(
     );
     // Room above the curve for the legend (`legend::corner`): the top
     // raised by a third of the axis's span.
+    // The ticks are written as the data's range asks (`axis_format`).
+    let data_high = high;
     let high = (high * (high / low).powf(1.0 / 3.0)).min(low * 10f64.powf(MAX_DECADES));
     let title = format!(
         "Campaign {}, {}: relative half-width, β = {}",
-        view.id,
-        tslg_api::vehicle_label(&view.vut),
-        view.beta
+        view.id, view.vut_label, view.beta
     );
     let beta = view.beta;
     let on_y = |y: f64| share(y, (low, high), true);
@@ -206,7 +206,7 @@ pub fn relative_half_width_svg(
         (low..high)
             .log_scale()
             .with_key_points(log_ticks(low, high)),
-        (low, high),
+        (low, data_high),
         "relative half-width",
         corner(&data, 2),
         |chart| {

@@ -14,6 +14,7 @@ fn view() -> CampaignView {
         method: Method::Library,
         library_id: Some(1),
         vut: serde_json::json!({"model": "idm"}),
+        vut_label: "idm".into(),
         epsilon: 0.1,
         outside: Outside::Uniform,
         split: Default::default(),

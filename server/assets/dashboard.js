@@ -33,16 +33,9 @@ const fmt = {
     return `${(s / 86400).toFixed(1)} d`;
   },
   interval: (c) => (c.ci_low == null ? '–' : `[${fmt.sci(c.ci_low)}, ${fmt.sci(c.ci_high)}]`),
-  // The model or program and the parameters the campaign sets (the CLI
-  // shows those that differ from the model's defaults).
-  vehicle: (v) => {
-    const name = v.model ?? (v.external ? `external ${v.external}` : JSON.stringify(v));
-    const set = Object.entries(v)
-      .filter(([k, x]) => !['model', 'external', 'mode'].includes(k) && typeof x === 'number'
-        && !(k === 'noise' && x === 0))
-      .map(([k, x]) => `${k} ${x}`);
-    return set.length ? `${name} (${set.join(', ')})` : name;
-  },
+  // The coordinator's name for it: the model or program and the
+  // parameters that differ from the model's defaults (`vut_label`).
+  vehicle: (v, label) => label || (v.model ?? (v.external ? `external ${v.external}` : JSON.stringify(v))),
 };
 
 // Share of the way to β: tests done of those predicted, since the
@@ -105,7 +98,7 @@ function campaignRow(c) {
       ? el('a', { href: `/libraries/${c.library_id}` },
         c.method === 'adaptive' ? `adaptive, library ${c.library_id}` : `library ${c.library_id}`)
       : c.method),
-    el('td', {}, fmt.vehicle(c.vut)),
+    el('td', {}, fmt.vehicle(c.vut, c.vut_label)),
     el('td', { class: `status-${c.status}`, 'data-field': 'status' }, c.status,
       warningMark(c.warnings ?? [])),
     num('tests', c.tests, fmt.count(c.tests)),
@@ -138,7 +131,7 @@ function libraryRow(l) {
   return el('tr', { id: `library-${l.id}` },
     el('td', {}, el('a', { href: `/libraries/${l.id}` }, l.id)),
     el('td', {}, l.case),
-    el('td', {}, fmt.vehicle(l.surrogate)),
+    el('td', {}, fmt.vehicle(l.surrogate, l.surrogate_label)),
     el('td', { class: `status-${l.status}` }, l.status),
     num('size', l.size, fmt.count(l.size)),
     num('total_scenarios', l.total_scenarios, fmt.count(l.total_scenarios)),
@@ -188,7 +181,7 @@ async function campaignPage() {
   const sampling = c.method === 'library' ? `, ε ${c.epsilon} (${c.split} split)`
     : a ? `: ${a.library_tests} library and ${a.search_tests} search tests, ${a.stages} stages`
       + (a.running ? `, running a ${a.running.kind} stage` : '') : '';
-  set('detail', c.status_detail ?? `${c.case}, ${c.method}${sampling}, vehicle ${fmt.vehicle(c.vut)}, seed ${c.seed}`);
+  set('detail', c.status_detail ?? `${c.case}, ${c.method}${sampling}, vehicle ${fmt.vehicle(c.vut, c.vut_label)}, seed ${c.seed}`);
   // The outside bound and the guarded interval exist for library campaigns
   // of grid cases (docs/statistics.md).
   set('outside-upper', fmt.sci(c.outside_upper), c.outside_upper);
@@ -245,7 +238,7 @@ async function pairSection(c) {
 async function libraryPage() {
   const l = await json(`/api/v1/libraries/${pageId}`);
   set('case', l.case);
-  set('surrogate', fmt.vehicle(l.surrogate));
+  set('surrogate', fmt.vehicle(l.surrogate, l.surrogate_label));
   set('status', l.status);
   set('size', fmt.count(l.size), l.size);
   set('total', fmt.count(l.total_scenarios), l.total_scenarios);

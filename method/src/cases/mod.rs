@@ -11,9 +11,11 @@
 //! entry in [`BUILTIN`] (`builtin.rs`).
 
 mod builtin;
+pub use label::vehicle_label;
 pub mod carfollow;
 pub mod cutin;
 pub mod highway;
+mod label;
 pub(crate) mod table_note;
 pub mod user;
 

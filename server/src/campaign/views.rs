@@ -78,6 +78,9 @@ pub fn campaign_view(row: &CampaignRow) -> CampaignView {
         method: row.method,
         library_id: row.library_id,
         vut: serde_json::from_str(&row.vut).unwrap_or_default(),
+        vut_label: tslg_method::cases::vehicle_label(
+            &serde_json::from_str(&row.vut).unwrap_or_default(),
+        ),
         epsilon: row.epsilon,
         outside: row.outside,
         split: row.split,
@@ -413,6 +416,9 @@ pub fn library_view(row: &LibraryRow) -> LibraryView {
         exposure_fingerprint: row.exposure_fingerprint.clone(),
         exposure_note: row.exposure_note.clone(),
         surrogate: serde_json::from_str(&row.surrogate).unwrap_or_default(),
+        surrogate_label: tslg_method::cases::vehicle_label(
+            &serde_json::from_str(&row.surrogate).unwrap_or_default(),
+        ),
         size: row.size.map(|v| v as u64),
         total_scenarios: row.total_scenarios as u64,
         sm_evaluations: row.sm_evaluations.map(|v| v as u64),
