@@ -243,12 +243,12 @@ pub fn vehicle_spec(
         .with_context(|| format!("invalid {what} `{text}`"))
 }
 
-/// A vehicle specification's short name: its model or its program, the
-/// parameters it sets (for a cut-in or car-following model those that
-/// differ from its defaults: `idm (v0 25)`), and the noise on its commands
-/// when it has some (`idm (noise 1.5)`).
-pub fn vehicle_name(spec: &serde_json::Value) -> String {
-    tslg_method::cases::vehicle_label(spec)
+/// A vehicle specification's short name on case `case`: its model or its
+/// program, the parameters that differ from the model's defaults there
+/// (`idm (v0 25)`), and the noise on its commands when it has some
+/// (`idm (noise 1.5)`); [`tslg_method::cases::vehicle_label`].
+pub fn vehicle_name(spec: &serde_json::Value, case: &str) -> String {
+    tslg_method::cases::vehicle_label(spec, case)
 }
 
 /// The rule of `args`; `exploring_share` sets the default `n_min`

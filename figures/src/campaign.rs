@@ -21,6 +21,19 @@ pub(crate) fn fail(e: impl std::fmt::Display) -> FigureError {
     FigureError(e.to_string())
 }
 
+/// The campaign's vehicle as its title names it: the coordinator's
+/// `vut_label`, or (from a coordinator before it) the model or program.
+fn vehicle(view: &CampaignView) -> String {
+    if !view.vut_label.is_empty() {
+        return view.vut_label.clone();
+    }
+    ["model", "external"]
+        .iter()
+        .find_map(|key| view.vut.get(key).and_then(|v| v.as_str()))
+        .unwrap_or("?")
+        .to_owned()
+}
+
 /// The points that have a place on a log axis of tests.
 fn plotted(points: &[HistoryPoint]) -> impl DoubleEndedIterator<Item = &HistoryPoint> {
     points.iter().filter(|p| p.tests > 0)
@@ -94,7 +107,7 @@ pub fn estimate_svg(view: &CampaignView, points: &[HistoryPoint]) -> Result<Stri
     let title = format!(
         "Campaign {}, {}: estimate of P(A), {} ({} tests)",
         view.id,
-        view.vut_label,
+        vehicle(view),
         view.status.as_str(),
         count(view.tests as f64)
     );
@@ -183,7 +196,9 @@ pub fn relative_half_width_svg(
     let high = (high * (high / low).powf(1.0 / 3.0)).min(low * 10f64.powf(MAX_DECADES));
     let title = format!(
         "Campaign {}, {}: relative half-width, β = {}",
-        view.id, view.vut_label, view.beta
+        view.id,
+        vehicle(view),
+        view.beta
     );
     let beta = view.beta;
     let on_y = |y: f64| share(y, (low, high), true);

@@ -10,7 +10,9 @@ use std::net::SocketAddr;
     name = "tslg-server",
     version,
     about = "The tslg campaign coordinator",
-    long_about = None
+    long_about = None,
+    // A leading minus is a value the range checks answer for.
+    allow_negative_numbers = true
 )]
 pub struct Config {
     /// Address to listen on.

@@ -214,7 +214,7 @@ fn print_table(args: &DemoArgs, views: &[CampaignView], report: Option<&ExactRep
     let interval = |v: &CampaignView| (v.ci_low.unwrap_or(f64::NAN), v.ci_high.unwrap_or(f64::NAN));
     outln!(
         "\nvehicle under test {}, β {}, confidence 0.9, ε {}, seed {}\n",
-        crate::inputs::vehicle_name(&by_library.vut),
+        crate::inputs::vehicle_name(&by_library.vut, &by_library.case),
         args.beta,
         args.exploration.epsilon,
         args.seed

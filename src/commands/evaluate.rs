@@ -93,10 +93,12 @@ struct Report {
 fn parameters_inert(case: &dyn ScenarioCase, vut: &serde_json::Value, exact: f64) -> Option<bool> {
     let name = vut.get("model")?.as_str()?;
     let defaults = serde_json::json!({ "model": name });
-    if crate::inputs::vehicle_name(vut) == crate::inputs::vehicle_name(&defaults) {
+    let case_name = case.descriptor().name;
+    let plain = case.normalise_vehicle(&defaults).ok()?;
+    if crate::inputs::vehicle_name(vut, case_name) == crate::inputs::vehicle_name(&plain, case_name)
+    {
         return None;
     }
-    let plain = case.normalise_vehicle(&defaults).ok()?;
     Some(exact_answer(case, &plain)?.to_bits() == exact.to_bits())
 }
 
@@ -333,7 +335,7 @@ fn print(report: &Report, rule: &StoppingRule) {
     outln!("method             {}", report.method);
     outln!(
         "vehicle under test {}",
-        crate::inputs::vehicle_name(&report.vut)
+        crate::inputs::vehicle_name(&report.vut, report.case)
     );
     if report.parameters_inert == Some(true) {
         outln!(

@@ -102,7 +102,7 @@ fn print_table(case: &dyn ScenarioCase, args: &ExactArgs) -> anyhow::Result<()> 
         descriptor.name,
         case.exposure_name(),
         case.preset(),
-        vehicle_name(&surrogate),
+        vehicle_name(&surrogate, descriptor.name),
         library.size,
         args.epsilon,
         args.beta,
@@ -129,7 +129,7 @@ fn print_table(case: &dyn ScenarioCase, args: &ExactArgs) -> anyhow::Result<()> 
     let mut notes = Vec::new();
     for text in &vehicles {
         let vut = vehicle_spec(case, text, "vehicle")?;
-        let name = vehicle_name(&vut);
+        let name = vehicle_name(&vut, case.descriptor().name);
         let r = case
             .exact_report(
                 &vut,

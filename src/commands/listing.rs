@@ -23,7 +23,7 @@ fn campaign_line(view: &CampaignView) -> String {
         view.status.as_str(),
         view.case,
         view.method.as_str(),
-        vehicle_name(&view.vut),
+        vehicle_name(&view.vut, &view.case),
         crate::commands::remote::tests_shown(view),
         view.events,
         sci(view.estimate),
@@ -91,7 +91,7 @@ fn library_line(view: &LibraryView) -> String {
         view.status.as_str(),
         view.case,
         view.preset,
-        vehicle_name(&view.surrogate),
+        vehicle_name(&view.surrogate, &view.case),
         view.exposure,
         size,
         sci(view.mu_s)
@@ -130,7 +130,10 @@ pub fn describe_library(view: &LibraryView) -> String {
     let mut lines = vec![
         format!("library {:<10} {}", view.id, view.status.as_str()),
         format!("case               {} ({})", view.case, view.preset),
-        format!("surrogate          {}", vehicle_name(&view.surrogate)),
+        format!(
+            "surrogate          {}",
+            vehicle_name(&view.surrogate, &view.case)
+        ),
         format!(
             "exposure           {} (fingerprint {})",
             view.exposure, view.exposure_fingerprint

@@ -49,7 +49,7 @@ pub struct LoadArgs {
     #[arg(long)]
     pub separate_claims: bool,
     /// Give up (exit 1) after this many seconds.
-    #[arg(long, default_value_t = 300.0)]
+    #[arg(long, default_value_t = 300.0, allow_negative_numbers = true)]
     pub time_limit: f64,
     /// Print the result as JSON.
     #[arg(long)]

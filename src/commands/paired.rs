@@ -73,7 +73,7 @@ pub fn run(
         outln!("{}", serde_json::to_string_pretty(&report)?);
         return Ok(());
     }
-    let name = crate::inputs::vehicle_name;
+    let name = |spec: &serde_json::Value| crate::inputs::vehicle_name(spec, report.case);
     let r = &result;
     let interval = |(m, lo, hi): (f64, f64, f64)| format!("{m:.4e}  [{lo:.4e}, {hi:.4e}]");
     outln!("case               {}", report.case);

@@ -71,6 +71,8 @@ fn duration(seconds: f64) -> String {
 pub struct CampaignBars {
     bars: Vec<(String, ProgressBar)>,
     shown: bool,
+    /// Whether the newline after the bars was printed.
+    ended: std::cell::Cell<bool>,
     _group: MultiProgress,
 }
 
@@ -94,6 +96,7 @@ impl CampaignBars {
         Self {
             bars,
             shown,
+            ended: Default::default(),
             _group: group,
         }
     }
@@ -134,7 +137,21 @@ impl CampaignBars {
                 // The bars leave the cursor at the end of their last line:
                 // what is printed next starts on a line of its own.
                 eprintln!();
+                self.ended.set(true);
             }
+        }
+    }
+}
+
+impl Drop for CampaignBars {
+    /// Bars left before every campaign stopped (a gate that decided early,
+    /// an error) end their line too.
+    fn drop(&mut self) {
+        if self.shown && !self.ended.get() {
+            for (_, bar) in &self.bars {
+                bar.abandon();
+            }
+            eprintln!();
         }
     }
 }

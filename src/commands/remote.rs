@@ -215,7 +215,7 @@ pub fn describe(view: &CampaignView) -> String {
         view.id,
         view.case,
         view.method.as_str(),
-        crate::inputs::vehicle_name(&view.vut),
+        crate::inputs::vehicle_name(&view.vut, &view.case),
         view.status.as_str(),
         view.status_detail.as_ref().map_or(String::new(), |d| format!(" — {d}")),
         counts(view),

@@ -108,7 +108,12 @@ pub struct ValidateArgs {
     /// the first surrogate's library (the IDM's) tested on each surrogate
     /// model (IDM, FVDM) with noise σ on every command, against a Monte
     /// Carlo P(A) (docs/statistics.md, "Noisy vehicles").
-    #[arg(long, value_delimiter = ',', value_name = "SIGMA")]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        value_name = "SIGMA",
+        allow_negative_numbers = true
+    )]
     pub noise: Vec<f64>,
 }
 
@@ -449,7 +454,7 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
         };
         let name = match &table {
             Some(t) => t.name.clone(),
-            None => crate::inputs::vehicle_name(&vut),
+            None => crate::inputs::vehicle_name(&vut, case_name),
         };
         let mut variants = Vec::new();
         if args.methods.contains(&ValidateMethod::Plain) {

@@ -443,5 +443,39 @@ async fn the_dashboard_follows_a_running_campaign_and_agrees_with_the_api() {
     )
     .await;
     assert_eq!(unmarked, json!(true));
+
+    // The library's picture, looked at as the browser draws it: no label
+    // meets a coloured cell or a step of a colour bar (the bars' middle
+    // labels ran into them), and a screenshot is kept.
+    browser
+        .goto(&format!(
+            "{}/libraries/{}?refresh=300",
+            server.url, library.id
+        ))
+        .await
+        .unwrap();
+    until(
+        &browser,
+        "document.querySelectorAll('#picture svg rect').length > 100",
+        "the library's picture",
+    )
+    .await;
+    let overlapping = eval(&browser, LABELS_ON_COLOUR).await;
+    assert_eq!(overlapping, json!([]), "labels drawn over colour");
+    save("library.png", &browser.screenshot().await.unwrap());
     browser.close().await.unwrap();
 }
+
+/// The texts of the library's picture whose box on the screen (after any
+/// rotation), as the browser lays the text out, meets a coloured rectangle (a map's cell or a colour bar's
+/// step); the white background is not coloured.
+const LABELS_ON_COLOUR: &str = "(() => {
+  const svg = document.querySelector('#picture svg');
+  const coloured = [...svg.querySelectorAll('rect')]
+    .filter(r => { const f = (r.getAttribute('fill') || 'none').toUpperCase(); return f !== 'NONE' && f !== '#FFFFFF'; })
+    .map(r => r.getBoundingClientRect());
+  const meets = (a, b) => a.left < b.right && b.left < a.right && a.top < b.bottom && b.top < a.bottom;
+  return [...svg.querySelectorAll('text')]
+    .filter(t => coloured.some(r => meets(t.getBoundingClientRect(), r)))
+    .map(t => t.textContent.trim());
+})()";

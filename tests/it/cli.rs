@@ -932,8 +932,12 @@ fn in_a_terminal_the_bars_start_empty_and_end_on_their_own_line() {
     assert!(text.contains("waiting for its first state"), "{text}");
     assert!(text.contains("converged"), "the bars were drawn: {text}");
     assert!(!text.contains(" 0/0 "), "a full bar of 0/0 tests: {text}");
-    // After the last frame of the bars, a newline comes before anything else.
-    let after = &text[text.rfind("converged").unwrap()..]["converged".len()..];
+    // After the last frame of the bars (a bar's message reads `… tests  r
+    // 0.199 → β 0.2 …`; the summary's lines do not), a newline comes before
+    // anything else.
+    let frame = text.rfind("tests  r ").expect("a bar's frame");
+    let end = frame + text[frame..].find("converged").expect("a stopped bar");
+    let after = &text[end + "converged".len()..];
     let next = after.trim_start_matches([' ', '\r']);
     assert!(
         next.starts_with('\n'),

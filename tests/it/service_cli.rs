@@ -398,7 +398,8 @@ fn a_waiting_library_build_says_it_waits_for_a_worker() {
         .unwrap_or_else(|_| panic!("{}", String::from_utf8_lossy(&done.stdout)));
     assert_eq!(view.status.as_str(), "ready");
     // It said so once, not at every poll.
-    let again: Vec<String> = said.try_iter().filter(|l| l.contains("waiting")).collect();
+    // The command has exited: its stderr is closed, and the reader ends.
+    let again: Vec<String> = said.iter().filter(|l| l.contains("waiting")).collect();
     assert!(again.is_empty(), "{again:?}");
 }
 

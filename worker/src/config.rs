@@ -13,7 +13,9 @@ pub const MAX_VUT_SECONDS: f64 = 86_400.0;
     name = "tslg-worker",
     version,
     about = "A tslg worker: runs the tests a coordinator hands out",
-    long_about = None
+    long_about = None,
+    // A leading minus is a value the range checks answer for.
+    allow_negative_numbers = true
 )]
 /// The worker's settings: every flag also readable from the environment.
 pub struct WorkerConfig {

@@ -12,13 +12,22 @@ use serde_json::Value;
 /// program runs, and the noise (named on its own).
 const NOT_PARAMETERS: [&str; 4] = ["model", "external", "mode", "noise"];
 
-/// `spec`'s name with the parameters that differ from its model's defaults
-/// and its noise: `idm`, `idm (v0 25)`, `mobil (politeness 0.5)`,
-/// `acc-aeb (actuator_lag 0.3, noise 0.5)`. A program's specification
-/// (`{"external": …}`) is named with the numbers it sets.
-pub fn vehicle_label(spec: &Value) -> String {
+/// `spec`'s name on case `case` with the parameters that differ from its
+/// model's defaults there and its noise: `idm`, `idm (v0 25)`,
+/// `mobil (politeness 0.5)`, `acc-aeb (actuator_lag 0.3, noise 0.5)`. The
+/// car-following case has defaults of its own (the IDM desires 36 m/s);
+/// a program's specification (`{"external": …}`) is named with the
+/// numbers it sets.
+pub fn vehicle_label(spec: &Value, case: &str) -> String {
     if let Ok(model) = serde_json::from_value::<VehicleModel>(spec.clone()) {
-        return model.label();
+        let bare = serde_json::json!({ "model": model.name() });
+        let defaults = match case {
+            "car-following" => crate::cases::carfollow::CarFollowing::vehicle(&bare).ok(),
+            _ => VehicleModel::builtin(model.name()).ok(),
+        };
+        if let Some(defaults) = defaults {
+            return model.label(&defaults);
+        }
     }
     // Another case's model (highway exit's), or a program.
     let defaults = spec
@@ -60,10 +69,18 @@ mod tests {
 
     #[test]
     fn a_label_names_what_differs_from_the_models_defaults() {
-        assert_eq!(
-            vehicle_label(&json!({"model": "idm", "v0": 25})),
-            "idm (v0 25)"
-        );
+        let cut_in = |spec: Value| vehicle_label(&spec, "cut-in");
+        assert_eq!(cut_in(json!({"model": "idm", "v0": 25})), "idm (v0 25)");
+        // Car-following's IDM desires 36 m/s and measures the bumper gap:
+        // as stored, it is the plain IDM there, and 18 m/s is a change.
+        let stored = |spec: Value| {
+            serde_json::to_value(crate::cases::carfollow::CarFollowing::vehicle(&spec).unwrap())
+                .unwrap()
+        };
+        let following = |spec: Value| vehicle_label(&stored(spec), "car-following");
+        assert_eq!(following(json!({"model": "idm"})), "idm");
+        assert_eq!(following(json!({"model": "idm", "v0": 18})), "idm (v0 18)");
+        assert_eq!(following(json!({"model": "acc-aeb"})), "acc-aeb");
         // Stored specifications are normalised: every default is written.
         let mobil = serde_json::to_value(
             serde_json::from_value::<ExitVehicle>(json!({"model": "mobil", "politeness": 0.5}))
@@ -71,10 +88,16 @@ mod tests {
         )
         .unwrap();
         assert!(mobil.as_object().unwrap().len() > 5, "{mobil}");
-        assert_eq!(vehicle_label(&mobil), "mobil (politeness 0.5)");
-        assert_eq!(vehicle_label(&json!({"model": "mobil"})), "mobil");
         assert_eq!(
-            vehicle_label(&json!({"external": "py", "mode": "episode", "noise": 0.5})),
+            vehicle_label(&mobil, "highway-exit"),
+            "mobil (politeness 0.5)"
+        );
+        assert_eq!(
+            vehicle_label(&json!({"model": "mobil"}), "highway-exit"),
+            "mobil"
+        );
+        assert_eq!(
+            cut_in(json!({"external": "py", "mode": "episode", "noise": 0.5})),
             "py (noise 0.5)"
         );
     }

@@ -182,27 +182,27 @@ impl VehicleModel {
         &self.spec
     }
 
-    /// The parameters that differ from the model's defaults, by name, in
-    /// the order the model writes them (`[("v0", 25.0)]` for
-    /// `{"model": "idm", "v0": 25}`); the noise is not a parameter here.
-    pub fn differing_parameters(&self) -> Vec<(String, f64)> {
+    /// The parameters that differ from `defaults` (the same model as a
+    /// case writes it when nothing is given), by name, in the order the
+    /// model writes them (`[("v0", 25.0)]` for `{"model": "idm", "v0": 25}`
+    /// on cut-in); the noise is not a parameter here.
+    pub fn differing_parameters(&self, defaults: &VehicleModel) -> Vec<(String, f64)> {
         let written = |spec: &VehicleSpec| match serde_json::to_value(spec) {
             Ok(serde_json::Value::Object(map)) => map,
             _ => serde_json::Map::new(),
         };
-        let default = Self::builtin(self.name()).expect("a built-in model's own name");
-        let (mine, theirs) = (written(&self.spec), written(&default.spec));
+        let (mine, theirs) = (written(&self.spec), written(&defaults.spec));
         mine.iter()
             .filter(|(key, value)| theirs.get(*key) != Some(*value))
             .filter_map(|(key, value)| Some((key.clone(), value.as_f64()?)))
             .collect()
     }
 
-    /// Its name with the parameters that differ from the defaults, and its
+    /// Its name with the parameters that differ from `defaults`, and its
     /// noise: `idm`, `idm (v0 25)`, `acc-aeb (actuator_lag 0.3, noise 0.5)`.
-    pub fn label(&self) -> String {
+    pub fn label(&self, defaults: &VehicleModel) -> String {
         let mut parts: Vec<String> = self
-            .differing_parameters()
+            .differing_parameters(defaults)
             .into_iter()
             .map(|(key, value)| format!("{key} {}", crate::number::Num(value)))
             .collect();
@@ -323,20 +323,17 @@ mod tests {
 
     #[test]
     fn a_label_names_the_parameters_that_differ_from_the_defaults() {
-        let model = |json: &str| serde_json::from_str::<VehicleModel>(json).unwrap();
-        assert_eq!(model(r#"{"model": "idm"}"#).label(), "idm");
-        assert_eq!(
-            model(r#"{"model": "idm", "v0": 25}"#).label(),
-            "idm (v0 25)"
-        );
+        let label = |json: &str| {
+            let m = serde_json::from_str::<VehicleModel>(json).unwrap();
+            m.label(&VehicleModel::builtin(m.name()).unwrap())
+        };
+        assert_eq!(label(r#"{"model": "idm"}"#), "idm");
+        assert_eq!(label(r#"{"model": "idm", "v0": 25}"#), "idm (v0 25)");
         // A default given explicitly is no difference.
         let v0 = IdmParams::default().v0;
+        assert_eq!(label(&format!(r#"{{"model": "idm", "v0": {v0}}}"#)), "idm");
         assert_eq!(
-            model(&format!(r#"{{"model": "idm", "v0": {v0}}}"#)).label(),
-            "idm"
-        );
-        assert_eq!(
-            model(r#"{"model": "acc-aeb", "actuator_lag": 0.3, "noise": 0.5}"#).label(),
+            label(r#"{"model": "acc-aeb", "actuator_lag": 0.3, "noise": 0.5}"#),
             "acc-aeb (actuator_lag 0.3, noise 0.5)"
         );
     }

@@ -80,6 +80,7 @@ pub fn campaign_view(row: &CampaignRow) -> CampaignView {
         vut: serde_json::from_str(&row.vut).unwrap_or_default(),
         vut_label: tslg_method::cases::vehicle_label(
             &serde_json::from_str(&row.vut).unwrap_or_default(),
+            &row.case_name,
         ),
         epsilon: row.epsilon,
         outside: row.outside,
@@ -213,7 +214,7 @@ fn audit_warnings(
 ) -> Vec<String> {
     let mut warnings = Vec::new();
     if counts.waived > 0 {
-        let past = if handed_out > used && used > 0 {
+        let past = if stopped && handed_out > used && used > 0 {
             format!(", {used} of them before the stop,")
         } else {
             String::new()
@@ -418,6 +419,7 @@ pub fn library_view(row: &LibraryRow) -> LibraryView {
         surrogate: serde_json::from_str(&row.surrogate).unwrap_or_default(),
         surrogate_label: tslg_method::cases::vehicle_label(
             &serde_json::from_str(&row.surrogate).unwrap_or_default(),
+            &row.case_name,
         ),
         size: row.size.map(|v| v as u64),
         total_scenarios: row.total_scenarios as u64,

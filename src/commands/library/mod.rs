@@ -179,7 +179,10 @@ fn show(path: &Path) -> anyhow::Result<()> {
 fn print_summary(library: &LibrarySummary, unit: &str) {
     let n = library.total;
     outln!("case               {} ({})", library.case, library.preset);
-    outln!("surrogate          {}", vehicle_name(&library.surrogate));
+    outln!(
+        "surrogate          {}",
+        vehicle_name(&library.surrogate, &library.case)
+    );
     outln!(
         "exposure           {} (fingerprint {})",
         library.exposure.name,
