@@ -172,6 +172,12 @@ pub struct CampaignView {
     /// (`idm (v0 25)`); `vut` holds every parameter.
     #[serde(default)]
     pub vut_label: String,
+    /// `true` when the parameters that differ from the model's defaults
+    /// change no accident of the preset: the exact `P(A)` equals the
+    /// defaults', to the bit (`{"model": "idm", "v0": 25}` on cut-in's
+    /// paper-code preset); `null` where it was not checked.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub parameters_inert: Option<bool>,
     /// Exploration share ε: the probability mass of tests drawn outside the library.
     pub epsilon: f64,
     /// How the ε share is spread outside the library.

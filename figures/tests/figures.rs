@@ -15,6 +15,7 @@ fn view() -> CampaignView {
         library_id: Some(1),
         vut: serde_json::json!({"model": "idm"}),
         vut_label: "idm".into(),
+        parameters_inert: None,
         epsilon: 0.1,
         outside: Outside::Uniform,
         split: Default::default(),

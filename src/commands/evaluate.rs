@@ -87,21 +87,6 @@ struct Report {
     warnings: Vec<String>,
 }
 
-/// Whether `vut`'s parameters that differ from its model's defaults leave
-/// the exact P(A) of the preset unchanged (to the bit); `None` without an
-/// exact answer or such parameters.
-fn parameters_inert(case: &dyn ScenarioCase, vut: &serde_json::Value, exact: f64) -> Option<bool> {
-    let name = vut.get("model")?.as_str()?;
-    let defaults = serde_json::json!({ "model": name });
-    let case_name = case.descriptor().name;
-    let plain = case.normalise_vehicle(&defaults).ok()?;
-    if crate::inputs::vehicle_name(vut, case_name) == crate::inputs::vehicle_name(&plain, case_name)
-    {
-        return None;
-    }
-    Some(exact_answer(case, &plain)?.to_bits() == exact.to_bits())
-}
-
 /// What an adaptive campaign spent finding the vehicle's failures, and
 /// where its estimation stage sampled.
 #[derive(Serialize)]
@@ -314,7 +299,9 @@ fn report(
         search,
         exact,
         covers_exact: exact.map(|p| result.covers(p)),
-        parameters_inert: exact.and_then(|p| parameters_inert(setup.case.as_ref(), &setup.vut, p)),
+        parameters_inert: exact.and_then(|p| {
+            tslg_method::registry::parameters_inert(setup.case.as_ref(), &setup.vut, p)
+        }),
         warnings: warnings(
             &result,
             WarningContext {

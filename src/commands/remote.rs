@@ -204,6 +204,15 @@ pub fn describe(view: &CampaignView) -> String {
         }
         text
     });
+    let inert = if view.parameters_inert == Some(true) {
+        format!(
+            "\n  note: the parameters of {} change no accident of this preset: its exact P(A) \
+             equals the defaults', to the last bit",
+            crate::inputs::vehicle_name(&view.vut, &view.case)
+        )
+    } else {
+        String::new()
+    };
     let warnings: String = view
         .warnings
         .iter()
@@ -211,7 +220,7 @@ pub fn describe(view: &CampaignView) -> String {
         .collect();
     format!(
         "campaign {} ({} {}, vehicle {}): {}{}\n  {}\n  \
-         estimate {}  {}interval [{}, {}]  relative half-width {} (β {}, confidence {}){exact}{health}{outside}{adaptive}{pair}{warnings}",
+         estimate {}  {}interval [{}, {}]  relative half-width {} (β {}, confidence {}){exact}{inert}{health}{outside}{adaptive}{pair}{warnings}",
         view.id,
         view.case,
         view.method.as_str(),

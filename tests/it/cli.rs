@@ -51,6 +51,8 @@ fn library_build_on_the_table_finds_184_cells_by_both_searches() {
             "--recall",
             "-o",
             out.to_str().unwrap(),
+            // The second search replaces the first's file.
+            "--force",
         ]);
         assert!(o.status.success(), "{}", stderr(&o));
         let text = stdout(&o);

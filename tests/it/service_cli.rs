@@ -3,7 +3,7 @@
 
 use crate::support::*;
 use std::process::Command;
-use tslg_api::{CampaignView, InvalidResult, LibraryView, Method, ResultReport};
+use tslg_api::{CampaignView, CreateCampaign, InvalidResult, LibraryView, Method, ResultReport};
 
 #[test]
 fn library_create_and_campaign_start_status_cancel_drive_a_coordinator() {
@@ -433,4 +433,62 @@ fn line_with(said: &std::sync::mpsc::Receiver<String>, needle: &str, what: &str)
             return line;
         }
     }
+}
+
+/// A campaign names its vehicle with the parameters that differ from the
+/// defaults, and says once when they change no accident of the preset
+/// (the README's `{"model": "idm", "v0": 25}` on paper-code gave exactly
+/// the plain IDM's answer without a word).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_campaign_names_its_vehicles_parameters_and_says_when_they_change_nothing() {
+    let dir = scratch();
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &[]);
+    let client = server.client();
+    let library = ready_library(&client, "idm", true).await;
+    let create = |vut: serde_json::Value| CreateCampaign {
+        vut,
+        max_tests: 100,
+        ..campaign(Method::Ndd, library.id, "idm", 0.2, 1)
+    };
+    let inert = client
+        .create_campaign(&create(serde_json::json!({"model": "idm", "v0": 25})))
+        .await
+        .unwrap();
+    assert_eq!(inert.vut_label, "idm (v0 25)");
+    assert_eq!(inert.parameters_inert, Some(true), "{inert:?}");
+    let active = client
+        .create_campaign(&create(serde_json::json!({"model": "idm", "s0": 4})))
+        .await
+        .unwrap();
+    assert_eq!(active.vut_label, "idm (s0 4)");
+    assert_eq!(active.parameters_inert, Some(false));
+    let plain = client
+        .create_campaign(&create(serde_json::json!({"model": "idm"})))
+        .await
+        .unwrap();
+    assert_eq!(
+        (plain.vut_label.as_str(), plain.parameters_inert),
+        ("idm", None)
+    );
+    let o = tslg(&[
+        "campaign",
+        "status",
+        &inert.id.to_string(),
+        "--server",
+        &server.url,
+    ]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("vehicle idm (v0 25)"), "{text}");
+    assert!(
+        text.contains("note: the parameters of idm (v0 25) change no accident of this preset"),
+        "{text}"
+    );
+    let o = tslg(&[
+        "campaign",
+        "status",
+        &active.id.to_string(),
+        "--server",
+        &server.url,
+    ]);
+    assert!(!String::from_utf8_lossy(&o.stdout).contains("change no accident"));
 }

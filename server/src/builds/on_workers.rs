@@ -167,6 +167,7 @@ pub async fn insert_build(
         seed: 0,
         status: CampaignStatus::Running,
         exact_probability: None,
+        parameters_inert: None,
         vehicle_noise: false,
         first_stage: None,
     };

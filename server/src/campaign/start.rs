@@ -190,6 +190,7 @@ struct Opened {
     split: Split,
     tests: Option<Arc<dyn CampaignTests>>,
     exact_probability: Option<f64>,
+    parameters_inert: Option<bool>,
 }
 
 fn open(
@@ -235,6 +236,8 @@ fn open(
     let exact_probability = (case.total_scenarios() <= limit)
         .then(|| case.exact_event_probability(&vut).ok())
         .flatten();
+    let parameters_inert = exact_probability
+        .and_then(|p| tslg_method::registry::parameters_inert(case.as_ref(), &vut, p));
     Ok(Opened {
         case,
         vut,
@@ -242,6 +245,7 @@ fn open(
         split,
         tests,
         exact_probability,
+        parameters_inert,
     })
 }
 
@@ -374,6 +378,7 @@ fn new_campaign(
         seed: req.seed,
         status,
         exact_probability: opened.exact_probability,
+        parameters_inert: opened.parameters_inert,
         // A built-in vehicle of a pair stays exactly replayed.
         vehicle_noise: req.vehicle_noise && external,
         first_stage: (req.method == Method::Adaptive).then(|| {

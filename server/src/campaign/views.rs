@@ -82,6 +82,7 @@ pub fn campaign_view(row: &CampaignRow) -> CampaignView {
             &serde_json::from_str(&row.vut).unwrap_or_default(),
             &row.case_name,
         ),
+        parameters_inert: row.parameters_inert,
         epsilon: row.epsilon,
         outside: row.outside,
         split: row.split,

@@ -76,6 +76,8 @@ pub struct CampaignRow {
     pub reported_s1: f64,
     /// `P(A)` by enumeration of the grid, where it was computed.
     pub exact_probability: Option<f64>,
+    /// See `store::campaigns::NewCampaign::parameters_inert`.
+    pub parameters_inert: Option<bool>,
     /// An adaptive campaign's running stage `[stage_start, stage_end)` and
     /// kind; NULL for other methods and once it stopped.
     pub stage_start: Option<i64>,
@@ -117,7 +119,7 @@ pub const COLUMNS: &str = "id, case_name, preset, \
     outside_mismatches, \
     cost_per_test, worker_seconds, audits_waived, reported_s1, exact_probability, \
     stage_start, stage_end, stage_kind, library_tests, search_tests, stages, support, paired_with, created_at, \
-    updated_at, vehicle_noise, interval, sequence_low, sequence_high, explore_from, outside_s2";
+    updated_at, vehicle_noise, interval, sequence_low, sequence_high, explore_from, outside_s2, parameters_inert";
 
 impl CampaignRow {
     pub fn seed(&self) -> u64 {
@@ -304,12 +306,13 @@ fn from_row(row: &Row<'_>) -> rusqlite::Result<CampaignRow> {
         sequence_high: at(row, 54)?,
         explore_from: at(row, 55)?,
         outside_s2: at(row, 56)?,
+        parameters_inert: at(row, 57)?,
     })
 }
 
 /// The number of columns [`from_row`] reads.
 #[cfg(test)]
-const READ: usize = 57;
+const READ: usize = 58;
 
 #[cfg(test)]
 mod tests {

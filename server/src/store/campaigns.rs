@@ -30,6 +30,9 @@ pub struct NewCampaign {
     pub status: CampaignStatus,
     /// `P(A)` by enumeration, where the case could compute it.
     pub exact_probability: Option<f64>,
+    /// Its vehicle's parameters change no accident of the preset
+    /// (`tslg_method::registry::parameters_inert`).
+    pub parameters_inert: Option<bool>,
     /// Its program's runs may differ: audits compare by statistics.
     pub vehicle_noise: bool,
     /// An adaptive campaign's first stage: its tests `start..end` and kind.
@@ -42,8 +45,8 @@ pub fn insert(conn: &Connection, new: &NewCampaign) -> Result<CampaignRow, Store
          exposure_fingerprint, exposure_table, vut, requires, epsilon, outside, beta, confidence, \
          n_min, min_events, max_tests, seed, status, guard_outside, exact_probability, split, \
          adaptive, stage_start, stage_end, stage_kind, enumerate, cost_per_test, vehicle_noise, \
-         interval, outside_s2) \
-         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, 0) \
+         interval, outside_s2, parameters_inert) \
+         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, 0, ?) \
          RETURNING {COLUMNS}"
     );
     let adaptive = new.method == Method::Adaptive;
@@ -102,6 +105,7 @@ pub fn insert(conn: &Connection, new: &NewCampaign) -> Result<CampaignRow, Store
             cost,
             new.vehicle_noise,
             new.rule.interval.name(),
+            new.parameters_inert,
         ],
     )?)
 }
