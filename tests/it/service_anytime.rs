@@ -38,7 +38,10 @@ async fn anytime_campaigns_stop_on_their_sequence_and_survive_a_coordinator_rest
     let started = Instant::now();
     loop {
         let view = client.campaign(ids[0]).await.unwrap();
-        if view.indices >= 40_000 {
+        // The first report's range (20,000 tests): the NDD campaign needs
+        // several more, so it is surely still running (at 40,000 a loaded
+        // machine once saw it converge between two polls).
+        if view.indices >= 20_000 {
             assert_eq!(view.status, CampaignStatus::Running, "killed too late");
             break;
         }
