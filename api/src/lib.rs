@@ -15,6 +15,7 @@ mod library;
 pub mod packed;
 mod pair;
 mod queue;
+mod stages;
 mod worker;
 
 pub use campaign::*;
@@ -25,6 +26,7 @@ pub use lease::*;
 pub use library::*;
 pub use pair::*;
 pub use queue::*;
+pub use stages::*;
 pub use worker::*;
 
 use serde::{Deserialize, Serialize};

@@ -351,6 +351,15 @@ impl Client {
         .await
     }
 
+    /// An adaptive campaign's resolved stages (none for other campaigns).
+    pub async fn stages(&self, id: i64) -> Result<tslg_api::AdaptiveStages, CallError> {
+        self.json(self.request(
+            reqwest::Method::GET,
+            &format!("/api/v1/campaigns/{id}/stages"),
+        ))
+        .await
+    }
+
     /// At most `points` of the history, spaced logarithmically in tests.
     pub async fn history_points(&self, id: i64, points: usize) -> Result<History, CallError> {
         self.json(self.request(

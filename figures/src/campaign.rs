@@ -23,7 +23,7 @@ pub(crate) fn fail(e: impl std::fmt::Display) -> FigureError {
 
 /// The campaign's vehicle as its title names it: the coordinator's
 /// `vut_label`, or (from a coordinator before it) the model or program.
-fn vehicle(view: &CampaignView) -> String {
+pub(crate) fn vehicle(view: &CampaignView) -> String {
     if !view.vut_label.is_empty() {
         return view.vut_label.clone();
     }
@@ -32,6 +32,15 @@ fn vehicle(view: &CampaignView) -> String {
         .find_map(|key| view.vut.get(key).and_then(|v| v.as_str()))
         .unwrap_or("?")
         .to_owned()
+}
+
+/// What the estimate's x axis counts: an adaptive campaign's estimate is
+/// over its estimation tests alone.
+fn tests_axis(view: &CampaignView) -> &'static str {
+    match view.method {
+        tslg_api::Method::Adaptive => "estimation tests",
+        _ => "tests",
+    }
 }
 
 /// The points that have a place on a log axis of tests.
@@ -111,9 +120,9 @@ pub fn estimate_svg(view: &CampaignView, points: &[HistoryPoint]) -> Result<Stri
         view.status.as_str(),
         count(view.tests as f64)
     );
-    draw(
+    draw_with(
         &title,
-        (x0..x1).log_scale(),
+        ((x0..x1).log_scale(), tests_axis(view)),
         0.0..y1,
         (0.0, y1),
         "P(A)",
@@ -215,9 +224,9 @@ pub fn relative_half_width_svg(
         low: on_y(beta),
         high: on_y(beta),
     }));
-    draw(
+    draw_with(
         &title,
-        (x0..x1).log_scale(),
+        ((x0..x1).log_scale(), tests_axis(view)),
         (low..high)
             .log_scale()
             .with_key_points(log_ticks(low, high)),
@@ -249,14 +258,14 @@ pub fn relative_half_width_svg(
     )
 }
 
-type Chart<'a, X, Y> = ChartContext<'a, SVGBackend<'a>, Cartesian2d<X, Y>>;
+pub(crate) type Chart<'a, X, Y> = ChartContext<'a, SVGBackend<'a>, Cartesian2d<X, Y>>;
 
-/// One plot of `title` with tests on x, the series drawn by `series`, and
-/// a legend; `y` runs from `low` to `high`, whose ticks are written alike
-/// ([`axis_format`]).
-fn draw<XR, YR, X, Y>(
+/// One plot of `title` with `x` named `x_label`, the series drawn by
+/// `series`, and a legend; `y` runs from `low` to `high`, whose ticks are
+/// written alike ([`axis_format`]).
+pub(crate) fn draw_with<XR, YR, X, Y>(
     title: &str,
-    x: XR,
+    (x, x_label): (XR, &str),
     y: YR,
     (low, high): (f64, f64),
     y_label: &str,
@@ -283,7 +292,7 @@ where
             .map_err(fail)?;
         chart
             .configure_mesh()
-            .x_desc("tests")
+            .x_desc(x_label)
             .y_desc(y_label)
             .x_labels(8)
             .y_labels(8)

@@ -10,6 +10,11 @@ pub const BAND: RGBColor = RGBColor(160, 196, 232);
 pub const LIMIT: RGBColor = RGBColor(200, 40, 40);
 /// The guarded interval's upper end.
 pub const GUARD: RGBColor = RGBColor(161, 92, 0);
+/// An adaptive campaign's stages: its library stage, its searches, and its
+/// estimation stages (the dashboard's colours for them too).
+pub const LIBRARY_STAGE: RGBColor = RGBColor(31, 93, 166);
+pub const SEARCH_STAGE: RGBColor = RGBColor(214, 130, 20);
+pub const ESTIMATE_STAGE: RGBColor = RGBColor(29, 122, 58);
 
 /// A count on a log axis: `1`, `10`, `100`, `1k`, `10k`, …, `1M`, …
 pub fn count(value: f64) -> String {

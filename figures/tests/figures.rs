@@ -2,9 +2,10 @@
 //! positions their data give.
 
 use roxmltree::Document;
-use tslg_api::{CampaignStatus, CampaignView, HistoryPoint, Method, Outside};
+use tslg_api::{AdaptiveStage, CampaignStatus, CampaignView, HistoryPoint, Method, Outside};
 use tslg_figures::{
-    estimate_svg, heatmaps_svg, history_csv, relative_half_width_svg, Heatmap, HeatmapAxis,
+    estimate_svg, heatmaps_svg, history_csv, relative_half_width_svg, stages_svg, support_svg,
+    Heatmap, HeatmapAxis,
 };
 
 fn view() -> CampaignView {
@@ -531,4 +532,74 @@ fn the_legend_covers_no_data() {
             );
         }
     }
+}
+
+fn stage(
+    kind: &str,
+    (start, end): (u64, u64),
+    events: u64,
+    new: u64,
+    support: u64,
+) -> AdaptiveStage {
+    AdaptiveStage {
+        kind: kind.into(),
+        start,
+        end,
+        events,
+        new_failures: new,
+        invalid: 0,
+        support,
+    }
+}
+
+/// The x of a rectangle's left edge and its height, for each of `fill`.
+fn rects(doc: &Document, fill: &str) -> Vec<(f64, f64, f64)> {
+    doc.descendants()
+        .filter(|n| n.has_tag_name("rect") && n.attribute("fill") == Some(fill))
+        .map(|n| {
+            let at = |a: &str| n.attribute(a).unwrap().parse::<f64>().unwrap();
+            (at("x"), at("width"), at("height"))
+        })
+        .collect()
+}
+
+#[test]
+fn an_adaptive_campaign_s_stages_are_drawn_over_their_tests_as_high_as_their_events() {
+    let stages = [
+        stage("library", (0, 100), 4, 4, 300),
+        stage("search", (100, 704), 40, 40, 340),
+        stage("estimate", (704, 734), 0, 0, 340),
+    ];
+    let svg = stages_svg(&view(), &stages).unwrap();
+    let doc = Document::parse(&svg).unwrap();
+    assert!(texts(&doc)
+        .iter()
+        .any(|t| t.contains("100 library, 604 search, 30 estimation tests")));
+    // Each stage's strip and bar in its colour: the search's bar 10 times
+    // the library's, its width 6.04 times; the estimation stage met nothing
+    // and still has its strip.
+    let library = rects(&doc, "#1F5DA6");
+    let search = rects(&doc, "#D68214");
+    let estimate = rects(&doc, "#1D7A3A");
+    // The strip, then the legend's key (bars of no height are not drawn).
+    assert_eq!(estimate.len(), 2, "{estimate:?}");
+    let tallest = |r: &[(f64, f64, f64)]| r.iter().map(|x| x.2).fold(0.0, f64::max);
+    let widest = |r: &[(f64, f64, f64)]| r.iter().map(|x| x.1).fold(0.0, f64::max);
+    assert!(
+        (tallest(&search) / tallest(&library) - 10.0).abs() < 0.5,
+        "{library:?} {search:?}"
+    );
+    assert!((widest(&search) / widest(&library) - 6.04).abs() < 0.1);
+    assert!(library[0].0 < search[0].0 && search[0].0 < estimate[0].0);
+    let support = support_svg(&view(), &stages).unwrap();
+    let doc = Document::parse(&support).unwrap();
+    assert!(texts(&doc)
+        .iter()
+        .any(|t| t.contains("support after each stage (340 cells)")));
+    // The support's steps: 300 after the library stage, held to 704, then 340.
+    let line = &lines(&doc, "#1F5DA6")[0];
+    assert_eq!(line.len(), 5, "{line:?}");
+    assert_eq!(line[0].1, line[1].1);
+    assert!(line[2].1 < line[1].1, "340 above 300 (y grows downwards)");
+    assert_eq!(lines(&doc, "#D68214")[0].len(), 5, "the failures found");
 }

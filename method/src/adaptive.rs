@@ -43,6 +43,9 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 
+mod record;
+pub use record::StageRecord;
+
 /// How an adaptive campaign searches and samples.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct AdaptiveSettings {
@@ -574,16 +577,23 @@ impl<C: Case> Planner<'_, C> {
     /// order, one per test): an estimation stage's events enter the
     /// estimate, whose rule may stop the campaign inside the stage (at the
     /// index where the rule first holds, as for any campaign); otherwise
-    /// the next stage is planned, unless the budget is spent.
+    /// the next stage is planned, unless the budget is spent. Returns what
+    /// the stage did.
     ///
     /// # Panics
     /// When the campaign has finished or `results` is not one per test.
-    pub fn resolve(&self, state: &mut AdaptiveState, rule: &StoppingRule, results: &[TestResult]) {
+    pub fn resolve(
+        &self,
+        state: &mut AdaptiveState,
+        rule: &StoppingRule,
+        results: &[TestResult],
+    ) -> StageRecord {
         assert!(state.finished.is_none(), "the campaign has finished");
         let planned = state.current().clone();
         assert_eq!(results.len() as u64, planned.len, "one result per test");
         let seed = state.seed;
         state.spent.stages += 1;
+        let failures_before = state.knowledge.failures.len();
         let observations: Vec<Option<Observation>> = results
             .iter()
             .enumerate()
@@ -596,25 +606,41 @@ impl<C: Case> Planner<'_, C> {
                 TestResult::Invalid => None,
             })
             .collect();
+        let mut course = record::Course::new(planned.start, state.fold.indices);
         match &planned.stage {
             Stage::Library(_) => state.spent.library_tests += planned.len,
             Stage::Search(_) => state.spent.search_tests += planned.len,
             Stage::Estimate(_) => {
                 let to = state.fold.indices + planned.len;
                 let outcomes = estimation_outcomes(&planned, seed, state.fold.indices, results);
-                if let Some((status, used)) =
-                    fold_estimation_stage(&mut state.fold, rule, planned.end(), to, &outcomes)
-                {
+                let stopped = fold_estimation_stage_observed(
+                    &mut state.fold,
+                    rule,
+                    (planned.end(), to),
+                    &outcomes,
+                    &mut |f| course.keep(f),
+                );
+                course.keep(&state.fold);
+                if let Some((status, used)) = stopped {
                     let support = self.support(&state.knowledge);
+                    let mut record =
+                        StageRecord::counted(planned.kind(), planned.start, used, results);
+                    record.support = support.len() as u64;
+                    record.course = course.points;
                     state.finished =
                         Some(state.spent.result(status, &state.fold, rule, used, support));
-                    return;
+                    return record;
                 }
             }
         }
         for o in observations.iter().flatten() {
             self.observe(&mut state.knowledge, o);
         }
+        let mut record =
+            StageRecord::counted(planned.kind(), planned.start, planned.end(), results);
+        record.new_failures = (state.knowledge.failures.len() - failures_before) as u64;
+        record.support = state.knowledge.support.len() as u64;
+        record.course = course.points;
         if planned.end() >= rule.max_tests {
             let support = self.support(&state.knowledge);
             state.finished = Some(state.spent.result(
@@ -624,7 +650,7 @@ impl<C: Case> Planner<'_, C> {
                 planned.end(),
                 support,
             ));
-            return;
+            return record;
         }
         let stage = self.next(&state.knowledge);
         let len = self.len(&stage).min(rule.max_tests - planned.end());
@@ -633,6 +659,7 @@ impl<C: Case> Planner<'_, C> {
             len,
             stage,
         });
+        record
     }
 }
 
@@ -701,12 +728,24 @@ pub(crate) fn fold_estimation_stage(
     to: u64,
     outcomes: &[(u64, SparseOutcome)],
 ) -> Option<(Decision, u64)> {
+    fold_estimation_stage_observed(fold, rule, (stage_end, to), outcomes, &mut |_| {})
+}
+
+/// [`fold_estimation_stage`], showing `observe` the fold on both sides of
+/// each outcome ([`PrefixFold::advance_observed`]).
+fn fold_estimation_stage_observed(
+    fold: &mut PrefixFold,
+    rule: &StoppingRule,
+    (stage_end, to): (u64, u64),
+    outcomes: &[(u64, SparseOutcome)],
+    observe: &mut dyn FnMut(&PrefixFold),
+) -> Option<(Decision, u64)> {
     let estimation_rule = StoppingRule {
         max_tests: u64::MAX,
         ..*rule
     };
     let decided = fold
-        .advance(&estimation_rule, rule.z(), to, outcomes, None)
+        .advance_observed(&estimation_rule, rule.z(), to, outcomes, None, observe)
         .expect("bounded weights in index order");
     decided.map(|status| (status, stage_end - (to - fold.indices)))
 }

@@ -163,11 +163,30 @@ async function indexPage() {
   return true;
 }
 
+// Which of a campaign page's parts (`data-applies`) apply to `c`: a
+// library build's surrogate runs estimate nothing; only an adaptive
+// campaign has stages; only a campaign with an outside bound shows it.
+function applies(c) {
+  const build = c.method === 'enumerate' || c.method === 'build';
+  return {
+    estimate: !build,
+    adaptive: c.method === 'adaptive',
+    outside: c.outside_upper != null || c.guarded_ci_high != null,
+  };
+}
+
 async function campaignPage() {
   const c = await json(`/api/v1/campaigns/${pageId}`);
+  const parts = applies(c);
+  for (const node of document.querySelectorAll('[data-applies]')) {
+    node.hidden = !parts[node.dataset.applies];
+  }
   set('status', c.status);
   document.getElementById('status').className = `status-${c.status}`;
+  set('tests-label', parts.adaptive ? 'estimation tests'
+    : parts.estimate ? 'tests' : 'surrogate runs');
   set('tests', fmt.count(c.tests), c.tests);
+  set('indices', fmt.count(c.indices), c.indices);
   set('events', fmt.count(c.events), c.events);
   set('invalid', fmt.count(c.invalid), c.invalid);
   set('estimate', fmt.sci(c.estimate), c.estimate);
@@ -181,7 +200,9 @@ async function campaignPage() {
   const sampling = c.method === 'library' ? `, ε ${c.epsilon} (${c.split} split)`
     : a ? `: ${a.library_tests} library and ${a.search_tests} search tests, ${a.stages} stages`
       + (a.running ? `, running a ${a.running.kind} stage` : '') : '';
-  set('detail', c.status_detail ?? `${c.case}, ${c.method}${sampling}, vehicle ${fmt.vehicle(c.vut, c.vut_label)}, seed ${c.seed}`);
+  const what = parts.estimate ? `${c.case}, ${c.method}${sampling}`
+    : `${c.case}, the surrogate runs of library ${c.library_id}'s build`;
+  set('detail', c.status_detail ?? `${what}, vehicle ${fmt.vehicle(c.vut, c.vut_label)}, seed ${c.seed}`);
   // The outside bound and the guarded interval exist for library campaigns
   // of grid cases (docs/statistics.md).
   set('outside-upper', fmt.sci(c.outside_upper), c.outside_upper);
@@ -192,12 +213,30 @@ async function campaignPage() {
   await pairSection(c);
   const share = progress(c);
   document.getElementById('progress').style.width = `${(share * 100).toFixed(1)}%`;
-  const [estimate, halfWidth] = await Promise.all([
-    text(`/api/v1/campaigns/${pageId}/figures/estimate.svg`),
-    text(`/api/v1/campaigns/${pageId}/figures/relative-half-width.svg`)]);
-  document.getElementById('estimate-figure').innerHTML = estimate;
-  document.getElementById('half-width-figure').innerHTML = halfWidth;
+  const figures = parts.estimate ? [
+    ['estimate-figure', 'estimate.svg'], ['half-width-figure', 'relative-half-width.svg']] : [];
+  if (parts.adaptive) {
+    adaptiveSection(c);
+    figures.push(['stages-figure', 'stages.svg'], ['support-figure', 'support.svg']);
+  }
+  const drawn = await Promise.all(figures.map(([, name]) =>
+    text(`/api/v1/campaigns/${pageId}/figures/${name}`)));
+  figures.forEach(([id], k) => { document.getElementById(id).innerHTML = drawn[k]; });
   return !['converged', 'exhausted', 'cancelled', 'failed'].includes(c.status);
+}
+
+// An adaptive campaign's stages in numbers: where its tests went.
+function adaptiveSection(c) {
+  const a = c.adaptive;
+  set('library-tests', fmt.count(a.library_tests), a.library_tests);
+  set('search-tests', fmt.count(a.search_tests), a.search_tests);
+  set('estimation-tests', fmt.count(c.tests), c.tests);
+  set('stages', fmt.count(a.stages), a.stages);
+  set('support', fmt.count(a.support), a.support);
+  set('adaptive-detail', `The library's tests and the searches around the failures and near misses `
+    + `they met found where the vehicle fails; only the estimation tests, drawn from the support K `
+    + `and, a share of them, by exposure outside it, enter the estimate. Its interval assumes every `
+    + `failure is reachable from what the tests met (docs/statistics.md, "Adaptive campaigns").`);
 }
 
 // A paired regression campaign: both vehicles' rates over the pair's tests

@@ -12,7 +12,7 @@
 
 use super::vut::CampaignVehicle;
 use super::{AdaptiveProgress, AdaptiveStages, CampaignTests, PlannedTest, TestOutcome};
-use crate::adaptive::{AdaptiveSettings, AdaptiveState, Planner, TestResult};
+use crate::adaptive::{AdaptiveSettings, AdaptiveState, Planner, StageRecord, TestResult};
 use crate::case::Case;
 use crate::estimator::StoppingRule;
 use crate::external::{DriverError, ExternalVehicle, ExternalVut};
@@ -170,9 +170,9 @@ where
         )
     }
 
-    fn resolve(&self, results: &[TestResult]) {
+    fn resolve(&self, results: &[TestResult]) -> StageRecord {
         let mut state = self.state();
-        self.planner.resolve(&mut state, &self.rule, results);
+        self.planner.resolve(&mut state, &self.rule, results)
     }
 
     fn stops_within(&self, results: &[TestResult]) -> bool {

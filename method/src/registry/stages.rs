@@ -1,7 +1,7 @@
 //! An adaptive campaign's stages as a coordinator keeps them between
 //! reports, and what an adaptive campaign run in this process did.
 
-use crate::adaptive::{AdaptiveResult, AdaptiveSettings, TestResult};
+use crate::adaptive::{AdaptiveResult, AdaptiveSettings, StageRecord, TestResult};
 
 /// The stages of an adaptive campaign ([`crate::adaptive`]) as a
 /// coordinator keeps them between reports: the running stage, and the step
@@ -16,8 +16,8 @@ pub trait AdaptiveStages: Send + Sync {
     /// stage) on the built-in vehicle, run here; `None` for a program.
     fn replay_stage(&self, from: u64, to: u64) -> Option<Vec<(bool, f64)>>;
     /// Resolves the running stage with one result per test
-    /// ([`crate::adaptive::Planner::resolve`]).
-    fn resolve(&self, results: &[TestResult]);
+    /// ([`crate::adaptive::Planner::resolve`]), and says what it did.
+    fn resolve(&self, results: &[TestResult]) -> StageRecord;
     /// Whether the running stage's rule stops the campaign within its
     /// first `results.len()` tests, whatever the rest give
     /// ([`crate::adaptive::Planner::stops_within`]): the stage may then be

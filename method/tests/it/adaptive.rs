@@ -247,6 +247,7 @@ fn a_service_adaptive_campaign_resolved_from_workers_runs_is_the_in_process_one(
                 )
                 .unwrap();
             let stages = coordinator.adaptive().unwrap();
+            let mut records = Vec::new();
             while let Some((from, to)) = stages.running() {
                 let results: Vec<TestResult> = (from..to)
                     .map(|i| {
@@ -273,12 +274,12 @@ fn a_service_adaptive_campaign_resolved_from_workers_runs_is_the_in_process_one(
                                 criticality: 0.0,
                             },
                         );
-                        stages.resolve(&early);
+                        records.push(stages.resolve(&early));
                         assert_eq!(stages.running(), None, "stopped");
                         assert_eq!(in_process.result.indices, from + k as u64);
                     }
                     None => {
-                        stages.resolve(&results);
+                        records.push(stages.resolve(&results));
                         assert!(
                             stages.running().is_some()
                                 || in_process.result.status != Decision::Converged,
@@ -288,6 +289,7 @@ fn a_service_adaptive_campaign_resolved_from_workers_runs_is_the_in_process_one(
                 }
             }
             let done = stages.progress().finished.unwrap();
+            stage_records_tell_the_campaign(&records, &done);
             assert_eq!(
                 AdaptiveRun::from_grid(done),
                 in_process,
@@ -295,6 +297,70 @@ fn a_service_adaptive_campaign_resolved_from_workers_runs_is_the_in_process_one(
             );
         }
     }
+}
+
+/// What the dashboard draws of an adaptive campaign, its stages' records,
+/// agrees with the campaign: the stages tile its tests from 0 to its stop,
+/// library first; their tests add up to its library and search tests;
+/// their events are counted only up to the stop (the test above fills the
+/// tests after it with events); an estimation stage's course ends at the
+/// estimate after it, and the last course ends at the campaign's estimate.
+fn stage_records_tell_the_campaign(
+    records: &[tslg_method::adaptive::StageRecord],
+    done: &AdaptiveResult,
+) {
+    assert_eq!(records[0].kind, "library");
+    assert_eq!(records[0].start, 0);
+    for pair in records.windows(2) {
+        assert_eq!(pair[0].end, pair[1].start, "stages tile the tests");
+    }
+    assert_eq!(records.last().unwrap().end, done.result.indices);
+    assert_eq!(records.len() as u64, done.stages);
+    let tests_of = |kind: &str| -> u64 {
+        records
+            .iter()
+            .filter(|r| r.kind == kind)
+            .map(|r| r.end - r.start)
+            .sum()
+    };
+    assert_eq!(tests_of("library"), done.library_tests);
+    assert_eq!(tests_of("search"), done.search_tests);
+    let estimation = records.iter().filter(|r| r.kind == "estimate");
+    assert_eq!(
+        estimation.clone().map(|r| r.events).sum::<u64>(),
+        done.result.events,
+        "the estimate's events are the estimation stages' events up to the stop"
+    );
+    let mut tests = 0;
+    for r in estimation {
+        assert!(r.course.windows(2).all(|w| w[0].indices < w[1].indices));
+        let last = r.course.last().expect("an estimation stage's course");
+        assert_eq!(last.indices, r.end, "the course ends at the stage's end");
+        assert!(r
+            .course
+            .iter()
+            .all(|p| (r.start..=r.end).contains(&p.indices)));
+        tests += r.end - r.start - r.invalid;
+        assert_eq!(last.estimator.tests(), tests);
+    }
+    for r in records.iter().filter(|r| r.kind != "estimate") {
+        assert!(r.course.is_empty());
+    }
+    let last = records
+        .iter()
+        .rev()
+        .find_map(|r| r.course.last())
+        .expect("a campaign that stopped by its rule estimated");
+    assert_eq!(last.estimate(), done.result.estimate);
+    assert_eq!(records.last().unwrap().support, done.support.len() as u64);
+    // The failing cells found, each once: a deterministic vehicle's
+    // failures all stay in the support.
+    let found: u64 = records.iter().map(|r| r.new_failures).sum();
+    assert!(
+        (1..=done.support.len() as u64).contains(&found),
+        "{found} failing cells found, support {}",
+        done.support.len()
+    );
 }
 
 #[test]

@@ -12,14 +12,15 @@
 //! coordinator's copy rebuilt after a restart resolves the same stages
 //! again ([`catch_up`]) and the campaign is the in-process one.
 
+use crate::campaign::history;
 use crate::error::ServiceError;
 use crate::store::campaigns::CampaignRow;
 use crate::store::prefix::{self, close_stopped, frontier};
-use crate::store::{near_misses, reports};
+use crate::store::{adaptive_stages, near_misses, reports};
 use rusqlite::Connection;
 use std::sync::Arc;
 use tslg_api::CampaignStatus;
-use tslg_method::adaptive::TestResult;
+use tslg_method::adaptive::{StageRecord, TestResult};
 use tslg_method::estimator::Decision;
 use tslg_method::outside::OutsideTally;
 use tslg_method::prefix::{PrefixFold, SparseOutcome};
@@ -122,13 +123,17 @@ pub fn catch_up(
         // Stopped: every stage that ran was resolved.
         None => campaign.indices as u64,
     };
+    let mut records = Vec::new();
     while let Some((from, to)) = stages.running() {
         if to > resolved_to {
             break;
         }
         let results = stage_results(conn, campaign.id, tests, from, to)?;
-        stages.resolve(&results);
+        records.push(stages.resolve(&results));
     }
+    // The same records again (a campaign's stages resolved before the
+    // table existed get theirs here).
+    adaptive_stages::store(conn, campaign.id, &records)?;
     Ok(())
 }
 
@@ -153,7 +158,7 @@ pub fn resolve_stages(
         )));
     }
     let frontier = frontier(conn, campaign)?;
-    let mut resolved = false;
+    let mut records = Vec::new();
     while let Some((from, to)) = stages.running() {
         let results = if frontier >= to {
             stage_results(conn, campaign.id, tests, from, to)?
@@ -164,13 +169,45 @@ pub fn resolve_stages(
         } else {
             break;
         };
-        stages.resolve(&results);
-        resolved = true;
+        records.push(stages.resolve(&results));
     }
-    if !resolved {
+    if records.is_empty() {
         return Ok(None);
     }
-    write(conn, campaign, stages)
+    write(conn, campaign, stages, &records)
+}
+
+/// Stores the estimate's course over the estimation stages of `records`
+/// as history points at the campaign's test indices, thinned as every
+/// campaign's history is ([`history::worth_storing`], on estimation tests)
+/// and keeping each stage's last point, so the estimate and its interval
+/// are drawn over the estimation tests (one point a stage drew nothing:
+/// a campaign that stopped in its first estimation stage had one point).
+fn store_courses(
+    conn: &Connection,
+    campaign: i64,
+    records: &[StageRecord],
+) -> Result<(), ServiceError> {
+    let mut last = prefix::last_history_tests(conn, campaign)?;
+    let mut kept = Vec::new();
+    for record in records {
+        for (k, point) in record.course.iter().enumerate() {
+            let tests = point.estimator.tests();
+            let stage_end = k + 1 == record.course.len();
+            if tests > 0 && (stage_end || history::worth_storing(last, tests)) {
+                last = Some(tests);
+                kept.push((
+                    PrefixFold {
+                        outside: OutsideTally::default(),
+                        ..*point
+                    },
+                    None,
+                ));
+            }
+        }
+    }
+    prefix::store_history(conn, campaign, &kept)?;
+    Ok(())
 }
 
 /// Persists the campaign's state after resolving stages.
@@ -178,6 +215,7 @@ fn write(
     conn: &Connection,
     campaign: &CampaignRow,
     stages: &dyn AdaptiveStages,
+    records: &[StageRecord],
 ) -> Result<Option<CampaignStatus>, ServiceError> {
     let p = stages.progress();
     let fold = p.fold;
@@ -218,15 +256,8 @@ fn write(
             detail: detail.as_deref(),
         },
     )?;
-    if fold.estimator.tests() > 0 {
-        // The estimate's point at every test the campaign used.
-        let point = PrefixFold {
-            indices,
-            outside: OutsideTally::default(),
-            ..fold
-        };
-        prefix::store_history(conn, campaign.id, &[(point, None)])?;
-    }
+    adaptive_stages::store(conn, campaign.id, records)?;
+    store_courses(conn, campaign.id, records)?;
     if p.finished.is_none() {
         return Ok(None);
     }

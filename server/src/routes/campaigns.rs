@@ -7,13 +7,14 @@ use crate::error::ServiceError;
 use crate::routes::problem::ApiJson;
 use crate::routes::{ApiPath, ApiQuery};
 use crate::state::AppState;
-use crate::store::campaigns;
+use crate::store::{adaptive_stages, campaigns};
 use axum::extract::State;
 use axum::http::{header, StatusCode};
 use axum::response::IntoResponse;
 use axum::Json;
 use tslg_api::{
-    CampaignList, CampaignPlan, CampaignView, CreateCampaign, History, Method, Problem,
+    AdaptiveStages, CampaignList, CampaignPlan, CampaignView, CreateCampaign, History, Method,
+    Problem,
 };
 
 /// Starts a campaign. It runs as soon as its library is ready.
@@ -81,6 +82,28 @@ pub async fn read_campaign(
     id: i64,
 ) -> Result<campaigns::CampaignRow, ServiceError> {
     Ok(state.db.read(move |conn| campaigns::get(conn, id)).await?)
+}
+
+/// An adaptive campaign's resolved stages in test order: where each
+/// stage's tests sit, what they found and the support after it (empty for
+/// other campaigns).
+#[utoipa::path(get, path = "/api/v1/campaigns/{id}/stages", params(("id" = i64, Path)),
+    responses((status = 200, body = AdaptiveStages), (status = 404, body = Problem)))]
+pub async fn stages(
+    State(state): State<AppState>,
+    ApiPath(id): ApiPath<i64>,
+) -> Result<Json<AdaptiveStages>, ServiceError> {
+    let stages = state
+        .db
+        .read(move |conn| -> Result<_, ServiceError> {
+            campaigns::get(conn, id)?;
+            Ok(adaptive_stages::of(conn, id)?)
+        })
+        .await?;
+    Ok(Json(AdaptiveStages {
+        campaign_id: id,
+        stages,
+    }))
 }
 
 /// `?points=N` of the history read.

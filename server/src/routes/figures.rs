@@ -71,6 +71,49 @@ pub async fn relative_half_width(
     svg(tslg_figures::relative_half_width_svg(&view, &points))
 }
 
+/// An adaptive campaign's view and its resolved stages.
+async fn adaptive(
+    state: &AppState,
+    id: i64,
+) -> Result<(tslg_api::CampaignView, Vec<tslg_api::AdaptiveStage>), ServiceError> {
+    let (row, stages) = state
+        .db
+        .read(move |conn| -> Result<_, ServiceError> {
+            let row = campaigns::get(conn, id)?;
+            let stages = crate::store::adaptive_stages::of(conn, id)?;
+            Ok((row, stages))
+        })
+        .await?;
+    Ok((
+        crate::campaign::views::live_view(state, &row).await?,
+        stages,
+    ))
+}
+
+/// An adaptive campaign's stages on one axis of all its tests, coloured by
+/// kind, each as high as the events its tests met.
+#[utoipa::path(get, path = "/api/v1/campaigns/{id}/figures/stages.svg", params(("id" = i64, Path)),
+    responses((status = 200, content_type = "image/svg+xml", body = String), (status = 404, body = tslg_api::Problem)))]
+pub async fn stages(
+    State(state): State<AppState>,
+    ApiPath(id): ApiPath<i64>,
+) -> Result<Response, ServiceError> {
+    let (view, stages) = adaptive(&state, id).await?;
+    svg(tslg_figures::stages_svg(&view, &stages))
+}
+
+/// An adaptive campaign's support (failures found and library cells
+/// untested) after each stage, against all its tests.
+#[utoipa::path(get, path = "/api/v1/campaigns/{id}/figures/support.svg", params(("id" = i64, Path)),
+    responses((status = 200, content_type = "image/svg+xml", body = String), (status = 404, body = tslg_api::Problem)))]
+pub async fn support(
+    State(state): State<AppState>,
+    ApiPath(id): ApiPath<i64>,
+) -> Result<Response, ServiceError> {
+    let (view, stages) = adaptive(&state, id).await?;
+    svg(tslg_figures::support_svg(&view, &stages))
+}
+
 /// The exposure beside the library's sampling distribution, projected onto
 /// two axes (cut-in: range × range rate; highway exit: the two background
 /// vehicles' positions; car-following: initial range × range rate).

@@ -69,6 +69,7 @@ pub fn router(state: AppState) -> Router {
         .route("/api/v1/campaigns", get(campaigns::list))
         .route("/api/v1/campaigns/{id}", get(campaigns::get_one))
         .route("/api/v1/campaigns/{id}/history", get(campaigns::history))
+        .route("/api/v1/campaigns/{id}/stages", get(campaigns::stages))
         .route("/api/v1/campaigns/{id}/events", get(events::list))
         .route(
             "/api/v1/campaigns/{id}/tests/{index}/openscenario",
@@ -83,6 +84,14 @@ pub fn router(state: AppState) -> Router {
         .route(
             "/api/v1/campaigns/{id}/figures/relative-half-width.svg",
             get(figures::relative_half_width),
+        )
+        .route(
+            "/api/v1/campaigns/{id}/figures/stages.svg",
+            get(figures::stages),
+        )
+        .route(
+            "/api/v1/campaigns/{id}/figures/support.svg",
+            get(figures::support),
         )
         .route(
             "/api/v1/libraries/{id}/figures/picture.svg",

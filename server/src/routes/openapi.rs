@@ -28,6 +28,7 @@ use utoipa::OpenApi;
         super::campaigns::list,
         super::campaigns::get_one,
         super::campaigns::history,
+        super::campaigns::stages,
         super::events::list,
         super::events::openscenario,
         super::campaigns::plan,
@@ -47,6 +48,8 @@ use utoipa::OpenApi;
         super::queue::get,
         super::figures::estimate,
         super::figures::relative_half_width,
+        super::figures::stages,
+        super::figures::support,
         super::figures::library_picture,
     )
 )]

@@ -10,8 +10,9 @@ use tslg_api::LibraryStatus;
 
 /// The tables holding a campaign's records, children before parents
 /// (leases name audits).
-const CAMPAIGN_TABLES: [&str; 6] = [
+const CAMPAIGN_TABLES: [&str; 7] = [
     "leases",
+    "adaptive_stages",
     "audits",
     "near_misses",
     "reports",

@@ -1,6 +1,7 @@
 //! Database access, one module per table family. Every write runs on the
 //! single writer connection ([`crate::db::Database::write`]).
 
+pub mod adaptive_stages;
 pub mod audits;
 pub mod campaign_row;
 pub mod campaigns;

@@ -202,6 +202,16 @@ pub fn store_stages(
     Ok(())
 }
 
+/// The valid tests of `campaign`'s last stored history point, if any.
+pub fn last_history_tests(conn: &Connection, campaign: i64) -> Result<Option<u64>, StoreError> {
+    let last: Option<(i64,)> = sql::optional(
+        conn,
+        "SELECT tests FROM history WHERE campaign_id = ? ORDER BY indices DESC LIMIT 1",
+        [campaign],
+    )?;
+    Ok(last.map(|(tests,)| tests as u64))
+}
+
 /// Stores the history points `course` of a campaign's prefix.
 pub fn store_history(
     conn: &Connection,

@@ -138,7 +138,8 @@ pub fn run(command: CampaignCommand) -> anyhow::Result<()> {
 }
 
 /// `tslg campaign report ID --out DIR`: the dashboard's figures as SVG
-/// files, and the numbers behind them as CSV and JSON.
+/// files, and the numbers behind them as CSV and JSON; an adaptive
+/// campaign's stages and support too, as its page shows them.
 pub fn report(server: &ServerArgs, id: i64, out: &Path, points: usize) -> anyhow::Result<()> {
     let client = client(server)?;
     let (view, history) = block_on(async {
@@ -147,9 +148,13 @@ pub fn report(server: &ServerArgs, id: i64, out: &Path, points: usize) -> anyhow
             client.history_points(id, points).await?,
         ))
     })?;
+    let stages = match view.method {
+        tslg_api::Method::Adaptive => Some(block_on(async { Ok(client.stages(id).await?) })?),
+        _ => None,
+    };
     std::fs::create_dir_all(out)
         .with_context(|| format!("cannot create the directory {}", out.display()))?;
-    let files = [
+    let mut files = vec![
         (
             "estimate.svg",
             tslg_figures::estimate_svg(&view, &history.points)?,
@@ -161,6 +166,19 @@ pub fn report(server: &ServerArgs, id: i64, out: &Path, points: usize) -> anyhow
         ("history.csv", tslg_figures::history_csv(&history.points)),
         ("campaign.json", serde_json::to_string_pretty(&view)? + "\n"),
     ];
+    if let Some(stages) = stages {
+        files.extend([
+            (
+                "stages.svg",
+                tslg_figures::stages_svg(&view, &stages.stages)?,
+            ),
+            (
+                "support.svg",
+                tslg_figures::support_svg(&view, &stages.stages)?,
+            ),
+            ("stages.json", serde_json::to_string_pretty(&stages)? + "\n"),
+        ]);
+    }
     for (name, content) in files {
         let path = out.join(name);
         std::fs::write(&path, content)
