@@ -1,8 +1,7 @@
 -- An adaptive campaign's resolved stages, as the dashboard and reports show
 -- them (issue 51): where each stage's tests sit among all the campaign's
 -- tests, what they found, and the support after it. Written when a stage
--- is resolved (and again, the same, when a restarted coordinator resolves
--- it again), so campaigns whose stages were resolved before this table
+-- is resolved, so campaigns whose stages were resolved before this table
 -- have rows only for the stages resolved after it.
 CREATE TABLE adaptive_stages (
     campaign_id  INTEGER NOT NULL REFERENCES campaigns(id),

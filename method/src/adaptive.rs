@@ -623,8 +623,7 @@ impl<C: Case> Planner<'_, C> {
                 course.keep(&state.fold);
                 if let Some((status, used)) = stopped {
                     let support = self.support(&state.knowledge);
-                    let mut record =
-                        StageRecord::counted(planned.kind(), planned.start, used, results);
+                    let mut record = counted(planned.kind(), planned.start, used, results);
                     record.support = support.len() as u64;
                     record.course = course.points;
                     state.finished =
@@ -636,8 +635,7 @@ impl<C: Case> Planner<'_, C> {
         for o in observations.iter().flatten() {
             self.observe(&mut state.knowledge, o);
         }
-        let mut record =
-            StageRecord::counted(planned.kind(), planned.start, planned.end(), results);
+        let mut record = counted(planned.kind(), planned.start, planned.end(), results);
         record.new_failures = (state.knowledge.failures.len() - failures_before) as u64;
         record.support = state.knowledge.support.len() as u64;
         record.course = course.points;
@@ -687,6 +685,23 @@ impl<C: Case> Planner<'_, C> {
         let to = fold.indices + results.len() as u64;
         let outcomes = estimation_outcomes(planned, state.seed, fold.indices, results);
         fold_estimation_stage(&mut fold, rule, planned.end(), to, &outcomes).is_some()
+    }
+}
+
+/// The record of a stage's tests `start..end` of kind `kind`, counted from
+/// their `results` (the stage's, from `start`; those after `end` unused).
+fn counted(kind: &'static str, start: u64, end: u64, results: &[TestResult]) -> StageRecord {
+    let used = &results[..(end - start) as usize];
+    let count = |f: fn(&TestResult) -> bool| used.iter().filter(|r| f(r)).count() as u64;
+    StageRecord {
+        kind,
+        start,
+        end,
+        events: count(|r| matches!(r, TestResult::Done { event: true, .. })),
+        new_failures: 0,
+        invalid: count(|r| matches!(r, TestResult::Invalid)),
+        support: 0,
+        course: Vec::new(),
     }
 }
 

@@ -234,8 +234,8 @@ function adaptiveSection(c) {
   set('stages', fmt.count(a.stages), a.stages);
   set('support', fmt.count(a.support), a.support);
   set('adaptive-detail', `The library's tests and the searches around the failures and near misses `
-    + `they met found where the vehicle fails; only the estimation tests, drawn from the support K `
-    + `and, a share of them, by exposure outside it, enter the estimate. Its interval assumes every `
+    + `they met found where the vehicle fails; only the estimation tests enter the estimate: most are drawn from the support K, `
+    + `a share by exposure outside it. Its interval assumes every `
     + `failure is reachable from what the tests met (docs/statistics.md, "Adaptive campaigns").`);
 }
 

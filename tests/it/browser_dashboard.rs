@@ -4,134 +4,21 @@
 //! agree with the API, the figures are drawn and redrawn, and screenshots
 //! are written to `target/tmp/artefacts/`.
 
+use crate::browser_kinds::page_agrees;
+use crate::browser_support::{eval, number, save, until, Driver};
 use crate::support::*;
-use fantoccini::{Client as Browser, ClientBuilder};
-use hyper_util::client::legacy::connect::HttpConnector;
-use serde_json::{json, Value};
-use std::net::TcpListener;
-use std::os::unix::process::CommandExt;
-use std::process::{Child, Command, Stdio};
-use std::time::{Duration, Instant};
+use serde_json::json;
+use std::time::Duration;
 use tslg_api::{CampaignStatus, CreateCampaign, Method};
-
-const CHROMIUM: &str = "/usr/bin/chromium";
-const CHROMEDRIVER: &str = "/usr/bin/chromedriver";
-
-/// chromedriver on a free port in its own process group, which is killed
-/// on drop: Chromium, started by chromedriver, goes with it even when the
-/// test fails before it closes its session.
-struct Driver {
-    child: Child,
-    url: String,
-}
-
-impl Driver {
-    fn start() -> Self {
-        for program in [CHROMIUM, CHROMEDRIVER] {
-            assert!(
-                std::path::Path::new(program).exists(),
-                "{program} is missing: the browser test needs Debian's chromium and \
-                 chromium-driver (`apt-get install chromium chromium-driver`, as .ci/run does)"
-            );
-        }
-        let port = TcpListener::bind("127.0.0.1:0")
-            .unwrap()
-            .local_addr()
-            .unwrap()
-            .port();
-        let child = Command::new(CHROMEDRIVER)
-            .arg(format!("--port={port}"))
-            .process_group(0)
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .expect("start chromedriver");
-        Self {
-            child,
-            url: format!("http://127.0.0.1:{port}"),
-        }
-    }
-
-    async fn connect(&self) -> Browser {
-        let capabilities = json!({
-            "goog:chromeOptions": {
-                "binary": CHROMIUM,
-                "args": ["--headless=new", "--no-sandbox", "--disable-gpu",
-                         "--disable-dev-shm-usage", "--window-size=1560,900"]
-            }
-        });
-        let started = Instant::now();
-        loop {
-            // The driver is on loopback: plain HTTP, no TLS.
-            let mut builder = ClientBuilder::new(HttpConnector::new());
-            builder.capabilities(capabilities.as_object().unwrap().clone());
-            match builder.connect(&self.url).await {
-                Ok(browser) => return browser,
-                Err(e) if started.elapsed() < Duration::from_secs(30) => {
-                    let _ = e;
-                    tokio::time::sleep(Duration::from_millis(200)).await;
-                }
-                Err(e) => panic!("cannot start a browser session: {e}"),
-            }
-        }
-    }
-}
-
-impl Drop for Driver {
-    fn drop(&mut self) {
-        // The group's id is chromedriver's pid (process_group(0)).
-        let _ = Command::new("kill")
-            .args(["-KILL", "--", &format!("-{}", self.child.id())])
-            .status();
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-/// Evaluates `expression` in the page.
-async fn eval(browser: &Browser, expression: &str) -> Value {
-    browser
-        .execute(&format!("return {expression};"), vec![])
-        .await
-        .expect("script")
-}
-
-/// Waits until `expression` is truthy in the page, then returns it.
-async fn until(browser: &Browser, expression: &str, what: &str) -> Value {
-    let started = Instant::now();
-    loop {
-        let value = eval(browser, expression).await;
-        if !(value.is_null() || value == json!(false) || value == json!(0) || value == json!("")) {
-            return value;
-        }
-        assert!(started.elapsed() < Duration::from_secs(60), "never: {what}");
-        tokio::time::sleep(Duration::from_millis(100)).await;
-    }
-}
-
-/// The number an element shows, from its exact `data-value`.
-fn number(value: &Value) -> u64 {
-    value
-        .as_str()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or_else(|| panic!("{value}"))
-}
-
-fn save(name: &str, png: &[u8]) {
-    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("artefacts");
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join(name);
-    std::fs::write(&path, png).unwrap();
-    eprintln!("screenshot: {}", path.display());
-}
 
 /// Whether every row of figures on the page spans at least 90% of the
 /// figures' section (they grow to the page's width, side by side or one per
 /// row) and every drawing fills its figure's width.
 const FIGURES_FILL_THE_PAGE: &str = "(() => {
-    const section = document.querySelector('.figures').getBoundingClientRect().width;
+    const shown = (n) => n.checkVisibility();
+    const section = [...document.querySelectorAll('.figures')].find(shown).getBoundingClientRect().width;
     const rows = {};
-    for (const f of document.querySelectorAll('.figures > .figure')) {
+    for (const f of [...document.querySelectorAll('.figures > .figure')].filter(shown)) {
         const r = f.getBoundingClientRect();
         rows[Math.round(r.top)] = (rows[Math.round(r.top)] ?? 0) + r.width;
         const svg = f.querySelector('svg').getBoundingClientRect().width;
@@ -151,7 +38,12 @@ fn line_points(figure: &str) -> String {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_dashboard_follows_a_running_campaign_and_agrees_with_the_api() {
     let dir = scratch();
-    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &["--lease-size", "3000"]);
+    // Library builds run on workers: the build's surrogate runs are a
+    // campaign of their own, whose page is checked too.
+    let server = ServerProcess::start(
+        &dir.path().join("db.sqlite"),
+        &["--lease-size", "3000", "--library-builds", "workers"],
+    );
     let _worker = WorkerProcess::start(&server.url, 1, "w1");
     let client = server.client();
     let library = ready_library(&client, "idm", true).await;
@@ -292,13 +184,16 @@ async fn the_dashboard_follows_a_running_campaign_and_agrees_with_the_api() {
     // Which interval the page shows: this campaign's holds at its stop.
     let kind = "document.getElementById('interval-kind').textContent";
     assert_eq!(eval(&browser, kind).await, json!("interval (Wald)"));
+    page_agrees(&browser, &server.url, &last, "ndd").await;
     // An anytime campaign's page says its interval holds at every n.
     let anytime = CreateCampaign {
         interval: tslg_api::IntervalKind::Anytime,
         ..campaign(Method::Ndd, library.id, "idm", 0.3, 5)
     };
     let anytime = client.create_campaign(&anytime).await.unwrap().id;
-    finished(&client, anytime, Duration::from_secs(120)).await;
+    let anytime_view = finished(&client, anytime, Duration::from_secs(120)).await;
+    page_agrees(&browser, &server.url, &anytime_view, "anytime").await;
+    let anytime = anytime_view.id;
     browser
         .goto(&format!("{}/campaigns/{anytime}?refresh=300", server.url))
         .await
@@ -361,7 +256,37 @@ async fn the_dashboard_follows_a_running_campaign_and_agrees_with_the_api() {
         json!(true),
         "a campaign without a pair shows none"
     );
-    save("campaign-library.png", &browser.screenshot().await.unwrap());
+    let library_page = page_agrees(&browser, &server.url, &view, "library").await;
+
+    // The same library, guarded: the outside bound within β of the
+    // estimate, by exposure (docs/statistics.md, "The guard").
+    let guarded = CreateCampaign {
+        guard_outside: true,
+        outside: Some(tslg_api::Outside::Ndd),
+        ..campaign(Method::Library, library.id, "idm", 0.3, 4)
+    };
+    let guarded = client.create_campaign(&guarded).await.unwrap().id;
+    let guarded = finished(&client, guarded, Duration::from_secs(180)).await;
+    assert!(guarded.guarded_ci_high.is_some());
+    page_agrees(&browser, &server.url, &guarded, "guarded").await;
+
+    // An adaptive campaign: the header, its stages in numbers and the four
+    // figures (its page showed none of them once).
+    let adaptive = campaign(Method::Adaptive, library.id, "fvdm", 0.2, 0);
+    let adaptive = client.create_campaign(&adaptive).await.unwrap().id;
+    let adaptive = finished(&client, adaptive, Duration::from_secs(120)).await;
+    let adaptive_page = page_agrees(&browser, &server.url, &adaptive, "adaptive").await;
+
+    // The library build's surrogate runs: a header without an estimate.
+    let build = client
+        .campaigns()
+        .await
+        .unwrap()
+        .campaigns
+        .into_iter()
+        .find(|c| c.method == Method::Enumerate)
+        .expect("the build's campaign");
+    page_agrees(&browser, &server.url, &build, "build").await;
 
     // A paired regression campaign: the FVDM against the IDM on the IDM's
     // library. Its page shows both rates and the difference with the
@@ -412,7 +337,8 @@ async fn the_dashboard_follows_a_running_campaign_and_agrees_with_the_api() {
     )
     .await;
     assert_eq!(link, json!(format!("/campaigns/{}", pair.campaign_a)));
-    save("campaign-paired.png", &browser.screenshot().await.unwrap());
+    let b = client.campaign(pair.campaign_b).await.unwrap();
+    page_agrees(&browser, &server.url, &b, "paired").await;
 
     // The overview marks the campaign with its warnings (their number, the
     // texts on hover); the NDD campaign, which has none, is not marked.
@@ -464,6 +390,38 @@ async fn the_dashboard_follows_a_running_campaign_and_agrees_with_the_api() {
     assert_eq!(overlapping, json!([]), "labels drawn over colour");
     save("library.png", &browser.screenshot().await.unwrap());
     browser.close().await.unwrap();
+    pictures_are_of_this_build(json!({
+        "library": {"size": library.size, "mu_s": library.mu_s,
+                    "sm_evaluations": library.sm_evaluations},
+        "campaign-library": library_page,
+        "campaign-adaptive": adaptive_page,
+    }));
+}
+
+/// The README's pictures (`docs/img/`, copied from this test's screenshots
+/// by `scripts/update-pictures`) show what this build shows: the numbers
+/// this run's pages showed where they do not move (the library, the
+/// stopped library and adaptive campaigns) are those the pictures were
+/// taken with (`docs/img/pictures.json`, written beside them). A change
+/// to those numbers fails here until the pictures are taken again
+/// (`TSLG_UPDATE_PICTURES=1`, which the script sets, writes the file).
+fn pictures_are_of_this_build(now: serde_json::Value) {
+    let text = serde_json::to_string_pretty(&now).unwrap() + "\n";
+    crate::browser_support::save("pictures.json", text.as_bytes());
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/img/pictures.json");
+    if std::env::var_os("TSLG_UPDATE_PICTURES").is_some() {
+        // scripts/update-pictures: the pictures are being taken again.
+        std::fs::write(&path, text).unwrap();
+        return;
+    }
+    let kept = path;
+    let kept: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&kept).unwrap()).unwrap();
+    assert_eq!(
+        kept, now,
+        "the README's pictures show other numbers than this build's pages: \
+         run scripts/update-pictures and commit docs/img/"
+    );
 }
 
 /// The texts of the library's picture whose box on the screen (after any

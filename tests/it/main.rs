@@ -8,6 +8,8 @@ mod architecture;
 mod module_graph;
 
 mod browser_dashboard;
+mod browser_kinds;
+mod browser_support;
 mod cli;
 mod deploy_kubernetes;
 mod docs_commands;

@@ -87,6 +87,47 @@ fn assert_same_adaptive(view: &CampaignView, own: &AdaptiveRun) {
     assert!(a.running.is_none());
 }
 
+/// What the campaign's page draws agrees with its view: its stages tile
+/// every test it ran, library first, adding up to its library and search
+/// tests, its estimation stages' events to its events, the last support to
+/// its support; its history holds the estimate over its estimation tests,
+/// enough points to draw a line, ending at its estimate.
+async fn stages_and_history_agree(client: &tslg_client::Client, view: &CampaignView) {
+    let a = view.adaptive.as_ref().unwrap();
+    let stages = client.stages(view.id).await.unwrap().stages;
+    assert_eq!(stages.len() as u64, a.stages, "{stages:?}");
+    assert_eq!((stages[0].kind.as_str(), stages[0].start), ("library", 0));
+    assert!(
+        stages.windows(2).all(|w| w[0].end == w[1].start),
+        "{stages:?}"
+    );
+    assert_eq!(stages.last().unwrap().end, view.indices);
+    let tests_of = |kind: &str| -> u64 {
+        stages
+            .iter()
+            .filter(|s| s.kind == kind)
+            .map(|s| s.end - s.start)
+            .sum()
+    };
+    assert_eq!(tests_of("library"), a.library_tests);
+    assert_eq!(tests_of("search"), a.search_tests);
+    let events: u64 = stages
+        .iter()
+        .filter(|s| s.kind == "estimate")
+        .map(|s| s.events)
+        .sum();
+    assert_eq!(events, view.events);
+    assert_eq!(stages.last().unwrap().support, a.support);
+    let points = client.history(view.id).await.unwrap().points;
+    assert!(points.len() >= 3, "{points:?}");
+    assert!(points.windows(2).all(|w| w[0].tests < w[1].tests));
+    let last = points.last().unwrap();
+    assert_eq!(
+        (last.tests, last.estimate),
+        (view.tests, view.estimate.unwrap())
+    );
+}
+
 fn adaptive(library_id: i64, vut: serde_json::Value, seed: u64) -> CreateCampaign {
     CreateCampaign {
         vut,
@@ -116,6 +157,7 @@ async fn an_adaptive_campaign_through_the_service_is_the_in_process_one() {
     assert_eq!(view.status, CampaignStatus::Converged, "{view:?}");
     assert_eq!(view.method, Method::Adaptive);
     assert_same_adaptive(&view, &own);
+    stages_and_history_agree(&client, &view).await;
     assert!(
         view.ci_low.unwrap() <= exact && exact <= view.ci_high.unwrap(),
         "{view:?}"
@@ -182,6 +224,8 @@ async fn an_adaptive_campaign_through_the_service_is_the_in_process_one() {
     let client = server.client();
     let view = finished(&client, id, Duration::from_secs(120)).await;
     assert_same_adaptive(&view, &own);
+    // The stages resolved before the kill are recorded once, as after it.
+    stages_and_history_agree(&client, &view).await;
 
     // Refused with a precise reason: the guard, and car-following.
     let guarded = CreateCampaign {

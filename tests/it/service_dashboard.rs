@@ -426,6 +426,41 @@ async fn the_report_writes_the_dashboard_figures_as_svg_with_the_numbers_as_csv(
         line.contains("converged") && line.contains(&format!("{} tests", view.tests)),
         "{line}"
     );
+    assert!(
+        !out.join("stages.svg").exists(),
+        "an NDD campaign has no stages"
+    );
+    // An adaptive campaign's report adds its stages and support, the
+    // figures its page serves, and the stages' numbers.
+    let adaptive = client
+        .create_campaign(&campaign(Method::Adaptive, library.id, "fvdm", 0.2, 2))
+        .await
+        .unwrap();
+    let adaptive = finished(&client, adaptive.id, Duration::from_secs(120)).await;
+    let out = dir.path().join("adaptive-report");
+    let o = Command::new(env!("CARGO_BIN_EXE_tslg"))
+        .args(["campaign", "report", &adaptive.id.to_string()])
+        .args(["--server", &server.url])
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for figure in ["stages.svg", "support.svg", "estimate.svg"] {
+        let written = std::fs::read_to_string(out.join(figure)).unwrap();
+        let url = format!(
+            "{}/api/v1/campaigns/{}/figures/{figure}",
+            server.url, adaptive.id
+        );
+        assert_eq!(written, get(&url).await.text().await.unwrap(), "{figure}");
+    }
+    let stages: tslg_api::AdaptiveStages =
+        serde_json::from_str(&std::fs::read_to_string(out.join("stages.json")).unwrap()).unwrap();
+    assert_eq!(stages, client.stages(adaptive.id).await.unwrap());
+    assert_eq!(
+        stages.stages.len() as u64,
+        adaptive.adaptive.as_ref().unwrap().stages
+    );
     // A campaign that does not exist: a message and a non-zero exit.
     let o = Command::new(env!("CARGO_BIN_EXE_tslg"))
         .args([
@@ -506,6 +541,9 @@ async fn library_pictures_and_pages_are_served_and_unknown_ids_are_404() {
         format!("/libraries/{}", id + 1),
         format!("/api/v1/libraries/{}/figures/picture.svg", id + 1),
         "/api/v1/campaigns/5/figures/estimate.svg".to_owned(),
+        "/api/v1/campaigns/5/figures/stages.svg".to_owned(),
+        "/api/v1/campaigns/5/figures/support.svg".to_owned(),
+        "/api/v1/campaigns/5/stages".to_owned(),
     ] {
         let response = get(&format!("{base}{missing}")).await;
         assert_eq!(response.status(), 404, "{missing}");

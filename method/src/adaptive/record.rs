@@ -3,7 +3,6 @@
 //! campaign's tests, what they found, the support after it, and (an
 //! estimation stage) the estimate's course over its tests.
 
-use super::TestResult;
 use crate::prefix::PrefixFold;
 
 /// One resolved stage ([`super::Planner::resolve`]).
@@ -30,34 +29,6 @@ pub struct StageRecord {
     /// campaign's test index (not the estimation tests' count, which is
     /// `estimator.tests()`); empty for other stages.
     pub course: Vec<PrefixFold>,
-}
-
-impl StageRecord {
-    /// Counts `results[..end − start]` of a stage that starts at `start`.
-    pub(super) fn counted(
-        kind: &'static str,
-        start: u64,
-        end: u64,
-        results: &[TestResult],
-    ) -> Self {
-        let used = &results[..(end - start) as usize];
-        Self {
-            kind,
-            start,
-            end,
-            events: used
-                .iter()
-                .filter(|r| matches!(r, TestResult::Done { event: true, .. }))
-                .count() as u64,
-            new_failures: 0,
-            invalid: used
-                .iter()
-                .filter(|r| matches!(r, TestResult::Invalid))
-                .count() as u64,
-            support: 0,
-            course: Vec::new(),
-        }
-    }
 }
 
 /// Follows an estimation stage's fold, whose estimation indices start at

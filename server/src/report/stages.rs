@@ -123,17 +123,15 @@ pub fn catch_up(
         // Stopped: every stage that ran was resolved.
         None => campaign.indices as u64,
     };
-    let mut records = Vec::new();
+    // On a reader: the stages' records were stored when they were
+    // resolved the first time.
     while let Some((from, to)) = stages.running() {
         if to > resolved_to {
             break;
         }
         let results = stage_results(conn, campaign.id, tests, from, to)?;
-        records.push(stages.resolve(&results));
+        stages.resolve(&results);
     }
-    // The same records again (a campaign's stages resolved before the
-    // table existed get theirs here).
-    adaptive_stages::store(conn, campaign.id, &records)?;
     Ok(())
 }
 

@@ -8,8 +8,7 @@ use serde::Deserialize;
 use tslg_api::AdaptiveStage;
 use tslg_method::adaptive::StageRecord;
 
-/// Stores `records` (a stage resolved again after a restart is the same
-/// record: it replaces itself).
+/// Stores `records` (a stage's record replaces any stored for its start).
 pub fn store(conn: &Connection, campaign: i64, records: &[StageRecord]) -> Result<(), StoreError> {
     for r in records {
         sql::execute(
