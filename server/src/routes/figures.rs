@@ -5,7 +5,8 @@
 use crate::error::ServiceError;
 use crate::routes::ApiPath;
 use crate::state::AppState;
-use crate::store::{campaigns, libraries};
+use crate::store::campaigns::{self, CampaignRow};
+use crate::store::libraries;
 use axum::extract::State;
 use axum::http::header;
 use axum::response::{IntoResponse, Response};
@@ -26,27 +27,37 @@ fn svg(figure: Result<String, FigureError>) -> Result<Response, ServiceError> {
         .into_response())
 }
 
-/// The campaign's view (with its live rate) and its history as plotted.
+/// The campaign's view (with its live rate) and what `read` takes from
+/// the store for it, read together.
+async fn view_with<T: Send + 'static>(
+    state: &AppState,
+    id: i64,
+    read: impl FnOnce(&rusqlite::Connection, &CampaignRow) -> Result<T, ServiceError> + Send + 'static,
+) -> Result<(tslg_api::CampaignView, T), ServiceError> {
+    let (row, data) = state
+        .db
+        .read(move |conn| -> Result<_, ServiceError> {
+            let row = campaigns::get(conn, id)?;
+            let data = read(conn, &row)?;
+            Ok((row, data))
+        })
+        .await?;
+    Ok((crate::campaign::views::live_view(state, &row).await?, data))
+}
+
+/// The campaign's view and its history as plotted.
 async fn campaign(
     state: &AppState,
     id: i64,
 ) -> Result<(tslg_api::CampaignView, Vec<tslg_api::HistoryPoint>), ServiceError> {
-    let (row, points) = state
-        .db
-        .read(move |conn| -> Result<_, ServiceError> {
-            let row = campaigns::get(conn, id)?;
-            let points = crate::campaign::history::read(
-                conn,
-                &row,
-                crate::campaign::history::DEFAULT_POINTS,
-            )?;
-            Ok((row, points))
-        })
-        .await?;
-    Ok((
-        crate::campaign::views::live_view(state, &row).await?,
-        points,
-    ))
+    view_with(state, id, |conn, row| {
+        Ok(crate::campaign::history::read(
+            conn,
+            row,
+            crate::campaign::history::DEFAULT_POINTS,
+        )?)
+    })
+    .await
 }
 
 /// The estimate with its interval band against tests (log axis).
@@ -76,18 +87,10 @@ async fn adaptive(
     state: &AppState,
     id: i64,
 ) -> Result<(tslg_api::CampaignView, Vec<tslg_api::AdaptiveStage>), ServiceError> {
-    let (row, stages) = state
-        .db
-        .read(move |conn| -> Result<_, ServiceError> {
-            let row = campaigns::get(conn, id)?;
-            let stages = crate::store::adaptive_stages::of(conn, id)?;
-            Ok((row, stages))
-        })
-        .await?;
-    Ok((
-        crate::campaign::views::live_view(state, &row).await?,
-        stages,
-    ))
+    view_with(state, id, move |conn, _| {
+        Ok(crate::store::adaptive_stages::of(conn, id)?)
+    })
+    .await
 }
 
 /// An adaptive campaign's stages on one axis of all its tests, coloured by
