@@ -274,8 +274,9 @@ pub struct CampaignView {
     pub outside_share: Option<f64>,
     /// Upper confidence bound (at `confidence`) on the failure mass outside
     /// the library, from its exploring tests: the worst-case exposure of the
-    /// scenarios their Clopper–Pearson bound allows to fail. Absent for the
-    /// NDD, for car-following and before the first results.
+    /// scenarios their Clopper–Pearson bound allows to fail; for an adaptive
+    /// campaign, outside its final support K. Absent for the NDD, for
+    /// car-following and before the first results.
     #[serde(default)]
     pub outside_upper: Option<f64>,
     /// `ci_high` with the outside part of the estimate replaced by

@@ -43,7 +43,9 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 
+mod outside;
 mod record;
+pub use outside::Explored;
 pub use record::StageRecord;
 
 /// How an adaptive campaign searches and samples.
@@ -438,6 +440,9 @@ pub struct AdaptiveResult {
     /// The cells the last estimation stage sampled besides its exploring
     /// share ([`Planner::support`]).
     pub support: Vec<usize>,
+    /// Its exploring tests, which bound the failure mass the support leaves
+    /// out (`result.outside_upper`, [`Explored`]).
+    pub explored: Explored,
 }
 
 /// What one test of a stage gave, in the stage's index order.
@@ -506,6 +511,7 @@ pub struct AdaptiveState {
     knowledge: Knowledge,
     fold: PrefixFold,
     spent: Spent,
+    explored: Explored,
     stages: Vec<PlannedStage>,
     finished: Option<AdaptiveResult>,
 }
@@ -547,6 +553,11 @@ impl AdaptiveState {
         &self.knowledge
     }
 
+    /// The estimation stages' exploring tests so far.
+    pub fn explored(&self) -> Explored {
+        self.explored
+    }
+
     /// Tests of the library stage, of the searches, and stages resolved.
     pub fn spent(&self) -> (u64, u64, u64) {
         let s = &self.spent;
@@ -564,6 +575,7 @@ impl<C: Case> Planner<'_, C> {
             knowledge: self.knowledge(),
             fold: PrefixFold::default(),
             spent: Spent::default(),
+            explored: Explored::default(),
             stages: vec![PlannedStage {
                 start: 0,
                 len,
@@ -610,7 +622,7 @@ impl<C: Case> Planner<'_, C> {
         match &planned.stage {
             Stage::Library(_) => state.spent.library_tests += planned.len,
             Stage::Search(_) => state.spent.search_tests += planned.len,
-            Stage::Estimate(_) => {
+            Stage::Estimate(distribution) => {
                 let to = state.fold.indices + planned.len;
                 let outcomes = estimation_outcomes(&planned, seed, state.fold.indices, results);
                 let stopped = fold_estimation_stage_observed(
@@ -621,13 +633,29 @@ impl<C: Case> Planner<'_, C> {
                     &mut |f| course.keep(f),
                 );
                 course.keep(&state.fold);
+                let used = stopped.map_or(planned.end(), |(_, used)| used);
+                state.explored.stage(distribution);
+                for (k, r) in results[..(used - planned.start) as usize]
+                    .iter()
+                    .enumerate()
+                {
+                    if let TestResult::Done { event, .. } = *r {
+                        let index = planned.start + k as u64;
+                        state.explored.test(distribution, seed, index, event);
+                    }
+                }
                 if let Some((status, used)) = stopped {
                     let support = self.support(&state.knowledge);
                     let mut record = counted(planned.kind(), planned.start, used, results);
                     record.support = support.len() as u64;
                     record.course = course.points;
-                    state.finished =
-                        Some(state.spent.result(status, &state.fold, rule, used, support));
+                    state.finished = Some(state.spent.result(
+                        status,
+                        (&state.fold, state.explored),
+                        rule,
+                        used,
+                        support,
+                    ));
                     return record;
                 }
             }
@@ -643,7 +671,7 @@ impl<C: Case> Planner<'_, C> {
             let support = self.support(&state.knowledge);
             state.finished = Some(state.spent.result(
                 Decision::Exhausted,
-                &state.fold,
+                (&state.fold, state.explored),
                 rule,
                 planned.end(),
                 support,
@@ -816,12 +844,17 @@ impl Spent {
     fn result(
         &self,
         status: Decision,
-        fold: &PrefixFold,
+        (fold, explored): (&PrefixFold, Explored),
         rule: &StoppingRule,
         indices: u64,
         support: Vec<usize>,
     ) -> AdaptiveResult {
-        let mut result = CampaignResult::from_fold(status, fold, rule, None);
+        let mut result = CampaignResult::with_outside_upper(
+            status,
+            &explored.on(fold),
+            rule.z(),
+            Some(explored.upper(rule.confidence)),
+        );
         result.indices = indices;
         AdaptiveResult {
             result,
@@ -829,6 +862,7 @@ impl Spent {
             search_tests: self.search_tests,
             stages: self.stages,
             support,
+            explored,
         }
     }
 }

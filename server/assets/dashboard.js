@@ -203,8 +203,10 @@ async function campaignPage() {
   const what = parts.estimate ? `${c.case}, ${c.method}${sampling}`
     : `${c.case}, the surrogate runs of library ${c.library_id}'s build`;
   set('detail', c.status_detail ?? `${what}, vehicle ${fmt.vehicle(c.vut, c.vut_label)}, seed ${c.seed}`);
-  // The outside bound and the guarded interval exist for library campaigns
-  // of grid cases (docs/statistics.md).
+  // The outside bound and the guarded interval exist for library and
+  // adaptive campaigns of grid cases (docs/statistics.md): the failure mass
+  // the library, or the support K the adaptive campaign found, leaves out.
+  set('outside-label', parts.adaptive ? 'outside the support K ≤' : 'outside the library ≤');
   set('outside-upper', fmt.sci(c.outside_upper), c.outside_upper);
   set('guarded-interval', c.guarded_ci_high == null ? '–'
     : `[${fmt.sci(c.ci_low)}, ${fmt.sci(c.guarded_ci_high)}]`, c.guarded_ci_high);

@@ -260,6 +260,14 @@ fn print_table(args: &DemoArgs, views: &[CampaignView], report: Option<&ExactRep
                 a.search_tests,
                 v.tests
             );
+            if let (Some(upper), Some(guarded)) = (v.outside_upper, v.guarded_ci_high) {
+                outln!(
+                    "{:<8}   without that assumption: up to {upper:.3e} of failure mass outside \
+                     its support ({} exploring tests), guarded upper end {guarded:.3e}",
+                    "",
+                    v.outside_tests
+                );
+            }
         }
     }
     print_outside(by_library, exact);
@@ -359,9 +367,16 @@ fn print_takeaway(views: &[CampaignView], exact: Option<f64>) {
               vehicle's failures"
         }
     };
+    // What the answer rests on, with what it would be without it.
+    let rests = match adaptive.guarded_ci_high {
+        Some(guarded) => {
+            format!(" (if its search reached every failure; without that, up to {guarded:.3e})")
+        }
+        None => " (if its search reached every failure)".to_owned(),
+    };
     outln!(
-        "\ntake away: the adaptive campaign answered P(A) in [{lo:.3e}, {hi:.3e}] after {} \
-         tests, {}× fewer than the NDD baseline{verdict}{library}.",
+        "\ntake away: the adaptive campaign answered P(A) in [{lo:.3e}, {hi:.3e}]{rests} after \
+         {} tests, {}× fewer than the NDD baseline{verdict}{library}.",
         adaptive.indices,
         crate::output::ratio(by_ndd.tests as f64 / adaptive.indices.max(1) as f64),
     );

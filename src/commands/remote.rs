@@ -147,13 +147,24 @@ pub fn describe(view: &CampaignView) -> String {
         ),
         _ => String::new(),
     };
+    // An adaptive campaign's exploring tests are a share of its estimation
+    // tests, drawn off its support K (docs/statistics.md, "Adaptive
+    // campaigns").
+    let (region, share) = match view.adaptive {
+        Some(_) => (
+            "outside the support K",
+            "of its estimation tests".to_owned(),
+        ),
+        None => (
+            "outside the library",
+            format!("ε {}, {} split", view.epsilon, view.split.as_str()),
+        ),
+    };
     let outside = match view.outside_upper {
         Some(upper) => format!(
-            "\n  outside the library: {} exploring tests (ε {}, {} split), {}; failure mass \
+            "\n  {region}: {} exploring tests ({share}), {}; failure mass \
              there ≤ {upper:.3e} ({:.0}% bound), guarded interval [{}, {}]{}",
             view.outside_tests,
-            view.epsilon,
-            view.split.as_str(),
             tslg_method::number::Count(view.outside_events, "event"),
             view.confidence * 100.0,
             sci(view.ci_low),

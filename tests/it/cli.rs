@@ -830,6 +830,13 @@ fn the_default_demo_tests_a_vehicle_that_is_not_the_surrogate_three_ways() {
         "{text}"
     );
     assert!(text.contains("NDD tests / adaptive tests: "), "{text}");
+    // Beside the adaptive row, what its answer would be without the
+    // assumption: the bound from its exploring tests.
+    assert!(
+        text.contains("without that assumption: up to ")
+            && text.contains("of failure mass outside its support"),
+        "{text}"
+    );
     // The exact P(A) of the FVDM on the built-in exposure (docs/models.md).
     assert!(
         text.contains("exact P(A) by enumeration: 5.3608e-3"),
@@ -840,6 +847,7 @@ fn the_default_demo_tests_a_vehicle_that_is_not_the_surrogate_three_ways() {
     let last = text.trim_end().lines().last().unwrap();
     assert!(
         last.starts_with("take away: the adaptive campaign answered P(A) in [")
+            && last.contains("(if its search reached every failure; without that, up to ")
             && last.contains("fewer than the NDD baseline")
             && last.contains("the library campaign's speed-up"),
         "{last}"

@@ -73,6 +73,24 @@ fn assert_same_adaptive(view: &CampaignView, own: &AdaptiveRun) {
     assert_eq!(bits(view.estimate), Some(r.estimate.to_bits()), "estimate");
     assert_eq!(bits(view.ci_low), Some(r.ci_low.to_bits()), "ci_low");
     assert_eq!(bits(view.ci_high), Some(r.ci_high.to_bits()), "ci_high");
+    // The bound on what the support leaves out, from the same exploring
+    // tests, and the guarded upper end it gives.
+    assert_eq!(
+        (view.outside_tests, view.outside_events),
+        (r.outside_tests, r.outside_events),
+        "exploring tests"
+    );
+    assert_eq!(
+        bits(view.outside_upper),
+        bits(r.outside_upper),
+        "outside_upper"
+    );
+    assert_eq!(
+        bits(view.guarded_ci_high),
+        bits(r.guarded_ci_high),
+        "guarded_ci_high"
+    );
+    assert!(view.outside_upper.is_some());
     let a = view.adaptive.as_ref().expect("adaptive figures");
     assert_eq!(
         (a.library_tests, a.search_tests, a.stages, a.support),
@@ -198,6 +216,33 @@ async fn an_adaptive_campaign_through_the_service_is_the_in_process_one() {
         .unwrap_or_else(|| panic!("{list}"));
     let columns: Vec<&str> = row.split_whitespace().collect();
     assert_eq!(columns[5], view.indices.to_string(), "{list}");
+    // The gate judges the campaign on its guarded upper end, which holds
+    // what its support may leave out: above a limit between its interval's
+    // upper end and the guarded one it fails (exit 3), above the guarded
+    // one it passes.
+    let guarded = view.guarded_ci_high.unwrap();
+    let high = view.ci_high.unwrap();
+    assert!(high < guarded, "{view:?}");
+    for (limit, code, said) in [
+        ((high + guarded) / 2.0, 3, "gate failed"),
+        (guarded * 1.01, 0, "gate passed"),
+    ] {
+        let o = tslg(&[
+            "campaign",
+            "watch",
+            &id.to_string(),
+            "--server",
+            &server.url,
+            "--fail-above",
+            &limit.to_string(),
+        ]);
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(code), "{stderr}");
+        assert!(
+            stderr.contains(said) && stderr.contains("guarded upper bound"),
+            "{stderr}"
+        );
+    }
 
     // A coordinator killed mid-campaign rebuilds its stages from the
     // database and ends at the same answer.

@@ -198,6 +198,7 @@ where
             search_tests,
             stages,
             support: self.planner.support(state.knowledge()).len(),
+            explored: state.explored(),
             finished: state.finished().cloned(),
         }
     }

@@ -1,7 +1,7 @@
 //! An adaptive campaign's stages as a coordinator keeps them between
 //! reports, and what an adaptive campaign run in this process did.
 
-use crate::adaptive::{AdaptiveResult, AdaptiveSettings, StageRecord, TestResult};
+use crate::adaptive::{AdaptiveResult, AdaptiveSettings, Explored, StageRecord, TestResult};
 
 /// The stages of an adaptive campaign ([`crate::adaptive`]) as a
 /// coordinator keeps them between reports: the running stage, and the step
@@ -92,6 +92,9 @@ pub struct AdaptiveProgress {
     /// Cells of the support the estimation samples besides its exploring
     /// share.
     pub support: usize,
+    /// The estimation stages' exploring tests, which bound the failure
+    /// mass the support leaves out ([`Explored::upper`]).
+    pub explored: Explored,
     /// The result, once the campaign stopped.
     pub finished: Option<AdaptiveResult>,
 }

@@ -132,6 +132,12 @@ impl SupportDistribution {
         self.epsilon
     }
 
+    /// `P(X∖K)`, the exposure its exploring tests sample: 0 when nothing
+    /// with exposure lies off the support (and no test explores).
+    pub fn outside_exposure(&self) -> f64 {
+        self.outside_weight * self.epsilon
+    }
+
     /// A support cell, drawn from `P` restricted there: the first whose
     /// cumulative mass exceeds a uniform share of the total.
     fn sample_inside<R: Rng + ?Sized>(&self, rng: &mut R) -> usize {

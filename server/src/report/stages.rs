@@ -252,6 +252,7 @@ fn write(
             progress: &p,
             status,
             detail: detail.as_deref(),
+            confidence: campaign.confidence,
         },
     )?;
     adaptive_stages::store(conn, campaign.id, records)?;

@@ -160,6 +160,8 @@ pub struct StagesState<'a> {
     pub status: CampaignStatus,
     /// Why the campaign stopped, when it did.
     pub detail: Option<&'a str>,
+    /// The campaign's confidence, of its outside bound.
+    pub confidence: f64,
 }
 
 /// Writes an adaptive campaign's state after resolving stages.
@@ -176,7 +178,8 @@ pub fn store_stages(
         conn,
         "UPDATE campaigns SET indices = ?, tests = ?, events = ?, invalid = ?, s1 = ?, s2 = ?, \
          largest = ?, stage_start = ?, stage_end = ?, stage_kind = ?, library_tests = ?, \
-         search_tests = ?, stages = ?, support = ?, status = ?, \
+         search_tests = ?, stages = ?, support = ?, outside_tests = ?, outside_events = ?, \
+         outside_s1 = ?, outside_upper = ?, status = ?, \
          status_detail = COALESCE(?, status_detail), \
          updated_at = strftime('%Y-%m-%dT%H:%M:%fZ', 'now') WHERE id = ?",
         params![
@@ -194,6 +197,10 @@ pub fn store_stages(
             p.search_tests as i64,
             p.stages as i64,
             p.support as i64,
+            p.explored.tally.tests as i64,
+            p.explored.tally.events as i64,
+            p.explored.tally.s1,
+            p.explored.upper(state.confidence),
             state.status.as_str(),
             state.detail,
             campaign
