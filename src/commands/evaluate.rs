@@ -370,8 +370,14 @@ fn print(report: &Report, rule: &StoppingRule) {
         _ => outln!("exact P(A)         none: no enumeration reaches this case's scenarios"),
     }
     if let (Some(upper), Some(high)) = (result.outside_upper, result.guarded_ci_high) {
+        // An adaptive campaign's exploring tests sample off its support K.
+        let region = if report.search.is_some() {
+            "outside support K"
+        } else {
+            "outside library   "
+        };
         outln!(
-            "outside library    {} exploring tests, {}; failure mass there ≤ {upper:.4e}",
+            "{region} {} exploring tests, {}; failure mass there ≤ {upper:.4e}",
             result.outside_tests,
             tslg_method::number::Count(result.outside_events, "event")
         );
