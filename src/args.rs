@@ -243,7 +243,10 @@ pub struct RuleArgs {
     /// estimate by at most β × the estimate (library campaigns of grid
     /// cases). The outside spread then defaults to `ndd`, and once the
     /// library stratum is known 95 % of the tests explore: about
-    /// ln(1/(1 − c))/(βμ) tests when no failure lies outside.
+    /// ln(1/(1 − c))/(βμ) tests when no failure lies outside. An adaptive
+    /// campaign bounds the mass outside its support K the same way, its
+    /// estimation stages exploring 95 % of their tests once its estimate
+    /// meets β.
     #[arg(long)]
     pub guard_outside: bool,
     /// The interval the rule reads and the answer reports: `wald` (valid at

@@ -38,6 +38,7 @@ use crate::prefix::{PrefixFold, SparseOutcome};
 use crate::sampling::SupportDistribution;
 use crate::sampling::{
     LibraryDistribution, NddDistribution, OutsideSpread, SamplingError, Split, TestDistribution,
+    LATE_SHARE,
 };
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -142,16 +143,21 @@ pub enum AdaptiveError {
     /// Settings out of range.
     #[error("adaptive settings: {0}")]
     Settings(String),
-    /// The guard bounds a fixed library's outside; an adaptive campaign's changes.
+    /// The guard bounds the failure mass off a grid's library or support;
+    /// car-following's adaptive campaign learns a policy over states.
     #[error(
-        "guard_outside bounds the outside of a fixed library; an adaptive campaign's \
-         library grows as it learns"
+        "guard_outside bounds the failure mass off a grid case's library or support; \
+         car-following's adaptive campaign probes states and has no outside to bound"
     )]
     Guard,
     /// The library's distribution cannot be built.
     #[error(transparent)]
     Sampling(#[from] SamplingError),
 }
+
+/// The last estimation stage's distribution, with the support and whether
+/// it explored the guard's share ([`Planner::next`]).
+type CachedEstimation = (Vec<usize>, bool, Arc<TestDistribution>);
 
 /// The case a planner plans for: borrowed for a campaign run in one
 /// call, shared for one a coordinator keeps between reports.
@@ -186,7 +192,7 @@ pub struct Planner<'a, C: Case> {
     library_stage: Arc<TestDistribution>,
     /// The last estimation stage's support and distribution, reused while
     /// the support is unchanged.
-    estimation: std::sync::Mutex<Option<(Vec<usize>, Arc<TestDistribution>)>>,
+    estimation: std::sync::Mutex<Option<CachedEstimation>>,
 }
 
 impl<C: Case> Planner<'static, C> {
@@ -357,6 +363,14 @@ impl<'a, C: Case> Planner<'a, C> {
     /// seed has an untested neighbour worth testing, else an estimation
     /// stage on the failures found.
     pub fn next(&self, knowledge: &Knowledge) -> Stage {
+        self.next_stage(knowledge, false)
+    }
+
+    /// [`Self::next`]; a guarded campaign whose estimate is known but whose
+    /// outside bound is not yet within β (`guarding`) explores
+    /// [`LATE_SHARE`] of each estimation stage's tests, the guard's
+    /// allocation (docs/statistics.md, "The guard").
+    fn next_stage(&self, knowledge: &Knowledge, guarding: bool) -> Stage {
         let frontier = self.frontier(knowledge);
         if !frontier.is_empty() {
             if self.settings.noisy {
@@ -369,13 +383,18 @@ impl<'a, C: Case> Planner<'a, C> {
             .estimation
             .lock()
             .unwrap_or_else(|poisoned| poisoned.into_inner());
-        if let Some((cached, distribution)) = cache.as_ref() {
-            if *cached == support {
+        if let Some((cached, late, distribution)) = cache.as_ref() {
+            if *cached == support && *late == guarding {
                 return Stage::Estimate(Arc::clone(distribution));
             }
         }
-        let distribution = Arc::new(self.estimation(&support));
-        *cache = Some((support, Arc::clone(&distribution)));
+        let epsilon = if guarding {
+            LATE_SHARE
+        } else {
+            1.0 / self.settings.explore_every as f64
+        };
+        let distribution = Arc::new(self.estimation(&support, epsilon));
+        *cache = Some((support, guarding, Arc::clone(&distribution)));
         Stage::Estimate(distribution)
     }
 
@@ -403,8 +422,8 @@ impl<'a, C: Case> Planner<'a, C> {
     }
 
     /// The support as a library (`V = P`), explored by exposure with share
-    /// `1/explore_every`; the exposure itself when the support is empty.
-    fn estimation(&self, support: &[usize]) -> TestDistribution {
+    /// `epsilon`; the exposure itself when the support is empty.
+    fn estimation(&self, support: &[usize], epsilon: f64) -> TestDistribution {
         let exposure = self.case.exposure();
         // The support is increasing ([`Planner::support`]).
         let cells: Vec<usize> = support
@@ -415,7 +434,6 @@ impl<'a, C: Case> Planner<'a, C> {
         if cells.is_empty() {
             return TestDistribution::Ndd(NddDistribution::clone(&self.everywhere));
         }
-        let epsilon = 1.0 / self.settings.explore_every as f64;
         TestDistribution::Support(Box::new(SupportDistribution::new(
             exposure,
             Arc::clone(&self.everywhere),
@@ -512,6 +530,10 @@ pub struct AdaptiveState {
     fold: PrefixFold,
     spent: Spent,
     explored: Explored,
+    /// A guarded campaign whose estimate met the rule while its outside
+    /// bound did not meet the guard: its estimation stages explore
+    /// [`LATE_SHARE`] of their tests from then on.
+    guarding: bool,
     stages: Vec<PlannedStage>,
     finished: Option<AdaptiveResult>,
 }
@@ -576,6 +598,7 @@ impl<C: Case> Planner<'_, C> {
             fold: PrefixFold::default(),
             spent: Spent::default(),
             explored: Explored::default(),
+            guarding: false,
             stages: vec![PlannedStage {
                 start: 0,
                 len,
@@ -625,9 +648,20 @@ impl<C: Case> Planner<'_, C> {
             Stage::Estimate(distribution) => {
                 let to = state.fold.indices + planned.len;
                 let outcomes = estimation_outcomes(&planned, seed, state.fold.indices, results);
+                // A guarded campaign stops only at a stage's end, where both
+                // its rule and its guard are read: its fold runs the whole
+                // stage.
+                let fold_rule = StoppingRule {
+                    n_min: if rule.guard_outside {
+                        u64::MAX
+                    } else {
+                        rule.n_min
+                    },
+                    ..*rule
+                };
                 let stopped = fold_estimation_stage_observed(
                     &mut state.fold,
-                    rule,
+                    &fold_rule,
                     (planned.end(), to),
                     &outcomes,
                     &mut |f| course.keep(f),
@@ -644,6 +678,15 @@ impl<C: Case> Planner<'_, C> {
                         state.explored.test(distribution, seed, index, event);
                     }
                 }
+                let stopped = match stopped {
+                    Some(stop) => Some(stop),
+                    None if rule.guard_outside && state.fold.converged(rule, rule.z()) => {
+                        let guarded = state.explored.guard_holds(&state.fold, rule);
+                        state.guarding = !guarded;
+                        guarded.then_some((Decision::Converged, planned.end()))
+                    }
+                    None => None,
+                };
                 if let Some((status, used)) = stopped {
                     let support = self.support(&state.knowledge);
                     let mut record = counted(planned.kind(), planned.start, used, results);
@@ -678,7 +721,7 @@ impl<C: Case> Planner<'_, C> {
             ));
             return record;
         }
-        let stage = self.next(&state.knowledge);
+        let stage = self.next_stage(&state.knowledge, state.guarding);
         let len = self.len(&stage).min(rule.max_tests - planned.end());
         state.stages.push(PlannedStage {
             start: planned.end(),
@@ -703,7 +746,9 @@ impl<C: Case> Planner<'_, C> {
         results: &[TestResult],
     ) -> bool {
         let planned = state.current();
+        // A guarded campaign reads its guard at a stage's end only.
         if state.finished.is_some()
+            || rule.guard_outside
             || !matches!(planned.stage, Stage::Estimate(_))
             || results.len() as u64 > planned.len
         {
@@ -805,9 +850,6 @@ pub fn run_adaptive<C: Case>(
     rule: &StoppingRule,
     seed: u64,
 ) -> Result<AdaptiveResult, AdaptiveError> {
-    if rule.guard_outside {
-        return Err(AdaptiveError::Guard);
-    }
     let settings = AdaptiveSettings {
         noisy: settings.noisy || case.is_noisy(vehicle),
         ..settings

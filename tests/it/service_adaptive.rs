@@ -34,7 +34,7 @@ fn adaptive_in_process(request: &CreateCampaign, vut: &str) -> AdaptiveRun {
         n_min: default_n_min(None, request.max_tests),
         min_events: 10,
         max_tests: request.max_tests,
-        guard_outside: false,
+        guard_outside: request.guard_outside,
         interval: Default::default(),
     };
     case.adaptive_campaign(
@@ -272,20 +272,31 @@ async fn an_adaptive_campaign_through_the_service_is_the_in_process_one() {
     // The stages resolved before the kill are recorded once, as after it.
     stages_and_history_agree(&client, &view).await;
 
-    // Refused with a precise reason: the guard, and car-following.
+    // Guarded: it explores until the bound on what its support leaves out
+    // is within β of its estimate, and is the in-process campaign.
     let guarded = CreateCampaign {
         guard_outside: true,
         ..adaptive(library.id, serde_json::json!({"model": "fvdm"}), 1)
     };
-    let refused = client
-        .create_campaign(&guarded)
-        .await
-        .unwrap_err()
-        .to_string();
+    let own = adaptive_in_process(&guarded, "fvdm");
+    let id = client.create_campaign(&guarded).await.unwrap().id;
+    let view = finished(&client, id, Duration::from_secs(180)).await;
+    assert_eq!(view.status, CampaignStatus::Converged, "{view:?}");
+    assert!(view.guard_outside);
+    assert_same_adaptive(&view, &own);
+    stages_and_history_agree(&client, &view).await;
+    let (upper, estimate) = (view.outside_upper.unwrap(), view.estimate.unwrap());
+    let outside_part = view.outside_share.unwrap_or(0.0) * estimate;
     assert!(
-        refused.contains("422") && refused.contains("adaptive"),
-        "{refused}"
+        upper <= (view.beta * estimate + outside_part) * (1.0 + 1e-12),
+        "the guard holds at the stop: {view:?}"
     );
+    assert!(
+        view.guarded_ci_high.unwrap() - view.ci_high.unwrap() <= view.beta * estimate,
+        "{view:?}"
+    );
+
+    // Refused with a precise reason: car-following.
     let following = CreateCampaign {
         case: "car-following".into(),
         ..adaptive(library.id, serde_json::json!({"model": "fvdm"}), 1)

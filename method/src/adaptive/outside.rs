@@ -26,6 +26,7 @@
 //! `docs/statistics.md` measures it. With no estimation stage, nothing is
 //! ruled out: `U = 1`.
 
+use crate::estimator::StoppingRule;
 use crate::outside::{clopper_pearson_upper, OutsideTally};
 use crate::prefix::PrefixFold;
 use crate::sampling::TestDistribution;
@@ -90,6 +91,15 @@ impl Explored {
             outside: self.tally,
             ..*fold
         }
+    }
+
+    /// The guard of a guarded adaptive campaign, as a library campaign's
+    /// ([`crate::outside::OutsideTally::guarded`]): `U ≤ β μ̂ + μ̂_out`,
+    /// `μ̂_out = S₁,out/n` the exploring tests' part of the estimate `fold`.
+    pub fn guard_holds(&self, fold: &PrefixFold, rule: &StoppingRule) -> bool {
+        let n = fold.estimator.tests();
+        n > 0
+            && self.upper(rule.confidence) <= rule.beta * fold.estimate() + self.tally.s1 / n as f64
     }
 
     /// `U` at `confidence` (see the module documentation).

@@ -10,6 +10,7 @@ mod carfollow_library;
 mod cutin_paper;
 mod external_protocol;
 mod highway_geometry;
+mod island;
 mod paired;
 mod readers_fuzz;
 mod sampling_exact;

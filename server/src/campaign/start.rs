@@ -70,13 +70,6 @@ pub fn rule_of(req: &CreateCampaign) -> Result<StoppingRule, ServiceError> {
              every scenario by its exposure and has no outside to guard",
         ));
     }
-    if req.guard_outside && req.method == Method::Adaptive {
-        return Err(bad(
-            "guard_outside bounds the outside of a fixed library; an adaptive campaign's \
-             support grows as it learns, and its estimation stages explore by exposure outside \
-             it (docs/statistics.md, \"Adaptive campaigns\")",
-        ));
-    }
     if req.method == Method::Adaptive && !case.is_grid() {
         return Err(bad(format!(
             "method `adaptive` runs through the service on the grid cases ({}); a {} adaptive \

@@ -3,7 +3,7 @@
 
 use super::campaign::CellCampaign;
 use super::Registered;
-use crate::adaptive::{run_adaptive, AdaptiveError, AdaptiveSettings, Planner};
+use crate::adaptive::{run_adaptive, AdaptiveSettings, Planner};
 use crate::case::Case;
 use crate::estimator::StoppingRule;
 use crate::registry::adaptive_tests::AdaptiveCellCampaign;
@@ -92,9 +92,6 @@ where
         rule: &StoppingRule,
         seed: u64,
     ) -> Result<Arc<dyn CampaignTests>, CaseError> {
-        if rule.guard_outside {
-            return Err(AdaptiveError::Guard.into());
-        }
         let vehicle = self.campaign_vehicle(vut)?;
         let library = self.library(file)?;
         let noisy_builtin =
