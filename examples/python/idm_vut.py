@@ -15,6 +15,17 @@ bit-reproducible (docs/statistics.md, "Noisy vehicles"):
                          "deterministic": false
     --brake-harder A     brake A m/s^2 harder than the IDM whenever it brakes
                          (a program that differs from the others')
+
+And for trying what an adaptive campaign cannot see (docs/statistics.md,
+"Adaptive campaigns"):
+
+    --blind R0,R1,D0,D1  a perception bug: when the lead first appears at a
+                         gap in [R0, R1] m closing at a range rate (lead
+                         minus own speed) in [D0, D1] m/s, the program does
+                         not see it for the rest of the test and accelerates
+                         as on an empty road. The scenarios where that ends in an
+                         accident are an island of failures that no other
+                         failure or near miss leads to.
 """
 import argparse
 import json
@@ -40,8 +51,16 @@ def idm(p, speed, lead_speed, gap):
     return p["alpha"] * (1.0 - (speed / p["v0"]) ** p["delta"] - interaction * interaction)
 
 
-# The plain IDM: no noise, no harder braking.
-PLAIN = argparse.Namespace(noise=0.0, brake_harder=0.0, entropy=None)
+# The plain IDM: no noise, no harder braking, no blind spot.
+PLAIN = argparse.Namespace(noise=0.0, brake_harder=0.0, entropy=None, blind=None)
+
+
+def blind_to(window, gap, range_rate):
+    """Whether the perception bug hides a lead first seen at `gap`, `range_rate`."""
+    if window is None:
+        return False
+    r0, r1, d0, d1 = window
+    return r0 <= gap <= r1 and d0 <= range_rate <= d1
 
 
 def respond(message, state, options=PLAIN):
@@ -59,7 +78,13 @@ def respond(message, state, options=PLAIN):
         return {"type": "ready"}
     if kind == "step":
         lead = next(v for v in message["vehicles"] if "gap" in v)
-        a = idm(state, message["ego"]["speed"], lead["speed"], lead["gap"])
+        speed = message["ego"]["speed"]
+        if "blind" not in state:  # the test's first step
+            state["blind"] = blind_to(options.blind, lead["gap"], lead["speed"] - speed)
+        if state["blind"]:
+            a = state["limits"][1]  # an empty road ahead: as fast as allowed
+        else:
+            a = idm(state, speed, lead["speed"], lead["gap"])
         if a < 0.0:
             a -= options.brake_harder
         if options.noise > 0.0:
@@ -69,10 +94,22 @@ def respond(message, state, options=PLAIN):
     return {"type": "error", "message": f"unexpected message {kind}"}
 
 
+def window(text):
+    """`R0,R1,D0,D1`, each pair increasing."""
+    try:
+        r0, r1, d0, d1 = (float(x) for x in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not four numbers R0,R1,D0,D1")
+    if not (r0 <= r1 and d0 <= d1):
+        raise argparse.ArgumentTypeError(f"{text!r}: need R0 <= R1 and D0 <= D1")
+    return (r0, r1, d0, d1)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--noise", type=float, default=0.0, metavar="SIGMA")
     parser.add_argument("--brake-harder", type=float, default=0.0, metavar="A")
+    parser.add_argument("--blind", type=window, default=None, metavar="R0,R1,D0,D1")
     options = parser.parse_args()
     if options.noise < 0.0 or options.brake_harder < 0.0:
         parser.error("--noise and --brake-harder must be >= 0")

@@ -28,6 +28,7 @@ use tslg_method::registry::{
     BuildRequest, CampaignTests, CaseError, ExposureSource, LibrarySearch, ScenarioCase,
 };
 use tslg_method::sampling::{default_outside, OutsideSpread, Split};
+use tslg_method::warnings::{warnings, Dialect, WarningContext};
 
 #[derive(Debug, clap::Args)]
 pub struct ValidateArgs {
@@ -65,7 +66,9 @@ pub struct ValidateArgs {
     pub guard: bool,
     /// The methods to compare (comma-separated): plain (the library
     /// campaign), guarded (with the outside guard, outside spread ndd),
-    /// adaptive (docs/adaptive-design.md). Writes methods.csv.
+    /// adaptive (docs/adaptive-design.md), adaptive-guarded (adaptive,
+    /// exploring until the bound on what its support leaves out is within
+    /// β). Writes methods.csv.
     #[arg(long, value_delimiter = ',', value_enum, default_values_t = [ValidateMethod::Plain])]
     pub methods: Vec<ValidateMethod>,
     /// The intervals to compare (comma-separated): wald (valid at the
@@ -126,6 +129,9 @@ pub enum ValidateMethod {
     Guarded,
     /// An adaptive campaign.
     Adaptive,
+    /// An adaptive campaign with the outside guard: it explores until the
+    /// bound on the failure mass outside its support is within β.
+    AdaptiveGuarded,
 }
 
 impl ValidateMethod {
@@ -134,7 +140,25 @@ impl ValidateMethod {
             ValidateMethod::Plain => "plain",
             ValidateMethod::Guarded => "guarded",
             ValidateMethod::Adaptive => "adaptive",
+            ValidateMethod::AdaptiveGuarded => "adaptive-guarded",
         }
+    }
+
+    /// Whether its campaigns are adaptive.
+    fn adaptive(self) -> bool {
+        matches!(
+            self,
+            ValidateMethod::Adaptive | ValidateMethod::AdaptiveGuarded
+        )
+    }
+
+    /// Whether it answers with the guarded interval `[ci_low,
+    /// guarded_ci_high]` (it stops under the outside guard).
+    fn guarded(self) -> bool {
+        matches!(
+            self,
+            ValidateMethod::Guarded | ValidateMethod::AdaptiveGuarded
+        )
     }
 }
 
@@ -193,7 +217,7 @@ impl Setup {
     /// P(A) at every settlement from n_min to the stop (`None` for an
     /// adaptive campaign, which is not watched).
     fn campaign(&self, seed: u64) -> anyhow::Result<(CampaignResult, Option<bool>)> {
-        if self.method != ValidateMethod::Adaptive {
+        if !self.method.adaptive() {
             let tests = self.tests(seed)?;
             // The interval the method answers with, as `Row::answer_coverage`.
             let mut held = true;
@@ -282,10 +306,33 @@ impl Row {
     /// interval `[ci_low, guarded_ci_high]` for a guarded campaign, the
     /// plain one otherwise.
     fn answer_coverage(&self) -> f64 {
-        match self.method {
-            ValidateMethod::Guarded => self.coverage(|r| r.guarded_covers(self.truth)),
-            _ => self.coverage(|r| r.covers(self.truth)),
+        if self.method.guarded() {
+            self.coverage(|r| r.guarded_covers(self.truth))
+        } else {
+            self.coverage(|r| r.covers(self.truth))
         }
+    }
+
+    /// The coverage of `[ci_low, guarded_ci_high]` where the campaigns
+    /// report it (library and adaptive campaigns of grid cases).
+    fn guarded_coverage(&self) -> Option<f64> {
+        self.runs
+            .iter()
+            .all(|r| r.guarded_ci_high.is_some())
+            .then(|| self.coverage(|r| r.guarded_covers(self.truth)))
+    }
+
+    /// The share of campaigns that warned (a surrogate mismatch, an outside
+    /// bound wider than accepted: `tslg_method::warnings`).
+    fn warned(&self) -> f64 {
+        let context = WarningContext {
+            beta: self.rule.beta,
+            guard_outside: self.rule.guard_outside,
+            dialect: Dialect::Cli,
+            unexplored: self.epsilon == 0.0 && !self.method.adaptive(),
+            uniform_spread: self.outside == OutsideSpread::Uniform,
+        };
+        self.coverage(|r| !warnings(r, context).is_empty())
     }
 
     /// The coverage a correct interval stays above but one time in a hundred.
@@ -465,17 +512,15 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
             // is known, so the guard needs no large ε (docs/statistics.md).
             variants.push((ValidateMethod::Guarded, args.epsilon, OutsideSpread::Ndd));
         }
-        if args.methods.contains(&ValidateMethod::Adaptive) {
-            variants.push((
-                ValidateMethod::Adaptive,
-                args.epsilon,
-                case.default_outside(),
-            ));
+        for adaptive in [ValidateMethod::Adaptive, ValidateMethod::AdaptiveGuarded] {
+            if args.methods.contains(&adaptive) {
+                variants.push((adaptive, args.epsilon, case.default_outside()));
+            }
         }
         for &(method, epsilon, outside) in &variants {
-            let guard_outside = method == ValidateMethod::Guarded;
+            let guard_outside = method.guarded();
             // An adaptive campaign's n_min counts its estimation tests.
-            let share = (method != ValidateMethod::Adaptive)
+            let share = (!method.adaptive())
                 .then(|| case.descriptor().exploring_share(true, epsilon))
                 .flatten();
             let n_mins = match args.n_min.as_slice() {
@@ -494,7 +539,7 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
                     // No sequence for adaptive stages, nor for the random
                     // split (its outside has no bound valid at every n).
                     if interval == Interval::Anytime
-                        && (method == ValidateMethod::Adaptive || split.split() == Split::Random)
+                        && (method.adaptive() || split.split() == Split::Random)
                     {
                         continue;
                     }
@@ -788,8 +833,8 @@ fn ndd_tests(row: &Row) -> f64 {
 
 /// The cells of one pairing and method: `case, exposure, surrogate, vut,
 /// method, replicates, coverage, median_tests, ndd_tests, interval,
-/// coverage_every_n`.
-fn method_cells(row: &Row) -> [String; 11] {
+/// coverage_every_n, guarded_coverage, warned`.
+fn method_cells(row: &Row) -> [String; 13] {
     [
         row.case.clone(),
         row.exposure.clone(),
@@ -803,6 +848,9 @@ fn method_cells(row: &Row) -> [String; 11] {
         row.rule.interval.name().into(),
         row.coverage_every_n()
             .map_or("-".into(), |c| format!("{c:.4}")),
+        row.guarded_coverage()
+            .map_or("-".into(), |c| format!("{c:.4}")),
+        format!("{:.4}", row.warned()),
     ]
 }
 
@@ -810,7 +858,7 @@ fn method_cells(row: &Row) -> [String; 11] {
 fn methods_csv(rows: &[Row]) -> String {
     let mut out = String::from(
         "case,exposure,surrogate,vut,method,replicates,coverage,median_tests,ndd_tests,interval,\
-         coverage_every_n\n",
+         coverage_every_n,guarded_coverage,warned\n",
     );
     for row in rows {
         let _ = writeln!(out, "{}", method_cells(row).join(","));
@@ -823,8 +871,8 @@ fn methods_csv(rows: &[Row]) -> String {
 fn methods_markdown(rows: &[Row], args: &ValidateArgs) -> String {
     let mut out = String::from(
         "| case | exposure | surrogate | vehicle | method | R | coverage | median tests | NDD tests | \
-         interval | coverage every n | NDD / median |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|---|\n",
+         interval | coverage every n | guarded end covers | warned | NDD / median |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for row in rows {
         let ratio = ndd_tests(row) / row.tests_quantile(0.5).max(1) as f64;
@@ -832,8 +880,10 @@ fn methods_markdown(rows: &[Row], args: &ValidateArgs) -> String {
     }
     let _ = writeln!(
         out,
-        "\nCoverage of the {:.0} % interval each method answers with (guarded: \
-         [ci_low, guarded_ci_high]); NDD tests z²(1 − μ)/(β²μ) at β {}.",
+        "\nCoverage of the {:.0} % interval each method answers with (guarded and \
+         adaptive-guarded: [ci_low, guarded_ci_high]); guarded end covers: of \
+         [ci_low, guarded_ci_high] for every method that reports it; warned: the share of \
+         campaigns with a warning; NDD tests z²(1 − μ)/(β²μ) at β {}.",
         100.0 * args.confidence,
         args.beta
     );
