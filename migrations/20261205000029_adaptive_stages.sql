@@ -12,5 +12,7 @@ CREATE TABLE adaptive_stages (
     new_failures INTEGER NOT NULL,
     invalid      INTEGER NOT NULL,
     support      INTEGER NOT NULL,
+    -- A guarded campaign's estimate starts again after this stage.
+    restarts_estimate INTEGER NOT NULL DEFAULT 0,
     PRIMARY KEY (campaign_id, start_index)
 ) WITHOUT ROWID;

@@ -24,6 +24,11 @@ pub struct AdaptiveStage {
     /// Cells the next estimation stage samples besides its exploring share
     /// (the failures found and the library's cells untested), after it.
     pub support: u64,
+    /// A guarded campaign's estimate starts again after this stage, with
+    /// the stages that explore the guard's share: the estimate, its
+    /// events and its history are those of the stages after it.
+    #[serde(default)]
+    pub restarts_estimate: bool,
 }
 
 /// `GET /api/v1/campaigns/{id}/stages`.

@@ -549,6 +549,7 @@ fn stage(
         new_failures: new,
         invalid: 0,
         support,
+        restarts_estimate: false,
     }
 }
 

@@ -242,9 +242,12 @@ impl<'a, C: Case> Planner<'a, C> {
                     .into(),
             ));
         }
-        if !s.stage_tests.is_multiple_of(s.explore_every) {
+        // A stage holds exactly its share of exploring tests, at
+        // 1/explore_every and at the guard's LATE_SHARE (19 in 20), so that
+        // its mean is unbiased.
+        if !s.stage_tests.is_multiple_of(s.explore_every) || !s.stage_tests.is_multiple_of(20) {
             return Err(AdaptiveError::Settings(format!(
-                "stage_tests = {} must be a multiple of explore_every = {}",
+                "stage_tests = {} must be a multiple of explore_every = {} and of 20",
                 s.stage_tests, s.explore_every
             )));
         }
@@ -642,6 +645,7 @@ impl<C: Case> Planner<'_, C> {
             })
             .collect();
         let mut course = record::Course::new(planned.start, state.fold.indices);
+        let mut restarts = false;
         match &planned.stage {
             Stage::Library(_) => state.spent.library_tests += planned.len,
             Stage::Search(_) => state.spent.search_tests += planned.len,
@@ -668,7 +672,6 @@ impl<C: Case> Planner<'_, C> {
                 );
                 course.keep(&state.fold);
                 let used = stopped.map_or(planned.end(), |(_, used)| used);
-                state.explored.stage(distribution);
                 for (k, r) in results[..(used - planned.start) as usize]
                     .iter()
                     .enumerate()
@@ -681,9 +684,23 @@ impl<C: Case> Planner<'_, C> {
                 let stopped = match stopped {
                     Some(stop) => Some(stop),
                     None if rule.guard_outside && state.fold.converged(rule, rule.z()) => {
-                        let guarded = state.explored.guard_holds(&state.fold, rule);
-                        state.guarding = !guarded;
-                        guarded.then_some((Decision::Converged, planned.end()))
+                        if state.explored.guard_holds(&state.fold, rule) {
+                            Some((Decision::Converged, planned.end()))
+                        } else {
+                            if !state.guarding {
+                                // The guard's stages explore another share:
+                                // the estimate and its bound start again
+                                // with them, so that every stage they read
+                                // explores alike (the bound's argument,
+                                // `outside.rs`). A restart decided at a
+                                // stage's end keeps the estimate unbiased.
+                                state.guarding = true;
+                                state.fold = PrefixFold::default();
+                                state.explored = Explored::default();
+                                restarts = true;
+                            }
+                            None
+                        }
                     }
                     None => None,
                 };
@@ -709,6 +726,7 @@ impl<C: Case> Planner<'_, C> {
         let mut record = counted(planned.kind(), planned.start, planned.end(), results);
         record.new_failures = (state.knowledge.failures.len() - failures_before) as u64;
         record.support = state.knowledge.support.len() as u64;
+        record.restarts_estimate = restarts;
         record.course = course.points;
         if planned.end() >= rule.max_tests {
             let support = self.support(&state.knowledge);
@@ -774,6 +792,7 @@ fn counted(kind: &'static str, start: u64, end: u64, results: &[TestResult]) -> 
         new_failures: 0,
         invalid: count(|r| matches!(r, TestResult::Invalid)),
         support: 0,
+        restarts_estimate: false,
         course: Vec::new(),
     }
 }

@@ -3,27 +3,33 @@
 //! library leaves out ([`crate::outside`]).
 //!
 //! An estimation stage `s` on support `K_s` draws its exploring tests from
-//! the exposure restricted to `O_s = X ∖ K_s`, of mass `m_s = P(O_s)`. Let
-//! `F` be where the vehicle fails and `K` the final support. A failing cell
-//! of `K_s` is a failure found or a library cell not yet tested, and either
-//! stays in the support (a failure never leaves it; an untested cell leaves
-//! only when a test passes there), so `F ∖ K ⊆ O_s` and the mass left out,
-//! `μ_out = P(F ∖ K)`, is at most `P(F ∩ O_s)`. An exploring test of stage
-//! `s` fails with probability `P(F ∩ O_s)/m_s ≥ μ_out/m_max`, where `m_max`
-//! is the largest `m_s` among the stages that explored. The count of
-//! failing exploring tests then stochastically dominates a binomial of
-//! that rate, and with `k` of `m` failing the one-sided Clopper–Pearson
-//! bound gives
+//! the exposure restricted to `O_s = X ∖ K_s`, of mass `m_s = P(O_s)`, with
+//! `F` where the vehicle fails. The estimate's exploring part, `S₁,out/n`,
+//! estimates `μ_O = Σ_s (n_s/n) P(F ∩ O_s)` over the stages' `n_s` valid
+//! tests, and the guarded upper end replaces it by a bound `U ≥ μ_O`.
 //!
-//! `U = min(m_min, m_max · p_U(k, m, c))`,
+//! An exploring test `i` of stage `s` fails with probability
+//! `q_i = P(F ∩ O_s)/m_s` given the stages before it. The count of failing
+//! exploring tests is then a Poisson binomial of mean `m q̄`, more
+//! concentrated than the binomial of that mean (Hoeffding 1956), so the
+//! one-sided Clopper–Pearson bound `p_U(k, m, c)` on `k` of `m` holds `q̄`
+//! at confidence `c`. Every stage explores the same share of its tests
+//! (`1/explore_every`; the guard's stages all [`crate::sampling::LATE_SHARE`],
+//! and a guarded campaign's estimate starts again with them), so the
+//! average over exploring tests is the average over tests, and
+//! `μ_O ≤ m_max q̄`, `m_max` the largest `m_s` that explored. With `m̄` the
+//! tests' average `m_s` (no stage can fail off its support more than its
+//! mass there):
 //!
-//! with `m_min` the smallest `m_s` (no more than the exposure a stage left
-//! unsampled can fail outside `K`). Every exploring failure counts in `k`,
-//! also the ones the search then added to `K`: the bound stays valid, and
-//! pays for them in width. Like the library's bound it holds at a fixed
-//! number of tests and is approximate at the random stop (and here at a
-//! support that the exploring tests themselves moved);
-//! `docs/statistics.md` measures it. With no estimation stage, nothing is
+//! `U = min(m̄, m_max · p_U(k, m, c))`.
+//!
+//! A failing cell of `K_s` is a failure found or an untested library cell
+//! and stays in the support, so `F ∖ K ⊆ O_s` for the final support `K`
+//! and `U` bounds the mass `P(F ∖ K)` that `K` leaves out as well. Every
+//! exploring failure counts in `k`, also the ones the search then added to
+//! `K`: they are in `μ_O`. Like the library's bound it holds at a fixed
+//! number of tests and is approximate at the random stop;
+//! `docs/statistics.md` measures it. Before any estimation test nothing is
 //! ruled out: `U = 1`.
 
 use crate::estimator::StoppingRule;
@@ -31,8 +37,8 @@ use crate::outside::{clopper_pearson_upper, OutsideTally};
 use crate::prefix::PrefixFold;
 use crate::sampling::TestDistribution;
 
-/// An adaptive campaign's exploring tests so far.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// An adaptive campaign's estimation tests as its outside bound reads them.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Explored {
     /// The estimation stages' exploring tests, their events and those
     /// events' terms `S₁,out` (their part of the estimate's `S₁`).
@@ -40,32 +46,19 @@ pub struct Explored {
     /// `m_max`: the largest exposure off the support among the stages
     /// whose tests explored (0 before any did).
     pub mass_max: f64,
-    /// `m_min`: the smallest exposure off the support of any estimation
-    /// stage (1 before the first).
-    pub mass_min: f64,
-}
-
-impl Default for Explored {
-    fn default() -> Self {
-        Self {
-            tally: OutsideTally::default(),
-            mass_max: 0.0,
-            mass_min: 1.0,
-        }
-    }
+    /// `Σ m_s` over the valid estimation tests (`m̄ = mass_sum/tests`).
+    pub mass_sum: f64,
+    /// The valid estimation tests.
+    pub tests: u64,
 }
 
 impl Explored {
-    /// Counts an estimation stage drawn from `distribution` (its support's
-    /// exposure off it, whether or not a test explored).
-    pub fn stage(&mut self, distribution: &TestDistribution) {
-        self.mass_min = self.mass_min.min(exposure_off_support(distribution));
-    }
-
-    /// Counts test `index` of an estimation stage drawn from
-    /// `distribution` under `seed`, valid, with or without the event, when
-    /// it explored.
+    /// Counts valid test `index` of an estimation stage drawn from
+    /// `distribution` under `seed`, with or without the event.
     pub fn test(&mut self, distribution: &TestDistribution, seed: u64, index: u64, event: bool) {
+        let mass = exposure_off_support(distribution);
+        self.tests += 1;
+        self.mass_sum += mass;
         let explores = match distribution {
             TestDistribution::Ndd(_) => true,
             d => d.explores(seed, index),
@@ -73,7 +66,7 @@ impl Explored {
         if !explores {
             return;
         }
-        self.mass_max = self.mass_max.max(exposure_off_support(distribution));
+        self.mass_max = self.mass_max.max(mass);
         if event {
             self.tally
                 .add(distribution.draw(seed, index).weight, || false);
@@ -104,10 +97,17 @@ impl Explored {
 
     /// `U` at `confidence` (see the module documentation).
     pub fn upper(&self, confidence: f64) -> f64 {
+        if self.tests == 0 {
+            return 1.0;
+        }
+        let average = self.mass_sum / self.tests as f64;
         let t = &self.tally;
-        let fill = self.mass_max * clopper_pearson_upper(t.events, t.tests, confidence);
-        let upper = if t.tests == 0 { 1.0 } else { fill };
-        upper.min(self.mass_min).clamp(0.0, 1.0)
+        let fill = if t.tests == 0 {
+            1.0
+        } else {
+            self.mass_max * clopper_pearson_upper(t.events, t.tests, confidence)
+        };
+        fill.min(average).clamp(0.0, 1.0)
     }
 }
 

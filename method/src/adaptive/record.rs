@@ -24,6 +24,9 @@ pub struct StageRecord {
     /// `|K|` after the stage: the cells the next estimation stage samples
     /// besides its exploring share ([`super::Planner::support`]).
     pub support: u64,
+    /// A guarded campaign's estimate starts again after this stage, with
+    /// the guard's stages (`course` and every estimate before are dropped).
+    pub restarts_estimate: bool,
     /// An estimation stage's estimate on both sides of each of its events
     /// and invalid tests and at its end, each fold's `indices` being the
     /// campaign's test index (not the estimation tests' count, which is

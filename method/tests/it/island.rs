@@ -176,7 +176,7 @@ fn an_island_the_search_cannot_reach_is_covered_by_the_guarded_end_and_found_by_
     // error over 60 seeds at one in a hundred), in fewer tests than the NDD.
     let floor = 0.87 - 2.33 * (0.87f64 * 0.13 / seeds as f64).sqrt();
     assert!(guard_covers >= floor, "{guard_covers} below {floor:.3}");
-    assert!(guard_guarded >= guard_covers);
+    assert!(found >= 0.95, "the island found in {found} of the runs");
     assert!(
         (median(&guarded) as f64) < ndd,
         "{} vs {ndd:.0}",

@@ -36,10 +36,12 @@ fn predicted_tests(rule: &StoppingRule, point: &HistoryPoint, row: &CampaignRow)
     let r = point.relative_half_width?;
     let needed = tests_to_beta(point.tests, point.events, rule.min_events, r, rule.beta)?;
     let fold = row.fold();
-    // Campaigns that switch (guarded Wald ones that track the strata, and
-    // anytime ones) explore nearly every test from the switch on.
+    // Campaigns that switch (guarded Wald ones that track the strata,
+    // anytime ones, guarded adaptive ones) explore nearly every test from
+    // the switch on.
     let switches = fold.within_strata
-        || (fold.strata.is_some() && row.interval() == tslg_method::estimator::Interval::Anytime);
+        || (fold.strata.is_some() && row.interval() == tslg_method::estimator::Interval::Anytime)
+        || (row.method == Method::Adaptive && row.guard_outside);
     let share = if switches {
         tslg_method::sampling::LATE_SHARE
     } else {

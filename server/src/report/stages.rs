@@ -176,7 +176,8 @@ pub fn resolve_stages(
 }
 
 /// Stores the estimate's course over the estimation stages of `records`
-/// as history points at the campaign's test indices, thinned as every
+/// (from the last restart of a guarded campaign's estimate on) as history
+/// points at the campaign's test indices, thinned as every
 /// campaign's history is ([`history::worth_storing`], on estimation tests)
 /// and keeping each stage's last point, so the estimate and its interval
 /// are drawn over the estimation tests (one point a stage drew nothing:
@@ -189,6 +190,14 @@ fn store_courses(
     let mut last = prefix::last_history_tests(conn, campaign)?;
     let mut kept = Vec::new();
     for record in records {
+        if record.restarts_estimate {
+            // A guarded campaign's estimate starts again after this stage:
+            // its history is the new estimate's.
+            prefix::delete_history(conn, campaign)?;
+            kept.clear();
+            last = None;
+            continue;
+        }
         for (k, point) in record.course.iter().enumerate() {
             let tests = point.estimator.tests();
             let stage_end = k + 1 == record.course.len();
@@ -225,19 +234,31 @@ fn write(
                     CampaignStatus::Converged,
                     format!(
                         "relative half-width ≤ β = {} after {} tests ({} estimation \
-                         tests; {} library and {} search tests found where the vehicle fails)",
+                         tests; {} library and {} search tests found where the vehicle \
+                         fails){}",
                         campaign.beta,
                         done.result.indices,
                         fold.indices,
                         done.library_tests,
-                        done.search_tests
+                        done.search_tests,
+                        if campaign.guard_outside {
+                            ", with the failure mass outside its support bounded"
+                        } else {
+                            ""
+                        }
                     ),
                 ),
                 _ => (
                     CampaignStatus::Exhausted,
                     format!(
-                        "max_tests = {} used up before the relative half-width reached β = {}",
-                        campaign.max_tests, campaign.beta
+                        "max_tests = {} used up before the relative half-width reached β = {}{}",
+                        campaign.max_tests,
+                        campaign.beta,
+                        if campaign.guard_outside {
+                            " with the outside bound within β × the estimate"
+                        } else {
+                            ""
+                        }
                     ),
                 ),
             };

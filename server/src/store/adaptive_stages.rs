@@ -14,7 +14,8 @@ pub fn store(conn: &Connection, campaign: i64, records: &[StageRecord]) -> Resul
         sql::execute(
             conn,
             "INSERT OR REPLACE INTO adaptive_stages (campaign_id, start_index, end_index, kind, \
-             events, new_failures, invalid, support) VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+             events, new_failures, invalid, support, restarts_estimate) \
+             VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
             params![
                 campaign,
                 r.start as i64,
@@ -23,7 +24,8 @@ pub fn store(conn: &Connection, campaign: i64, records: &[StageRecord]) -> Resul
                 r.events as i64,
                 r.new_failures as i64,
                 r.invalid as i64,
-                r.support as i64
+                r.support as i64,
+                r.restarts_estimate
             ],
         )?;
     }
@@ -39,14 +41,15 @@ struct Row {
     new_failures: i64,
     invalid: i64,
     support: i64,
+    restarts_estimate: i64,
 }
 
 /// `campaign`'s stored stages in test order.
 pub fn of(conn: &Connection, campaign: i64) -> Result<Vec<AdaptiveStage>, StoreError> {
     let rows: Vec<Row> = sql::all(
         conn,
-        "SELECT kind, start_index, end_index, events, new_failures, invalid, support \
-         FROM adaptive_stages WHERE campaign_id = ? ORDER BY start_index",
+        "SELECT kind, start_index, end_index, events, new_failures, invalid, support, \
+         restarts_estimate FROM adaptive_stages WHERE campaign_id = ? ORDER BY start_index",
         [campaign],
     )?;
     Ok(rows
@@ -59,6 +62,7 @@ pub fn of(conn: &Connection, campaign: i64) -> Result<Vec<AdaptiveStage>, StoreE
             new_failures: r.new_failures as u64,
             invalid: r.invalid as u64,
             support: r.support as u64,
+            restarts_estimate: r.restarts_estimate != 0,
         })
         .collect())
 }

@@ -209,6 +209,16 @@ pub fn store_stages(
     Ok(())
 }
 
+/// Deletes `campaign`'s history (an estimate that starts again).
+pub fn delete_history(conn: &Connection, campaign: i64) -> Result<(), StoreError> {
+    sql::execute(
+        conn,
+        "DELETE FROM history WHERE campaign_id = ?",
+        [campaign],
+    )?;
+    Ok(())
+}
+
 /// The valid tests of `campaign`'s last stored history point, if any.
 pub fn last_history_tests(conn: &Connection, campaign: i64) -> Result<Option<u64>, StoreError> {
     let last: Option<(i64,)> = sql::optional(

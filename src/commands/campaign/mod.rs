@@ -148,8 +148,15 @@ pub fn report(server: &ServerArgs, id: i64, out: &Path, points: usize) -> anyhow
             client.history_points(id, points).await?,
         ))
     })?;
+    // A coordinator older than the stages' list answers 404: no stages.
     let stages = match view.method {
-        tslg_api::Method::Adaptive => Some(block_on(async { Ok(client.stages(id).await?) })?),
+        tslg_api::Method::Adaptive => block_on(async {
+            match client.stages(id).await {
+                Ok(stages) => Ok(Some(stages)),
+                Err(tslg_client::CallError::Refused { status: 404, .. }) => Ok(None),
+                Err(e) => Err(e.into()),
+            }
+        })?,
         _ => None,
     };
     std::fs::create_dir_all(out)
