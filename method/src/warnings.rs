@@ -86,6 +86,9 @@ pub struct WarningContext {
     /// Its exploring tests are spread uniformly over the outside cells
     /// (`outside: uniform`), not by exposure.
     pub uniform_spread: bool,
+    /// An adaptive campaign: its exploring tests sample off its support K,
+    /// which its warnings name instead of the library.
+    pub adaptive: bool,
 }
 
 /// The warnings `result` deserves under `context`: empty unless the tests
@@ -93,6 +96,11 @@ pub struct WarningContext {
 pub fn warnings(result: &CampaignResult, context: WarningContext) -> Vec<String> {
     let mut found = Vec::new();
     let advice = context.dialect.guard_advice();
+    let region = if context.adaptive {
+        "its support K"
+    } else {
+        "the library"
+    };
     if context.unexplored {
         // Not evidence of a miss, but the absence of any check: the only
         // campaign whose interval can be exact and wrong (a vehicle that
@@ -148,13 +156,18 @@ pub fn warnings(result: &CampaignResult, context: WarningContext) -> Vec<String>
                 )
             } else {
                 format!(
-                    "Raise {}, or use a library that covers this vehicle's failures",
-                    context.dialect.max_tests()
+                    "Raise {}{}",
+                    context.dialect.max_tests(),
+                    if context.adaptive {
+                        ""
+                    } else {
+                        ", or use a library that covers this vehicle's failures"
+                    }
                 )
             };
             found.push(format!(
                 "the outside bound never came within β × the estimate: up to {upper:.3e} of \
-                 failure mass may lie outside the library ({} exploring tests, {}); the \
+                 failure mass may lie outside {region} ({} exploring tests, {}); the \
                  guarded upper end is {high:.3e}. {remedy}",
                 result.outside_tests,
                 Count(result.outside_events, "event"),
@@ -165,7 +178,7 @@ pub fn warnings(result: &CampaignResult, context: WarningContext) -> Vec<String>
         let unexplained = result.outside_events > 0 && result.mismatched_events == 0;
         if !context.guard_outside && short && converged && unexplained {
             found.push(format!(
-                "the interval does not bound what the library leaves out: its exploring tests \
+                "the interval does not bound what {region} leaves out: its exploring tests \
                  found {} outside it, and up to {upper:.3e} of failure mass may lie there \
                  ({} exploring tests), more than β × the estimate; the guarded upper end is \
                  {high:.3e}. Rerun with {advice} to test until it is bounded",
@@ -215,6 +228,7 @@ mod tests {
             dialect,
             unexplored: false,
             uniform_spread: false,
+            adaptive: false,
         }
     }
 
@@ -356,5 +370,17 @@ mod tests {
             found[0]
         );
         assert!(warnings(&result, context(true, Dialect::Api)).is_empty());
+        // An adaptive campaign's exploring tests sample off its support K:
+        // the warning names it, not the library.
+        let adaptive = WarningContext {
+            adaptive: true,
+            ..context(false, Dialect::Api)
+        };
+        let found = warnings(&result, adaptive);
+        assert!(
+            found[0].starts_with("the interval does not bound what its support K leaves out"),
+            "{}",
+            found[0]
+        );
     }
 }

@@ -311,6 +311,7 @@ fn report(
                 unexplored: matches!(args.method, MethodArg::Library)
                     && args.exploration.epsilon == 0.0,
                 uniform_spread: setup.outside == tslg_method::sampling::OutsideSpread::Uniform,
+                adaptive: matches!(args.method, MethodArg::Adaptive),
             },
         ),
     }

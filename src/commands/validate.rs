@@ -331,6 +331,7 @@ impl Row {
             dialect: Dialect::Cli,
             unexplored: self.epsilon == 0.0 && !self.method.adaptive(),
             uniform_spread: self.outside == OutsideSpread::Uniform,
+            adaptive: self.method.adaptive(),
         };
         self.coverage(|r| !warnings(r, context).is_empty())
     }

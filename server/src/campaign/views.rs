@@ -147,6 +147,7 @@ pub fn campaign_view(row: &CampaignRow) -> CampaignView {
                     dialect: Dialect::Api,
                     unexplored: row.method == Method::Library && row.epsilon == 0.0,
                     uniform_spread: row.outside == tslg_api::Outside::Uniform,
+                    adaptive: row.method == Method::Adaptive,
                 },
             );
             match row.paired_with {
