@@ -32,7 +32,6 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 use tslg_api::{CampaignView, CreateCampaign, Method};
 use tslg_client::Client;
@@ -43,14 +42,11 @@ use tslg_client::Client;
 /// baseline stops after about 1,900 tests at β 0.2.
 const HOT_GAIN: f64 = 0.1;
 
-/// The authors' cut-in table (`../shared/data`, or `$TSLG_SHARED_DATA`),
-/// when it is there.
+/// The authors' cut-in table (`tslg_testkit::shared_data`: `../shared/data`,
+/// or `$TSLG_SHARED_DATA`), when it is there.
 fn authors_table() -> Option<tslg_api::ExposureRequest> {
-    let dir = std::env::var_os("TSLG_SHARED_DATA").map_or_else(
-        || Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data"),
-        PathBuf::from,
-    );
-    let text = std::fs::read_to_string(dir.join("cutin_ndd_spmd.csv")).ok()?;
+    let path = tslg_testkit::shared_data().join("cutin_ndd_spmd.csv");
+    let text = std::fs::read_to_string(path).ok()?;
     Some(tslg_api::ExposureRequest::Table {
         name: "cutin_ndd_spmd.csv".into(),
         text,

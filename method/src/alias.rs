@@ -392,10 +392,9 @@ mod tests {
     #[test]
     fn fails_where_the_crate_fails() {
         for weights in [vec![], vec![0.0, 0.0], vec![1.0, f64::NAN], vec![-1.0, 2.0]] {
-            assert_eq!(
-                AliasTable::new(weights.clone()).err(),
-                WeightedAliasIndex::new(weights).err()
-            );
+            let ours = AliasTable::new(weights.clone()).err();
+            assert!(ours.is_some(), "{weights:?} accepted");
+            assert_eq!(ours, WeightedAliasIndex::new(weights).err());
         }
     }
 }

@@ -52,6 +52,27 @@ struct Inner {
     /// Wake-ups sent, of all and of one (what the tests check handlers
     /// send).
     announced: [AtomicU64; 2],
+    /// Requests waiting now (`/metrics`: `tslg_lease_requests_waiting`):
+    /// what an operator sees of idle workers, and what a test waits for
+    /// before it makes work appear, so that the wake-up is what answers.
+    waiting: AtomicU64,
+}
+
+/// One request counted as waiting until it stops (returns or is dropped
+/// with its connection).
+struct Waiting<'a>(&'a AtomicU64);
+
+impl<'a> Waiting<'a> {
+    fn new(count: &'a AtomicU64) -> Self {
+        count.fetch_add(1, Ordering::SeqCst);
+        Self(count)
+    }
+}
+
+impl Drop for Waiting<'_> {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::SeqCst);
+    }
 }
 
 impl WorkSignal {
@@ -87,6 +108,12 @@ impl WorkSignal {
         self.inner.closed.load(Ordering::SeqCst)
     }
 
+    /// Lease requests waiting for work now: each counts from its first ask
+    /// that found nothing (its wake-up registered) until it ends.
+    pub fn waiting(&self) -> u64 {
+        self.inner.waiting.load(Ordering::SeqCst)
+    }
+
     /// Runs `ask` until it gives `Some`, or `wait` has passed, or the
     /// signal closes: again at each wake-up and at rechecks whose ceiling
     /// starts at `first` and doubles up to `recheck` (module doc), each
@@ -106,6 +133,7 @@ impl WorkSignal {
     {
         let deadline = Instant::now() + wait;
         let mut ceiling = first.min(recheck);
+        let mut counted = None;
         loop {
             // Registered before asking: a wake-up from here on ends the
             // wait below at once.
@@ -119,6 +147,7 @@ impl WorkSignal {
             if now >= deadline || self.closed() {
                 return Ok(None);
             }
+            counted.get_or_insert_with(|| Waiting::new(&self.inner.waiting));
             let pause = ceiling.mul_f64(jitter().clamp(0.5, 1.0));
             ceiling = (ceiling * 2).min(recheck);
             let until = (now + pause).min(deadline);
@@ -205,6 +234,36 @@ mod tests {
         // Work there at once is found by the first ask.
         let (found, asked, at) = run(&signal, ms(10_000), Duration::ZERO).await;
         assert_eq!((found, asked, at), (Some(1), 1, ms(0)));
+    }
+
+    /// A request counts as waiting from its first empty ask until it ends:
+    /// answered by a wake-up, or dropped (its client went away).
+    #[tokio::test(start_paused = true)]
+    async fn a_request_counts_as_waiting_until_it_ends() {
+        let signal = WorkSignal::default();
+        let waiter = {
+            let signal = signal.clone();
+            tokio::spawn(async move { run(&signal, ms(10_000), ms(1_000_000)).await })
+        };
+        tokio::time::sleep(ms(100)).await;
+        assert_eq!(signal.waiting(), 1);
+        waiter.abort();
+        let _ = waiter.await;
+        assert_eq!(signal.waiting(), 0, "a dropped request stops counting");
+        let announcer = signal.clone();
+        let counted = tokio::spawn(async move {
+            tokio::time::sleep(ms(300)).await;
+            let seen = announcer.waiting();
+            announcer.announce();
+            seen
+        });
+        // Found at the wake-up (the work is there from 0.3 s on).
+        let (found, _, at) = run(&signal, ms(10_000), ms(300)).await;
+        assert_eq!((found.is_some(), at), (true, ms(300)));
+        assert_eq!((counted.await.unwrap(), signal.waiting()), (1, 0));
+        // A request answered by its first ask never waits.
+        run(&signal, ms(10_000), Duration::ZERO).await;
+        assert_eq!(signal.waiting(), 0);
     }
 
     /// A request of an idle worker starts at the long ceiling: asks at 0,

@@ -37,6 +37,9 @@ struct Entry {
     /// It said it is leaving (`POST /api/v1/workers/{name}/leave`): not
     /// live from then on, until it asks for work again.
     left: bool,
+    /// How many times it said so: a lease request held since before a
+    /// leaving is its dropped wait, and takes nothing ([`Workers::leavings`]).
+    leavings: u64,
 }
 
 impl Entry {
@@ -148,6 +151,7 @@ impl WorkerRegistry {
                 last_release: None,
                 idle: false,
                 left: false,
+                leavings: 0,
             });
         let changed =
             entry.threads != request.threads || entry.offers != request.offers || !entry.is_live();
@@ -220,8 +224,19 @@ impl WorkerRegistry {
         let mut workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
         if let Some(entry) = workers.get_mut(worker) {
             entry.left = true;
+            entry.leavings += 1;
             self.fleet_changed.store(true, Ordering::Release);
         }
+    }
+
+    /// How many times `worker` said it is leaving (0 for one not seen): a
+    /// held lease request compares it with the count at its start, so
+    /// that a wait its worker dropped as it stopped (the coordinator does
+    /// not see the connection close while it holds the request) takes no
+    /// lease that nobody would work.
+    pub fn leavings(&self, worker: &str) -> u64 {
+        let workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
+        workers.get(worker).map_or(0, |e| e.leavings)
     }
 
     /// The live workers offering `requirement` (`NAME:case:mode`).

@@ -1,6 +1,6 @@
 //! The `tslg` command, run as a user runs it.
 
-use crate::support::tslg;
+use crate::support::{clean_refusal, tslg};
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
@@ -12,17 +12,20 @@ fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
+/// The coverage a `tslg validate` row of 20 replicates must show:
+/// `coverage_floor(20, 0.9, 0.01) / 20` = 0.70, which a method covering at
+/// the nominal 0.9 misses on 1 % of seed sets. Twenty replicates tell a
+/// method far below (a plain campaign's 0.1–0.6) from a sound one, not one
+/// at 0.8: that the method tests do with 200 seeds
+/// (`tslg_testkit::CoverageCheck`). These tests check what `validate`
+/// computes and writes.
+fn floor_of_20() -> f64 {
+    tslg_testkit::coverage_floor(20, 0.9, 0.01) as f64 / 20.0
+}
+
+/// The authors' cut-in table, or `None` after the test recorded its skip.
 fn shared_table() -> Option<PathBuf> {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/cutin_ndd_spmd.csv");
-    if path.exists() {
-        Some(path)
-    } else {
-        eprintln!(
-            "SKIPPED: needs the authors' cut-in table at {}",
-            path.display()
-        );
-        None
-    }
+    tslg_testkit::authors_table()
 }
 
 fn field<'a>(text: &'a str, label: &str) -> &'a str {
@@ -160,7 +163,7 @@ fn evaluate_adaptive_finds_what_the_idm_library_misses_of_the_fvdm() {
     ]);
     assert!(stdout(&o).contains("assumes"), "{}", stdout(&o));
     let o = tslg(&["evaluate", "--method", "adaptive", "--vut", "fvdm"]);
-    assert!(!o.status.success());
+    assert!(clean_refusal(&o));
     assert!(stderr(&o).contains("--library"), "{}", stderr(&o));
 }
 
@@ -299,11 +302,11 @@ fn evaluate_runs_car_following_campaigns_in_process_and_adapts_the_policy() {
         let mut all = vec!["evaluate", "--vut", "idm"];
         all.extend(args);
         let o = tslg(&all);
-        assert!(!o.status.success());
+        assert!(clean_refusal(&o));
         assert!(stderr(&o).contains(expected), "{}", stderr(&o));
     }
     let o = tslg(&["exact", "--case", "car-following"]);
-    assert!(!o.status.success());
+    assert!(clean_refusal(&o));
     assert!(stderr(&o).contains("no exact answer"), "{}", stderr(&o));
 }
 
@@ -377,16 +380,16 @@ fn validate_compares_the_methods_in_one_csv() {
     let plain = row("fvdm", "plain");
     let adaptive = row("fvdm", "adaptive");
     assert!(number(&plain, 6) < 0.6, "{csv}");
-    assert!(number(&adaptive, 6) >= 0.85, "{csv}");
+    assert!(number(&adaptive, 6) >= floor_of_20(), "{csv}");
     // Guarded, the adaptive campaign answers with [ci_low, guarded_ci_high]
     // (the coverage column is that one's), explores until the bound on what
     // its support leaves out is within β, and costs more tests for it; the
     // plain library campaign's guarded end covers where its interval does not.
     let guarded = row("fvdm", "adaptive-guarded");
     assert_eq!(guarded[6], guarded[11], "{csv}");
-    assert!(number(&guarded, 6) >= 0.85, "{csv}");
+    assert!(number(&guarded, 6) >= floor_of_20(), "{csv}");
     assert!(number(&guarded, 7) > 2.0 * number(&adaptive, 7), "{csv}");
-    assert!(number(&plain, 11) >= 0.85, "{csv}");
+    assert!(number(&plain, 11) >= floor_of_20(), "{csv}");
     // A guarded adaptive campaign that met its guard has nothing to warn of.
     assert_eq!(number(&guarded, 12), 0.0, "{csv}");
     // Fewer than a tenth of the NDD baseline's tests.
@@ -439,7 +442,7 @@ fn evaluate_runs_on_the_preset_the_library_was_built_on() {
     // The matched surrogate on its own simulation stops at n_min.
     assert!(tests(&implied) <= 200, "{} tests", tests(&implied));
     let other = run(&["--preset", "paper-code"]);
-    assert!(!other.status.success());
+    assert!(clean_refusal(&other));
     assert!(
         stderr(&other).contains("the library was built on preset paper-table"),
         "{}",
@@ -482,7 +485,7 @@ fn a_library_file_with_an_unknown_field_is_refused() {
         let changed = dir.path().join(format!("{field}.json"));
         std::fs::write(&changed, text.replacen(from, to, 1)).unwrap();
         let o = tslg(&["library", "show", changed.to_str().unwrap()]);
-        assert!(!o.status.success(), "{field} accepted");
+        assert!(clean_refusal(&o), "{field} accepted");
         assert!(
             stderr(&o).contains(&format!("unknown field `{field}`")),
             "{field}: {}",
@@ -676,7 +679,7 @@ fn bad_input_gets_a_message_and_a_non_zero_exit() {
     for (args, expected) in cases {
         let args: Vec<&str> = args.iter().map(String::as_str).collect();
         let o = tslg(&args);
-        assert!(!o.status.success(), "{args:?} succeeded");
+        assert!(clean_refusal(&o), "{args:?} succeeded");
         assert!(
             stderr(&o).contains(expected),
             "{args:?}: expected `{expected}` in\n{}",
@@ -767,7 +770,7 @@ fn a_library_cannot_be_used_with_another_exposure() {
     .status
     .success());
     let o = tslg(&["evaluate", "--library", lib, "--vut", "idm"]);
-    assert!(!o.status.success());
+    assert!(clean_refusal(&o));
     assert!(
         stderr(&o).contains("was built on exposure cutin_ndd_spmd.csv"),
         "{}",
@@ -906,7 +909,7 @@ fn the_car_following_demo_compares_library_and_ndd_intervals() {
     assert!(text.contains("no exact P(A) for this case"), "{text}");
     assert!(text.contains("measured"), "{text}");
     let o = tslg(&["demo", "--case", "car-following", "--preset", "dense"]);
-    assert!(!o.status.success());
+    assert!(clean_refusal(&o));
     assert!(stderr(&o).contains("presets are paper"), "{}", stderr(&o));
 }
 
@@ -932,7 +935,7 @@ fn the_demo_refuses_bad_settings_before_it_starts() {
         ),
     ] {
         let o = tslg(&[&["demo"][..], args].concat());
-        assert!(!o.status.success(), "{args:?}");
+        assert!(clean_refusal(&o), "{args:?}");
         assert!(stdout(&o).is_empty(), "{args:?}: {}", stdout(&o));
         assert!(stderr(&o).contains(reason), "{args:?}: {}", stderr(&o));
     }
@@ -1028,7 +1031,7 @@ fn files_written_are_not_replaced_without_force() {
     let first = std::fs::read(&library).unwrap();
     std::fs::write(&library, b"mine").unwrap();
     let refused = build(false);
-    assert!(!refused.status.success());
+    assert!(clean_refusal(&refused));
     assert!(
         stderr(&refused).contains("idm.tslg.json exists; pass --force to replace it"),
         "{}",
@@ -1042,7 +1045,7 @@ fn files_written_are_not_replaced_without_force() {
     std::fs::write(dir.path().join("validation.md"), "mine").unwrap();
     let out = dir.path().to_str().unwrap();
     let refused = tslg(&["validate", "--quick", "--out", out]);
-    assert!(!refused.status.success());
+    assert!(clean_refusal(&refused));
     assert!(
         stderr(&refused).contains("validation.md exists; pass --force to replace it"),
         "{}",
@@ -1068,7 +1071,7 @@ fn an_error_says_its_cause_once() {
         "--out",
         out.to_str().unwrap(),
     ]);
-    assert!(!o.status.success());
+    assert!(clean_refusal(&o));
     let text = stderr(&o);
     assert_eq!(
         text.matches("unable to open database file").count(),
@@ -1119,7 +1122,7 @@ fn a_negative_number_is_a_value_that_the_range_check_refuses() {
         &["evaluate", "--vut", "idm", "--epsilon", "-0.5"][..],
     ] {
         let o = tslg(args);
-        assert!(!o.status.success(), "{args:?}");
+        assert!(clean_refusal(&o), "{args:?}");
         let text = stderr(&o);
         assert!(!text.contains("unexpected argument"), "{args:?}: {text}");
         assert!(
@@ -1158,7 +1161,7 @@ fn policy_prints_the_car_following_librarys_action_distribution_at_the_papers_st
         ("30,200,0", "beyond the grid"),
     ] {
         let o = tslg(&["policy", "--state", state]);
-        assert!(!o.status.success());
+        assert!(clean_refusal(&o));
         assert!(stderr(&o).contains(expected), "{}", stderr(&o));
     }
 }
@@ -1268,7 +1271,7 @@ fn validate_measures_the_coverage_curve_at_every_n_on_the_authors_table() {
         "--curve-to",
         "10",
     ]);
-    assert!(!refused.status.success());
+    assert!(clean_refusal(&refused));
 }
 
 #[test]
@@ -1317,7 +1320,7 @@ fn validate_flags_the_mismatched_pair_and_the_guard_restores_coverage() {
     assert_eq!(csv.lines().count(), 1 + 12, "{csv}");
     assert!(csv.starts_with("case,surrogate,vehicle,"), "{csv}");
     let unknown = tslg(&["validate", "--cases", "car-following"]);
-    assert!(!unknown.status.success());
+    assert!(clean_refusal(&unknown));
     assert!(
         stderr(&unknown).contains("needs an exact answer"),
         "{}",
@@ -1355,12 +1358,12 @@ fn validate_compares_the_wald_and_the_anytime_interval_at_every_n() {
     let number = |c: &[String], k: usize| c[k].parse::<f64>().unwrap();
     let (wald, anytime) = (row("idm", "fvdm", "wald"), row("idm", "fvdm", "anytime"));
     assert!(number(&wald, 10) < 0.5, "{csv}");
-    assert!(number(&anytime, 10) >= 0.85, "{csv}");
+    assert!(number(&anytime, 10) >= floor_of_20(), "{csv}");
     assert!(number(&anytime, 7) > 10.0 * number(&wald, 7), "{csv}");
     // Every anytime row holds at every n at about its level or above.
     for line in csv.lines().skip(1).filter(|l| l.contains(",anytime,")) {
         let c: Vec<String> = line.split(',').map(str::to_owned).collect();
-        assert!(number(&c, 10) >= 0.85, "{line}");
+        assert!(number(&c, 10) >= floor_of_20(), "{line}");
     }
 }
 
@@ -1421,6 +1424,6 @@ fn a_paired_evaluation_estimates_the_difference_of_two_builds_on_the_same_tests(
         "--paired-with",
         "idm",
     ]);
-    assert!(!o.status.success());
+    assert!(clean_refusal(&o));
     assert!(stderr(&o).contains("--paired-with runs library and ndd campaigns"));
 }

@@ -123,7 +123,7 @@ fn free_port() -> u16 {
 fn script(doc: &str, lines: &[String], url: &str, used: &mut Vec<usize>) -> String {
     let repo = repo();
     let debug = format!("{}/target/debug/", repo.display());
-    let table_dir = repo.join("../shared/data");
+    let table_dir = tslg_testkit::shared_data();
     let mut script = String::from("set -euo pipefail\nshopt -s expand_aliases\n");
     for line in lines {
         if line == BLOCK {
@@ -145,10 +145,13 @@ fn script(doc: &str, lines: &[String], url: &str, used: &mut Vec<usize>) -> Stri
         if line.trim().starts_with("cargo build --release") {
             continue;
         }
-        if line.contains("../shared/data/") && !table_dir.exists() {
-            eprintln!(
-                "SKIPPED ({doc}): needs the authors' table at {}: {line}",
-                table_dir.display()
+        if line.contains("../shared/data/") && !table_dir.join("cutin_ndd_spmd.csv").is_file() {
+            tslg_testkit::skip(
+                "authors-table",
+                &format!(
+                    "{doc}: `{line}` needs the authors' table in {} (TSLG_SHARED_DATA)",
+                    table_dir.display()
+                ),
             );
             continue;
         }

@@ -649,7 +649,9 @@ impl<'ast> Visit<'ast> for PathCollector<'_> {
 /// and each binary target are separate module trees).
 pub fn workspace_roots(workspace: &Path) -> Vec<PathBuf> {
     let mut roots = Vec::new();
-    for crate_dir in ["", "api", "client", "figures", "method", "server", "worker"] {
+    for crate_dir in [
+        "", "api", "client", "figures", "method", "server", "testkit", "worker",
+    ] {
         let dir = workspace.join(crate_dir);
         for root in ["src/lib.rs", "src/main.rs"] {
             let file = dir.join(root);

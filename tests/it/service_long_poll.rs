@@ -33,19 +33,31 @@ fn coordinator(dir: &tempfile::TempDir, extra: &[&str]) -> ServerProcess {
     ServerProcess::start(&dir.path().join("db.sqlite"), extra)
 }
 
+/// A coordinator whose waiting requests ask the store again after 30 to
+/// 60 s (`--claim-recheck-seconds 60`, the longest; a worker whose last
+/// wait found nothing starts there): within a test's 20 s wait, only a
+/// wake-up can answer one with work.
+fn coordinator_without_rechecks(dir: &tempfile::TempDir, extra: &[&str]) -> ServerProcess {
+    let mut args = vec!["--claim-recheck-seconds", "60"];
+    args.extend(extra);
+    coordinator(dir, &args)
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_waiting_request_gets_the_campaign_that_starts_meanwhile() {
     let dir = scratch();
-    let server = coordinator(&dir, &[]);
+    let server = coordinator_without_rechecks(&dir, &[]);
     let client = server.client();
     // Nothing to do: a request with a short wait answers 204 when it ends.
     assert!(client.claim(&waiting("w1", 0.3)).await.unwrap().is_none());
-    // A request that waits 20 s, and a campaign started while it waits.
+    // A request that waits 20 s, and a campaign started while it waits:
+    // without the wake-up it would end empty at 20 s (its first recheck
+    // comes after 30 s at the earliest).
     let waiter = {
         let client = client.clone();
         tokio::spawn(async move { client.claim(&waiting("w1", 20.0)).await })
     };
-    tokio::time::sleep(Duration::from_millis(300)).await;
+    until_waiting(&server.url, 1.0).await;
     let id = client.create_campaign(&ndd(1_000_000)).await.unwrap().id;
     let lease = waiter
         .await
@@ -59,16 +71,19 @@ async fn a_waiting_request_gets_the_campaign_that_starts_meanwhile() {
 async fn a_waiting_request_gets_the_lease_another_worker_gives_back() {
     let dir = scratch();
     // One lease holds the whole campaign.
-    let server = coordinator(&dir, &["--lease-size", "1000"]);
+    let server = coordinator_without_rechecks(&dir, &["--lease-size", "1000"]);
     let client = server.client();
     let id = client.create_campaign(&ndd(1000)).await.unwrap().id;
     let held = client.claim(&ask("w1", &[])).await.unwrap().expect("lease");
     assert_eq!((held.campaign_id, held.start, held.end), (id, 0, 1000));
+    // w2 found nothing in its last wait, so its next one's rechecks start
+    // at the 60 s ceiling: only the release's wake-up can answer it.
+    assert!(client.claim(&waiting("w2", 0.3)).await.unwrap().is_none());
     let waiter = {
         let client = client.clone();
         tokio::spawn(async move { client.claim(&waiting("w2", 20.0)).await })
     };
-    tokio::time::sleep(Duration::from_millis(300)).await;
+    until_waiting(&server.url, 1.0).await;
     let fence = LeaseFence {
         worker: "w1".into(),
         attempt: held.attempt,
@@ -106,14 +121,9 @@ async fn shutdown_ends_the_waits() {
             tokio::spawn(async move { client.claim(&waiting(&format!("w{k}"), 30.0)).await })
         })
         .collect();
-    // Each request is in the coordinator once its worker is listed (it is
-    // listed at its first ask, after its wake-up is registered); a fixed
-    // sleep could send the signal before a loaded host delivered them.
-    let deadline = std::time::Instant::now() + Duration::from_secs(60);
-    while client.workers().await.unwrap().workers.len() < 3 {
-        assert!(std::time::Instant::now() < deadline, "the requests arrive");
-        tokio::time::sleep(Duration::from_millis(10)).await;
-    }
+    // All three held; a fixed sleep could send the signal before a
+    // loaded host delivered them.
+    until_waiting(&server.url, 3.0).await;
     let exited = tokio::task::spawn_blocking(move || server.terminate());
     for waiter in waiters {
         // A hang guard, not a speed limit: the waits are 30 s.
@@ -144,7 +154,8 @@ async fn a_waiting_worker_stops_at_once() {
     let worker = tokio::spawn(tslg_worker::run(config, async move {
         let _ = stopped.await;
     }));
-    tokio::time::sleep(Duration::from_millis(500)).await;
+    // The worker's request is held: the stop comes during its wait.
+    until_waiting(&server.url, 1.0).await;
     let _ = stop.send(());
     let summary = tokio::time::timeout(Duration::from_secs(20), worker)
         .await

@@ -78,6 +78,7 @@ async fn a_report_brings_the_next_lease_and_a_bad_request_for_one_records_nothin
             Some(next) => {
                 assert_eq!(next.campaign_id, id);
                 assert_eq!(next.resume_at, next.start);
+                assert!(next.start >= lease.end, "each range is new: {next:?}");
                 ranges.push((next.start, next.end));
                 lease = next;
             }

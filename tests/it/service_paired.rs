@@ -181,7 +181,8 @@ async fn a_paired_campaign_stops_where_the_same_pair_in_process_stops_and_stops_
     };
     let a = client.create_campaign(&waiting).await.unwrap();
     wait_for(&client, a.id, Duration::from_secs(30), |v| v.indices > 0).await;
-    tokio::time::sleep(Duration::from_secs(1)).await;
+    // A worker found nothing more to take: the campaign is at its limit.
+    until_waiting(&server.url, 1.0).await;
     let ahead = client.campaign(a.id).await.unwrap();
     assert_eq!(ahead.status, CampaignStatus::Running);
     assert!(ahead.leased <= 4096, "{ahead:?}");

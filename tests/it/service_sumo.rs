@@ -30,7 +30,7 @@ fn sumo_python() -> Result<PathBuf, String> {
         Ok(python)
     } else {
         Err(format!(
-            "SKIPPED: SUMO (PyPI eclipse-sumo, libsumo) is not installed at {}: run \
+            "SUMO (PyPI eclipse-sumo, libsumo) is not installed at {}: run \
              scripts/install-test-deps",
             python.display()
         ))
@@ -41,8 +41,8 @@ fn sumo_python() -> Result<PathBuf, String> {
 async fn a_sumo_vehicle_is_a_surrogate_and_its_library_and_ndd_campaigns_agree() {
     let python = match sumo_python() {
         Ok(p) => p,
-        Err(skip) => {
-            eprintln!("{skip}");
+        Err(why) => {
+            tslg_testkit::skip("sumo", &why);
             return;
         }
     };

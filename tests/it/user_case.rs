@@ -6,7 +6,7 @@
 //! exact P(A), on the built-in exposure and on the authors' table. A case
 //! file or program that is wrong fails with the reason.
 
-use crate::support::tslg;
+use crate::support::{clean_refusal, tslg};
 use std::path::{Path, PathBuf};
 
 fn text(bytes: &[u8]) -> String {
@@ -111,7 +111,7 @@ fn the_example_case_reproduces_the_builtin_cut_in() {
     assert_eq!(field(&text(&shown.stdout), "case"), "cut-in-py (default)");
     // A library of a user case needs its case file to run campaigns.
     let o = tslg(&["evaluate", "--library", &mine, "--vut", "idm"]);
-    assert!(!o.status.success());
+    assert!(clean_refusal(&o));
     assert!(
         text(&o.stderr).contains("give its --case-file"),
         "{}",
@@ -121,14 +121,8 @@ fn the_example_case_reproduces_the_builtin_cut_in() {
 
 /// The authors' table in long form, and a case file of its grid beside it.
 fn authors_case(dir: &Path) -> Option<PathBuf> {
-    let table = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/cutin_ndd_spmd.csv");
-    let Ok(matrix) = std::fs::read_to_string(&table) else {
-        eprintln!(
-            "SKIPPED: needs the authors' cut-in table at {}",
-            table.display()
-        );
-        return None;
-    };
+    let table = tslg_testkit::authors_table()?;
+    let matrix = std::fs::read_to_string(&table).unwrap();
     let mut lines = matrix.lines().filter(|l| !l.trim().is_empty());
     let rates: Vec<String> = lines
         .next()?
@@ -179,7 +173,7 @@ fn on_the_authors_table_the_case_file_gives_the_184_cell_library_and_the_exact_a
         field(&out, "library size").starts_with("184 of 3420"),
         "{out}"
     );
-    let table = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/cutin_ndd_spmd.csv");
+    let table = tslg_testkit::authors_table().unwrap();
     assert_eq!(
         exact(&["--case-file", case], "cutin-idm"),
         exact(&["--ndd-table", table.to_str().unwrap()], "idm")

@@ -306,10 +306,18 @@ fn library_intervals_cover_a_high_precision_reference_across_seeds() {
         t.accident.then(|| t.weight())
     };
     let (truth, _) = mean_weight(&|i| weight(u64::MAX, i), 400_000);
-    let c = seeded_coverage(&weight, &StoppingRule::new(0.2, 1_000_000), 200, truth);
+    // 200 seeds, floor 170 (tslg_testkit::CoverageCheck: P(Bin(200, 0.90)
+    // < 170) ≤ 0.01, and coverage 0.80 fails with probability 0.957).
+    let check = tslg_testkit::CoverageCheck::new(200, 0.9, 0.01);
+    let c = seeded_coverage(
+        &weight,
+        &StoppingRule::new(0.2, 1_000_000),
+        check.runs,
+        truth,
+    );
     let (covered, mean) = (c.covered, c.mean_estimate);
     // docs/statistics.md: 0.900 over 1,000 campaigns.
-    assert!(covered >= 170, "{covered} of 200 intervals cover {truth:e}");
+    check.assert_covers(covered, &format!("the IDM (reference {truth:e})"));
     assert!(
         (mean / truth - 1.0).abs() < 0.05,
         "mean {mean:e} vs {truth:e}"

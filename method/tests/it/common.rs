@@ -1,25 +1,11 @@
 //! Helpers shared by the integration tests.
 
-use std::path::PathBuf;
-
-/// The authors' cut-in table from `../shared/data`, or `None` (after printing
-/// why) when it is absent: it is a reference fixture, not part of the product.
+/// The authors' cut-in table's text (`tslg_testkit::authors_table`: from
+/// `TSLG_SHARED_DATA` or `../shared/data`), or `None` after the test
+/// recorded its skip: it is a reference fixture, not part of the product.
 pub fn shared_table() -> Option<String> {
-    let path = std::env::var_os("TSLG_SHARED_DATA")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/data"))
-        .join("cutin_ndd_spmd.csv");
-    match std::fs::read_to_string(&path) {
-        Ok(text) => Some(text),
-        Err(e) => {
-            eprintln!(
-                "SKIPPED: this test needs the authors' cut-in table at {} ({e}); \
-                 set TSLG_SHARED_DATA to the folder that holds it",
-                path.display()
-            );
-            None
-        }
-    }
+    let path = tslg_testkit::authors_table()?;
+    Some(std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display())))
 }
 
 use tslg_method::case::Case;

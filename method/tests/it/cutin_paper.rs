@@ -126,6 +126,7 @@ fn multistart_recovers_the_exhaustive_library_with_fewer_evaluations() {
 }
 
 struct Coverage {
+    covered: u64,
     coverage: f64,
     median_tests: f64,
     analytic_tests: f64,
@@ -158,6 +159,7 @@ fn coverage(case: &CutIn, surrogate: &str, vut: &str, runs: u64) -> Coverage {
         tests.push(r.tests);
     }
     let c = Coverage {
+        covered,
         coverage: covered as f64 / runs as f64,
         median_tests: median(&mut tests),
         analytic_tests: exact.library_tests,
@@ -178,23 +180,34 @@ fn fvdm_library_testing_idm_covers_the_exact_answer() {
     let mut cases = vec![CutIn::builtin(CutInPreset::PaperCode)];
     cases.extend(table_case());
     for case in &cases {
-        let c = coverage(case, "fvdm", "idm", 200);
-        assert!(c.coverage >= 0.85, "coverage {}", c.coverage);
+        // 200 seeds, floor 170: P(Bin(200, 0.90) < 170) ≤ 0.01, and
+        // coverage 0.80 fails with probability 0.957.
+        let check = tslg_testkit::CoverageCheck::new(200, 0.9, 0.01);
+        let c = coverage(case, "fvdm", "idm", check.runs);
+        check.assert_covers(c.covered, case.exposure_name());
         let ratio = c.median_tests / c.analytic_tests;
         assert!((0.5..=2.0).contains(&ratio), "median/analytic = {ratio}");
     }
 }
 
-/// The surrogate (IDM) misses much of FVDM's failure region, so the naive
-/// stopping rule can be confidently wrong. Reported, not asserted: it is the
-/// known weakness that a later guard addresses (docs/statistics.md).
+/// The surrogate (IDM) misses much of FVDM's failure region, so the plain
+/// stopping rule is confidently wrong: the known weakness that the guard
+/// and adaptive campaigns address (docs/statistics.md: coverage 0.120 on
+/// the built-in exposure, 0.145 on the authors' table). Held below half
+/// the nominal 0.9: a change that made plain library campaigns cover here
+/// would also change what the docs and the warnings say of them.
 #[test]
-fn reverse_pairing_idm_library_testing_fvdm_is_reported() {
-    let case = CutIn::builtin(CutInPreset::PaperCode);
-    let c = coverage(&case, "idm", "fvdm", 200);
-    assert!(c.coverage.is_finite());
-    if let Some(table) = table_case() {
-        coverage(&table, "idm", "fvdm", 200);
+fn reverse_pairing_idm_library_testing_fvdm_undercovers() {
+    let mut cases = vec![CutIn::builtin(CutInPreset::PaperCode)];
+    cases.extend(table_case());
+    for case in &cases {
+        let c = coverage(case, "idm", "fvdm", 200);
+        assert!(
+            c.coverage < 0.45,
+            "{}: coverage {}",
+            case.exposure_name(),
+            c.coverage
+        );
     }
 }
 

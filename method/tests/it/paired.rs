@@ -99,9 +99,16 @@ fn paired_run(
     run_paired_outcomes(&outcomes, rule)
 }
 
-/// What 120 paired campaigns of `a` against `b` give.
+/// The paired coverage tests' plan: 200 seeds, floor 170, the largest k
+/// with P(Bin(200, 0.90) < k) ≤ 0.01; an interval covering 0.80 fails with
+/// probability 0.957 (`tslg_testkit::CoverageCheck`).
+static COVERAGE: std::sync::LazyLock<tslg_testkit::CoverageCheck> =
+    std::sync::LazyLock::new(|| tslg_testkit::CoverageCheck::new(200, 0.9, 0.01));
+
+/// What COVERAGE's paired campaigns of `a` against `b` give.
 struct Study {
     delta: f64,
+    covered: u64,
     coverage: f64,
     exact_gain: f64,
     measured_gain: f64,
@@ -118,7 +125,7 @@ fn study(
     let ([delta, va, vb, vd], unseen) = exact(exposure, q, o);
     assert_eq!(unseen, 0.0, "every difference can be drawn");
     let rule = StoppingRule::new(beta, 10_000_000);
-    let runs: Vec<PairedResult> = (0..120u64)
+    let runs: Vec<PairedResult> = (0..COVERAGE.runs)
         .into_par_iter()
         .map(|seed| paired_run(distribution, o, &rule, seed))
         .collect();
@@ -136,6 +143,7 @@ fn study(
     tests.sort_unstable();
     let s = Study {
         delta,
+        covered: covered as u64,
         coverage: covered as f64 / runs.len() as f64,
         exact_gain: (va + vb) / vd,
         measured_gain: gains[gains.len() / 2],
@@ -163,7 +171,7 @@ fn paired_intervals_cover_the_exact_difference_and_need_far_fewer_tests() {
     let p = |cell| case.exposure().p(cell);
     let regression = Outcomes::of(&case, &today, &yesterday);
     let s = study(&p, &distribution, &qf, &regression, 0.2);
-    assert!(s.coverage >= 0.81, "coverage {}", s.coverage);
+    COVERAGE.assert_covers(s.covered, &format!("Δ = {:e}", s.delta));
     // Under the library both rates are known almost without variance (it
     // samples their failures): the difference's variance is that of the
     // few discordant cells it explores, and pairing gains nothing.
@@ -173,14 +181,14 @@ fn paired_intervals_cover_the_exact_difference_and_need_far_fewer_tests() {
     // with (Var a + Var b)/Var d times fewer tests than two campaigns.
     let ndd = TestDistribution::Ndd(tslg_method::sampling::NddDistribution::new(case.exposure()));
     let s = study(&p, &ndd, &p, &regression, 0.2);
-    assert!(s.coverage >= 0.81, "coverage {}", s.coverage);
+    COVERAGE.assert_covers(s.covered, &format!("Δ = {:e}", s.delta));
     assert!(s.exact_gain > 10.0, "{}", s.exact_gain);
     let agree = |s: &Study| (s.measured_gain / s.exact_gain - 1.0).abs() < 0.3;
     assert!(agree(&s), "{} against {}", s.measured_gain, s.exact_gain);
     // FVDM against IDM: they differ on most of the FVDM's failures.
     let fvdm_idm = Outcomes::of(&case, &vehicle("fvdm"), &vehicle("idm"));
     let s = study(&p, &ndd, &p, &fvdm_idm, 0.2);
-    assert!(s.coverage >= 0.81, "coverage {}", s.coverage);
+    COVERAGE.assert_covers(s.covered, &format!("Δ = {:e}", s.delta));
     assert!(agree(&s), "{} against {}", s.measured_gain, s.exact_gain);
 }
 
@@ -197,7 +205,7 @@ fn paired_intervals_cover_the_exact_difference_on_highway_exit() {
     let ndd = TestDistribution::Ndd(tslg_method::sampling::NddDistribution::new(case.exposure()));
     let s = study(&p, &ndd, &p, &o, 0.2);
     assert!(s.delta != 0.0, "the two builds differ");
-    assert!(s.coverage >= 0.81, "coverage {}", s.coverage);
+    COVERAGE.assert_covers(s.covered, &format!("Δ = {:e}", s.delta));
     assert!(
         (s.measured_gain / s.exact_gain - 1.0).abs() < 0.3,
         "{} against {}",

@@ -17,8 +17,28 @@ use tslg_method::registry::{BuildRequest, ExposureSource, LibrarySearch};
 /// A small valid table: ranges 1, 3, 5 m by range rates −1, 0, 1 m/s.
 const SMALL_TABLE: &str = ",-1,0,1\n1,0.1,0.1,0\n3,0.2,0.1,0.1\n5,0.2,0.1,0.1\n";
 
-/// The authors' cut-in table, when `../shared/data` holds it.
-static AUTHORS_TABLE: LazyLock<Option<String>> = LazyLock::new(crate::common::shared_table);
+/// The authors' cut-in table, when `tslg_testkit::shared_data` holds it.
+static AUTHORS_TABLE: LazyLock<Option<String>> = LazyLock::new(|| {
+    std::fs::read_to_string(tslg_testkit::shared_data().join("cutin_ndd_spmd.csv")).ok()
+});
+
+/// The authors' table, or `None` after the running test recorded its skip
+/// (once, not at each of a property's cases).
+fn authors_table() -> Option<&'static str> {
+    thread_local!(static SAID: std::cell::Cell<bool> = const { std::cell::Cell::new(false) });
+    let text = AUTHORS_TABLE.as_deref();
+    if text.is_none() && !SAID.replace(true) {
+        tslg_testkit::authors_table(); // says SKIPPED, with the reason
+    }
+    text
+}
+
+/// Failing cases found are kept here and tried first on every run (commit
+/// the file when a case is added).
+const REGRESSIONS: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/tests/it/readers_fuzz.proptest-regressions"
+);
 
 /// The cut-in library of the IDM by exhaustive search, as its JSON file.
 static CUT_IN_FILE: LazyLock<Vec<u8>> = LazyLock::new(|| {
@@ -133,7 +153,13 @@ fn check_library(case: &str, preset: Option<&str>, bytes: &[u8]) -> bool {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 256, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig {
+        cases: 256,
+        failure_persistence: Some(Box::new(
+            proptest::test_runner::FileFailurePersistence::Direct(REGRESSIONS),
+        )),
+        ..ProptestConfig::default()
+    })]
 
     #[test]
     fn any_text_is_a_table_or_a_clean_error(text in "\\PC{0,300}") {
@@ -159,7 +185,7 @@ proptest! {
     fn a_damaged_authors_table_is_a_table_or_a_clean_error(
         edits in prop::collection::vec(edit(), 1..6)
     ) {
-        if let Some(text) = AUTHORS_TABLE.as_deref() {
+        if let Some(text) = authors_table() {
             check_table(&String::from_utf8_lossy(&damaged(text.as_bytes(), &edits)));
         }
     }
@@ -203,7 +229,7 @@ fn the_undamaged_inputs_are_accepted() {
     assert!(check_library("cut-in", None, &CUT_IN_FILE));
     assert!(PolicyLibraryFile::from_bytes(&FOLLOW_FILE).is_ok());
     assert!(check_library("car-following", Some("risky"), &FOLLOW_FILE));
-    if let Some(text) = AUTHORS_TABLE.as_deref() {
+    if let Some(text) = authors_table() {
         assert!(parse_table(text, "range", "range_rate").is_ok());
     }
 }

@@ -2,6 +2,7 @@
 //! commits, a failed or abandoned write, and reads beside an open write.
 
 use super::{sql, Database, DbError, Durability};
+use std::future::Future;
 use std::sync::mpsc;
 use std::time::Duration;
 
@@ -124,26 +125,21 @@ async fn a_write_whose_requester_left_commits_whole() {
     let (_dir, db) = database().await;
     let (held, entered, release) = write_and_wait(&db, 1);
     entered.await.unwrap();
-    let gone = tokio::spawn({
-        let db = db.clone();
-        async move {
-            db.write(|conn| {
-                insert(conn, 2)?;
-                insert(conn, 3)
-            })
-            .await
-        }
-    });
-    tokio::time::sleep(Duration::from_millis(50)).await;
-    gone.abort();
-    let behind = tokio::spawn({
-        let db = db.clone();
-        async move { db.write(|conn| insert(conn, 4)).await }
-    });
-    tokio::time::sleep(Duration::from_millis(50)).await;
+    // A write's first poll queues it (the writer's channel takes the job
+    // at once); polled once and dropped, it is a request whose client
+    // went away after asking. No sleep: the order is the polls'.
+    let mut cx = std::task::Context::from_waker(std::task::Waker::noop());
+    let mut gone = Box::pin(db.write(|conn| {
+        insert(conn, 2)?;
+        insert(conn, 3)
+    }));
+    assert!(gone.as_mut().poll(&mut cx).is_pending(), "queued, held");
+    drop(gone);
+    let mut behind = Box::pin(db.write(|conn| insert(conn, 4)));
+    assert!(behind.as_mut().poll(&mut cx).is_pending(), "queued, held");
     release.send(()).unwrap();
     held.await.unwrap().unwrap();
-    behind.await.unwrap().unwrap();
+    behind.await.unwrap();
     assert_eq!(stored(&db).await, vec![1, 2, 3, 4]);
 }
 

@@ -87,6 +87,18 @@ pub async fn heartbeat(
     .await
 }
 
+/// A worker left (`POST /api/v1/workers/{name}/leave`), after giving back
+/// the leases it knew of: any lease still its own was granted to a wait it
+/// dropped as it stopped (the coordinator answered a request whose
+/// worker had gone). It expires now rather than at its TTL, so a fleet
+/// that a scheduler stops leaves no range idle for 30 s. How many.
+pub async fn expire_left_behind(db: &Database, worker: &str) -> Result<usize, ServiceError> {
+    let worker = worker.to_owned();
+    Ok(db
+        .write(move |conn| leases::expire_all_of(conn, &worker))
+        .await?)
+}
+
 /// Gives a lease back unfinished: it expires now and is handed out again
 /// from its first unreported index.
 pub async fn release(db: &Database, id: i64, fence: &LeaseFence) -> Result<LeaseRow, ServiceError> {

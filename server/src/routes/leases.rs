@@ -80,13 +80,26 @@ pub async fn claim(
     };
     // The time spent asking the store is latency; the rest is held time.
     let clock = HoldClock::start();
+    // A worker that leaves while this request is held dropped it: from
+    // then on the request takes nothing (it ends at its deadline).
+    let leavings = state.workers.leavings(&req.worker);
     let granted = state
         .work
         .ask_until(
             Duration::from_secs_f64(wait),
             (first, recheck),
             || rand::random_range(0.5..=1.0),
-            || clock.ask(grant(&state, &req)),
+            || {
+                let dropped = state.workers.leavings(&req.worker) != leavings;
+                let asked = clock.ask(grant(&state, &req));
+                async move {
+                    if dropped {
+                        Ok(None)
+                    } else {
+                        asked.await
+                    }
+                }
+            },
         )
         .await;
     if let Ok(granted) = &granted {

@@ -34,8 +34,9 @@ pub async fn register(
 /// A worker says it is leaving (stopped by SIGTERM, or a batch job ending
 /// when idle), after giving its leases back: it is out of the live fleet
 /// at once, not a minute after its last request, so `GET /api/v1/queue`
-/// and the sizing of leases stop counting it. Asking for work again brings
-/// it back.
+/// and the sizing of leases stop counting it. A lease still its own (one
+/// granted to a wait it dropped as it stopped) is handed out again at
+/// once. Asking for work again brings it back.
 #[utoipa::path(post, path = "/api/v1/workers/{name}/leave",
     params(("name" = String, Path), ("tslg-worker-secret" = String, Header, description = "The worker's secret (POST /api/v1/workers)")),
     responses((status = 204, description = "Out of the live fleet"), (status = 400, body = Problem),
@@ -47,8 +48,12 @@ pub async fn leave(
 ) -> Result<StatusCode, ServiceError> {
     path_name(&name)?;
     admit(&state, &headers, &name).await?;
+    let left_behind = crate::leasing::fence::expire_left_behind(&state.db, &name).await?;
+    if left_behind > 0 {
+        state.work.announce();
+    }
     state.workers.left(&name);
-    tracing::info!(worker = %name, "worker left");
+    tracing::info!(worker = %name, left_behind, "worker left");
     Ok(StatusCode::NO_CONTENT)
 }
 

@@ -392,15 +392,14 @@ pub fn advance(
     Ok(moved == 1)
 }
 
-/// Expires every active lease of `worker` (it was flagged): each is
-/// handed out again to another.
-pub fn expire_all_of(conn: &Connection, worker: &str) -> Result<(), StoreError> {
-    sql::execute(
+/// Expires every active lease of `worker` (it was flagged, or it left):
+/// each is handed out again to another. How many there were.
+pub fn expire_all_of(conn: &Connection, worker: &str) -> Result<usize, StoreError> {
+    Ok(sql::execute(
         conn,
         formatcp!("UPDATE leases SET expires_at = 0 WHERE worker = ? AND state = {LEASE_ACTIVE}"),
         [worker],
-    )?;
-    Ok(())
+    )?)
 }
 
 /// Keeps `worker`'s active audit runs until `expires_at` (its heartbeat

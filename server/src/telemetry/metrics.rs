@@ -32,16 +32,21 @@ struct Snapshot {
     fold_drawn: u64,
     /// What the replay checks did since it started.
     replays: ReplayTotals,
+    /// Lease requests waiting for work now.
+    waiting: u64,
 }
 
 async fn snapshot(state: &AppState) -> Result<Snapshot, ServiceError> {
     let groups = state.db.group_counts();
     let fold_drawn = state.samplers.explored().drawn();
     let replays = state.replays.totals();
-    Ok(state
+    let waiting = state.work.waiting();
+    let mut snapshot = state
         .db
         .read(move |conn| read_snapshot(conn, groups, fold_drawn, replays))
-        .await?)
+        .await?;
+    snapshot.waiting = waiting;
+    Ok(snapshot)
 }
 
 fn read_snapshot(
@@ -58,6 +63,7 @@ fn read_snapshot(
         groups,
         fold_drawn,
         replays,
+        waiting: 0,
     })
 }
 
@@ -93,6 +99,12 @@ fn scrape_registry(s: &Snapshot, live: usize, known: usize) -> Registry {
     register_statuses(&r, s);
     register_results(&r, &s.results);
     register_leases(&r, &s.leases);
+    gauge(
+        &r,
+        "tslg_lease_requests_waiting",
+        "Lease requests held for work now (wait_seconds): idle workers.",
+        s.waiting as i64,
+    );
     register_writer(&r, s);
     register_replays(&r, &s.replays);
     let workers = gauge_vec(

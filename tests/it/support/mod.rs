@@ -111,12 +111,13 @@ impl ServerProcess {
         }
     }
 
-    /// SIGTERM, then waits for the coordinator to exit by itself.
+    /// SIGTERM, then waits (up to a minute, a hang guard) for the
+    /// coordinator to exit by itself.
     pub fn terminate(mut self) -> std::process::ExitStatus {
         let _ = Command::new("kill")
             .args(["-TERM", &self.child.id().to_string()])
             .status();
-        self.child.wait().expect("wait")
+        exited_within(&mut self.child, Duration::from_secs(60))
     }
 
     /// SIGKILL: no shutdown, no flush beyond what was committed.
@@ -171,10 +172,11 @@ impl WorkerProcess {
         let _ = self.0.wait();
     }
 
-    /// SIGTERM, then waits for the worker to exit by itself.
+    /// SIGTERM, then waits (up to a minute, a hang guard) for the worker
+    /// to exit by itself.
     pub fn terminate(mut self) -> std::process::ExitStatus {
         self.signal_term();
-        self.0.wait().expect("wait")
+        exited_within(&mut self.0, Duration::from_secs(60))
     }
 
     /// Sends SIGTERM, as Kubernetes or `scancel` do, without waiting.
@@ -233,14 +235,93 @@ pub async fn scraped(url: &str, name: &str) -> f64 {
         .unwrap()
 }
 
+/// Waits (at most a minute) until the coordinator at `url` holds at least
+/// `n` lease requests waiting for work (`tslg_lease_requests_waiting`):
+/// workers that asked and found nothing. Tests wait for it where a fixed
+/// sleep would come too soon on a loaded host.
+pub async fn until_waiting(url: &str, n: f64) {
+    let deadline = Instant::now() + Duration::from_secs(60);
+    loop {
+        let waiting = scraped(url, "tslg_lease_requests_waiting").await;
+        if waiting >= n {
+            return;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "{waiting} lease requests waiting after a minute, not {n}"
+        );
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+}
+
+/// Waits for `child` to exit; kills it and fails after `limit`.
+fn exited_within(child: &mut Child, limit: Duration) -> std::process::ExitStatus {
+    let started = Instant::now();
+    loop {
+        if let Some(status) = child.try_wait().expect("try_wait") {
+            return status;
+        }
+        if started.elapsed() > limit {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("the process did not exit within {limit:?}");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// Whether a process refused cleanly: a non-zero exit of its own (1 for
+/// an error, 2 for bad usage, 3 for a failed gate), not a panic (Rust's
+/// exit 101) nor death by a signal, which `!status.success()` would accept.
+pub fn clean_refusal(out: &std::process::Output) -> bool {
+    matches!(out.status.code(), Some(code) if code != 0 && code != 101)
+}
+
 /// Runs the `tslg` command with `args` (without an exposure table from the
-/// environment) and waits for it.
+/// environment) and waits for it (up to [`COMMAND_LIMIT`]).
 pub fn tslg(args: &[&str]) -> std::process::Output {
-    std::process::Command::new(env!("CARGO_BIN_EXE_tslg"))
-        .args(args)
-        .env_remove("TSLG_NDD_TABLE")
-        .output()
-        .expect("tslg runs")
+    let mut command = Command::new(env!("CARGO_BIN_EXE_tslg"));
+    command.args(args).env_remove("TSLG_NDD_TABLE");
+    output_within(command, COMMAND_LIMIT)
+}
+
+/// How long a command a test runs may take before the test fails: a guard
+/// against a hang (a `--wait` that never ends), not a speed check.
+pub const COMMAND_LIMIT: Duration = Duration::from_secs(30 * 60);
+
+/// Runs `command` with its output captured, as `Command::output`, but
+/// kills it and fails after `limit`.
+pub fn output_within(mut command: Command, limit: Duration) -> std::process::Output {
+    let child = command
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap_or_else(|e| panic!("{command:?}: {e}"));
+    wait_within(child, limit)
+}
+
+/// Waits for `child` to exit by itself, reading what is left of its
+/// stdout and stderr meanwhile (a full pipe would stop it); kills it and
+/// fails after `limit`.
+pub fn wait_within(mut child: Child, limit: Duration) -> std::process::Output {
+    use std::io::Read;
+    fn drain(pipe: Option<impl Read + Send + 'static>) -> std::thread::JoinHandle<Vec<u8>> {
+        std::thread::spawn(move || {
+            let mut bytes = Vec::new();
+            if let Some(mut pipe) = pipe {
+                let _ = pipe.read_to_end(&mut bytes);
+            }
+            bytes
+        })
+    }
+    let (stdout, stderr) = (drain(child.stdout.take()), drain(child.stderr.take()));
+    let status = exited_within(&mut child, limit);
+    std::process::Output {
+        status,
+        stdout: stdout.join().expect("stdout read"),
+        stderr: stderr.join().expect("stderr read"),
+    }
 }
 
 pub fn scratch() -> tempfile::TempDir {

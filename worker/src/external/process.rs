@@ -171,6 +171,10 @@ pub struct ProgramProcess {
     group: i32,
     stdin: ChildStdin,
     lines: Receiver<Line>,
+    /// A line taken from `lines` before its turn, read first: where a test
+    /// waits for a line to have arrived (`wait_for_line`) without
+    /// consuming it.
+    early: Option<Line>,
     stderr: Arc<Mutex<VecDeque<String>>>,
     watchdog: Arc<Watchdog>,
 }
@@ -232,6 +236,7 @@ impl ProgramProcess {
             group,
             stdin,
             lines,
+            early: None,
             stderr,
             watchdog,
         };
@@ -282,7 +287,11 @@ impl ProgramProcess {
     /// is [`Fault::Refused`].
     pub fn receive(&mut self, deadline: Instant) -> Result<Reply, Fault> {
         let wait = deadline.saturating_duration_since(Instant::now());
-        let line = match self.lines.recv_timeout(wait) {
+        let line = match self
+            .early
+            .take()
+            .map_or_else(|| self.lines.recv_timeout(wait), Ok)
+        {
             Ok(line) => line,
             Err(RecvTimeoutError::Timeout) => {
                 self.kill();
@@ -351,9 +360,19 @@ impl ProgramProcess {
         self.unprompted().is_ok()
     }
 
+    /// Waits up to `limit` for a line to arrive, and keeps it for the next
+    /// read: whether one did.
+    #[cfg(test)]
+    fn wait_for_line(&mut self, limit: Duration) -> bool {
+        if self.early.is_none() {
+            self.early = self.lines.recv_timeout(limit).ok();
+        }
+        self.early.is_some()
+    }
+
     /// An error if a line is waiting that no request asked for.
     fn unprompted(&mut self) -> Result<(), Fault> {
-        match self.lines.try_recv() {
+        match self.early.take().map_or_else(|| self.lines.try_recv(), Ok) {
             Err(TryRecvError::Empty) => Ok(()),
             Ok(Line::Text(text)) => Err(Fault::Garbage {
                 detail: format!("it printed `{}` without being asked", clip(&text)),
@@ -523,13 +542,15 @@ print(json.dumps({"type": "hello", "protocol": 1, "name": str(os.getpid()), "cas
         // Between tests the extra line marks the process as not reusable.
         let (mut p, _) = start(&python(&code));
         assert!(p.call(&reset, "ready", deadline).is_ok());
-        std::thread::sleep(Duration::from_millis(200));
+        // The extra line has arrived (a wait on it, not a sleep that a
+        // loaded host could outlast).
+        assert!(p.wait_for_line(Duration::from_secs(10)), "the extra line");
         assert!(!p.is_quiet(), "the extra line is noticed between tests");
         // Without that check the next request fails rather than taking the
         // stale line as its answer.
         let (mut p, _) = start(&python(&code));
         assert!(p.call(&reset, "ready", deadline).is_ok());
-        std::thread::sleep(Duration::from_millis(200));
+        assert!(p.wait_for_line(Duration::from_secs(10)), "the extra line");
         let fault = p.call(&reset, "ready", deadline).unwrap_err();
         assert!(fault.to_string().contains("without being asked"), "{fault}");
     }
@@ -577,7 +598,12 @@ print(json.dumps({"type": "hello", "protocol": 1, "name": str(os.getpid()), "cas
         };
         let fault = p.call(&hello, "hello", deadline).unwrap_err();
         assert!(matches!(fault, Fault::Timeout { .. }), "{fault}");
-        std::thread::sleep(Duration::from_millis(200));
+        // The kill is sent with the timeout; its delivery is waited for,
+        // up to 10 s (the program would sleep an hour).
+        let until = Instant::now() + Duration::from_secs(10);
+        while !dead(&pid) && Instant::now() < until {
+            std::thread::sleep(Duration::from_millis(10));
+        }
         assert!(dead(&pid), "the program {pid} outlived the timeout");
     }
 }

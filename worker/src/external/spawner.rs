@@ -143,20 +143,29 @@ mod tests {
     #[test]
     #[allow(unsafe_code)]
     fn a_hanging_start_does_not_hold_other_callers_past_their_deadlines() {
-        let slow = std::thread::spawn(|| {
+        use std::io::Read;
+        use std::os::fd::AsRawFd;
+        // The forked child says it has begun its start on this socket.
+        let (mut begun, child_end) = std::os::unix::net::UnixStream::pair().unwrap();
+        let fd = child_end.as_raw_fd();
+        let slow = std::thread::spawn(move || {
             let mut command = Command::new("true");
-            // SAFETY: sleep(3) is async-signal-safe; it stands for an exec
-            // stuck in the kernel.
+            // SAFETY: write(2) and sleep(3) are async-signal-safe; the
+            // sleep stands for an exec stuck in the kernel.
             unsafe {
-                std::os::unix::process::CommandExt::pre_exec(&mut command, || {
+                std::os::unix::process::CommandExt::pre_exec(&mut command, move || {
+                    libc::write(fd, b"x".as_ptr().cast(), 1);
                     libc::sleep(3);
                     Ok(())
                 });
             }
             spawn(command, soon()).unwrap().wait().unwrap()
         });
-        // The slow start is under way (its thread asked first).
-        std::thread::sleep(Duration::from_millis(500));
+        // The slow start is under way: its child has forked and says so.
+        begun
+            .set_read_timeout(Some(Duration::from_secs(30)))
+            .unwrap();
+        begun.read_exact(&mut [0]).expect("the slow start began");
         let late = spawn(
             Command::new("true"),
             Instant::now() + Duration::from_millis(100),
@@ -168,6 +177,7 @@ mod tests {
             "the error came only when the hang ended"
         );
         assert!(slow.join().unwrap().success());
+        drop(child_end);
         assert!(spawn(Command::new("true"), soon())
             .unwrap()
             .wait()

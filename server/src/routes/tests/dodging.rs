@@ -48,7 +48,8 @@ async fn standing(app: &App, worker: &str) -> (u64, u64) {
 /// large share of the estimate), whose index is returned.
 async fn run_audits_then_report_an_event(app: &App, events: &[u64]) -> u64 {
     for worker in ["b", "c"] {
-        loop {
+        for turn in 0.. {
+            assert!(turn < 1000, "{worker} was never handed a range");
             let (status, lease) = app.claim(worker, 40).await;
             assert_eq!(status, StatusCode::OK, "{lease}");
             let from = lease["start"].as_u64().unwrap();

@@ -679,7 +679,10 @@ async fn event_pages_cross_report_rows_in_order() {
             assert!(events.len() <= limit);
             paged.extend(events.iter().map(|e| e["test_index"].as_u64().unwrap()));
             match page["next_after"].as_u64() {
-                Some(next) => after = Some(next),
+                Some(next) => {
+                    assert!(after.is_none_or(|a| next > a), "the cursor moves on");
+                    after = Some(next);
+                }
                 None => break,
             }
         }

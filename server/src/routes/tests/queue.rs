@@ -222,3 +222,69 @@ async fn the_queue_of_one_program_is_its_entries_and_bad_names_are_refused() {
         assert!(problem["detail"].as_str().is_some(), "{problem}");
     }
 }
+
+/// `worker` says it is leaving, with its secret.
+async fn leave(app: &App, worker: &str) -> StatusCode {
+    let request = axum::http::Request::builder()
+        .method("POST")
+        .uri(format!("/api/v1/workers/{worker}/leave"))
+        .header(tslg_api::WORKER_SECRET_HEADER, app.secret(worker).await);
+    app.send(request, None).await.0
+}
+
+/// A worker stopped by its scheduler drops its held lease request and
+/// leaves; the coordinator, which does not see that connection close,
+/// must not hand work to it. A lease still its own at its leaving (granted
+/// to a wait it had dropped) goes to another worker at once, not at its
+/// 30 s TTL; and a request it held from before its leaving takes nothing
+/// when work appears.
+#[tokio::test]
+async fn a_leaving_worker_s_lease_and_dropped_wait_go_to_the_others_at_once() {
+    let app = app(|c| c.lease_size = Some(1_000_000)).await;
+    let id = app.idm_ndd_campaign().await;
+    let ask = |w: &str, wait: f64| json!({"worker": w, "threads": 1, "wait_seconds": wait});
+    // pod-1 holds the whole campaign, and leaves without giving it back.
+    let (status, held) = app
+        .call("POST", "/api/v1/leases", Some(ask("pod-1", 0.0)))
+        .await;
+    assert_eq!(status, StatusCode::OK, "{held}");
+    assert_eq!(
+        (held["campaign_id"].as_i64(), held["start"].as_u64()),
+        (Some(id), Some(0))
+    );
+    let (status, _) = app
+        .call("POST", "/api/v1/leases", Some(ask("pod-2", 0.0)))
+        .await;
+    assert_eq!(status, StatusCode::NO_CONTENT, "nothing else to take");
+    assert_eq!(leave(&app, "pod-1").await, StatusCode::NO_CONTENT);
+    let (status, again) = app
+        .call("POST", "/api/v1/leases", Some(ask("pod-2", 0.0)))
+        .await;
+    assert_eq!(status, StatusCode::OK, "handed out at once: {again}");
+    assert_eq!(again["resume_at"], held["resume_at"], "{again}");
+    // pod-3 waits; it leaves, then pod-2 gives its lease back (which wakes
+    // one waiting request): pod-3's request ends empty at its deadline.
+    let waited = app.call("POST", "/api/v1/leases", Some(ask("pod-3", 2.0)));
+    let meanwhile = async {
+        for _ in 0..1000 {
+            if app.state.work.waiting() == 1 {
+                break;
+            }
+            tokio::time::sleep(std::time::Duration::from_millis(5)).await;
+        }
+        assert_eq!(app.state.work.waiting(), 1, "pod-3's request is held");
+        assert_eq!(leave(&app, "pod-3").await, StatusCode::NO_CONTENT);
+        let release = json!({"worker": "pod-2", "attempt": again["attempt"], "key": again["key"],
+                             "reason": "stopping"});
+        let path = format!("/api/v1/leases/{}/release", again["id"]);
+        let (status, _) = app.call("POST", &path, Some(release)).await;
+        assert_eq!(status, StatusCode::NO_CONTENT);
+    };
+    let ((status, body), ()) = tokio::join!(waited, meanwhile);
+    assert_eq!(status, StatusCode::NO_CONTENT, "a dropped wait took {body}");
+    let (status, last) = app
+        .call("POST", "/api/v1/leases", Some(ask("pod-4", 0.0)))
+        .await;
+    assert_eq!(status, StatusCode::OK, "{last}");
+    assert_eq!(last["resume_at"], held["resume_at"], "{last}");
+}
