@@ -239,20 +239,18 @@ fn the_image_builds_and_runs_the_python_example() {
         return;
     }
     let root = env!("CARGO_MANIFEST_DIR");
-    let built = Command::new("docker")
-        .args(["build", "-q", "-t", "tslg:test", root])
-        .output()
-        .expect("docker build");
+    let mut build = Command::new("docker");
+    build.args(["build", "-q", "-t", "tslg:test", root]);
+    let built = output_within(build, COMMAND_LIMIT);
     assert!(
         built.status.success(),
         "{}",
         String::from_utf8_lossy(&built.stderr)
     );
-    let ran = Command::new("docker")
-        .args(["run", "--rm", "--entrypoint", "python3", "tslg:test"])
-        .args(["/usr/local/share/tslg/examples/python/idm_vut.py", "--help"])
-        .output()
-        .expect("docker run");
+    let mut run = Command::new("docker");
+    run.args(["run", "--rm", "--entrypoint", "python3", "tslg:test"])
+        .args(["/usr/local/share/tslg/examples/python/idm_vut.py", "--help"]);
+    let ran = output_within(run, Duration::from_secs(120));
     assert!(
         ran.status.success() && String::from_utf8_lossy(&ran.stdout).contains("usage: idm_vut.py"),
         "{ran:?}"

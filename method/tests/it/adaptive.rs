@@ -58,7 +58,12 @@ fn seeded_runs(
 /// k with P(Bin(200, 0.90) < k) ≤ 0.01, so a campaign covering at the
 /// nominal 0.90 passes on 99 % of seed sets, and one covering 0.80 fails
 /// with probability 0.957 (`tslg_testkit::CoverageCheck`, which refuses a
-/// plan below 0.95).
+/// plan below 0.95). A pairing that covers a little below nominal fails
+/// more often on a fresh set of seeds: FVDM → IDM, at 0.883 over 1,000
+/// seeds, on 6 % of them, one at the issue-21 target 0.87 on 17 %. The
+/// seeds are fixed, so a change of the random streams can move a pairing
+/// across the floor: then measure it over 1,000 seeds before anything
+/// else (docs/adaptive-design.md).
 static COVERAGE: std::sync::LazyLock<CoverageCheck> =
     std::sync::LazyLock::new(|| CoverageCheck::new(200, 0.9, 0.01));
 

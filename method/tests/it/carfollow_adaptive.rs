@@ -100,10 +100,11 @@ fn adaptive_campaigns_repair_the_estimate_of_a_vehicle_the_library_misses() {
     let mean = runs.iter().map(|r| r.result.estimate).sum::<f64>() / n;
     check.assert_covers(covered, &format!("the lagged IDM (reference {truth:e})"));
     // Each estimate's relative spread is about β/z = 0.12, so the mean of
-    // 200 is within 3 % of the reference unless the estimate is biased (by
-    // 4.2 standard errors of the mean); the plain IDM library's is 9 % low.
+    // 200 has a standard error of 0.85 %, and the reference about 1 %: 5 %
+    // is 3.8 of their combined standard errors. The plain IDM library's
+    // estimate is 9 % low.
     assert!(
-        (mean / truth - 1.0).abs() < 0.03,
+        (mean / truth - 1.0).abs() < 0.05,
         "mean {mean:e} vs {truth:e}"
     );
     // The NDD baseline needs z²(1 − μ)/(β²μ) ≈ 3.8 × 10⁵ tests; the

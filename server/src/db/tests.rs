@@ -66,10 +66,14 @@ async fn a_failed_write_rolls_back_only_its_own_rows() {
     // Held, so the writes below queue and share transactions.
     let (held, entered, release) = write_and_wait(&db, 1000);
     entered.await.unwrap();
+    // Each write is queued by its first poll, here, in order; then it runs
+    // on its own task. (A sleep standing in for "all queued" could end
+    // too soon on a loaded host.)
+    let mut cx = std::task::Context::from_waker(std::task::Waker::noop());
     let tasks: Vec<_> = (0..40)
         .map(|n| {
             let db = db.clone();
-            tokio::spawn(async move {
+            let mut write = Box::pin(async move {
                 let answer = db
                     .write(move |conn| {
                         insert(conn, n)?;
@@ -88,10 +92,14 @@ async fn a_failed_write_rolls_back_only_its_own_rows() {
                     assert!(stored(&db).await.contains(&n), "row {n} not committed");
                 }
                 answer
-            })
+            });
+            assert!(
+                write.as_mut().poll(&mut cx).is_pending(),
+                "write {n} queued"
+            );
+            tokio::spawn(write)
         })
         .collect();
-    tokio::time::sleep(Duration::from_millis(200)).await;
     release.send(()).unwrap();
     held.await.unwrap().unwrap();
     let mut succeeded = Vec::new();

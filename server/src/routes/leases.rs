@@ -80,8 +80,9 @@ pub async fn claim(
     };
     // The time spent asking the store is latency; the rest is held time.
     let clock = HoldClock::start();
-    // A worker that leaves while this request is held dropped it: from
-    // then on the request takes nothing (it ends at its deadline).
+    // A worker that leaves while this request is held dropped it (the
+    // coordinator does not see its connection close): the request ends
+    // at its next ask, taking nothing.
     let leavings = state.workers.leavings(&req.worker);
     let granted = state
         .work
@@ -90,18 +91,27 @@ pub async fn claim(
             (first, recheck),
             || rand::random_range(0.5..=1.0),
             || {
-                let dropped = state.workers.leavings(&req.worker) != leavings;
+                let left = state.workers.leavings(&req.worker) != leavings;
                 let asked = clock.ask(grant(&state, &req));
                 async move {
-                    if dropped {
-                        Ok(None)
-                    } else {
-                        asked.await
+                    if left {
+                        return Err(Ended::Left);
                     }
+                    asked.await.map_err(Ended::Failed)
                 }
             },
         )
         .await;
+    let granted = match granted {
+        // Granted as its worker left: nobody would work it. (The grant
+        // counted the worker as seen again: it is out of the fleet anew.)
+        Ok(Some(lease)) if state.workers.leavings(&req.worker) != leavings => {
+            give_back(&state, &req.worker, &lease).await;
+            state.workers.left(&req.worker);
+            Err(Ended::Left)
+        }
+        other => other,
+    };
     if let Ok(granted) = &granted {
         state
             .workers
@@ -112,12 +122,44 @@ pub async fn claim(
     let mut response = match granted {
         Ok(Some(lease)) => Json(lease).into_response(),
         Ok(None) => StatusCode::NO_CONTENT.into_response(),
-        Err(e) => e.into_response(),
+        Err(Ended::Left) => {
+            // A wake-up this request took goes on to a live one.
+            state.work.announce_one();
+            StatusCode::NO_CONTENT.into_response()
+        }
+        Err(Ended::Failed(e)) => e.into_response(),
     };
     if wait > 0.0 {
         clock.mark(&mut response);
     }
     Ok(response)
+}
+
+/// Why a held lease request ended without a lease.
+enum Ended {
+    /// The store failed.
+    Failed(ServiceError),
+    /// Its worker left while it was held.
+    Left,
+}
+
+/// Gives back a lease granted to a worker that has left.
+async fn give_back(state: &AppState, worker: &str, lease: &Lease) {
+    let fence = LeaseFence {
+        worker: worker.to_owned(),
+        attempt: lease.attempt,
+        key: lease.key.clone(),
+    };
+    match fence::release_as(&state.db, lease.id, &fence, fence::Giver::Coordinator).await {
+        Ok(_) => tracing::info!(
+            lease = lease.id,
+            worker,
+            "a lease granted as its worker left; given back"
+        ),
+        Err(e) => {
+            tracing::warn!(lease = lease.id, error = %e, "a lease granted as its worker left could not be given back")
+        }
+    }
 }
 
 /// What a lease request must be before anything is taken (422 otherwise).

@@ -48,11 +48,13 @@ pub async fn leave(
 ) -> Result<StatusCode, ServiceError> {
     path_name(&name)?;
     admit(&state, &headers, &name).await?;
+    // Out of the fleet first, so that a request of it still held takes
+    // nothing from here on; then what it still holds goes to the others.
+    state.workers.left(&name);
     let left_behind = crate::leasing::fence::expire_left_behind(&state.db, &name).await?;
     if left_behind > 0 {
         state.work.announce();
     }
-    state.workers.left(&name);
     tracing::info!(worker = %name, left_behind, "worker left");
     Ok(StatusCode::NO_CONTENT)
 }
