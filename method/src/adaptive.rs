@@ -44,8 +44,11 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 
+mod lattice;
 mod outside;
 mod record;
+use lattice::merged;
+pub use lattice::Lattice;
 pub use outside::Explored;
 pub use record::StageRecord;
 
@@ -69,6 +72,15 @@ pub struct AdaptiveSettings {
     /// library cell that passed stays in the support ("passed once" is not
     /// "never fails").
     pub noisy: bool,
+    /// Search a fine grid on its coarser lattice ([`Lattice`]): a seed
+    /// puts its whole block in the support and the search walks lattice
+    /// points, so its cost is the failure region's volume in blocks. It
+    /// rests on each failing region holding failing or near-miss lattice
+    /// points: true of a MOBIL driver on highway-exit's paper grid, not of
+    /// the gap-seeker, whose failures lie in sheets a cell or two thick
+    /// between them (docs/adaptive-design.md, "Fine grids").
+    #[serde(default)]
+    pub lattice: bool,
 }
 
 impl Default for AdaptiveSettings {
@@ -84,6 +96,7 @@ impl Default for AdaptiveSettings {
             explore_every: 10,
             stage_tests: 100,
             noisy: false,
+            lattice: false,
         }
     }
 }
@@ -110,6 +123,17 @@ pub enum Stage {
     Estimate(Arc<TestDistribution>),
 }
 
+impl Stage {
+    /// `"library"`, `"search"` or `"estimate"`.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Stage::Library(_) => "library",
+            Stage::Search(_) => "search",
+            Stage::Estimate(_) => "estimate",
+        }
+    }
+}
+
 /// What the tests so far showed, per cell, kept by [`Planner::observe`]:
 /// the search's candidates are gathered as seeds are met, so planning a
 /// stage does not rescan the grid.
@@ -125,9 +149,13 @@ pub struct Knowledge {
     /// `Σ P(x)` over `failures`, summed in that order.
     failure_mass: f64,
     /// Cells outside the library with exposure that neighboured a seed
-    /// when it was met and were untested then (each once).
+    /// when it was met and were untested then (each once); on a lattice
+    /// ([`Lattice`]), the lattice points next to a seed's block.
     candidates: Vec<usize>,
     is_candidate: Vec<bool>,
+    /// On a lattice, the lattice points whose block a seed put in the
+    /// support.
+    hot: Vec<bool>,
 }
 
 impl Knowledge {
@@ -193,6 +221,8 @@ pub struct Planner<'a, C: Case> {
     /// The last estimation stage's support and distribution, reused while
     /// the support is unchanged.
     estimation: std::sync::Mutex<Option<CachedEstimation>>,
+    /// What the search walks: the grid, or a coarser lattice of a fine one.
+    lattice: Lattice,
 }
 
 impl<C: Case> Planner<'static, C> {
@@ -211,6 +241,7 @@ impl<C: Case> Planner<'static, C> {
             in_library,
             library_stage,
             estimation,
+            lattice,
             ..
         } = Planner::new(case.as_ref(), library, epsilon, settings)?;
         Ok(Planner {
@@ -222,6 +253,7 @@ impl<C: Case> Planner<'static, C> {
             in_library,
             library_stage,
             estimation,
+            lattice,
         })
     }
 }
@@ -280,6 +312,11 @@ impl<'a, C: Case> Planner<'a, C> {
             in_library,
             library_stage,
             estimation: Default::default(),
+            lattice: if settings.lattice {
+                Lattice::of(case.grid())
+            } else {
+                Lattice::unit()
+            },
         })
     }
 
@@ -298,6 +335,11 @@ impl<'a, C: Case> Planner<'a, C> {
             failure_mass: 0.0,
             candidates: Vec::new(),
             is_candidate: vec![false; cells],
+            hot: if self.lattice.stride() > 1 {
+                vec![false; cells]
+            } else {
+                Vec::new()
+            },
         }
     }
 
@@ -334,7 +376,9 @@ impl<'a, C: Case> Planner<'a, C> {
             _ => {}
         }
         let seeds_now = before.is_none_or(|b| b > self.settings.near_miss);
-        if criticality <= self.settings.near_miss && seeds_now {
+        if criticality <= self.settings.near_miss && seeds_now && self.lattice.stride() > 1 {
+            self.heat(knowledge, o.cell);
+        } else if criticality <= self.settings.near_miss && seeds_now {
             for n in self.case.grid().neighbours(o.cell) {
                 if knowledge.criticality[n].is_none()
                     && !self.in_library[n]
@@ -344,6 +388,37 @@ impl<'a, C: Case> Planner<'a, C> {
                     knowledge.is_candidate[n] = true;
                     knowledge.candidates.push(n);
                 }
+            }
+        }
+    }
+
+    /// A seed on a lattice: its block joins the support (its cells with
+    /// exposure, but for those a deterministic vehicle passed), and its
+    /// lattice point and the points next to it, untested, are the search's
+    /// candidates.
+    fn heat(&self, knowledge: &mut Knowledge, cell: usize) {
+        let grid = self.case.grid();
+        let point = self.lattice.point(grid, cell);
+        let next = self.lattice.neighbours(grid, point);
+        let exposure = self.case.exposure();
+        if !knowledge.hot[point] {
+            knowledge.hot[point] = true;
+            let joining: Vec<usize> = self
+                .lattice
+                .block(grid, point)
+                .into_iter()
+                .filter(|&c| {
+                    exposure.p(c) > 0.0
+                        && (self.settings.noisy
+                            || knowledge.criticality[c].is_none_or(|k| k == 0.0))
+                })
+                .collect();
+            knowledge.support = merged(&knowledge.support, &joining);
+        }
+        for n in std::iter::once(point).chain(next) {
+            if knowledge.criticality[n].is_none() && !knowledge.is_candidate[n] {
+                knowledge.is_candidate[n] = true;
+                knowledge.candidates.push(n);
             }
         }
     }
@@ -402,15 +477,19 @@ impl<'a, C: Case> Planner<'a, C> {
     }
 
     /// Untested neighbours outside the library of the seeds, whose exposure
-    /// exceeds the floor, in cell order.
+    /// exceeds the floor, in cell order; on a lattice, untested lattice
+    /// points next to a seed's block, whose block's exposure exceeds it.
     fn frontier(&self, knowledge: &Knowledge) -> Vec<usize> {
-        let exposure = self.case.exposure();
+        let (grid, exposure) = (self.case.grid(), self.case.exposure());
         let floor = self.settings.exposure_floor * knowledge.failure_mass;
         let mut frontier: Vec<usize> = knowledge
             .candidates
             .iter()
             .copied()
-            .filter(|&n| knowledge.criticality[n].is_none() && exposure.p(n) > floor)
+            .filter(|&n| {
+                knowledge.criticality[n].is_none()
+                    && self.lattice.block_mass(grid, exposure, n) > floor
+            })
             .collect();
         frontier.sort_unstable();
         frontier
@@ -513,11 +592,7 @@ impl PlannedStage {
 
     /// `"library"`, `"search"` or `"estimate"`.
     pub fn kind(&self) -> &'static str {
-        match self.stage {
-            Stage::Library(_) => "library",
-            Stage::Search(_) => "search",
-            Stage::Estimate(_) => "estimate",
-        }
+        self.stage.kind()
     }
 }
 

@@ -262,8 +262,16 @@ impl Grid {
     /// differ by at most one (diagonals included), excluding `cell` itself.
     /// A grid of dimension d has up to 3ᵈ − 1 neighbours.
     pub fn neighbours(&self, cell: usize) -> Vec<usize> {
+        self.neighbours_at(cell, 1)
+    }
+
+    /// The cells whose per-axis indices differ from `cell`'s by `-step`,
+    /// 0 or `step` (not all 0): the Moore neighbourhood on the lattice of
+    /// every `step`-th index (`adaptive::Lattice`).
+    pub fn neighbours_at(&self, cell: usize, step: usize) -> Vec<usize> {
         let base = self.multi_index(cell);
         let d = base.len();
+        let step = step as i64;
         let mut out = Vec::with_capacity(3usize.pow(d as u32) - 1);
         let mut offset = vec![-1i64; d];
         loop {
@@ -274,7 +282,7 @@ impl Grid {
                     .zip(&offset)
                     .zip(&self.axes)
                     .all(|((&b, &o), axis)| {
-                        let i = b as i64 + o;
+                        let i = b as i64 + o * step;
                         index.push(i.max(0) as usize);
                         i >= 0 && (i as usize) < axis.len()
                     });

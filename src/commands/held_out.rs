@@ -190,18 +190,11 @@ pub fn adaptive_campaign(
     case: &dyn ScenarioCase,
     library: &[u8],
     table: &ProgramTable,
-    epsilon: f64,
+    (epsilon, settings): (f64, AdaptiveSettings),
     rule: &StoppingRule,
     seed: u64,
 ) -> anyhow::Result<AdaptiveResult> {
-    let tests = case.adaptive_tests(
-        library,
-        &table.spec,
-        epsilon,
-        AdaptiveSettings::default(),
-        rule,
-        seed,
-    )?;
+    let tests = case.adaptive_tests(library, &table.spec, epsilon, settings, rule, seed)?;
     let stages = tests.adaptive().context("an adaptive campaign's stages")?;
     while let Some((from, to)) = stages.running() {
         let results = (from..to)

@@ -132,6 +132,10 @@ pub enum ValidateMethod {
     /// An adaptive campaign with the outside guard: it explores until the
     /// bound on the failure mass outside its support is within β.
     AdaptiveGuarded,
+    /// An adaptive campaign whose search walks a fine grid's coarser
+    /// lattice (highway-exit's paper grid: its coarse grid) and puts whole
+    /// blocks in its support (docs/adaptive-design.md, "Fine grids").
+    AdaptiveLattice,
 }
 
 impl ValidateMethod {
@@ -141,6 +145,15 @@ impl ValidateMethod {
             ValidateMethod::Guarded => "guarded",
             ValidateMethod::Adaptive => "adaptive",
             ValidateMethod::AdaptiveGuarded => "adaptive-guarded",
+            ValidateMethod::AdaptiveLattice => "adaptive-lattice",
+        }
+    }
+
+    /// The settings of its adaptive campaigns.
+    fn settings(self) -> AdaptiveSettings {
+        AdaptiveSettings {
+            lattice: self == ValidateMethod::AdaptiveLattice,
+            ..AdaptiveSettings::default()
         }
     }
 
@@ -148,7 +161,9 @@ impl ValidateMethod {
     fn adaptive(self) -> bool {
         matches!(
             self,
-            ValidateMethod::Adaptive | ValidateMethod::AdaptiveGuarded
+            ValidateMethod::Adaptive
+                | ValidateMethod::AdaptiveGuarded
+                | ValidateMethod::AdaptiveLattice
         )
     }
 
@@ -249,7 +264,7 @@ impl Setup {
                     self.case.as_ref(),
                     &self.library,
                     table,
-                    self.epsilon,
+                    (self.epsilon, self.method.settings()),
                     &self.rule,
                     seed,
                 )?
@@ -261,7 +276,7 @@ impl Setup {
                         &self.library,
                         &self.vut_spec(),
                         self.epsilon,
-                        AdaptiveSettings::default(),
+                        self.method.settings(),
                         &self.rule,
                         seed,
                     )?
@@ -513,7 +528,11 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
             // is known, so the guard needs no large ε (docs/statistics.md).
             variants.push((ValidateMethod::Guarded, args.epsilon, OutsideSpread::Ndd));
         }
-        for adaptive in [ValidateMethod::Adaptive, ValidateMethod::AdaptiveGuarded] {
+        for adaptive in [
+            ValidateMethod::Adaptive,
+            ValidateMethod::AdaptiveGuarded,
+            ValidateMethod::AdaptiveLattice,
+        ] {
             if args.methods.contains(&adaptive) {
                 variants.push((adaptive, args.epsilon, case.default_outside()));
             }

@@ -3,6 +3,7 @@
 
 #[allow(dead_code)]
 mod adaptive;
+mod adaptive_lattice;
 mod common;
 
 mod carfollow_adaptive;
