@@ -223,6 +223,9 @@ pub struct Planner<'a, C: Case> {
     estimation: std::sync::Mutex<Option<CachedEstimation>>,
     /// What the search walks: the grid, or a coarser lattice of a fine one.
     lattice: Lattice,
+    /// The exposure of each lattice block (on a coarser lattice), computed
+    /// once: the search's floor reads it at every plan.
+    block_masses: std::collections::HashMap<usize, f64>,
 }
 
 impl<C: Case> Planner<'static, C> {
@@ -242,6 +245,7 @@ impl<C: Case> Planner<'static, C> {
             library_stage,
             estimation,
             lattice,
+            block_masses,
             ..
         } = Planner::new(case.as_ref(), library, epsilon, settings)?;
         Ok(Planner {
@@ -254,6 +258,7 @@ impl<C: Case> Planner<'static, C> {
             library_stage,
             estimation,
             lattice,
+            block_masses,
         })
     }
 }
@@ -295,6 +300,11 @@ impl<'a, C: Case> Planner<'a, C> {
             OutsideSpread::Uniform,
             Split::Stratified,
         )?));
+        let lattice = if settings.lattice {
+            Lattice::of(case.grid())
+        } else {
+            Lattice::with_stride(case.grid(), 1)
+        };
         let mut in_library = vec![false; case.grid().len()];
         for c in &library.cells {
             in_library[c.cell] = true;
@@ -312,11 +322,8 @@ impl<'a, C: Case> Planner<'a, C> {
             in_library,
             library_stage,
             estimation: Default::default(),
-            lattice: if settings.lattice {
-                Lattice::of(case.grid())
-            } else {
-                Lattice::unit()
-            },
+            block_masses: lattice.block_masses(case.grid(), case.exposure()),
+            lattice,
         })
     }
 
@@ -480,16 +487,17 @@ impl<'a, C: Case> Planner<'a, C> {
     /// exceeds the floor, in cell order; on a lattice, untested lattice
     /// points next to a seed's block, whose block's exposure exceeds it.
     fn frontier(&self, knowledge: &Knowledge) -> Vec<usize> {
-        let (grid, exposure) = (self.case.grid(), self.case.exposure());
+        let exposure = self.case.exposure();
         let floor = self.settings.exposure_floor * knowledge.failure_mass;
+        let block_mass = |n: usize| match self.lattice.stride() {
+            1 => exposure.p(n),
+            _ => self.block_masses.get(&n).copied().unwrap_or(0.0),
+        };
         let mut frontier: Vec<usize> = knowledge
             .candidates
             .iter()
             .copied()
-            .filter(|&n| {
-                knowledge.criticality[n].is_none()
-                    && self.lattice.block_mass(grid, exposure, n) > floor
-            })
+            .filter(|&n| knowledge.criticality[n].is_none() && block_mass(n) > floor)
             .collect();
         frontier.sort_unstable();
         frontier

@@ -269,6 +269,7 @@ impl Grid {
     /// 0 or `step` (not all 0): the Moore neighbourhood on the lattice of
     /// every `step`-th index (`adaptive::Lattice`).
     pub fn neighbours_at(&self, cell: usize, step: usize) -> Vec<usize> {
+        assert!(step > 0, "neighbours at a step of at least 1");
         let base = self.multi_index(cell);
         let d = base.len();
         let step = step as i64;

@@ -3,7 +3,7 @@
 //! The search tests every untested neighbour of a seed (a failure or a near
 //! miss), so it walks a failure region cell by cell: its cost is the
 //! region's volume. In 4-D that is 80 neighbours a cell, and the highway
-//! paper grid's 0.5 m/s and 1 m steps make a region of a few thousand
+//! paper grid's 5 m and 1 m/s steps make a region of a few thousand
 //! cells. The estimation stage does not need those cells tested, only a
 //! support `K` that holds the failures (it samples `K` by exposure; any `K`
 //! planned from past results keeps every stage unbiased). So on a fine grid
@@ -22,6 +22,7 @@
 
 use crate::grid::Grid;
 use crate::mass::GridMass;
+use std::collections::HashMap;
 
 /// The most lattice points a search walks: a grid with more is searched on
 /// a coarser lattice.
@@ -45,14 +46,19 @@ impl Lattice {
         while points(stride) > MAX_LATTICE_POINTS && lengths.iter().any(|&n| n > stride) {
             stride *= 2;
         }
-        Self { stride, lengths }
+        Self::with_stride(grid, stride)
     }
 
-    /// The grid itself: every cell its own block (stride 1).
-    pub fn unit() -> Self {
+    /// The lattice of every `stride`-th index of `grid`'s axes (1: the
+    /// grid itself, every cell its own block).
+    ///
+    /// # Panics
+    /// When `stride` is 0.
+    pub fn with_stride(grid: &Grid, stride: usize) -> Self {
+        assert!(stride > 0, "a lattice's stride is at least 1");
         Self {
-            stride: 1,
-            lengths: Vec::new(),
+            stride,
+            lengths: grid.axes().iter().map(|a| a.len()).collect(),
         }
     }
 
@@ -118,12 +124,39 @@ impl Lattice {
         }
     }
 
-    /// The exposure of `point`'s block.
-    pub fn block_mass(&self, grid: &Grid, exposure: &GridMass, point: usize) -> f64 {
+    /// The exposure of every block with exposure, by lattice point (empty
+    /// on stride 1, where a block is its cell): one pass over the grid in
+    /// cell order, the per-axis snaps looked up.
+    pub fn block_masses(&self, grid: &Grid, exposure: &GridMass) -> HashMap<usize, f64> {
+        let mut masses = HashMap::new();
         if self.stride == 1 {
-            return exposure.p(point);
+            return masses;
         }
-        self.block(grid, point).iter().map(|&c| exposure.p(c)).sum()
+        let snaps: Vec<Vec<usize>> = self
+            .lengths
+            .iter()
+            .map(|&n| (0..n).map(|i| self.snap(i, n)).collect())
+            .collect();
+        let mut index = vec![0usize; self.lengths.len()];
+        let mut snapped = index.clone();
+        for cell in 0..grid.len() {
+            let p = exposure.p(cell);
+            if p > 0.0 {
+                for (k, s) in snapped.iter_mut().enumerate() {
+                    *s = snaps[k][index[k]];
+                }
+                *masses.entry(grid.cell(&snapped)).or_insert(0.0) += p;
+            }
+            // The next cell: the last axis varies fastest.
+            for k in (0..index.len()).rev() {
+                index[k] += 1;
+                if index[k] < self.lengths[k] {
+                    break;
+                }
+                index[k] = 0;
+            }
+        }
+        masses
     }
 }
 
@@ -207,6 +240,17 @@ mod tests {
         assert_eq!(n[0], vec![36, 36]);
         assert_eq!(n[7], vec![44, 44]);
         assert_eq!(lattice.neighbours(&fine, 0).len(), 3);
+        // The blocks' exposure, in one pass, is their cells' sum.
+        let weights: Vec<f64> = (0..fine.len()).map(|c| ((c * 7919) % 13) as f64).collect();
+        let mass = GridMass::from_weights(fine.clone(), weights).unwrap();
+        let masses = lattice.block_masses(&fine, &mass);
+        for &p in &points {
+            let summed: f64 = lattice.block(&fine, p).iter().map(|&c| mass.p(c)).sum();
+            assert!(
+                (masses.get(&p).copied().unwrap_or(0.0) - summed).abs() < 1e-15,
+                "{p}"
+            );
+        }
         // The last point's block runs to the axis's end: 299 snaps to 296.
         assert_eq!(
             lattice.point(&fine, fine.cell(&[299, 0])),
