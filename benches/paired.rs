@@ -40,6 +40,7 @@ fn request(method: Method, library_id: Option<i64>, vut: &Value, seed: u64) -> C
         outside: None,
         split: None,
         vehicle_noise: false,
+        adaptive_search: None,
     }
 }
 

@@ -38,6 +38,7 @@ fn request(tests: u64) -> CreateCampaign {
         outside: None,
         split: None,
         vehicle_noise: false,
+        adaptive_search: None,
     }
 }
 

@@ -143,6 +143,7 @@ async fn through_service(seed: u64, threads: usize) -> anyhow::Result<Run> {
             outside: None,
             split: None,
             vehicle_noise: false,
+            adaptive_search: None,
         })
         .await?
         .id;

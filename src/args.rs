@@ -173,6 +173,36 @@ impl OutsideArg {
     }
 }
 
+/// How an adaptive campaign searches (`--adaptive-search`).
+#[derive(Debug, Clone, Copy, ValueEnum, PartialEq, Eq)]
+pub enum AdaptiveSearchArg {
+    /// Every untested neighbour of a seed once (the default).
+    Grid,
+    /// A fine grid's coarser lattice, whole blocks into the support
+    /// (docs/adaptive-design.md, "Fine grids").
+    Lattice,
+}
+
+impl AdaptiveSearchArg {
+    pub fn wire(self) -> tslg_api::AdaptiveSearch {
+        match self {
+            AdaptiveSearchArg::Grid => tslg_api::AdaptiveSearch::Grid,
+            AdaptiveSearchArg::Lattice => tslg_api::AdaptiveSearch::Lattice,
+        }
+    }
+
+    /// `--search` checked against the method: only adaptive campaigns
+    /// search.
+    pub fn for_method(search: Option<Self>, adaptive: bool) -> anyhow::Result<Option<Self>> {
+        anyhow::ensure!(
+            search.is_none() || adaptive,
+            "--adaptive-search chooses how an adaptive campaign searches around its failures; use it \
+             with --method adaptive"
+        );
+        Ok(search)
+    }
+}
+
 /// How a library campaign explores outside the library.
 #[derive(Debug, Clone, Copy, Args)]
 pub struct ExplorationArgs {

@@ -23,6 +23,9 @@ pub struct AdaptiveView {
     /// Cells the estimation samples besides its exploring share: the
     /// failures found and the library's cells not yet tested.
     pub support: u64,
+    /// How it searches (`grid` or `lattice`).
+    #[serde(default)]
+    pub search: crate::AdaptiveSearch,
 }
 
 /// An adaptive campaign's running stage.
@@ -120,6 +123,13 @@ pub struct CreateCampaign {
     /// this field warn; the workers' word does not set it.
     #[serde(default)]
     pub vehicle_noise: bool,
+    /// For `method: adaptive`: how it searches, `grid` (the default) or
+    /// `lattice` (a fine grid's coarser lattice, whole blocks into the
+    /// support: cheaper on a 4-D grid where failures form solid regions,
+    /// blind to failures in sheets thinner than a block;
+    /// docs/adaptive-design.md, "Fine grids"). Refused for other methods.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub adaptive_search: Option<crate::AdaptiveSearch>,
 }
 
 fn default_epsilon() -> f64 {

@@ -49,6 +49,36 @@ impl Method {
     }
 }
 
+/// How an adaptive campaign searches around the failures and near misses
+/// it meets (docs/adaptive-design.md, "Fine grids").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, ToSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum AdaptiveSearch {
+    /// Every untested neighbour of a seed is tested once: the search costs
+    /// the failure region's volume in cells, and finds every connected
+    /// failure it touches.
+    #[default]
+    Grid,
+    /// The search walks the grid's coarser lattice (every s-th index, `s`
+    /// the smallest power of two leaving at most 16,384 points) and a seed
+    /// puts its whole block in the support untested: the cost is the
+    /// region's volume in blocks. It rests on every failing region holding
+    /// failing or near-miss lattice points, which fails for failures in
+    /// thin sheets between them. On a grid that small it is the grid
+    /// search.
+    Lattice,
+}
+
+impl AdaptiveSearch {
+    /// Its name on the wire (`grid`, `lattice`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            AdaptiveSearch::Grid => "grid",
+            AdaptiveSearch::Lattice => "lattice",
+        }
+    }
+}
+
 /// How a library campaign of a grid case splits its tests between the
 /// library and the scenarios outside it (docs/statistics.md, "Strata").
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, ToSchema)]

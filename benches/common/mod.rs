@@ -83,5 +83,6 @@ pub fn program_campaign(
         interval: Default::default(),
         paired_with: None,
         vehicle_noise: false,
+        adaptive_search: None,
     }
 }

@@ -85,6 +85,19 @@ pub fn outside(spread: OutsideSpread) -> Outside {
     }
 }
 
+/// An adaptive campaign's settings: the defaults, with the vehicle's noise
+/// and the search the request names.
+pub fn adaptive_settings(
+    noisy: bool,
+    search: tslg_api::AdaptiveSearch,
+) -> tslg_method::adaptive::AdaptiveSettings {
+    tslg_method::adaptive::AdaptiveSettings {
+        noisy,
+        lattice: search == tslg_api::AdaptiveSearch::Lattice,
+        ..Default::default()
+    }
+}
+
 /// The wire form of a library search.
 pub fn search_request(search: tslg_method::library::LibrarySearch) -> tslg_api::SearchRequest {
     use tslg_api::SearchRequest;

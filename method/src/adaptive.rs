@@ -48,7 +48,7 @@ mod lattice;
 mod outside;
 mod record;
 use lattice::merged;
-pub use lattice::Lattice;
+pub use lattice::{Lattice, MAX_LATTICE_POINTS};
 pub use outside::Explored;
 pub use record::StageRecord;
 

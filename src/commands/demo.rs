@@ -129,6 +129,7 @@ async fn drive(
         interval: Default::default(),
         paired_with: None,
         vehicle_noise: false,
+        adaptive_search: None,
     };
     // The service runs adaptive campaigns of grid cases; a sequential
     // case's probes the vehicle from grid states, which it cannot lease

@@ -3,7 +3,7 @@
 //! adaptive one. On a grid case small enough to enumerate
 //! ([`tslg_api::EXACT_MAX_SCENARIOS`]) the exact P(A) is printed beside it.
 
-use crate::args::{CaseArgs, ExplorationArgs, OutsideArg, RuleArgs};
+use crate::args::{AdaptiveSearchArg, CaseArgs, ExplorationArgs, OutsideArg, RuleArgs};
 use crate::commands::exact::exact_answer;
 use crate::inputs::{
     case_of_library, check_epsilon, open, read_library_file, stopping_rule, vehicle_spec,
@@ -36,6 +36,11 @@ pub struct EvaluateArgs {
     /// (with `ndd`, the baseline runs on them too).
     #[arg(long)]
     pub library: Option<PathBuf>,
+    /// How an adaptive campaign searches: `grid` (the default) or
+    /// `lattice` (a fine grid's coarser lattice, whole blocks into the
+    /// support; docs/adaptive-design.md, "Fine grids").
+    #[arg(long, value_enum)]
+    pub adaptive_search: Option<AdaptiveSearchArg>,
     #[command(flatten)]
     pub exploration: ExplorationArgs,
     #[command(flatten)]
@@ -105,6 +110,8 @@ struct Search {
     assumes: &'static str,
     #[serde(skip)]
     search_kind: &'static str,
+    /// `grid` or `lattice` (`--adaptive-search`; grid cases).
+    adaptive_search: &'static str,
 }
 
 /// What a campaign runs on, worked out from the arguments: the case (the
@@ -151,6 +158,7 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
 /// The arguments checked and the case, vehicle, rule and library read.
 fn set_up(args: &EvaluateArgs) -> anyhow::Result<Setup> {
     check_epsilon(args.exploration.epsilon)?;
+    AdaptiveSearchArg::for_method(args.adaptive_search, args.method == MethodArg::Adaptive)?;
     anyhow::ensure!(
         args.paired_with.is_none() || args.method != MethodArg::Adaptive,
         "--paired-with runs library and ndd campaigns: an adaptive campaign's stages follow \
@@ -196,6 +204,12 @@ fn set_up(args: &EvaluateArgs) -> anyhow::Result<Setup> {
          that holds at every n"
     );
     anyhow::ensure!(
+        args.adaptive_search.is_none() || descriptor.is_grid(),
+        "--adaptive-search applies to the grid cases: a {} adaptive campaign probes states \
+         from its policy, not neighbours on a grid",
+        descriptor.name
+    );
+    anyhow::ensure!(
         !rule.guard_outside || descriptor.is_grid(),
         "--guard-outside applies to the grid cases: a {} campaign explores per decision, and \
          no bound on its outside mass is defined",
@@ -237,7 +251,10 @@ fn run_campaign(
                 file,
                 vut,
                 args.exploration.epsilon,
-                AdaptiveSettings::default(),
+                AdaptiveSettings {
+                    lattice: args.adaptive_search == Some(AdaptiveSearchArg::Lattice),
+                    ..AdaptiveSettings::default()
+                },
                 rule,
                 args.seed,
             )?;
@@ -259,6 +276,11 @@ fn run_campaign(
                 support_cells: support.len(),
                 assumes,
                 search_kind,
+                adaptive_search: args
+                    .adaptive_search
+                    .unwrap_or(AdaptiveSearchArg::Grid)
+                    .wire()
+                    .as_str(),
             };
             (result, Some(search))
         }
@@ -335,6 +357,9 @@ fn print(report: &Report, rule: &StoppingRule) {
     outln!("status             {}", result.status.as_str());
     match &report.search {
         Some(search) => {
+            if report.grid {
+                outln!("search             {}", search.adaptive_search);
+            }
             outln!(
                 "tests              {} ({} library, {} {}, {} estimating; {} stages)",
                 result.indices,

@@ -367,6 +367,7 @@ fn load_campaign(shape: &Shape) -> CreateCampaign {
         interval: Default::default(),
         paired_with: None,
         vehicle_noise: false,
+        adaptive_search: None,
         outside: None,
         split: None,
     }

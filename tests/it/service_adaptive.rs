@@ -348,3 +348,130 @@ async fn an_external_program_in_step_mode_runs_the_adaptive_campaign_of_its_buil
     assert_eq!(view.status, CampaignStatus::Converged, "{view:?}");
     assert_same_adaptive(&view, &own);
 }
+
+/// `adaptive_search: lattice` through the service, on highway-exit's paper
+/// grid (1,640,961 scenarios, searched on every 4th index): the campaign is
+/// the in-process lattice campaign to the bit, its search a fraction of the
+/// grid search's, its view says which search ran; asked of a method that
+/// does not search, it is refused with the reason, over HTTP and by the
+/// command line.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_lattice_search_through_the_service_is_the_in_process_one_on_the_paper_grid() {
+    let dir = scratch();
+    let database = dir.path().join("db.sqlite");
+    let server = ServerProcess::start(&database, &[]);
+    let address = server.address.clone();
+    let _workers = two_workers(&server.url);
+    let client = server.client();
+    let library = build_library(
+        &client,
+        &tslg_api::CreateLibrary {
+            case: "highway-exit".into(),
+            preset: Some("paper".into()),
+            surrogate: serde_json::json!({"model": "mobil"}),
+            exposure: Default::default(),
+            search: Some(tslg_api::SearchRequest::Exhaustive),
+            threshold: None,
+        },
+    )
+    .await;
+    let request = CreateCampaign {
+        case: "highway-exit".into(),
+        vut: serde_json::json!({"model": "mobil"}),
+        adaptive_search: Some(tslg_api::AdaptiveSearch::Lattice),
+        ..campaign(Method::Adaptive, library.id, "mobil", 0.2, 5)
+    };
+    let case = open_case("highway-exit", Some("paper"), &ExposureSource::Builtin).unwrap();
+    let file = client.library_file(library.id).await.unwrap();
+    let rule = StoppingRule {
+        n_min: default_n_min(None, request.max_tests),
+        ..StoppingRule::new(0.2, request.max_tests)
+    };
+    let in_process = |settings: AdaptiveSettings| {
+        case.adaptive_campaign(&file, &request.vut, 0.1, settings, &rule, 5)
+            .unwrap()
+    };
+    let own = in_process(AdaptiveSettings {
+        lattice: true,
+        ..AdaptiveSettings::default()
+    });
+    let grid = in_process(AdaptiveSettings::default());
+    // The grid search walks the failure region cell by cell.
+    assert!(
+        2 * own.search_tests < grid.search_tests,
+        "lattice {} search tests, grid {}",
+        own.search_tests,
+        grid.search_tests
+    );
+    let id = client.create_campaign(&request).await.unwrap().id;
+    // Killed mid-campaign, the coordinator plans the rest from what it
+    // stored, on the lattice.
+    let started = Instant::now();
+    loop {
+        let view = client.campaign(id).await.unwrap();
+        if view.adaptive.as_ref().map_or(0, |a| a.stages) >= 3 || view.status.is_final() {
+            assert_eq!(
+                view.status,
+                CampaignStatus::Running,
+                "killed too late: {view:?}"
+            );
+            break;
+        }
+        assert!(started.elapsed() < Duration::from_secs(60), "{view:?}");
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+    server.kill();
+    let server = ServerProcess::start_on(&database, &address, &[]);
+    let client = server.client();
+    let view = finished(&client, id, Duration::from_secs(300)).await;
+    assert_eq!(view.status, CampaignStatus::Converged, "{view:?}");
+    assert_same_adaptive(&view, &own);
+    stages_and_history_agree(&client, &view).await;
+    assert_eq!(
+        view.adaptive.as_ref().unwrap().search,
+        tslg_api::AdaptiveSearch::Lattice
+    );
+    // A plain adaptive campaign says it searched the grid.
+    let plain = client
+        .create_campaign(&CreateCampaign {
+            adaptive_search: None,
+            max_tests: 100,
+            ..request.clone()
+        })
+        .await
+        .unwrap();
+    assert_eq!(
+        plain.adaptive.unwrap().search,
+        tslg_api::AdaptiveSearch::Grid
+    );
+
+    // Refused where nothing searches.
+    let refused = client
+        .create_campaign(&CreateCampaign {
+            method: Method::Library,
+            ..request.clone()
+        })
+        .await
+        .unwrap_err()
+        .to_string();
+    assert!(
+        refused.contains("422") && refused.contains("adaptive_search chooses"),
+        "{refused}"
+    );
+    let library_id = library.id.to_string();
+    let o = tslg(&[
+        "campaign",
+        "start",
+        "--server",
+        &server.url,
+        "--library-id",
+        &library_id,
+        "--vut",
+        "mobil",
+        "--adaptive-search",
+        "lattice",
+    ]);
+    let said = String::from_utf8_lossy(&o.stderr);
+    assert!(clean_refusal(&o), "{said}");
+    assert!(said.contains("use it with --method adaptive"), "{said}");
+}

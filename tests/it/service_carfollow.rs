@@ -31,6 +31,7 @@ fn request(method: Method, library_id: i64, vut: &str, seed: u64) -> CreateCampa
         paired_with: None,
         split: None,
         vehicle_noise: false,
+        adaptive_search: None,
     }
 }
 

@@ -41,6 +41,7 @@ fn request(
         paired_with: None,
         split: None,
         vehicle_noise: false,
+        adaptive_search: None,
     }
 }
 

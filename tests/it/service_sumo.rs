@@ -140,6 +140,7 @@ async fn a_sumo_vehicle_is_a_surrogate_and_its_library_and_ndd_campaigns_agree()
         interval: Default::default(),
         paired_with: None,
         vehicle_noise: false,
+        adaptive_search: None,
     };
     let mut views = Vec::new();
     for (method, seed) in [(Method::Library, 1), (Method::Ndd, 2)] {

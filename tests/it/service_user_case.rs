@@ -140,6 +140,7 @@ async fn a_user_defined_case_is_defined_listed_and_run_by_workers_offering_its_p
         interval: Default::default(),
         paired_with: None,
         vehicle_noise: false,
+        adaptive_search: None,
     };
     let view = client.create_campaign(&request).await.unwrap();
     assert_eq!(
@@ -381,6 +382,7 @@ async fn a_program_surrogates_library_is_built_by_workers_and_is_the_offline_one
             interval: Default::default(),
             paired_with: None,
             vehicle_noise: false,
+            adaptive_search: None,
         })
         .await
         .unwrap()

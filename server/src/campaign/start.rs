@@ -81,6 +81,13 @@ pub fn rule_of(req: &CreateCampaign) -> Result<StoppingRule, ServiceError> {
             req.case
         )));
     }
+    if req.adaptive_search.is_some() && req.method != Method::Adaptive {
+        return Err(bad(format!(
+            "adaptive_search chooses how an adaptive campaign searches around its failures; method \
+             `{}` does not search: leave it out, or use method `adaptive`",
+            req.method.as_str()
+        )));
+    }
     if req.paired_with.is_some() && !matches!(req.method, Method::Library | Method::Ndd) {
         return Err(bad(format!(
             "paired_with runs methods `library` and `ndd`: an {} campaign's stages follow \
@@ -99,12 +106,12 @@ pub fn rule_of(req: &CreateCampaign) -> Result<StoppingRule, ServiceError> {
         && !(case.is_grid() && matches!(req.method, Method::Library | Method::Ndd))
     {
         return Err(bad(format!(
-            "interval `anytime` applies to the library and ndd campaigns of the grid cases              ({}): {}",
+            "interval `anytime` applies to the library and ndd campaigns of the grid cases ({}): {}",
             grid_cases(),
             if !case.is_grid() {
                 "a car-following test's weight has no known largest value to bet against"
             } else {
-                "an adaptive campaign's stages and a library build have no confidence                  sequence yet"
+                "an adaptive campaign's stages and a library build have no confidence sequence yet"
             }
         )));
     }
@@ -120,7 +127,7 @@ pub fn rule_of(req: &CreateCampaign) -> Result<StoppingRule, ServiceError> {
     }
     if req.interval == IntervalKind::Anytime && req.paired_with.is_some() {
         return Err(bad(
-            "paired_with stops on the difference of two rates at its looks; interval              `anytime` is a sequence for one rate: run the two campaigns apart",
+            "paired_with stops on the difference of two rates at its looks; interval `anytime` is a sequence for one rate: run the two campaigns apart",
         ));
     }
     if req.guard_outside && !case.is_grid() {
@@ -205,10 +212,7 @@ fn open(
             file,
             &vut,
             req.epsilon,
-            AdaptiveSettings {
-                noisy: req.vehicle_noise,
-                ..AdaptiveSettings::default()
-            },
+            wire::adaptive_settings(req.vehicle_noise, req.adaptive_search.unwrap_or_default()),
             rule,
             req.seed,
         )?),
@@ -374,6 +378,7 @@ fn new_campaign(
         parameters_inert: opened.parameters_inert,
         // A built-in vehicle of a pair stays exactly replayed.
         vehicle_noise: req.vehicle_noise && external,
+        search: req.adaptive_search.unwrap_or_default(),
         first_stage: (req.method == Method::Adaptive).then(|| {
             (
                 0,

@@ -11,7 +11,6 @@ use anyhow::Context;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use tslg_api::Method;
-use tslg_method::adaptive::AdaptiveSettings;
 use tslg_method::cases::open_case;
 use tslg_method::registry::CampaignTests;
 
@@ -128,10 +127,7 @@ fn build(row: &CampaignRow, file: Option<&[u8]>) -> anyhow::Result<Arc<dyn Campa
             file,
             &vut,
             row.epsilon,
-            AdaptiveSettings {
-                noisy: row.vehicle_noise,
-                ..AdaptiveSettings::default()
-            },
+            tslg_client::wire::adaptive_settings(row.vehicle_noise, row.adaptive_search),
             &row.rule(),
             row.seed(),
         )?);

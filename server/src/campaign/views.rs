@@ -137,6 +137,7 @@ pub fn campaign_view(row: &CampaignRow) -> CampaignView {
                 _ => None,
             },
             support: row.support as u64,
+            search: row.adaptive_search,
         }),
         warnings: if row.tests > 1 {
             let found = warnings(

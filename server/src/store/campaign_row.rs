@@ -14,7 +14,7 @@ use crate::store::error::StoreError;
 use rusqlite::types::FromSql;
 use rusqlite::{Connection, Params, Row};
 use serde::de::{DeserializeOwned, IntoDeserializer};
-use tslg_api::{CampaignStatus, ExposureRequest, Method, Outside, Split};
+use tslg_api::{AdaptiveSearch, CampaignStatus, ExposureRequest, Method, Outside, Split};
 use tslg_method::estimator::{ImportanceEstimator, Interval, StoppingRule};
 use tslg_method::outside::OutsideTally;
 use tslg_method::prefix::PrefixFold;
@@ -101,6 +101,8 @@ pub struct CampaignRow {
     /// The test from which nearly every test explores, once the campaign
     /// switched (`tslg_method::sampling::allocated_explores`).
     pub explore_from: Option<i64>,
+    /// How an adaptive campaign searches (`grid`, `lattice`).
+    pub adaptive_search: AdaptiveSearch,
     pub created_at: String,
     pub updated_at: String,
 }
@@ -119,7 +121,8 @@ pub const COLUMNS: &str = "id, case_name, preset, \
     outside_mismatches, \
     cost_per_test, worker_seconds, audits_waived, reported_s1, exact_probability, \
     stage_start, stage_end, stage_kind, library_tests, search_tests, stages, support, paired_with, created_at, \
-    updated_at, vehicle_noise, interval, sequence_low, sequence_high, explore_from, outside_s2, parameters_inert";
+    updated_at, vehicle_noise, interval, sequence_low, sequence_high, explore_from, outside_s2, parameters_inert, \
+    adaptive_search";
 
 impl CampaignRow {
     pub fn seed(&self) -> u64 {
@@ -307,12 +310,13 @@ fn from_row(row: &Row<'_>) -> rusqlite::Result<CampaignRow> {
         explore_from: at(row, 55)?,
         outside_s2: at(row, 56)?,
         parameters_inert: at(row, 57)?,
+        adaptive_search: named(row, 58)?,
     })
 }
 
 /// The number of columns [`from_row`] reads.
 #[cfg(test)]
-const READ: usize = 58;
+const READ: usize = 59;
 
 #[cfg(test)]
 mod tests {

@@ -8,7 +8,7 @@ use crate::store::error::StoreError;
 use crate::store::states::{CAMPAIGN_CANCELLED, CAMPAIGN_FAILED, CAMPAIGN_RUNNING};
 use const_format::formatcp;
 use rusqlite::{params, Connection};
-use tslg_api::{CampaignStatus, Method, Outside, Split};
+use tslg_api::{AdaptiveSearch, CampaignStatus, Method, Outside, Split};
 use tslg_method::estimator::StoppingRule;
 
 /// A validated campaign to insert.
@@ -35,6 +35,8 @@ pub struct NewCampaign {
     pub parameters_inert: Option<bool>,
     /// Its program's runs may differ: audits compare by statistics.
     pub vehicle_noise: bool,
+    /// How an adaptive campaign searches (`grid` for the others).
+    pub search: AdaptiveSearch,
     /// An adaptive campaign's first stage: its tests `start..end` and kind.
     pub first_stage: Option<(u64, u64, &'static str)>,
 }
@@ -45,8 +47,8 @@ pub fn insert(conn: &Connection, new: &NewCampaign) -> Result<CampaignRow, Store
          exposure_fingerprint, exposure_table, vut, requires, epsilon, outside, beta, confidence, \
          n_min, min_events, max_tests, seed, status, guard_outside, exact_probability, split, \
          adaptive, stage_start, stage_end, stage_kind, enumerate, cost_per_test, vehicle_noise, \
-         interval, outside_s2, parameters_inert) \
-         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, 0, ?) \
+         interval, outside_s2, parameters_inert, adaptive_search) \
+         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, 0, ?, ?) \
          RETURNING {COLUMNS}"
     );
     let adaptive = new.method == Method::Adaptive;
@@ -106,6 +108,7 @@ pub fn insert(conn: &Connection, new: &NewCampaign) -> Result<CampaignRow, Store
             new.vehicle_noise,
             new.rule.interval.name(),
             new.parameters_inert,
+            new.search.as_str(),
         ],
     )?)
 }

@@ -2,7 +2,7 @@
 //! coordinator, and watched with a progress bar until it stops, as a gate
 //! when `--fail-above` is given.
 
-use crate::args::{ExplorationArgs, OutsideArg, RuleArgs, ServerArgs};
+use crate::args::{AdaptiveSearchArg, ExplorationArgs, OutsideArg, RuleArgs, ServerArgs};
 use crate::commands::gate;
 use crate::commands::progress::CampaignBars;
 use crate::commands::remote::{block_on, client, print_campaign as print, vehicle_json};
@@ -48,6 +48,13 @@ pub struct CampaignStartArgs {
     /// (docs/statistics.md, "Noisy vehicles").
     #[arg(long)]
     pub vehicle_noise: bool,
+    /// How an adaptive campaign searches: `grid` (every neighbour of a
+    /// failure or near miss; the default) or `lattice` (a fine grid's
+    /// coarser lattice, whole blocks into the support: far cheaper on
+    /// highway-exit's paper grid, blind to failures in sheets thinner than
+    /// a block; docs/adaptive-design.md, "Fine grids").
+    #[arg(long, value_enum)]
+    pub adaptive_search: Option<AdaptiveSearchArg>,
     /// Wait until the campaign stops, showing progress.
     #[arg(long)]
     pub wait: bool,
@@ -101,6 +108,11 @@ pub fn start(args: &CampaignStartArgs) -> anyhow::Result<()> {
         interval: tslg_client::wire::wire_interval(args.rule.interval),
         paired_with: args.paired_with.as_deref().map(vehicle_json).transpose()?,
         vehicle_noise: args.vehicle_noise,
+        adaptive_search: AdaptiveSearchArg::for_method(
+            args.adaptive_search,
+            args.method == MethodArg::Adaptive,
+        )?
+        .map(AdaptiveSearchArg::wire),
     };
     if let Some(limit) = args.fail_above {
         gate::check_limit(limit)?;

@@ -20,8 +20,8 @@ use crate::commands::local::{build_library, exact_report, watch_campaigns, Exact
 use crate::commands::remote::exposure_request;
 use std::path::PathBuf;
 use tslg_api::{
-    CampaignView, CreateCampaign, CreateLibrary, ExposureRequest, LibraryView, Method, Outside,
-    SearchRequest,
+    AdaptiveSearch, CampaignView, CreateCampaign, CreateLibrary, ExposureRequest, LibraryView,
+    Method, Outside, SearchRequest,
 };
 use tslg_client::Client;
 use tslg_method::estimator::z_for_confidence;
@@ -247,6 +247,7 @@ impl Vehicle<'_> {
             interval: Default::default(),
             paired_with: None,
             vehicle_noise: false,
+            adaptive_search: None,
         }
     }
 
@@ -259,6 +260,11 @@ impl Vehicle<'_> {
         let ids = self.start(client, replicates).await?;
         let label = format!("{} {}", setting.case, self.label);
         let mut library_runs = watch(client, &ids, &label).await?;
+        let lattice_runs = if self.searches_lattice() {
+            library_runs.split_off(library_runs.len() - replicates as usize)
+        } else {
+            Vec::new()
+        };
         let adaptive_runs = if grid {
             library_runs.split_off(library_runs.len() - replicates as usize)
         } else {
@@ -300,6 +306,7 @@ impl Vehicle<'_> {
             library_runs,
             guarded_run,
             adaptive_runs,
+            lattice_runs,
             ndd_run,
             ndd_tests,
             ndd_source,
@@ -308,11 +315,21 @@ impl Vehicle<'_> {
         })
     }
 
+    /// Whether its adaptive campaigns also search a coarser lattice: on a
+    /// grid too fine to search cell by cell (highway-exit's paper grid;
+    /// docs/adaptive-design.md, "Fine grids"). On a smaller grid the
+    /// lattice is the grid and the campaigns would repeat the grid's.
+    fn searches_lattice(&self) -> bool {
+        self.setting.grid
+            && self.library.total_scenarios > tslg_method::adaptive::MAX_LATTICE_POINTS as u64
+    }
+
     /// Starts the seeded library campaigns and, on grid cases, one that
     /// does not assume the library covers the vehicle's failures (the
     /// outside guard, with ε 0.5 spread by the exposure so exploring tests
     /// weigh at most P(X∖Φ)/ε) and as many adaptive campaigns, same seeds
-    /// (stages that learn where this vehicle fails; docs/statistics.md).
+    /// (stages that learn where this vehicle fails; docs/statistics.md),
+    /// then on a fine grid as many that search its lattice.
     async fn start(&self, client: &Client, replicates: u64) -> anyhow::Result<Vec<i64>> {
         let mut ids = Vec::new();
         for k in 0..replicates {
@@ -327,6 +344,15 @@ impl Vehicle<'_> {
             ids.push(client.create_campaign(&request).await?.id);
             for k in 0..replicates {
                 let request = self.request(Method::Adaptive, self.seed + k);
+                ids.push(client.create_campaign(&request).await?.id);
+            }
+        }
+        if self.searches_lattice() {
+            for k in 0..replicates {
+                let request = CreateCampaign {
+                    adaptive_search: Some(AdaptiveSearch::Lattice),
+                    ..self.request(Method::Adaptive, self.seed + k)
+                };
                 ids.push(client.create_campaign(&request).await?.id);
             }
         }

@@ -33,6 +33,10 @@ pub struct Row {
     /// Adaptive campaigns, one per seed of the library campaigns (grid
     /// cases; none for car-following).
     pub adaptive_runs: Vec<CampaignView>,
+    /// Adaptive campaigns that search the grid's coarser lattice, one per
+    /// seed, on a grid finer than [`tslg_method::adaptive::MAX_LATTICE_POINTS`]
+    /// cells; none elsewhere.
+    pub lattice_runs: Vec<CampaignView>,
     pub ndd_run: Option<CampaignView>,
     pub ndd_tests: f64,
     pub ndd_source: NddSource,

@@ -18,26 +18,22 @@ impl Row {
         *lower_median(&self.library_tests()).expect("at least one library campaign")
     }
 
-    /// The plain library campaigns, the guarded one, then the adaptive ones.
+    /// The plain library campaigns, the guarded one, then the adaptive ones
+    /// (the grid's search, then the lattice's).
     fn campaigns(&self) -> impl Iterator<Item = &CampaignView> {
         self.library_runs
             .iter()
             .chain(&self.guarded_run)
             .chain(&self.adaptive_runs)
+            .chain(&self.lattice_runs)
     }
 
-    /// The adaptive campaigns' test counts (every test: library, search and
-    /// estimation), sorted.
-    fn adaptive_tests(&self) -> Vec<u64> {
-        let mut tests: Vec<u64> = self.adaptive_runs.iter().map(|v| v.indices).collect();
+    /// Median tests of adaptive campaigns `runs` (every test: library,
+    /// search and estimation), their range, and NDD tests / median; `-`
+    /// without campaigns.
+    fn adaptive_summary(&self, runs: &[CampaignView]) -> (String, String) {
+        let mut tests: Vec<u64> = runs.iter().map(|v| v.indices).collect();
         tests.sort_unstable();
-        tests
-    }
-
-    /// Median adaptive tests, their range, and NDD tests / median; `-`
-    /// without adaptive campaigns.
-    fn adaptive_summary(&self) -> (String, String) {
-        let tests = self.adaptive_tests();
         match lower_median(&tests) {
             Some(&median) => (
                 format!("{median} ({}–{})", tests[0], tests[tests.len() - 1]),
@@ -47,17 +43,27 @@ impl Row {
         }
     }
 
-    /// How many adaptive intervals contain the exact `P(A)`.
-    fn adaptive_covering(&self) -> Option<usize> {
+    /// How many of the intervals of `runs` contain the exact `P(A)`.
+    fn adaptive_covering(&self, runs: &[CampaignView]) -> Option<usize> {
         let p = self.exact?.probability;
         Some(
-            self.adaptive_runs
-                .iter()
+            runs.iter()
                 .filter(
                     |v| matches!((v.ci_low, v.ci_high), (Some(lo), Some(hi)) if lo <= p && p <= hi),
                 )
                 .count(),
         )
+    }
+
+    /// The adaptive searches this row ran, by name, with their campaigns.
+    fn searches(&self) -> Vec<(&'static str, &[CampaignView])> {
+        [
+            ("grid", self.adaptive_runs.as_slice()),
+            ("lattice", self.lattice_runs.as_slice()),
+        ]
+        .into_iter()
+        .filter(|(_, runs)| !runs.is_empty())
+        .collect()
     }
 
     /// NDD tests / median library tests.
@@ -143,7 +149,7 @@ pub fn markdown(rows: &[Row], replicates: u64, budget: u64) -> String {
     for row in rows {
         let tests = row.library_tests();
         let paper = row.paper;
-        let (adaptive_tests, adaptive_ratio) = row.adaptive_summary();
+        let (adaptive_tests, adaptive_ratio) = row.adaptive_summary(&row.adaptive_runs);
         let _ = writeln!(
             out,
             "| {} | {} of {} ({}) | {} | {} | {} | {} ({}–{}) | {} | {} | {adaptive_tests} | {} | {} | {} | {adaptive_ratio} | {} | {} / {} ({:.0}) |",
@@ -190,7 +196,7 @@ pub fn markdown(rows: &[Row], replicates: u64, budget: u64) -> String {
                 .map_or("- (no exact answer)".into(), |(plain, guarded)| {
                     format!(
                         "{plain}/{n}, {guarded}/{n}, {}/{}",
-                        row.adaptive_covering().unwrap_or(0),
+                        row.adaptive_covering(&row.adaptive_runs).unwrap_or(0),
                         row.adaptive_runs.len(),
                         n = row.library_runs.len()
                     )
@@ -214,6 +220,32 @@ pub fn markdown(rows: &[Row], replicates: u64, budget: u64) -> String {
     out += "\nAdaptive campaigns count every test they ran (library, search and estimation); \
             their interval assumes the vehicle's failures outside the library are reachable \
             through failures and near misses from what the tests met.\n";
+    out += "\n## Adaptive searches\n\n";
+    out += "On a grid of more than 16,384 cells the adaptive campaigns also search its coarser \
+            lattice (`search: lattice`; docs/adaptive-design.md, \"Fine grids\"): whole blocks \
+            join the support untested, so the search costs the failure region's volume in \
+            blocks, and failures in sheets thinner than a block go unseen. Ratio = NDD tests / \
+            median tests.\n\n";
+    out +=
+        "| case | vehicle | search | tests: median (range) | ratio | intervals covering P(A) |\n";
+    out += &"|---".repeat(6);
+    out += "|\n";
+    for row in rows {
+        for (search, runs) in row.searches() {
+            let (tests, ratio) = row.adaptive_summary(runs);
+            let _ = writeln!(
+                out,
+                "| {} | {} | {search} | {tests} | {ratio} | {} |",
+                row.case,
+                row.vehicle,
+                row.adaptive_covering(runs)
+                    .map_or("- (no exact answer)".into(), |k| format!(
+                        "{k} of {}",
+                        runs.len()
+                    )),
+            );
+        }
+    }
     out += "\n## Library campaigns\n\n";
     out += "| case | vehicle | campaign | seed | status | tests | events | \
             estimate [90% interval] | outside tests, events | U | guarded high | warnings |\n";
@@ -254,10 +286,14 @@ pub fn markdown(rows: &[Row], replicates: u64, budget: u64) -> String {
 }
 
 /// How a campaign sampled: the plain library campaign, the guarded one
-/// (ε 0.5 spread by the exposure, the outside guard on), or adaptive.
+/// (ε 0.5 spread by the exposure, the outside guard on), or adaptive
+/// (searching the grid or its lattice).
 fn kind(view: &CampaignView) -> &'static str {
-    if view.method == tslg_api::Method::Adaptive {
-        "adaptive"
+    if let Some(adaptive) = &view.adaptive {
+        match adaptive.search {
+            tslg_api::AdaptiveSearch::Grid => "adaptive",
+            tslg_api::AdaptiveSearch::Lattice => "adaptive-lattice",
+        }
     } else if view.guard_outside {
         "library-guarded"
     } else {

@@ -386,6 +386,7 @@ pub fn campaign(
         interval: Default::default(),
         paired_with: None,
         vehicle_noise: false,
+        adaptive_search: None,
     }
 }
 
