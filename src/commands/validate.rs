@@ -68,7 +68,9 @@ pub struct ValidateArgs {
     /// campaign), guarded (with the outside guard, outside spread ndd),
     /// adaptive (docs/adaptive-design.md), adaptive-guarded (adaptive,
     /// exploring until the bound on what its support leaves out is within
-    /// β). Writes methods.csv.
+    /// β), adaptive-lattice (searching a fine grid's coarser lattice;
+    /// docs/adaptive-design.md, "Fine grids"), adaptive-lattice-guarded
+    /// (the lattice search under the guard). Writes methods.csv.
     #[arg(long, value_delimiter = ',', value_enum, default_values_t = [ValidateMethod::Plain])]
     pub methods: Vec<ValidateMethod>,
     /// The intervals to compare (comma-separated): wald (valid at the
@@ -136,6 +138,8 @@ pub enum ValidateMethod {
     /// lattice (highway-exit's paper grid: its coarse grid) and puts whole
     /// blocks in its support (docs/adaptive-design.md, "Fine grids").
     AdaptiveLattice,
+    /// The lattice search under the outside guard.
+    AdaptiveLatticeGuarded,
 }
 
 impl ValidateMethod {
@@ -146,13 +150,17 @@ impl ValidateMethod {
             ValidateMethod::Adaptive => "adaptive",
             ValidateMethod::AdaptiveGuarded => "adaptive-guarded",
             ValidateMethod::AdaptiveLattice => "adaptive-lattice",
+            ValidateMethod::AdaptiveLatticeGuarded => "adaptive-lattice-guarded",
         }
     }
 
     /// The settings of its adaptive campaigns.
     fn settings(self) -> AdaptiveSettings {
         AdaptiveSettings {
-            lattice: self == ValidateMethod::AdaptiveLattice,
+            lattice: matches!(
+                self,
+                ValidateMethod::AdaptiveLattice | ValidateMethod::AdaptiveLatticeGuarded
+            ),
             ..AdaptiveSettings::default()
         }
     }
@@ -164,6 +172,7 @@ impl ValidateMethod {
             ValidateMethod::Adaptive
                 | ValidateMethod::AdaptiveGuarded
                 | ValidateMethod::AdaptiveLattice
+                | ValidateMethod::AdaptiveLatticeGuarded
         )
     }
 
@@ -172,7 +181,9 @@ impl ValidateMethod {
     fn guarded(self) -> bool {
         matches!(
             self,
-            ValidateMethod::Guarded | ValidateMethod::AdaptiveGuarded
+            ValidateMethod::Guarded
+                | ValidateMethod::AdaptiveGuarded
+                | ValidateMethod::AdaptiveLatticeGuarded
         )
     }
 }
@@ -532,6 +543,7 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
             ValidateMethod::Adaptive,
             ValidateMethod::AdaptiveGuarded,
             ValidateMethod::AdaptiveLattice,
+            ValidateMethod::AdaptiveLatticeGuarded,
         ] {
             if args.methods.contains(&adaptive) {
                 variants.push((adaptive, args.epsilon, case.default_outside()));
