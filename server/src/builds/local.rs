@@ -21,7 +21,7 @@ fn build(req: &CreateLibrary, progress: &Progress) -> Result<(BuiltLibrary, f64)
     .map_err(|e| e.to_string())?;
     let request = build_request(req)?;
     let library = case
-        .build_library_observed(&req.surrogate, &request, progress)
+        .build_library_observed(&tslg_api::vehicle_spec(&req.surrogate), &request, progress)
         .map_err(|e| e.to_string())?;
     Ok((library, started.elapsed().as_secs_f64()))
 }

@@ -481,6 +481,28 @@ async fn campaigns_take_a_vehicle_name_and_the_default_budget_and_list_by_state(
             "{problem}"
         );
     }
+
+    // A library's surrogate may be named alone too, and it builds (it was
+    // accepted, then failed: "invalid type: string").
+    let (status, library) = app
+        .call(
+            "POST",
+            "/api/v1/libraries",
+            Some(json!({"case": "cut-in", "surrogate": "idm"})),
+        )
+        .await;
+    assert_eq!(status, StatusCode::ACCEPTED, "{library}");
+    let path = format!("/api/v1/libraries/{}", library["id"]);
+    let mut library = library;
+    for _ in 0..600 {
+        if library["status"] != "building" {
+            break;
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+        library = app.call("GET", &path, None).await.1;
+    }
+    assert_eq!(library["status"], "ready", "{library}");
+    assert_eq!(library["surrogate"]["model"], "idm", "{library}");
 }
 
 /// The requests that make work claimable wake the lease requests waiting
