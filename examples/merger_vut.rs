@@ -6,7 +6,7 @@
 //!
 //! ```sh
 //! cargo build --release --example merger_vut
-//! tslg validate --cases highway-exit --methods adaptive,adaptive-guarded \
+//! tslg validate --quick --cases highway-exit --methods adaptive,adaptive-guarded \
 //!     --vut-exec merger=target/release/examples/merger_vut
 //! ```
 //!

@@ -191,7 +191,7 @@ impl AdaptiveSearchArg {
         }
     }
 
-    /// `--search` checked against the method: only adaptive campaigns
+    /// `--adaptive-search` checked against the method: only adaptive campaigns
     /// search.
     pub fn for_method(search: Option<Self>, adaptive: bool) -> anyhow::Result<Option<Self>> {
         anyhow::ensure!(

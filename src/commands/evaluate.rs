@@ -110,8 +110,9 @@ struct Search {
     assumes: &'static str,
     #[serde(skip)]
     search_kind: &'static str,
-    /// `grid` or `lattice` (`--adaptive-search`; grid cases).
-    adaptive_search: &'static str,
+    /// `grid` or `lattice` (`--adaptive-search`); grid cases only.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    adaptive_search: Option<&'static str>,
 }
 
 /// What a campaign runs on, worked out from the arguments: the case (the
@@ -276,11 +277,12 @@ fn run_campaign(
                 support_cells: support.len(),
                 assumes,
                 search_kind,
-                adaptive_search: args
-                    .adaptive_search
-                    .unwrap_or(AdaptiveSearchArg::Grid)
-                    .wire()
-                    .as_str(),
+                adaptive_search: setup.descriptor.is_grid().then(|| {
+                    args.adaptive_search
+                        .unwrap_or(AdaptiveSearchArg::Grid)
+                        .wire()
+                        .as_str()
+                }),
             };
             (result, Some(search))
         }
@@ -357,8 +359,8 @@ fn print(report: &Report, rule: &StoppingRule) {
     outln!("status             {}", result.status.as_str());
     match &report.search {
         Some(search) => {
-            if report.grid {
-                outln!("search             {}", search.adaptive_search);
+            if let Some(adaptive_search) = search.adaptive_search {
+                outln!("search             {adaptive_search}");
             }
             outln!(
                 "tests              {} ({} library, {} {}, {} estimating; {} stages)",

@@ -784,8 +784,8 @@ fn evaluate_searches_the_paper_grid_on_its_lattice_when_asked() {
         lib,
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let run = |search: &str| -> (String, serde_json::Value) {
-        let o = tslg(&[
+    let run = |search: &str, json: bool| -> Output {
+        let mut args = vec![
             "evaluate",
             "--library",
             lib,
@@ -795,28 +795,19 @@ fn evaluate_searches_the_paper_grid_on_its_lattice_when_asked() {
             search,
             "--vut",
             "mobil",
-        ]);
+        ];
+        if json {
+            args.push("--json");
+        }
+        let o = tslg(&args);
         assert!(o.status.success(), "{}", stderr(&o));
-        let text = stdout(&o);
-        let o = tslg(&[
-            "evaluate",
-            "--library",
-            lib,
-            "--method",
-            "adaptive",
-            "--adaptive-search",
-            search,
-            "--vut",
-            "mobil",
-            "--json",
-        ]);
-        assert!(o.status.success(), "{}", stderr(&o));
-        (text, serde_json::from_slice(&o.stdout).unwrap())
+        o
     };
-    let (grid_text, grid) = run("grid");
-    let (lattice_text, lattice) = run("lattice");
-    assert_eq!(field(&grid_text, "search"), "grid");
-    assert_eq!(field(&lattice_text, "search"), "lattice");
+    let json = |o: Output| -> serde_json::Value { serde_json::from_slice(&o.stdout).unwrap() };
+    let grid = json(run("grid", true));
+    let lattice = json(run("lattice", true));
+    assert_eq!(field(&stdout(&run("lattice", false)), "search"), "lattice");
+    assert_eq!(grid["search"]["adaptive_search"], "grid");
     assert_eq!(lattice["search"]["adaptive_search"], "lattice");
     let searched = |r: &serde_json::Value| r["search"]["search_tests"].as_u64().unwrap();
     assert!(

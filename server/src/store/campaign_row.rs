@@ -339,11 +339,11 @@ mod tests {
                      max_tests, seed, status, next_index, requires, exposure_table, \
                      strata_epsilon, cost_per_test, guard_outside, outside, split, adaptive, \
                      stage_start, stage_end, stage_kind, exact_probability, outside_upper, \
-                     status_detail) \
+                     status_detail, adaptive_search) \
                      VALUES ('cut-in', 'paper-code', 'library', 'builtin', 'fp', \
                      '{\"model\":\"idm\"}', 0.1, 0.05, 0.9, 100, 10, 1000000, 7, 'running', \
                      300, 'py:cut-in:step', 'table', 0.1, 2.5e-7, 1, 'ndd', 'stratified', 1, 0, \
-                     4096, 'search', 9.3e-4, 1e-5, 'why')",
+                     4096, 'search', 9.3e-4, 1e-5, 'why', 'lattice')",
                 )?;
                 let text = format!("SELECT {COLUMNS} FROM campaigns");
                 let by_name: CampaignRow = sql::one(conn, &text, [])?;
@@ -357,5 +357,9 @@ mod tests {
         assert_eq!(count, READ);
         assert_eq!(by_position.method, tslg_api::Method::Adaptive);
         assert_eq!(by_position.split, tslg_api::Split::Stratified);
+        assert_eq!(
+            by_position.adaptive_search,
+            tslg_api::AdaptiveSearch::Lattice
+        );
     }
 }

@@ -220,31 +220,8 @@ pub fn markdown(rows: &[Row], replicates: u64, budget: u64) -> String {
     out += "\nAdaptive campaigns count every test they ran (library, search and estimation); \
             their interval assumes the vehicle's failures outside the library are reachable \
             through failures and near misses from what the tests met.\n";
-    out += "\n## Adaptive searches\n\n";
-    out += "On a grid of more than 16,384 cells the adaptive campaigns also search its coarser \
-            lattice (`search: lattice`; docs/adaptive-design.md, \"Fine grids\"): whole blocks \
-            join the support untested, so the search costs the failure region's volume in \
-            blocks, and failures in sheets thinner than a block go unseen. Ratio = NDD tests / \
-            median tests.\n\n";
-    out +=
-        "| case | vehicle | search | tests: median (range) | ratio | intervals covering P(A) |\n";
-    out += &"|---".repeat(6);
-    out += "|\n";
-    for row in rows {
-        for (search, runs) in row.searches() {
-            let (tests, ratio) = row.adaptive_summary(runs);
-            let _ = writeln!(
-                out,
-                "| {} | {} | {search} | {tests} | {ratio} | {} |",
-                row.case,
-                row.vehicle,
-                row.adaptive_covering(runs)
-                    .map_or("- (no exact answer)".into(), |k| format!(
-                        "{k} of {}",
-                        runs.len()
-                    )),
-            );
-        }
+    if rows.iter().any(|r| !r.searches().is_empty()) {
+        adaptive_searches(&mut out, rows);
     }
     out += "\n## Library campaigns\n\n";
     out += "| case | vehicle | campaign | seed | status | tests | events | \
@@ -283,6 +260,42 @@ pub fn markdown(rows: &[Row], replicates: u64, budget: u64) -> String {
         );
     }
     out
+}
+
+/// The "Adaptive searches" section: each adaptive search a row ran (the
+/// grid's, and the lattice's on a fine grid), its tests, ratio and
+/// coverage.
+fn adaptive_searches(out: &mut String, rows: &[Row]) {
+    *out += "\n## Adaptive searches\n\n";
+    let _ = write!(
+        out,
+        "On a grid of more than {} cells the adaptive campaigns also search its coarser \
+         lattice (`adaptive_search: lattice`; docs/adaptive-design.md, \"Fine grids\"): whole \
+         blocks join the support untested, so the search costs the failure region's volume in \
+         blocks, and failures in sheets thinner than a block go unseen. Ratio = NDD tests / \
+         median tests.\n\n",
+        tslg_method::adaptive::MAX_LATTICE_POINTS
+    );
+    *out +=
+        "| case | vehicle | search | tests: median (range) | ratio | intervals covering P(A) |\n";
+    *out += &"|---".repeat(6);
+    *out += "|\n";
+    for row in rows {
+        for (search, runs) in row.searches() {
+            let (tests, ratio) = row.adaptive_summary(runs);
+            let _ = writeln!(
+                out,
+                "| {} | {} | {search} | {tests} | {ratio} | {} |",
+                row.case,
+                row.vehicle,
+                row.adaptive_covering(runs)
+                    .map_or("- (no exact answer)".into(), |k| format!(
+                        "{k} of {}",
+                        runs.len()
+                    )),
+            );
+        }
+    }
 }
 
 /// How a campaign sampled: the plain library campaign, the guarded one
