@@ -11,7 +11,6 @@ use crate::inputs::{
 use clap::{Args, ValueEnum};
 use serde::Serialize;
 use std::path::PathBuf;
-use tslg_method::adaptive::AdaptiveSettings;
 use tslg_method::campaign::{run_campaign_tests, CampaignResult};
 use tslg_method::estimator::{Interval, StoppingRule};
 use tslg_method::registry::{AdaptiveRun, ScenarioCase};
@@ -248,14 +247,12 @@ fn run_campaign(
     } = setup;
     Ok(match (args.method, setup.file.as_deref()) {
         (MethodArg::Adaptive, Some(file)) => {
+            let search = args.adaptive_search.unwrap_or(AdaptiveSearchArg::Grid);
             let run = case.adaptive_campaign(
                 file,
                 vut,
                 args.exploration.epsilon,
-                AdaptiveSettings {
-                    lattice: args.adaptive_search == Some(AdaptiveSearchArg::Lattice),
-                    ..AdaptiveSettings::default()
-                },
+                tslg_client::wire::adaptive_settings(false, search.wire()),
                 rule,
                 args.seed,
             )?;
@@ -277,12 +274,7 @@ fn run_campaign(
                 support_cells: support.len(),
                 assumes,
                 search_kind,
-                adaptive_search: setup.descriptor.is_grid().then(|| {
-                    args.adaptive_search
-                        .unwrap_or(AdaptiveSearchArg::Grid)
-                        .wire()
-                        .as_str()
-                }),
+                adaptive_search: setup.descriptor.is_grid().then(|| search.wire().as_str()),
             };
             (result, Some(search))
         }

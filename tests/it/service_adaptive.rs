@@ -156,6 +156,25 @@ async fn stages_and_history_agree(client: &tslg_client::Client, view: &CampaignV
     );
 }
 
+/// Waits until campaign `id` has resolved three stages and is still
+/// running: the moment a test kills its coordinator.
+async fn running_after_three_stages(client: &tslg_client::Client, id: i64) {
+    let started = Instant::now();
+    loop {
+        let view = client.campaign(id).await.unwrap();
+        if view.adaptive.as_ref().map_or(0, |a| a.stages) >= 3 || view.status.is_final() {
+            assert_eq!(
+                view.status,
+                CampaignStatus::Running,
+                "killed too late: {view:?}"
+            );
+            return;
+        }
+        assert!(started.elapsed() < Duration::from_secs(60), "{view:?}");
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+}
+
 fn adaptive(library_id: i64, vut: serde_json::Value, seed: u64) -> CreateCampaign {
     CreateCampaign {
         vut,
@@ -259,21 +278,7 @@ async fn an_adaptive_campaign_through_the_service_is_the_in_process_one() {
     let request = adaptive(library.id, serde_json::json!({"model": "fvdm"}), 11);
     let own = adaptive_in_process(&request, "fvdm");
     let id = client.create_campaign(&request).await.unwrap().id;
-    let started = Instant::now();
-    loop {
-        let view = client.campaign(id).await.unwrap();
-        let stages = view.adaptive.as_ref().map_or(0, |a| a.stages);
-        if stages >= 3 || view.status.is_final() {
-            assert_eq!(
-                view.status,
-                CampaignStatus::Running,
-                "killed too late: {view:?}"
-            );
-            break;
-        }
-        assert!(started.elapsed() < Duration::from_secs(60), "{view:?}");
-        tokio::time::sleep(Duration::from_millis(5)).await;
-    }
+    running_after_three_stages(&client, id).await;
     server.kill();
     let server = ServerProcess::start_on(&database, &address, &["--lease-size", "37"]);
     let client = server.client();
@@ -406,20 +411,7 @@ async fn a_lattice_search_through_the_service_is_the_in_process_one_on_the_paper
     let id = client.create_campaign(&request).await.unwrap().id;
     // Killed mid-campaign, the coordinator plans the rest from what it
     // stored, on the lattice.
-    let started = Instant::now();
-    loop {
-        let view = client.campaign(id).await.unwrap();
-        if view.adaptive.as_ref().map_or(0, |a| a.stages) >= 3 || view.status.is_final() {
-            assert_eq!(
-                view.status,
-                CampaignStatus::Running,
-                "killed too late: {view:?}"
-            );
-            break;
-        }
-        assert!(started.elapsed() < Duration::from_secs(60), "{view:?}");
-        tokio::time::sleep(Duration::from_millis(5)).await;
-    }
+    running_after_three_stages(&client, id).await;
     server.kill();
     let server = ServerProcess::start_on(&database, &address, &[]);
     let client = server.client();

@@ -169,7 +169,7 @@ pub async fn insert_build(
         exact_probability: None,
         parameters_inert: None,
         vehicle_noise: false,
-        search: tslg_api::AdaptiveSearch::Grid,
+        adaptive_search: tslg_api::AdaptiveSearch::Grid,
         first_stage: None,
     };
     Ok(state

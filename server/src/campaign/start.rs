@@ -378,7 +378,7 @@ fn new_campaign(
         parameters_inert: opened.parameters_inert,
         // A built-in vehicle of a pair stays exactly replayed.
         vehicle_noise: req.vehicle_noise && external,
-        search: req.adaptive_search.unwrap_or_default(),
+        adaptive_search: req.adaptive_search.unwrap_or_default(),
         first_stage: (req.method == Method::Adaptive).then(|| {
             (
                 0,

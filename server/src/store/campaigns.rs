@@ -36,7 +36,7 @@ pub struct NewCampaign {
     /// Its program's runs may differ: audits compare by statistics.
     pub vehicle_noise: bool,
     /// How an adaptive campaign searches (`grid` for the others).
-    pub search: AdaptiveSearch,
+    pub adaptive_search: AdaptiveSearch,
     /// An adaptive campaign's first stage: its tests `start..end` and kind.
     pub first_stage: Option<(u64, u64, &'static str)>,
 }
@@ -108,7 +108,7 @@ pub fn insert(conn: &Connection, new: &NewCampaign) -> Result<CampaignRow, Store
             new.vehicle_noise,
             new.rule.interval.name(),
             new.parameters_inert,
-            new.search.as_str(),
+            new.adaptive_search.as_str(),
         ],
     )?)
 }
