@@ -10,6 +10,7 @@ mod carfollow_adaptive;
 mod carfollow_library;
 mod cutin_paper;
 mod external_protocol;
+mod gap_seeker_ceiling;
 mod highway_geometry;
 mod island;
 mod paired;
