@@ -163,6 +163,13 @@ fn script(doc: &str, lines: &[String], url: &str, used: &mut Vec<usize>) -> Stri
             .replace("127.0.0.1:8080", &format!("127.0.0.1:{port}"))
             .replace("http://coordinator:8080", url)
             .replace("../shared/data/", &format!("{}/", table_dir.display()));
+        for built in command.split(&format!("{debug}examples/")).skip(1) {
+            let name = built
+                .split(|c: char| c.is_whitespace() || c == '"' || c == '\'')
+                .next()
+                .unwrap_or_default();
+            built_example(&format!("{doc}: `{line}`"), name);
+        }
         script.push_str(&format!(
             "echo \"[$SECONDS s]\" {} >&2\n",
             shell_quote(&format!("+ {command}"))

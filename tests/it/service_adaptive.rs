@@ -175,6 +175,36 @@ async fn running_after_three_stages(client: &tslg_client::Client, id: i64) {
     }
 }
 
+/// A coordinator on a scratch database with leases of 37 tests (stages of
+/// 100 end inside leases), two workers, and the IDM's exhaustive cut-in
+/// library.
+struct CutInService {
+    _dir: tempfile::TempDir,
+    database: std::path::PathBuf,
+    server: ServerProcess,
+    address: String,
+    _workers: [WorkerProcess; 2],
+    library: tslg_api::LibraryView,
+}
+
+async fn cut_in_service() -> CutInService {
+    let dir = scratch();
+    let database = dir.path().join("db.sqlite");
+    let server = ServerProcess::start(&database, &["--lease-size", "37"]);
+    let address = server.address.clone();
+    let workers = two_workers(&server.url);
+    let client = server.client();
+    let library = ready_library(&client, "idm", true).await;
+    CutInService {
+        _dir: dir,
+        database,
+        server,
+        address,
+        _workers: workers,
+        library,
+    }
+}
+
 fn adaptive(library_id: i64, vut: serde_json::Value, seed: u64) -> CreateCampaign {
     CreateCampaign {
         vut,
@@ -184,14 +214,8 @@ fn adaptive(library_id: i64, vut: serde_json::Value, seed: u64) -> CreateCampaig
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn an_adaptive_campaign_through_the_service_is_the_in_process_one() {
-    let dir = scratch();
-    let database = dir.path().join("db.sqlite");
-    // Leases of 37 tests: stages of 100 end inside leases.
-    let server = ServerProcess::start(&database, &["--lease-size", "37"]);
-    let address = server.address.clone();
-    let _workers = two_workers(&server.url);
-    let client = server.client();
-    let library = ready_library(&client, "idm", true).await;
+    let service = cut_in_service().await;
+    let (client, library) = (service.server.client(), &service.library);
     let exact = exact("fvdm");
 
     // The IDM's library misses most of the FVDM's failures; the adaptive
@@ -220,7 +244,7 @@ async fn an_adaptive_campaign_through_the_service_is_the_in_process_one() {
         "campaign",
         "start",
         "--server",
-        &server.url,
+        &service.server.url,
         "--method",
         "adaptive",
         "--library-id",
@@ -237,7 +261,7 @@ async fn an_adaptive_campaign_through_the_service_is_the_in_process_one() {
     let line = format!(" {} tests {:>6} events", view.indices, view.events);
     assert!(progress.lines().any(|l| l.contains(&line)), "{progress}");
     // So does its line in `campaign list`.
-    let o = tslg(&["campaign", "list", "--server", &server.url]);
+    let o = tslg(&["campaign", "list", "--server", &service.server.url]);
     let list = String::from_utf8_lossy(&o.stdout);
     let row = list
         .lines()
@@ -261,7 +285,7 @@ async fn an_adaptive_campaign_through_the_service_is_the_in_process_one() {
             "watch",
             &id.to_string(),
             "--server",
-            &server.url,
+            &service.server.url,
             "--fail-above",
             &limit.to_string(),
         ]);
@@ -279,8 +303,9 @@ async fn an_adaptive_campaign_through_the_service_is_the_in_process_one() {
     let own = adaptive_in_process(&request, "fvdm");
     let id = client.create_campaign(&request).await.unwrap().id;
     running_after_three_stages(&client, id).await;
-    server.kill();
-    let server = ServerProcess::start_on(&database, &address, &["--lease-size", "37"]);
+    service.server.kill();
+    let server =
+        ServerProcess::start_on(&service.database, &service.address, &["--lease-size", "37"]);
     let client = server.client();
     let view = finished(&client, id, Duration::from_secs(120)).await;
     assert_same_adaptive(&view, &own);
@@ -334,10 +359,7 @@ async fn an_external_program_in_step_mode_runs_the_adaptive_campaign_of_its_buil
     // and the stages planned from them are the built-in FVDM's.
     let dir = scratch();
     let server = ServerProcess::start(&dir.path().join("db.sqlite"), &["--lease-size", "64"]);
-    let bin = std::path::Path::new(env!("CARGO_BIN_EXE_tslg"))
-        .parent()
-        .unwrap()
-        .join("examples/fvdm_vut");
+    let bin = example_binary("fvdm_vut");
     let exec = format!("rs-fvdm={}", bin.display());
     let _worker = WorkerProcess::start_with(&server.url, 2, "rs", &["--vut-exec", &exec]);
     let client = server.client();
@@ -466,4 +488,48 @@ async fn a_lattice_search_through_the_service_is_the_in_process_one_on_the_paper
     let said = String::from_utf8_lossy(&o.stderr);
     assert!(clean_refusal(&o), "{said}");
     assert!(said.contains("use it with --method adaptive"), "{said}");
+}
+
+/// A coordinator whose plan, made again after a restart, does not reach
+/// the campaign's stored stage (a campaign planned by another version, or
+/// a stored state changed by hand: here its running stage moved one test
+/// on) fails the campaign with the reason, rather than holding its
+/// workers on a stage no report can resolve.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_campaign_whose_stages_cannot_be_planned_again_fails_with_the_reason() {
+    let service = cut_in_service().await;
+    let (client, library) = (service.server.client(), &service.library);
+    let request = adaptive(library.id, serde_json::json!({"model": "fvdm"}), 11);
+    let id = client.create_campaign(&request).await.unwrap().id;
+    running_after_three_stages(&client, id).await;
+    service.server.kill();
+    let start: i64 = {
+        use sqlx::Connection;
+        let url = format!("sqlite://{}", service.database.display());
+        let mut conn = sqlx::SqliteConnection::connect(&url).await.unwrap();
+        sqlx::query_scalar(
+            "UPDATE campaigns SET stage_start = stage_start + 1 WHERE id = ? \
+             RETURNING stage_start",
+        )
+        .bind(id)
+        .fetch_one(&mut conn)
+        .await
+        .unwrap()
+    };
+    let server =
+        ServerProcess::start_on(&service.database, &service.address, &["--lease-size", "37"]);
+    let client = server.client();
+    let view = finished(&client, id, Duration::from_secs(60)).await;
+    assert_eq!(view.status, CampaignStatus::Failed, "{view:?}");
+    let detail = view.status_detail.clone().unwrap_or_default();
+    assert!(
+        detail.contains(&format!("stored stage at test {start}"))
+            && detail.contains("cannot go on"),
+        "{detail}"
+    );
+    // Its leases ended with it: nothing more is run.
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    let later = client.campaign(id).await.unwrap();
+    assert_eq!(later.indices, view.indices, "{later:?}");
+    assert_eq!(later.status, CampaignStatus::Failed);
 }

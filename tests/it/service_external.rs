@@ -9,24 +9,10 @@
 //! workers offering a program get its tests.
 
 use crate::support::*;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::{Duration, Instant};
 use tslg_api::{CampaignStatus, CreateCampaign, CreateLibrary, LeaseRequest, Method};
 use tslg_client::Client;
-
-/// The Rust example's binary, built by `cargo test` with the examples.
-fn rust_example() -> PathBuf {
-    let bin = Path::new(env!("CARGO_BIN_EXE_tslg"))
-        .parent()
-        .unwrap()
-        .join("examples/fvdm_vut");
-    assert!(
-        bin.exists(),
-        "{} is missing: run `cargo build --example fvdm_vut` (cargo test builds it)",
-        bin.display()
-    );
-    bin
-}
 
 fn with_vut(request: CreateCampaign, vut: serde_json::Value) -> CreateCampaign {
     CreateCampaign { vut, ..request }
@@ -108,7 +94,7 @@ async fn a_python_idm_runs_cut_in_and_car_following_exactly_like_the_builtin_idm
 async fn a_rust_fvdm_runs_cut_in_episodes_and_steps_exactly_like_the_builtin_fvdm() {
     let dir = scratch();
     let server = ServerProcess::start(&dir.path().join("db.sqlite"), &[]);
-    let exec = format!("rs-fvdm={}", rust_example().display());
+    let exec = format!("rs-fvdm={}", example_binary("fvdm_vut").display());
     let _worker = WorkerProcess::start_with(&server.url, 2, "rs", &["--vut-exec", &exec]);
     let client = server.client();
     let library = ready_library(&client, "fvdm", true).await;

@@ -6,7 +6,7 @@ use crate::db::Database;
 use crate::error::ServiceError;
 use crate::report::explored::ExploredRanges;
 use crate::store::campaigns::CampaignRow;
-use crate::store::libraries;
+use crate::store::{campaigns, leases, libraries};
 use anyhow::Context;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
@@ -110,9 +110,35 @@ async fn load(db: &Database, row: &CampaignRow) -> Result<Arc<dyn CampaignTests>
     // An adaptive campaign's copy resolves again the stages its stored
     // state has passed.
     let caught_up = Arc::clone(&tests);
-    db.read(move |conn| crate::report::stages::catch_up(conn, &row, &caught_up))
+    let stored = row.clone();
+    let diverged = db
+        .read(move |conn| crate::report::stages::catch_up(conn, &stored, &caught_up))
         .await?;
+    if let Some(reason) = diverged {
+        fail_diverged(db, &row, &reason).await?;
+        return Err(ServiceError::Conflict(reason));
+    }
     Ok(tests)
+}
+
+/// Fails adaptive campaign `row` whose stages its copy cannot reach
+/// ([`crate::report::stages::catch_up`]), saying why, unless it moved on
+/// meanwhile; its leases end. It would otherwise hold its workers on a
+/// stage no report can resolve.
+async fn fail_diverged(db: &Database, row: &CampaignRow, reason: &str) -> Result<(), ServiceError> {
+    let (id, start, detail) = (row.id, row.stage_start, reason.to_string());
+    db.write(move |conn| -> Result<(), ServiceError> {
+        let now = campaigns::get(conn, id)?;
+        if now.status.is_final() || now.stage_start != start {
+            return Ok(());
+        }
+        campaigns::set_failed(conn, id, &detail)?;
+        leases::cancel_active(conn, id)?;
+        Ok(())
+    })
+    .await?;
+    tracing::error!(campaign = id, %reason, "adaptive campaign failed");
+    Ok(())
 }
 
 fn build(row: &CampaignRow, file: Option<&[u8]>) -> anyhow::Result<Arc<dyn CampaignTests>> {

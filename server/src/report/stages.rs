@@ -110,13 +110,17 @@ fn stopped_within(
 
 /// Resolves the stages of `tests` that `campaign`'s stored state has
 /// already passed: the coordinator's copy, rebuilt, catches up with it.
+/// `Some(reason)` when the copy cannot: its plan, made again from the seed
+/// and the stored results, does not start a stage where the stored one
+/// runs (a campaign planned by another version of tslg, or whose stored
+/// state was changed), so no report could ever resolve its stage.
 pub fn catch_up(
     conn: &Connection,
     campaign: &CampaignRow,
     tests: &Arc<dyn CampaignTests>,
-) -> Result<(), ServiceError> {
+) -> Result<Option<String>, ServiceError> {
     let Some(stages) = tests.adaptive() else {
-        return Ok(());
+        return Ok(None);
     };
     let resolved_to = match campaign.stage_start {
         Some(start) => start as u64,
@@ -132,7 +136,23 @@ pub fn catch_up(
         let results = stage_results(conn, campaign.id, tests, from, to)?;
         stages.resolve(&results);
     }
-    Ok(())
+    let (Some(start), false) = (campaign.stage_start, campaign.status.is_final()) else {
+        return Ok(None);
+    };
+    let planned = stages.running().map(|(from, _)| from);
+    if planned == Some(start as u64) {
+        return Ok(None);
+    }
+    let planned = planned.map_or("no stage".to_string(), |from| {
+        format!("a stage at test {from}")
+    });
+    Ok(Some(format!(
+        "adaptive campaign {}'s stages, planned again from its seed and stored results, do \
+         not reach its stored stage at test {start} (they run {planned}): it was planned by \
+         another version of tslg or its stored state was changed, so it cannot go on; start \
+         it again",
+        campaign.id
+    )))
 }
 
 /// Resolves every stage of `campaign` whose tests all have results, and

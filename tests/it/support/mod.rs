@@ -802,9 +802,23 @@ pub fn honest_events(
 /// The debug build's example program `name` (`examples/NAME.rs`), built
 /// with the tests.
 pub fn example_binary(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_BIN_EXE_tslg"))
+    built_example("this test", name)
+}
+
+/// The path of example `name`, built: a test that started workers on a
+/// missing program would wait for them until its time ran out.
+pub fn built_example(needed_by: &str, name: &str) -> PathBuf {
+    let path = Path::new(env!("CARGO_BIN_EXE_tslg"))
         .parent()
         .expect("the binaries' folder")
         .join("examples")
-        .join(name)
+        .join(name);
+    assert!(
+        path.is_file(),
+        "{needed_by} needs the example `{name}`, which is not built ({}): `cargo test \
+         --workspace` builds the examples; before `cargo test --test it` alone, run `cargo build \
+         --workspace --examples`",
+        path.display()
+    );
+    path
 }
