@@ -30,7 +30,7 @@ impl SamplerCache {
         if let Some(sampler) = self.lock().get(&row.id) {
             return Ok(switched(Arc::clone(sampler), row));
         }
-        let tests = load(db, row).await?;
+        let tests = load(db, row, OnDivergence::Fail).await?;
         self.lock().insert(row.id, Arc::clone(&tests));
         Ok(switched(tests, row))
     }
@@ -44,7 +44,7 @@ impl SamplerCache {
     ) -> Result<Arc<dyn CampaignTests>, ServiceError> {
         match self.cached(row.id) {
             Some(tests) => Ok(switched(tests, row)),
-            None => Ok(switched(load(db, row).await?, row)),
+            None => Ok(switched(load(db, row, OnDivergence::Refuse).await?, row)),
         }
     }
 
@@ -90,9 +90,23 @@ pub fn switched(tests: Arc<dyn CampaignTests>, row: &CampaignRow) -> Arc<dyn Cam
     tests
 }
 
+/// What [`load`] does with an adaptive campaign whose stages its copy
+/// cannot reach ([`crate::report::stages::catch_up`]).
+#[derive(Clone, Copy, PartialEq)]
+enum OnDivergence {
+    /// Fails the campaign (for its workers: the lease and report paths).
+    Fail,
+    /// Only refuses (a read: a view of its tests changes nothing).
+    Refuse,
+}
+
 /// Builds campaign `row`'s tests off the async runtime, caught up with its
 /// stored state.
-async fn load(db: &Database, row: &CampaignRow) -> Result<Arc<dyn CampaignTests>, ServiceError> {
+async fn load(
+    db: &Database,
+    row: &CampaignRow,
+    on_divergence: OnDivergence,
+) -> Result<Arc<dyn CampaignTests>, ServiceError> {
     let file = match row.library_id {
         Some(id) if row.method.uses_library() => Some(
             db.read(move |conn| libraries::file(conn, id))
@@ -114,31 +128,44 @@ async fn load(db: &Database, row: &CampaignRow) -> Result<Arc<dyn CampaignTests>
     let diverged = db
         .read(move |conn| crate::report::stages::catch_up(conn, &stored, &caught_up))
         .await?;
-    if let Some(reason) = diverged {
-        fail_diverged(db, &row, &reason).await?;
-        return Err(ServiceError::Conflict(reason));
+    let Some(reason) = diverged else {
+        return Ok(tests);
+    };
+    if on_divergence == OnDivergence::Fail && !fail_diverged(db, &row, &reason).await? {
+        return Err(ServiceError::Conflict(format!(
+            "campaign {} moved on while its stages were planned again; ask again",
+            row.id
+        )));
     }
-    Ok(tests)
+    Err(ServiceError::Conflict(reason))
 }
 
 /// Fails adaptive campaign `row` whose stages its copy cannot reach
 /// ([`crate::report::stages::catch_up`]), saying why, unless it moved on
-/// meanwhile; its leases end. It would otherwise hold its workers on a
-/// stage no report can resolve.
-async fn fail_diverged(db: &Database, row: &CampaignRow, reason: &str) -> Result<(), ServiceError> {
-    let (id, start, detail) = (row.id, row.stage_start, reason.to_string());
-    db.write(move |conn| -> Result<(), ServiceError> {
-        let now = campaigns::get(conn, id)?;
-        if now.status.is_final() || now.stage_start != start {
-            return Ok(());
-        }
-        campaigns::set_failed(conn, id, &detail)?;
-        leases::cancel_active(conn, id)?;
-        Ok(())
-    })
-    .await?;
-    tracing::error!(campaign = id, %reason, "adaptive campaign failed");
-    Ok(())
+/// meanwhile (then `false`); its leases end. It would otherwise hold its
+/// workers on a stage no report can resolve.
+async fn fail_diverged(
+    db: &Database,
+    row: &CampaignRow,
+    reason: &str,
+) -> Result<bool, ServiceError> {
+    let (id, stage) = (row.id, (row.stage_start, row.stage_end));
+    let detail = reason.to_string();
+    let failed = db
+        .write(move |conn| -> Result<bool, ServiceError> {
+            let now = campaigns::get(conn, id)?;
+            if now.status.is_final() || (now.stage_start, now.stage_end) != stage {
+                return Ok(false);
+            }
+            campaigns::set_failed(conn, id, &detail)?;
+            leases::cancel_active(conn, id)?;
+            Ok(true)
+        })
+        .await?;
+    if failed {
+        tracing::error!(campaign = id, %reason, "adaptive campaign failed");
+    }
+    Ok(failed)
 }
 
 fn build(row: &CampaignRow, file: Option<&[u8]>) -> anyhow::Result<Arc<dyn CampaignTests>> {

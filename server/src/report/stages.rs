@@ -139,19 +139,33 @@ pub fn catch_up(
     let (Some(start), false) = (campaign.stage_start, campaign.status.is_final()) else {
         return Ok(None);
     };
-    let planned = stages.running().map(|(from, _)| from);
-    if planned == Some(start as u64) {
+    // Leases run to the stored stage's end and the lease size follows its
+    // kind: the plan must agree on all three.
+    let stored = (
+        start as u64,
+        campaign.stage_end.map(|end| end as u64),
+        campaign.stage_kind.as_deref(),
+    );
+    let planned = stages
+        .running()
+        .map(|(from, to)| (from, Some(to), stages.stage_kind(from)));
+    if planned == Some(stored) {
         return Ok(None);
     }
-    let planned = planned.map_or("no stage".to_string(), |from| {
-        format!("a stage at test {from}")
-    });
+    let describe = |(from, to, kind): (u64, Option<u64>, Option<&str>)| {
+        format!(
+            "{} stage {from}..{}",
+            kind.unwrap_or("a"),
+            to.map_or("?".to_string(), |to| to.to_string())
+        )
+    };
+    let planned = planned.map_or("no stage".to_string(), describe);
     Ok(Some(format!(
         "adaptive campaign {}'s stages, planned again from its seed and stored results, do \
-         not reach its stored stage at test {start} (they run {planned}): it was planned by \
-         another version of tslg or its stored state was changed, so it cannot go on; start \
-         it again",
-        campaign.id
+         not reach its stored {} (they run {planned}): it was planned by another version of \
+         tslg or its stored state was changed, so it cannot go on; start it again",
+        campaign.id,
+        describe(stored)
     )))
 }
 
