@@ -236,7 +236,9 @@ async fn heartbeats_keep_a_workers_audit_runs_and_an_expired_run_counts() {
     let app = app(|c| {
         c.audit_share = 0.0;
         c.lease_size = Some(40);
-        c.lease_ttl_seconds = 1.0;
+        // Heartbeats every 0.5 s keep it with 1.5 s to spare on a
+        // stalled host.
+        c.lease_ttl_seconds = 2.0;
     })
     .await;
     app.external_campaign().await;
@@ -256,8 +258,8 @@ async fn heartbeats_keep_a_workers_audit_runs_and_an_expired_run_counts() {
     let fence = json!({"worker": "a", "attempt": a_range["attempt"], "key": a_range["key"]});
     let heartbeat = || app.call("POST", &path, Some(fence.clone()));
     // Past the TTL, kept by heartbeats of the range: "c" gets no audit run.
-    for _ in 0..3 {
-        tokio::time::sleep(std::time::Duration::from_millis(600)).await;
+    for _ in 0..6 {
+        tokio::time::sleep(std::time::Duration::from_millis(500)).await;
         let (status, ack) = heartbeat().await;
         assert_eq!(status, StatusCode::OK, "{ack}");
     }
@@ -266,7 +268,7 @@ async fn heartbeats_keep_a_workers_audit_runs_and_an_expired_run_counts() {
     assert_eq!(standing(&app, "a").await, (0, 0));
     // Without heartbeats it expires; handed to "c", it counts against "a".
     // (a's range and c's expired too, and are handed out first.)
-    tokio::time::sleep(std::time::Duration::from_millis(1200)).await;
+    tokio::time::sleep(std::time::Duration::from_millis(2400)).await;
     let mut taken = Vec::new();
     for _ in 0..3 {
         let (_, lease) = app.claim("c", 40).await;
