@@ -140,15 +140,16 @@ pub fn catch_up(
         return Ok(None);
     };
     // Leases run to the stored stage's end and the lease size follows its
-    // kind: the plan must agree on all three.
+    // kind: the plan must agree on all three, as it would store them.
     let stored = (
         start as u64,
         campaign.stage_end.map(|end| end as u64),
         campaign.stage_kind.as_deref(),
     );
     let planned = stages
-        .running()
-        .map(|(from, to)| (from, Some(to), stages.stage_kind(from)));
+        .progress()
+        .running
+        .map(|(from, to, kind)| (from, Some(to), Some(kind)));
     if planned == Some(stored) {
         return Ok(None);
     }
