@@ -94,7 +94,7 @@ impl Enumerated {
     fn defensive(&self, g: &[f64]) -> Vec<f64> {
         let mass: f64 = self.p.iter().zip(g).map(|(p, g)| p * g).sum();
         g.iter()
-            .map(|g| if mass > 0.0 { 0.9 * g / mass } else { 0.0 } + 0.1)
+            .map(|g| 0.1 + if mass > 0.0 { 0.9 * g / mass } else { 0.0 })
             .collect()
     }
 }
@@ -219,10 +219,10 @@ fn no_pair_of_coordinates_predicts_the_gap_seeker_s_failures() {
     let mut best = f64::INFINITY;
     for a in 0..4 {
         for b in a + 1..4 {
+            let key = |i: usize| (e.index[i][a] as usize, e.index[i][b] as usize);
             let mut mass = std::collections::HashMap::<(usize, usize), (f64, f64)>::new();
             for i in 0..e.p.len() {
-                let key = (e.index[i][a] as usize, e.index[i][b] as usize);
-                let m = mass.entry(key).or_default();
+                let m = mass.entry(key(i)).or_default();
                 m.0 += e.p[i];
                 if e.event[i] {
                     m.1 += e.p[i];
@@ -236,7 +236,7 @@ fn no_pair_of_coordinates_predicts_the_gap_seeker_s_failures() {
             // The bound is attained: the proposal h_k = √(a_k/b_k) needs it.
             let h: Vec<f64> = (0..e.p.len())
                 .map(|i| {
-                    let (all, failing) = mass[&(e.index[i][a] as usize, e.index[i][b] as usize)];
+                    let (all, failing) = mass[&key(i)];
                     (failing / all).sqrt()
                 })
                 .collect();

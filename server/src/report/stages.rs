@@ -111,9 +111,9 @@ fn stopped_within(
 /// Resolves the stages of `tests` that `campaign`'s stored state has
 /// already passed: the coordinator's copy, rebuilt, catches up with it.
 /// `Some(reason)` when the copy cannot: its plan, made again from the seed
-/// and the stored results, does not start a stage where the stored one
-/// runs (a campaign planned by another version of tslg, or whose stored
-/// state was changed), so no report could ever resolve its stage.
+/// and the stored results, does not run the stored stage (its start, end
+/// and kind; a campaign planned by another version of tslg, or whose
+/// stored state was changed), so no report could ever resolve it.
 pub fn catch_up(
     conn: &Connection,
     campaign: &CampaignRow,
