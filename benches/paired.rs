@@ -34,7 +34,7 @@ fn request(method: Method, library_id: Option<i64>, vut: &Value, seed: u64) -> C
         seed,
         n_min: None,
         min_events: None,
-        guard_outside: false,
+        guard_outside: Some(false),
         interval: Default::default(),
         paired_with: None,
         outside: None,

@@ -32,7 +32,7 @@ fn request(tests: u64) -> CreateCampaign {
         seed: 1,
         n_min: None,
         min_events: None,
-        guard_outside: false,
+        guard_outside: Some(false),
         interval: Default::default(),
         paired_with: None,
         outside: None,

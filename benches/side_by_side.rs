@@ -137,7 +137,7 @@ async fn through_service(seed: u64, threads: usize) -> anyhow::Result<Run> {
             seed,
             n_min: None,
             min_events: None,
-            guard_outside: false,
+            guard_outside: Some(false),
             interval: Default::default(),
             paired_with: None,
             outside: None,

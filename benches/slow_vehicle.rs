@@ -256,7 +256,7 @@ async fn measure(sleep: f64, workers: usize) -> anyhow::Result<Vec<Row>> {
             &tslg_api::CreateCampaign {
                 // The allocation of issue 49: both switch to exploring
                 // nearly every test once the library stratum is known.
-                guard_outside: kind == "guarded",
+                guard_outside: Some(kind == "guarded"),
                 interval: if kind == "anytime" {
                     tslg_api::IntervalKind::Anytime
                 } else {

@@ -275,16 +275,34 @@ pub struct RuleArgs {
     /// library stratum is known 95 % of the tests explore: about
     /// ln(1/(1 − c))/(βμ) tests when no failure lies outside. An adaptive
     /// campaign bounds the mass outside its support K the same way, its
-    /// estimation stages exploring 95 % of their tests once its estimate
-    /// meets β.
-    #[arg(long)]
+    /// estimation stages exploring the share that needs fewest tests once
+    /// its estimate meets β. On by default for a noisy vehicle
+    /// (docs/statistics.md, "Noisy vehicles").
+    #[arg(long, conflicts_with = "no_guard_outside")]
     pub guard_outside: bool,
+    /// Run without the guard even for a noisy vehicle; its answer is then
+    /// still the guarded interval, as wide as its few exploring tests leave
+    /// it.
+    #[arg(long)]
+    pub no_guard_outside: bool,
     /// The interval the rule reads and the answer reports: `wald` (valid at
     /// the stop) or `anytime` (a confidence sequence, valid at every number
     /// of tests: watch, stop, extend or gate at any time; about three
     /// times the tests). Grid cases' library and NDD campaigns.
     #[arg(long, default_value = "wald")]
     pub interval: tslg_method::estimator::Interval,
+}
+
+impl RuleArgs {
+    /// The guard as asked for: on, off, or (`None`) the default, on for a
+    /// noisy vehicle.
+    pub fn guard_request(&self) -> Option<bool> {
+        match (self.guard_outside, self.no_guard_outside) {
+            (true, _) => Some(true),
+            (_, true) => Some(false),
+            _ => None,
+        }
+    }
 }
 
 /// A value given by its name on the wire (`running`, `ready`).

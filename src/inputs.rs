@@ -252,10 +252,13 @@ pub fn vehicle_name(spec: &serde_json::Value, case: &str) -> String {
 }
 
 /// The rule of `args`; `exploring_share` sets the default `n_min`
-/// ([`tslg_method::estimator::default_n_min`]).
+/// ([`tslg_method::estimator::default_n_min`]), `guard_by_default` whether
+/// the guard is on unless the flags say (a noisy vehicle's campaign that
+/// can take it, [`tslg_method::noise::guards_by_default`]).
 pub fn stopping_rule(
     args: &RuleArgs,
     exploring_share: Option<f64>,
+    guard_by_default: bool,
 ) -> anyhow::Result<StoppingRule> {
     let rule = StoppingRule {
         beta: args.beta,
@@ -265,7 +268,7 @@ pub fn stopping_rule(
         }),
         min_events: args.min_events,
         max_tests: args.max_tests,
-        guard_outside: args.guard_outside,
+        guard_outside: args.guard_request().unwrap_or(guard_by_default),
         interval: args.interval,
     };
     rule.validate().context("invalid stopping rule")?;

@@ -92,10 +92,15 @@ pub struct CreateCampaign {
     /// Also stop only when the failure mass the library's exploring tests
     /// could still be missing, `outside_upper`, exceeds what they already
     /// contributed to the estimate by at most β times the estimate
-    /// (docs/statistics.md). Library campaigns of grid cases only. It costs
-    /// about `2.3/(ε β P(A))` tests with `outside: ndd` at 90 %.
-    #[serde(default)]
-    pub guard_outside: bool,
+    /// (docs/statistics.md). Library and adaptive campaigns of grid cases.
+    /// It costs about `ln(1/(1 − c))/(β P(A))` tests with `outside: ndd`.
+    /// When absent: on for a noisy vehicle (`vehicle_noise`, or a built-in
+    /// model with `noise`) where it applies (not paired, not `anytime`),
+    /// off otherwise; `false` turns it off for a noisy vehicle too, whose
+    /// answer is still the guarded interval (docs/statistics.md, "Noisy
+    /// vehicles").
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub guard_outside: Option<bool>,
     /// The interval the campaign stops on and reports: `wald` (the
     /// default; valid at the stop) or `anytime` (a confidence sequence,
     /// valid at every number of tests, so that watching, stopping early
@@ -293,6 +298,11 @@ pub struct CampaignView {
     /// `outside_upper`: the upper end of the guarded interval.
     #[serde(default)]
     pub guarded_ci_high: Option<f64>,
+    /// The interval to report, and why: the guarded one for a guarded
+    /// campaign and for any campaign of a noisy vehicle, the plain one
+    /// otherwise. Absent before two valid tests.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub answer: Option<AnswerView>,
     /// `P(A)` by enumeration of the grid: present for a built-in vehicle on
     /// a grid case of at most [`EXACT_MAX_SCENARIOS`] scenarios (cut-in,
     /// highway-exit `coarse`), computed when the campaign was created; for
@@ -324,6 +334,39 @@ pub struct CampaignView {
     pub created_at: String,
     /// When the campaign's row last changed (UTC, RFC 3339 with milliseconds).
     pub updated_at: String,
+}
+
+/// Which interval a campaign answers with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum AnswerInterval {
+    /// `[ci_low, ci_high]`.
+    Plain,
+    /// `[ci_low, guarded_ci_high]`.
+    Guarded,
+}
+
+impl AnswerInterval {
+    /// Its name on the wire: `plain`, `guarded`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            AnswerInterval::Plain => "plain",
+            AnswerInterval::Guarded => "guarded",
+        }
+    }
+}
+
+/// The interval a campaign answers with (`CampaignView::answer`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct AnswerView {
+    /// Which interval.
+    pub interval: AnswerInterval,
+    /// Its lower end.
+    pub low: f64,
+    /// Its upper end.
+    pub high: f64,
+    /// Why this interval, in words.
+    pub reason: String,
 }
 
 /// How a campaign's audited tests stand: each is run again by a different

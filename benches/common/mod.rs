@@ -79,7 +79,7 @@ pub fn program_campaign(
         seed,
         n_min: None,
         min_events: None,
-        guard_outside: false,
+        guard_outside: Some(false),
         interval: Default::default(),
         paired_with: None,
         vehicle_noise: false,

@@ -61,6 +61,26 @@ pub fn interval(kind: tslg_api::IntervalKind) -> tslg_method::estimator::Interva
     }
 }
 
+/// Whether a campaign runs under the guard: as the request says, else by
+/// default when its vehicle is noisy and the guard applies to it (a grid
+/// case's library or adaptive campaign, not paired, on the Wald interval):
+/// a noisy vehicle's support is never shown complete by a few runs, so its
+/// answer is the guarded one ([`tslg_method::noise::guards_by_default`]).
+pub fn guard_outside(req: &tslg_api::CreateCampaign, grid_case: bool) -> bool {
+    req.guard_outside.unwrap_or_else(|| {
+        tslg_method::noise::guards_by_default(
+            req.vehicle_noise || tslg_method::noise::spec_is_noisy(&req.vut),
+            grid_case
+                && matches!(
+                    req.method,
+                    tslg_api::Method::Library | tslg_api::Method::Adaptive
+                )
+                && req.paired_with.is_none()
+                && req.interval == tslg_api::IntervalKind::Wald,
+        )
+    })
+}
+
 /// The interval a campaign reads, for the wire.
 pub fn wire_interval(interval: tslg_method::estimator::Interval) -> tslg_api::IntervalKind {
     match interval {

@@ -51,6 +51,7 @@ fn view() -> CampaignView {
         outside_share: None,
         outside_upper: None,
         guarded_ci_high: None,
+        answer: None,
         exact_probability: None,
         adaptive: None,
         warnings: Vec::new(),

@@ -25,6 +25,15 @@
 //!    unbiased given the past. When an estimation stage meets a new failure
 //!    or near miss, the campaign searches again from it.
 //!
+//! A noisy vehicle's cells fail with a probability: its support grows by
+//! the failures every run shows, with their neighbours, and only failures
+//! seed the search ([`Planner::observe`]). Whether such a support holds
+//! every cell that can fail is never checkable from a few runs, so its
+//! campaigns run under the outside guard, with the guard's share of
+//! exploring tests chosen to need the fewest tests
+//! ([`AllocationInputs::guard_share`]), and answer with the guarded
+//! interval (docs/statistics.md, "Noisy vehicles").
+//!
 //! Only estimation tests enter the estimate; library and search tests are
 //! the cost of finding `K`. Each estimation term is unbiased given the
 //! stages before it, so the estimate is a martingale average, and the
@@ -38,15 +47,16 @@ use crate::prefix::{PrefixFold, SparseOutcome};
 use crate::sampling::SupportDistribution;
 use crate::sampling::{
     LibraryDistribution, NddDistribution, OutsideSpread, SamplingError, Split, TestDistribution,
-    LATE_SHARE,
 };
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 
+mod allocation;
 mod lattice;
 mod outside;
 mod record;
+pub use allocation::AllocationInputs;
 use lattice::merged;
 pub use lattice::{Lattice, MAX_LATTICE_POINTS};
 pub use outside::Explored;
@@ -67,10 +77,12 @@ pub struct AdaptiveSettings {
     /// Tests of an estimation stage: a multiple of `explore_every`.
     pub stage_tests: u64,
     /// The vehicle's runs of one scenario may differ (a noisy model or
-    /// program): every run of a cell counts, a failure in any run puts it
-    /// in the support and a near miss in any run seeds the search, and a
-    /// library cell that passed stays in the support ("passed once" is not
-    /// "never fails").
+    /// program): every run of a cell counts, a failure in any run puts the
+    /// cell and its neighbours in the support and seeds the search, whose
+    /// candidates are tested once, and a library cell that passed stays in
+    /// the support ("passed once" is not "never fails"); near misses count
+    /// for nothing ([`Planner::observe`]). Such a campaign runs under the
+    /// guard unless asked not to ([`crate::noise::guards_by_default`]).
     pub noisy: bool,
     /// Search a fine grid on its coarser lattice ([`Lattice`]): a seed
     /// puts its whole block in the support and the search walks lattice
@@ -156,12 +168,30 @@ pub struct Knowledge {
     /// On a lattice, the lattice points whose block a seed put in the
     /// support.
     hot: Vec<bool>,
+    /// A noisy vehicle's cells: whether a run of each was seen to fail
+    /// ([`SEEN_FAIL`]) and to pass ([`SEEN_PASS`]); empty for a
+    /// deterministic one.
+    seen: Vec<u8>,
+    /// A noisy vehicle's cells seen both to fail and to pass.
+    varying: u64,
 }
+
+/// A run of the cell failed.
+const SEEN_FAIL: u8 = 1;
+/// A run of the cell passed.
+const SEEN_PASS: u8 = 2;
 
 impl Knowledge {
     /// The failing cells found, in the order they were found.
     pub fn failures(&self) -> &[usize] {
         &self.failures
+    }
+
+    /// A noisy vehicle's cells whose runs were seen both to fail and to
+    /// pass: the evidence that its outcome is a draw, which a warning
+    /// names.
+    pub fn varying_cells(&self) -> u64 {
+        self.varying
     }
 }
 
@@ -183,9 +213,9 @@ pub enum AdaptiveError {
     Sampling(#[from] SamplingError),
 }
 
-/// The last estimation stage's distribution, with the support and whether
-/// it explored the guard's share ([`Planner::next`]).
-type CachedEstimation = (Vec<usize>, bool, Arc<TestDistribution>);
+/// The last estimation stage's distribution, with the support and the
+/// guard's share it explored, if any ([`Planner::next`]).
+type CachedEstimation = (Vec<usize>, Option<f64>, Arc<TestDistribution>);
 
 /// The case a planner plans for: borrowed for a campaign run in one
 /// call, shared for one a coordinator keeps between reports.
@@ -280,8 +310,8 @@ impl<'a, C: Case> Planner<'a, C> {
             ));
         }
         // A stage holds exactly its share of exploring tests, at
-        // 1/explore_every and at the guard's LATE_SHARE (19 in 20), so that
-        // its mean is unbiased.
+        // 1/explore_every and at the guard's shares (multiples of 1/20), so
+        // that its mean is unbiased.
         if !s.stage_tests.is_multiple_of(s.explore_every) || !s.stage_tests.is_multiple_of(20) {
             return Err(AdaptiveError::Settings(format!(
                 "stage_tests = {} must be a multiple of explore_every = {} and of 20",
@@ -347,54 +377,106 @@ impl<'a, C: Case> Planner<'a, C> {
             } else {
                 Vec::new()
             },
+            seen: if self.settings.noisy {
+                vec![0; cells]
+            } else {
+                Vec::new()
+            },
+            varying: 0,
         }
     }
 
     /// Records a test in `knowledge`. A deterministic vehicle's cell gives
     /// the same outcome every time it is run, so only its first test
-    /// counts; a noisy vehicle's cell keeps its lowest criticality over
-    /// all its runs (0 once it failed). A seed (a failure, or a near miss
-    /// within `near_miss`) adds its untested neighbours outside the
-    /// library, with exposure, to the search's candidates.
+    /// counts: a failure joins the support, a library cell that passed
+    /// leaves it, and a seed (a failure, or a near miss within `near_miss`)
+    /// adds its untested neighbours outside the library, with exposure, to
+    /// the search's candidates.
+    ///
+    /// A noisy vehicle's cell fails with a probability, so one run proves
+    /// nothing and a near miss is no evidence: its support grows by what
+    /// every run shows ([`Self::observe_noisy`]).
     pub fn observe(&self, knowledge: &mut Knowledge, o: &Observation) {
-        let before = knowledge.criticality[o.cell];
-        if before.is_some() && !self.settings.noisy {
+        if self.settings.noisy {
+            return self.observe_noisy(knowledge, o);
+        }
+        if knowledge.criticality[o.cell].is_some() {
             return;
         }
-        let run = if o.event { 0.0 } else { o.criticality };
-        let criticality = before.map_or(run, |b| b.min(run));
+        let criticality = if o.event { 0.0 } else { o.criticality };
         knowledge.criticality[o.cell] = Some(criticality);
-        let exposure = self.case.exposure();
-        let newly_failed = o.event && before != Some(0.0);
-        if newly_failed {
+        if o.event {
             knowledge.failures.push(o.cell);
-            knowledge.failure_mass += exposure.p(o.cell);
+            knowledge.failure_mass += self.case.exposure().p(o.cell);
         }
-        // A failure joins the support; a library cell that passed leaves
-        // it. A noisy vehicle's cell may fail another time: a near miss
-        // joins too, and a library cell that passed stays.
-        let joins = o.event || (self.settings.noisy && criticality <= self.settings.near_miss);
         let at = knowledge.support.binary_search(&o.cell);
-        match (joins, at) {
+        match (o.event, at) {
             (true, Err(k)) => knowledge.support.insert(k, o.cell),
-            (false, Ok(k)) if !self.settings.noisy => {
+            (false, Ok(k)) => {
                 knowledge.support.remove(k);
             }
             _ => {}
         }
-        let seeds_now = before.is_none_or(|b| b > self.settings.near_miss);
-        if criticality <= self.settings.near_miss && seeds_now && self.lattice.stride() > 1 {
-            self.heat(knowledge, o.cell);
-        } else if criticality <= self.settings.near_miss && seeds_now {
-            for n in self.case.grid().neighbours(o.cell) {
-                if knowledge.criticality[n].is_none()
-                    && !self.in_library[n]
-                    && exposure.p(n) > 0.0
-                    && !knowledge.is_candidate[n]
-                {
-                    knowledge.is_candidate[n] = true;
-                    knowledge.candidates.push(n);
-                }
+        if criticality <= self.settings.near_miss {
+            self.seed(knowledge, o.cell);
+        }
+    }
+
+    /// [`Self::observe`] for a noisy vehicle (docs/statistics.md, "Noisy
+    /// vehicles"). Every run counts: the cell keeps its lowest criticality,
+    /// and whether it was seen to fail and to pass. A cell joins the
+    /// support the first time a run of it fails, with its neighbours that
+    /// have exposure, tested or not (a scenario next to one that fails now
+    /// and then fails now and then itself: the evidence of one run, spread
+    /// to where it is likely to hold); a library cell stays whatever its
+    /// runs gave. Only failures seed the search, each once: a noisy
+    /// vehicle's near misses are everywhere its noise reaches, and a
+    /// support grown from them holds much exposure that never fails, which
+    /// the guard's allocation pays for (the noisy IDM at σ 1.5: support
+    /// exposure 0.22 against 0.08, 36,038 tests against 14,862).
+    fn observe_noisy(&self, knowledge: &mut Knowledge, o: &Observation) {
+        let seen = &mut knowledge.seen[o.cell];
+        let before = *seen;
+        *seen |= if o.event { SEEN_FAIL } else { SEEN_PASS };
+        if *seen == SEEN_FAIL | SEEN_PASS && before != *seen {
+            knowledge.varying += 1;
+        }
+        let run = if o.event { 0.0 } else { o.criticality };
+        let criticality = knowledge.criticality[o.cell].map_or(run, |b: f64| b.min(run));
+        knowledge.criticality[o.cell] = Some(criticality);
+        if !o.event || before & SEEN_FAIL != 0 {
+            return;
+        }
+        let exposure = self.case.exposure();
+        knowledge.failures.push(o.cell);
+        knowledge.failure_mass += exposure.p(o.cell);
+        if self.lattice.stride() == 1 {
+            let mut joining: Vec<usize> = std::iter::once(o.cell)
+                .chain(self.case.grid().neighbours(o.cell))
+                .filter(|&c| exposure.p(c) > 0.0)
+                .collect();
+            joining.sort_unstable();
+            knowledge.support = merged(&knowledge.support, &joining);
+        }
+        self.seed(knowledge, o.cell);
+    }
+
+    /// A seed at `cell`: on the grid its untested neighbours outside the
+    /// library, with exposure, join the search's candidates; on a lattice
+    /// its block heats ([`Self::heat`]).
+    fn seed(&self, knowledge: &mut Knowledge, cell: usize) {
+        if self.lattice.stride() > 1 {
+            return self.heat(knowledge, cell);
+        }
+        let exposure = self.case.exposure();
+        for n in self.case.grid().neighbours(cell) {
+            if knowledge.criticality[n].is_none()
+                && !self.in_library[n]
+                && exposure.p(n) > 0.0
+                && !knowledge.is_candidate[n]
+            {
+                knowledge.is_candidate[n] = true;
+                knowledge.candidates.push(n);
             }
         }
     }
@@ -448,19 +530,16 @@ impl<'a, C: Case> Planner<'a, C> {
     /// seed has an untested neighbour worth testing, else an estimation
     /// stage on the failures found.
     pub fn next(&self, knowledge: &Knowledge) -> Stage {
-        self.next_stage(knowledge, false)
+        self.next_stage(knowledge, None)
     }
 
     /// [`Self::next`]; a guarded campaign whose estimate is known but whose
-    /// outside bound is not yet within β (`guarding`) explores
-    /// [`LATE_SHARE`] of each estimation stage's tests, the guard's
-    /// allocation (docs/statistics.md, "The guard").
-    fn next_stage(&self, knowledge: &Knowledge, guarding: bool) -> Stage {
+    /// outside bound is not yet within β explores the guard's share
+    /// (`guarding`, [`AllocationInputs::guard_share`]) of each estimation
+    /// stage's tests (docs/statistics.md, "The guard").
+    fn next_stage(&self, knowledge: &Knowledge, guarding: Option<f64>) -> Stage {
         let frontier = self.frontier(knowledge);
         if !frontier.is_empty() {
-            if self.settings.noisy {
-                return Stage::Search(frontier.iter().flat_map(|&c| [c, c]).collect());
-            }
             return Stage::Search(frontier);
         }
         let support = self.support(knowledge);
@@ -473,11 +552,7 @@ impl<'a, C: Case> Planner<'a, C> {
                 return Stage::Estimate(Arc::clone(distribution));
             }
         }
-        let epsilon = if guarding {
-            LATE_SHARE
-        } else {
-            1.0 / self.settings.explore_every as f64
-        };
+        let epsilon = guarding.unwrap_or(1.0 / self.settings.explore_every as f64);
         let distribution = Arc::new(self.estimation(&support, epsilon));
         *cache = Some((support, guarding, Arc::clone(&distribution)));
         Stage::Estimate(distribution)
@@ -617,9 +692,9 @@ pub struct AdaptiveState {
     spent: Spent,
     explored: Explored,
     /// A guarded campaign whose estimate met the rule while its outside
-    /// bound did not meet the guard: its estimation stages explore
-    /// [`LATE_SHARE`] of their tests from then on.
-    guarding: bool,
+    /// bound did not meet the guard: the share of their tests its
+    /// estimation stages explore from then on ([`AllocationInputs`]).
+    guarding: Option<f64>,
     stages: Vec<PlannedStage>,
     finished: Option<AdaptiveResult>,
 }
@@ -673,6 +748,24 @@ impl AdaptiveState {
     }
 }
 
+/// What the guard's allocation reads off the estimation tests since the
+/// last restart, for stages drawn as `distribution` is.
+fn allocation_inputs(
+    state: &AdaptiveState,
+    distribution: &TestDistribution,
+    rule: &StoppingRule,
+) -> AllocationInputs {
+    let n = state.fold.estimator.tests().max(1) as f64;
+    AllocationInputs {
+        estimate: state.fold.estimate(),
+        outside_estimate: state.explored.tally.s1 / n,
+        outside_mass: outside::exposure_off_support(distribution),
+        beta: rule.beta,
+        z: rule.z(),
+        confidence: rule.confidence,
+    }
+}
+
 impl<C: Case> Planner<'_, C> {
     /// A campaign under `seed` before any test: its library stage planned.
     pub fn start(&self, rule: &StoppingRule, seed: u64) -> AdaptiveState {
@@ -684,7 +777,7 @@ impl<C: Case> Planner<'_, C> {
             fold: PrefixFold::default(),
             spent: Spent::default(),
             explored: Explored::default(),
-            guarding: false,
+            guarding: None,
             stages: vec![PlannedStage {
                 start: 0,
                 len,
@@ -770,14 +863,17 @@ impl<C: Case> Planner<'_, C> {
                         if state.explored.guard_holds(&state.fold, rule) {
                             Some((Decision::Converged, planned.end()))
                         } else {
-                            if !state.guarding {
+                            if state.guarding.is_none() {
                                 // The guard's stages explore another share:
                                 // the estimate and its bound start again
                                 // with them, so that every stage they read
                                 // explores alike (the bound's argument,
                                 // `outside.rs`). A restart decided at a
-                                // stage's end keeps the estimate unbiased.
-                                state.guarding = true;
+                                // stage's end keeps the estimate unbiased,
+                                // and the share, read off the tests before
+                                // it, is fixed by the past.
+                                let inputs = allocation_inputs(state, distribution, rule);
+                                state.guarding = Some(inputs.guard_share());
                                 state.fold = PrefixFold::default();
                                 state.explored = Explored::default();
                                 restarts = true;

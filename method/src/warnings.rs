@@ -16,6 +16,13 @@
 //!   when exploring tests did find events there (in scenarios where the
 //!   surrogate fails too; a mismatch says it already).
 //!
+//! - **a noisy vehicle without the guard**: a scenario that passed in one
+//!   run may fail in another, so no number of runs shows that the library
+//!   or the support holds every scenario where it fails; the plain interval
+//!   assumes it (it covered 0.30 to 0.44 of the time on a noisy Gipps
+//!   program), and the campaign answers with the guarded interval
+//!   ([`crate::campaign::answer`]), which is wide unless the guard ran.
+//!
 //! A plain campaign whose exploring tests found nothing gets no warning: its
 //! outside bound is wide by construction (few tests sample there), and a
 //! warning on every campaign would tell a user nothing. What each answer
@@ -89,6 +96,9 @@ pub struct WarningContext {
     /// An adaptive campaign: its exploring tests sample off its support K,
     /// which its warnings name instead of the library.
     pub adaptive: bool,
+    /// The vehicle is noisy (a built-in one with noise, or a program's
+    /// campaign with `vehicle_noise`): its scenarios fail only sometimes.
+    pub noisy: bool,
 }
 
 /// The warnings `result` deserves under `context`: empty unless the tests
@@ -138,6 +148,28 @@ pub fn warnings(result: &CampaignResult, context: WarningContext) -> Vec<String>
             }
         ));
     }
+    if context.noisy && !context.guard_outside {
+        found.push(format!(
+            "the vehicle is noisy: a scenario that passed in one run may fail in another, so \
+             no number of runs shows that {region} holds every scenario where it fails, and \
+             the interval [{low:.3e}, {plain:.3e}] assumes it does{evidence}. The answer is \
+             the guarded interval{guarded}; rerun with {advice} for one within β",
+            low = result.ci_low,
+            plain = result.ci_high,
+            evidence = if result.outside_events > 0 {
+                format!(
+                    "; its exploring tests found {} outside it",
+                    Count(result.outside_events, "event")
+                )
+            } else {
+                String::new()
+            },
+            guarded = match result.guarded_ci_high {
+                Some(high) => format!(" [{:.3e}, {high:.3e}]", result.ci_low),
+                None => String::new(),
+            },
+        ));
+    }
     if let (Some(upper), Some(high)) = (result.outside_upper, result.guarded_ci_high) {
         let unseen = high - result.ci_high;
         let short = unseen > context.beta * result.estimate;
@@ -174,8 +206,10 @@ pub fn warnings(result: &CampaignResult, context: WarningContext) -> Vec<String>
             ));
         }
         let converged = result.relative_half_width <= context.beta;
-        // A mismatch already says this, with its advice.
-        let unexplained = result.outside_events > 0 && result.mismatched_events == 0;
+        // A mismatch already says this, with its advice, and so does a
+        // noisy vehicle's warning.
+        let unexplained =
+            result.outside_events > 0 && result.mismatched_events == 0 && !context.noisy;
         if !context.guard_outside && short && converged && unexplained {
             found.push(format!(
                 "the interval does not bound what {region} leaves out: its exploring tests \
@@ -229,6 +263,7 @@ mod tests {
             unexplored: false,
             uniform_spread: false,
             adaptive: false,
+            noisy: false,
         }
     }
 
@@ -382,5 +417,40 @@ mod tests {
             "{}",
             found[0]
         );
+    }
+
+    #[test]
+    fn a_noisy_vehicle_without_the_guard_is_warned_with_the_guarded_answer() {
+        let result = CampaignResult {
+            outside_events: 2,
+            outside_share: Some(0.1),
+            ..matched()
+        };
+        let noisy = |guard_outside, dialect| WarningContext {
+            noisy: true,
+            adaptive: true,
+            ..context(guard_outside, dialect)
+        };
+        let cli = warnings(&result, noisy(false, Dialect::Cli));
+        assert_eq!(cli.len(), 1, "{cli:?}");
+        assert!(
+            cli[0].starts_with("the vehicle is noisy")
+                && cli[0].contains("its support K holds every scenario")
+                && cli[0].contains("[8.500e-4, 1.150e-3] assumes it does")
+                && cli[0].contains("found 2 events outside it")
+                && cli[0].contains("guarded interval [8.500e-4, 1.115e-2]")
+                && cli[0].contains("--guard-outside --outside ndd"),
+            "{}",
+            cli[0]
+        );
+        let api = warnings(&result, noisy(false, Dialect::Api));
+        assert_eq!(Dialect::Cli.translate(&api[0]), cli[0]);
+        // Without events outside: the warning stands (a cell may still
+        // fail), without the evidence clause.
+        let quiet = warnings(&matched(), noisy(false, Dialect::Cli));
+        assert_eq!(quiet.len(), 1);
+        assert!(!quiet[0].contains("exploring tests found"), "{}", quiet[0]);
+        // Under the guard, the default for a noisy vehicle: nothing to say.
+        assert!(warnings(&result, noisy(true, Dialect::Cli)).is_empty());
     }
 }

@@ -172,6 +172,7 @@ function applies(c) {
     estimate: !build,
     adaptive: c.method === 'adaptive',
     outside: c.outside_upper != null || c.guarded_ci_high != null,
+    answer: c.answer != null,
   };
 }
 
@@ -192,6 +193,11 @@ async function campaignPage() {
   set('estimate', fmt.sci(c.estimate), c.estimate);
   set('interval', fmt.interval(c));
   set('interval-kind', c.interval === 'anytime' ? 'anytime interval' : 'interval (Wald)');
+  // The interval to report and why (the API's `answer`): the guarded one
+  // for a guarded campaign and for a noisy vehicle.
+  set('answer', c.answer ? `[${fmt.sci(c.answer.low)}, ${fmt.sci(c.answer.high)}]` : '–',
+    c.answer?.high);
+  set('answer-reason', c.answer ? `${c.answer.interval}: ${c.answer.reason}` : '');
   set('relative-half-width', fmt.ratio(c.relative_half_width), c.relative_half_width);
   set('beta', c.beta);
   set('rate', fmt.rate(c.tests_per_second), c.tests_per_second);

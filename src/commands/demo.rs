@@ -125,7 +125,7 @@ async fn drive(
         seed: args.seed,
         n_min: None,
         min_events: None,
-        guard_outside: false,
+        guard_outside: None,
         interval: Default::default(),
         paired_with: None,
         vehicle_noise: false,

@@ -11,7 +11,7 @@ use crate::inputs::{
 use clap::{Args, ValueEnum};
 use serde::Serialize;
 use std::path::PathBuf;
-use tslg_method::campaign::{run_campaign_tests, CampaignResult};
+use tslg_method::campaign::{run_campaign_tests, Answer, AnswerContext, CampaignResult};
 use tslg_method::estimator::{Interval, StoppingRule};
 use tslg_method::registry::{AdaptiveRun, ScenarioCase};
 use tslg_method::sampling::default_outside;
@@ -79,8 +79,11 @@ struct Report {
     /// Adaptive campaigns: the tests spent finding the failures.
     #[serde(skip_serializing_if = "Option::is_none")]
     search: Option<Search>,
+    /// The interval to report, and why ([`tslg_method::campaign::answer`]).
+    answer: AnswerOut,
     /// The exact P(A) by enumeration, where the case has one this size.
     exact: Option<f64>,
+    /// Whether the answer's interval holds it.
     covers_exact: Option<bool>,
     /// The vehicle sets parameters that differ from its model's defaults,
     /// and its exact P(A) on this preset equals the defaults' to the bit:
@@ -89,6 +92,26 @@ struct Report {
     #[serde(skip_serializing_if = "Option::is_none")]
     parameters_inert: Option<bool>,
     warnings: Vec<String>,
+}
+
+/// The interval a campaign answers with, as JSON.
+#[derive(Serialize)]
+struct AnswerOut {
+    interval: tslg_method::campaign::AnswerInterval,
+    low: f64,
+    high: f64,
+    reason: &'static str,
+}
+
+impl From<Answer> for AnswerOut {
+    fn from(a: Answer) -> Self {
+        Self {
+            interval: a.interval,
+            low: a.low,
+            high: a.high,
+            reason: a.reason.text(),
+        }
+    }
 }
 
 /// What an adaptive campaign spent finding the vehicle's failures, and
@@ -181,9 +204,13 @@ fn set_up(args: &EvaluateArgs) -> anyhow::Result<Setup> {
     let case = open(&case_args)?;
     let descriptor = case.descriptor().clone();
     let vut = vehicle_spec(case.as_ref(), &args.vut, "vehicle under test")?;
+    let guardable = descriptor.is_grid()
+        && args.method != MethodArg::Ndd
+        && args.rule.interval == Interval::Wald;
     let rule = stopping_rule(
         &args.rule,
         descriptor.exploring_share(args.method == MethodArg::Library, args.exploration.epsilon),
+        tslg_method::noise::guards_by_default(tslg_method::noise::spec_is_noisy(&vut), guardable),
     )?;
     anyhow::ensure!(
         rule.interval == Interval::Wald
@@ -301,6 +328,14 @@ fn report(
     search: Option<Search>,
 ) -> Report {
     let exact = exact_answer(setup.case.as_ref(), &setup.vut);
+    let answer = tslg_method::campaign::answer(
+        &result,
+        AnswerContext {
+            guard_outside: setup.rule.guard_outside,
+            noisy: tslg_method::noise::spec_is_noisy(&setup.vut),
+            adaptive: args.method == MethodArg::Adaptive,
+        },
+    );
     Report {
         case: setup.descriptor.name,
         grid: setup.descriptor.is_grid(),
@@ -313,8 +348,9 @@ fn report(
         vut: setup.vut.clone(),
         result,
         search,
+        answer: answer.into(),
         exact,
-        covers_exact: exact.map(|p| result.covers(p)),
+        covers_exact: exact.map(|p| answer.covers(p)),
         parameters_inert: exact.and_then(|p| {
             tslg_method::registry::parameters_inert(setup.case.as_ref(), &setup.vut, p)
         }),
@@ -328,6 +364,7 @@ fn report(
                     && args.exploration.epsilon == 0.0,
                 uniform_spread: setup.outside == tslg_method::sampling::OutsideSpread::Uniform,
                 adaptive: matches!(args.method, MethodArg::Adaptive),
+                noisy: tslg_method::noise::spec_is_noisy(&setup.vut),
             },
         ),
     }
@@ -374,14 +411,17 @@ fn print(report: &Report, rule: &StoppingRule) {
         None => outln!("tests              {}", result.tests),
     }
     print_estimate(result, rule);
+    let answer = &report.answer;
+    outln!(
+        "answer             [{:.4e}, {:.4e}]: {}",
+        answer.low,
+        answer.high,
+        answer.reason
+    );
     match (report.exact, report.covers_exact) {
         (Some(exact), Some(covers)) => outln!(
-            "exact P(A)         {exact:.4e} ({})",
-            if covers {
-                "inside the interval"
-            } else {
-                "OUTSIDE the interval"
-            }
+            "exact P(A)         {exact:.4e} ({} the answer)",
+            if covers { "inside" } else { "OUTSIDE" }
         ),
         _ if report.grid => outln!(
             "exact P(A)         not computed: enumeration here stops at {} scenarios",

@@ -25,6 +25,15 @@ pub struct ExactArgs {
     /// noisy IDM, whose P(A|x) per cell is a Monte Carlo); repeatable.
     #[arg(long, value_name = "VUT")]
     pub vut: Vec<String>,
+    /// A program to report beside them, started here as `tslg-worker
+    /// --vut-exec` starts it (a built-in grid case): its P(A) from its
+    /// outcomes on every cell with exposure, run `--program-runs` times
+    /// each when its hello says it is not deterministic; repeatable.
+    #[arg(long, value_name = "NAME=COMMAND")]
+    pub program: Vec<String>,
+    /// Runs of every cell of a noisy `--program`.
+    #[arg(long, default_value_t = crate::commands::held_out::DEFAULT_PROGRAM_RUNS)]
+    pub program_runs: usize,
 }
 
 /// P(A) by enumeration of the grid, where the case has one and it is
@@ -161,6 +170,48 @@ fn print_table(case: &dyn ScenarioCase, args: &ExactArgs) -> anyhow::Result<()> 
                 mc.runs_per_cell, mc.varying_cells, mc.standard_error
             ));
         }
+    }
+    for exec in &args.program {
+        let z = StoppingRule {
+            beta: args.beta,
+            confidence: args.confidence,
+            ..StoppingRule::new(args.beta, tslg_method::estimator::MAX_TESTS_LIMIT)
+        }
+        .z();
+        let Some(table) = crate::commands::held_out::tabulate(case, exec, args.program_runs)?
+        else {
+            anyhow::bail!(
+                "--program {exec}: the program does not drive case {}",
+                descriptor.name
+            );
+        };
+        outln!(
+            "{:<14} {:>12.4e} {:>14} {:>14.0} {:>10}",
+            table.name,
+            table.probability,
+            "–",
+            tslg_method::exact::expected_ndd_tests(table.probability, args.beta, z),
+            "–"
+        );
+        let best = tslg_method::exact::expected_library_tests(
+            table.best_sampling_variance(&case.cell_exposures()?),
+            table.probability,
+            args.beta,
+            z,
+        );
+        notes.push(if table.noisy() {
+            format!(
+                "{}: a noisy program, {} runs of every cell with exposure: P(A) has standard \
+                 error {:.2e}; the best sampling of one run a test, were every cell's rate \
+                 known (q ∝ P(x)√p̂(x)), would need {:.0} tests",
+                table.name, table.runs, table.standard_error, best
+            )
+        } else {
+            format!(
+                "{}: a deterministic program, one run of every cell with exposure",
+                table.name
+            )
+        });
     }
     for note in notes {
         outln!("{note}");

@@ -363,7 +363,7 @@ fn load_campaign(shape: &Shape) -> CreateCampaign {
         seed: 1,
         n_min: Some(planned.clamp(DEFAULT_N_MIN, max_tests)),
         min_events: None,
-        guard_outside: false,
+        guard_outside: None,
         interval: Default::default(),
         paired_with: None,
         vehicle_noise: false,

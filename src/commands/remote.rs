@@ -173,16 +173,25 @@ pub fn describe(view: &CampaignView) -> String {
         ),
         None => String::new(),
     };
-    let exact = match (view.exact_probability, view.ci_low, view.ci_high) {
-        (Some(p), Some(low), Some(high)) => format!(
-            "\n  exact P(A) {p:.3e} (by enumeration of the grid): {} the interval",
-            if low <= p && p <= high {
+    let answer = match &view.answer {
+        Some(a) => format!(
+            "\n  answer [{}, {}]: {}",
+            sci(Some(a.low)),
+            sci(Some(a.high)),
+            a.reason
+        ),
+        None => String::new(),
+    };
+    let exact = match (view.exact_probability, &view.answer) {
+        (Some(p), Some(a)) => format!(
+            "\n  exact P(A) {p:.3e} (by enumeration of the grid): {} the answer",
+            if a.low <= p && p <= a.high {
                 "inside"
             } else {
                 "OUTSIDE"
             }
         ),
-        (Some(p), _, _) => format!("\n  exact P(A) {p:.3e} (by enumeration of the grid)"),
+        (Some(p), _) => format!("\n  exact P(A) {p:.3e} (by enumeration of the grid)"),
         _ => String::new(),
     };
     let adaptive = match &view.adaptive {
@@ -231,7 +240,7 @@ pub fn describe(view: &CampaignView) -> String {
         .collect();
     format!(
         "campaign {} ({} {}, vehicle {}): {}{}\n  {}\n  \
-         estimate {}  {}interval [{}, {}]  relative half-width {} (β {}, confidence {}){exact}{inert}{health}{outside}{adaptive}{pair}{warnings}",
+         estimate {}  {}interval [{}, {}]  relative half-width {} (β {}, confidence {}){answer}{exact}{inert}{health}{outside}{adaptive}{pair}{warnings}",
         view.id,
         view.case,
         view.method.as_str(),

@@ -19,7 +19,7 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::sync::Arc;
 use tslg_method::adaptive::AdaptiveSettings;
-use tslg_method::campaign::{run_campaign_tests_watched, CampaignResult};
+use tslg_method::campaign::{answer, run_campaign_tests_watched, AnswerContext, CampaignResult};
 use tslg_method::cases::open_case;
 use tslg_method::estimator::{default_n_min, Decision, Interval, StoppingRule};
 use tslg_method::library::SearchMethod;
@@ -104,22 +104,31 @@ pub struct ValidateArgs {
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(2..=1_000_000))]
     pub curve_to: Option<u64>,
     /// A held-out vehicle under test: an external program (as
-    /// `tslg-worker --vut-exec`), tested in step mode with the library of
-    /// the case's default surrogate, on each case it drives. It is run once
-    /// on every cell with exposure, which gives its exact P(A); repeatable.
+    /// `tslg-worker --vut-exec`), tested with the library of the case's
+    /// default surrogate on each case it drives, in step mode where it
+    /// offers it, else in episode mode. A deterministic program is run once
+    /// on every cell with exposure, which gives its exact P(A); a noisy one
+    /// (`"deterministic": false`) --program-runs times, and each test takes
+    /// one of its cell's runs; repeatable.
     #[arg(long, value_name = "NAME=COMMAND")]
     pub vut_exec: Vec<String>,
-    /// Noisy pairings (cut-in): for each σ given (m/s², comma-separated),
-    /// the first surrogate's library (the IDM's) tested on each surrogate
-    /// model (IDM, FVDM) with noise σ on every command, against a Monte
-    /// Carlo P(A) (docs/statistics.md, "Noisy vehicles").
-    #[arg(
-        long,
-        value_delimiter = ',',
-        value_name = "SIGMA",
-        allow_negative_numbers = true
-    )]
-    pub noise: Vec<f64>,
+    /// Runs of every cell of a noisy --vut-exec program: the tests draw
+    /// from them, and the exact P(A) is theirs.
+    #[arg(long, default_value_t = held_out::DEFAULT_PROGRAM_RUNS)]
+    pub program_runs: usize,
+    /// Noisy pairings (cut-in): for each noise given (comma-separated), the
+    /// first surrogate's library (the IDM's) tested on each surrogate model
+    /// (IDM, FVDM) with that noise, against a Monte Carlo P(A)
+    /// (docs/statistics.md, "Noisy vehicles"). A number is σ of additive
+    /// noise (m/s²); `KIND:σ` another kind: `multiplicative:0.3`,
+    /// `perception:0.1`, `reaction:1.5` (docs/models.md).
+    #[arg(long, value_delimiter = ',', value_name = "NOISE")]
+    pub noise: Vec<String>,
+    /// More built-in vehicles under test (JSON specifications, noisy or
+    /// not, e.g. '{"model": "acc-aeb", "actuator_lag": 0.3, "noise": 1}'),
+    /// tested with the library of the case's first surrogate; repeatable.
+    #[arg(long, value_name = "SPEC")]
+    pub vut: Vec<String>,
 }
 
 /// A way of running a pairing's campaigns.
@@ -176,8 +185,17 @@ impl ValidateMethod {
         )
     }
 
-    /// Whether it answers with the guarded interval `[ci_low,
-    /// guarded_ci_high]` (it stops under the outside guard).
+    /// The same method without the guard.
+    fn unguarded(self) -> Self {
+        match self {
+            ValidateMethod::Guarded => ValidateMethod::Plain,
+            ValidateMethod::AdaptiveGuarded => ValidateMethod::Adaptive,
+            ValidateMethod::AdaptiveLatticeGuarded => ValidateMethod::AdaptiveLattice,
+            other => other,
+        }
+    }
+
+    /// Whether it stops under the outside guard whatever the vehicle.
     fn guarded(self) -> bool {
         matches!(
             self,
@@ -207,6 +225,17 @@ struct Setup {
     split: Split,
     rule: StoppingRule,
     truth: f64,
+    /// The vehicle's runs of one scenario may differ.
+    noisy: bool,
+}
+
+/// What a campaign's answer depends on ([`tslg_method::campaign::answer`]).
+fn answer_context(method: ValidateMethod, rule: &StoppingRule, noisy: bool) -> AnswerContext {
+    AnswerContext {
+        guard_outside: rule.guard_outside,
+        noisy,
+        adaptive: method.adaptive(),
+    }
 }
 
 impl Setup {
@@ -233,7 +262,8 @@ impl Setup {
         Ok(match &self.table {
             Some(table) => Arc::new(TabulatedTests {
                 inner: tests,
-                outcomes: Arc::clone(&table.outcomes),
+                table: Arc::clone(table),
+                seed,
             }),
             None => tests,
         })
@@ -247,18 +277,11 @@ impl Setup {
             let tests = self.tests(seed)?;
             // The interval the method answers with, as `Row::answer_coverage`.
             let mut held = true;
-            let (truth, n_min, guarded) = (
-                self.truth,
-                self.rule.n_min,
-                self.method == ValidateMethod::Guarded,
-            );
+            let (truth, n_min) = (self.truth, self.rule.n_min);
+            let context = answer_context(self.method, &self.rule, self.noisy);
             let mut watch = |result: &CampaignResult| {
                 if result.tests >= n_min {
-                    held &= if guarded {
-                        result.guarded_covers(truth)
-                    } else {
-                        result.covers(truth)
-                    };
+                    held &= answer(result, context).covers(truth);
                 }
             };
             let result = run_campaign_tests_watched(
@@ -311,6 +334,8 @@ pub struct Row {
     rule: StoppingRule,
     truth: f64,
     runs: Vec<CampaignResult>,
+    /// The vehicle's runs of one scenario may differ.
+    noisy: bool,
     /// Per run: whether its interval held the exact P(A) at every
     /// settlement from n_min to the stop (`None`: not watched, adaptive).
     held: Vec<Option<bool>>,
@@ -329,14 +354,11 @@ impl Row {
     }
 
     /// The coverage of the interval the method answers with: the guarded
-    /// interval `[ci_low, guarded_ci_high]` for a guarded campaign, the
-    /// plain one otherwise.
+    /// interval `[ci_low, guarded_ci_high]` for a guarded campaign and for
+    /// a noisy vehicle's, the plain one otherwise.
     fn answer_coverage(&self) -> f64 {
-        if self.method.guarded() {
-            self.coverage(|r| r.guarded_covers(self.truth))
-        } else {
-            self.coverage(|r| r.covers(self.truth))
-        }
+        let context = answer_context(self.method, &self.rule, self.noisy);
+        self.coverage(|r| answer(r, context).covers(self.truth))
     }
 
     /// The coverage of `[ci_low, guarded_ci_high]` where the campaigns
@@ -358,6 +380,7 @@ impl Row {
             unexplored: self.epsilon == 0.0 && !self.method.adaptive(),
             uniform_spread: self.outside == OutsideSpread::Uniform,
             adaptive: self.method.adaptive(),
+            noisy: self.noisy,
         };
         self.coverage(|r| !warnings(r, context).is_empty())
     }
@@ -487,27 +510,36 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
                 models.push(surrogate);
             }
         }
-        for &sigma in &args.noise {
-            anyhow::ensure!(
-                sigma > 0.0 && sigma <= tslg_method::vehicle::MAX_NOISE,
-                "--noise {sigma}: σ must be in (0, {}] m/s²",
-                tslg_method::vehicle::MAX_NOISE
-            );
+        for written in &args.noise {
+            let noise = tslg_method::noise::Noise::parse_short(written)
+                .map_err(|e| anyhow::anyhow!("--noise {written}: {e}"))?;
             for model in &models {
-                let spec = serde_json::json!({ "model": model, "noise": sigma });
+                let spec = serde_json::json!({ "model": model, "noise": noise });
                 vehicles.push((pairs[0].0, spec, None));
             }
         }
     }
+    for written in &args.vut {
+        let spec = crate::inputs::vehicle_spec(case.as_ref(), written, "--vut")?;
+        vehicles.push((pairs[0].0, spec, None));
+    }
     for exec in &args.vut_exec {
-        let Some(table) = held_out::tabulate(case.as_ref(), exec)? else {
-            eprintln!("{case_name}: `{exec}` does not drive this case in step mode; skipped");
+        let Some(table) = held_out::tabulate(case.as_ref(), exec, args.program_runs)? else {
+            eprintln!("{case_name}: `{exec}` does not drive this case; skipped");
             continue;
         };
-        eprintln!(
-            "{case_name}: program `{}` on every cell: exact P(A) {:.4e}",
-            table.name, table.probability
-        );
+        if table.noisy() {
+            eprintln!(
+                "{case_name}: noisy program `{}`, {} runs on every cell: P(A) {:.4e} \
+                 (± {:.1e} as the program's)",
+                table.name, table.runs, table.probability, table.standard_error
+            );
+        } else {
+            eprintln!(
+                "{case_name}: program `{}` on every cell: exact P(A) {:.4e}",
+                table.name, table.probability
+            );
+        }
         let spec = table.spec.clone();
         vehicles.push((pairs[0].0, spec, Some(Arc::new(table))));
     }
@@ -527,6 +559,7 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
             None => case.exact_event_probability(&vut)?,
         };
         let name = match &table {
+            Some(t) if t.noisy() => format!("{} (noisy program)", t.name),
             Some(t) => t.name.clone(),
             None => crate::inputs::vehicle_name(&vut, case_name),
         };
@@ -549,8 +582,16 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
                 variants.push((adaptive, args.epsilon, case.default_outside()));
             }
         }
+        // A noisy vehicle's campaigns run under the guard unless told not
+        // to, as the service runs them: its plain and guarded variants are
+        // then one campaign, run once under the unguarded one's name.
+        let noisy =
+            tslg_method::noise::spec_is_noisy(&vut) || table.as_ref().is_some_and(|t| t.noisy());
+        if noisy {
+            let asked: Vec<ValidateMethod> = variants.iter().map(|v| v.0).collect();
+            variants.retain(|v| !asked.contains(&v.0.unguarded()) || v.0.unguarded() == v.0);
+        }
         for &(method, epsilon, outside) in &variants {
-            let guard_outside = method.guarded();
             // An adaptive campaign's n_min counts its estimation tests.
             let share = (!method.adaptive())
                 .then(|| case.descriptor().exploring_share(true, epsilon))
@@ -575,6 +616,8 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
                     {
                         continue;
                     }
+                    let guard_outside = method.guarded()
+                        || tslg_method::noise::guards_by_default(noisy, interval == Interval::Wald);
                     let rule = StoppingRule {
                         beta: args.beta,
                         confidence: args.confidence,
@@ -605,6 +648,7 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
                         split: split.split(),
                         rule,
                         truth,
+                        noisy,
                     });
                 }
             }
@@ -746,6 +790,7 @@ fn replicate(setup: &Setup, replicates: u64) -> anyhow::Result<Row> {
         rule: setup.rule,
         truth: setup.truth,
         runs,
+        noisy: setup.noisy,
         held,
     })
 }

@@ -261,7 +261,7 @@ async fn the_dashboard_follows_a_running_campaign_and_agrees_with_the_api() {
     // The same library, guarded: the outside bound within β of the
     // estimate, by exposure (docs/statistics.md, "The guard").
     let guarded = CreateCampaign {
-        guard_outside: true,
+        guard_outside: Some(true),
         outside: Some(tslg_api::Outside::Ndd),
         ..campaign(Method::Library, library.id, "idm", 0.3, 4)
     };

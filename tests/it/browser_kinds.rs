@@ -19,7 +19,7 @@ const SHOWN: &str = "(() => {
     return on(n) ? (n.dataset.value ?? n.textContent) : null; };
   const ids = ['status', 'tests', 'indices', 'events', 'invalid', 'estimate',
     'relative-half-width', 'outside-upper', 'guarded-interval', 'library-tests',
-    'search-tests', 'estimation-tests', 'stages', 'support'];
+    'search-tests', 'estimation-tests', 'stages', 'support', 'answer', 'answer-reason'];
   const sections = ['summary', 'pair', 'adaptive', 'estimate-figures'];
   return {
     fields: Object.fromEntries(ids.map((id) => [id, field(id)])),
@@ -129,6 +129,18 @@ pub async fn page_agrees(browser: &Browser, url: &str, view: &CampaignView, name
             (Value::Null, Value::Null)
         },
         "{name}: the outside bound is shown where there is one"
+    );
+    // The answer to report, and why, as the API gives it.
+    assert_eq!(
+        (number("answer"), fields["answer-reason"].clone()),
+        match &view.answer {
+            Some(a) => (
+                json!(a.high),
+                json!(format!("{}: {}", a.interval.as_str(), a.reason))
+            ),
+            None => (Value::Null, Value::Null),
+        },
+        "{name}: the answer"
     );
     assert_eq!(sections["pair"], json!(view.pair.is_some()), "{name}");
     assert_eq!(sections["adaptive"], json!(adaptive.is_some()), "{name}");

@@ -317,16 +317,59 @@ fn validate_compares_the_methods_in_one_csv() {
     // a held-out vehicle, run once on every cell.
     let program = crate::support::example_binary("fvdm_vut");
     let exec = format!("rs-fvdm={}", program.display());
-    // The same program with noise is not a held-out vehicle: one run per
-    // cell is not its P(A).
+    // The same program with noise: every cell run `--program-runs` times,
+    // each test drawing one of its cell's runs, and the reference the mean
+    // of those runs by exposure; its campaigns run under the guard (its
+    // hello says it is noisy) and answer with the guarded interval.
     let noisy = format!("rs-noisy={} --noise 1.5", program.display());
-    let out = tslg(&["validate", "--cases", "cut-in", "--vut-exec", &noisy]);
-    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    let out = tslg(&[
+        "validate",
+        "--cases",
+        "cut-in",
+        "--vut-exec",
+        &noisy,
+        "--program-runs",
+        "1",
+    ]);
+    assert!(clean_refusal(&out));
     assert!(
-        stderr(&out).contains("says its runs of one test may differ"),
+        stderr(&out).contains("needs at least 2 runs a cell"),
         "{}",
         stderr(&out)
     );
+    let noisy_dir = tempfile::tempdir().unwrap();
+    let out = tslg(&[
+        "validate",
+        "--cases",
+        "cut-in",
+        "--methods",
+        "adaptive",
+        "--replicates",
+        "5",
+        "--vut-exec",
+        &noisy,
+        "--program-runs",
+        "3",
+        "--out",
+        noisy_dir.path().to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("noisy program `rs-noisy`, 3 runs on every cell: P(A)"),
+        "{}",
+        stderr(&out)
+    );
+    let csv = std::fs::read_to_string(noisy_dir.path().join("methods.csv")).unwrap();
+    let program_row: Vec<&str> = csv
+        .lines()
+        .find(|l| l.contains("rs-noisy (noisy program)"))
+        .unwrap_or_else(|| panic!("no row of the noisy program in {csv}"))
+        .split(',')
+        .collect();
+    // Its answer is the guarded interval, and a campaign that met its
+    // guard has nothing to warn of.
+    assert_eq!(program_row[6], program_row[11], "{csv}");
+    assert_eq!(program_row[12], "0.0000", "{csv}");
     let out = tslg(&[
         "validate",
         "--cases",
@@ -358,8 +401,10 @@ fn validate_compares_the_methods_in_one_csv() {
             .find(|c| c[2] == "idm" && c[3] == vut && c[4] == method)
             .unwrap_or_else(|| panic!("no idm → {vut} {method} in {csv}"))
     };
-    // Six pairings, the noisy IDM and FVDM, and the program; three methods.
-    assert_eq!(csv.lines().count(), 1 + 9 * 3, "{csv}");
+    // Six pairings and the program, three methods; the noisy IDM and FVDM
+    // two, their campaigns being guarded already (no separate
+    // adaptive-guarded row).
+    assert_eq!(csv.lines().count(), 1 + 7 * 3 + 2 * 2, "{csv}");
     // The noisy IDM's reference is its Monte Carlo P(A), above the plain
     // IDM's (its noise makes boundary cells fail now and then): a larger
     // rate needs fewer NDD tests.

@@ -28,6 +28,7 @@ mod service_e2e;
 mod service_events;
 mod service_external;
 mod service_fairness;
+mod service_held_back;
 mod service_highway;
 mod service_leaving;
 mod service_load;

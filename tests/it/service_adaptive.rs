@@ -34,7 +34,7 @@ fn adaptive_in_process(request: &CreateCampaign, vut: &str) -> AdaptiveRun {
         n_min: default_n_min(None, request.max_tests),
         min_events: 10,
         max_tests: request.max_tests,
-        guard_outside: request.guard_outside,
+        guard_outside: tslg_client::wire::guard_outside(request, true),
         interval: Default::default(),
     };
     case.adaptive_campaign(
@@ -315,7 +315,7 @@ async fn an_adaptive_campaign_through_the_service_is_the_in_process_one() {
     // Guarded: it explores until the bound on what its support leaves out
     // is within β of its estimate, and is the in-process campaign.
     let guarded = CreateCampaign {
-        guard_outside: true,
+        guard_outside: Some(true),
         ..adaptive(library.id, serde_json::json!({"model": "fvdm"}), 1)
     };
     let own = adaptive_in_process(&guarded, "fvdm");

@@ -26,7 +26,7 @@ fn request(method: Method, library_id: i64, vut: &str, seed: u64) -> CreateCampa
         seed,
         n_min: None,
         min_events: None,
-        guard_outside: false,
+        guard_outside: Some(false),
         interval: Default::default(),
         paired_with: None,
         split: None,

@@ -36,7 +36,7 @@ fn request(
         seed,
         n_min: None,
         min_events: None,
-        guard_outside: false,
+        guard_outside: Some(false),
         interval: Default::default(),
         paired_with: None,
         split: None,

@@ -17,7 +17,7 @@ fn guarded(library_id: i64, beta: f64) -> CreateCampaign {
     CreateCampaign {
         epsilon: 0.5,
         outside: Some(Outside::Ndd),
-        guard_outside: true,
+        guard_outside: Some(true),
         ..campaign(Method::Library, library_id, "fvdm", beta, 3)
     }
 }

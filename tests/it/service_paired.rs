@@ -319,7 +319,7 @@ async fn a_pair_is_cancelled_and_deleted_whole_and_refuses_what_it_cannot_pair()
         (
             CreateCampaign {
                 paired_with: Some(json!("idm")),
-                guard_outside: true,
+                guard_outside: Some(true),
                 ..campaign(Method::Library, library.id, "fvdm", 0.2, 1)
             },
             "no guard is defined for a difference",

@@ -136,7 +136,7 @@ async fn a_sumo_vehicle_is_a_surrogate_and_its_library_and_ndd_campaigns_agree()
         seed,
         n_min: None,
         min_events: None,
-        guard_outside: false,
+        guard_outside: Some(false),
         interval: Default::default(),
         paired_with: None,
         vehicle_noise: false,

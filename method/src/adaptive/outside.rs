@@ -14,8 +14,9 @@
 //! concentrated than the binomial of that mean (Hoeffding 1956), so the
 //! one-sided Clopper–Pearson bound `p_U(k, m, c)` on `k` of `m` holds `q̄`
 //! at confidence `c`. Every stage explores the same share of its tests
-//! (`1/explore_every`; the guard's stages all [`crate::sampling::LATE_SHARE`],
-//! and a guarded campaign's estimate starts again with them), so the
+//! (`1/explore_every`; the guard's stages all the guard's share,
+//! [`super::AllocationInputs::guard_share`], and a guarded campaign's
+//! estimate starts again with them), so the
 //! average over exploring tests is the average over tests, and
 //! `μ_O ≤ m_max q̄`, `m_max` the largest `m_s` that explored. With `m̄` the
 //! tests' average `m_s` (no stage can fail off its support more than its
@@ -113,7 +114,7 @@ impl Explored {
 
 /// The exposure an estimation stage's exploring tests sample: `P(X ∖ K)`,
 /// all of it when the support is empty (the stage is the NDD).
-fn exposure_off_support(distribution: &TestDistribution) -> f64 {
+pub(crate) fn exposure_off_support(distribution: &TestDistribution) -> f64 {
     match distribution {
         TestDistribution::Support(d) => d.outside_exposure(),
         _ => 1.0,

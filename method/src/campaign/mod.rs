@@ -5,8 +5,10 @@
 //! estimate do not depend on the batch size or the number of threads, and
 //! equal, to the bit, what the coordinator computes from the same seed.
 
+pub mod answer;
 pub(crate) mod result;
 
+pub use answer::{answer, Answer, AnswerContext, AnswerInterval, AnswerReason};
 pub use result::CampaignResult;
 
 use crate::anytime::{AnytimeFold, TermBounds};

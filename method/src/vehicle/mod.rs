@@ -25,7 +25,7 @@ pub(crate) use parameters::check;
 pub use parameters::{ParamError, MAX_PARAMETER_MAGNITUDE, MIN_PARAMETER_MAGNITUDE};
 pub use switching_acc::{SwitchingAccParams, SwitchingAccState};
 
-use crate::noise::{CommandNoise, NoiseRng};
+use crate::noise::{Noise, NoiseRng, RunNoise};
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
@@ -77,21 +77,19 @@ pub enum VehicleSpec {
     AccAeb(AccAebParams),
 }
 
-/// A vehicle model as written, with the noise on its commands
-/// (`{"model": "idm", "noise": 0.5}`), before validation.
+/// A vehicle model as written, with the noise on its runs
+/// (`{"model": "idm", "noise": 0.5}`, `{"model": "idm", "noise": {"kind":
+/// "reaction", "sigma": 1.5}}`), before validation.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct WrittenVehicle {
     #[serde(flatten)]
     spec: VehicleSpec,
-    /// σ (m/s²) of the Gaussian noise added to every commanded
-    /// acceleration, before the world's bounds: a vehicle that is not
-    /// bit-reproducible ([`crate::noise`]); 0, the default, for none.
-    #[serde(default, skip_serializing_if = "is_zero")]
-    noise: f64,
-}
-
-fn is_zero(value: &f64) -> bool {
-    *value == 0.0
+    /// The noise on its runs ([`Noise`]): a number is σ (m/s²) of Gaussian
+    /// noise added to every commanded acceleration, before the world's
+    /// bounds; an object names another kind. A noisy vehicle is not
+    /// bit-reproducible ([`crate::noise`]); absent or 0 for none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    noise: Option<Noise>,
 }
 
 /// A validated vehicle model. Deserialising one validates it.
@@ -99,26 +97,36 @@ fn is_zero(value: &f64) -> bool {
 #[serde(try_from = "WrittenVehicle", into = "WrittenVehicle")]
 pub struct VehicleModel {
     spec: VehicleSpec,
-    noise: f64,
+    /// `None` for a deterministic model (σ 0 is none).
+    noise: Option<Noise>,
 }
 
-/// The largest noise σ a vehicle takes (m/s²): beyond any actuator, and
-/// far beyond what keeps a cut-in's outcome tied to its scenario.
-pub const MAX_NOISE: f64 = 10.0;
+/// The largest additive noise σ a vehicle takes (m/s²): beyond any
+/// actuator, and far beyond what keeps a cut-in's outcome tied to its
+/// scenario.
+pub const MAX_NOISE: f64 = crate::noise::MAX_ADDITIVE;
 
 impl TryFrom<WrittenVehicle> for VehicleModel {
     type Error = ParamError;
     fn try_from(written: WrittenVehicle) -> Result<Self, ParamError> {
         let model = Self::try_from(written.spec)?;
+        let Some(noise) = written.noise else {
+            return Ok(model);
+        };
+        let parameter = match noise {
+            Noise::Additive(_) => "noise",
+            _ => "noise.sigma",
+        };
+        let requirement = noise.check().err().unwrap_or("");
         check(
             model.name(),
-            "noise",
-            written.noise,
-            |v| (0.0..=MAX_NOISE).contains(&v),
-            "must be in [0, 10] (m/s²)",
+            parameter,
+            noise.sigma(),
+            |_| noise.check().is_ok(),
+            requirement,
         )?;
         Ok(Self {
-            noise: written.noise,
+            noise: noise.is_some().then_some(noise),
             ..model
         })
     }
@@ -145,7 +153,7 @@ impl TryFrom<VehicleSpec> for VehicleModel {
             VehicleSpec::SwitchingAcc(p) => p.validate(),
             VehicleSpec::AccAeb(p) => p.validate(),
         }?;
-        Ok(Self { spec, noise: 0.0 })
+        Ok(Self { spec, noise: None })
     }
 }
 
@@ -164,7 +172,7 @@ impl VehicleModel {
             "acc-aeb" => VehicleSpec::AccAeb(AccAebParams::default()),
             other => return Err(UnknownModel(other.to_owned())),
         };
-        Ok(Self { spec, noise: 0.0 })
+        Ok(Self { spec, noise: None })
     }
 
     /// The model's name as used on the command line and in files.
@@ -206,8 +214,8 @@ impl VehicleModel {
             .into_iter()
             .map(|(key, value)| format!("{key} {}", crate::number::Num(value)))
             .collect();
-        if self.is_noisy() {
-            parts.push(format!("noise {}", crate::number::Num(self.noise)));
+        if let Some(noise) = &self.noise {
+            parts.push(noise.label());
         }
         if parts.is_empty() {
             self.name().to_owned()
@@ -216,20 +224,20 @@ impl VehicleModel {
         }
     }
 
-    /// σ of the noise on its commands (m/s²); 0 for a deterministic model.
-    pub fn noise(&self) -> f64 {
+    /// The noise on its runs; `None` for a deterministic model.
+    pub fn noise(&self) -> Option<Noise> {
         self.noise
     }
 
     /// Whether two runs of one scenario may differ.
     pub fn is_noisy(&self) -> bool {
-        self.noise > 0.0
+        self.noise.is_some()
     }
 
     /// The same model without noise (a surrogate's view of it).
     pub fn without_noise(&self) -> Self {
         Self {
-            noise: 0.0,
+            noise: None,
             ..*self
         }
     }
@@ -250,8 +258,8 @@ impl VehicleModel {
     pub fn noisy_controller(&self, stream: NoiseRng) -> Controller {
         Controller {
             noise: self
-                .is_noisy()
-                .then(|| Box::new(CommandNoise::new(self.noise, stream))),
+                .noise
+                .map(|noise| Box::new(RunNoise::new(noise, stream))),
             ..self.controller()
         }
     }
@@ -265,33 +273,46 @@ pub struct Controller {
     /// The acceleration the actuator delivered at the last step (for a
     /// model with an actuator lag).
     delivered: Option<f64>,
-    /// The noise on its commands, for a noisy model (boxed: a stream is
-    /// some 300 bytes, and deterministic controllers stay small).
-    noise: Option<Box<CommandNoise>>,
+    /// The noise on its runs, for a noisy model (boxed: a stream is some
+    /// 300 bytes, and deterministic controllers stay small).
+    noise: Option<Box<RunNoise>>,
 }
 
 impl Controller {
     /// The acceleration over the next step of `dt` seconds, clipped to
-    /// `clip = (a_min, a_max)`. A noisy model adds `σ Z` (`Z` standard
-    /// normal, from the test's noise stream) to each command before the
-    /// clip. A model with an actuator lag τ delivers a first-order response
-    /// to its command `c`: `a ← a + (c − a)(1 − e^{−Δt/τ})`, starting from
-    /// the first command.
+    /// `clip = (a_min, a_max)`. A noisy model acts on the gap its noise
+    /// lets it perceive and its actuator delivers what its noise makes of
+    /// the command, before the clip ([`RunNoise`]; additive noise adds `σ
+    /// Z`, `Z` standard normal from the test's noise stream). A model with
+    /// an actuator lag τ delivers a first-order response to its command
+    /// `c`: `a ← a + (c − a)(1 − e^{−Δt/τ})`, starting from the first
+    /// command.
     pub fn acceleration(&mut self, obs: &FollowerObservation, clip: (f64, f64), dt: f64) -> f64 {
+        let perceived;
+        let obs = match &mut self.noise {
+            Some(noise) => {
+                perceived = FollowerObservation {
+                    gap: noise.perceived_gap(obs.gap),
+                    ..*obs
+                };
+                &perceived
+            }
+            None => obs,
+        };
         let (command, lag) = match &self.spec {
             VehicleSpec::Idm(p) => (p.acceleration(obs), 0.0),
             VehicleSpec::Fvdm(p) => (p.acceleration(obs), 0.0),
             VehicleSpec::SwitchingAcc(p) => {
                 let command = self.acc_state.acceleration(p, obs, clip);
                 return match &mut self.noise {
-                    Some(noise) => (command + noise.draw()).clamp(clip.0, clip.1),
+                    Some(noise) => noise.deliver(command, dt).clamp(clip.0, clip.1),
                     None => command,
                 };
             }
             VehicleSpec::AccAeb(p) => (p.acceleration(obs), p.actuator_lag),
         };
         let command = match &mut self.noise {
-            Some(noise) => command + noise.draw(),
+            Some(noise) => noise.deliver(command, dt),
             None => command,
         };
         let command = command.clamp(clip.0, clip.1);

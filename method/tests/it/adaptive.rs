@@ -37,7 +37,23 @@ fn seeded_runs(
     vehicle: &tslg_method::vehicle::VehicleModel,
     seeds: u64,
 ) -> Vec<AdaptiveResult> {
-    let rule = StoppingRule::new(0.2, 1_000_000);
+    seeded_runs_under(
+        case,
+        library,
+        vehicle,
+        seeds,
+        &StoppingRule::new(0.2, 1_000_000),
+    )
+}
+
+/// [`seeded_runs`] under `rule`.
+fn seeded_runs_under(
+    case: &CutIn,
+    library: &tslg_method::library::Library,
+    vehicle: &tslg_method::vehicle::VehicleModel,
+    seeds: u64,
+    rule: &StoppingRule,
+) -> Vec<AdaptiveResult> {
     (0..seeds)
         .map(|seed| {
             run_adaptive(
@@ -46,7 +62,7 @@ fn seeded_runs(
                 library,
                 0.1,
                 AdaptiveSettings::default(),
-                &rule,
+                rule,
                 seed,
             )
             .unwrap()
@@ -374,31 +390,40 @@ fn stage_records_tell_the_campaign(
 }
 
 #[test]
-fn adaptive_campaigns_of_a_noisy_vehicle_cover_its_monte_carlo_rate() {
-    // The IDM with noise σ 1.5 m/s² on every command: about 170 cells
-    // near its failure boundary fail on some runs and not others, so a
-    // cell that passed once may fail. Its campaigns count every run of a
-    // cell, test search cells twice, and keep near misses in the support
+fn guarded_adaptive_campaigns_of_a_noisy_vehicle_cover_its_monte_carlo_rate() {
+    // The IDM with noise σ 1.5 m/s² on every command: about 170 cells near
+    // its failure boundary fail on some runs and not others, and its near
+    // misses reach far past them. A noisy campaign runs under the guard
+    // and answers with the guarded interval [ci_low, guarded_ci_high]; its
+    // support grows by its failures and their neighbours, only failures
+    // seed the search, and the guard's share is the one of fewest tests
     // (docs/statistics.md, "Noisy vehicles"). COVERAGE's 200 seeds:
-    // coverage at the nominal 0.9 (its floor), no bias, and far cheaper
-    // than the NDD. Judging a cell on its first run alone, as
-    // for a deterministic vehicle, gave coverage 0.34 and a bias of −16 %.
+    // coverage at the nominal 0.9 (its floor), no bias, and more than
+    // three times cheaper than the NDD. Under the rule before (near misses
+    // in the support, the guard exploring 95 % of its tests) the same
+    // campaigns needed 444,230 tests, 7.5 times the NDD's; judging a cell
+    // on its first run alone, as for a deterministic vehicle, gave the
+    // unguarded interval coverage 0.34.
     use tslg_method::exact::{event_rates, rate_probability};
     let case = CutIn::builtin(CutInPreset::PaperCode);
     let library = library(&case, "idm", SearchMethod::Exhaustive);
     let noisy: tslg_method::vehicle::VehicleModel =
         serde_json::from_value(serde_json::json!({"model": "idm", "noise": 1.5})).unwrap();
     let mu = rate_probability(&case, &event_rates(&case, &noisy));
-    let runs = seeded_runs(&case, &library, &noisy, COVERAGE.runs);
-    let covered = runs.iter().filter(|r| r.result.covers(mu)).count() as u64;
+    let rule = StoppingRule {
+        guard_outside: true,
+        ..StoppingRule::new(0.2, 1_000_000)
+    };
+    let runs = seeded_runs_under(&case, &library, &noisy, COVERAGE.runs, &rule);
+    let covered = runs.iter().filter(|r| r.result.guarded_covers(mu)).count() as u64;
     let mean = runs.iter().map(|r| r.result.estimate).sum::<f64>() / runs.len() as f64;
     let z = z_for_confidence(0.9);
     let ndd = z * z * (1.0 - mu) / (0.2f64.powi(2) * mu);
     COVERAGE.assert_covers(covered, "the noisy IDM");
-    assert!((mean / mu - 1.0).abs() < 0.06, "mean {mean:e} vs {mu:e}");
+    assert!((mean / mu - 1.0).abs() < 0.05, "mean {mean:e} vs {mu:e}");
     assert!(
-        ndd / median_tests(&runs) > 4.0,
-        "{} tests",
+        ndd / median_tests(&runs) > 3.0,
+        "{} tests, NDD {ndd:.0}",
         median_tests(&runs)
     );
 }

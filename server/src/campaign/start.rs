@@ -49,6 +49,8 @@ pub fn rule_of(req: &CreateCampaign) -> Result<StoppingRule, ServiceError> {
     }
     let case = descriptor(&req.case).map_err(|e| bad(e.to_string()))?;
     check_epsilon(req.epsilon).map_err(|e| bad(e.to_string()))?;
+    // A noisy vehicle's campaign runs under the guard unless it says not to.
+    let guard_outside = wire::guard_outside(req, case.is_grid());
     let rule = StoppingRule {
         beta: req.beta,
         confidence: req.confidence,
@@ -60,11 +62,11 @@ pub fn rule_of(req: &CreateCampaign) -> Result<StoppingRule, ServiceError> {
         }),
         min_events: req.min_events.unwrap_or(DEFAULT_MIN_EVENTS),
         max_tests: req.max_tests,
-        guard_outside: req.guard_outside,
+        guard_outside,
         interval: wire::interval(req.interval),
     };
     rule.validate().map_err(|e| bad(e.to_string()))?;
-    if req.guard_outside && req.method == Method::Ndd {
+    if guard_outside && req.method == Method::Ndd {
         return Err(bad(
             "guard_outside bounds the failure mass outside a library; an ndd campaign samples \
              every scenario by its exposure and has no outside to guard",
@@ -95,7 +97,7 @@ pub fn rule_of(req: &CreateCampaign) -> Result<StoppingRule, ServiceError> {
             req.method.as_str()
         )));
     }
-    if req.paired_with.is_some() && req.guard_outside {
+    if req.paired_with.is_some() && guard_outside {
         return Err(bad(
             "paired_with estimates the difference of two rates; guard_outside bounds one \
              campaign's outside mass, and no guard is defined for a difference: run the \
@@ -130,7 +132,7 @@ pub fn rule_of(req: &CreateCampaign) -> Result<StoppingRule, ServiceError> {
             "paired_with stops on the difference of two rates at its looks; interval `anytime` is a sequence for one rate: run the two campaigns apart",
         ));
     }
-    if req.guard_outside && !case.is_grid() {
+    if guard_outside && !case.is_grid() {
         return Err(bad(format!(
             "guard_outside applies to the grid cases ({}): a {} campaign explores per \
              decision, and no bound on its outside mass is defined",

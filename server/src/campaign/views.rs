@@ -74,16 +74,23 @@ pub fn campaign_view(row: &CampaignRow) -> CampaignView {
         Some(sequence) => summary.on_sequence(&fold, sequence, fold.strata.is_some()),
         None => summary,
     };
+    let vut: serde_json::Value = serde_json::from_str(&row.vut).unwrap_or_default();
+    let noisy = row.vehicle_noise || tslg_method::noise::spec_is_noisy(&vut);
+    let answer = tslg_method::campaign::answer(
+        &summary,
+        tslg_method::campaign::AnswerContext {
+            guard_outside: row.guard_outside,
+            noisy,
+            adaptive: row.method == Method::Adaptive,
+        },
+    );
     CampaignView {
         id: row.id,
         case: row.case_name.clone(),
         method: row.method,
         library_id: row.library_id,
-        vut: serde_json::from_str(&row.vut).unwrap_or_default(),
-        vut_label: tslg_method::cases::vehicle_label(
-            &serde_json::from_str(&row.vut).unwrap_or_default(),
-            &row.case_name,
-        ),
+        vut_label: tslg_method::cases::vehicle_label(&vut, &row.case_name),
+        vut,
         parameters_inert: row.parameters_inert,
         epsilon: row.epsilon,
         outside: row.outside,
@@ -121,6 +128,21 @@ pub fn campaign_view(row: &CampaignRow) -> CampaignView {
         outside_share: summary.outside_share,
         outside_upper: summary.outside_upper,
         guarded_ci_high: summary.guarded_ci_high.filter(|_| row.tests > 1),
+        // Not before its upper end is known (a campaign whose outside
+        // tally is being counted again has none yet).
+        answer: (row.tests > 1 && answer.low.is_finite() && answer.high.is_finite()).then(|| {
+            tslg_api::AnswerView {
+                interval: match answer.interval {
+                    tslg_method::campaign::AnswerInterval::Plain => tslg_api::AnswerInterval::Plain,
+                    tslg_method::campaign::AnswerInterval::Guarded => {
+                        tslg_api::AnswerInterval::Guarded
+                    }
+                },
+                low: answer.low,
+                high: answer.high,
+                reason: answer.reason.text().to_owned(),
+            }
+        }),
         exact_probability: row.exact_probability,
         adaptive: (row.method == Method::Adaptive).then(|| AdaptiveView {
             library_tests: row.library_tests as u64,
@@ -149,6 +171,7 @@ pub fn campaign_view(row: &CampaignRow) -> CampaignView {
                     unexplored: row.method == Method::Library && row.epsilon == 0.0,
                     uniform_spread: row.outside == tslg_api::Outside::Uniform,
                     adaptive: row.method == Method::Adaptive,
+                    noisy,
                 },
             );
             match row.paired_with {

@@ -104,7 +104,7 @@ pub fn start(args: &CampaignStartArgs) -> anyhow::Result<()> {
         seed: args.seed,
         n_min: args.rule.n_min,
         min_events: Some(args.rule.min_events),
-        guard_outside: args.rule.guard_outside,
+        guard_outside: args.rule.guard_request(),
         interval: tslg_client::wire::wire_interval(args.rule.interval),
         paired_with: args.paired_with.as_deref().map(vehicle_json).transpose()?,
         vehicle_noise: args.vehicle_noise,

@@ -243,7 +243,7 @@ impl Vehicle<'_> {
             seed,
             n_min: None,
             min_events: None,
-            guard_outside: false,
+            guard_outside: None,
             interval: Default::default(),
             paired_with: None,
             vehicle_noise: false,
@@ -340,7 +340,7 @@ impl Vehicle<'_> {
             let mut request = self.request(Method::Library, self.seed);
             request.epsilon = 0.5;
             request.outside = Some(Outside::Ndd);
-            request.guard_outside = true;
+            request.guard_outside = Some(true);
             ids.push(client.create_campaign(&request).await?.id);
             for k in 0..replicates {
                 let request = self.request(Method::Adaptive, self.seed + k);

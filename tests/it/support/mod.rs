@@ -382,7 +382,7 @@ pub fn campaign(
         min_events: None,
         outside: Default::default(),
         split: None,
-        guard_outside: false,
+        guard_outside: Some(false),
         interval: Default::default(),
         paired_with: None,
         vehicle_noise: false,
@@ -576,7 +576,12 @@ pub fn rule_of(request: &CreateCampaign) -> StoppingRule {
         }),
         min_events: request.min_events.unwrap_or(10),
         max_tests: request.max_tests,
-        guard_outside: request.guard_outside,
+        guard_outside: tslg_client::wire::guard_outside(
+            request,
+            tslg_method::cases::descriptor(&request.case)
+                .unwrap()
+                .is_grid(),
+        ),
         interval: tslg_client::wire::interval(request.interval),
     }
 }
