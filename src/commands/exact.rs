@@ -203,8 +203,9 @@ fn print_table(case: &dyn ScenarioCase, args: &ExactArgs) -> anyhow::Result<()> 
             format!(
                 "{}: a noisy program, {} runs of every cell with exposure: P(A) has standard \
                  error {:.2e}; the best sampling of one run a test, were every cell's rate \
-                 known (q ∝ P(x)√p̂(x)), would need {:.0} tests",
-                table.name, table.runs, table.standard_error, best
+                 known (q ∝ P(x)√p̂(x)), would need about {:.0} tests, or more: a cell \
+                 failing in fewer than 1 run in {} may count as never failing here",
+                table.name, table.runs, table.standard_error, best, table.runs
             )
         } else {
             format!(

@@ -76,7 +76,9 @@ impl ProgramTable {
     /// sampler of single runs does better, library or search, so
     /// `z² V/(β P(A))²` is the fewest tests any campaign of this program
     /// can expect: where its failures are spread thin over much exposure
-    /// it is close to the NDD's `z² (1 − P(A))/(β² P(A))`.
+    /// it is close to the NDD's `z² (1 − P(A))/(β² P(A))`. From `m` runs a
+    /// cell it is biased low (`E √p̂ ≤ √p`; a cell failing in fewer than
+    /// one run in `m` often shows `p̂ = 0`), so the true floor is higher.
     /// `exposures` are the case's cell exposures.
     pub fn best_sampling_variance(&self, exposures: &[f64]) -> f64 {
         let root: f64 = exposures

@@ -225,14 +225,15 @@ pub fn markdown(rows: &[Row], replicates: u64, budget: u64) -> String {
     }
     out += "\n## Library campaigns\n\n";
     out += "| case | vehicle | campaign | seed | status | tests | events | \
-            estimate [90% interval] | outside tests, events | U | guarded high | warnings |\n";
-    out += &"|---".repeat(12);
+            estimate [90% interval] | outside tests, events | U | guarded high | answer | \
+            warnings |\n";
+    out += &"|---".repeat(13);
     out += "|\n";
     for row in rows {
         for v in row.campaigns() {
             let _ = writeln!(
                 out,
-                "| {} | {} | {} | {} | {} | {} | {} | {} | {}, {} | {} | {} | {} |",
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {}, {} | {} | {} | {} | {} |",
                 row.case,
                 row.vehicle,
                 kind(v),
@@ -245,6 +246,13 @@ pub fn markdown(rows: &[Row], replicates: u64, budget: u64) -> String {
                 v.outside_events,
                 sci(v.outside_upper),
                 sci(v.guarded_ci_high),
+                // The interval to report (the view's `answer`).
+                v.answer.as_ref().map_or("-".into(), |a| format!(
+                    "{} [{}, {}]",
+                    a.interval.as_str(),
+                    sci(Some(a.low)),
+                    sci(Some(a.high))
+                )),
                 v.warnings.len(),
             );
         }
