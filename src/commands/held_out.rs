@@ -325,3 +325,62 @@ pub fn adaptive_campaign(
         .finished
         .context("an adaptive campaign ends when its stages do")
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A table of three cells with `runs` runs each, the first `failing[c]`
+    /// of cell `c` failing.
+    fn table(failing: [usize; 3], runs: usize, exposures: &[f64]) -> ProgramTable {
+        let outcomes: Vec<(bool, f64)> = failing
+            .iter()
+            .flat_map(|&k| (0..runs).map(move |j| (j < k, 1.0)))
+            .collect();
+        let probability = exposures
+            .iter()
+            .zip(failing)
+            .map(|(p, k)| p * k as f64 / runs as f64)
+            .sum();
+        ProgramTable {
+            name: "t".into(),
+            spec: serde_json::Value::Null,
+            runs,
+            outcomes: Arc::new(outcomes),
+            probability,
+            standard_error: 0.0,
+        }
+    }
+
+    #[test]
+    fn the_best_sampling_variance_is_the_square_root_rule_on_the_cells_rates() {
+        // Rates 1/4, 1, 0 on exposures 0.5, 0.1, 0.4: μ = 0.225,
+        // Σ P √p = 0.5·0.5 + 0.1·1 = 0.35, V = 0.35² − 0.225² = 0.071875.
+        let exposures = [0.5, 0.1, 0.4];
+        let t = table([1, 4, 0], 4, &exposures);
+        assert!((t.probability - 0.225).abs() < 1e-15);
+        assert!((t.best_sampling_variance(&exposures) - 0.071875).abs() < 1e-12);
+        // Below the NDD's per-test variance μ(1 − μ) = 0.174375, as it must be.
+        assert!(t.best_sampling_variance(&exposures) < 0.225 * 0.775);
+        // A vehicle whose cells fail always or never: no variance at all
+        // (sampling only the failing cells, each test's weighted outcome is μ).
+        let sure = table([4, 0, 4], 4, &exposures);
+        assert!(sure.best_sampling_variance(&exposures).abs() < 1e-15);
+        // Every cell at the same rate p: nothing to gain over the NDD,
+        // V = (√p)² − p² = p(1 − p).
+        let flat = table([2, 2, 2], 4, &exposures);
+        assert!((flat.best_sampling_variance(&exposures) - 0.25).abs() < 1e-12);
+    }
+
+    #[test]
+    fn every_test_draws_one_of_its_cells_runs_the_same_each_time() {
+        let t = table([1, 4, 0], 4, &[0.5, 0.1, 0.4]);
+        // Cell 0 fails in one run of four: over many tests about a quarter
+        // of its draws fail, and test i draws the same run every time.
+        let draws: Vec<bool> = (0..4000).map(|i| t.outcome(7, i, 0).0).collect();
+        let share = draws.iter().filter(|&&e| e).count() as f64 / 4000.0;
+        assert!((share - 0.25).abs() < 0.03, "{share}");
+        assert!((0..4000).all(|i| t.outcome(7, i, 0).0 == draws[i as usize]));
+        assert!((0..100).all(|i| t.outcome(7, i, 1).0 && !t.outcome(7, i, 2).0));
+    }
+}

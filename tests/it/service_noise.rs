@@ -74,6 +74,21 @@ async fn honest_workers_of_a_noisy_program_are_not_flagged_and_their_campaigns_c
         let view = finished(&client, id, Duration::from_secs(400)).await;
         assert_eq!(view.status, CampaignStatus::Converged, "{view:?}");
         assert!(view.vehicle_noise, "campaign {id} is not audited as noisy");
+        // Run without the guard (as this test asks, to stay short), a
+        // noisy campaign answers with the guarded interval and says why,
+        // with the switch that makes that interval narrow.
+        assert!(!view.guard_outside);
+        let answer = view.answer.as_ref().expect("an answer");
+        assert_eq!(answer.interval, tslg_api::AnswerInterval::Guarded);
+        assert_eq!(Some(answer.high), view.guarded_ci_high);
+        assert!(
+            view.warnings
+                .iter()
+                .any(|w| w.starts_with("the vehicle is noisy")
+                    && w.contains(r#""guard_outside": true"#)),
+            "{:?}",
+            view.warnings
+        );
         let audits = view.audits.expect("an external program's audits");
         eprintln!("campaign {id}: {} tests, audits {audits:?}", view.tests);
         // Nobody was flagged for runs that differ.
