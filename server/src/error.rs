@@ -33,6 +33,10 @@ pub enum ServiceError {
     /// 422: well-formed, but a value is out of range or inconsistent.
     #[error("{0}")]
     Unprocessable(String),
+    /// 503: the coordinator answers but cannot do its work (its database
+    /// cannot be written); the detail says why.
+    #[error("{0}")]
+    Unavailable(String),
     /// 500: anything else; the cause is logged, not returned.
     #[error(transparent)]
     Internal(#[from] anyhow::Error),

@@ -309,3 +309,42 @@ async fn every_endpoint_answers_bad_input_with_a_problem_and_keeps_serving() {
     assert_eq!(list["campaigns"].as_array().unwrap().len(), 1, "{list}");
     assert!(!server.log().contains("panicked"));
 }
+
+/// A coordinator whose database cannot be written answers `/healthz` with
+/// 503 and says why (it answered 200 while every write failed), and 200
+/// again once it can. Another process holding the write lock is the
+/// failure here: reads still work (write-ahead log), every write waits out
+/// the busy timeout and fails.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn healthz_reports_a_database_that_cannot_be_written() {
+    use sqlx::{ConnectOptions, Connection};
+    let dir = scratch();
+    let database = dir.path().join("db.sqlite");
+    let server = ServerProcess::start(&database, &[]);
+    let http = reqwest::Client::new();
+    let health = || async {
+        let response = http
+            .get(format!("{}/healthz", server.url))
+            .send()
+            .await
+            .unwrap();
+        (response.status(), response.text().await.unwrap())
+    };
+    assert_eq!(health().await.0, StatusCode::OK);
+    let mut locker = sqlx::sqlite::SqliteConnectOptions::new()
+        .filename(&database)
+        .connect()
+        .await
+        .unwrap();
+    sqlx::query("BEGIN IMMEDIATE")
+        .execute(&mut locker)
+        .await
+        .unwrap();
+    let (status, body) = health().await;
+    assert_eq!(status, StatusCode::SERVICE_UNAVAILABLE, "{body}");
+    assert!(body.contains("the database cannot be written"), "{body}");
+    sqlx::query("ROLLBACK").execute(&mut locker).await.unwrap();
+    locker.close().await.unwrap();
+    assert_eq!(health().await.0, StatusCode::OK);
+    assert!(!server.log().contains("panicked"));
+}

@@ -219,6 +219,22 @@ async fn a_report_sent_again_brings_the_same_lease_and_a_refused_one_takes_none(
         other => panic!("a forged report must be refused: {other:?}"),
     }
     assert_eq!(client.campaign(id).await.unwrap().leased, leased);
+    // Its every lease request is refused now, giving a lease back as well
+    // (403, saying why; docs/api.md); its leases expired when it was
+    // flagged (a release answered 204 once).
+    let release = tslg_api::LeaseRelease {
+        worker: "liar".into(),
+        attempt: liar.attempt,
+        key: liar.key.clone(),
+        reason: Some("shutting down".into()),
+    };
+    match client.release(liar.id, &release).await {
+        Err(CallError::Refused { status, detail }) => {
+            assert_eq!(status, 403, "{detail}");
+            assert!(detail.contains("is flagged"), "{detail}");
+        }
+        other => panic!("a flagged worker's release must be refused: {other:?}"),
+    }
 }
 
 /// A report sent again asking for its next lease's tests listed does not

@@ -297,4 +297,29 @@ async fn the_api_takes_a_table_for_every_case_and_records_how_far_it_is() {
         message.contains("behind.csv") && message.contains("positive range"),
         "{message}"
     );
+    // One cell at a range of 10⁷ km, where the built-in model's density
+    // underflows to 0 on every cell: the library builds (the IDM never
+    // fails there) and its note says there is no distance to give (the
+    // distance's panic was a 500, and `tslg library build` exited 101).
+    let far = build_library(
+        &client,
+        &CreateLibrary {
+            case: "cut-in".into(),
+            preset: None,
+            surrogate: serde_json::json!({"model": "idm"}),
+            exposure: ExposureRequest::Table {
+                name: "far.csv".into(),
+                text: ",-1\n10000000000,1\n".into(),
+            },
+            search: Some(tslg_api::SearchRequest::Exhaustive),
+            threshold: None,
+        },
+    )
+    .await;
+    let note = far.exposure_note.as_deref().unwrap();
+    assert!(
+        note.contains("far.csv: the built-in model puts no mass on its grid"),
+        "{note}"
+    );
+    assert_eq!(far.size, Some(0), "{far:?}");
 }

@@ -123,7 +123,12 @@ pub async fn release_as(
 ) -> Result<LeaseRow, ServiceError> {
     let fence = fence.clone();
     db.write(move |conn| -> Result<_, ServiceError> {
-        let lease = leases::get(conn, id)?;
+        // A flagged worker's release is refused as its every lease request
+        // is (403, saying why): its leases expired when it was flagged.
+        let lease = match giver {
+            Giver::Worker => get_unless_flagged(conn, id, &fence.worker)?,
+            Giver::Coordinator => leases::get(conn, id)?,
+        };
         check_fence(&lease, &fence.worker, fence.attempt, fence.key.as_str())?;
         let audit_run = lease.audit_id.is_some() && lease.state == leases::LeaseState::Active;
         if audit_run && giver == Giver::Coordinator {

@@ -1,4 +1,7 @@
-//! `/healthz`: the coordinator answers and its database does.
+//! `/healthz`: the coordinator answers, its database reads, and it
+//! writes: a probe row set and committed through the writer, as every
+//! lease and report is (a coordinator that reads but cannot write takes no
+//! report: it is not healthy).
 
 use crate::db::DbError;
 use crate::error::ServiceError;
@@ -7,11 +10,25 @@ use axum::extract::State;
 use axum::Json;
 use tslg_api::{Health, Problem};
 
-/// Liveness and database health.
+/// Liveness and database health: 503 when the database cannot be read or
+/// written, saying why.
 #[utoipa::path(get, path = "/healthz", responses(
-    (status = 200, body = Health), (status = 500, body = Problem)))]
+    (status = 200, body = Health), (status = 503, body = Problem)))]
 pub async fn healthz(State(state): State<AppState>) -> Result<Json<Health>, ServiceError> {
-    state.db.read::<_, DbError, _>(crate::db::sql::ping).await?;
+    state
+        .db
+        .read::<_, DbError, _>(crate::db::sql::ping)
+        .await
+        .map_err(|e| {
+            ServiceError::Unavailable(format!("the database cannot be read: {:#}", e.0))
+        })?;
+    state
+        .db
+        .write::<_, DbError, _>(crate::db::sql::probe_write)
+        .await
+        .map_err(|e| {
+            ServiceError::Unavailable(format!("the database cannot be written: {:#}", e.0))
+        })?;
     Ok(Json(Health {
         status: "ok".into(),
         version: env!("CARGO_PKG_VERSION").into(),

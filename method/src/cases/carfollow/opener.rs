@@ -29,7 +29,7 @@ pub fn open(
             let (states, laws) = case
                 .exposure
                 .distance(&builtin.exposure, case.world.actions);
-            let mut note = table_note(name, sum, states);
+            let mut note = table_note(name, sum, Some(states));
             note.push_str(&format!(
                 " (P(s); P(u | v): at most {laws:.3} at any speed; preset {})",
                 preset.name()

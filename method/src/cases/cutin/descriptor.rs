@@ -103,10 +103,12 @@ pub fn open(
                         reason: e.to_string(),
                     }
                 })?;
-            // The built-in model evaluated on the table's own grid.
-            let model =
-                super::CutInExposureModel::default().mass_on(case.exposure().grid().clone());
-            let distance = case.exposure().total_variation(&model);
+            // The built-in model evaluated on the table's own grid, where
+            // it puts any mass there.
+            let distance = super::CutInExposureModel::default()
+                .try_mass_on(case.exposure().grid().clone())
+                .ok()
+                .map(|model| case.exposure().total_variation(&model));
             let note = Some(table_note(name, table.mass.original_sum(), distance));
             (case, note)
         }

@@ -86,13 +86,23 @@ impl CutInExposureModel {
         f * g
     }
 
-    /// The model as a mass on a (range, range rate) grid.
+    /// The model as a mass on a (range, range rate) grid whose ranges it
+    /// reaches (the built-in grid).
     pub fn mass_on(&self, grid: Grid) -> GridMass {
+        self.try_mass_on(grid)
+            .expect("the density is positive on the built-in grid")
+    }
+
+    /// The model as a mass on any (range, range rate) grid: an error where
+    /// its density underflows to 0 on every cell (ranges of kilometres and
+    /// more: `exp(−R/θ)` with θ 437 m), as on a user's table far outside
+    /// the SPMD data.
+    pub fn try_mass_on(&self, grid: Grid) -> Result<GridMass, crate::mass::MassError> {
         assert_eq!(grid.dimensions(), 2, "the cut-in grid is two-dimensional");
         let weights = (0..grid.len())
             .map(|cell| self.density(grid.value(cell, 0), grid.value(cell, 1)))
             .collect();
-        GridMass::from_weights(grid, weights).expect("the density is positive on R > 0")
+        GridMass::from_weights(grid, weights)
     }
 }
 

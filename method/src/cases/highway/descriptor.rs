@@ -103,7 +103,7 @@ pub fn open(
             let distance = case
                 .exposure()
                 .total_variation(HighwayExit::builtin(preset).exposure());
-            (case, Some(table_note(name, sum, distance)))
+            (case, Some(table_note(name, sum, Some(distance))))
         }
     };
     Ok(Arc::new(
