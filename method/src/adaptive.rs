@@ -168,30 +168,15 @@ pub struct Knowledge {
     /// On a lattice, the lattice points whose block a seed put in the
     /// support.
     hot: Vec<bool>,
-    /// A noisy vehicle's cells: whether a run of each was seen to fail
-    /// ([`SEEN_FAIL`]) and to pass ([`SEEN_PASS`]); empty for a
+    /// A noisy vehicle's cells: whether a run of each failed; empty for a
     /// deterministic one.
-    seen: Vec<u8>,
-    /// A noisy vehicle's cells seen both to fail and to pass.
-    varying: u64,
+    failed: Vec<bool>,
 }
-
-/// A run of the cell failed.
-const SEEN_FAIL: u8 = 1;
-/// A run of the cell passed.
-const SEEN_PASS: u8 = 2;
 
 impl Knowledge {
     /// The failing cells found, in the order they were found.
     pub fn failures(&self) -> &[usize] {
         &self.failures
-    }
-
-    /// A noisy vehicle's cells whose runs were seen both to fail and to
-    /// pass: the evidence that its outcome is a draw, which a warning
-    /// names.
-    pub fn varying_cells(&self) -> u64 {
-        self.varying
     }
 }
 
@@ -377,12 +362,11 @@ impl<'a, C: Case> Planner<'a, C> {
             } else {
                 Vec::new()
             },
-            seen: if self.settings.noisy {
-                vec![0; cells]
+            failed: if self.settings.noisy {
+                vec![false; cells]
             } else {
                 Vec::new()
             },
-            varying: 0,
         }
     }
 
@@ -424,7 +408,7 @@ impl<'a, C: Case> Planner<'a, C> {
 
     /// [`Self::observe`] for a noisy vehicle (docs/statistics.md, "Noisy
     /// vehicles"). Every run counts: the cell keeps its lowest criticality,
-    /// and whether it was seen to fail and to pass. A cell joins the
+    /// and whether a run of it failed. A cell joins the
     /// support the first time a run of it fails, with its neighbours that
     /// have exposure, tested or not (a scenario next to one that fails now
     /// and then fails now and then itself: the evidence of one run, spread
@@ -435,18 +419,13 @@ impl<'a, C: Case> Planner<'a, C> {
     /// the guard's allocation pays for (the noisy IDM at σ 1.5: support
     /// exposure 0.22 against 0.08, 36,038 tests against 14,862).
     fn observe_noisy(&self, knowledge: &mut Knowledge, o: &Observation) {
-        let seen = &mut knowledge.seen[o.cell];
-        let before = *seen;
-        *seen |= if o.event { SEEN_FAIL } else { SEEN_PASS };
-        if *seen == SEEN_FAIL | SEEN_PASS && before != *seen {
-            knowledge.varying += 1;
-        }
         let run = if o.event { 0.0 } else { o.criticality };
         let criticality = knowledge.criticality[o.cell].map_or(run, |b: f64| b.min(run));
         knowledge.criticality[o.cell] = Some(criticality);
-        if !o.event || before & SEEN_FAIL != 0 {
+        if !o.event || knowledge.failed[o.cell] {
             return;
         }
+        knowledge.failed[o.cell] = true;
         let exposure = self.case.exposure();
         knowledge.failures.push(o.cell);
         knowledge.failure_mass += exposure.p(o.cell);

@@ -15,20 +15,18 @@ use tslg_api::{Health, Problem};
 #[utoipa::path(get, path = "/healthz", responses(
     (status = 200, body = Health), (status = 503, body = Problem)))]
 pub async fn healthz(State(state): State<AppState>) -> Result<Json<Health>, ServiceError> {
-    state
-        .db
-        .read::<_, DbError, _>(crate::db::sql::ping)
+    let unavailable = |what: &'static str| {
+        move |e: DbError| {
+            ServiceError::Unavailable(format!("the database cannot be {what}: {:#}", e.0))
+        }
+    };
+    let db = &state.db;
+    db.read(crate::db::sql::ping)
         .await
-        .map_err(|e| {
-            ServiceError::Unavailable(format!("the database cannot be read: {:#}", e.0))
-        })?;
-    state
-        .db
-        .write::<_, DbError, _>(crate::db::sql::probe_write)
+        .map_err(unavailable("read"))?;
+    db.write(crate::db::sql::probe_write)
         .await
-        .map_err(|e| {
-            ServiceError::Unavailable(format!("the database cannot be written: {:#}", e.0))
-        })?;
+        .map_err(unavailable("written"))?;
     Ok(Json(Health {
         status: "ok".into(),
         version: env!("CARGO_PKG_VERSION").into(),
