@@ -18,12 +18,15 @@
 //! bit-reproducible (docs/statistics.md, "Noisy vehicles"): `--noise SIGMA`
 //! adds Gaussian noise of σ m/s² to every commanded acceleration, from
 //! fresh entropy each run (its hello then says `"deterministic": false`),
-//! and `--brake-harder A` brakes A m/s² harder whenever the FVDM brakes, a
-//! program that differs from the others'.
+//! `--brake-harder A` brakes A m/s² harder whenever the FVDM brakes, a
+//! program that differs from the others', and `--drop-events P` reports no
+//! event in a share P of the tests that had one (episode mode), a careless
+//! or lying operator's program.
 //!
 //! The protocol (one JSON object per line) is docs/vut-protocol.md.
 
 use rand::rngs::ThreadRng;
+use rand::Rng;
 use rand_distr::{Distribution, Normal};
 use serde_json::{json, Value};
 use std::io::{BufRead, Write};
@@ -41,6 +44,8 @@ struct Settings {
     noise: f64,
     /// How much harder than the FVDM it brakes (m/s²).
     brake_harder: f64,
+    /// The share of its events it hides (episode mode).
+    drop_events: f64,
     /// Entropy from the operating system, for the noise.
     entropy: ThreadRng,
 }
@@ -68,6 +73,12 @@ impl Settings {
                 "--sleep" => settings.sleep = number()?,
                 "--noise" => settings.noise = number()?,
                 "--brake-harder" => settings.brake_harder = number()?,
+                "--drop-events" => {
+                    settings.drop_events = number()?;
+                    if settings.drop_events > 1.0 {
+                        return Err("--drop-events takes a share in [0, 1]".into());
+                    }
+                }
                 "--tally" => {
                     let file = std::fs::OpenOptions::new()
                         .create(true)
@@ -79,7 +90,7 @@ impl Settings {
                 other => {
                     return Err(format!(
                         "unknown option {other}; options: --gain, --sleep, --tally, --noise, \
-                         --brake-harder"
+                         --brake-harder, --drop-events"
                     ))
                 }
             }
@@ -168,7 +179,11 @@ fn respond(settings: &mut Settings, message: &Value, world: &mut Value) -> Value
             json!({"type": "control", "acceleration": accel})
         }
         Some("episode") => {
-            json!({"type": "outcome", "event": crashes(settings, world, &message["scenario"])})
+            let crashed = crashes(settings, world, &message["scenario"]);
+            let hidden = crashed
+                && settings.drop_events > 0.0
+                && settings.entropy.random_bool(settings.drop_events);
+            json!({"type": "outcome", "event": crashed && !hidden})
         }
         _ => json!({"type": "error", "message": format!("unexpected message {message}")}),
     }

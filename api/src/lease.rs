@@ -167,6 +167,23 @@ pub struct WorkerView {
     /// (docs/statistics.md, "Noisy vehicles").
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub noisy_evidence: Option<f64>,
+    /// Its tests paired with other workers' tests of the same campaign and
+    /// stratum, flagged partners left out (every test is evidence,
+    /// docs/statistics.md, "Every test as evidence").
+    #[serde(default)]
+    pub test_pairs_compared: u64,
+    /// Of those, the pairs where its test found the event and the
+    /// partner's none.
+    #[serde(default)]
+    pub test_own_events: u64,
+    /// Of those, the pairs where the partner's test found the event and
+    /// its own none.
+    #[serde(default)]
+    pub test_partner_events: u64,
+    /// The evidence from its tests that its program behaves unlike the
+    /// others' (an e-value apart from the audits'); it is flagged at 10⁴.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub test_evidence: Option<f64>,
 }
 
 /// One test of a lease.

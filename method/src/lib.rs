@@ -37,7 +37,11 @@
 //! - `sequence`: confidence sequences by betting; `anytime`: a campaign's
 //!   interval that holds at every number of tests.
 //! - `paired`: paired regressions; `exact`: exact answers by enumeration;
-//!   `warnings`: what an answer's numbers warn of.
+//!   `warnings`: what an answer's numbers warn of; `noise`: the noise of a
+//!   vehicle that is not bit-reproducible.
+//! - `discordance`: whether a worker's program behaves like the others'
+//!   (an e-value of discordant pairs); `test_pairing`: each worker's tests
+//!   paired with the fleet's, so that every test is such evidence.
 //!
 //! The method:
 //! - `library`: scenario libraries and their search.
@@ -80,6 +84,7 @@ pub mod progress;
 pub mod registry;
 pub mod sampling;
 pub mod sequence;
+pub mod test_pairing;
 pub mod test_stream;
 pub mod tolerance;
 pub mod vehicle;

@@ -323,6 +323,10 @@ impl WorkerRegistry {
                 noisy_own_events: 0,
                 noisy_partner_events: 0,
                 noisy_evidence: None,
+                test_pairs_compared: 0,
+                test_own_events: 0,
+                test_partner_events: 0,
+                test_evidence: None,
             })
             .collect();
         list.sort_by(|a, b| a.last_seen_seconds.total_cmp(&b.last_seen_seconds));

@@ -26,6 +26,7 @@ mod service_dashboard;
 mod service_deploy;
 mod service_e2e;
 mod service_events;
+mod service_evidence;
 mod service_external;
 mod service_fairness;
 mod service_held_back;

@@ -43,7 +43,7 @@ fn py_idm(
     }
 }
 
-async fn worker_views(client: &Client) -> Vec<WorkerView> {
+pub(crate) async fn worker_views(client: &Client) -> Vec<WorkerView> {
     client.workers().await.unwrap().workers
 }
 
@@ -106,7 +106,13 @@ async fn honest_workers_of_a_noisy_program_are_not_flagged_and_their_campaigns_c
     for worker in &workers {
         assert!(worker.flagged.is_none(), "{worker:?}");
         assert!(worker.noisy_evidence.unwrap_or(1.0) < 1e4, "{worker:?}");
+        // Every test is evidence too, and nothing leans.
+        assert!(worker.test_evidence.unwrap_or(1.0) < 1e4, "{worker:?}");
     }
+    // The library campaign's tests were paired (the adaptive campaign's
+    // are left to the audits).
+    let paired: u64 = workers.iter().map(|w| w.test_pairs_compared).sum();
+    assert!(paired > 0, "{workers:?}");
     // The program says in its hello that it is noisy; a campaign that
     // does not say so is told, and not switched by the workers' word.
     let unmarked = client
@@ -127,7 +133,7 @@ async fn honest_workers_of_a_noisy_program_are_not_flagged_and_their_campaigns_c
 /// `--vut-exec` for the FVDM in Rust (`examples/fvdm_vut`) with actuator
 /// noise σ 1.5 m/s² and `extra` options; campaigns run it in episode mode,
 /// one message a test.
-fn noisy_fvdm(extra: &str) -> String {
+pub(crate) fn noisy_fvdm(extra: &str) -> String {
     let bin = example_binary("fvdm_vut");
     format!("rs-fvdm={} --noise 1.5 {extra}", bin.display())
 }

@@ -25,7 +25,7 @@
 //!
 //! A worker whose report the replay contradicts, that ends in the
 //! minority of an audit, or whose noisy program behaves unlike the
-//! others', is flagged ([`flag_worker`]): every request of its
+//! others', is flagged ([`crate::report::flag::flag_worker`]): every request of its
 //! is refused, every result it reported to a campaign that has not been
 //! cancelled is taken back and leased to others, and a campaign that had
 //! stopped on such results runs again. So the answer is the one honest
@@ -35,14 +35,14 @@ use crate::db::{now_ms, Database};
 use crate::error::ServiceError;
 use crate::report::check::CheckedReport;
 use crate::report::explored::ExploredRanges;
+use crate::report::flag::flag_worker;
 use crate::report::fold::{fold_prefix, KnownExplored};
 use crate::report::mismatch::{describe, Mismatch};
 use crate::report::record::{at_lease_limit, check_effort, held_lease, stopped_ack, Recorded};
 use crate::report::verdict::Verdict;
 use crate::store::audits::{self, AuditRow, AuditState, NewAudit, RunColumn};
 use crate::store::leases::LeaseState;
-use crate::store::pairs;
-use crate::store::{campaigns, leases, reports};
+use crate::store::{campaigns, leases};
 use rusqlite::Connection;
 use std::sync::Arc;
 use tslg_api::{CampaignStatus, ResultAck, ResultReport};
@@ -165,87 +165,6 @@ pub fn record_run(
         _ => {}
     }
     Ok(verdict)
-}
-
-/// Flags `worker` (caught at test `index` of `campaign`, for `reason`) and
-/// takes back its results: see the module's documentation. Returns the
-/// campaigns whose results changed.
-pub fn flag_worker(
-    conn: &Connection,
-    worker: &str,
-    reason: &str,
-    campaign: i64,
-    index: u64,
-) -> Result<Vec<i64>, ServiceError> {
-    audits::flag(conn, worker, reason, campaign, index)?;
-    let mut changed = Vec::new();
-    for id in reports::campaigns_of_worker(conn, worker)? {
-        if take_back(conn, id, worker)? {
-            changed.push(id);
-        }
-    }
-    leases::expire_all_of(conn, worker)?;
-    audits::void_runs_of(conn, worker)?;
-    tracing::warn!(
-        worker,
-        campaign,
-        test = index,
-        reason,
-        ?changed,
-        "worker flagged; its results are taken back"
-    );
-    Ok(changed)
-}
-
-/// Takes back `worker`'s results in `campaign`: its report rows go, their
-/// ranges become leases for others, and the estimate is folded again from
-/// the start (a campaign that stopped on those results runs again). A
-/// cancelled campaign, or one that stopped before them, is left alone.
-fn take_back(conn: &Connection, id: i64, worker: &str) -> Result<bool, ServiceError> {
-    let campaign = campaigns::get(conn, id)?;
-    let ranges = reports::ranges_of_worker(conn, id, worker)?;
-    let Some(first) = ranges.first().map(|r| r.0) else {
-        return Ok(false);
-    };
-    let status = campaign.status;
-    let stopped = status.is_final();
-    // A campaign its pair stopped was decided at the pair's index.
-    let decided = pairs::decided_at(conn, &campaign)?.unwrap_or(campaign.indices as u64);
-    if matches!(status, CampaignStatus::Cancelled | CampaignStatus::Failed)
-        || (stopped && decided <= first as u64)
-    {
-        return Ok(false);
-    }
-    for &(from, to) in &ranges {
-        reports::delete_range(conn, id, from, to)?;
-        leases::insert_redo(conn, id, from as u64, to as u64)?;
-    }
-    if campaign.method == tslg_api::Method::Adaptive && campaign.indices > first {
-        // Later stages were planned from those results: they cannot be
-        // planned again without running the campaign again.
-        let detail = format!(
-            "results of worker `{worker}` from test {first} on were taken back (it was caught \
-             reporting what others could not reproduce); the adaptive stages planned from them \
-             cannot stand: start the campaign again"
-        );
-        campaigns::set_failed(conn, id, &detail)?;
-        leases::cancel_active(conn, id)?;
-        return Ok(true);
-    }
-    if campaign.indices > first {
-        let detail = format!(
-            "results of worker `{worker}` from test {first} on were taken back (it was caught \
-             reporting what others could not reproduce) and are being run again"
-        );
-        campaigns::run_again(conn, id, &detail, first)?;
-        if stopped {
-            // The leases the stop cancelled hold ranges not yet reported.
-            leases::reactivate_cancelled(conn, id)?;
-            tracing::warn!(campaign = id, worker, "a stopped campaign runs again");
-        }
-        pairs::reopen(conn, &campaign)?;
-    }
-    Ok(true)
 }
 
 /// Records a run of an audit (a one-test lease with `audit_id`) and decides

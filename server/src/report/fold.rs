@@ -12,9 +12,11 @@ use crate::campaign::history;
 use crate::error::ServiceError;
 use crate::report::anytime::{self, AnytimeSpan};
 use crate::report::check::CheckedReport;
+use crate::report::evidence;
 use crate::report::explored::{exploring_in, ExploredRanges};
+use crate::report::flag::flag_worker;
 use crate::report::replay::Explored;
-use crate::store::campaigns::CampaignRow;
+use crate::store::campaigns::{self, CampaignRow};
 use crate::store::prefix::{self, Charge};
 use crate::store::reports;
 use rusqlite::Connection;
@@ -160,6 +162,24 @@ pub fn fold_prefix(
     fresh: Option<&CheckedReport>,
     charge: Option<Charge>,
 ) -> Result<Option<CampaignStatus>, ServiceError> {
+    // Every test is evidence: a worker its tests convict is flagged before
+    // the fold, which then folds what honest workers reported.
+    let convicted = evidence::weigh(conn, campaign, tests.as_ref())?;
+    let reread;
+    let (campaign, fresh) = match convicted {
+        Some(convicted) => {
+            flag_worker(
+                conn,
+                &convicted.worker,
+                &convicted.detail,
+                campaign.id,
+                convicted.index,
+            )?;
+            reread = campaigns::get(conn, campaign.id)?;
+            (&reread, None)
+        }
+        None => (campaign, fresh),
+    };
     let mut pending = charge;
     let folded = fold_charging(conn, campaign, tests, known, fresh, &mut pending)?;
     if let Some(charge) = pending {

@@ -1,16 +1,21 @@
 //! What happens to a worker's report, from the route that parsed it to the
 //! folded estimate: its shape checked ([`check`]), its tests run again
 //! ([`replay`], on the [`secret_sample`]) or audited by other workers
-//! ([`audit`], which a worker cannot dodge: [`dodging`]), recorded ([`record`]), and the campaign's resolved prefix
-//! folded ([`fold`], with the exploring tests the replay found kept in
-//! [`explored`]) or, for an adaptive campaign, its stages resolved
-//! ([`stages`]). [`receive`] runs them in order.
+//! ([`audit`], which a worker cannot dodge: [`dodging`]; by statistics for
+//! noisy programs: [`noisy`]), recorded ([`record`]), weighed with every
+//! other resolved test of the campaign ([`evidence`]), and the campaign's
+//! resolved prefix folded ([`fold`], with the exploring tests the replay
+//! found kept in [`explored`]) or, for an adaptive campaign, its stages
+//! resolved ([`stages`]). A worker caught is flagged ([`flag`]).
+//! [`receive`] runs them in order.
 
 pub mod anytime;
 pub mod audit;
 pub mod check;
 pub mod dodging;
+pub mod evidence;
 pub mod explored;
+pub mod flag;
 pub mod fold;
 pub mod mismatch;
 pub mod noisy;

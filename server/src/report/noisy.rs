@@ -18,9 +18,10 @@
 use crate::error::ServiceError;
 use crate::report::verdict::Verdict;
 use crate::store::audits::{self, AuditRow, AuditState, RunColumn};
-use crate::store::discordance;
+use crate::store::discordance::{self, Pairs};
 use rusqlite::Connection;
 use tslg_method::discordance::{worker_evidence, FLAG_AT};
+use tslg_method::test_pairing::PairTally;
 
 /// Whether a stored outcome (`audits::encode`) is an event. An invalid
 /// run counts as no event: under "same program" a pair of one event and
@@ -70,20 +71,19 @@ pub fn record_run(
     if audit.reason != "sample" || audit.owed {
         return Ok(settled);
     }
-    discordance::record(
-        conn,
-        &audit.first_worker,
-        worker,
-        first_event,
-        replica_event,
-    )?;
+    let tally = PairTally {
+        compared: 1,
+        first_closer: u64::from(first_event && !replica_event),
+        second_closer: u64::from(replica_event && !first_event),
+    };
+    discordance::record(conn, Pairs::Audits, &audit.first_worker, worker, tally)?;
     if first_event == replica_event {
         return Ok(settled);
     }
     // The stronger evidence of the two, when both reach the level.
     let mut suspects = Vec::new();
     for suspect in [audit.first_worker.as_str(), worker] {
-        let (partners, compared) = discordance::partners_of(conn, suspect)?;
+        let (partners, compared) = discordance::partners_of(conn, Pairs::Audits, suspect)?;
         suspects.push((worker_evidence(&partners), suspect, partners, compared));
     }
     suspects.sort_by(|a, b| b.0.total_cmp(&a.0));
@@ -176,7 +176,7 @@ mod tests {
                     Verdict::Undecided
                 );
             }
-            assert_eq!(discordance::partners_of(conn, "a")?.1, 0);
+            assert_eq!(discordance::partners_of(conn, Pairs::Audits, "a")?.1, 0);
             // Agreement is counted but proves nothing.
             assert_eq!(
                 run(("a", "none"), ("b", "none"), "sample", false)?,
@@ -197,7 +197,7 @@ mod tests {
                     Verdict::Undecided
                 );
             }
-            let (pairs, compared) = discordance::partners_of(conn, "a")?;
+            let (pairs, compared) = discordance::partners_of(conn, Pairs::Audits, "a")?;
             assert_eq!(compared, 34);
             assert!(worker_evidence(&pairs) < FLAG_AT);
             // ... the 17th against `c` is: `a` is flagged, not `c`, whose
@@ -213,12 +213,17 @@ mod tests {
                 }
                 other => panic!("{other:?}"),
             }
-            let (c_pairs, _) = discordance::partners_of(conn, "c")?;
+            let (c_pairs, _) = discordance::partners_of(conn, Pairs::Audits, "c")?;
             assert!(worker_evidence(&c_pairs) < 2.0, "{c_pairs:?}");
             // An operator who clears the flag clears the counts.
             discordance::forget(conn, "a")?;
-            assert_eq!(discordance::partners_of(conn, "a")?, (Vec::new(), 0));
-            assert!(discordance::partners_of(conn, "b")?.0.is_empty());
+            assert_eq!(
+                discordance::partners_of(conn, Pairs::Audits, "a")?,
+                (Vec::new(), 0)
+            );
+            assert!(discordance::partners_of(conn, Pairs::Audits, "b")?
+                .0
+                .is_empty());
             Ok(())
         })
         .await

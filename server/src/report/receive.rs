@@ -338,7 +338,13 @@ fn decide(
         );
         if let Some(mismatch) = verified.mismatch {
             let reason = format!("campaign {}: {mismatch}", campaign.id);
-            audit::flag_worker(conn, &report.worker, &reason, campaign.id, mismatch.index)?;
+            crate::report::flag::flag_worker(
+                conn,
+                &report.worker,
+                &reason,
+                campaign.id,
+                mismatch.index,
+            )?;
             return Ok(Decided::Contradicted(mismatch));
         }
         explored = verified.explored;

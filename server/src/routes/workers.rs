@@ -8,7 +8,8 @@ use crate::routes::leases::{admit, worker_name_problem};
 use crate::routes::problem::ApiJson;
 use crate::routes::ApiPath;
 use crate::state::AppState;
-use crate::store::{audits, costs, discordance, standing};
+use crate::store::discordance::{self, Pairs};
+use crate::store::{audits, costs, standing};
 use axum::extract::State;
 use axum::http::{HeaderMap, StatusCode};
 use axum::Json;
@@ -67,14 +68,15 @@ pub async fn leave(
 /// each program.
 #[utoipa::path(get, path = "/api/v1/workers", responses((status = 200, body = WorkerList)))]
 pub async fn list(State(state): State<AppState>) -> Result<Json<WorkerList>, ServiceError> {
-    let (flagged, costs, standings, compared) = state
+    let (flagged, costs, standings, compared, tested) = state
         .db
         .read(|conn| {
             Ok::<_, ServiceError>((
                 audits::flagged(conn)?,
                 costs::programs(conn)?,
                 standing::all(conn)?,
-                discordance::all(conn)?,
+                discordance::all(conn, Pairs::Audits)?,
+                discordance::all(conn, Pairs::Tests)?,
             ))
         })
         .await?;
@@ -90,6 +92,12 @@ pub async fn list(State(state): State<AppState>) -> Result<Json<WorkerList>, Ser
             worker.noisy_own_events = pairs.iter().map(|p| p.own_event).sum();
             worker.noisy_partner_events = pairs.iter().map(|p| p.partner_event).sum();
             worker.noisy_evidence = Some(worker_evidence(pairs));
+        }
+        if let Some((_, pairs, compared)) = tested.iter().find(|(w, _, _)| *w == worker.name) {
+            worker.test_pairs_compared = *compared;
+            worker.test_own_events = pairs.iter().map(|p| p.own_event).sum();
+            worker.test_partner_events = pairs.iter().map(|p| p.partner_event).sum();
+            worker.test_evidence = Some(worker_evidence(pairs));
         }
     }
     Ok(Json(WorkerList {

@@ -10,8 +10,9 @@ use tslg_api::LibraryStatus;
 
 /// The tables holding a campaign's records, children before parents
 /// (leases name audits).
-const CAMPAIGN_TABLES: [&str; 7] = [
+const CAMPAIGN_TABLES: [&str; 8] = [
     "leases",
+    "test_pairing_walks",
     "adaptive_stages",
     "audits",
     "near_misses",

@@ -1,46 +1,88 @@
-//! The `worker_discordance` table: per pair of workers, the sampled audits
-//! of noisy programs both ran, and on how many of them only one of the two
-//! found an event (`report/noisy.rs` weighs them).
+//! Per pair of workers, the pairs of their runs compared, and on how many
+//! only one of the two found an event: the sampled audits of noisy
+//! programs both ran (`worker_discordance`, weighed by `report/noisy.rs`)
+//! and, apart, pairs of their tests of one campaign and stratum
+//! (`worker_test_evidence`, weighed by `report/evidence.rs`).
 
 use crate::db::sql;
 use crate::store::error::StoreError;
 use rusqlite::{params, Connection};
 use tslg_method::discordance::Discordant;
+use tslg_method::test_pairing::PairTally;
 
-/// Counts one sampled audit of a noisy program that `first` and `replica`
-/// both ran, with whether each found an event, in both directions.
+/// Which pairs: each kind is its own e-value (an audited test's first run
+/// may be in a pair of each kind, and one e-value must not count a run
+/// twice).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Pairs {
+    /// An audit's two runs of one test.
+    Audits,
+    /// Two workers' tests of one campaign and stratum.
+    Tests,
+}
+
+impl Pairs {
+    fn table(self) -> &'static str {
+        match self {
+            Pairs::Audits => "worker_discordance",
+            Pairs::Tests => "worker_test_evidence",
+        }
+    }
+}
+
+/// Counts `tally.compared` pairs of `first`'s and `second`'s runs, in
+/// `tally.first_closer` of which `first`'s found the event (or came
+/// closer to it) and `second`'s not, in `tally.second_closer` the other
+/// way round, in both directions.
 pub fn record(
     conn: &Connection,
+    kind: Pairs,
     first: &str,
-    replica: &str,
-    first_event: bool,
-    replica_event: bool,
+    second: &str,
+    tally: PairTally,
 ) -> Result<(), StoreError> {
     for (worker, partner, own, theirs) in [
-        (first, replica, first_event, replica_event),
-        (replica, first, replica_event, first_event),
+        (first, second, tally.first_closer, tally.second_closer),
+        (second, first, tally.second_closer, tally.first_closer),
     ] {
         sql::execute(
             conn,
-            "INSERT INTO worker_discordance (worker, partner, compared, own_event, partner_event) \
-             VALUES (?, ?, 1, ?, ?) \
-             ON CONFLICT (worker, partner) DO UPDATE SET compared = compared + 1, \
-               own_event = own_event + excluded.own_event, \
-               partner_event = partner_event + excluded.partner_event",
-            params![worker, partner, own && !theirs, theirs && !own],
+            &format!(
+                "INSERT INTO {} (worker, partner, compared, own_event, partner_event) \
+                 VALUES (?, ?, ?, ?, ?) \
+                 ON CONFLICT (worker, partner) DO UPDATE SET \
+                   compared = compared + excluded.compared, \
+                   own_event = own_event + excluded.own_event, \
+                   partner_event = partner_event + excluded.partner_event",
+                kind.table()
+            ),
+            params![
+                worker,
+                partner,
+                tally.compared as i64,
+                own as i64,
+                theirs as i64
+            ],
         )?;
     }
     Ok(())
 }
 
-/// `worker`'s discordant pairs with each partner that is not flagged (a
-/// flagged worker's runs say nothing about the others), and the audits
-/// compared with all partners.
-pub fn partners_of(conn: &Connection, worker: &str) -> Result<(Vec<Discordant>, u64), StoreError> {
+/// `worker`'s discordant pairs of `kind` with each partner that is not
+/// flagged (a flagged worker's runs say nothing about the others), and the
+/// pairs compared with all partners.
+pub fn partners_of(
+    conn: &Connection,
+    kind: Pairs,
+    worker: &str,
+) -> Result<(Vec<Discordant>, u64), StoreError> {
     let rows: Vec<(i64, i64, i64)> = sql::all(
         conn,
-        "SELECT compared, own_event, partner_event FROM worker_discordance \
-         WHERE worker = ? AND partner NOT IN (SELECT name FROM flagged_workers)",
+        &format!(
+            "SELECT compared, own_event, partner_event FROM {} \
+             WHERE worker = ? AND partner NOT IN (SELECT name FROM flagged_workers)",
+            kind.table()
+        ),
         [worker],
     )?;
     let compared = rows.iter().map(|r| r.0 as u64).sum();
@@ -54,12 +96,18 @@ pub fn partners_of(conn: &Connection, worker: &str) -> Result<(Vec<Discordant>, 
     Ok((pairs, compared))
 }
 
-/// Every worker's pairs, by name, for the workers' view.
-pub fn all(conn: &Connection) -> Result<Vec<(String, Vec<Discordant>, u64)>, StoreError> {
+/// Every worker's pairs of `kind`, by name, for the workers' view.
+pub fn all(
+    conn: &Connection,
+    kind: Pairs,
+) -> Result<Vec<(String, Vec<Discordant>, u64)>, StoreError> {
     let rows: Vec<(String, i64, i64, i64)> = sql::all(
         conn,
-        "SELECT worker, compared, own_event, partner_event FROM worker_discordance \
-         WHERE partner NOT IN (SELECT name FROM flagged_workers) ORDER BY worker",
+        &format!(
+            "SELECT worker, compared, own_event, partner_event FROM {} \
+             WHERE partner NOT IN (SELECT name FROM flagged_workers) ORDER BY worker",
+            kind.table()
+        ),
         [],
     )?;
     let mut out: Vec<(String, Vec<Discordant>, u64)> = Vec::new();
@@ -81,10 +129,15 @@ pub fn all(conn: &Connection) -> Result<Vec<(String, Vec<Discordant>, u64)>, Sto
 /// evidence starts afresh, and a cleared liar's past runs do not count for
 /// or against the others).
 pub fn forget(conn: &Connection, worker: &str) -> Result<(), StoreError> {
-    sql::execute(
-        conn,
-        "DELETE FROM worker_discordance WHERE worker = ?1 OR partner = ?1",
-        [worker],
-    )?;
+    for kind in [Pairs::Audits, Pairs::Tests] {
+        sql::execute(
+            conn,
+            &format!(
+                "DELETE FROM {} WHERE worker = ?1 OR partner = ?1",
+                kind.table()
+            ),
+            [worker],
+        )?;
+    }
     Ok(())
 }

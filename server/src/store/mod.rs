@@ -18,5 +18,6 @@ pub mod prefix;
 pub mod reports;
 pub mod standing;
 pub mod states;
+pub mod test_pairing_walks;
 pub mod totals;
 pub mod user_cases;

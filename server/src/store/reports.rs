@@ -248,6 +248,32 @@ pub fn campaigns_of_worker(conn: &Connection, worker: &str) -> Result<Vec<i64>, 
     Ok(rows.into_iter().map(|(id,)| id).collect())
 }
 
+/// Who ran the tests of `from..to`: the reports' ranges reaching into it,
+/// clipped to it, `(from, to, worker)` in index order (rows moved from the
+/// old per-event table, which name no worker, left out). Report rows never
+/// overlap, so the scan starts at the last row starting at or before
+/// `from`, as in [`outcomes`].
+pub fn workers_between(
+    conn: &Connection,
+    campaign: i64,
+    from: u64,
+    to: u64,
+) -> Result<Vec<(u64, u64, String)>, StoreError> {
+    let rows: Vec<(i64, i64, String)> = sql::all(
+        conn,
+        "WITH start AS (SELECT COALESCE((SELECT MAX(from_index) FROM reports \
+                        WHERE campaign_id = ?1 AND from_index <= ?2), ?2) AS at) \
+         SELECT from_index, to_index, worker FROM reports, start WHERE campaign_id = ?1 \
+           AND from_index >= start.at AND from_index < ?3 AND to_index > ?2 AND worker != '' \
+         ORDER BY from_index",
+        params![campaign, from as i64, to as i64],
+    )?;
+    Ok(rows
+        .into_iter()
+        .map(|(a, b, worker)| ((a as u64).max(from), (b as u64).min(to), worker))
+        .collect())
+}
+
 /// The ranges `(from, to)` of `worker`'s reports to `campaign`, in order.
 pub fn ranges_of_worker(
     conn: &Connection,
