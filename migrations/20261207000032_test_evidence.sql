@@ -23,3 +23,10 @@ CREATE TABLE test_pairing_walks (
     walked_to    INTEGER NOT NULL,
     waiting      TEXT NOT NULL
 );
+
+-- How close each test of a report came to the event, for the pairing:
+-- the tests whose criticality the worker reported (at most the plan's
+-- `criticality_below`), packed as events are (index, criticality rounded
+-- to thousandths). NULL when none (adaptive campaigns keep theirs in
+-- near_misses).
+ALTER TABLE reports ADD COLUMN near_packed BLOB;

@@ -464,6 +464,12 @@ pub struct CampaignPlan {
     /// weight come with its lease (`tests`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub near_miss: Option<f64>,
+    /// For other campaigns of an external program: report the criticality
+    /// of every test at or below this too (`near_misses`), as evidence that
+    /// the workers run the same program (docs/statistics.md, "Every test as
+    /// evidence"). A worker that sends none only weakens that evidence.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub criticality_below: Option<f64>,
     /// For a user-defined case: its definition, which the worker registers
     /// before it opens the case.
     #[serde(default, skip_serializing_if = "Option::is_none")]

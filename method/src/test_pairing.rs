@@ -1,48 +1,50 @@
 //! Every test is evidence: each worker's tests paired with the rest of the
-//! fleet's tests of the same campaign and stratum.
+//! fleet's tests of the same campaign and scenario cell (or stratum).
 //!
 //! Audits ([`crate::discordance`]) compare two runs of one test, so they
 //! see only the audited share (1 % by default): a program that brakes a
 //! little harder, or drops a share of its events, needs thousands of
 //! compared audits. Yet every test a worker runs is a draw from the
-//! campaign's proposal: within one stratum (library, outside, one
-//! estimate's single stratum) the scenarios of the tests are independent
-//! and identically distributed, whoever runs them, and a worker cannot
-//! choose its tests (leases hand out the next indices). So if worker `W`
-//! runs the same program as the others, a test of `W`'s and a test of
-//! another worker's in the same stratum are two independent draws of the
-//! same (scenario, outcome) distribution, and when the two differ, `W`'s
-//! is the one closer to the event with probability ½, whatever the
-//! stratum's event rate and however noisy the program. That is the audit's
-//! discordant pair, and the same Krichevsky–Trofimov e-value
+//! campaign's proposal, and a worker cannot choose its tests (leases hand
+//! out the next indices). Two tests of one grid cell are two runs of one
+//! scenario, whoever runs them; two tests of one stratum (a library's
+//! inside or outside, the NDD's one stratum) are two independent draws of
+//! its scenarios. So if worker `W` runs the same program as the others, a
+//! test of `W`'s and one of another worker's with the same [key](ResolvedRun::key)
+//! are two independent draws of the same (scenario, outcome) distribution,
+//! and when the two differ, `W`'s is the one closer to the event with
+//! probability ½, whatever the cell and however noisy the program. That is
+//! the audit's discordant pair, and the same Krichevsky–Trofimov e-value
 //! ([`crate::discordance::kt_e_value`]) weighs it.
 //!
 //! **How close** is a test's [`score`]: 0 for the event, else 1 + its
-//! criticality in thousandths (1,001 when none is known), so that a pair
-//! could count whenever two runs differ in how close they came, not only
-//! when exactly one found the event. Workers report a criticality only for
-//! an adaptive campaign's near misses, so today every other test scores 0
-//! or 1,001: the event alone. That is weak where events are rare. A
+//! criticality in thousandths (the program's own measure of how near it
+//! came, in `[0, 1]`; 1,001 when none is known), so that a pair counts
+//! whenever two runs differ in how close they came, not only when exactly
+//! one found the event. Events alone are weak where they are rare: a
 //! program that brakes 3 m/s² harder than the noisy IDM's three other
-//! workers (β 0.05 library campaign, guard on, 168,000 tests) was in 51
-//! pairs of differing events, 11 its own: an e-value of 20, far from 10⁴,
-//! because its events differ only outside the library, where two tests
-//! in 10⁴ have one (docs/statistics.md, "Every test as evidence").
+//! workers (β 0.05 library campaign, guard on, 168,000 tests, pairs by
+//! stratum) was in 51 pairs of differing events, 11 its own, an e-value of
+//! 20, far from 10⁴: it differs from the others outside the library,
+//! where two tests in 10⁴ have an event, but there it stays further from
+//! the event in every scenario where it brakes. Pairs by cell keep that
+//! difference from drowning in the spread between scenarios.
 //!
 //! **The pairing must not look at outcomes.** [`Walk`] runs over a
 //! campaign's resolved tests in index order (the prefix, which does not
-//! depend on who reported when) and, in each stratum, pairs each test with
-//! the oldest waiting test of another worker; a test with none waits. The
-//! waiting tests of a stratum are then all one worker's (a test of anyone
-//! else would have paired), at most [`WAIT_CAP`] of them, the oldest
-//! dropped. Which tests pair depends on indices and on who ran them only,
-//! and each test is in at most one pair, so the pairs are independent and
-//! each counts for both its workers: the e-value of a worker's discordant
-//! pairs is a test martingale under "same program", and Ville's
-//! inequality bounds the chance that it ever reaches 10⁴ by 10⁻⁴, over
-//! the worker's whole life. Audit pairs are counted apart (an audited
-//! test's first run may also be in a test pair, and two pairs sharing a
-//! run are not independent).
+//! depend on who reported when) and pairs each test with the oldest
+//! waiting test of another worker with the same key; a test with none
+//! waits. The waiting tests of a key are then all one worker's (a test of
+//! anyone else would have paired), at most [`WAIT_CAP`] of them, the
+//! oldest dropped, and at most [`MAX_KEYS`] keys wait, the one waiting
+//! longest dropped. Which tests pair depends on indices, keys and who ran
+//! them only, and each test is in at most one pair, so the pairs are
+//! independent and each counts for both its workers: the e-value of a
+//! worker's discordant pairs is a test martingale under "same program",
+//! and Ville's inequality bounds the chance that it ever reaches 10⁴ by
+//! 10⁻⁴, over the worker's whole life. Audit pairs are counted apart (an
+//! audited test's first run may also be in a test pair, and two pairs
+//! sharing a run are not independent).
 //!
 //! What it assumes: which worker runs a test does not depend on that
 //! test's outcome. Leases are handed out before any of their tests run, so
@@ -54,11 +56,21 @@
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, VecDeque};
 
-/// The most tests that wait in a stratum; past it the oldest are dropped
+/// The most tests that wait under one key; past it the oldest are dropped
 /// (by index, so the rule still looks at no outcome). Only one worker's
 /// tests wait, so this costs a worker that runs far more than the rest of
 /// the fleet some of its pairs, never validity.
 pub const WAIT_CAP: u64 = 4096;
+
+/// The most keys with waiting tests; past it the key waiting longest (by
+/// the index its wait began at) is dropped. A campaign's cells number in
+/// the thousands on the grid cases.
+pub const MAX_KEYS: usize = 4096;
+
+/// The criticality at or below which workers report it for every test of
+/// a library or NDD campaign of an external program (`near_misses`): every
+/// test that came near the event at all.
+pub const CRITICALITY_BELOW: f64 = 0.999;
 
 /// How close a test came to the event, smaller closer: 0 for the event,
 /// `1 + round(1000 c)` for criticality `c` (not reported: `c` = 1).
@@ -69,18 +81,31 @@ pub fn score(event: bool, criticality: Option<f64>) -> u16 {
     1 + (criticality.unwrap_or(1.0).clamp(0.0, 1.0) * 1000.0).round() as u16
 }
 
+/// The key of a test of a grid cell: cells and strata share one space.
+pub fn cell_key(cell: u64) -> u64 {
+    cell.saturating_add(2)
+}
+
+/// The key of a test of stratum 0 or 1 where its cell is not known.
+pub fn stratum_key(explores: bool) -> u64 {
+    u64::from(explores)
+}
+
 /// Consecutive resolved tests of a campaign (in index order) that one
-/// worker ran, of one stratum and one [`score`].
+/// worker ran, of one key and one [`score`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ResolvedRun<'a> {
     /// The worker that reported them.
     pub worker: &'a str,
-    /// Their stratum: tests of one stratum are draws of one distribution.
-    pub stratum: u8,
+    /// What they are draws of: their grid cell ([`cell_key`]), else their
+    /// stratum ([`stratum_key`]).
+    pub key: u64,
     /// Their [`score`] (an invalid test counts as one that never came
     /// near, as in the audits: otherwise a worker could hide events by
     /// failing them).
     pub score: u16,
+    /// The first one's index.
+    pub index: u64,
     /// How many tests.
     pub tests: u64,
 }
@@ -101,11 +126,12 @@ pub struct PairTally {
 /// test waited).
 pub type PairCounts = BTreeMap<(String, String), PairTally>;
 
-/// The tests of one stratum waiting for a partner: all one worker's, as
-/// runs of one score, oldest first.
+/// The tests of one key waiting for a partner: all one worker's, as runs
+/// of one score, oldest first, since test `since`.
 #[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
 struct Waiting {
     worker: String,
+    since: u64,
     runs: VecDeque<(u16, u64)>,
 }
 
@@ -142,45 +168,63 @@ impl Waiting {
     }
 }
 
-/// The pairing state of one campaign: each stratum's waiting tests.
-/// Stored between folds (JSON), so a walk continues where it stopped.
+/// The pairing state of one campaign: each key's waiting tests. Stored
+/// between folds (JSON), so a walk continues where it stopped.
 #[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(transparent)]
 pub struct Walk {
-    strata: BTreeMap<u8, Waiting>,
+    keys: BTreeMap<u64, Waiting>,
 }
 
 impl Walk {
     /// Walks `run` (the next tests in index order), adding the pairs it
     /// closes to `pairs`: its tests pair with the oldest waiting tests of
-    /// their stratum when another worker's wait, and wait otherwise.
+    /// their key when another worker's wait, and wait otherwise.
     pub fn step(&mut self, run: ResolvedRun<'_>, pairs: &mut PairCounts) {
-        let waiting = self.strata.entry(run.stratum).or_default();
         let mut left = run.tests;
-        if waiting.worker != run.worker {
-            for (score, n) in waiting.take(left) {
-                let key = (waiting.worker.clone(), run.worker.to_owned());
-                let tally = pairs.entry(key).or_default();
-                tally.compared += n;
-                match score.cmp(&run.score) {
-                    std::cmp::Ordering::Less => tally.first_closer += n,
-                    std::cmp::Ordering::Greater => tally.second_closer += n,
-                    std::cmp::Ordering::Equal => {}
+        if let Some(waiting) = self.keys.get_mut(&run.key) {
+            if waiting.worker != run.worker {
+                for (score, n) in waiting.take(left) {
+                    let key = (waiting.worker.clone(), run.worker.to_owned());
+                    let tally = pairs.entry(key).or_default();
+                    tally.compared += n;
+                    match score.cmp(&run.score) {
+                        std::cmp::Ordering::Less => tally.first_closer += n,
+                        std::cmp::Ordering::Greater => tally.second_closer += n,
+                        std::cmp::Ordering::Equal => {}
+                    }
+                    left -= n;
                 }
-                left -= n;
+                if waiting.runs.is_empty() {
+                    self.keys.remove(&run.key);
+                }
             }
-            if left == 0 {
-                return;
-            }
-            waiting.worker = run.worker.to_owned();
         }
+        if left == 0 {
+            return;
+        }
+        let waiting = self.keys.entry(run.key).or_insert_with(|| Waiting {
+            worker: run.worker.to_owned(),
+            since: run.index + (run.tests - left),
+            runs: VecDeque::new(),
+        });
         waiting.push(run.score, left);
+        if self.keys.len() > MAX_KEYS {
+            let oldest = self
+                .keys
+                .iter()
+                .min_by_key(|(key, w)| (w.since, **key))
+                .map(|(key, _)| *key);
+            if let Some(key) = oldest {
+                self.keys.remove(&key);
+            }
+        }
     }
 
     /// Forgets the waiting tests of `worker` (flagged: its tests were
     /// taken back).
     pub fn forget(&mut self, worker: &str) {
-        self.strata.retain(|_, waiting| waiting.worker != worker);
+        self.keys.retain(|_, waiting| waiting.worker != worker);
     }
 }
 
@@ -191,12 +235,25 @@ mod tests {
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
-    fn run(worker: &str, stratum: u8, score: u16, tests: u64) -> ResolvedRun<'_> {
-        ResolvedRun {
-            worker,
-            stratum,
-            score,
-            tests,
+    /// A walk that numbers the tests it is given.
+    #[derive(Default)]
+    struct Walker {
+        walk: Walk,
+        index: u64,
+        pairs: PairCounts,
+    }
+
+    impl Walker {
+        fn step(&mut self, worker: &str, key: u64, score: u16, tests: u64) {
+            let run = ResolvedRun {
+                worker,
+                key,
+                score,
+                index: self.index,
+                tests,
+            };
+            self.walk.step(run, &mut self.pairs);
+            self.index += tests;
         }
     }
 
@@ -220,75 +277,81 @@ mod tests {
         assert_eq!(score(false, None), 1001);
         assert_eq!(score(false, Some(1.0)), 1001);
         assert_eq!(score(false, Some(7.0)), 1001);
+        assert_ne!(cell_key(0), stratum_key(true));
     }
 
     #[test]
-    fn tests_pair_in_index_order_within_a_stratum_and_each_test_once() {
-        let mut walk = Walk::default();
-        let mut pairs = PairCounts::new();
-        walk.step(run("a", 0, 0, 1), &mut pairs);
-        walk.step(run("a", 1, 1001, 1), &mut pairs);
-        walk.step(run("a", 0, 500, 3), &mut pairs);
-        assert!(pairs.is_empty());
-        // b's two stratum-0 tests (score 500) pair with a's oldest two (an
-        // event, then a tie); a's stratum-1 test and two more wait.
-        walk.step(run("b", 0, 500, 2), &mut pairs);
-        assert_eq!(pairs, PairCounts::from([(key("a", "b"), tally(2, 1, 0))]));
-        pairs.clear();
+    fn tests_pair_in_index_order_within_a_key_and_each_test_once() {
+        let mut w = Walker::default();
+        w.step("a", 0, 0, 1);
+        w.step("a", 1, 1001, 1);
+        w.step("a", 0, 500, 3);
+        assert!(w.pairs.is_empty());
+        // b's two key-0 tests (score 500) pair with a's oldest two (an
+        // event, then a tie); a's key-1 test and two more wait.
+        w.step("b", 0, 500, 2);
+        assert_eq!(w.pairs, PairCounts::from([(key("a", "b"), tally(2, 1, 0))]));
+        w.pairs.clear();
         // c's five pair with a's last two (c closer), then three wait.
-        walk.step(run("c", 0, 20, 5), &mut pairs);
-        assert_eq!(pairs, PairCounts::from([(key("a", "c"), tally(2, 0, 2))]));
-        pairs.clear();
-        walk.step(run("a", 0, 0, 1), &mut pairs);
-        assert_eq!(pairs, PairCounts::from([(key("c", "a"), tally(1, 0, 1))]));
+        w.step("c", 0, 20, 5);
+        assert_eq!(w.pairs, PairCounts::from([(key("a", "c"), tally(2, 0, 2))]));
+        w.pairs.clear();
+        w.step("a", 0, 0, 1);
+        assert_eq!(w.pairs, PairCounts::from([(key("c", "a"), tally(1, 0, 1))]));
+        // c's wait began at its first unpaired test, index 9.
+        assert_eq!(w.walk.keys[&0].since, 9);
         // The state round-trips through its stored form.
-        let stored = serde_json::to_string(&walk).unwrap();
-        assert_eq!(serde_json::from_str::<Walk>(&stored).unwrap(), walk);
+        let stored = serde_json::to_string(&w.walk).unwrap();
+        assert_eq!(serde_json::from_str::<Walk>(&stored).unwrap(), w.walk);
     }
 
     #[test]
-    fn at_most_the_cap_waits_and_a_forgotten_worker_leaves_nothing_waiting() {
-        let mut walk = Walk::default();
-        let mut pairs = PairCounts::new();
+    fn at_most_the_caps_wait_and_a_forgotten_worker_leaves_nothing_waiting() {
+        let mut w = Walker::default();
         for k in 0..10_000u64 {
-            walk.step(run("a", 0, (k % 3) as u16, 1), &mut pairs);
+            w.step("a", 0, (k % 3) as u16, 1);
         }
-        assert_eq!(walk.strata[&0].tests(), WAIT_CAP);
+        assert_eq!(w.walk.keys[&0].tests(), WAIT_CAP);
         // The oldest were dropped: the next partner test pairs with test
         // 10,000 − 4,096 = 5,904, of score 5,904 mod 3 = 0.
-        walk.step(run("b", 0, 1, 1), &mut pairs);
-        assert_eq!(pairs, PairCounts::from([(key("a", "b"), tally(1, 1, 0))]));
-        walk.forget("a");
-        assert!(walk.strata.is_empty());
+        w.step("b", 0, 1, 1);
+        assert_eq!(w.pairs, PairCounts::from([(key("a", "b"), tally(1, 1, 0))]));
+        // Past MAX_KEYS keys the one waiting longest goes: key 0 (since
+        // test 5,905), not key 7 (since 10,001).
+        w.step("a", 7, 1, 1);
+        for cell in 0..MAX_KEYS as u64 - 1 {
+            w.step("a", cell_key(cell + 100), 1, 1);
+        }
+        assert_eq!(w.walk.keys.len(), MAX_KEYS);
+        assert!(!w.walk.keys.contains_key(&0) && w.walk.keys.contains_key(&7));
+        w.walk.forget("a");
+        assert!(w.walk.keys.is_empty());
     }
 
     /// A fleet's campaign: `tests` tests in leases of `lease` consecutive
     /// indices handed to workers at random (worker `shares[k]` for a
-    /// uniform `k`), each test in stratum 1 with probability `outside`,
-    /// its score drawn by `draw(stratum, liar)` (`liar` for worker 0).
-    /// The largest e-value (as flagged) any honest worker reached, and the
-    /// liar's.
+    /// uniform `k`), each test's key and score drawn by `draw(rng, liar)`
+    /// (`liar` for worker 0). The largest e-value (as flagged) any honest
+    /// worker reached, and the liar's.
     fn campaign(
         rng: &mut ChaCha8Rng,
         shares: &[usize],
-        (tests, lease, outside): (usize, usize, f64),
-        draw: impl Fn(&mut ChaCha8Rng, u8, bool) -> u16,
+        (tests, lease): (usize, usize),
+        draw: impl Fn(&mut ChaCha8Rng, bool) -> (u64, u16),
     ) -> (f64, f64) {
         let names = ["w0", "w1", "w2", "w3"];
-        let mut walk = Walk::default();
+        let mut w = Walker::default();
         let mut counts: BTreeMap<(String, String), Discordant> = BTreeMap::new();
-        let mut pairs = PairCounts::new();
         let (mut honest_max, mut liar_max) = (1.0f64, 1.0f64);
         let mut index = 0;
         while index < tests {
             let worker = shares[rng.random_range(0..shares.len())];
             for _ in 0..lease {
-                let stratum = u8::from(rng.random_bool(outside));
-                let score = draw(rng, stratum, worker == 0);
-                walk.step(run(names[worker], stratum, score, 1), &mut pairs);
+                let (key, score) = draw(rng, worker == 0);
+                w.step(names[worker], key, score, 1);
                 index += 1;
             }
-            for ((a, b), t) in std::mem::take(&mut pairs) {
+            for ((a, b), t) in std::mem::take(&mut w.pairs) {
                 let ab = counts.entry((a.clone(), b.clone())).or_default();
                 ab.own_event += t.first_closer;
                 ab.partner_event += t.second_closer;
@@ -325,28 +388,60 @@ mod tests {
         }
     }
 
+    /// A cut-in-like campaign of 50 cells: the vehicle brakes in the first
+    /// 25, and a run that brakes ends at a criticality uniform on
+    /// `floor..1` (0 for the others, `liar_floor` for worker 0), an event
+    /// with probability 2 in 10⁴ (the outside of a library).
+    fn braking(liar_floor: f64, by_cell: bool) -> impl Fn(&mut ChaCha8Rng, bool) -> (u64, u16) {
+        move |rng: &mut ChaCha8Rng, liar: bool| {
+            let cell = rng.random_range(0..50u64);
+            let key = if by_cell {
+                cell_key(cell)
+            } else {
+                stratum_key(true)
+            };
+            let floor = if liar { liar_floor } else { 0.0 };
+            let score = if rng.random_bool(0.0002) {
+                0
+            } else if cell < 25 {
+                score(false, Some(rng.random_range(floor..1.0)))
+            } else {
+                1001
+            };
+            (key, score)
+        }
+    }
+
     #[test]
     fn honest_fleets_cross_a_level_no_more_often_than_ville_allows() {
-        // 400 campaigns of 2,000 tests, strata of very different event
-        // rates (0.6 in the library, 0.002 outside, half the rest with a
-        // criticality) mixed unevenly, leases of 20 to uneven workers:
-        // every worker honest. Ville bounds the chance that an honest
-        // worker's e-value ever reaches 20 by 1/20 per worker.
+        // 400 campaigns of 2,000 tests each way (keys by stratum with
+        // event rates 0.6 and 0.002; keys by cell with criticalities),
+        // leases of 20 to uneven workers: every worker honest. Ville
+        // bounds the chance that an honest worker's e-value ever reaches
+        // 20 by 1/20 per worker.
         let mut rng = ChaCha8Rng::seed_from_u64(66);
-        let runs = 400;
-        let mut crossed = 0;
-        let draw = |rng: &mut ChaCha8Rng, stratum: u8, _| match stratum {
-            0 => event(rng, 0.6),
-            _ if rng.random_bool(0.5) => rng.random_range(1..1001),
-            _ => event(rng, 0.002),
+        let strata = |rng: &mut ChaCha8Rng, _| {
+            let outside = rng.random_bool(0.5);
+            let rate = if outside { 0.002 } else { 0.6 };
+            (stratum_key(outside), event(rng, rate))
         };
-        for _ in 0..runs {
-            let (honest, liar) = campaign(&mut rng, &UNEVEN, (2000, 20, 0.5), draw);
-            crossed += usize::from(honest.max(liar) >= 20.0);
+        let runs = 400;
+        for (name, draw) in [
+            (
+                "strata",
+                Box::new(strata) as Box<dyn Fn(&mut ChaCha8Rng, bool) -> (u64, u16)>,
+            ),
+            ("cells", Box::new(braking(0.0, true))),
+        ] {
+            let mut crossed = 0;
+            for _ in 0..runs {
+                let (honest, liar) = campaign(&mut rng, &UNEVEN, (2000, 20), &draw);
+                crossed += usize::from(honest.max(liar) >= 20.0);
+            }
+            // Four workers: at most 4/20 of the campaigns in expectation;
+            // the e-value of a worker leaving out a partner is smaller still.
+            assert!(crossed <= runs / 10, "{name}: {crossed} of {runs}");
         }
-        // Four workers: at most 4/20 of the campaigns in expectation; the
-        // e-value of a worker leaving out a partner is smaller still.
-        assert!(crossed <= runs / 10, "{crossed} of {runs}");
     }
 
     #[test]
@@ -359,15 +454,39 @@ mod tests {
         // a liar with a small share of a fleet that one worker dominates
         // needs more tests.
         let mut rng = ChaCha8Rng::seed_from_u64(67);
-        let draw = |rng: &mut ChaCha8Rng, stratum: u8, liar: bool| match (stratum, liar) {
-            (0, false) => event(rng, 0.6),
-            (0, true) => event(rng, 0.35),
-            _ => event(rng, 0.002),
+        let draw = |rng: &mut ChaCha8Rng, liar: bool| {
+            let outside = rng.random_bool(0.5);
+            let rate = match (outside, liar) {
+                (true, _) => 0.002,
+                (false, false) => 0.6,
+                (false, true) => 0.35,
+            };
+            (stratum_key(outside), event(rng, rate))
         };
         for _ in 0..20 {
-            let (honest, liar) = campaign(&mut rng, &[0, 1, 2, 3], (5000, 20, 0.5), draw);
+            let (honest, liar) = campaign(&mut rng, &[0, 1, 2, 3], (5000, 20), draw);
             assert!(liar >= FLAG_AT, "{liar}");
             assert!(honest < FLAG_AT, "{honest}");
         }
+    }
+
+    #[test]
+    fn pairs_by_cell_convict_a_program_that_stays_further_where_it_brakes() {
+        // Worker 0 brakes harder: where it brakes, its criticality is
+        // uniform on 0.3..1 against the others' 0..1, and its events are
+        // as rare. Paired by cell, it is flagged within 8,000 tests in
+        // every one of 20 campaigns; paired across the cells of a stratum,
+        // where whether a run brakes at all depends on its scenario, the
+        // same tests leave it unflagged in most.
+        let mut rng = ChaCha8Rng::seed_from_u64(68);
+        let mut by_stratum_flagged = 0;
+        for _ in 0..20 {
+            let (honest, liar) = campaign(&mut rng, &[0, 1, 2, 3], (8000, 20), braking(0.3, true));
+            assert!(liar >= FLAG_AT, "{liar}");
+            assert!(honest < FLAG_AT, "{honest}");
+            let (_, liar) = campaign(&mut rng, &[0, 1, 2, 3], (8000, 20), braking(0.3, false));
+            by_stratum_flagged += usize::from(liar >= FLAG_AT);
+        }
+        assert!(by_stratum_flagged < 10, "{by_stratum_flagged}");
     }
 }

@@ -11,7 +11,7 @@ use tslg_client::Client;
 
 /// `--vut-exec` for the Python IDM with actuator noise σ 1.5 m/s² (its
 /// hello says `"deterministic": false`), and `extra` options.
-fn noisy_idm(extra: &str) -> String {
+pub(crate) fn noisy_idm(extra: &str) -> String {
     format!(
         "py-idm=python3 {} --noise 1.5 {extra}",
         Path::new(env!("CARGO_MANIFEST_DIR"))

@@ -31,6 +31,9 @@ pub struct PreparedCampaign {
     /// An adaptive campaign's near-miss criticality (its leases name their
     /// tests' cells).
     pub near_miss: Option<f64>,
+    /// Another campaign's: the criticality of every test at or below this
+    /// is reported, as evidence (`CampaignPlan::criticality_below`).
+    pub criticality_below: Option<f64>,
 }
 
 impl PreparedCampaign {
@@ -57,6 +60,7 @@ impl PreparedCampaign {
         Ok(Self {
             tests,
             near_miss: plan.near_miss,
+            criticality_below: plan.criticality_below,
         })
     }
 }

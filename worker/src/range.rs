@@ -24,7 +24,7 @@ pub struct RangeRun {
     pub events: Vec<EventResult>,
     pub invalid: Vec<InvalidResult>,
     /// Tests without the event that came within the plan's `near_miss`
-    /// (adaptive campaigns).
+    /// (adaptive campaigns) or its `criticality_below` (others).
     pub near_misses: Vec<NearMiss>,
 }
 
@@ -56,18 +56,25 @@ pub fn run_range(
             return ran;
         }
     }
-    let near = |c: Option<f64>| {
-        planned
-            .and_then(|p| p.near_miss)
-            .is_some_and(|n| c.is_some_and(|c| c <= n))
-    };
+    let level = planned.and_then(|p| p.near_miss).or(p.criticality_below);
+    let near = |c: Option<f64>| level.is_some_and(|n| c.is_some_and(|c| c <= n));
     let mut found: Vec<(u64, ProgramRun)> = (from..to)
         .into_par_iter()
         .filter_map(|index| {
             if !go_on.load(Ordering::Relaxed) {
                 return Some((index, ProgramRun::Skipped));
             }
-            let cell = planned.map(|p| p.tests[(index - p.first) as usize]);
+            // A planned test's cell and weight: from an adaptive lease, or,
+            // where criticalities are asked for, the campaign's own draw
+            // (a cell's run gives its criticality).
+            let cell = planned
+                .map(|p| p.tests[(index - p.first) as usize])
+                .or_else(|| {
+                    p.criticality_below?;
+                    program?;
+                    let test = p.tests.planned(index)?;
+                    Some((test.cell as u64, test.weight))
+                });
             let run = match (program, cell) {
                 (Some(program), None) => program.run_test(p.tests.as_ref(), campaign, index),
                 (Some(program), Some((cell, weight))) => {

@@ -27,10 +27,34 @@ use rusqlite::Connection;
 use std::collections::BTreeSet;
 use std::sync::Arc;
 use tslg_api::Method;
+use tslg_api::NearMiss;
 use tslg_method::discordance::{worker_evidence, FLAG_AT};
 use tslg_method::prefix::SparseOutcome;
 use tslg_method::registry::CampaignTests;
-use tslg_method::test_pairing::{score, PairCounts, ResolvedRun, Walk};
+use tslg_method::test_pairing::{
+    cell_key, score, stratum_key, PairCounts, ResolvedRun, Walk, CRITICALITY_BELOW,
+};
+
+/// The criticality below which the workers of `campaign` report it for
+/// every test (`CampaignPlan::criticality_below`): library and NDD
+/// campaigns of an external program (a built-in vehicle's tests the
+/// coordinator replays itself).
+pub fn criticality_below(campaign: &CampaignRow) -> Option<f64> {
+    let external = serde_json::from_str::<serde_json::Value>(&campaign.vut)
+        .is_ok_and(|vut| vut.get("external").is_some());
+    (external && matches!(campaign.method, Method::Library | Method::Ndd))
+        .then_some(CRITICALITY_BELOW)
+}
+
+/// The criticalities of a report's tests from `new_from` on, rounded to
+/// the thousandths the pairing scores them in (so that they pack small).
+pub fn kept_criticalities(near_misses: &[NearMiss], new_from: u64) -> Vec<(u64, f64)> {
+    near_misses
+        .iter()
+        .filter(|m| m.index >= new_from)
+        .map(|m| (m.index, (m.criticality * 1000.0).round() / 1000.0))
+        .collect()
+}
 
 /// A worker the evidence of its tests convicts.
 #[derive(Debug, Clone, PartialEq)]
@@ -71,40 +95,59 @@ pub fn weigh(
     for worker in &flagged {
         walk.forget(worker);
     }
-    let strata = tests.filter(|t| t.outside_mass().is_some());
-    let stratum = |i: u64| u8::from(strata.is_some_and(|t| t.explores(i)));
+    let near = reports::near_between(conn, campaign.id, walked_to, frontier)?;
     let events: Vec<u64> = reports::outcomes(conn, campaign.id, walked_to, frontier)?
         .into_iter()
         .filter(|(_, outcome)| matches!(outcome, SparseOutcome::Event(_)))
         .map(|(i, _)| i)
         .collect();
+    // A test's key: its grid cell where the campaign draws from a grid,
+    // else its stratum (the library's inside or outside, the NDD's one).
+    let strata = tests.filter(|t| t.outside_mass().is_some());
+    let key = |i: u64| match tests.and_then(|t| t.planned(i)) {
+        Some(planned) => cell_key(planned.cell as u64),
+        None => stratum_key(strata.is_some_and(|t| t.explores(i))),
+    };
     let mut pairs = PairCounts::new();
     let mut next_event = events.iter().peekable();
+    let mut next_near = near.iter().peekable();
     for (from, to, worker) in reports::workers_between(conn, campaign.id, walked_to, frontier)? {
         if flagged.contains(&worker) {
             continue;
         }
-        // Runs of one stratum and one score: an event, or a stretch
-        // without one.
+        // Runs of one key and one score: in a grid campaign each test, in
+        // the NDD's stretches between events and criticalities.
         let mut start = from;
         while start < to {
             while next_event.next_if(|&&e| e < start).is_some() {}
+            while next_near.next_if(|&&(n, _)| n < start).is_some() {}
             let event = next_event.peek().is_some_and(|&&e| e == start);
-            let kind = stratum(start);
+            let criticality = next_near
+                .peek()
+                .filter(|&&&(n, _)| n == start)
+                .map(|&&(_, c)| c);
+            let kind = key(start);
             let mut end = start + 1;
-            if !event {
-                let next = next_event.peek().map_or(to, |&&e| e.min(to));
-                if strata.is_none() {
+            if !event && criticality.is_none() {
+                let next = [
+                    next_event.peek().map(|&&e| e),
+                    next_near.peek().map(|&&(n, _)| n),
+                ]
+                .into_iter()
+                .flatten()
+                .fold(to, u64::min);
+                if tests.is_none() {
                     end = next;
                 }
-                while end < next && stratum(end) == kind {
+                while end < next && key(end) == kind {
                     end += 1;
                 }
             }
             let run = ResolvedRun {
                 worker: &worker,
-                stratum: kind,
-                score: score(event, None),
+                key: kind,
+                score: score(event, criticality),
+                index: start,
                 tests: end - start,
             };
             walk.step(run, &mut pairs);
@@ -132,8 +175,8 @@ pub fn weigh(
         let detail = format!(
             "worker `{suspect}` runs a program that behaves unlike the other workers': of \
              {compared} of its tests paired with tests of {} other workers (same campaign, same \
-             stratum), {} differed in whether the event occurred, and its test found the event \
-             in {own} of them, its partners' in {theirs} (evidence {evidence:.3e} ≥ {FLAG_AT:e}: \
+             cell or stratum), {} differed in how close they came to the event, and its test came \
+             closer in {own} of them, its partners' in {theirs} (evidence {evidence:.3e} ≥ {FLAG_AT:e}: \
              a false flag at most once in 10⁴ honest workers; docs/statistics.md, \"Every test \
              as evidence\")",
             partners.len(),

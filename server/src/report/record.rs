@@ -282,6 +282,13 @@ fn store_new_part(
         .filter(|(i, _)| *i >= new_from)
         .map(|(i, r)| (*i, r.as_str()))
         .collect();
+    // Other campaigns keep the criticalities with the report, for the
+    // pairing of tests; an adaptive campaign's go to its near misses.
+    let near: Vec<(u64, f64)> = if campaign.method == Method::Adaptive {
+        Vec::new()
+    } else {
+        crate::report::evidence::kept_criticalities(&report.near_misses, new_from)
+    };
     reports::insert(
         conn,
         &NewReport {
@@ -292,6 +299,7 @@ fn store_new_part(
             to: checked.to,
             events: &checked.events[first_new..],
             invalid: &invalid,
+            near: &near,
         },
     )?;
     if campaign.method == Method::Adaptive {

@@ -194,6 +194,7 @@ pub async fn plan(
         vut: serde_json::from_str(&row.vut).map_err(|e| ServiceError::Internal(e.into()))?,
         near_miss: (row.method == Method::Adaptive)
             .then(|| tslg_method::adaptive::AdaptiveSettings::default().near_miss),
+        criticality_below: crate::report::evidence::criticality_below(&row),
         user_case: user_case.map(|d| tslg_api::UserCaseDefinition {
             file: d.file,
             table_name: d.table_name,

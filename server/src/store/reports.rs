@@ -25,13 +25,16 @@ pub struct NewReport<'a> {
     pub to: u64,
     pub events: &'a [(u64, f64)],
     pub invalid: &'a [(u64, &'a str)],
+    /// The criticality of tests without the event (index order), kept for
+    /// the pairing of tests (`report/evidence.rs`); empty: none.
+    pub near: &'a [(u64, f64)],
 }
 
 pub fn insert(conn: &Connection, report: &NewReport<'_>) -> Result<(), StoreError> {
     sql::execute(
         conn,
-        "INSERT INTO reports (campaign_id, from_index, to_index, lease_id, worker, events, packed) \
-         VALUES (?, ?, ?, ?, ?, ?, ?)",
+        "INSERT INTO reports (campaign_id, from_index, to_index, lease_id, worker, events, packed, \
+         near_packed) VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
         params![
             report.campaign_id,
             report.from as i64,
@@ -39,7 +42,8 @@ pub fn insert(conn: &Connection, report: &NewReport<'_>) -> Result<(), StoreErro
             report.lease_id,
             report.worker,
             report.events.len() as i64,
-            packed::pack(report.from, report.events)
+            packed::pack(report.from, report.events),
+            (!report.near.is_empty()).then(|| packed::pack(report.from, report.near))
         ],
     )?;
     if report.invalid.is_empty() {
@@ -246,6 +250,29 @@ pub fn campaigns_of_worker(conn: &Connection, worker: &str) -> Result<Vec<i64>, 
         [worker],
     )?;
     Ok(rows.into_iter().map(|(id,)| id).collect())
+}
+
+/// The criticalities kept with the reports of `from..to` (index order).
+pub fn near_between(
+    conn: &Connection,
+    campaign: i64,
+    from: u64,
+    to: u64,
+) -> Result<Vec<(u64, f64)>, StoreError> {
+    let rows: Vec<(i64, Vec<u8>)> = sql::all(
+        conn,
+        "WITH start AS (SELECT COALESCE((SELECT MAX(from_index) FROM reports \
+                        WHERE campaign_id = ?1 AND from_index <= ?2), ?2) AS at) \
+         SELECT from_index, near_packed FROM reports, start WHERE campaign_id = ?1 \
+           AND from_index >= start.at AND from_index < ?3 AND to_index > ?2 \
+           AND near_packed IS NOT NULL ORDER BY from_index",
+        params![campaign, from as i64, to as i64],
+    )?;
+    let mut near = Vec::new();
+    for (start, bytes) in rows {
+        unpack_into(&mut near, campaign, start, &bytes, from..to)?;
+    }
+    Ok(near)
 }
 
 /// Who ran the tests of `from..to`: the reports' ranges reaching into it,
