@@ -30,6 +30,7 @@ use args::ServerArgs;
 use clap::{Parser, Subcommand};
 use commands::{
     backup, campaign, cases, demo, evaluate, exact, library, load, policy, reproduce, validate,
+    worker,
 };
 
 /// Testing scenario library generation for automated vehicles.
@@ -75,6 +76,10 @@ pub enum Command {
     /// Start, watch or cancel campaigns on a running coordinator.
     #[command(subcommand)]
     Campaign(campaign::CampaignCommand),
+    /// Enrol workers' principals on a coordinator run with `--enrolment
+    /// required`.
+    #[command(subcommand)]
+    Worker(worker::WorkerCommand),
     /// Check that a coordinator answers and its database works (exit 0 if so).
     Health(ServerArgs),
     /// Copy a coordinator's SQLite database to a new file, consistently,
@@ -106,6 +111,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Exact(args) => exact::run(&args),
         Command::Demo(args) => demo::run(&args),
         Command::Campaign(command) => campaign::run(command),
+        Command::Worker(command) => worker::run(command),
         Command::Health(server) => campaign::health(&server),
         Command::Backup(args) => backup::run(&args),
         Command::Policy(args) => policy::run(&args),

@@ -139,6 +139,11 @@ pub struct WorkerView {
     /// other workers contradict. A flagged worker gets no work.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub flagged: Option<String>,
+    /// The principal it enrolled under (`POST /api/v1/enrolments`), if any:
+    /// audits, quorums and evidence count principals, and a flag sticks to
+    /// the principal.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub principal: Option<String>,
     /// When its credential was issued (`POST /api/v1/workers`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub registered_at: Option<String>,

@@ -63,7 +63,20 @@ impl Client {
     /// credential is kept for the requests that name the worker issued
     /// (which is `name`, or `name.k` when `name` was issued before).
     pub async fn register(&self, name: &str) -> Result<WorkerCredential, CallError> {
-        let registration = WorkerRegistration { name: name.into() };
+        self.register_enrolled(name, None).await
+    }
+
+    /// [`Self::register`] with an enrolment secret an administrator issued
+    /// (`POST /api/v1/enrolments`): the worker belongs to its principal.
+    pub async fn register_enrolled(
+        &self,
+        name: &str,
+        enrolment: Option<&str>,
+    ) -> Result<WorkerCredential, CallError> {
+        let registration = WorkerRegistration {
+            name: name.into(),
+            enrolment: enrolment.map(str::to_owned),
+        };
         let issued: WorkerCredential = self.post("/api/v1/workers", &registration).await?;
         self.use_credential(&issued.name, &issued.secret);
         Ok(issued)
@@ -297,6 +310,15 @@ impl Client {
     pub async fn library(&self, id: i64) -> Result<LibraryView, CallError> {
         self.json(self.request(reqwest::Method::GET, &format!("/api/v1/libraries/{id}")))
             .await
+    }
+
+    /// `POST /api/v1/enrolments` (admin): an enrolment credential for
+    /// `principal`; the secret is shown this once.
+    pub async fn enrol(&self, principal: &str) -> Result<tslg_api::Enrolment, CallError> {
+        let request = tslg_api::EnrolmentRequest {
+            principal: principal.into(),
+        };
+        self.post("/api/v1/enrolments", &request).await
     }
 
     /// `POST /api/v1/campaigns`: starts a campaign.

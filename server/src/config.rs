@@ -54,6 +54,15 @@ pub struct Config {
     #[arg(long, env = "TSLG_WORKER_TOKEN", hide_env_values = true)]
     pub worker_token: Option<String>,
 
+    /// Whether a worker must register with an enrolment credential an
+    /// administrator issued (`POST /api/v1/enrolments`): `required` makes
+    /// audits, quorums and evidence count principals, so one holder of the
+    /// worker token cannot mint voters; `open` (the default) also admits
+    /// workers with the worker token alone, each its own principal (one
+    /// trusted cluster).
+    #[arg(long, env = "TSLG_ENROLMENT", value_enum, default_value = "open")]
+    pub enrolment: Enrolment,
+
     /// Token needed to create libraries and to start or cancel campaigns.
     /// When unset, anyone who can reach the server may.
     #[arg(long, env = "TSLG_ADMIN_TOKEN", hide_env_values = true)]
@@ -124,6 +133,16 @@ pub struct Config {
     /// `w ≥ share · (S₁ + w)`. 1 turns this off.
     #[arg(long, env = "TSLG_AUDIT_WEIGHT_SHARE", default_value_t = 0.05)]
     pub audit_weight_share: f64,
+}
+
+/// Whether workers enrol ([`Config::enrolment`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Enrolment {
+    /// The worker token alone registers a worker (its own principal); an
+    /// enrolment, when given, must be valid.
+    Open,
+    /// Registration needs an enrolment credential.
+    Required,
 }
 
 /// Where a library build with a built-in surrogate runs

@@ -13,6 +13,7 @@
 use crate::db::Database;
 use crate::error::ServiceError;
 use crate::store::credentials::{self, CredentialRow};
+use crate::store::enrolments;
 use sha2::{Digest, Sha256};
 use std::collections::HashMap;
 use std::sync::Mutex;
@@ -33,7 +34,47 @@ pub struct Credentials {
     known: Mutex<HashMap<String, CredentialRow>>,
 }
 
-fn digest(secret: &str) -> String {
+/// The principal an enrolment secret (its hash, `None`: none given)
+/// enrols under: refused (403) when it is not one an administrator issued,
+/// was revoked, or its principal is flagged (registering again does not
+/// shed a flag), and when none is given where `required`.
+fn principal_of_enrolment(
+    conn: &rusqlite::Connection,
+    hash: Option<&str>,
+    required: bool,
+) -> Result<Option<String>, ServiceError> {
+    let refuse = |why: String| Err(ServiceError::Forbidden(why));
+    let Some(hash) = hash else {
+        if required {
+            return refuse(
+                "this coordinator admits enrolled workers only (--enrolment required): ask an \
+                 administrator for an enrolment credential (POST /api/v1/enrolments, or `tslg \
+                 worker enrol PRINCIPAL`) and start the worker with --enrolment-file or \
+                 TSLG_ENROLMENT_SECRET"
+                    .into(),
+            );
+        }
+        return Ok(None);
+    };
+    let Some((principal, revoked)) = enrolments::by_secret(conn, hash)? else {
+        return refuse("the enrolment credential given is not one an administrator issued".into());
+    };
+    if let Some(at) = revoked {
+        return refuse(format!(
+            "the enrolment of principal `{principal}` was revoked at {at}"
+        ));
+    }
+    if let Some(reason) = enrolments::flag_of(conn, &principal)? {
+        return refuse(format!(
+            "principal `{principal}` is flagged ({reason}); registering again does not shed a \
+             flag: an operator clears it with DELETE /api/v1/workers/NAME/flag"
+        ));
+    }
+    Ok(Some(principal))
+}
+
+/// Hex SHA-256 of a secret.
+pub fn digest(secret: &str) -> String {
     Sha256::digest(secret.as_bytes())
         .iter()
         .map(|b| format!("{b:02x}"))
@@ -48,7 +89,9 @@ impl Credentials {
         &self,
         db: &Database,
         requested: &str,
+        (enrolment, required): (Option<&str>, bool),
     ) -> Result<WorkerCredential, ServiceError> {
+        let enrolment_hash = enrolment.map(digest);
         let secret = format!(
             "{:032x}{:032x}",
             rand::random::<u128>(),
@@ -57,7 +100,15 @@ impl Credentials {
         let hash = digest(&secret);
         let asked = requested.to_owned();
         let row = db
-            .write(move |conn| credentials::issue(conn, &asked, &hash))
+            .write(move |conn| {
+                let principal = principal_of_enrolment(conn, enrolment_hash.as_deref(), required)?;
+                Ok::<_, ServiceError>(credentials::issue(
+                    conn,
+                    &asked,
+                    &hash,
+                    principal.as_deref(),
+                )?)
+            })
             .await?
             .ok_or_else(|| {
                 ServiceError::Conflict(format!(
@@ -69,6 +120,7 @@ impl Credentials {
             name: row.name.clone(),
             secret,
             issued_at: row.issued_at.clone(),
+            principal: row.principal.clone(),
         };
         self.remember(row);
         Ok(issued)
@@ -145,12 +197,19 @@ impl Credentials {
         Ok(revoked)
     }
 
-    /// When `worker`'s credential was issued and revoked, as far as this
-    /// process has seen it.
-    pub fn dates(&self, worker: &str) -> (Option<String>, Option<String>) {
+    /// When `worker`'s credential was issued and revoked, and the principal
+    /// it enrolled under, as far as this process has seen it.
+    pub fn dates(&self, worker: &str) -> (Option<String>, Option<String>, Option<String>) {
         self.lock()
             .get(worker)
-            .map(|row| (Some(row.issued_at.clone()), row.revoked_at.clone()))
+            .map(|row| {
+                let principal = row.principal.clone();
+                (
+                    Some(row.issued_at.clone()),
+                    row.revoked_at.clone(),
+                    principal,
+                )
+            })
             .unwrap_or_default()
     }
 

@@ -315,6 +315,7 @@ impl WorkerRegistry {
                 invalid: e.invalid,
                 last_release_reason: e.last_release.clone(),
                 flagged: flag(name),
+                principal: None,
                 registered_at: None,
                 revoked_at: None,
                 audits_given_back: 0,

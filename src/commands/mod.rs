@@ -19,3 +19,4 @@ pub mod progress;
 pub mod remote;
 pub mod reproduce;
 pub mod validate;
+pub mod worker;

@@ -38,6 +38,7 @@ mod service_next_lease;
 mod service_noise;
 mod service_outside;
 mod service_paired;
+mod service_principals;
 mod service_protocol;
 mod service_recovery;
 mod service_scale;

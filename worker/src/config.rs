@@ -43,6 +43,19 @@ pub struct WorkerConfig {
     #[arg(long, env = "TSLG_CREDENTIAL_FILE")]
     pub credential_file: Option<std::path::PathBuf>,
 
+    /// The enrolment secret an administrator issued this worker's principal
+    /// (`tslg worker enrol PRINCIPAL`), sent when it registers: required by
+    /// a coordinator run with `--enrolment required`. Prefer the
+    /// environment or `--enrolment-file` to the command line, which other
+    /// users of the machine can read.
+    #[arg(long, env = "TSLG_ENROLMENT_SECRET", hide_env_values = true)]
+    pub enrolment: Option<String>,
+
+    /// A file holding the enrolment secret (its first line), instead of
+    /// `--enrolment`.
+    #[arg(long, env = "TSLG_ENROLMENT_FILE", conflicts_with = "enrolment")]
+    pub enrolment_file: Option<std::path::PathBuf>,
+
     /// Longest pause between polls when there is no work (seconds), for a
     /// coordinator that answers a lease request at once (`--claim-wait-seconds
     /// 0`, or its `--max-claim-wait-seconds 0`).
@@ -120,6 +133,8 @@ impl WorkerConfig {
             token: None,
             name: Some(name.into()),
             credential_file: None,
+            enrolment: None,
+            enrolment_file: None,
             max_backoff_seconds: 0.5,
             claim_wait_seconds: 10.0,
             exit_when_idle_seconds: None,

@@ -76,6 +76,7 @@ mod tests {
             name: "w.2".into(),
             secret: "ab".repeat(32),
             issued_at: "2026-11-28T20:00:00.000Z".into(),
+            principal: None,
         };
         save(&path, "http://a:1", &issued).unwrap();
         #[cfg(unix)]

@@ -213,7 +213,26 @@ async fn register(
         worker.name = stored.name;
         return Ok(Ok(()));
     }
-    let issued = match worker.client.register(&worker.name).await {
+    let enrolment = match (&config.enrolment, &config.enrolment_file) {
+        (Some(secret), _) => Some(secret.trim().to_owned()),
+        (None, Some(path)) => {
+            let text = std::fs::read_to_string(path)
+                .map_err(|e| anyhow::anyhow!("--enrolment-file {}: {e}", path.display()))?;
+            let secret = text.lines().next().unwrap_or("").trim().to_owned();
+            anyhow::ensure!(
+                !secret.is_empty(),
+                "--enrolment-file {}: the file is empty",
+                path.display()
+            );
+            Some(secret)
+        }
+        (None, None) => None,
+    };
+    let registered = worker
+        .client
+        .register_enrolled(&worker.name, enrolment.as_deref())
+        .await;
+    let issued = match registered {
         Ok(issued) => issued,
         Err(e) => return Ok(Err(e)),
     };

@@ -12,19 +12,30 @@
 //! is flagged as a liar is: a false flag at most once in 10⁴ honest
 //! workers over their whole life (Ville's inequality).
 //!
-//! Adaptive campaigns are left to the audits: their stages change the
-//! proposal as they go, so a stratum would be a stage's support, and the
-//! results of a flagged worker fail them anyway (`report/flag.rs`).
+//! Library and NDD campaigns only. Adaptive campaigns are left to the
+//! audits: their stages change the proposal as they go, so a stratum would
+//! be a stage's support, and the results of a flagged worker fail them
+//! anyway (`report/flag.rs`). A library build's enumeration runs its cells
+//! in order, each once: its tests are no draws of one distribution, and
+//! workers taking consecutive cells would look different.
+//!
+//! **One vote per principal.** Tests are paired and counted by the
+//! workers' principals (`credentials::principal_of`: the one a worker
+//! enrolled under, else the worker itself): the names of one principal
+//! never pair with each other, and count as one partner, so a holder of
+//! the worker token with one enrolment cannot outvote the others with
+//! names it registers.
 
 use crate::error::ServiceError;
 use crate::store::audits;
 use crate::store::campaign_row::CampaignRow;
+use crate::store::credentials;
 use crate::store::discordance::{self, Pairs};
 use crate::store::prefix;
 use crate::store::reports;
 use crate::store::test_pairing_walks;
 use rusqlite::Connection;
-use std::collections::BTreeSet;
+use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
 use tslg_api::Method;
 use tslg_api::NearMiss;
@@ -75,7 +86,10 @@ pub fn weigh(
     campaign: &CampaignRow,
     tests: Option<&Arc<dyn CampaignTests>>,
 ) -> Result<Option<Convicted>, ServiceError> {
-    if campaign.method == Method::Adaptive {
+    // Only tests that are independent draws of one proposal: not an
+    // adaptive campaign's stages, nor a library build's enumeration (its
+    // cells in order, each once).
+    if !matches!(campaign.method, Method::Library | Method::Ndd) {
         return Ok(None);
     }
     let frontier = prefix::bounds(conn, campaign)?.frontier;
@@ -93,8 +107,11 @@ pub fn weigh(
     }
     let flagged: BTreeSet<String> = audits::flagged(conn)?.into_iter().map(|f| f.0).collect();
     for worker in &flagged {
-        walk.forget(worker);
+        walk.forget(&credentials::principal_of(conn, worker)?);
     }
+    // Each worker's principal, and a worker of each principal to flag.
+    let mut principals: BTreeMap<String, String> = BTreeMap::new();
+    let mut named: BTreeMap<String, String> = BTreeMap::new();
     let near = reports::near_between(conn, campaign.id, walked_to, frontier)?;
     let events: Vec<u64> = reports::outcomes(conn, campaign.id, walked_to, frontier)?
         .into_iter()
@@ -115,6 +132,12 @@ pub fn weigh(
         if flagged.contains(&worker) {
             continue;
         }
+        if !principals.contains_key(&worker) {
+            let principal = credentials::principal_of(conn, &worker)?;
+            principals.insert(worker.clone(), principal);
+        }
+        let principal = principals[&worker].clone();
+        named.insert(principal.clone(), worker.clone());
         // Runs of one key and one score: in a grid campaign each test, in
         // the NDD's stretches between events and criticalities.
         let mut start = from;
@@ -144,7 +167,7 @@ pub fn weigh(
                 }
             }
             let run = ResolvedRun {
-                worker: &worker,
+                worker: &principal,
                 key: kind,
                 score: score(event, criticality),
                 index: start,
@@ -170,22 +193,29 @@ pub fn weigh(
         if evidence < FLAG_AT || strongest.as_ref().is_some_and(|s| s.0 >= evidence) {
             continue;
         }
+        let worker = match named.get(&suspect) {
+            Some(worker) => worker.clone(),
+            None => credentials::names_of(conn, &suspect)?
+                .pop()
+                .unwrap_or_else(|| suspect.clone()),
+        };
         let own: u64 = partners.iter().map(|p| p.own_event).sum();
         let theirs: u64 = partners.iter().map(|p| p.partner_event).sum();
         let detail = format!(
-            "worker `{suspect}` runs a program that behaves unlike the other workers': of \
+            "worker `{worker}`{} runs a program that behaves unlike the other workers': of \
              {compared} of its tests paired with tests of {} other workers (same campaign, same \
              cell or stratum), {} differed in how close they came to the event, and its test came \
              closer in {own} of them, its partners' in {theirs} (evidence {evidence:.3e} ≥ {FLAG_AT:e}: \
              a false flag at most once in 10⁴ honest workers; docs/statistics.md, \"Every test \
              as evidence\")",
+            if suspect == worker { String::new() } else { format!(" (principal `{suspect}`)") },
             partners.len(),
             own + theirs
         );
         strongest = Some((
             evidence,
             Convicted {
-                worker: suspect,
+                worker: worker.clone(),
                 detail,
                 index: frontier - 1,
             },

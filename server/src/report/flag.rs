@@ -10,14 +10,17 @@
 
 use crate::error::ServiceError;
 use crate::store::audits;
+use crate::store::credentials;
 use crate::store::pairs;
 use crate::store::{campaigns, leases, reports};
 use rusqlite::Connection;
 use tslg_api::CampaignStatus;
 
 /// Flags `worker` (caught at test `index` of `campaign`, for `reason`) and
-/// takes back its results: see the module's documentation. Returns the
-/// campaigns whose results changed.
+/// takes back its results: see the module's documentation. An enrolled
+/// worker's principal is flagged with it, and the results of every worker
+/// of that principal are taken back: one principal, one vote, whatever the
+/// names it registered. Returns the campaigns whose results changed.
 pub fn flag_worker(
     conn: &Connection,
     worker: &str,
@@ -26,16 +29,20 @@ pub fn flag_worker(
     index: u64,
 ) -> Result<Vec<i64>, ServiceError> {
     audits::flag(conn, worker, reason, campaign, index)?;
+    let principal = credentials::principal_of(conn, worker)?;
     let mut changed = Vec::new();
-    for id in reports::campaigns_of_worker(conn, worker)? {
-        if take_back(conn, id, worker)? {
-            changed.push(id);
+    for name in credentials::names_of(conn, &principal)? {
+        for id in reports::campaigns_of_worker(conn, &name)? {
+            if take_back(conn, id, &name)? && !changed.contains(&id) {
+                changed.push(id);
+            }
         }
+        leases::expire_all_of(conn, &name)?;
+        audits::void_runs_of(conn, &name)?;
     }
-    leases::expire_all_of(conn, worker)?;
-    audits::void_runs_of(conn, worker)?;
     tracing::warn!(
         worker,
+        principal,
         campaign,
         test = index,
         reason,

@@ -18,6 +18,7 @@
 use crate::error::ServiceError;
 use crate::report::verdict::Verdict;
 use crate::store::audits::{self, AuditRow, AuditState, RunColumn};
+use crate::store::credentials;
 use crate::store::discordance::{self, Pairs};
 use rusqlite::Connection;
 use tslg_method::discordance::{worker_evidence, FLAG_AT};
@@ -76,14 +77,27 @@ pub fn record_run(
         first_closer: u64::from(first_event && !replica_event),
         second_closer: u64::from(replica_event && !first_event),
     };
-    discordance::record(conn, Pairs::Audits, &audit.first_worker, worker, tally)?;
+    // One vote per principal: pairs are counted by principal (the replica
+    // ran on another principal than the first run: `audits::runnable`).
+    let first_principal = credentials::principal_of(conn, &audit.first_worker)?;
+    let replica_principal = credentials::principal_of(conn, worker)?;
+    discordance::record(
+        conn,
+        Pairs::Audits,
+        &first_principal,
+        &replica_principal,
+        tally,
+    )?;
     if first_event == replica_event {
         return Ok(settled);
     }
     // The stronger evidence of the two, when both reach the level.
     let mut suspects = Vec::new();
-    for suspect in [audit.first_worker.as_str(), worker] {
-        let (partners, compared) = discordance::partners_of(conn, Pairs::Audits, suspect)?;
+    for (suspect, principal) in [
+        (audit.first_worker.as_str(), &first_principal),
+        (worker, &replica_principal),
+    ] {
+        let (partners, compared) = discordance::partners_of(conn, Pairs::Audits, principal)?;
         suspects.push((worker_evidence(&partners), suspect, partners, compared));
     }
     suspects.sort_by(|a, b| b.0.total_cmp(&a.0));

@@ -9,6 +9,7 @@ mod auth;
 mod campaigns;
 mod cases;
 mod dashboard;
+mod enrolments;
 mod events;
 mod extract;
 mod figures;
@@ -47,6 +48,8 @@ pub fn router(state: AppState) -> Router {
         .route("/api/v1/libraries/{id}", delete(libraries::delete))
         .route("/api/v1/workers/{name}/flag", delete(workers::unflag))
         .route("/api/v1/workers/{name}", delete(workers::revoke))
+        .route("/api/v1/enrolments", post(enrolments::issue))
+        .route("/api/v1/enrolments/{principal}", delete(enrolments::revoke))
         .route_layer(from_fn_with_state(state.clone(), auth::require_admin));
     let worker = Router::new()
         .route("/api/v1/workers", post(workers::register))

@@ -45,6 +45,8 @@ use utoipa::OpenApi;
         super::workers::list,
         super::workers::revoke,
         super::workers::unflag,
+        super::enrolments::issue,
+        super::enrolments::revoke,
         super::queue::get,
         super::figures::estimate,
         super::figures::relative_half_width,

@@ -27,8 +27,20 @@ pub async fn register(
     ApiJson(req): ApiJson<WorkerRegistration>,
 ) -> Result<(StatusCode, Json<WorkerCredential>), ServiceError> {
     crate::validate::check_name("name", &req.name, MAX_REQUESTED_NAME)?;
-    let issued = state.credentials.register(&state.db, &req.name).await?;
-    tracing::info!(worker = %issued.name, asked = %req.name, "worker registered");
+    if req.name.starts_with('@') {
+        // `@PRINCIPAL` names an enrolled principal in the evidence.
+        return Err(ServiceError::Unprocessable(
+            "name must not begin with `@`".into(),
+        ));
+    }
+    let required = state.config.enrolment == crate::config::Enrolment::Required;
+    let enrolment = (req.enrolment.as_deref(), required);
+    let issued = state
+        .credentials
+        .register(&state.db, &req.name, enrolment)
+        .await?;
+    tracing::info!(worker = %issued.name, asked = %req.name, principal = ?issued.principal,
+        "worker registered");
     Ok((StatusCode::CREATED, Json(issued)))
 }
 
@@ -82,18 +94,25 @@ pub async fn list(State(state): State<AppState>) -> Result<Json<WorkerList>, Ser
         .await?;
     let mut workers = state.workers.list(&flagged);
     for worker in &mut workers {
-        (worker.registered_at, worker.revoked_at) = state.credentials.dates(&worker.name);
+        let principal;
+        (worker.registered_at, worker.revoked_at, principal) =
+            state.credentials.dates(&worker.name);
+        // The evidence is its principal's (`credentials::principal_of`).
+        let key = principal
+            .as_ref()
+            .map_or_else(|| worker.name.clone(), |p| format!("@{p}"));
+        worker.principal = principal;
         if let Some((_, in_row, all)) = standings.iter().find(|(w, _, _)| *w == worker.name) {
             (worker.audits_given_back, worker.audits_given_back_in_row) =
                 (*all as u64, *in_row as u64);
         }
-        if let Some((_, pairs, compared)) = compared.iter().find(|(w, _, _)| *w == worker.name) {
+        if let Some((_, pairs, compared)) = compared.iter().find(|(w, _, _)| *w == key) {
             worker.noisy_audits_compared = *compared;
             worker.noisy_own_events = pairs.iter().map(|p| p.own_event).sum();
             worker.noisy_partner_events = pairs.iter().map(|p| p.partner_event).sum();
             worker.noisy_evidence = Some(worker_evidence(pairs));
         }
-        if let Some((_, pairs, compared)) = tested.iter().find(|(w, _, _)| *w == worker.name) {
+        if let Some((_, pairs, compared)) = tested.iter().find(|(w, _, _)| *w == key) {
             worker.test_pairs_compared = *compared;
             worker.test_own_events = pairs.iter().map(|p| p.own_event).sum();
             worker.test_partner_events = pairs.iter().map(|p| p.partner_event).sum();
@@ -152,9 +171,10 @@ pub async fn unflag(
     if !state
         .db
         .write(move |conn| {
+            let principal = crate::store::credentials::principal_of(conn, &worker)?;
             let cleared = audits::unflag(conn, &worker)?;
             if cleared {
-                discordance::forget(conn, &worker)?;
+                discordance::forget(conn, &principal)?;
             }
             Ok::<_, ServiceError>(cleared)
         })

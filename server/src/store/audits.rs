@@ -2,6 +2,7 @@
 //! workers, and the workers caught disagreeing with two others.
 
 use crate::db::sql;
+use crate::store::credentials;
 use crate::store::error::StoreError;
 pub use crate::store::states::AuditState;
 use crate::store::states::{
@@ -131,7 +132,8 @@ pub fn get(conn: &Connection, id: i64) -> Result<AuditRow, StoreError> {
 }
 
 /// An open audit that `worker` may run: of a running campaign whose program
-/// it offers, not run by it before, and without a live lease; first those
+/// it offers, not run by its principal before (one vote per principal:
+/// `credentials::principal_of`), and without a live lease; first those
 /// whose last run was not handed to it (a run it gave back goes to others
 /// first, and to it again only when nobody else takes it: with two
 /// workers, nobody else may).
@@ -147,15 +149,18 @@ pub fn runnable(
          LEFT JOIN leases l ON l.id = a.lease_id \
          WHERE a.state IN {AUDIT_OPEN} AND c.status = {CAMPAIGN_RUNNING} \
            AND c.requires IN (SELECT value FROM json_each(?)) \
-           AND a.first_worker <> ? AND COALESCE(a.replica_worker, '') <> ? \
+           AND {first} <> ? AND COALESCE({replica}, '') <> ? \
            AND (a.lease_id IS NULL OR l.state <> {LEASE_ACTIVE} OR l.expires_at < ?) \
          ORDER BY COALESCE(l.worker = ?, 0), a.campaign_id, a.test_index LIMIT 1",
-        columns.join(", ")
+        columns.join(", "),
+        first = credentials::principal_sql("a.first_worker"),
+        replica = credentials::principal_sql("a.replica_worker"),
     );
+    let principal = credentials::principal_of(conn, worker)?;
     Ok(sql::optional(
         conn,
         &sql,
-        params![offered, worker, worker, now_ms, worker],
+        params![offered, principal, principal, now_ms, worker],
     )?)
 }
 
@@ -172,11 +177,25 @@ pub fn counts(conn: &Connection, campaign: i64) -> Result<Vec<(AuditState, i64)>
 pub fn flag_of(conn: &Connection, worker: &str) -> Result<Option<String>, StoreError> {
     let row: Option<(String,)> = sql::optional(
         conn,
-        "SELECT reason FROM flagged_workers WHERE name = ?",
+        &format!("SELECT reason FROM ({FLAGGED}) WHERE name = ?"),
         [worker],
     )?;
     Ok(row.map(|(reason,)| reason))
 }
+
+/// Every flagged worker with why and when: those flagged themselves, and
+/// the other workers of a principal flagged with one of its own (a flag
+/// sticks to the principal, so a new name does not shed it).
+const FLAGGED: &str = "\
+    SELECT name, reason, flagged_at FROM flagged_workers \
+    UNION ALL SELECT c.name, 'its principal `' || p.principal || '` is flagged: ' || p.reason, \
+      p.flagged_at FROM worker_credentials c JOIN flagged_principals p ON p.principal = c.principal \
+      WHERE c.name NOT IN (SELECT name FROM flagged_workers)";
+
+/// SQL for the flagged principals, as `credentials::principal_of` names
+/// them (`@` and the enrolled principal, or a worker's own name).
+pub const FLAGGED_PRINCIPALS: &str = "\
+    SELECT name FROM flagged_workers UNION SELECT '@' || principal FROM flagged_principals";
 
 /// Refuses a flagged worker (403), inside the transaction that would give
 /// it work or take its results, so a flag set meanwhile cannot be missed.
@@ -199,14 +218,22 @@ pub fn flagged_problem(worker: &str, reason: &str) -> StoreError {
 pub fn flagged(conn: &Connection) -> Result<Vec<(String, String)>, StoreError> {
     Ok(sql::all(
         conn,
-        "SELECT name, reason FROM flagged_workers ORDER BY flagged_at",
+        &format!("SELECT name, reason FROM ({FLAGGED}) ORDER BY flagged_at, name"),
         [],
     )?)
 }
 
-/// Clears a flag (a write); false when the worker was not flagged.
+/// Clears a flag (a write), with its principal's; false when the worker
+/// was not flagged.
 pub fn unflag(conn: &Connection, worker: &str) -> Result<bool, StoreError> {
-    Ok(sql::execute(conn, "DELETE FROM flagged_workers WHERE name = ?", [worker])? == 1)
+    let own = sql::execute(conn, "DELETE FROM flagged_workers WHERE name = ?", [worker])? == 1;
+    let principal = sql::execute(
+        conn,
+        "DELETE FROM flagged_principals WHERE principal = \
+         (SELECT principal FROM worker_credentials WHERE name = ?)",
+        [worker],
+    )? == 1;
+    Ok(own || principal)
 }
 
 /// Records a run of audit `id`: the audit moves to `state`, its `column`
@@ -256,6 +283,16 @@ pub fn flag(
         "INSERT OR IGNORE INTO flagged_workers (name, reason, campaign_id, test_index) \
          VALUES (?, ?, ?, ?)",
         params![worker, reason, campaign, index as i64],
+    )?;
+    // An enrolled worker's principal is flagged with it.
+    sql::execute(
+        conn,
+        "INSERT OR IGNORE INTO flagged_principals (principal, reason) \
+         SELECT principal, ? FROM worker_credentials WHERE name = ? AND principal IS NOT NULL",
+        params![
+            format!("its worker `{worker}` was flagged: {reason}"),
+            worker
+        ],
     )?;
     Ok(())
 }

@@ -1,5 +1,7 @@
 //! The `worker_credentials` table: each worker's name, the SHA-256 of its
-//! secret, when it was issued and, once an operator revoked it, when.
+//! secret, when it was issued and, once an operator revoked it, when; and
+//! the principal it enrolled under, if any (a worker registered with the
+//! shared worker token alone is its own principal).
 
 use crate::db::sql;
 use crate::store::error::StoreError;
@@ -14,6 +16,8 @@ pub struct CredentialRow {
     pub secret_hash: String,
     pub issued_at: String,
     pub revoked_at: Option<String>,
+    /// The principal it enrolled under (`None`: its own).
+    pub principal: Option<String>,
 }
 
 /// The `NAME.k` tried past the count of those issued, before registration
@@ -24,7 +28,8 @@ const MAX_TRIES: u32 = 100;
 pub fn get(conn: &Connection, name: &str) -> Result<Option<CredentialRow>, StoreError> {
     Ok(sql::optional(
         conn,
-        "SELECT name, secret_hash, issued_at, revoked_at FROM worker_credentials WHERE name = ?",
+        "SELECT name, secret_hash, issued_at, revoked_at, principal FROM worker_credentials \
+         WHERE name = ?",
         [name],
     )?)
 }
@@ -38,12 +43,14 @@ pub fn issue(
     conn: &Connection,
     requested: &str,
     secret_hash: &str,
+    principal: Option<&str>,
 ) -> Result<Option<CredentialRow>, StoreError> {
     let insert = |name: &str| -> Result<bool, StoreError> {
         Ok(sql::execute(
             conn,
-            "INSERT OR IGNORE INTO worker_credentials (name, secret_hash) VALUES (?1, ?2)",
-            params![name, secret_hash],
+            "INSERT OR IGNORE INTO worker_credentials (name, secret_hash, principal) \
+             VALUES (?1, ?2, ?3)",
+            params![name, secret_hash, principal],
         )? == 1)
     };
     if insert(requested)? {
@@ -73,4 +80,35 @@ pub fn revoke(conn: &Connection, name: &str) -> Result<bool, StoreError> {
          WHERE name = ? AND revoked_at IS NULL",
         [name],
     )? == 1)
+}
+
+/// SQL for the principal of the worker named by the expression `name`:
+/// `@` and the principal it enrolled under, else its own name (names do not
+/// begin with `@`, so the two never meet).
+pub fn principal_sql(name: &str) -> String {
+    format!(
+        "COALESCE((SELECT '@' || principal FROM worker_credentials WHERE name = {name}), {name})"
+    )
+}
+
+/// The principal of worker `name`: `@` and the principal it enrolled
+/// under, else its own name (also when it is unknown).
+pub fn principal_of(conn: &Connection, name: &str) -> Result<String, StoreError> {
+    let (principal,): (String,) =
+        sql::one(conn, &format!("SELECT {}", principal_sql("?1")), [name])?;
+    Ok(principal)
+}
+
+/// The workers of principal `principal` (as [`principal_of`] gives it):
+/// those enrolled under it, or the worker itself.
+pub fn names_of(conn: &Connection, principal: &str) -> Result<Vec<String>, StoreError> {
+    let Some(enrolled) = principal.strip_prefix('@') else {
+        return Ok(vec![principal.to_owned()]);
+    };
+    let rows: Vec<(String,)> = sql::all(
+        conn,
+        "SELECT name FROM worker_credentials WHERE principal = ? ORDER BY name",
+        [enrolled],
+    )?;
+    Ok(rows.into_iter().map(|(name,)| name).collect())
 }

@@ -80,8 +80,9 @@ pub fn partners_of(
         conn,
         &format!(
             "SELECT compared, own_event, partner_event FROM {} \
-             WHERE worker = ? AND partner NOT IN (SELECT name FROM flagged_workers)",
-            kind.table()
+             WHERE worker = ? AND partner NOT IN ({})",
+            kind.table(),
+            crate::store::audits::FLAGGED_PRINCIPALS
         ),
         [worker],
     )?;
@@ -105,8 +106,9 @@ pub fn all(
         conn,
         &format!(
             "SELECT worker, compared, own_event, partner_event FROM {} \
-             WHERE partner NOT IN (SELECT name FROM flagged_workers) ORDER BY worker",
-            kind.table()
+             WHERE partner NOT IN ({}) ORDER BY worker",
+            kind.table(),
+            crate::store::audits::FLAGGED_PRINCIPALS
         ),
         [],
     )?;

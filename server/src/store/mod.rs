@@ -9,6 +9,7 @@ pub mod costs;
 pub mod credentials;
 pub mod deletion;
 pub mod discordance;
+pub mod enrolments;
 pub mod error;
 pub mod leases;
 pub mod libraries;
