@@ -64,8 +64,11 @@ pub const WAIT_CAP: u64 = 4096;
 
 /// The most keys with waiting tests; past it the key waiting longest (by
 /// the index its wait began at) is dropped. A campaign's cells number in
-/// the thousands on the grid cases.
-pub const MAX_KEYS: usize = 4096;
+/// the thousands on the grid cases, but the pairs come from the cells its
+/// tests visit often; a key rarely visited waits long and is dropped
+/// first. The walk is stored at every fold, so this bounds what is
+/// written (about 60 bytes a key).
+pub const MAX_KEYS: usize = 1024;
 
 /// The criticality at or below which workers report it for every test of
 /// a library or NDD campaign of an external program (`near_misses`): every

@@ -12,7 +12,8 @@
 //! is flagged as a liar is: a false flag at most once in 10⁴ honest
 //! workers over their whole life (Ville's inequality).
 //!
-//! Library and NDD campaigns only. Adaptive campaigns are left to the
+//! Library and NDD campaigns of external programs only (a built-in
+//! vehicle's tests the coordinator replays). Adaptive campaigns are left to the
 //! audits: their stages change the proposal as they go, so a stratum would
 //! be a stage's support, and the results of a flagged worker fail them
 //! anyway (`report/flag.rs`). A library build's enumeration runs its cells
@@ -51,10 +52,19 @@ use tslg_method::test_pairing::{
 /// campaigns of an external program (a built-in vehicle's tests the
 /// coordinator replays itself).
 pub fn criticality_below(campaign: &CampaignRow) -> Option<f64> {
+    weighed(campaign).then_some(CRITICALITY_BELOW)
+}
+
+/// Whether `campaign`'s tests are weighed: a library or NDD campaign (its
+/// tests independent draws of one proposal: not an adaptive campaign's
+/// stages, nor a library build's enumeration, its cells in order, each
+/// once) of an external program (a built-in vehicle's tests the
+/// coordinator replays itself, and they come by the million, where the
+/// walk's microsecond a test would slow the writer).
+fn weighed(campaign: &CampaignRow) -> bool {
     let external = serde_json::from_str::<serde_json::Value>(&campaign.vut)
         .is_ok_and(|vut| vut.get("external").is_some());
-    (external && matches!(campaign.method, Method::Library | Method::Ndd))
-        .then_some(CRITICALITY_BELOW)
+    external && matches!(campaign.method, Method::Library | Method::Ndd)
 }
 
 /// The criticalities of a report's tests from `new_from` on, rounded to
@@ -86,10 +96,7 @@ pub fn weigh(
     campaign: &CampaignRow,
     tests: Option<&Arc<dyn CampaignTests>>,
 ) -> Result<Option<Convicted>, ServiceError> {
-    // Only tests that are independent draws of one proposal: not an
-    // adaptive campaign's stages, nor a library build's enumeration (its
-    // cells in order, each once).
-    if !matches!(campaign.method, Method::Library | Method::Ndd) {
+    if !weighed(campaign) {
         return Ok(None);
     }
     let frontier = prefix::bounds(conn, campaign)?.frontier;
