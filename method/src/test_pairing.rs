@@ -173,11 +173,24 @@ impl Waiting {
 
 /// The pairing state of one campaign: each key's waiting tests. Stored
 /// between folds (JSON), so a walk continues where it stopped.
-#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
 #[serde(transparent)]
 pub struct Walk {
     keys: BTreeMap<u64, Waiting>,
+    /// `(since, key)` of the keys in the order their waits began (the
+    /// index order), with stale entries of keys paired since: the next to
+    /// drop is found without a scan. Rebuilt from `keys` after a load.
+    #[serde(skip)]
+    order: VecDeque<(u64, u64)>,
 }
+
+impl PartialEq for Walk {
+    fn eq(&self, other: &Self) -> bool {
+        self.keys == other.keys
+    }
+}
+
+impl Eq for Walk {}
 
 impl Walk {
     /// Walks `run` (the next tests in index order), adding the pairs it
@@ -206,22 +219,43 @@ impl Walk {
         if left == 0 {
             return;
         }
+        if self.order.is_empty() && !self.keys.is_empty() {
+            self.rebuild_order();
+        }
+        let since = run.index + (run.tests - left);
         let waiting = self.keys.entry(run.key).or_insert_with(|| Waiting {
             worker: run.worker.to_owned(),
-            since: run.index + (run.tests - left),
+            since,
             runs: VecDeque::new(),
         });
+        if waiting.runs.is_empty() {
+            self.order.push_back((since, run.key));
+        }
         waiting.push(run.score, left);
         if self.keys.len() > MAX_KEYS {
-            let oldest = self
-                .keys
-                .iter()
-                .min_by_key(|(key, w)| (w.since, **key))
-                .map(|(key, _)| *key);
-            if let Some(key) = oldest {
+            self.drop_oldest();
+        }
+        if self.order.len() > 4 * MAX_KEYS {
+            self.rebuild_order();
+        }
+    }
+
+    /// Drops the key waiting longest: the first entry of `order` that is
+    /// still a key's wait.
+    fn drop_oldest(&mut self) {
+        while let Some((since, key)) = self.order.pop_front() {
+            if self.keys.get(&key).is_some_and(|w| w.since == since) {
                 self.keys.remove(&key);
+                return;
             }
         }
+    }
+
+    /// `order` from `keys`: by the index each wait began at.
+    fn rebuild_order(&mut self) {
+        let mut order: Vec<(u64, u64)> = self.keys.iter().map(|(k, w)| (w.since, *k)).collect();
+        order.sort_unstable();
+        self.order = order.into();
     }
 
     /// Forgets the waiting tests of `worker` (flagged: its tests were
