@@ -19,9 +19,10 @@
 //!
 //! **How close** is a test's [`score`]: 0 for the event, else 1 + its
 //! criticality in thousandths (the program's own measure of how near it
-//! came, in `[0, 1]`; 1,001 when none is known), so that a pair counts
-//! whenever two runs differ in how close they came, not only when exactly
-//! one found the event. Events alone are weak where they are rare: a
+//! came, in `[0, 1]`, where it reported one at most [`CRITICALITY_BELOW`]),
+//! so that a pair counts whenever two runs differ in how close they came,
+//! not only when exactly one found the event; where either criticality is
+//! unknown ([`closer`]), by the event alone. Events alone are weak where they are rare: a
 //! program that brakes 3 m/s² harder than the noisy IDM's three other
 //! workers (β 0.05 library campaign, guard on, 168,000 tests, pairs by
 //! stratum) was in 51 pairs of differing events, 11 its own, an e-value of
@@ -36,13 +37,14 @@
 //! waiting test of another worker with the same key; a test with none
 //! waits. The waiting tests of a key are then all one worker's (a test of
 //! anyone else would have paired), at most [`WAIT_CAP`] of them, the
-//! oldest dropped, and at most [`MAX_KEYS`] keys wait, the one waiting
-//! longest dropped. Which tests pair depends on indices, keys and who ran
+//! oldest dropped, and at most [`MAX_KEYS`] keys and [`MAX_WAITING`]
+//! tests in all wait, the keys waiting longest dropped. Which tests pair depends on indices, keys and who ran
 //! them only, and each test is in at most one pair, so the pairs are
 //! independent and each counts for both its workers: the e-value of a
-//! worker's discordant pairs is a test martingale under "same program",
-//! and Ville's inequality bounds the chance that it ever reaches 10⁴ by
-//! 10⁻⁴, over the worker's whole life. Audit pairs are counted apart (an
+//! worker's discordant pairs in a campaign is a test martingale under
+//! "same program", and Ville's inequality bounds the chance that it ever
+//! reaches 10⁴ by 10⁻⁴ (one e-value a campaign: campaigns that reuse a
+//! seed draw the same tests again, so their pairs would repeat). Audit pairs are counted apart (an
 //! audited test's first run may also be in a test pair, and two pairs
 //! sharing a run are not independent).
 //!
@@ -62,6 +64,12 @@ use std::collections::{BTreeMap, VecDeque};
 /// the fleet some of its pairs, never validity.
 pub const WAIT_CAP: u64 = 4096;
 
+/// The most tests waiting under all keys together; past it the keys
+/// waiting longest are dropped. With [`MAX_KEYS`] it bounds what the walk
+/// stores at every fold, whatever the fleet (one principal's tests
+/// waiting in every cell, each of its own score).
+pub const MAX_WAITING: u64 = 16_384;
+
 /// The most keys with waiting tests; past it the key waiting longest (by
 /// the index its wait began at) is dropped. A campaign's cells number in
 /// the thousands on the grid cases, but the pairs come from the cells its
@@ -75,13 +83,33 @@ pub const MAX_KEYS: usize = 1024;
 /// test that came near the event at all.
 pub const CRITICALITY_BELOW: f64 = 0.999;
 
+/// The score of a test without the event whose criticality is not known:
+/// none was reported (a program that sends none, a worker that did not
+/// ask), or it was above [`CRITICALITY_BELOW`].
+pub const UNKNOWN: u16 = 1001;
+
 /// How close a test came to the event, smaller closer: 0 for the event,
-/// `1 + round(1000 c)` for criticality `c` (not reported: `c` = 1).
+/// `1 + round(1000 c)` for a reported criticality `c` ≤
+/// [`CRITICALITY_BELOW`], else [`UNKNOWN`].
 pub fn score(event: bool, criticality: Option<f64>) -> u16 {
-    if event {
-        return 0;
+    match (event, criticality) {
+        (true, _) => 0,
+        (false, Some(c)) if (0.0..=CRITICALITY_BELOW).contains(&c) => {
+            1 + (c * 1000.0).round() as u16
+        }
+        _ => UNKNOWN,
     }
-    1 + (criticality.unwrap_or(1.0).clamp(0.0, 1.0) * 1000.0).round() as u16
+}
+
+/// Which of two scores is closer to the event (`Less`: the first). Where
+/// either criticality is unknown, by the event alone: a worker whose
+/// program sends no criticality is compared with the others on what it
+/// does send, never taken for one that stays far from the event.
+pub fn closer(a: u16, b: u16) -> std::cmp::Ordering {
+    if a == UNKNOWN || b == UNKNOWN {
+        return (a != 0).cmp(&(b != 0));
+    }
+    a.cmp(&b)
 }
 
 /// The key of a test of a grid cell: cells and strata share one space.
@@ -136,13 +164,11 @@ struct Waiting {
     worker: String,
     since: u64,
     runs: VecDeque<(u16, u64)>,
+    /// Tests in `runs`.
+    tests: u64,
 }
 
 impl Waiting {
-    fn tests(&self) -> u64 {
-        self.runs.iter().map(|r| r.1).sum()
-    }
-
     /// Takes the oldest `n` tests (fewer if fewer wait), as runs.
     fn take(&mut self, mut n: u64) -> Vec<(u16, u64)> {
         let mut taken = Vec::new();
@@ -154,6 +180,7 @@ impl Waiting {
             taken.push((front.0, k));
             front.1 -= k;
             n -= k;
+            self.tests -= k;
             if front.1 == 0 {
                 self.runs.pop_front();
             }
@@ -161,13 +188,16 @@ impl Waiting {
         taken
     }
 
-    fn push(&mut self, score: u16, tests: u64) {
+    /// Adds `tests` of `score`; the number dropped past [`WAIT_CAP`].
+    fn push(&mut self, score: u16, tests: u64) -> u64 {
         match self.runs.back_mut() {
             Some(last) if last.0 == score => last.1 += tests,
             _ => self.runs.push_back((score, tests)),
         }
-        let excess = self.tests().saturating_sub(WAIT_CAP);
+        self.tests += tests;
+        let excess = self.tests.saturating_sub(WAIT_CAP);
         self.take(excess);
+        excess
     }
 }
 
@@ -182,6 +212,12 @@ pub struct Walk {
     /// drop is found without a scan. Rebuilt from `keys` after a load.
     #[serde(skip)]
     order: VecDeque<(u64, u64)>,
+    /// Tests waiting under all keys (kept with `order`).
+    #[serde(skip)]
+    waiting: u64,
+    /// Whether `order` and `waiting` are built (not after a load).
+    #[serde(skip)]
+    ready: bool,
 }
 
 impl PartialEq for Walk {
@@ -197,6 +233,9 @@ impl Walk {
     /// closes to `pairs`: its tests pair with the oldest waiting tests of
     /// their key when another worker's wait, and wait otherwise.
     pub fn step(&mut self, run: ResolvedRun<'_>, pairs: &mut PairCounts) {
+        if !self.ready {
+            self.rebuild();
+        }
         let mut left = run.tests;
         if let Some(waiting) = self.keys.get_mut(&run.key) {
             if waiting.worker != run.worker {
@@ -204,12 +243,13 @@ impl Walk {
                     let key = (waiting.worker.clone(), run.worker.to_owned());
                     let tally = pairs.entry(key).or_default();
                     tally.compared += n;
-                    match score.cmp(&run.score) {
+                    match closer(score, run.score) {
                         std::cmp::Ordering::Less => tally.first_closer += n,
                         std::cmp::Ordering::Greater => tally.second_closer += n,
                         std::cmp::Ordering::Equal => {}
                     }
                     left -= n;
+                    self.waiting -= n;
                 }
                 if waiting.runs.is_empty() {
                     self.keys.remove(&run.key);
@@ -219,24 +259,23 @@ impl Walk {
         if left == 0 {
             return;
         }
-        if self.order.is_empty() && !self.keys.is_empty() {
-            self.rebuild_order();
-        }
         let since = run.index + (run.tests - left);
         let waiting = self.keys.entry(run.key).or_insert_with(|| Waiting {
             worker: run.worker.to_owned(),
             since,
             runs: VecDeque::new(),
+            tests: 0,
         });
         if waiting.runs.is_empty() {
             self.order.push_back((since, run.key));
         }
-        waiting.push(run.score, left);
-        if self.keys.len() > MAX_KEYS {
+        let dropped = waiting.push(run.score, left);
+        self.waiting += left - dropped;
+        while self.keys.len() > MAX_KEYS || self.waiting > MAX_WAITING {
             self.drop_oldest();
         }
         if self.order.len() > 4 * MAX_KEYS {
-            self.rebuild_order();
+            self.rebuild();
         }
     }
 
@@ -245,23 +284,29 @@ impl Walk {
     fn drop_oldest(&mut self) {
         while let Some((since, key)) = self.order.pop_front() {
             if self.keys.get(&key).is_some_and(|w| w.since == since) {
-                self.keys.remove(&key);
+                if let Some(dropped) = self.keys.remove(&key) {
+                    self.waiting -= dropped.tests;
+                }
                 return;
             }
         }
     }
 
-    /// `order` from `keys`: by the index each wait began at.
-    fn rebuild_order(&mut self) {
+    /// `order` and `waiting` from `keys` (after a load, or to shed stale
+    /// entries of `order`).
+    fn rebuild(&mut self) {
         let mut order: Vec<(u64, u64)> = self.keys.iter().map(|(k, w)| (w.since, *k)).collect();
         order.sort_unstable();
         self.order = order.into();
+        self.waiting = self.keys.values().map(|w| w.tests).sum();
+        self.ready = true;
     }
 
     /// Forgets the waiting tests of `worker` (flagged: its tests were
     /// taken back).
     pub fn forget(&mut self, worker: &str) {
         self.keys.retain(|_, waiting| waiting.worker != worker);
+        self.rebuild();
     }
 }
 
@@ -311,9 +356,16 @@ mod tests {
         assert_eq!(score(true, Some(0.5)), 0);
         assert_eq!(score(false, Some(0.0)), 1);
         assert_eq!(score(false, Some(0.0314)), 32);
-        assert_eq!(score(false, None), 1001);
-        assert_eq!(score(false, Some(1.0)), 1001);
-        assert_eq!(score(false, Some(7.0)), 1001);
+        assert_eq!(score(false, Some(0.999)), 1000);
+        assert_eq!(score(false, None), UNKNOWN);
+        assert_eq!(score(false, Some(1.0)), UNKNOWN);
+        assert_eq!(score(false, Some(7.0)), UNKNOWN);
+        // Unknown against a criticality: a tie; against the event: farther.
+        use std::cmp::Ordering::*;
+        assert_eq!(closer(32, UNKNOWN), Equal);
+        assert_eq!(closer(0, UNKNOWN), Less);
+        assert_eq!(closer(UNKNOWN, 0), Greater);
+        assert_eq!(closer(32, 500), Less);
         assert_ne!(cell_key(0), stratum_key(true));
     }
 
@@ -348,7 +400,7 @@ mod tests {
         for k in 0..10_000u64 {
             w.step("a", 0, (k % 3) as u16, 1);
         }
-        assert_eq!(w.walk.keys[&0].tests(), WAIT_CAP);
+        assert_eq!(w.walk.keys[&0].tests, WAIT_CAP);
         // The oldest were dropped: the next partner test pairs with test
         // 10,000 − 4,096 = 5,904, of score 5,904 mod 3 = 0.
         w.step("b", 0, 1, 1);
@@ -363,6 +415,24 @@ mod tests {
         assert!(!w.walk.keys.contains_key(&0) && w.walk.keys.contains_key(&7));
         w.walk.forget("a");
         assert!(w.walk.keys.is_empty());
+    }
+
+    #[test]
+    fn what_waits_stays_bounded_when_one_worker_runs_everything() {
+        // One worker, each test of its own score, 1,000 cells: nothing
+        // ever pairs. At most MAX_WAITING tests wait, the oldest cells
+        // dropped first, and a reloaded walk counts them the same.
+        let mut w = Walker::default();
+        for k in 0..40_000u64 {
+            w.step("a", cell_key(k % 1000), (k % 997) as u16 + 1, 1);
+        }
+        assert!(w.walk.waiting <= MAX_WAITING, "{}", w.walk.waiting);
+        assert!(w.walk.waiting > MAX_WAITING - 1000, "{}", w.walk.waiting);
+        let stored = serde_json::to_string(&w.walk).unwrap();
+        assert!(stored.len() < 400_000, "{}", stored.len());
+        let mut reloaded: Walk = serde_json::from_str(&stored).unwrap();
+        reloaded.rebuild();
+        assert_eq!(reloaded.waiting, w.walk.waiting);
     }
 
     /// A fleet's campaign: `tests` tests in leases of `lease` consecutive
@@ -426,10 +496,11 @@ mod tests {
     }
 
     /// A cut-in-like campaign of 50 cells: the vehicle brakes in the first
-    /// 25, and a run that brakes ends at a criticality uniform on
-    /// `floor..1` (0 for the others, `liar_floor` for worker 0), an event
-    /// with probability 2 in 10⁴ (the outside of a library).
-    fn braking(liar_floor: f64, by_cell: bool) -> impl Fn(&mut ChaCha8Rng, bool) -> (u64, u16) {
+    /// 25, and a run that brakes ends at a criticality uniform on `b..b +
+    /// 0.2` where `b` grows with the cell from 0 to 0.67 (`shift` more for
+    /// worker 0), an event with probability 2 in 10⁴ (the outside of a
+    /// library); a run that does not brake reports no criticality.
+    fn braking(shift: f64, by_cell: bool) -> impl Fn(&mut ChaCha8Rng, bool) -> (u64, u16) {
         move |rng: &mut ChaCha8Rng, liar: bool| {
             let cell = rng.random_range(0..50u64);
             let key = if by_cell {
@@ -437,13 +508,13 @@ mod tests {
             } else {
                 stratum_key(true)
             };
-            let floor = if liar { liar_floor } else { 0.0 };
+            let base = cell as f64 / 25.0 * 0.7 + if liar { shift } else { 0.0 };
             let score = if rng.random_bool(0.0002) {
                 0
             } else if cell < 25 {
-                score(false, Some(rng.random_range(floor..1.0)))
+                score(false, Some(rng.random_range(base..base + 0.2)))
             } else {
-                1001
+                score(false, None)
             };
             (key, score)
         }
@@ -509,19 +580,19 @@ mod tests {
 
     #[test]
     fn pairs_by_cell_convict_a_program_that_stays_further_where_it_brakes() {
-        // Worker 0 brakes harder: where it brakes, its criticality is
-        // uniform on 0.3..1 against the others' 0..1, and its events are
-        // as rare. Paired by cell, it is flagged within 8,000 tests in
-        // every one of 20 campaigns; paired across the cells of a stratum,
-        // where whether a run brakes at all depends on its scenario, the
-        // same tests leave it unflagged in most.
+        // Worker 0 brakes harder: where it brakes, its criticality is 0.06
+        // higher than the others' in the same cell (on a spread of 0.2),
+        // and its events are as rare. Paired by cell, it is flagged within
+        // 8,000 tests in every one of 20 campaigns; paired across the cells
+        // of a stratum, where the spread between cells (0.7) drowns the
+        // shift, the same tests leave it unflagged in most.
         let mut rng = ChaCha8Rng::seed_from_u64(68);
         let mut by_stratum_flagged = 0;
         for _ in 0..20 {
-            let (honest, liar) = campaign(&mut rng, &[0, 1, 2, 3], (8000, 20), braking(0.3, true));
+            let (honest, liar) = campaign(&mut rng, &[0, 1, 2, 3], (8000, 20), braking(0.06, true));
             assert!(liar >= FLAG_AT, "{liar}");
             assert!(honest < FLAG_AT, "{honest}");
-            let (_, liar) = campaign(&mut rng, &[0, 1, 2, 3], (8000, 20), braking(0.3, false));
+            let (_, liar) = campaign(&mut rng, &[0, 1, 2, 3], (8000, 20), braking(0.06, false));
             by_stratum_flagged += usize::from(liar >= FLAG_AT);
         }
         assert!(by_stratum_flagged < 10, "{by_stratum_flagged}");

@@ -223,6 +223,11 @@ impl Config {
         // Protecting leases or reads while anyone may create and cancel
         // campaigns is a mistake, not a configuration.
         anyhow::ensure!(
+            self.enrolment == Enrolment::Open || self.admin_token.is_some(),
+            "TSLG_ENROLMENT=required without TSLG_ADMIN_TOKEN: anyone could issue \
+             enrolments; set TSLG_ADMIN_TOKEN too"
+        );
+        anyhow::ensure!(
             self.admin_token.is_some()
                 || (self.worker_token.is_none() && self.read_token.is_none()),
             "TSLG_WORKER_TOKEN or TSLG_READ_TOKEN is set without TSLG_ADMIN_TOKEN: anyone \

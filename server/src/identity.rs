@@ -32,6 +32,9 @@ const MAX_KEPT: usize = 100_000;
 #[derive(Default)]
 pub struct Credentials {
     known: Mutex<HashMap<String, CredentialRow>>,
+    /// `--enrolment required`: a credential issued without an enrolment
+    /// (before the switch) is refused too.
+    enrolment_required: bool,
 }
 
 /// The principal an enrolment secret (its hash, `None`: none given)
@@ -82,6 +85,15 @@ pub fn digest(secret: &str) -> String {
 }
 
 impl Credentials {
+    /// No credentials checked yet; `enrolment_required` as the
+    /// coordinator's `--enrolment required`.
+    pub fn new(enrolment_required: bool) -> Self {
+        Self {
+            known: Mutex::default(),
+            enrolment_required,
+        }
+    }
+
     /// Issues a credential for a worker asking for `requested` (checked by
     /// the caller): the name itself when it was never issued, else the
     /// first free `requested.k`.
@@ -159,6 +171,20 @@ impl Credentials {
         if let Some(at) = &row.revoked_at {
             return refuse(format!(
                 "worker `{worker}`'s credential was revoked at {at}: it gets no work"
+            ));
+        }
+        if self.enrolment_required && row.principal.is_none() {
+            return refuse(format!(
+                "worker `{worker}` registered without an enrolment, and this coordinator now \
+                 admits enrolled workers only (--enrolment required): register again with an \
+                 enrolment credential (a new credential file)"
+            ));
+        }
+        if worker.starts_with('@') {
+            // Registered before `@` was kept for principals.
+            return refuse(format!(
+                "worker `{worker}`: names beginning with `@` name principals now; register \
+                 under another name"
             ));
         }
         let Some(secret) = secret else {

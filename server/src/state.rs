@@ -58,6 +58,7 @@ pub struct Shared {
 
 impl AppState {
     pub fn new(db: Database, config: Config) -> Self {
+        let enrolment_required = config.enrolment == crate::config::Enrolment::Required;
         Self(Arc::new(Shared {
             db,
             config: Arc::new(config),
@@ -71,7 +72,7 @@ impl AppState {
             sampler: Arc::default(),
             replays: Arc::default(),
             work: Default::default(),
-            credentials: Default::default(),
+            credentials: crate::identity::Credentials::new(enrolment_required),
         }))
     }
 }

@@ -85,11 +85,19 @@ async fn sybil(client: Client, secret: Option<String>, limit: Duration) -> Sybil
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn with_enrolment_a_sybil_principal_moves_no_answer_and_flags_no_honest_worker() {
     let dir = scratch();
-    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &["--enrolment", "required"]);
-    let client = server.client();
+    // Enrolment needs an admin token (else anyone could enrol).
+    let server = ServerProcess::start(
+        &dir.path().join("db.sqlite"),
+        &["--enrolment", "required", "--admin-token", "admin-secret"],
+    );
+    let client = Client::new(&server.url, Some("admin-secret".into())).unwrap();
+    match server.client().enrol("intruder").await {
+        Err(CallError::Refused { status: 401, .. }) => {}
+        other => panic!("an enrolment without the admin token: {other:?}"),
+    }
     let library = ready_library(&client, "idm", true).await;
     // Registering without an enrolment is refused, and says how to get one.
-    match client.register("stranger").await {
+    match server.client().register("stranger").await {
         Err(CallError::Refused {
             status: 403,
             detail,

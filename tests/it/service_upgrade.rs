@@ -75,6 +75,12 @@ async fn undo_report_rows(database: &Path) {
         "ALTER TABLE leases DROP COLUMN claimed_at",
         "ALTER TABLE leases DROP COLUMN threads",
         "DELETE FROM _sqlx_migrations WHERE version = 20261124000010",
+        // Later migrations that add to `reports` (and their tables): a
+        // release before the report rows had none of them either.
+        "DROP TABLE worker_test_evidence",
+        "DROP TABLE test_pairing_walks",
+        "DELETE FROM _sqlx_migrations WHERE version = 20261207000032",
+        "DELETE FROM _sqlx_migrations WHERE version = 20261207000034",
     ] {
         sqlx::query(statement).execute(&mut conn).await.unwrap();
     }

@@ -10,7 +10,8 @@
 //! to one side against its partners beyond [`FLAG_AT`], leaving out any
 //! one partner (so one liar cannot make an honest worker look different),
 //! is flagged as a liar is: a false flag at most once in 10⁴ honest
-//! workers over their whole life (Ville's inequality).
+//! worker-campaigns (Ville's inequality; one e-value a campaign, since
+//! campaigns that reuse a seed draw the same tests again).
 //!
 //! Library and NDD campaigns of external programs only (a built-in
 //! vehicle's tests the coordinator replays). Adaptive campaigns are left to the
@@ -100,18 +101,19 @@ pub fn weigh(
         return Ok(None);
     }
     let frontier = prefix::bounds(conn, campaign)?.frontier;
-    let (walked_to, mut walk) = match test_pairing_walks::get(conn, campaign.id)? {
-        Some((to, waiting)) => {
-            let walk: Walk = serde_json::from_str(&waiting).map_err(|e| {
-                anyhow::anyhow!("stored test pairing of campaign {}: {e}", campaign.id)
-            })?;
-            (to, walk)
-        }
-        None => (0, Walk::default()),
-    };
-    if frontier <= walked_to {
+    let stored = test_pairing_walks::get(conn, campaign.id)?;
+    let walked_to = stored.as_ref().map_or(0, |(to, _)| *to);
+    // A library campaign's tests give its cells; a fold without them (a
+    // campaign read as stopped, running again since) leaves the walk for
+    // the next.
+    if frontier <= walked_to || (campaign.method == Method::Library && tests.is_none()) {
         return Ok(None);
     }
+    let mut walk: Walk = match stored {
+        Some((_, waiting)) => serde_json::from_str(&waiting)
+            .map_err(|e| anyhow::anyhow!("stored test pairing of campaign {}: {e}", campaign.id))?,
+        None => Walk::default(),
+    };
     let flagged: BTreeSet<String> = audits::flagged(conn)?.into_iter().map(|f| f.0).collect();
     for worker in &flagged {
         walk.forget(&credentials::principal_of(conn, worker)?);
@@ -188,14 +190,15 @@ pub fn weigh(
     test_pairing_walks::put(conn, campaign.id, frontier, &waiting)?;
     let mut suspects = BTreeSet::new();
     for ((first, second), tally) in pairs {
-        discordance::record(conn, Pairs::Tests, &first, &second, tally)?;
+        discordance::record(conn, Pairs::Tests(campaign.id), &first, &second, tally)?;
         if tally.first_closer + tally.second_closer > 0 {
             suspects.extend([first, second]);
         }
     }
     let mut strongest: Option<(f64, Convicted)> = None;
     for suspect in suspects {
-        let (partners, compared) = discordance::partners_of(conn, Pairs::Tests, &suspect)?;
+        let (partners, compared) =
+            discordance::partners_of(conn, Pairs::Tests(campaign.id), &suspect)?;
         let evidence = worker_evidence(&partners);
         if evidence < FLAG_AT || strongest.as_ref().is_some_and(|s| s.0 >= evidence) {
             continue;
@@ -213,8 +216,8 @@ pub fn weigh(
              {compared} of its tests paired with tests of {} other workers (same campaign, same \
              cell or stratum), {} differed in how close they came to the event, and its test came \
              closer in {own} of them, its partners' in {theirs} (evidence {evidence:.3e} ≥ {FLAG_AT:e}: \
-             a false flag at most once in 10⁴ honest workers; docs/statistics.md, \"Every test \
-             as evidence\")",
+             a false flag at most once in 10⁴ honest worker-campaigns; docs/statistics.md, \"Every \
+             test as evidence\")",
             if suspect == worker { String::new() } else { format!(" (principal `{suspect}`)") },
             partners.len(),
             own + theirs

@@ -496,8 +496,8 @@ async fn check_weights(
     })
 }
 
-/// The audits of an external program's report, waived when no other live
-/// worker that is not flagged offers the program.
+/// The audits of an external program's report, waived when no live worker
+/// of another principal that is not flagged offers the program.
 async fn audit_plan(
     state: &AppState,
     campaign: &campaigns::CampaignRow,
@@ -524,17 +524,27 @@ async fn audit_plan(
     if planned.is_empty() {
         return Ok(AuditPlan::default());
     }
+    // Another principal's worker runs the replica (one vote per principal:
+    // `audits::runnable`), so a live one must offer the program.
     let requirement = campaign.requires.as_deref().unwrap_or_default();
+    let own = worker.to_owned();
+    let own_principal = state
+        .db
+        .read(move |conn| crate::store::credentials::principal_of(conn, &own))
+        .await?;
     let mut others = false;
     for name in state.workers.live_offering(requirement) {
         if name == worker {
             continue;
         }
-        let flag = state
+        let (flag, principal) = state
             .db
-            .read(move |conn| audits::flag_of(conn, &name))
+            .read(move |conn| {
+                let flag = audits::flag_of(conn, &name)?;
+                Ok::<_, ServiceError>((flag, crate::store::credentials::principal_of(conn, &name)?))
+            })
             .await?;
-        if flag.is_none() {
+        if flag.is_none() && principal != own_principal {
             others = true;
             break;
         }

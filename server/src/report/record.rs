@@ -284,10 +284,10 @@ fn store_new_part(
         .collect();
     // Other campaigns keep the criticalities with the report, for the
     // pairing of tests; an adaptive campaign's go to its near misses.
-    let near: Vec<(u64, f64)> = if campaign.method == Method::Adaptive {
-        Vec::new()
-    } else {
+    let near: Vec<(u64, f64)> = if crate::report::evidence::criticality_below(campaign).is_some() {
         crate::report::evidence::kept_criticalities(&report.near_misses, new_from)
+    } else {
+        Vec::new()
     };
     reports::insert(
         conn,
@@ -300,6 +300,7 @@ fn store_new_part(
             events: &checked.events[first_new..],
             invalid: &invalid,
             near: &near,
+            handed_again: lease.attempt > 1,
         },
     )?;
     if campaign.method == Method::Adaptive {

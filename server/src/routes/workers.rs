@@ -8,7 +8,7 @@ use crate::routes::leases::{admit, worker_name_problem};
 use crate::routes::problem::ApiJson;
 use crate::routes::ApiPath;
 use crate::state::AppState;
-use crate::store::discordance::{self, Pairs};
+use crate::store::discordance;
 use crate::store::{audits, costs, standing};
 use axum::extract::State;
 use axum::http::{HeaderMap, StatusCode};
@@ -87,8 +87,8 @@ pub async fn list(State(state): State<AppState>) -> Result<Json<WorkerList>, Ser
                 audits::flagged(conn)?,
                 costs::programs(conn)?,
                 standing::all(conn)?,
-                discordance::all(conn, Pairs::Audits)?,
-                discordance::all(conn, Pairs::Tests)?,
+                discordance::all(conn, false)?,
+                discordance::all(conn, true)?,
             ))
         })
         .await?;
@@ -112,11 +112,14 @@ pub async fn list(State(state): State<AppState>) -> Result<Json<WorkerList>, Ser
             worker.noisy_partner_events = pairs.iter().map(|p| p.partner_event).sum();
             worker.noisy_evidence = Some(worker_evidence(pairs));
         }
-        if let Some((_, pairs, compared)) = tested.iter().find(|(w, _, _)| *w == key) {
-            worker.test_pairs_compared = *compared;
-            worker.test_own_events = pairs.iter().map(|p| p.own_event).sum();
-            worker.test_partner_events = pairs.iter().map(|p| p.partner_event).sum();
-            worker.test_evidence = Some(worker_evidence(pairs));
+        // Its tests' evidence: one e-value a campaign; the largest shown,
+        // the pairs counted over all.
+        for (_, pairs, compared) in tested.iter().filter(|(w, _, _)| *w == key) {
+            worker.test_pairs_compared += *compared;
+            worker.test_own_events += pairs.iter().map(|p| p.own_event).sum::<u64>();
+            worker.test_partner_events += pairs.iter().map(|p| p.partner_event).sum::<u64>();
+            let evidence = worker_evidence(pairs);
+            worker.test_evidence = Some(worker.test_evidence.map_or(evidence, |e| e.max(evidence)));
         }
     }
     Ok(Json(WorkerList {

@@ -223,10 +223,16 @@ pub fn flagged(conn: &Connection) -> Result<Vec<(String, String)>, StoreError> {
     )?)
 }
 
-/// Clears a flag (a write), with its principal's; false when the worker
-/// was not flagged.
+/// Clears a flag (a write), with its principal's and those of the
+/// principal's other workers; false when the worker was not flagged.
 pub fn unflag(conn: &Connection, worker: &str) -> Result<bool, StoreError> {
-    let own = sql::execute(conn, "DELETE FROM flagged_workers WHERE name = ?", [worker])? == 1;
+    let own = sql::execute(
+        conn,
+        "DELETE FROM flagged_workers WHERE name = ?1 OR name IN (SELECT name FROM \
+         worker_credentials WHERE principal = (SELECT principal FROM worker_credentials \
+         WHERE name = ?1))",
+        [worker],
+    )? > 0;
     let principal = sql::execute(
         conn,
         "DELETE FROM flagged_principals WHERE principal = \

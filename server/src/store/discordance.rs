@@ -1,8 +1,9 @@
 //! Per pair of workers, the pairs of their runs compared, and on how many
 //! only one of the two found an event: the sampled audits of noisy
 //! programs both ran (`worker_discordance`, weighed by `report/noisy.rs`)
-//! and, apart, pairs of their tests of one campaign and stratum
-//! (`worker_test_evidence`, weighed by `report/evidence.rs`).
+//! and, apart, pairs of their tests of one campaign and cell
+//! (`worker_test_evidence`, weighed by `report/evidence.rs`), one e-value
+//! per campaign (campaigns that reuse a seed draw the same tests again).
 
 use crate::db::sql;
 use crate::store::error::StoreError;
@@ -17,16 +18,31 @@ use tslg_method::test_pairing::PairTally;
 pub enum Pairs {
     /// An audit's two runs of one test.
     Audits,
-    /// Two workers' tests of one campaign and stratum.
-    Tests,
+    /// Two workers' tests of one campaign (its id) and cell.
+    Tests(i64),
 }
 
 impl Pairs {
     fn table(self) -> &'static str {
         match self {
             Pairs::Audits => "worker_discordance",
-            Pairs::Tests => "worker_test_evidence",
+            Pairs::Tests(_) => "worker_test_evidence",
         }
+    }
+
+    /// The campaign column and its value, where the kind has one.
+    fn campaign(self) -> Option<i64> {
+        match self {
+            Pairs::Audits => None,
+            Pairs::Tests(campaign) => Some(campaign),
+        }
+    }
+
+    /// `AND campaign_id = N` for a campaign's pairs (an integer: nothing
+    /// to quote).
+    fn scope(self) -> String {
+        self.campaign()
+            .map_or_else(String::new, |id| format!(" AND campaign_id = {id}"))
     }
 }
 
@@ -45,12 +61,17 @@ pub fn record(
         (first, second, tally.first_closer, tally.second_closer),
         (second, first, tally.second_closer, tally.first_closer),
     ] {
+        // A campaign's pairs carry its id (an integer: nothing to quote).
+        let (column, value, key) = match kind.campaign() {
+            Some(id) => ("campaign_id, ", format!("{id}, "), "campaign_id, "),
+            None => ("", String::new(), ""),
+        };
         sql::execute(
             conn,
             &format!(
-                "INSERT INTO {} (worker, partner, compared, own_event, partner_event) \
-                 VALUES (?, ?, ?, ?, ?) \
-                 ON CONFLICT (worker, partner) DO UPDATE SET \
+                "INSERT INTO {} ({column}worker, partner, compared, own_event, partner_event) \
+                 VALUES ({value}?, ?, ?, ?, ?) \
+                 ON CONFLICT ({key}worker, partner) DO UPDATE SET \
                    compared = compared + excluded.compared, \
                    own_event = own_event + excluded.own_event, \
                    partner_event = partner_event + excluded.partner_event",
@@ -80,9 +101,10 @@ pub fn partners_of(
         conn,
         &format!(
             "SELECT compared, own_event, partner_event FROM {} \
-             WHERE worker = ? AND partner NOT IN ({})",
+             WHERE worker = ? AND partner NOT IN ({}){}",
             kind.table(),
-            crate::store::audits::FLAGGED_PRINCIPALS
+            crate::store::audits::FLAGGED_PRINCIPALS,
+            kind.scope()
         ),
         [worker],
     )?;
@@ -97,24 +119,33 @@ pub fn partners_of(
     Ok((pairs, compared))
 }
 
-/// Every worker's pairs of `kind`, by name, for the workers' view.
+/// Every worker's pairs of the audits, by name, for the workers' view;
+/// with `tests`, of the tests instead, one entry a worker and campaign.
 pub fn all(
     conn: &Connection,
-    kind: Pairs,
+    tests: bool,
 ) -> Result<Vec<(String, Vec<Discordant>, u64)>, StoreError> {
-    let rows: Vec<(String, i64, i64, i64)> = sql::all(
+    // The audits' pairs are a worker's whole life: one entry, campaign 0.
+    let (table, campaign) = if tests {
+        ("worker_test_evidence", "campaign_id")
+    } else {
+        ("worker_discordance", "0 AS campaign_id")
+    };
+    let rows: Vec<(String, i64, i64, i64, i64)> = sql::all(
         conn,
         &format!(
-            "SELECT worker, compared, own_event, partner_event FROM {} \
-             WHERE partner NOT IN ({}) ORDER BY worker",
-            kind.table(),
+            "SELECT worker, {campaign}, compared, own_event, partner_event FROM {table} \
+             WHERE partner NOT IN ({}) ORDER BY worker, campaign_id",
             crate::store::audits::FLAGGED_PRINCIPALS
         ),
         [],
     )?;
     let mut out: Vec<(String, Vec<Discordant>, u64)> = Vec::new();
-    for (worker, compared, own, theirs) in rows {
-        if out.last().map(|o| &o.0) != Some(&worker) {
+    let mut last_key = None;
+    for (worker, campaign, compared, own, theirs) in rows {
+        let key = Some((worker.clone(), campaign));
+        if last_key != key {
+            last_key = key;
             out.push((worker.clone(), Vec::new(), 0));
         }
         let last = out.last_mut().expect("pushed");
@@ -131,13 +162,10 @@ pub fn all(
 /// evidence starts afresh, and a cleared liar's past runs do not count for
 /// or against the others).
 pub fn forget(conn: &Connection, worker: &str) -> Result<(), StoreError> {
-    for kind in [Pairs::Audits, Pairs::Tests] {
+    for table in ["worker_discordance", "worker_test_evidence"] {
         sql::execute(
             conn,
-            &format!(
-                "DELETE FROM {} WHERE worker = ?1 OR partner = ?1",
-                kind.table()
-            ),
+            &format!("DELETE FROM {table} WHERE worker = ?1 OR partner = ?1"),
             [worker],
         )?;
     }

@@ -28,13 +28,16 @@ pub struct NewReport<'a> {
     /// The criticality of tests without the event (index order), kept for
     /// the pairing of tests (`report/evidence.rs`); empty: none.
     pub near: &'a [(u64, f64)],
+    /// Made on a lease handed out again (attempt > 1): left out of the
+    /// pairing, since its range may have been chosen by outcomes.
+    pub handed_again: bool,
 }
 
 pub fn insert(conn: &Connection, report: &NewReport<'_>) -> Result<(), StoreError> {
     sql::execute(
         conn,
         "INSERT INTO reports (campaign_id, from_index, to_index, lease_id, worker, events, packed, \
-         near_packed) VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+         near_packed, handed_again) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
         params![
             report.campaign_id,
             report.from as i64,
@@ -43,7 +46,8 @@ pub fn insert(conn: &Connection, report: &NewReport<'_>) -> Result<(), StoreErro
             report.worker,
             report.events.len() as i64,
             packed::pack(report.from, report.events),
-            (!report.near.is_empty()).then(|| packed::pack(report.from, report.near))
+            (!report.near.is_empty()).then(|| packed::pack(report.from, report.near)),
+            report.handed_again
         ],
     )?;
     if report.invalid.is_empty() {
@@ -277,7 +281,8 @@ pub fn near_between(
 
 /// Who ran the tests of `from..to`: the reports' ranges reaching into it,
 /// clipped to it, `(from, to, worker)` in index order (rows moved from the
-/// old per-event table, which name no worker, left out). Report rows never
+/// old per-event table, which name no worker, and reports made on a lease
+/// handed out again, left out). Report rows never
 /// overlap, so the scan starts at the last row starting at or before
 /// `from`, as in [`outcomes`].
 pub fn workers_between(
@@ -292,7 +297,7 @@ pub fn workers_between(
                         WHERE campaign_id = ?1 AND from_index <= ?2), ?2) AS at) \
          SELECT from_index, to_index, worker FROM reports, start WHERE campaign_id = ?1 \
            AND from_index >= start.at AND from_index < ?3 AND to_index > ?2 AND worker != '' \
-         ORDER BY from_index",
+           AND handed_again = 0 ORDER BY from_index",
         params![campaign, from as i64, to as i64],
     )?;
     Ok(rows
