@@ -109,10 +109,9 @@ async fn honest_workers_of_a_noisy_program_are_not_flagged_and_their_campaigns_c
         // Every test is evidence too, and nothing leans.
         assert!(worker.test_evidence.unwrap_or(1.0) < 1e4, "{worker:?}");
     }
-    // The library campaign's tests were paired (the adaptive campaign's
-    // are left to the audits).
-    let paired: u64 = workers.iter().map(|w| w.test_pairs_compared).sum();
-    assert!(paired > 0, "{workers:?}");
+    // (Whether the library campaign's tests paired at all depends on how
+    // its few leases fell among the workers: tests/it/service_evidence.rs
+    // checks the pairing.)
     // The program says in its hello that it is noisy; a campaign that
     // does not say so is told, and not switched by the workers' word.
     let unmarked = client
