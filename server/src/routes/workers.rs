@@ -21,6 +21,7 @@ use tslg_method::discordance::worker_evidence;
 /// worker, or to this one before a restart). The secret is shown once.
 #[utoipa::path(post, path = "/api/v1/workers", request_body = WorkerRegistration, responses(
     (status = 201, body = WorkerCredential), (status = 401, body = Problem),
+    (status = 403, body = Problem, description = "An enrolment not issued, revoked or of a flagged principal, or none where enrolment is required"),
     (status = 409, body = Problem), (status = 422, body = Problem)))]
 pub async fn register(
     State(state): State<AppState>,
