@@ -99,59 +99,41 @@ async fn odd_one_flagged(
     caught
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_worker_whose_noisy_program_brakes_harder_is_flagged_by_its_tests_within_one_campaign() {
+/// Ten runs of [`odd_one_flagged`] on one coordinator, the default audit
+/// share (1 %) and leases: `honest` and `odd` programs, campaigns of
+/// `vut`. The odd worker's tests at each flag, sorted.
+async fn ten_runs(programs: (String, String), vut: serde_json::Value) -> Vec<u64> {
     let dir = scratch();
-    // The default audit share (1 %) and leases.
     let server = ServerProcess::start(&dir.path().join("db.sqlite"), &[]);
     let client = server.client();
     let library = ready_library(&client, "idm", true).await.id;
+    let mut tests = Vec::new();
+    for run in 0..10 {
+        let odd = (programs.0.as_str(), programs.1.as_str());
+        let caught = odd_one_flagged(&server, &client, library, run, odd, vut.clone()).await;
+        tests.push(caught.tests);
+    }
+    tests.sort_unstable();
+    tests
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_worker_whose_noisy_program_brakes_harder_is_flagged_by_its_tests_within_one_campaign() {
     // The fleet: three workers of the noisy Python IDM (σ 1.5
     // m/s², step mode: the worker measures each test's criticality) and a
     // fourth whose IDM brakes 3 m/s² harder.
     let programs = (noisy_idm(""), noisy_idm("--brake-harder 3"));
-    let mut tests = Vec::new();
-    for run in 0..10 {
-        let vut = serde_json::json!({"external": "py-idm"});
-        let caught = odd_one_flagged(
-            &server,
-            &client,
-            library,
-            run,
-            (&programs.0, &programs.1),
-            vut,
-        )
-        .await;
-        tests.push(caught.tests);
-    }
-    tests.sort_unstable();
+    let tests = ten_runs(programs, serde_json::json!({"external": "py-idm"})).await;
     eprintln!("the harder-braking worker's tests at its flag, sorted: {tests:?}");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_worker_whose_noisy_program_hides_events_is_flagged_by_its_tests_within_one_campaign() {
-    let dir = scratch();
-    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &[]);
-    let client = server.client();
-    let library = ready_library(&client, "idm", true).await.id;
     // Three workers of the noisy FVDM (episode mode: no criticality, the
     // event alone) and a fourth whose program reports no event in 30 % of
     // the tests that had one (the noisy liar).
     let programs = (noisy_fvdm(""), noisy_fvdm("--drop-events 0.3"));
-    let mut tests = Vec::new();
-    for run in 0..10 {
-        let vut = serde_json::json!({"external": "rs-fvdm", "mode": "episode"});
-        let caught = odd_one_flagged(
-            &server,
-            &client,
-            library,
-            run,
-            (&programs.0, &programs.1),
-            vut,
-        )
-        .await;
-        tests.push(caught.tests);
-    }
-    tests.sort_unstable();
+    let vut = serde_json::json!({"external": "rs-fvdm", "mode": "episode"});
+    let tests = ten_runs(programs, vut).await;
     eprintln!("the hiding worker's tests at its flag, sorted: {tests:?}");
 }
