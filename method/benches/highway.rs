@@ -150,7 +150,7 @@ fn main() {
         r#"{"model":"gap-seeker"}"#,
     ] {
         let vut = vehicle(spec);
-        let report = exact_report(&case, &vut, &q, 0.2, 1.645);
+        let report = exact_report(&case, &vut, &q, 0.2, 0.9);
         let events = event_cells(&case, &vut);
         let covered: f64 = events
             .iter()

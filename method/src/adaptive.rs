@@ -56,7 +56,7 @@ mod allocation;
 mod lattice;
 mod outside;
 mod record;
-pub use allocation::AllocationInputs;
+pub use allocation::{guard_shares, AllocationInputs};
 use lattice::merged;
 pub use lattice::{Lattice, MAX_LATTICE_POINTS};
 pub use outside::Explored;

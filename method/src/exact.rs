@@ -11,6 +11,7 @@
 //!   outcomes) `n ≈ z² (1 − μ) / (β² μ)`.
 
 use crate::case::{parallel_chunk, Case};
+use crate::guard_floor::GuardFloors;
 use crate::sampling::LibraryDistribution;
 use crate::tolerance::PROBABILITY_FLOOR;
 use rayon::prelude::*;
@@ -237,6 +238,9 @@ pub struct ExactReport {
     pub ndd_tests: f64,
     /// For a noisy vehicle, how its `P(A|x)` were obtained.
     pub monte_carlo: Option<MonteCarlo>,
+    /// For a noisy vehicle that fails, the fewest tests a guarded
+    /// campaign told every cell's rate would need ([`crate::guard_floor`]).
+    pub guard_floors: Option<GuardFloors>,
 }
 
 impl ExactReport {
@@ -252,12 +256,27 @@ pub fn exact_report<C: Case>(
     vehicle: &C::Vehicle,
     q: &LibraryDistribution,
     beta: f64,
-    z: f64,
+    confidence: f64,
 ) -> ExactReport {
+    let z = crate::estimator::z_for_confidence(confidence);
     let rates = event_rates(case, vehicle);
     let probability = rate_probability(case, &rates);
     let library_variance = rate_library_variance(case, &rates, q);
+    let guard_floors = rates.monte_carlo.and_then(|_| {
+        let cells: Vec<(f64, f64)> = rates
+            .cells
+            .iter()
+            .map(|&(c, rate)| (case.exposure().p(c), rate))
+            .collect();
+        // The cells that never failed hold the rest of the (normalised)
+        // exposure.
+        let failing: f64 = cells.iter().map(|&(p, _)| p).sum();
+        let safe = (1.0 - failing).max(0.0);
+        let all: Vec<(f64, f64)> = cells.into_iter().chain([(safe, 0.0)]).collect();
+        GuardFloors::of(&all, beta, z, confidence)
+    });
     ExactReport {
+        guard_floors,
         probability,
         library_variance,
         library_tests: expected_library_tests(library_variance, probability, beta, z),

@@ -37,6 +37,8 @@
 //! - `sequence`: confidence sequences by betting; `anytime`: a campaign's
 //!   interval that holds at every number of tests.
 //! - `paired`: paired regressions; `exact`: exact answers by enumeration;
+//!   `guard_floor`: the fewest tests a guarded campaign of a noisy vehicle
+//!   can expect, were every cell's rate known;
 //!   `warnings`: what an answer's numbers warn of; `noise`: the noise of a
 //!   vehicle that is not bit-reproducible.
 //! - `discordance`: whether a worker's program behaves like the others'
@@ -69,6 +71,7 @@ pub mod estimator;
 pub mod exact;
 pub mod external;
 pub mod grid;
+pub mod guard_floor;
 pub mod library;
 pub mod long_table;
 pub mod mass;

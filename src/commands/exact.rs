@@ -52,6 +52,7 @@ use crate::inputs::{
 use anyhow::Context;
 use clap::Args;
 use tslg_method::estimator::StoppingRule;
+use tslg_method::guard_floor::GuardFloors;
 use tslg_method::library::{LibrarySearch, SearchMethod};
 use tslg_method::registry::{BuildRequest, ScenarioCase};
 
@@ -170,6 +171,9 @@ fn print_table(case: &dyn ScenarioCase, args: &ExactArgs) -> anyhow::Result<()> 
                 mc.runs_per_cell, mc.varying_cells, mc.standard_error
             ));
         }
+        if let Some(floors) = &r.guard_floors {
+            notes.push(guard_floor_note(&name, floors, r.ndd_tests));
+        }
     }
     for exec in &args.program {
         let z = StoppingRule {
@@ -193,8 +197,15 @@ fn print_table(case: &dyn ScenarioCase, args: &ExactArgs) -> anyhow::Result<()> 
             tslg_method::exact::expected_ndd_tests(table.probability, args.beta, z),
             "–"
         );
+        let exposures = case.cell_exposures()?;
+        let ndd = tslg_method::exact::expected_ndd_tests(table.probability, args.beta, z);
+        if table.noisy() {
+            let floors =
+                GuardFloors::of(&table.cell_rates(&exposures), args.beta, z, args.confidence);
+            notes.extend(floors.map(|f| guard_floor_note(&table.name, &f, ndd)));
+        }
         let best = tslg_method::exact::expected_library_tests(
-            table.best_sampling_variance(&case.cell_exposures()?),
+            table.best_sampling_variance(&exposures),
             table.probability,
             args.beta,
             z,
@@ -218,4 +229,27 @@ fn print_table(case: &dyn ScenarioCase, args: &ExactArgs) -> anyhow::Result<()> 
         outln!("{note}");
     }
     Ok(())
+}
+
+/// What a guarded campaign of a noisy vehicle can reach at best
+/// ([`tslg_method::guard_floor`]): its tests told every cell's rate,
+/// sampling the support by exposure as tslg does and by `P √p`, against
+/// the NDD's `ndd` tests.
+fn guard_floor_note(name: &str, floors: &GuardFloors, ndd: f64) -> String {
+    let (exposure, root) = (&floors.exposure, &floors.root_rate);
+    format!(
+        "{name}: a guarded campaign (the answer that covers whatever the vehicle does off \
+         its support) told every cell's rate would need about {:.0} tests ({:.1} times \
+         fewer than the NDD) sampling its support by exposure as tslg does, {:.0} ({:.1} \
+         times fewer) sampling it by P(x)√p(x): the support then holds {:.1}% of the \
+         exposure and {:.0}% of the failures, and {:.0}% of the tests explore off it. A \
+         campaign that must learn its support needs more",
+        exposure.tests,
+        ndd / exposure.tests,
+        root.tests,
+        ndd / root.tests,
+        100.0 * root.support_exposure,
+        100.0 * root.support_failure_share,
+        100.0 * root.exploring_share,
+    )
 }

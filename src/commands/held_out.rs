@@ -81,17 +81,26 @@ impl ProgramTable {
     /// one run in `m` often shows `p̂ = 0`), so the true floor is higher.
     /// `exposures` are the case's cell exposures.
     pub fn best_sampling_variance(&self, exposures: &[f64]) -> f64 {
-        let root: f64 = exposures
+        let root: f64 = self
+            .cell_rates(exposures)
+            .iter()
+            .map(|&(p, rate)| p * rate.sqrt())
+            .sum();
+        (root * root - self.probability * self.probability).max(0.0)
+    }
+
+    /// `(P(x), p̂(x))` of every cell: its exposure and the share of its runs
+    /// with the event.
+    pub fn cell_rates(&self, exposures: &[f64]) -> Vec<(f64, f64)> {
+        exposures
             .iter()
             .enumerate()
             .map(|(cell, &p)| {
                 let runs = &self.outcomes[cell * self.runs..(cell + 1) * self.runs];
-                let rate =
-                    runs.iter().filter(|(event, _)| *event).count() as f64 / self.runs as f64;
-                p * rate.sqrt()
+                let events = runs.iter().filter(|(event, _)| *event).count();
+                (p, events as f64 / self.runs as f64)
             })
-            .sum();
-        (root * root - self.probability * self.probability).max(0.0)
+            .collect()
     }
 
     /// The outcome of test `index` of the campaign seeded `seed`, whose

@@ -574,6 +574,50 @@ fn exact_reports_every_vehicle_for_both_exposures() {
     }
 }
 
+#[test]
+fn exact_gives_a_noisy_vehicle_the_tests_of_its_best_guarded_campaign() {
+    // The IDM at σ 1.5 fails in a few cells near the library's: a guarded
+    // campaign told every rate samples them (0.6 % of the exposure) and
+    // spends its tests ruling out failures elsewhere, M ≈ ln(1/(1 − c))
+    // P_O/(β μ) exploring tests at share 0.95 (docs/statistics.md).
+    let o = tslg(&["exact", "--vut", r#"{"model": "idm", "noise": 1.5}"#]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = stdout(&o);
+    let row = text
+        .lines()
+        .find(|l| l.starts_with("idm (noise 1.5) "))
+        .unwrap_or_else(|| panic!("{text}"));
+    let cols: Vec<f64> = row
+        .split_whitespace()
+        .skip(3)
+        .map(|c| c.parse().unwrap())
+        .collect();
+    let (mu, ndd) = (cols[0], cols[2]);
+    let note = text
+        .lines()
+        .find(|l| l.starts_with("idm (noise 1.5): a guarded campaign"))
+        .unwrap_or_else(|| panic!("{text}"));
+    let number_after = |marker: &str| -> f64 {
+        let rest = &note[note.find(marker).unwrap_or_else(|| panic!("{note}")) + marker.len()..];
+        rest.split(|c: char| !(c.is_ascii_digit() || c == '.'))
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    let tests = number_after("would need about ");
+    let times = number_after("tests (");
+    let support = number_after("the support then holds ") / 100.0;
+    assert!((ndd / tests - times).abs() < 0.06, "{note}");
+    let guard = (1.0f64 / 0.1).ln() * (1.0 - support) / (0.2 * mu) / 0.95;
+    assert!(
+        (tests / guard - 1.0).abs() < 0.01,
+        "{tests} against {guard}: {note}"
+    );
+    assert!(note.contains("100% of the failures"), "{note}");
+    assert!(times < 5.9 && times > 5.0, "{note}");
+}
+
 fn write(dir: &Path, name: &str, text: &str) -> String {
     let path = dir.join(name);
     std::fs::write(&path, text).unwrap();

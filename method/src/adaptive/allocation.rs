@@ -116,15 +116,19 @@ impl AllocationInputs {
         let Some(need) = self.exploring_need() else {
             return share(*SHARES.end());
         };
-        let best = SHARES
+        guard_shares()
             .rev()
             .min_by(|&x, &y| {
-                self.tests_needed(share(x), need)
-                    .total_cmp(&self.tests_needed(share(y), need))
+                self.tests_needed(x, need)
+                    .total_cmp(&self.tests_needed(y, need))
             })
-            .expect("shares to choose from");
-        share(best)
+            .expect("shares to choose from")
     }
+}
+
+/// The shares a guard's stage may explore, `0.10, 0.15, …, 0.95`.
+pub fn guard_shares() -> impl DoubleEndedIterator<Item = f64> {
+    SHARES.map(share)
 }
 
 /// `k/20`.

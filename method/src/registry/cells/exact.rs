@@ -2,7 +2,6 @@
 
 use super::Registered;
 use crate::case::Case;
-use crate::estimator::z_for_confidence;
 use crate::exact::{event_rates, exact_report, rate_probability, ExactReport};
 use crate::registry::CaseError;
 use crate::registry::ExactAnswers;
@@ -53,7 +52,7 @@ where
             &vehicle,
             &q,
             beta,
-            z_for_confidence(confidence),
+            confidence,
         ))
     }
 }
