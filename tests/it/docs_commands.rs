@@ -39,6 +39,7 @@ const NOT_RUN: &[(&str, &str, &str)] = &[
     ("docs/statistics.md", "--replicates 2000", "the coverage study: minutes of CPU each"),
     ("docs/statistics.md", "--interval wald,anytime", "the Wald/anytime study: minutes of CPU; cli.rs runs validate --interval"),
     ("docs/statistics.md", "cargo bench", "a benchmark (scripts/bench)"),
+    ("docs/statistics.md", "--program-runs 1000", "3,420 cells run 1,000 times: minutes of CPU; cli.rs checks a noisy vehicle's floor"),
     ("docs/benchmarks.md", "scripts/bench", "benchmarks: minutes on a quiet machine, never in CI"),
     ("docs/benchmarks.md", "cargo bench", "benchmarks: minutes on a quiet machine, never in CI"),
     ("docs/bring-your-own.md", "git clone", "this is the clone"),
