@@ -10,9 +10,13 @@
 //! an adaptive campaign (the same)
 //! and an NDD campaign of a
 //! vehicle that fails often (the FVDM with a lower gain, so that it stops
-//! within about 2,000 tests), each against the ideal: the tests it used
-//! times `d`, over `W` (an adaptive campaign's stages run one after
-//! another: `stages × d + tests × d / W`). Prints a Markdown table for
+//! within about 2,000 tests), each against the ideal `tests used × d / W`,
+//! within target when its wall time is at most `1.5 × ideal + 2 s +
+//! stages × d` (an adaptive campaign's stages run one after another, each
+//! at least one test long; issue 68). The fleet's busy share is read from
+//! the campaign's timeline (`GET /api/v1/campaigns/{id}/timeline`): the
+//! worker-seconds its workers held its work over `W ×` the time from its
+//! first lease to its last report. Prints a Markdown table for
 //! docs/benchmarks.md.
 //!
 //! ```sh
@@ -20,7 +24,8 @@
 //! cargo bench --bench slow_vehicle
 //! ```
 //!
-//! `TSLG_SLOW_SLEEPS` (seconds, comma-separated; default `0.01,0.05`),
+//! `TSLG_SLOW_TIMELINE` (set) prints each campaign's timeline in 20
+//! buckets on stderr. `TSLG_SLOW_SLEEPS` (seconds, comma-separated; default `0.01,0.05`),
 //! `TSLG_SLOW_WORKERS` (default `1,4,8,16`) and `TSLG_SLOW_CAMPAIGNS`
 //! (default `library,adaptive,ndd`; also `guarded`, `anytime`) choose the
 //! rows.
@@ -72,6 +77,10 @@ struct Row {
     stages: u64,
     wall: f64,
     ideal: f64,
+    /// Worker-seconds on its work over `W ×` its timeline's span.
+    fleet_busy: f64,
+    /// Workers that ran any of its work.
+    ran_by: u32,
     first_result: f64,
     /// `seconds_left` shown half-way over the time that was left.
     time_left: Option<f64>,
@@ -275,7 +284,18 @@ async fn measure(sleep: f64, workers: usize) -> anyhow::Result<Vec<Row>> {
             a.open + a.agreed + a.void + 2 * (a.settled + a.undecided)
         });
         let w = workers as f64;
-        let ideal = used as f64 * sleep / w + stages as f64 * sleep;
+        let ideal = used as f64 * sleep / w;
+        let timeline = client.timeline(view.id, 1).await?;
+        if std::env::var_os("TSLG_SLOW_TIMELINE").is_some() {
+            let t = client.timeline(view.id, 20).await?;
+            for b in &t.buckets {
+                eprintln!(
+                    "  {kind} {:>6.2} s: busy {:>5.1} (audits {:>4.1}), reported {:>4}, folded {:>5}",
+                    b.from_seconds, b.busy_workers, b.audit_workers, b.reported_tests, b.folded
+                );
+            }
+        }
+        let fleet_busy = timeline.busy_worker_seconds / (w * timeline.seconds.max(1e-9));
         rows.push(Row {
             sleep,
             workers,
@@ -286,6 +306,8 @@ async fn measure(sleep: f64, workers: usize) -> anyhow::Result<Vec<Row>> {
             stages,
             wall,
             ideal,
+            fleet_busy,
+            ran_by: timeline.workers,
             first_result,
             time_left,
         });
@@ -311,13 +333,13 @@ fn main() -> anyhow::Result<()> {
         }
     }
     println!(
-        "| d (s) | workers | campaign | tests used | tests run | audit runs | stages | wall (s) | ideal (s) | wall / ideal | within target | first result (s) | time left shown / actual, half-way |"
+        "| d (s) | workers | campaign | tests used | tests run | audit runs | stages | wall (s) | ideal (s) | wall / ideal | target (s) | within target | workers that ran it | fleet busy | first result (s) | time left shown / actual, half-way |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for r in &rows {
-        let target = 1.3 * r.ideal + 1.0;
+        let target = 1.5 * r.ideal + 2.0 + r.stages as f64 * r.sleep;
         println!(
-            "| {} | {} | {} | {} | {} | {} | {} | {:.2} | {:.2} | {:.2} | {} | {:.2} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {} | {:.2} | {:.2} | {:.2} | {:.2} | {} | {} | {:.2} | {:.2} | {} |",
             r.sleep,
             r.workers,
             r.kind,
@@ -328,11 +350,14 @@ fn main() -> anyhow::Result<()> {
             r.wall,
             r.ideal,
             r.wall / r.ideal,
+            target,
             if r.wall <= target && r.ran as f64 <= 1.2 * r.used as f64 + r.audits as f64 {
                 "yes"
             } else {
                 "no"
             },
+            r.ran_by,
+            r.fleet_busy,
             r.first_result,
             r.time_left.map_or("–".into(), |t| format!("{t:.2}"))
         );

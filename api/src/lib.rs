@@ -16,6 +16,7 @@ pub mod packed;
 mod pair;
 mod queue;
 mod stages;
+mod timeline;
 mod worker;
 
 pub use campaign::*;
@@ -27,6 +28,7 @@ pub use library::*;
 pub use pair::*;
 pub use queue::*;
 pub use stages::*;
+pub use timeline::*;
 pub use worker::*;
 
 use serde::{Deserialize, Serialize};

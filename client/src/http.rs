@@ -382,6 +382,19 @@ impl Client {
         .await
     }
 
+    /// Where the campaign's wall time went, in `buckets` buckets.
+    pub async fn timeline(
+        &self,
+        id: i64,
+        buckets: u32,
+    ) -> Result<tslg_api::CampaignTimeline, CallError> {
+        self.json(self.request(
+            reqwest::Method::GET,
+            &format!("/api/v1/campaigns/{id}/timeline?buckets={buckets}"),
+        ))
+        .await
+    }
+
     /// At most `points` of the history, spaced logarithmically in tests.
     pub async fn history_points(&self, id: i64, points: usize) -> Result<History, CallError> {
         self.json(self.request(

@@ -8,4 +8,5 @@ pub mod events;
 pub mod history;
 pub mod start;
 pub mod tests_cache;
+pub mod timeline;
 pub mod views;

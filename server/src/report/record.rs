@@ -25,6 +25,7 @@ use crate::store::leases::{self, LeaseRow, LeaseState};
 use crate::store::near_misses;
 use crate::store::prefix::Charge;
 use crate::store::reports::{self, NewReport};
+use crate::store::work_spans;
 use rusqlite::Connection;
 use std::sync::Arc;
 use tslg_api::{CampaignStatus, Method, ResultAck, ResultReport};
@@ -306,6 +307,16 @@ fn store_new_part(
     if campaign.method == Method::Adaptive {
         near_misses::insert(conn, campaign.id, &report.near_misses, new_from)?;
     }
+    work_spans::insert(
+        conn,
+        campaign.id,
+        lease.id,
+        &report.worker,
+        false,
+        (new_from, checked.to),
+        lease.claimed_at,
+        now_ms(),
+    )?;
     let done = checked.to == lease.end_index as u64;
     let state = if done {
         LeaseState::Done

@@ -2,19 +2,20 @@
 
 use crate::campaign;
 use crate::campaign::history;
+use crate::campaign::timeline;
 use crate::campaign::views::live_view;
 use crate::error::ServiceError;
 use crate::routes::problem::ApiJson;
 use crate::routes::{ApiPath, ApiQuery};
 use crate::state::AppState;
-use crate::store::{adaptive_stages, campaigns};
+use crate::store::{adaptive_stages, campaigns, work_spans};
 use axum::extract::State;
 use axum::http::{header, StatusCode};
 use axum::response::IntoResponse;
 use axum::Json;
 use tslg_api::{
-    AdaptiveStages, CampaignList, CampaignPlan, CampaignView, CreateCampaign, History, Method,
-    Problem,
+    AdaptiveStages, CampaignList, CampaignPlan, CampaignTimeline, CampaignView, CreateCampaign,
+    History, Method, Problem,
 };
 
 /// Starts a campaign. It runs as soon as its library is ready.
@@ -144,6 +145,45 @@ pub async fn history(
         campaign_id: id,
         points,
     }))
+}
+
+/// `?buckets=N` of the timeline read.
+#[derive(Debug, serde::Deserialize, utoipa::IntoParams)]
+#[serde(deny_unknown_fields)]
+#[into_params(parameter_in = Query)]
+pub struct TimelineQuery {
+    /// Buckets of equal length from the first lease to the last report
+    /// (1 to 1000, default 60).
+    buckets: Option<u32>,
+}
+
+/// Where the campaign's wall time went: its workers busy on it over time,
+/// from when each piece of its work was leased and reported.
+#[utoipa::path(get, path = "/api/v1/campaigns/{id}/timeline", params(("id" = i64, Path), TimelineQuery),
+    responses((status = 200, body = CampaignTimeline), (status = 400, body = Problem), (status = 404, body = Problem)))]
+pub async fn timeline(
+    State(state): State<AppState>,
+    ApiPath(id): ApiPath<i64>,
+    ApiQuery(query): ApiQuery<TimelineQuery>,
+) -> Result<Json<CampaignTimeline>, ServiceError> {
+    let buckets = query.buckets.unwrap_or(60);
+    if !(1..=timeline::MAX_BUCKETS).contains(&buckets) {
+        return Err(ServiceError::BadRequest(format!(
+            "buckets = {buckets} must be in 1..={}",
+            timeline::MAX_BUCKETS
+        )));
+    }
+    let (spans, workers, folds) = state
+        .db
+        .read(move |conn| -> Result<_, ServiceError> {
+            campaigns::get(conn, id)?;
+            let (spans, workers) = work_spans::of(conn, id)?;
+            Ok((spans, workers, work_spans::folds(conn, id)?))
+        })
+        .await?;
+    Ok(Json(timeline::timeline(
+        id, &spans, workers, &folds, buckets,
+    )))
 }
 
 /// What a worker needs to reproduce any test of the campaign.

@@ -73,6 +73,7 @@ pub fn router(state: AppState) -> Router {
         .route("/api/v1/campaigns/{id}", get(campaigns::get_one))
         .route("/api/v1/campaigns/{id}/history", get(campaigns::history))
         .route("/api/v1/campaigns/{id}/stages", get(campaigns::stages))
+        .route("/api/v1/campaigns/{id}/timeline", get(campaigns::timeline))
         .route("/api/v1/campaigns/{id}/events", get(events::list))
         .route(
             "/api/v1/campaigns/{id}/tests/{index}/openscenario",

@@ -29,6 +29,7 @@ use utoipa::OpenApi;
         super::campaigns::get_one,
         super::campaigns::history,
         super::campaigns::stages,
+        super::campaigns::timeline,
         super::events::list,
         super::events::openscenario,
         super::campaigns::plan,

@@ -10,8 +10,9 @@ use tslg_api::LibraryStatus;
 
 /// The tables holding a campaign's records, children before parents
 /// (leases name audits).
-const CAMPAIGN_TABLES: [&str; 9] = [
+const CAMPAIGN_TABLES: [&str; 10] = [
     "leases",
+    "work_spans",
     "worker_test_evidence",
     "test_pairing_walks",
     "adaptive_stages",

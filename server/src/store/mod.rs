@@ -22,3 +22,4 @@ pub mod states;
 pub mod test_pairing_walks;
 pub mod totals;
 pub mod user_cases;
+pub mod work_spans;

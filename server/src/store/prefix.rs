@@ -238,9 +238,10 @@ pub fn store_history(
     if !course.is_empty() {
         let mut statement = conn.prepare_cached(
             "INSERT OR REPLACE INTO history (campaign_id, indices, tests, events, s1, s2, \
-             outside_tests, outside_s1, sequence_low, sequence_high, outside_s2) \
-             VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+             outside_tests, outside_s1, sequence_low, sequence_high, outside_s2, folded_at) \
+             VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
         )?;
+        let now = crate::db::now_ms();
         for (state, sequence) in course {
             let (s1, s2) = state.estimator.sums();
             statement.execute(params![
@@ -254,7 +255,8 @@ pub fn store_history(
                 state.outside.s1,
                 sequence.map(|s| s.0),
                 sequence.map(|s| s.1),
-                state.within_strata.then_some(state.outside.s2)
+                state.within_strata.then_some(state.outside.s2),
+                now
             ])?;
         }
     }

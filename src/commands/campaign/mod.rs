@@ -1,6 +1,7 @@
 //! `tslg campaign …`: clients of a running coordinator's campaigns.
 
 mod start;
+mod timeline;
 
 use crate::args::{wire_name, ServerArgs};
 use crate::commands::remote::{block_on, client, print_campaign as print};
@@ -75,6 +76,21 @@ pub enum CampaignCommand {
         #[arg(long)]
         max: Option<u64>,
     },
+    /// Where the campaign's wall time went: its workers busy on it over
+    /// time, from when each piece of its work was leased and reported.
+    Timeline {
+        /// The campaign's id.
+        id: i64,
+        #[command(flatten)]
+        server: ServerArgs,
+        /// Buckets of equal length from its first lease to its last report
+        /// (1 to 1000).
+        #[arg(long, default_value_t = 30)]
+        buckets: u32,
+        /// Print JSON (as `GET /api/v1/campaigns/{id}/timeline` answers).
+        #[arg(long)]
+        json: bool,
+    },
     /// Cancel a pending or running campaign.
     Cancel {
         /// The campaign's id.
@@ -127,6 +143,12 @@ pub fn run(command: CampaignCommand) -> anyhow::Result<()> {
             out,
             max,
         } => events::export(&server, id, format, out.as_deref(), max),
+        CampaignCommand::Timeline {
+            id,
+            server,
+            buckets,
+            json,
+        } => timeline::timeline(&server, id, buckets, json),
         CampaignCommand::Cancel { id, server } => cancel(&server, id),
         CampaignCommand::Delete { id, server } => delete_campaign(&server, id),
         CampaignCommand::List {
