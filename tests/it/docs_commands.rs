@@ -33,6 +33,7 @@ const NOT_RUN: &[(&str, &str, &str)] = &[
     ("docs/operations.md", "docker compose up", "no Docker engine here"),
     ("docs/operations.md", "TSLG_SERVER=http://127.0.0.1:8080 tslg campaign start", "needs the compose coordinator above"),
     ("docs/operations.md", "openssl rand", "tokens for the compose coordinator above"),
+    ("docs/operations.md", "tslg campaign timeline 1", "a campaign run to its end; service_slow.rs runs the command on one"),
     ("docs/reproduction.md", "reproduce --ndd-table ../shared/data/cutin_ndd_spmd.csv          #", "5 minutes of CPU; README's --quick runs"),
     ("docs/reproduction.md", "reproduce --quick", "README's same line runs"),
     ("docs/adaptive-design.md", "--replicates", "the study behind the design: minutes to hours of CPU each"),

@@ -242,3 +242,84 @@ async fn an_audit_is_run_before_the_auditing_worker_s_next_range() {
         "{ran} tests ran before test 0's audit agreed: {view:?}"
     );
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_timeline_shows_where_a_slow_program_s_campaign_spent_its_time() {
+    // Three one-thread workers of a 0.05 s program run an NDD campaign
+    // to its budget of 60 tests. Every test's wait is worker time, so the
+    // timeline's busy worker-seconds are at least 60 × 0.05 s; they cannot
+    // exceed the three workers' time; its buckets hold the 60 tests once.
+    let dir = scratch();
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &[]);
+    let program = slow_program("--sleep 0.05");
+    let _workers: Vec<WorkerProcess> = (1..=3)
+        .map(|k| {
+            WorkerProcess::start_with(&server.url, 1, &format!("w{k}"), &["--vut-exec", &program])
+        })
+        .collect();
+    let client = server.client();
+    let started = Instant::now();
+    while client.workers().await.unwrap().workers.len() < 3 {
+        assert!(started.elapsed() < Duration::from_secs(60), "workers seen");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    let id = client
+        .create_campaign(&CreateCampaign {
+            max_tests: 60,
+            n_min: Some(60),
+            ..program_campaign("slow", 5)
+        })
+        .await
+        .unwrap()
+        .id;
+    let view = finished(&client, id, Duration::from_secs(120)).await;
+    assert_eq!(view.indices, 60, "{view:?}");
+    let t = client.timeline(id, 10).await.unwrap();
+    assert_eq!((t.campaign_id, t.workers, t.buckets.len()), (id, 3, 10));
+    assert!(t.busy_worker_seconds >= 60.0 * 0.05, "{t:?}");
+    assert!(t.seconds >= 60.0 * 0.05 / 3.0, "{t:?}");
+    assert!(t.busy_share > 0.0 && t.busy_share <= 1.0 + 1e-9, "{t:?}");
+    let reported: u64 = t.buckets.iter().map(|b| b.reported_tests).sum();
+    assert_eq!(reported, 60, "{t:?}");
+    assert_eq!(t.buckets.last().unwrap().folded, 60, "{t:?}");
+    let busiest = t.buckets.iter().map(|b| b.busy_workers).fold(0.0, f64::max);
+    assert!(busiest <= 3.0 + 1e-9, "{t:?}");
+
+    // The CLI's table, and a bad bucket count refused with the reason.
+    let out = tslg(&[
+        "campaign",
+        "timeline",
+        &id.to_string(),
+        "--server",
+        &server.url,
+        "--buckets",
+        "5",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("3 workers ran its work"), "{text}");
+    assert_eq!(
+        text.lines().filter(|l| l.contains(" |")).count(),
+        5,
+        "{text}"
+    );
+    let refused = tslg(&[
+        "campaign",
+        "timeline",
+        &id.to_string(),
+        "--server",
+        &server.url,
+        "--buckets",
+        "0",
+    ]);
+    assert!(clean_refusal(&refused), "{refused:?}");
+    assert!(
+        String::from_utf8_lossy(&refused.stderr).contains("buckets = 0 must be in 1..=1000"),
+        "{}",
+        String::from_utf8_lossy(&refused.stderr)
+    );
+}

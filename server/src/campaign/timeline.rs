@@ -33,12 +33,13 @@ pub fn timeline(
     let start = pieces.iter().map(|p| p.0).min().unwrap_or(0);
     let end = pieces.iter().map(|p| p.1).max().unwrap_or(start);
     let seconds = (end - start) as f64 / 1000.0;
-    let busy: f64 = pieces.iter().map(|p| (p.1 - p.0) as f64 / 1000.0).sum();
-    let audit: f64 = pieces
+    let seconds_of = |p: &(i64, i64, WorkSpan)| (p.1 - p.0) as f64 / 1000.0;
+    let busy = pieces.iter().map(seconds_of).fold(0.0, |a, b| a + b);
+    let audit = pieces
         .iter()
         .filter(|p| p.2.audit)
-        .map(|p| (p.1 - p.0) as f64 / 1000.0)
-        .sum();
+        .map(seconds_of)
+        .fold(0.0, |a, b| a + b);
     let share = if workers > 0 && seconds > 0.0 {
         busy / (f64::from(workers) * seconds)
     } else {
@@ -103,6 +104,10 @@ pub fn timeline(
 
 /// Each span's `(began, ended, span)`: it began at its lease attempt's
 /// claim or at the previous report of that attempt, whichever is later.
+/// A worker holds the campaign's work or not: where its spans overlap (it
+/// took its next lease before its last report reached the coordinator),
+/// the later starts where the earlier ended, so that a worker is never
+/// counted busy twice.
 fn pieces(spans: &[WorkSpan]) -> Vec<(i64, i64, WorkSpan)> {
     let mut out = Vec::with_capacity(spans.len());
     let mut previous: Option<&WorkSpan> = None;
@@ -116,6 +121,20 @@ fn pieces(spans: &[WorkSpan]) -> Vec<(i64, i64, WorkSpan)> {
         // A report cannot precede its claim; clocks of one coordinator.
         out.push((began.min(span.reported_at), span.reported_at, *span));
         previous = Some(span);
+    }
+    out.sort_by_key(|&(began, ended, span)| (span.worker, began, ended));
+    let mut held_until: Option<(u32, i64)> = None;
+    for piece in &mut out {
+        if let Some((worker, until)) = held_until {
+            if worker == piece.2.worker {
+                piece.0 = piece.0.max(until).min(piece.1);
+            }
+        }
+        let until = match held_until {
+            Some((worker, until)) if worker == piece.2.worker => until.max(piece.1),
+            _ => piece.1,
+        };
+        held_until = Some((piece.2.worker, until));
     }
     out
 }
@@ -161,7 +180,7 @@ mod tests {
 
     #[test]
     fn a_lease_handed_out_again_starts_at_its_new_claim_and_audits_are_counted_apart() {
-        let mut audit = span(3, 1, (5, 6), (2_000, 3_000));
+        let mut audit = span(3, 2, (5, 6), (2_000, 3_000));
         audit.audit = true;
         let spans = [
             span(1, 0, (0, 5), (0, 1_000)),
@@ -170,12 +189,28 @@ mod tests {
             span(1, 1, (5, 10), (2_000, 4_000)),
             audit,
         ];
-        let t = timeline(1, &spans, 2, &[], 4);
+        let t = timeline(1, &spans, 3, &[], 4);
         assert_eq!(t.busy_worker_seconds, 1.0 + 2.0 + 1.0);
         assert_eq!(t.audit_worker_seconds, 1.0);
         let audits: Vec<f64> = t.buckets.iter().map(|b| b.audit_workers).collect();
         assert_eq!(audits, [0.0, 0.0, 1.0, 0.0]);
         assert_eq!(t.buckets.iter().map(|b| b.reported_tests).sum::<u64>(), 10);
+    }
+
+    #[test]
+    fn a_worker_that_took_its_next_lease_before_its_report_is_busy_once() {
+        // Worker 0 claimed lease 2 at 1.5 s while lease 1 ran to 2 s.
+        let spans = [
+            span(1, 0, (0, 10), (0, 2_000)),
+            span(2, 0, (10, 20), (1_500, 3_000)),
+        ];
+        let t = timeline(1, &spans, 1, &[], 3);
+        assert_eq!(t.busy_worker_seconds, 3.0);
+        assert_eq!(t.busy_share, 1.0);
+        assert!(t
+            .buckets
+            .iter()
+            .all(|b| (b.busy_workers - 1.0).abs() < 1e-12));
     }
 
     #[test]
