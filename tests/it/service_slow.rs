@@ -159,6 +159,15 @@ fn slow_program(args: &str) -> String {
     format!("slow={} {args}", example_binary("fvdm_vut").display())
 }
 
+/// Waits until `n` workers have registered (a minute at most).
+async fn until_registered(client: &tslg_client::Client, n: usize) {
+    let started = Instant::now();
+    while client.workers().await.unwrap().workers.len() < n {
+        assert!(started.elapsed() < Duration::from_secs(60), "workers seen");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+}
+
 /// Tests the program has started, counted in its tally file.
 fn tally(file: &Path) -> u64 {
     std::fs::metadata(file).map_or(0, |m| m.len())
@@ -224,11 +233,7 @@ async fn an_audit_is_run_before_the_auditing_worker_s_next_range() {
     let _a = WorkerProcess::start_with(&server.url, 1, "slow-a", &["--vut-exec", &program]);
     let _b = WorkerProcess::start_with(&server.url, 1, "slow-b", &["--vut-exec", &program]);
     let client = server.client();
-    let started = Instant::now();
-    while client.workers().await.unwrap().workers.len() < 2 {
-        assert!(started.elapsed() < Duration::from_secs(60), "workers seen");
-        tokio::time::sleep(Duration::from_millis(20)).await;
-    }
+    until_registered(&client, 2).await;
     let id = client
         .create_campaign(&program_campaign("slow", 4))
         .await
@@ -258,11 +263,7 @@ async fn the_timeline_shows_where_a_slow_program_s_campaign_spent_its_time() {
         })
         .collect();
     let client = server.client();
-    let started = Instant::now();
-    while client.workers().await.unwrap().workers.len() < 3 {
-        assert!(started.elapsed() < Duration::from_secs(60), "workers seen");
-        tokio::time::sleep(Duration::from_millis(20)).await;
-    }
+    until_registered(&client, 3).await;
     let id = client
         .create_campaign(&CreateCampaign {
             max_tests: 60,
