@@ -41,6 +41,7 @@ fn request(method: Method, library_id: Option<i64>, vut: &Value, seed: u64) -> C
         split: None,
         vehicle_noise: false,
         adaptive_search: None,
+        stage_tests: None,
     }
 }
 

@@ -39,6 +39,7 @@ fn request(tests: u64) -> CreateCampaign {
         split: None,
         vehicle_noise: false,
         adaptive_search: None,
+        stage_tests: None,
     }
 }
 

@@ -144,6 +144,7 @@ async fn through_service(seed: u64, threads: usize) -> anyhow::Result<Run> {
             split: None,
             vehicle_noise: false,
             adaptive_search: None,
+            stage_tests: None,
         })
         .await?
         .id;

@@ -7,7 +7,8 @@
 //! issue that asked for this bench; else on the built-in exposure, where
 //! that campaign needs about 10⁴ tests), the same guarded and with an
 //! anytime interval (both switch to exploring mid-campaign, issue 49),
-//! an adaptive campaign (the same)
+//! an adaptive campaign (the same), the adaptive campaign of a noisy
+//! program (the FVDM with actuator noise σ 1.5, under the guard, `noisy`)
 //! and an NDD campaign of a
 //! vehicle that fails often (the FVDM with a lower gain, so that it stops
 //! within about 2,000 tests), each against the ideal `tests used × d / W`,
@@ -27,7 +28,7 @@
 //! `TSLG_SLOW_TIMELINE` (set) prints each campaign's timeline in 20
 //! buckets on stderr. `TSLG_SLOW_SLEEPS` (seconds, comma-separated; default `0.01,0.05`),
 //! `TSLG_SLOW_WORKERS` (default `1,4,8,16`) and `TSLG_SLOW_CAMPAIGNS`
-//! (default `library,adaptive,ndd`; also `guarded`, `anytime`) choose the
+//! (default `library,adaptive,ndd`; also `guarded`, `anytime`, `noisy`) choose the
 //! rows.
 //!
 //! The last column checks the time left the service shows
@@ -46,6 +47,11 @@ use tslg_client::Client;
 /// evaluate --method ndd --vut '{"model":"fvdm","k":0.1}'`), so its NDD
 /// baseline stops after about 1,900 tests at β 0.2.
 const HOT_GAIN: f64 = 0.1;
+
+/// The noisy program's actuator noise (m/s²): the FVDM at σ 1.5, whose
+/// adaptive campaign runs under the guard for about 2,800 tests
+/// (docs/statistics.md, "Noisy vehicles").
+const NOISE: f64 = 1.5;
 
 /// The authors' cut-in table (`tslg_testkit::shared_data`: `../shared/data`,
 /// or `$TSLG_SHARED_DATA`), when it is there.
@@ -128,6 +134,11 @@ impl Fleet {
                     "hot={} --sleep {sleep} --gain {HOT_GAIN} --tally {}",
                     exe.display(),
                     tally("hot").display()
+                ),
+                format!(
+                    "noisy={} --sleep {sleep} --noise {NOISE} --tally {}",
+                    exe.display(),
+                    tally("noisy").display()
                 ),
             ];
             let run = tslg_worker::run(config, stopped(rx.clone()));
@@ -239,6 +250,11 @@ async fn idm_library(client: &Client, exposure: &tslg_api::ExposureRequest) -> a
 async fn measure(sleep: f64, workers: usize) -> anyhow::Result<Vec<Row>> {
     let fleet = Fleet::start(sleep, workers).await?;
     let client = Client::new(&fleet.url, None)?;
+    // A user starts the fleet, then the campaigns: an adaptive campaign's
+    // stages are sized from the workers live at its creation.
+    while client.workers().await?.workers.len() < workers {
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
     let exposure = authors_table().unwrap_or(tslg_api::ExposureRequest::Builtin);
     let library = idm_library(&client, &exposure).await?;
     let mut rows = Vec::new();
@@ -248,6 +264,7 @@ async fn measure(sleep: f64, workers: usize) -> anyhow::Result<Vec<Row>> {
         ("guarded", Method::Library, "slow"),
         ("anytime", Method::Library, "slow"),
         ("adaptive", Method::Adaptive, "slow"),
+        ("noisy", Method::Adaptive, "noisy"),
         ("ndd", Method::Ndd, "hot"),
     ] {
         if !chosen.iter().any(|c| c == kind) {
@@ -265,7 +282,13 @@ async fn measure(sleep: f64, workers: usize) -> anyhow::Result<Vec<Row>> {
             &tslg_api::CreateCampaign {
                 // The allocation of issue 49: both switch to exploring
                 // nearly every test once the library stratum is known.
-                guard_outside: Some(kind == "guarded"),
+                guard_outside: match kind {
+                    "guarded" => Some(true),
+                    // A noisy program's campaign runs under the guard by default.
+                    "noisy" => None,
+                    _ => Some(false),
+                },
+                vehicle_noise: kind == "noisy",
                 interval: if kind == "anytime" {
                     tslg_api::IntervalKind::Anytime
                 } else {

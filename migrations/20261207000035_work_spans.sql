@@ -16,3 +16,6 @@ CREATE TABLE work_spans (
 );
 CREATE INDEX work_spans_by_campaign ON work_spans (campaign_id, lease_id, from_index);
 ALTER TABLE history ADD COLUMN folded_at INTEGER;
+-- An adaptive campaign's estimation stages' length, chosen at its creation
+-- (100 before this column, and by default for a fleet of up to 20 threads).
+ALTER TABLE campaigns ADD COLUMN stage_tests INTEGER NOT NULL DEFAULT 100;

@@ -26,6 +26,14 @@ pub struct AdaptiveView {
     /// How it searches (`grid` or `lattice`).
     #[serde(default)]
     pub search: crate::AdaptiveSearch,
+    /// Tests of each of its estimation stages.
+    #[serde(default = "default_stage_tests")]
+    pub stage_tests: u64,
+}
+
+/// Estimation stages' length of campaigns before it was chosen.
+fn default_stage_tests() -> u64 {
+    100
 }
 
 /// An adaptive campaign's running stage.
@@ -135,6 +143,14 @@ pub struct CreateCampaign {
     /// docs/adaptive-design.md, "Fine grids"). Refused for other methods.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub adaptive_search: Option<crate::AdaptiveSearch>,
+    /// Tests of an adaptive campaign's estimation stages: a multiple of 20,
+    /// from 20 to 100,000. By default 100, or, when the live workers that
+    /// offer its vehicle have more than 20 threads `T` at its creation,
+    /// `20 ⌈5 T / 20⌉`: about five rounds of them, so that a stage keeps
+    /// them busy (an adaptive campaign plans each stage from the results
+    /// of the one before). Refused for other methods.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stage_tests: Option<u64>,
 }
 
 fn default_epsilon() -> f64 {

@@ -84,5 +84,6 @@ pub fn program_campaign(
         paired_with: None,
         vehicle_noise: false,
         adaptive_search: None,
+        stage_tests: None,
     }
 }

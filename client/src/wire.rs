@@ -110,10 +110,12 @@ pub fn outside(spread: OutsideSpread) -> Outside {
 pub fn adaptive_settings(
     noisy: bool,
     search: tslg_api::AdaptiveSearch,
+    stage_tests: u64,
 ) -> tslg_method::adaptive::AdaptiveSettings {
     tslg_method::adaptive::AdaptiveSettings {
         noisy,
         lattice: search == tslg_api::AdaptiveSearch::Lattice,
+        stage_tests,
         ..Default::default()
     }
 }

@@ -130,6 +130,7 @@ async fn drive(
         paired_with: None,
         vehicle_noise: false,
         adaptive_search: None,
+        stage_tests: None,
     };
     // The service runs adaptive campaigns of grid cases; a sequential
     // case's probes the vehicle from grid states, which it cannot lease

@@ -279,7 +279,11 @@ fn run_campaign(
                 file,
                 vut,
                 args.exploration.epsilon,
-                tslg_client::wire::adaptive_settings(false, search.wire()),
+                tslg_client::wire::adaptive_settings(
+                    false,
+                    search.wire(),
+                    tslg_method::adaptive::AdaptiveSettings::default().stage_tests,
+                ),
                 rule,
                 args.seed,
             )?;

@@ -368,6 +368,7 @@ fn load_campaign(shape: &Shape) -> CreateCampaign {
         paired_with: None,
         vehicle_noise: false,
         adaptive_search: None,
+        stage_tests: None,
         outside: None,
         split: None,
     }

@@ -18,6 +18,15 @@ use tslg_method::registry::{AdaptiveRun, BuildRequest, ExposureSource, LibrarySe
 /// The same adaptive campaign in this process, on the IDM's exhaustive
 /// library of the built-in cut-in.
 fn adaptive_in_process(request: &CreateCampaign, vut: &str) -> AdaptiveRun {
+    adaptive_in_process_with(request, vut, AdaptiveSettings::default())
+}
+
+/// [`adaptive_in_process`] with `settings`.
+fn adaptive_in_process_with(
+    request: &CreateCampaign,
+    vut: &str,
+    settings: AdaptiveSettings,
+) -> AdaptiveRun {
     let case = open_case("cut-in", None, &ExposureSource::Builtin).unwrap();
     let library = case
         .build_library(
@@ -41,7 +50,7 @@ fn adaptive_in_process(request: &CreateCampaign, vut: &str) -> AdaptiveRun {
         &library.file,
         &serde_json::json!({"model": vut}),
         request.epsilon,
-        AdaptiveSettings::default(),
+        settings,
         &rule,
         request.seed,
     )
@@ -406,6 +415,7 @@ async fn a_lattice_search_through_the_service_is_the_in_process_one_on_the_paper
         case: "highway-exit".into(),
         vut: serde_json::json!({"model": "mobil"}),
         adaptive_search: Some(tslg_api::AdaptiveSearch::Lattice),
+        stage_tests: None,
         ..campaign(Method::Adaptive, library.id, "mobil", 0.2, 5)
     };
     let case = open_case("highway-exit", Some("paper"), &ExposureSource::Builtin).unwrap();
@@ -449,6 +459,7 @@ async fn a_lattice_search_through_the_service_is_the_in_process_one_on_the_paper
     let plain = client
         .create_campaign(&CreateCampaign {
             adaptive_search: None,
+            stage_tests: None,
             max_tests: 100,
             ..request.clone()
         })
@@ -537,5 +548,83 @@ async fn a_campaign_whose_stages_cannot_be_planned_again_fails_with_the_reason()
         .await
         .unwrap();
         assert_eq!(active, 0, "{column}");
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_large_fleet_gets_stages_of_about_five_rounds_and_the_in_process_answer() {
+    // One worker of 32 threads: stages of 20 ⌈5 · 32/20⌉ = 160 tests, so
+    // that a stage keeps them busy; the campaign is the in-process one
+    // with that length, to the bit. A length given is kept; one for a
+    // method without stages, or not a multiple of 20, is refused.
+    let dir = scratch();
+    let server = ServerProcess::start(&dir.path().join("db.sqlite"), &[]);
+    let _worker = WorkerProcess::start(&server.url, 32, "wide");
+    let client = server.client();
+    let started = std::time::Instant::now();
+    while client.workers().await.unwrap().workers.is_empty() {
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "the worker seen"
+        );
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    let library = ready_library(&client, "idm", true).await;
+    let request = adaptive(library.id, serde_json::json!({"model": "fvdm"}), 3);
+    let id = client.create_campaign(&request).await.unwrap().id;
+    let view = finished(&client, id, Duration::from_secs(120)).await;
+    assert_eq!(view.status, CampaignStatus::Converged, "{view:?}");
+    assert_eq!(view.adaptive.as_ref().unwrap().stage_tests, 160, "{view:?}");
+    let settings = AdaptiveSettings {
+        stage_tests: 160,
+        ..AdaptiveSettings::default()
+    };
+    assert_same_adaptive(&view, &adaptive_in_process_with(&request, "fvdm", settings));
+    let stages = client.stages(id).await.unwrap().stages;
+    let estimates: Vec<u64> = stages
+        .iter()
+        .filter(|s| s.kind == "estimate")
+        .map(|s| s.end - s.start)
+        .collect();
+    assert!(!estimates.is_empty(), "{stages:?}");
+    let (last, full) = estimates.split_last().unwrap();
+    assert!(
+        full.iter().all(|&n| n == 160) && *last <= 160,
+        "{estimates:?}"
+    );
+
+    let given = client
+        .create_campaign(&CreateCampaign {
+            stage_tests: Some(200),
+            ..adaptive(library.id, serde_json::json!({"model": "fvdm"}), 4)
+        })
+        .await
+        .unwrap();
+    assert_eq!(given.adaptive.unwrap().stage_tests, 200);
+    for (request, reason) in [
+        (
+            CreateCampaign {
+                stage_tests: Some(200),
+                ..campaign(Method::Library, library.id, "fvdm", 0.2, 5)
+            },
+            "method `library` has no stages",
+        ),
+        (
+            CreateCampaign {
+                stage_tests: Some(110),
+                ..request.clone()
+            },
+            "stage_tests = 110 must be a multiple of 20 from 20 to 100000",
+        ),
+    ] {
+        let refused = client
+            .create_campaign(&request)
+            .await
+            .unwrap_err()
+            .to_string();
+        assert!(
+            refused.contains("422") && refused.contains(reason),
+            "{refused}"
+        );
     }
 }

@@ -32,6 +32,7 @@ fn request(method: Method, library_id: i64, vut: &str, seed: u64) -> CreateCampa
         split: None,
         vehicle_noise: false,
         adaptive_search: None,
+        stage_tests: None,
     }
 }
 

@@ -42,6 +42,7 @@ fn request(
         split: None,
         vehicle_noise: false,
         adaptive_search: None,
+        stage_tests: None,
     }
 }
 

@@ -141,6 +141,7 @@ async fn a_sumo_vehicle_is_a_surrogate_and_its_library_and_ndd_campaigns_agree()
         paired_with: None,
         vehicle_noise: false,
         adaptive_search: None,
+        stage_tests: None,
     };
     let mut views = Vec::new();
     for (method, seed) in [(Method::Library, 1), (Method::Ndd, 2)] {

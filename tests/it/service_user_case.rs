@@ -141,6 +141,7 @@ async fn a_user_defined_case_is_defined_listed_and_run_by_workers_offering_its_p
         paired_with: None,
         vehicle_noise: false,
         adaptive_search: None,
+        stage_tests: None,
     };
     let view = client.create_campaign(&request).await.unwrap();
     assert_eq!(
@@ -383,6 +384,7 @@ async fn a_program_surrogates_library_is_built_by_workers_and_is_the_offline_one
             paired_with: None,
             vehicle_noise: false,
             adaptive_search: None,
+            stage_tests: None,
         })
         .await
         .unwrap()

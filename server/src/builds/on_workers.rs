@@ -170,6 +170,7 @@ pub async fn insert_build(
         parameters_inert: None,
         vehicle_noise: false,
         adaptive_search: tslg_api::AdaptiveSearch::Grid,
+        stage_tests: crate::campaign::stage_size::DEFAULT_STAGE_TESTS,
         first_stage: None,
     };
     Ok(state

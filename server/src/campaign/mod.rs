@@ -6,6 +6,7 @@
 pub mod end;
 pub mod events;
 pub mod history;
+pub mod stage_size;
 pub mod start;
 pub mod tests_cache;
 pub mod timeline;

@@ -3,6 +3,7 @@
 //! (what a worker could not prepare is refused here, not leased forever),
 //! and the campaign stored `running`, or `pending` while its library builds.
 
+use super::stage_size;
 use crate::error::ServiceError;
 use crate::state::AppState;
 use crate::store::campaigns::{self, CampaignRow, NewCampaign};
@@ -89,6 +90,22 @@ pub fn rule_of(req: &CreateCampaign) -> Result<StoppingRule, ServiceError> {
              `{}` does not search: leave it out, or use method `adaptive`",
             req.method.as_str()
         )));
+    }
+    match req.stage_tests {
+        Some(_) if req.method != Method::Adaptive => {
+            return Err(bad(format!(
+                "stage_tests sets the length of an adaptive campaign's estimation stages; \
+                 method `{}` has no stages: leave it out, or use method `adaptive`",
+                req.method.as_str()
+            )))
+        }
+        Some(tests) if !stage_size::valid(tests) => {
+            return Err(bad(format!(
+                "stage_tests = {tests} must be a multiple of 20 from 20 to {}",
+                stage_size::MAX_STAGE_TESTS
+            )))
+        }
+        _ => {}
     }
     if req.paired_with.is_some() && !matches!(req.method, Method::Library | Method::Ndd) {
         return Err(bad(format!(
@@ -214,7 +231,11 @@ fn open(
             file,
             &vut,
             req.epsilon,
-            wire::adaptive_settings(req.vehicle_noise, req.adaptive_search.unwrap_or_default()),
+            wire::adaptive_settings(
+                req.vehicle_noise,
+                req.adaptive_search.unwrap_or_default(),
+                req.stage_tests.unwrap_or(stage_size::DEFAULT_STAGE_TESTS),
+            ),
             rule,
             req.seed,
         )?),
@@ -252,6 +273,21 @@ fn open(
 /// (`paired_with`), both of its campaigns, linked, and answers vehicle a's.
 pub async fn start(state: &AppState, req: CreateCampaign) -> Result<CampaignRow, ServiceError> {
     let rule = rule_of(&req)?;
+    // An adaptive campaign's stages keep the fleet that offers its vehicle
+    // busy ([`stage_size`]), unless the request fixes their length.
+    let req = match (req.method, req.stage_tests) {
+        (Method::Adaptive, None) => {
+            let requires = ExternalVut::from_spec(&tslg_api::vehicle_spec(&req.vut))
+                .and_then(Result::ok)
+                .map(|e| e.requirement(&req.case));
+            let threads = state.workers.fleet().serving(requires.as_deref());
+            CreateCampaign {
+                stage_tests: Some(stage_size::for_fleet(threads)),
+                ..req
+            }
+        }
+        _ => req,
+    };
     let library = library_of(state, &req).await?;
     let exposure = library.as_ref().map_or(ExposureSource::Builtin, |lib| {
         wire::stored_exposure(&lib.exposure_name, lib.exposure_table.as_ref())
@@ -381,6 +417,7 @@ fn new_campaign(
         // A built-in vehicle of a pair stays exactly replayed.
         vehicle_noise: req.vehicle_noise && external,
         adaptive_search: req.adaptive_search.unwrap_or_default(),
+        stage_tests: req.stage_tests.unwrap_or(stage_size::DEFAULT_STAGE_TESTS),
         first_stage: (req.method == Method::Adaptive).then(|| {
             (
                 0,

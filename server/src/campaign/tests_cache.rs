@@ -180,7 +180,11 @@ fn build(row: &CampaignRow, file: Option<&[u8]>) -> anyhow::Result<Arc<dyn Campa
             file,
             &vut,
             row.epsilon,
-            tslg_client::wire::adaptive_settings(row.vehicle_noise, row.adaptive_search),
+            tslg_client::wire::adaptive_settings(
+                row.vehicle_noise,
+                row.adaptive_search,
+                row.stage_tests.max(0) as u64,
+            ),
             &row.rule(),
             row.seed(),
         )?);

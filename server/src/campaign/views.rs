@@ -160,6 +160,7 @@ pub fn campaign_view(row: &CampaignRow) -> CampaignView {
             },
             support: row.support as u64,
             search: row.adaptive_search,
+            stage_tests: row.stage_tests.max(0) as u64,
         }),
         warnings: if row.tests > 1 {
             let found = warnings(

@@ -117,6 +117,7 @@ pub fn lease_limit(row: &CampaignRow, frontier: Option<u64>) -> u64 {
     };
     limit(&LimitInput {
         method: row.method,
+        guard_outside: rule.guard_outside,
         max_tests: row.max_tests.max(0) as u64,
         stage,
         n_min: rule.n_min,
@@ -138,6 +139,9 @@ pub fn lease_limit(row: &CampaignRow, frontier: Option<u64>) -> u64 {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LimitInput {
     pub method: Method,
+    /// The campaign runs under the guard: an adaptive one reads its rule
+    /// and guard at a stage's end only.
+    pub guard_outside: bool,
     pub max_tests: u64,
     /// An adaptive campaign's running stage.
     pub stage: Option<RunningStage>,
@@ -211,7 +215,10 @@ fn stage_limit(input: &LimitInput) -> u64 {
         return 0;
     };
     let end = stage.end.min(input.max_tests);
-    if !stage.estimation {
+    // A guarded campaign's stage is run whole (its rule and guard are read
+    // at the stage's end), so it is leased whole: leased an eighth at a
+    // time, a stage of 640 tests of 1 s kept 80 of 128 workers busy.
+    if !stage.estimation || input.guard_outside {
         return end;
     }
     let before = input.resolved;
@@ -382,6 +389,7 @@ mod tests {
     fn campaign() -> LimitInput {
         LimitInput {
             method: Method::Ndd,
+            guard_outside: false,
             max_tests: 10_000_000,
             stage: None,
             n_min: 100,
@@ -513,6 +521,12 @@ mod tests {
         assert_eq!(limit(&first(697)), 727);
         assert_eq!(limit(&first(727)), 767);
         assert_eq!(limit(&first(760)), 767);
+        // Under the guard the stage runs whole, and is leased whole.
+        let guarded = LimitInput {
+            guard_outside: true,
+            ..first(667)
+        };
+        assert_eq!(limit(&guarded), 767);
         assert_eq!(
             limit(&LimitInput {
                 method: Method::Enumerate,

@@ -103,6 +103,8 @@ pub struct CampaignRow {
     pub explore_from: Option<i64>,
     /// How an adaptive campaign searches (`grid`, `lattice`).
     pub adaptive_search: AdaptiveSearch,
+    /// An adaptive campaign's estimation stages' length.
+    pub stage_tests: i64,
     pub created_at: String,
     pub updated_at: String,
 }
@@ -122,7 +124,7 @@ pub const COLUMNS: &str = "id, case_name, preset, \
     cost_per_test, worker_seconds, audits_waived, reported_s1, exact_probability, \
     stage_start, stage_end, stage_kind, library_tests, search_tests, stages, support, paired_with, created_at, \
     updated_at, vehicle_noise, interval, sequence_low, sequence_high, explore_from, outside_s2, parameters_inert, \
-    adaptive_search";
+    adaptive_search, stage_tests";
 
 impl CampaignRow {
     pub fn seed(&self) -> u64 {
@@ -311,12 +313,13 @@ fn from_row(row: &Row<'_>) -> rusqlite::Result<CampaignRow> {
         outside_s2: at(row, 56)?,
         parameters_inert: at(row, 57)?,
         adaptive_search: named(row, 58)?,
+        stage_tests: at(row, 59)?,
     })
 }
 
 /// The number of columns [`from_row`] reads.
 #[cfg(test)]
-const READ: usize = 59;
+const READ: usize = 60;
 
 #[cfg(test)]
 mod tests {

@@ -37,6 +37,9 @@ pub struct NewCampaign {
     pub vehicle_noise: bool,
     /// How an adaptive campaign searches (`grid` for the others).
     pub adaptive_search: AdaptiveSearch,
+    /// An adaptive campaign's estimation stages' length (100 for the
+    /// others).
+    pub stage_tests: u64,
     /// An adaptive campaign's first stage: its tests `start..end` and kind.
     pub first_stage: Option<(u64, u64, &'static str)>,
 }
@@ -47,8 +50,8 @@ pub fn insert(conn: &Connection, new: &NewCampaign) -> Result<CampaignRow, Store
          exposure_fingerprint, exposure_table, vut, requires, epsilon, outside, beta, confidence, \
          n_min, min_events, max_tests, seed, status, guard_outside, exact_probability, split, \
          adaptive, stage_start, stage_end, stage_kind, enumerate, cost_per_test, vehicle_noise, \
-         interval, outside_s2, parameters_inert, adaptive_search) \
-         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, 0, ?, ?) \
+         interval, outside_s2, parameters_inert, adaptive_search, stage_tests) \
+         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, 0, ?, ?, ?) \
          RETURNING {COLUMNS}"
     );
     let adaptive = new.method == Method::Adaptive;
@@ -109,6 +112,7 @@ pub fn insert(conn: &Connection, new: &NewCampaign) -> Result<CampaignRow, Store
             new.rule.interval.name(),
             new.parameters_inert,
             new.adaptive_search.as_str(),
+            new.stage_tests as i64,
         ],
     )?)
 }

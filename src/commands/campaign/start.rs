@@ -55,6 +55,11 @@ pub struct CampaignStartArgs {
     /// a block; docs/adaptive-design.md, "Fine grids").
     #[arg(long, value_enum)]
     pub adaptive_search: Option<AdaptiveSearchArg>,
+    /// Tests of an adaptive campaign's estimation stages (a multiple of 20,
+    /// 20 to 100000); by default 100, or about five rounds of the live
+    /// workers offering its vehicle when they have more than 20 threads.
+    #[arg(long)]
+    pub stage_tests: Option<u64>,
     /// Wait until the campaign stops, showing progress.
     #[arg(long)]
     pub wait: bool,
@@ -113,6 +118,7 @@ pub fn start(args: &CampaignStartArgs) -> anyhow::Result<()> {
             args.method == MethodArg::Adaptive,
         )?
         .map(AdaptiveSearchArg::wire),
+        stage_tests: args.stage_tests,
     };
     if let Some(limit) = args.fail_above {
         gate::check_limit(limit)?;

@@ -248,6 +248,7 @@ impl Vehicle<'_> {
             paired_with: None,
             vehicle_noise: false,
             adaptive_search: None,
+            stage_tests: None,
         }
     }
 
@@ -351,6 +352,7 @@ impl Vehicle<'_> {
             for k in 0..replicates {
                 let request = CreateCampaign {
                     adaptive_search: Some(AdaptiveSearch::Lattice),
+                    stage_tests: None,
                     ..self.request(Method::Adaptive, self.seed + k)
                 };
                 ids.push(client.create_campaign(&request).await?.id);

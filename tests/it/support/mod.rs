@@ -387,6 +387,7 @@ pub fn campaign(
         paired_with: None,
         vehicle_noise: false,
         adaptive_search: None,
+        stage_tests: None,
     }
 }
 
