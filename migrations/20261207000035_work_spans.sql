@@ -14,7 +14,7 @@ CREATE TABLE work_spans (
     leased_at   INTEGER NOT NULL,
     reported_at INTEGER NOT NULL
 );
-CREATE INDEX work_spans_by_campaign ON work_spans (campaign_id, lease_id, from_index);
+CREATE INDEX work_spans_by_campaign ON work_spans (campaign_id, lease_id, leased_at, from_index);
 ALTER TABLE history ADD COLUMN folded_at INTEGER;
 -- An adaptive campaign's estimation stages' length, chosen at its creation
 -- (100 before this column, and by default for a fleet of up to 20 threads).

@@ -146,7 +146,7 @@ pub struct CreateCampaign {
     /// Tests of an adaptive campaign's estimation stages: a multiple of 20,
     /// from 20 to 100,000. By default 100, or, when the live workers that
     /// offer its vehicle have more than 20 threads `T` at its creation,
-    /// `20 ⌈5 T / 20⌉`: about five rounds of them, so that a stage keeps
+    /// `20 ⌈5 T / 20⌉` (at most 2,000): about five rounds of them, so that a stage keeps
     /// them busy (an adaptive campaign plans each stage from the results
     /// of the one before). Refused for other methods.
     #[serde(default, skip_serializing_if = "Option::is_none")]

@@ -130,7 +130,9 @@ async fn drive(
         paired_with: None,
         vehicle_noise: false,
         adaptive_search: None,
-        stage_tests: None,
+        // The demo's numbers are those of stages of 100 on any machine.
+        stage_tests: (method == tslg_api::Method::Adaptive)
+            .then_some(tslg_method::adaptive::AdaptiveSettings::default().stage_tests),
     };
     // The service runs adaptive campaigns of grid cases; a sequential
     // case's probes the vehicle from grid states, which it cannot lease

@@ -40,6 +40,10 @@ pub struct EvaluateArgs {
     /// support; docs/adaptive-design.md, "Fine grids").
     #[arg(long, value_enum)]
     pub adaptive_search: Option<AdaptiveSearchArg>,
+    /// Tests of an adaptive campaign's estimation stages (a multiple of 20,
+    /// 20 to 100000): a service campaign's `stage_tests`, to replay it.
+    #[arg(long, default_value_t = 100)]
+    pub stage_tests: u64,
     #[command(flatten)]
     pub exploration: ExplorationArgs,
     #[command(flatten)]
@@ -231,6 +235,11 @@ fn set_up(args: &EvaluateArgs) -> anyhow::Result<Setup> {
          that holds at every n"
     );
     anyhow::ensure!(
+        args.stage_tests == 100 || (args.method == MethodArg::Adaptive && descriptor.is_grid()),
+        "--stage-tests sets the length of a grid case's adaptive estimation stages; use it with \
+         --method adaptive on cut-in or highway-exit"
+    );
+    anyhow::ensure!(
         args.adaptive_search.is_none() || descriptor.is_grid(),
         "--adaptive-search applies to the grid cases: a {} adaptive campaign probes states \
          from its policy, not neighbours on a grid",
@@ -279,11 +288,7 @@ fn run_campaign(
                 file,
                 vut,
                 args.exploration.epsilon,
-                tslg_client::wire::adaptive_settings(
-                    false,
-                    search.wire(),
-                    tslg_method::adaptive::AdaptiveSettings::default().stage_tests,
-                ),
+                tslg_client::wire::adaptive_settings(false, search.wire(), args.stage_tests),
                 rule,
                 args.seed,
             )?;

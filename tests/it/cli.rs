@@ -688,6 +688,18 @@ fn bad_input_gets_a_message_and_a_non_zero_exit() {
                 "ndd".into(),
                 "--vut".into(),
                 "idm".into(),
+                "--stage-tests".into(),
+                "200".into(),
+            ],
+            "--stage-tests sets the length of a grid case's adaptive estimation stages",
+        ),
+        (
+            vec![
+                "evaluate".into(),
+                "--method".into(),
+                "ndd".into(),
+                "--vut".into(),
+                "idm".into(),
                 "--beta".into(),
                 "1.5".into(),
             ],

@@ -137,7 +137,7 @@ fn coverage(case: &CutIn, surrogate: &str, vut: &str, runs: u64) -> Coverage {
     let lib = library(case, surrogate, SearchMethod::Exhaustive);
     let q = paper_q(case, &lib, 0.1);
     let rule = StoppingRule::new(0.2, 1_000_000);
-    let exact = exact_report(case, &vehicle(vut), &q, rule.beta, rule.z());
+    let exact = exact_report(case, &vehicle(vut), &q, rule.beta, rule.confidence);
     let distribution = TestDistribution::library(q);
     let mut covered = 0;
     let mut tests = Vec::new();
@@ -286,7 +286,7 @@ fn the_epsilon_greedy_split_makes_a_matched_pairs_coverage_ride_a_lattice() {
     ];
     for (epsilon, n, coverage) in measured {
         let q = paper_q(&case, &lib, epsilon);
-        let truth = exact_report(&case, &idm, &q, 0.2, z).probability;
+        let truth = exact_report(&case, &idm, &q, 0.2, 0.9).probability;
         assert!(
             (truth - lib.w).abs() < 1e-12 * lib.w,
             "{truth} against W {}",

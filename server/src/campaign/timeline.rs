@@ -10,7 +10,14 @@
 //! workers that ran any of it: 1 when every one of them held its work all
 //! the time, lower when they waited for leases, for audits of others or
 //! for a stage's last test. Each bucket's `busy_workers` is the time its
-//! spans overlap it over its length.
+//! spans overlap it over its length. A worker counts as busy while it holds
+//! a piece of the campaign's work, whatever its threads.
+//!
+//! What it cannot show: work taken back from a flagged worker stays (it
+//! was worker time), so `reported_tests` can add up to more than the
+//! campaign's indices; and a history cut back (a guarded campaign's
+//! estimate starting again, a flagged worker's results taken back) loses
+//! the folds before the cut, so `folded` reads from the new start.
 
 use crate::store::work_spans::WorkSpan;
 use tslg_api::{CampaignTimeline, TimelineBucket};
@@ -81,11 +88,18 @@ pub fn timeline(
             out[last].reported_tests += (span.to_index - span.from_index) as u64;
         }
     }
+    let last = out.len().saturating_sub(1);
     for (k, bucket) in out.iter_mut().enumerate() {
-        let at = start as f64 + (k + 1) as f64 * width;
+        // The fold of a report is written just after it, so the last
+        // bucket holds every fold: the prefix as it stands.
+        let at = if k == last {
+            i64::MAX
+        } else {
+            start + (end - start) * (k as i64 + 1) / i64::from(count)
+        };
         bucket.folded = folds
             .iter()
-            .filter(|&&(_, folded_at)| folded_at as f64 <= at)
+            .filter(|&&(_, folded_at)| folded_at <= at)
             .map(|&(indices, _)| indices.max(0) as u64)
             .max()
             .unwrap_or(0);

@@ -248,7 +248,10 @@ impl Vehicle<'_> {
             paired_with: None,
             vehicle_noise: false,
             adaptive_search: None,
-            stage_tests: None,
+            // The documented numbers are those of stages of 100, whatever
+            // the cores of the machine that reproduces them.
+            stage_tests: (method == Method::Adaptive)
+                .then_some(tslg_method::adaptive::AdaptiveSettings::default().stage_tests),
         }
     }
 
@@ -352,7 +355,6 @@ impl Vehicle<'_> {
             for k in 0..replicates {
                 let request = CreateCampaign {
                     adaptive_search: Some(AdaptiveSearch::Lattice),
-                    stage_tests: None,
                     ..self.request(Method::Adaptive, self.seed + k)
                 };
                 ids.push(client.create_campaign(&request).await?.id);
