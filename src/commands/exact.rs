@@ -189,16 +189,16 @@ fn print_table(case: &dyn ScenarioCase, args: &ExactArgs) -> anyhow::Result<()> 
                 descriptor.name
             );
         };
+        let ndd = tslg_method::exact::expected_ndd_tests(table.probability, args.beta, z);
         outln!(
             "{:<14} {:>12.4e} {:>14} {:>14.0} {:>10}",
             table.name,
             table.probability,
             "–",
-            tslg_method::exact::expected_ndd_tests(table.probability, args.beta, z),
+            ndd,
             "–"
         );
         let exposures = case.cell_exposures()?;
-        let ndd = tslg_method::exact::expected_ndd_tests(table.probability, args.beta, z);
         if table.noisy() {
             let floors =
                 GuardFloors::of(&table.cell_rates(&exposures), args.beta, z, args.confidence);

@@ -287,15 +287,19 @@ async fn the_timeline_shows_where_a_slow_program_s_campaign_spent_its_time() {
     assert!(busiest <= 3.0 + 1e-9, "{t:?}");
 
     // The CLI's table, and a bad bucket count refused with the reason.
-    let out = tslg(&[
-        "campaign",
-        "timeline",
-        &id.to_string(),
-        "--server",
-        &server.url,
-        "--buckets",
-        "5",
-    ]);
+    let id = id.to_string();
+    let timeline = |buckets| {
+        tslg(&[
+            "campaign",
+            "timeline",
+            &id,
+            "--server",
+            &server.url,
+            "--buckets",
+            buckets,
+        ])
+    };
+    let out = timeline("5");
     assert!(
         out.status.success(),
         "{}",
@@ -308,15 +312,7 @@ async fn the_timeline_shows_where_a_slow_program_s_campaign_spent_its_time() {
         5,
         "{text}"
     );
-    let refused = tslg(&[
-        "campaign",
-        "timeline",
-        &id.to_string(),
-        "--server",
-        &server.url,
-        "--buckets",
-        "0",
-    ]);
+    let refused = timeline("0");
     assert!(clean_refusal(&refused), "{refused:?}");
     assert!(
         String::from_utf8_lossy(&refused.stderr).contains("buckets = 0 must be in 1..=1000"),

@@ -277,9 +277,7 @@ pub async fn start(state: &AppState, req: CreateCampaign) -> Result<CampaignRow,
     // busy ([`stage_size`]), unless the request fixes their length.
     let req = match (req.method, req.stage_tests) {
         (Method::Adaptive, None) => {
-            let requires = ExternalVut::from_spec(&tslg_api::vehicle_spec(&req.vut))
-                .and_then(Result::ok)
-                .map(|e| e.requirement(&req.case));
+            let requires = requirement(&tslg_api::vehicle_spec(&req.vut), &req.case);
             let threads = state.workers.fleet().serving(requires.as_deref());
             CreateCampaign {
                 stage_tests: Some(stage_size::for_fleet(threads)),
@@ -383,6 +381,14 @@ pub async fn start(state: &AppState, req: CreateCampaign) -> Result<CampaignRow,
     Ok(rows.into_iter().next().expect("a campaign was inserted"))
 }
 
+/// What a worker must offer to run `vut` on `case` (`NAME:case:mode`); none
+/// for a built-in vehicle, which every worker runs.
+fn requirement(vut: &serde_json::Value, case: &str) -> Option<String> {
+    ExternalVut::from_spec(vut)
+        .and_then(Result::ok)
+        .map(|e| e.requirement(case))
+}
+
 /// The row to insert for `req`'s vehicle as `opened`.
 fn new_campaign(
     req: &CreateCampaign,
@@ -392,9 +398,7 @@ fn new_campaign(
     exposure_table: Option<String>,
 ) -> NewCampaign {
     // Only workers offering an external program get its tests.
-    let requires = ExternalVut::from_spec(&opened.vut)
-        .and_then(Result::ok)
-        .map(|e| e.requirement(opened.case.name()));
+    let requires = requirement(&opened.vut, opened.case.name());
     let external = requires.is_some();
     NewCampaign {
         case_name: opened.case.name().to_owned(),

@@ -88,11 +88,11 @@ pub fn timeline(
             out[last].reported_tests += (span.to_index - span.from_index) as u64;
         }
     }
-    let last = out.len().saturating_sub(1);
+    let final_bucket = out.len().saturating_sub(1);
     for (k, bucket) in out.iter_mut().enumerate() {
         // The fold of a report is written just after it, so the last
         // bucket holds every fold: the prefix as it stands.
-        let at = if k == last {
+        let at = if k == final_bucket {
             i64::MAX
         } else {
             start + (end - start) * (k as i64 + 1) / i64::from(count)
@@ -137,18 +137,15 @@ fn pieces(spans: &[WorkSpan]) -> Vec<(i64, i64, WorkSpan)> {
         previous = Some(span);
     }
     out.sort_by_key(|&(began, ended, span)| (span.worker, began, ended));
-    let mut held_until: Option<(u32, i64)> = None;
+    // Until when each worker, in turn, already held work.
+    let mut held: Option<(u32, i64)> = None;
     for piece in &mut out {
-        if let Some((worker, until)) = held_until {
-            if worker == piece.2.worker {
-                piece.0 = piece.0.max(until).min(piece.1);
-            }
-        }
-        let until = match held_until {
-            Some((worker, until)) if worker == piece.2.worker => until.max(piece.1),
-            _ => piece.1,
+        let until = match held {
+            Some((worker, until)) if worker == piece.2.worker => until,
+            _ => i64::MIN,
         };
-        held_until = Some((piece.2.worker, until));
+        piece.0 = piece.0.max(until).min(piece.1);
+        held = Some((piece.2.worker, until.max(piece.1)));
     }
     out
 }

@@ -222,16 +222,7 @@ fn record_audit_run_in(
         record_run(conn, &audit, &report.worker, &outcome)?
     };
     leases::finish(conn, lease.id)?;
-    crate::store::work_spans::insert(
-        conn,
-        campaign.id,
-        lease.id,
-        &report.worker,
-        true,
-        (start, end),
-        lease.claimed_at,
-        now_ms(),
-    )?;
+    crate::store::work_spans::insert(conn, &lease, true, (start, end))?;
     crate::store::standing::ran_audit(conn, &report.worker)?;
     if let Verdict::Liar { liar, detail } = &verdict {
         flag_worker(conn, liar, detail, campaign.id, start)?;

@@ -307,16 +307,7 @@ fn store_new_part(
     if campaign.method == Method::Adaptive {
         near_misses::insert(conn, campaign.id, &report.near_misses, new_from)?;
     }
-    work_spans::insert(
-        conn,
-        campaign.id,
-        lease.id,
-        &report.worker,
-        false,
-        (new_from, checked.to),
-        lease.claimed_at,
-        now_ms(),
-    )?;
+    work_spans::insert(conn, lease, false, (new_from, checked.to))?;
     let done = checked.to == lease.end_index as u64;
     let state = if done {
         LeaseState::Done

@@ -4,6 +4,7 @@
 
 use crate::db::sql;
 use crate::store::error::StoreError;
+use crate::store::leases::LeaseRow;
 use rusqlite::{params, Connection};
 use serde::Deserialize;
 
@@ -22,32 +23,27 @@ pub struct WorkSpan {
     pub reported_at: i64,
 }
 
-/// Stores a piece of work `from..to` of `lease_id`, reported now by
-/// `worker` on the attempt handed out at `leased_at`.
-#[allow(clippy::too_many_arguments)]
+/// Stores a piece of work `from..to` of `lease`, reported now by its
+/// holder on its current attempt (an audit run when `audit`).
 pub fn insert(
     conn: &Connection,
-    campaign: i64,
-    lease_id: i64,
-    worker: &str,
+    lease: &LeaseRow,
     audit: bool,
     (from, to): (u64, u64),
-    leased_at: i64,
-    reported_at: i64,
 ) -> Result<(), StoreError> {
     let mut statement = conn.prepare_cached(
         "INSERT INTO work_spans (campaign_id, lease_id, worker, audit, from_index, to_index, \
          leased_at, reported_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
     )?;
     statement.execute(params![
-        campaign,
-        lease_id,
-        worker,
+        lease.campaign_id,
+        lease.id,
+        lease.worker,
         audit,
         from as i64,
         to as i64,
-        leased_at,
-        reported_at
+        lease.claimed_at,
+        crate::db::now_ms()
     ])?;
     Ok(())
 }
