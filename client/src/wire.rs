@@ -105,8 +105,9 @@ pub fn outside(spread: OutsideSpread) -> Outside {
     }
 }
 
-/// An adaptive campaign's settings: the defaults, with the vehicle's noise
-/// and the search the request names.
+/// An adaptive campaign's settings: the defaults, with the vehicle's noise,
+/// the search the request names, and its stage length (which sets the
+/// search's width, [`tslg_method::adaptive::AdaptiveSettings::fleet_search_width`]).
 pub fn adaptive_settings(
     noisy: bool,
     search: tslg_api::AdaptiveSearch,
@@ -116,6 +117,7 @@ pub fn adaptive_settings(
         noisy,
         lattice: search == tslg_api::AdaptiveSearch::Lattice,
         stage_tests,
+        search_width: tslg_method::adaptive::AdaptiveSettings::fleet_search_width(stage_tests),
         ..Default::default()
     }
 }

@@ -93,6 +93,30 @@ pub struct AdaptiveSettings {
     /// between them (docs/adaptive-design.md, "Fine grids").
     #[serde(default)]
     pub lattice: bool,
+    /// A search stage of fewer cells than this is widened by the rings
+    /// around its cells, nearest first, up to this many: one round of a
+    /// large fleet tests what several one-ring searches would, in one
+    /// test's time instead of several. It changes which cells are
+    /// tested, never how an estimation stage is sampled or weighted, so
+    /// the estimate stays unbiased given the past; 0 searches one ring a
+    /// stage ([`Self::fleet_search_width`]).
+    #[serde(default)]
+    pub search_width: u64,
+}
+
+impl AdaptiveSettings {
+    /// The search width a stage length implies. A service campaign's
+    /// stages longer than 100 tests are sized for a fleet of
+    /// `stage_tests / 5` threads (`20⌈5T/20⌉`, docs/api.md), so its search
+    /// stages are widened to one round of that fleet; stages of at most
+    /// 100 tests (up to 20 threads, the default) search one ring a stage.
+    pub fn fleet_search_width(stage_tests: u64) -> u64 {
+        if stage_tests > 100 {
+            stage_tests / 5
+        } else {
+            0
+        }
+    }
 }
 
 impl Default for AdaptiveSettings {
@@ -109,6 +133,7 @@ impl Default for AdaptiveSettings {
             stage_tests: 100,
             noisy: false,
             lattice: false,
+            search_width: 0,
         }
     }
 }
@@ -553,6 +578,33 @@ impl<'a, C: Case> Planner<'a, C> {
             .copied()
             .filter(|&n| knowledge.criticality[n].is_none() && block_mass(n) > floor)
             .collect();
+        let width = self.settings.search_width as usize;
+        if !frontier.is_empty() && frontier.len() < width {
+            // Rings around the frontier, nearest first and each in cell
+            // order, until the stage holds `width` cells: what the next
+            // searches would test if the frontier failed, tested now by
+            // threads that would otherwise wait (`search_width`).
+            let mut taken: std::collections::HashSet<usize> = frontier.iter().copied().collect();
+            let mut ring = frontier.clone();
+            while frontier.len() < width && !ring.is_empty() {
+                let mut next: Vec<usize> = Vec::new();
+                for &c in &ring {
+                    for n in self.lattice.neighbours(self.case.grid(), c) {
+                        if knowledge.criticality[n].is_none()
+                            && (self.lattice.stride() > 1 || !self.in_library[n])
+                            && block_mass(n) > floor
+                            && taken.insert(n)
+                        {
+                            next.push(n);
+                        }
+                    }
+                }
+                next.sort_unstable();
+                next.truncate(width - frontier.len());
+                frontier.extend_from_slice(&next);
+                ring = next;
+            }
+        }
         frontier.sort_unstable();
         frontier
     }
@@ -1095,6 +1147,17 @@ mod tests {
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
+    /// The IDM's exhaustive library on `case`.
+    fn idm_library(case: &CutIn) -> Library {
+        let idm = VehicleModel::builtin("idm").unwrap();
+        let request = LibraryRequest {
+            threshold: Threshold::default(),
+            search: SearchMethod::Exhaustive,
+        };
+        let spec = serde_json::to_value(idm).unwrap();
+        build_library(case, &idm, spec, "paper-code", &request)
+    }
+
     /// The frontier by scanning every tested cell's neighbourhood afresh.
     fn frontier_by_scan<C: Case>(planner: &Planner<'_, C>, knowledge: &Knowledge) -> Vec<usize> {
         let exposure = planner.case.exposure();
@@ -1120,13 +1183,7 @@ mod tests {
     #[test]
     fn the_kept_frontier_and_support_are_the_scanned_ones_after_every_observation() {
         let case = CutIn::builtin(CutInPreset::PaperCode);
-        let idm = VehicleModel::builtin("idm").unwrap();
-        let request = LibraryRequest {
-            threshold: Threshold::default(),
-            search: SearchMethod::Exhaustive,
-        };
-        let spec = serde_json::to_value(idm).unwrap();
-        let library = build_library(&case, &idm, spec, "paper-code", &request);
+        let library = idm_library(&case);
         let planner = Planner::new(&case, &library, 0.1, AdaptiveSettings::default()).unwrap();
         let mut rng = ChaCha8Rng::seed_from_u64(5);
         for _ in 0..5 {
@@ -1162,5 +1219,85 @@ mod tests {
             }
             assert!(!knowledge.failures().is_empty());
         }
+    }
+
+    /// The widened frontier by distances: the one-ring frontier at 0, then
+    /// cells reached through untested, searchable cells at 1, 2, …, taken
+    /// by distance then cell until `width`.
+    fn widened_by_distance<C: Case>(
+        planner: &Planner<'_, C>,
+        knowledge: &Knowledge,
+        width: usize,
+    ) -> Vec<usize> {
+        let narrow = frontier_by_scan(planner, knowledge);
+        if narrow.is_empty() || narrow.len() >= width {
+            return narrow;
+        }
+        let exposure = planner.case.exposure();
+        let found: f64 = knowledge.failures.iter().map(|&c| exposure.p(c)).sum();
+        let floor = planner.settings.exposure_floor * found;
+        let grid = planner.case.grid();
+        let mut distance: Vec<Option<usize>> = vec![None; grid.len()];
+        let mut queue = std::collections::VecDeque::new();
+        for &c in &narrow {
+            distance[c] = Some(0);
+            queue.push_back(c);
+        }
+        while let Some(c) = queue.pop_front() {
+            for n in grid.neighbours(c) {
+                if distance[n].is_none()
+                    && knowledge.criticality[n].is_none()
+                    && !planner.in_library[n]
+                    && exposure.p(n) > floor
+                {
+                    distance[n] = Some(distance[c].unwrap() + 1);
+                    queue.push_back(n);
+                }
+            }
+        }
+        let mut reached: Vec<(usize, usize)> = (0..grid.len())
+            .filter_map(|c| distance[c].map(|d| (d, c)))
+            .collect();
+        reached.sort_unstable();
+        let mut cells: Vec<usize> = reached.into_iter().take(width).map(|(_, c)| c).collect();
+        cells.sort_unstable();
+        cells
+    }
+
+    #[test]
+    fn a_widened_search_takes_the_nearest_rings_around_the_frontier_up_to_its_width() {
+        let case = CutIn::builtin(CutInPreset::PaperCode);
+        let library = idm_library(&case);
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let mut widened_somewhere = 0;
+        for width in [0, 1, 7, 40, 128] {
+            let settings = AdaptiveSettings {
+                search_width: width,
+                ..AdaptiveSettings::default()
+            };
+            let planner = Planner::new(&case, &library, 0.1, settings).unwrap();
+            let mut knowledge = planner.knowledge();
+            for _ in 0..300 {
+                let cell = rng.random_range(0..case.grid().len());
+                let o = Observation {
+                    cell,
+                    event: rng.random::<f64>() < 0.3,
+                    criticality: rng.random::<f64>() * 0.3,
+                };
+                planner.observe(&mut knowledge, &o);
+                let narrow = frontier_by_scan(&planner, &knowledge);
+                let widened = planner.frontier(&knowledge);
+                assert_eq!(
+                    widened,
+                    widened_by_distance(&planner, &knowledge, width as usize)
+                );
+                assert!(narrow.iter().all(|c| widened.binary_search(c).is_ok()));
+                if widened.len() > narrow.len() {
+                    widened_somewhere += 1;
+                    assert!(widened.len() <= width as usize);
+                }
+            }
+        }
+        assert!(widened_somewhere > 50, "widened {widened_somewhere} times");
     }
 }

@@ -81,6 +81,12 @@ pub struct ValidateArgs {
     /// interval and are skipped.
     #[arg(long, value_delimiter = ',', default_values_t = [Interval::Wald])]
     pub interval: Vec<Interval>,
+    /// Tests of each adaptive campaign's estimation stages, as a service
+    /// campaign's `stage_tests` on a fleet (a multiple of 20, 20 to
+    /// 100000; above 100 the search is widened to stage_tests / 5 cells
+    /// a stage, docs/statistics.md, "Stage length").
+    #[arg(long, default_value_t = 100)]
+    pub stage_tests: u64,
     /// A quick run: 50 replicates (unless given) and highway-exit's coarse preset.
     #[arg(long)]
     pub quick: bool,
@@ -163,9 +169,12 @@ impl ValidateMethod {
         }
     }
 
-    /// The settings of its adaptive campaigns.
-    fn settings(self) -> AdaptiveSettings {
+    /// The settings of its adaptive campaigns, with estimation stages of
+    /// `stage_tests` and the search width they imply.
+    fn settings(self, stage_tests: u64) -> AdaptiveSettings {
         AdaptiveSettings {
+            stage_tests,
+            search_width: AdaptiveSettings::fleet_search_width(stage_tests),
             lattice: matches!(
                 self,
                 ValidateMethod::AdaptiveLattice | ValidateMethod::AdaptiveLatticeGuarded
@@ -227,6 +236,8 @@ struct Setup {
     truth: f64,
     /// The vehicle's runs of one scenario may differ.
     noisy: bool,
+    /// An adaptive campaign's estimation stage length (`--stage-tests`).
+    stage_tests: u64,
 }
 
 /// What a campaign's answer depends on ([`tslg_method::campaign::answer`]).
@@ -298,7 +309,7 @@ impl Setup {
                     self.case.as_ref(),
                     &self.library,
                     table,
-                    (self.epsilon, self.method.settings()),
+                    (self.epsilon, self.method.settings(self.stage_tests)),
                     &self.rule,
                     seed,
                 )?
@@ -310,7 +321,7 @@ impl Setup {
                         &self.library,
                         &self.vut_spec(),
                         self.epsilon,
-                        self.method.settings(),
+                        self.method.settings(self.stage_tests),
                         &self.rule,
                         seed,
                     )?
@@ -428,6 +439,11 @@ impl Row {
 pub fn run(args: &ValidateArgs) -> anyhow::Result<()> {
     let replicates = args.replicates.unwrap_or(if args.quick { 50 } else { 200 });
     anyhow::ensure!(replicates >= 2, "--replicates must be at least 2");
+    anyhow::ensure!(
+        (20..=100_000).contains(&args.stage_tests) && args.stage_tests.is_multiple_of(20),
+        "--stage-tests must be a multiple of 20 from 20 to 100000, not {}",
+        args.stage_tests
+    );
     if let Some(dir) = &args.out {
         let names: &[&str] = if args.curve_to.is_some() {
             &["curve.md", "curve.csv"]
@@ -649,6 +665,7 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
                         rule,
                         truth,
                         noisy,
+                        stage_tests: args.stage_tests,
                     });
                 }
             }

@@ -1264,6 +1264,60 @@ fn the_coordinator_address_is_not_shown_as_required() {
     }
 }
 
+/// `tslg validate --stage-tests`: adaptive campaigns with a fleet's stage
+/// length, whose search is widened to `stage_tests / 5` cells, still cover
+/// and cost what the widened search tests; a length that is no multiple
+/// of 20 is refused before anything runs.
+#[test]
+fn validate_runs_adaptive_campaigns_at_a_fleet_s_stage_length() {
+    let medians = |stage_tests: &str| -> Vec<(String, f64, u64)> {
+        let dir = tempfile::tempdir().unwrap();
+        let out = tslg(&[
+            "validate",
+            "--cases",
+            "cut-in",
+            "--methods",
+            "adaptive",
+            "--replicates",
+            "20",
+            "--stage-tests",
+            stage_tests,
+            "--out",
+            dir.path().to_str().unwrap(),
+        ]);
+        assert!(out.status.success(), "{}", stderr(&out));
+        let csv = std::fs::read_to_string(dir.path().join("methods.csv")).unwrap();
+        csv.lines()
+            .skip(1)
+            .map(|l| {
+                let c: Vec<&str> = l.split(',').collect();
+                (
+                    format!("{} → {}", c[2], c[3]),
+                    c[6].parse().unwrap(),
+                    c[7].parse().unwrap(),
+                )
+            })
+            .collect()
+    };
+    let (one_ring, widened) = (medians("100"), medians("640"));
+    assert_eq!(one_ring.len(), 6, "{one_ring:?}");
+    for ((pairing, _, tests), (same, coverage, wider)) in one_ring.iter().zip(&widened) {
+        assert_eq!(pairing, same);
+        assert!(*coverage >= floor_of_20(), "{pairing}: {coverage}");
+        // The rings around each search stage are tested too (statistics.md:
+        // 1.2 to 1.9 times the tests at 200 seeds).
+        assert!(wider > tests, "{pairing}: {wider} against {tests}");
+    }
+    let refused = tslg(&["validate", "--quick", "--stage-tests", "110"]);
+    assert!(clean_refusal(&refused));
+    assert!(
+        stderr(&refused)
+            .contains("--stage-tests must be a multiple of 20 from 20 to 100000, not 110"),
+        "{}",
+        stderr(&refused)
+    );
+}
+
 /// Numeric flags take a leading minus, so that the range check says what
 /// the range is (clap alone said "unexpected argument '-0' found").
 #[test]

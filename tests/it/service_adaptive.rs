@@ -554,7 +554,8 @@ async fn a_campaign_whose_stages_cannot_be_planned_again_fails_with_the_reason()
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_large_fleet_gets_stages_of_about_five_rounds_and_the_in_process_answer() {
     // One worker of 32 threads: stages of 20 ⌈5 · 32/20⌉ = 160 tests, so
-    // that a stage keeps them busy; the campaign is the in-process one
+    // that a stage keeps them busy, and searches of at least 32 cells a
+    // stage where the rings reach that far; the campaign is the in-process one
     // with that length, to the bit. A length given is kept; one for a
     // method without stages, or not a multiple of 20, is refused.
     let dir = scratch();
@@ -575,10 +576,13 @@ async fn a_large_fleet_gets_stages_of_about_five_rounds_and_the_in_process_answe
     let view = finished(&client, id, Duration::from_secs(120)).await;
     assert_eq!(view.status, CampaignStatus::Converged, "{view:?}");
     assert_eq!(view.adaptive.as_ref().unwrap().stage_tests, 160, "{view:?}");
+    // Its search is widened to a round of the fleet it was sized for.
     let settings = AdaptiveSettings {
         stage_tests: 160,
+        search_width: AdaptiveSettings::fleet_search_width(160),
         ..AdaptiveSettings::default()
     };
+    assert_eq!(settings.search_width, 32);
     assert_same_adaptive(&view, &adaptive_in_process_with(&request, "fvdm", settings));
     let stages = client.stages(id).await.unwrap().stages;
     let estimates: Vec<u64> = stages

@@ -83,6 +83,20 @@ fn seeded_runs_under(
 static COVERAGE: std::sync::LazyLock<CoverageCheck> =
     std::sync::LazyLock::new(|| CoverageCheck::new(200, 0.9, 0.01));
 
+/// The exposure of the failing cells (`events`) in a campaign's last
+/// estimation support.
+fn failure_mass_held(
+    case: &CutIn,
+    events: &std::collections::HashSet<usize>,
+    r: &AdaptiveResult,
+) -> f64 {
+    r.support
+        .iter()
+        .filter(|c| events.contains(c))
+        .map(|&c| case.exposure().p(c))
+        .sum()
+}
+
 fn median_tests(runs: &[AdaptiveResult]) -> f64 {
     let mut tests: Vec<u64> = runs.iter().map(|r| r.result.indices).collect();
     tests.sort_unstable();
@@ -113,13 +127,7 @@ fn adaptive_campaigns_cover_where_the_search_reaches_every_failure() {
         // 95 % of the failure mass (the rest only its exploring share meets).
         let events: std::collections::HashSet<usize> =
             event_cells(&case, &vehicle(vut)).into_iter().collect();
-        let held = |r: &AdaptiveResult| -> f64 {
-            r.support
-                .iter()
-                .filter(|c| events.contains(c))
-                .map(|&c| case.exposure().p(c))
-                .sum()
-        };
+        let held = |r: &AdaptiveResult| failure_mass_held(&case, &events, r);
         let found = runs.iter().filter(|r| held(r) > 0.95 * mu).count() as f64 / 200.0;
         eprintln!(
             "{surrogate} → {vut}: coverage {coverage}, median tests {} (NDD {ndd:.0}, \
@@ -539,4 +547,42 @@ fn the_adaptive_outside_bound_is_what_its_exploring_tests_give_by_enumeration() 
     // Some exploring test met a failure outside its stage's support, so
     // the recount of events was put to the test.
     assert!(failing_explorers > 0);
+}
+
+#[test]
+fn a_widened_search_finds_the_failures_of_the_one_ring_search_in_fewer_stages() {
+    // A fleet's stages of 640 tests widen the search to 128 cells a stage
+    // (`AdaptiveSettings::fleet_search_width`): what several one-ring
+    // searches would test, tested in one round of the fleet.
+    let case = CutIn::builtin(CutInPreset::PaperCode);
+    let rule = StoppingRule::new(0.2, 1_000_000);
+    let one_ring = AdaptiveSettings {
+        stage_tests: 640,
+        ..AdaptiveSettings::default()
+    };
+    let widened = AdaptiveSettings {
+        search_width: AdaptiveSettings::fleet_search_width(640),
+        ..one_ring
+    };
+    assert_eq!(widened.search_width, 128);
+    for vut in ["fvdm", "switching-acc", "acc-aeb"] {
+        let library = library(&case, "idm", SearchMethod::Exhaustive);
+        let v = vehicle(vut);
+        let events: std::collections::HashSet<usize> = event_cells(&case, &v).into_iter().collect();
+        let held = |r: &AdaptiveResult| failure_mass_held(&case, &events, r);
+        let (mut stages, mut mass) = ([0u64; 2], [0.0f64; 2]);
+        for seed in 0..20 {
+            for (k, settings) in [one_ring, widened].into_iter().enumerate() {
+                let r = run_adaptive(&case, &v, &library, 0.1, settings, &rule, seed).unwrap();
+                stages[k] += r.stages;
+                mass[k] += held(&r);
+            }
+        }
+        eprintln!("idm → {vut}: stages {stages:?}, failure mass held {mass:?}");
+        assert!(stages[1] * 2 < stages[0], "idm → {vut}: stages {stages:?}");
+        assert!(
+            mass[1] >= mass[0] * (1.0 - 1e-9),
+            "idm → {vut}: mass {mass:?}"
+        );
+    }
 }

@@ -15,7 +15,9 @@ use tslg_method::registry::AdaptiveProgress;
 /// The first index the prefix may not pass: the smallest `resume_at` of
 /// the campaign's active leases (below it every outcome is recorded), its
 /// `next_index`, and its first open audit (a test two workers have not yet
-/// agreed on, `report/audit.rs`).
+/// agreed on, `report/audit.rs`). A noisy program's audit holds nothing:
+/// its first run stands whatever the replica gives (`report/noisy.rs`),
+/// so a stage does not wait a test's time for it.
 pub fn frontier(conn: &Connection, campaign: &CampaignRow) -> Result<u64, StoreError> {
     Ok(bounds(conn, campaign)?.frontier)
 }
@@ -44,7 +46,10 @@ pub fn bounds(conn: &Connection, campaign: &CampaignRow) -> Result<Bounds, Store
     )?;
     let recorded = open.map_or(campaign.next_index, |r| r.min(campaign.next_index)) as u64;
     Ok(Bounds {
-        frontier: audited.map_or(recorded, |a| (a as u64).min(recorded)),
+        frontier: match audited {
+            Some(a) if !campaign.vehicle_noise => (a as u64).min(recorded),
+            _ => recorded,
+        },
         last_stored: last_stored.map(|i| i as u64),
     })
 }
@@ -290,4 +295,49 @@ pub(crate) fn close_stopped(conn: &Connection, campaign: i64, stop: u64) -> Resu
         [campaign, stop as i64],
     )?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::db::{Database, Durability};
+    use crate::error::ServiceError;
+    use crate::store::audits::{self, NewAudit};
+    use crate::store::campaigns;
+
+    #[tokio::test]
+    async fn an_open_audit_holds_the_frontier_unless_the_program_is_noisy() {
+        let dir = tempfile::tempdir().unwrap();
+        let url = format!("sqlite://{}", dir.path().join("db.sqlite").display());
+        let db = Database::open(&url, Durability::Full).await.unwrap();
+        db.write(|conn| -> Result<(), ServiceError> {
+            for noise in [0, 1] {
+                conn.execute_batch(&format!(
+                    "INSERT INTO campaigns (case_name, preset, method, exposure_name, \
+                     exposure_fingerprint, vut, epsilon, beta, confidence, n_min, min_events, \
+                     max_tests, seed, status, next_index, requires, vehicle_noise) \
+                     VALUES ('cut-in', 'paper-code', 'library', 'builtin', 'fp', \
+                     '{{\"external\":\"p\"}}', 0.1, 0.2, 0.9, 100, 10, 1000000, 7, 'running', \
+                     20, 'p:cut-in:step', {noise})"
+                ))
+                .map_err(StoreError::from)?;
+            }
+            for id in [1, 2] {
+                let audit = NewAudit {
+                    test_index: 5,
+                    reason: "sample",
+                    first_outcome: "none".into(),
+                    owed: false,
+                };
+                audits::insert(conn, id, "a", &[audit])?;
+            }
+            // A deterministic program's test 5 waits for two workers to
+            // agree on it; a noisy program's first run stands.
+            assert_eq!(bounds(conn, &campaigns::get(conn, 1)?)?.frontier, 5);
+            assert_eq!(bounds(conn, &campaigns::get(conn, 2)?)?.frontier, 20);
+            Ok(())
+        })
+        .await
+        .unwrap();
+    }
 }
