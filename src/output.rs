@@ -46,8 +46,28 @@ pub fn ratio(r: f64) -> String {
 /// An error and its causes, joined by `: ` as `{:#}` joins them, without a
 /// cause that only repeats what the text already ends with (sqlx's
 /// database error and its SQLite source read the same:
-/// `(code: 14) unable to open database file`, twice).
+/// `(code: 14) unable to open database file`, twice); a refused token
+/// (401) also says which flag gives one.
 pub fn error_text(error: &anyhow::Error) -> String {
+    let mut text = chain_text(error);
+    // A refused token is the CLI's to mend: say with which flag.
+    let unauthorized = error.chain().any(|cause| {
+        matches!(
+            cause.downcast_ref::<tslg_client::CallError>(),
+            Some(tslg_client::CallError::Refused { status: 401, .. })
+        )
+    });
+    if unauthorized {
+        text.push_str(
+            " (give the coordinator's admin token with --token or TSLG_ADMIN_TOKEN; \
+             a read token will do for reading)",
+        );
+    }
+    text
+}
+
+/// The error and its causes, each said once.
+fn chain_text(error: &anyhow::Error) -> String {
     let mut text = String::new();
     for cause in error.chain() {
         let part = cause.to_string();

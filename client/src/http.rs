@@ -139,10 +139,21 @@ impl Client {
     }
 
     async fn send(&self, builder: reqwest::RequestBuilder) -> Result<reqwest::Response, CallError> {
-        let response = builder
-            .send()
-            .await
-            .map_err(|e| CallError::Transient(e.to_string()))?;
+        let response = builder.send().await.map_err(|e| {
+            if e.is_connect() {
+                CallError::Transient(format!(
+                    "cannot connect to the coordinator at {}: is it running there? ({e})",
+                    self.base
+                ))
+            } else if e.is_timeout() {
+                CallError::Transient(format!(
+                    "the coordinator at {} did not answer in time ({e})",
+                    self.base
+                ))
+            } else {
+                CallError::Transient(e.to_string())
+            }
+        })?;
         let status = response.status();
         if status.is_server_error() {
             return Err(CallError::Transient(format!("HTTP {status}")));

@@ -184,6 +184,12 @@ pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
 
 /// The arguments checked and the case, vehicle, rule and library read.
 fn set_up(args: &EvaluateArgs) -> anyhow::Result<Setup> {
+    // What is wrong in a value is said before what is missing: a rule out
+    // of range, or a case that does not exist, before `--library`.
+    stopping_rule(&args.rule, None, false)?;
+    if args.case.case.is_some() {
+        crate::inputs::case_descriptor(&args.case)?;
+    }
     check_epsilon(args.exploration.epsilon)?;
     AdaptiveSearchArg::for_method(args.adaptive_search, args.method == MethodArg::Adaptive)?;
     anyhow::ensure!(

@@ -629,6 +629,19 @@ fn bad_input_gets_a_message_and_a_non_zero_exit() {
     let dir = tempfile::tempdir().unwrap();
     let lib = write(dir.path(), "lib.json", "");
     let cases: Vec<(Vec<String>, &str)> = vec![
+        // A wrong value is said before a missing --library.
+        (
+            ["evaluate", "--vut", "idm", "--beta", "-0.2"]
+                .map(String::from)
+                .to_vec(),
+            "beta = -0.2 must be in",
+        ),
+        (
+            ["evaluate", "--vut", "idm", "--case", "cutin"]
+                .map(String::from)
+                .to_vec(),
+            "unknown case `cutin`; known cases: cut-in",
+        ),
         (
             vec![
                 "exact".into(),

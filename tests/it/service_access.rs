@@ -324,6 +324,38 @@ async fn a_refusal_names_the_token_it_needs() {
             "{path}: {problem}"
         );
     }
+    // The CLI says which flag gives a token, and where it looked for a
+    // coordinator that does not answer.
+    let url = server.url.clone();
+    let refused = tokio::task::spawn_blocking(move || {
+        tslg(&["campaign", "list", "--server", &url, "--token", "wrong"])
+    })
+    .await
+    .unwrap();
+    assert!(!refused.status.success());
+    let text = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        text.contains("the read token") && text.contains("--token or TSLG_ADMIN_TOKEN"),
+        "{text}"
+    );
+    let closed = free_port_url();
+    let unreachable =
+        tokio::task::spawn_blocking(move || tslg(&["campaign", "list", "--server", &closed]))
+            .await
+            .unwrap();
+    assert!(!unreachable.status.success());
+    let text = String::from_utf8_lossy(&unreachable.stderr);
+    assert!(
+        text.contains("cannot connect to the coordinator at http://127.0.0.1:")
+            && text.contains("is it running there?"),
+        "{text}"
+    );
+}
+
+/// The URL of a port nothing listens on (bound, then let go).
+fn free_port_url() -> String {
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    format!("http://127.0.0.1:{}", listener.local_addr().unwrap().port())
 }
 
 #[test]
