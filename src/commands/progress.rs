@@ -3,15 +3,18 @@
 //! (`n (rₙ/β)²`, from the coordinator), so it fills as the relative
 //! half-width falls; until that prediction exists (too few events) it runs
 //! over the campaign's budget (`max_tests`), not over the tests so far,
-//! which drew a full bar far from β. When stderr is not a terminal the bars
-//! are hidden and each campaign's final state is printed as one line
-//! instead. Why a campaign waits (no worker) is printed once as it appears.
+//! which drew a full bar far from β. When stderr is not a terminal (a log,
+//! a pipe) the bars are hidden: a line of each running campaign's state,
+//! or of a count's progress, is printed every [`line_every`] (10 s, or
+//! `TSLG_PROGRESS_EVERY` seconds) instead, and each campaign's final state
+//! as one line. Why a campaign waits (no worker) is printed once as it
+//! appears.
 
 use crate::commands::remote::progress_line;
 use indicatif::{MultiProgress, ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::io::IsTerminal;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 use tslg_api::{CampaignView, LibraryView};
 use tslg_method::number::Count;
 use tslg_method::progress::Progress;
@@ -67,10 +70,24 @@ fn duration(seconds: f64) -> String {
     }
 }
 
+/// How often a line of progress is printed when stderr is not a
+/// terminal: `TSLG_PROGRESS_EVERY` seconds (a positive number), else 10 s,
+/// so that a log shows a long run is alive without filling up.
+pub fn line_every() -> Duration {
+    std::env::var("TSLG_PROGRESS_EVERY")
+        .ok()
+        .and_then(|s| s.parse::<f64>().ok())
+        .filter(|s| s.is_finite() && *s > 0.0)
+        .map_or(Duration::from_secs(10), Duration::from_secs_f64)
+}
+
 /// Bars for a set of campaigns, drawn together.
 pub struct CampaignBars {
     bars: Vec<(String, ProgressBar)>,
     shown: bool,
+    /// When each campaign's last line was printed (bars hidden).
+    lines: std::cell::RefCell<Vec<Option<Instant>>>,
+    every: Duration,
     /// Whether the newline after the bars was printed.
     ended: std::cell::Cell<bool>,
     _group: MultiProgress,
@@ -94,6 +111,8 @@ impl CampaignBars {
             })
             .collect();
         Self {
+            lines: std::cell::RefCell::new(vec![None; labels.len()]),
+            every: line_every(),
             bars,
             shown,
             ended: Default::default(),
@@ -128,6 +147,20 @@ impl CampaignBars {
         bar.set_length(target);
         bar.set_position(view.tests);
         bar.set_message(message(view));
+        if !self.shown && !view.status.is_final() {
+            let last = &mut self.lines.borrow_mut()[k];
+            if last.is_none_or(|at| at.elapsed() >= self.every) {
+                let mut line = progress_line(label, view);
+                if let Some(rate) = view.tests_per_second {
+                    line.push_str(&format!("  {rate:.0} tests/s"));
+                }
+                if let Some(left) = view.seconds_left {
+                    line.push_str(&format!("  ~{} left", duration(left)));
+                }
+                eprintln!("{line}");
+                *last = Some(Instant::now());
+            }
+        }
         if view.status.is_final() {
             bar.set_length(view.tests.max(1));
             bar.finish();
@@ -230,7 +263,8 @@ fn search_unit(case: &str) -> &'static str {
 }
 
 /// Runs `work` with a bar on stderr that follows the [`Progress`] it
-/// reports to (hidden when stderr is not a terminal).
+/// reports to; when stderr is not a terminal, a line `label: done of
+/// total` every [`line_every`] instead.
 pub fn with_progress<T>(label: &str, work: impl FnOnce(&Progress) -> T) -> T {
     let progress = Progress::default();
     let bar = counting_bar(label);
@@ -245,8 +279,13 @@ pub fn with_progress<T>(label: &str, work: impl FnOnce(&Progress) -> T) -> T {
     let finished = AtomicBool::new(false);
     let result = std::thread::scope(|scope| {
         scope.spawn(|| {
+            let (every, mut said) = (line_every(), Instant::now());
             while !finished.load(Ordering::Relaxed) {
                 let (done, total) = progress.get();
+                if bar.is_hidden() && total > 0 && said.elapsed() >= every {
+                    eprintln!("{label}: {done} of {total}");
+                    said = Instant::now();
+                }
                 show_counts(
                     &bar,
                     "{prefix} [{bar:30.cyan/blue}] {human_pos}/{human_len} ({elapsed}, ~{eta} left)",

@@ -462,7 +462,16 @@ pub fn run(args: &ValidateArgs) -> anyhow::Result<()> {
     }
     let mut rows = Vec::new();
     for (k, setup) in setups_all.iter().enumerate() {
-        let row = replicate(setup, replicates)?;
+        let label = format!(
+            "[{}/{}] {} → {} replicates",
+            k + 1,
+            setups_all.len(),
+            setup.surrogate,
+            setup.vut
+        );
+        let row = crate::commands::progress::with_progress(&label, |progress| {
+            replicate(setup, replicates, progress)
+        })?;
         // Progress only: the table comes whole on stdout at the end.
         eprintln!(
             "[{}/{}] {} {} → {} ({}): coverage {:.3}, median {} tests",
@@ -787,11 +796,21 @@ fn coverage_curve(setup: &Setup, replicates: u64, to: u64) -> anyhow::Result<Vec
         .collect())
 }
 
-/// Runs the campaigns of seeds `0..replicates`.
-fn replicate(setup: &Setup, replicates: u64) -> anyhow::Result<Row> {
+/// Runs the campaigns of seeds `0..replicates`, counting them on
+/// `progress`.
+fn replicate(
+    setup: &Setup,
+    replicates: u64,
+    progress: &tslg_method::progress::Progress,
+) -> anyhow::Result<Row> {
+    progress.start(replicates);
     let (runs, held) = (0..replicates)
         .into_par_iter()
-        .map(|seed| setup.campaign(seed))
+        .map(|seed| {
+            let run = setup.campaign(seed);
+            progress.add(1);
+            run
+        })
         .collect::<anyhow::Result<Vec<_>>>()?
         .into_iter()
         .unzip();

@@ -146,6 +146,26 @@ fn library_create_and_campaign_start_status_cancel_drive_a_coordinator() {
     ]);
     assert!(clean_refusal(&o));
     assert!(String::from_utf8_lossy(&o.stderr).contains("beta = 2 must be in [0.0001, 0.99]"));
+    // Into a log (stderr not a terminal), `--wait` prints the running
+    // campaign's state every TSLG_PROGRESS_EVERY seconds, then its end.
+    let mut command = Command::new(env!("CARGO_BIN_EXE_tslg"));
+    command
+        .args(["campaign", "start", "--server", url, "--method", "ndd"])
+        .args(["--vut", "idm", "--beta", "0.1", "--seed", "3", "--wait"])
+        .env("TSLG_PROGRESS_EVERY", "0.01")
+        .env_remove("TSLG_NDD_TABLE");
+    let o = output_within(command, COMMAND_LIMIT);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let log = String::from_utf8_lossy(&o.stderr);
+    let running: Vec<&str> = log.lines().filter(|l| l.contains(" running ")).collect();
+    assert!(
+        !running.is_empty()
+            && running
+                .iter()
+                .all(|l| l.contains("tests") && l.contains("→ β 0.1")),
+        "{log}"
+    );
+    assert!(log.lines().any(|l| l.contains(" converged ")), "{log}");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
