@@ -40,7 +40,8 @@ use crate::number::Count;
 pub enum Dialect {
     /// JSON fields of `POST /api/v1/campaigns`.
     Api,
-    /// Flags of `tslg evaluate` and `tslg campaign start`.
+    /// Flags of `tslg evaluate` and `tslg campaign start`, bare (a
+    /// terminal shows Markdown's backticks as they are).
     Cli,
 }
 
@@ -49,7 +50,7 @@ impl Dialect {
     pub fn guard_advice(self) -> &'static str {
         match self {
             Dialect::Api => "`\"guard_outside\": true, \"outside\": \"ndd\"`",
-            Dialect::Cli => "`--guard-outside --outside ndd`",
+            Dialect::Cli => "--guard-outside --outside ndd",
         }
     }
 
@@ -57,7 +58,7 @@ impl Dialect {
     pub fn ndd_advice(self) -> &'static str {
         match self {
             Dialect::Api => "`\"outside\": \"ndd\"`",
-            Dialect::Cli => "`--outside ndd`",
+            Dialect::Cli => "--outside ndd",
         }
     }
 
@@ -65,7 +66,7 @@ impl Dialect {
     pub fn max_tests(self) -> &'static str {
         match self {
             Dialect::Api => "`max_tests`",
-            Dialect::Cli => "`--max-tests`",
+            Dialect::Cli => "--max-tests",
         }
     }
 
@@ -138,10 +139,12 @@ pub fn warnings(result: &CampaignResult, context: WarningContext) -> Vec<String>
             "surrogate mismatch: the vehicle failed in {} whose scenario the \
              library's surrogate passes ({} outside the library in all, {:.0}% of the \
              estimate): the library does not cover where this vehicle fails, and the interval \
-             rests on the few exploring tests{bound}. {remedy}",
+             rests on its exploring tests ({} of {}){bound}. {remedy}",
             Count(result.mismatched_events, "exploring test"),
             Count(result.outside_events, "event"),
             100.0 * result.outside_share.unwrap_or(0.0),
+            result.outside_tests,
+            result.tests,
             bound = match result.guarded_ci_high {
                 Some(high) => format!(" (the guarded upper end is {high:.3e})"),
                 None => String::new(),
@@ -346,7 +349,16 @@ mod tests {
         let found = warnings(&exhausted, context(true, Dialect::Cli));
         assert_eq!(found.len(), 1);
         assert!(found[0].contains("never came within β"), "{}", found[0]);
-        assert!(found[0].contains("`--max-tests`"), "{}", found[0]);
+        assert!(
+            found[0].contains("raise --max-tests") || found[0].contains("Raise --max-tests"),
+            "{}",
+            found[0]
+        );
+        assert!(
+            !found[0].contains('`'),
+            "the command line's words, bare: {}",
+            found[0]
+        );
         // Within the bound: nothing, exhausted or not.
         let bounded = CampaignResult {
             guarded_ci_high: Some(1.3e-3),
@@ -360,7 +372,7 @@ mod tests {
             ..exhausted
         };
         for (dialect, advice) in [
-            (Dialect::Cli, "`--outside ndd`"),
+            (Dialect::Cli, "Use --outside ndd, the guard's default"),
             (Dialect::Api, "`\"outside\": \"ndd\"`"),
         ] {
             let spread = WarningContext {

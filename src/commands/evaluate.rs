@@ -425,8 +425,8 @@ fn print(report: &Report, rule: &StoppingRule) {
         }
         None => outln!("tests              {}", result.tests),
     }
-    print_estimate(result, rule);
     let answer = &report.answer;
+    print_estimate(result, rule, answer.high > result.ci_high);
     outln!(
         "answer             [{:.4e}, {:.4e}]: {}",
         answer.low,
@@ -480,22 +480,31 @@ fn print(report: &Report, rule: &StoppingRule) {
 }
 
 /// The events, estimate, interval and relative half-width of `result`.
-fn print_estimate(result: &CampaignResult, rule: &StoppingRule) {
+/// With `assumes`, the interval is not the answer: it says that it holds
+/// only if nothing fails where the tests barely looked (a guarded
+/// campaign's interval can be exact inside and miss P(A)).
+fn print_estimate(result: &CampaignResult, rule: &StoppingRule, assumes: bool) {
     outln!("events             {}", result.events);
     outln!("estimate           {:.4e}", result.estimate);
-    let label = match result.interval {
-        Interval::Wald => "interval      ",
+    let kind = match result.interval {
+        Interval::Wald => "interval",
         // A confidence sequence: it holds at every number of tests at once.
-        Interval::Anytime => "anytime       ",
+        Interval::Anytime => "anytime",
     };
+    let label = format!("{:.0}% {kind}", 100.0 * rule.confidence);
     outln!(
-        "{:.0}% {label}[{:.4e}, {:.4e}]",
-        100.0 * rule.confidence,
+        "{label:<18} [{:.4e}, {:.4e}]{}",
         result.ci_low,
-        result.ci_high
+        result.ci_high,
+        if assumes {
+            " (if nothing fails outside what the tests sampled; the answer below does not \
+             assume it)"
+        } else {
+            ""
+        }
     );
     outln!(
-        "relative half-width {:.4} (beta {})",
+        "rel. half-width    {:.4} (β {})",
         result.relative_half_width,
         rule.beta
     );

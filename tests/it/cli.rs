@@ -1277,6 +1277,49 @@ fn the_coordinator_address_is_not_shown_as_required() {
     }
 }
 
+/// docs/operations.md's pipeline gate quotes what its guarded campaigns
+/// need in process: the numbers there are these commands' (docs as tests).
+#[test]
+fn the_gate_example_s_numbers_are_what_its_guarded_campaigns_give() {
+    let dir = tempfile::tempdir().unwrap();
+    let library = dir.path().join("idm.json");
+    let library = library.to_str().unwrap();
+    let o = tslg(&["library", "build", "--surrogate", "idm", "--out", library]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let docs = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/operations.md"),
+    )
+    .unwrap();
+    for (vut, fails) in [("fvdm", true), ("idm", false)] {
+        let o = tslg(&[
+            "evaluate",
+            "--library",
+            library,
+            "--vut",
+            vut,
+            "--guard-outside",
+            "--outside",
+            "ndd",
+            "--beta",
+            "0.2",
+            "--max-tests",
+            "200000",
+            "--json",
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let report: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        let tests = report["tests"].as_u64().unwrap();
+        let quoted = format!("{},{:03}", tests / 1000, tests % 1000);
+        assert!(
+            docs.contains(&quoted),
+            "operations.md does not quote {quoted} ({vut})"
+        );
+        // The gate `--fail-above 5e-3` judges the guarded upper end.
+        let high = report["guarded_ci_high"].as_f64().unwrap();
+        assert_eq!(high > 5e-3, fails, "{vut}: guarded upper end {high}");
+    }
+}
+
 /// `tslg validate --stage-tests`: adaptive campaigns with a fleet's stage
 /// length, whose search is widened to `stage_tests / 5` cells, still cover
 /// and cost what the widened search tests; a length that is no multiple
