@@ -335,3 +335,54 @@ fn the_api_example_is_what_the_coordinator_answers() {
         assert_eq!(answer.get(key), Some(value), "docs/api.md's `{key}`");
     }
 }
+
+/// Every Markdown table of the docs has as many cells in each row as in its
+/// header: a row with one more (an empty column left behind) or a `|` in a
+/// formula (GitHub splits cells at it, code spans too, unless it is
+/// written `\|`) renders shifted.
+#[test]
+fn every_docs_table_row_has_its_header_s_cells() {
+    let separators = |line: &str| -> usize {
+        let bytes = line.as_bytes();
+        (0..bytes.len())
+            .filter(|&k| bytes[k] == b'|' && (k == 0 || bytes[k - 1] != b'\\'))
+            .count()
+    };
+    let mut docs: Vec<PathBuf> = std::fs::read_dir(repo().join("docs"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "md"))
+        .collect();
+    docs.push(repo().join("README.md"));
+    let mut wrong = Vec::new();
+    for doc in &docs {
+        let text = std::fs::read_to_string(doc).unwrap();
+        let lines: Vec<&str> = text.lines().collect();
+        let mut k = 0;
+        while k + 1 < lines.len() {
+            let delimiter = lines[k + 1];
+            let is_table = lines[k].starts_with('|')
+                && delimiter.starts_with("|-")
+                && delimiter
+                    .chars()
+                    .all(|c| matches!(c, '|' | '-' | ':' | ' '));
+            if !is_table {
+                k += 1;
+                continue;
+            }
+            let cells = separators(lines[k]);
+            let mut row = k + 2;
+            while row < lines.len() && lines[row].starts_with('|') {
+                if separators(lines[row]) != cells {
+                    wrong.push(format!("{}:{}", doc.display(), row + 1));
+                }
+                row += 1;
+            }
+            k = row;
+        }
+    }
+    assert!(
+        wrong.is_empty(),
+        "rows whose cells differ from their header's: {wrong:?}"
+    );
+}
