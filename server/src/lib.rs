@@ -23,8 +23,9 @@
 //! - `builds/`: library builds, on the coordinator or on workers.
 //! - `telemetry/`: `/metrics`, per-campaign series, request latencies and
 //!   campaigns' rates.
-//! - `workers.rs` (the workers seen), `work_signal.rs` (waking held lease
-//!   requests), `state.rs` (the handlers' shared state), `validate.rs`
+//! - `workers.rs` (the workers seen), `identity.rs` (their credentials),
+//!   `queue.rs` (how many workers the campaigns want), `work_signal.rs`
+//!   (waking held lease requests), `state.rs` (the handlers' shared state), `validate.rs`
 //!   (names), `error.rs` (the service's error), `config.rs` (settings).
 //!
 //! Rows:

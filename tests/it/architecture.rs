@@ -202,3 +202,121 @@ fn the_cycle_check_sees_uses_paths_and_macros() {
     );
     assert_eq!(graph.sql[routes], vec!["SELECT {}".to_string()]);
 }
+
+/// The text of docs/architecture.md from the heading `from` to the next
+/// heading of the same level.
+fn layout_section(from: &str) -> String {
+    let doc = std::fs::read_to_string(workspace().join("docs/architecture.md")).unwrap();
+    let start = doc
+        .find(from)
+        .unwrap_or_else(|| panic!("no `{from}` in docs/architecture.md"));
+    let level = from.split(' ').next().unwrap();
+    let rest = &doc[start + from.len()..];
+    let end = rest
+        .match_indices(&format!("\n{level} "))
+        .next()
+        .map_or(rest.len(), |(k, _)| k);
+    rest[..end].to_owned()
+}
+
+/// The modules directly in `dir`: `name` for `name.rs`, `name/` for a
+/// folder with its own `mod.rs` (a folder beside `name.rs` is the file's).
+fn modules_in(dir: &Path) -> Vec<String> {
+    let mut found = Vec::new();
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let path = entry.unwrap().path();
+        let name = path.file_name().unwrap().to_string_lossy().into_owned();
+        if path.is_dir() {
+            if path.join("mod.rs").exists() && name != "tests" {
+                found.push(format!("{name}/"));
+            }
+        } else if let Some(stem) = name.strip_suffix(".rs") {
+            if !matches!(stem, "mod" | "lib" | "main" | "tests") && !stem.ends_with("_tests") {
+                found.push(stem.to_owned());
+            }
+        }
+    }
+    found.sort();
+    found
+}
+
+/// Whether `text` names module `module` (`name` or `name/`) in code
+/// quotes: `` `name` ``, `` `name/` ``, `` `name.rs` ``, a path ending in
+/// it, or a rustdoc link `` [`name`] ``.
+fn names(text: &str, module: &str) -> bool {
+    let stem = module.trim_end_matches('/');
+    [
+        format!("`{stem}`"),
+        format!("`{stem}/"),
+        format!("`{stem}.rs"),
+        format!("/{stem}`"),
+        format!("/{stem}.rs"),
+        format!("/{stem}/"),
+        format!("`{stem}` ("),
+    ]
+    .iter()
+    .any(|form| text.contains(form.as_str()))
+        || text.contains(&format!("`{stem},"))
+        || text.contains(&format!(" {stem}`"))
+}
+
+/// Every module has a line in the layout docs: each file of the
+/// coordinator in docs/architecture.md's "Server modules" (and its top
+/// folders in `server/src/lib.rs`'s layout), each of the method crate's
+/// modules in "The method crate" and `method/src/lib.rs`'s layout, each
+/// command module in "The command line", and each of `report/`'s files in
+/// its `mod.rs`. A module added without a line fails here.
+#[test]
+fn every_module_is_in_the_layout_docs() {
+    let mut missing = Vec::new();
+    let mut check = |what: &str, text: &str, modules: Vec<String>| {
+        for module in modules {
+            if !names(text, &module) {
+                missing.push(format!("{module} (in {what})"));
+            }
+        }
+    };
+    let server = workspace().join("server/src");
+    let server_doc = layout_section("### Server modules");
+    check(
+        "architecture.md, Server modules",
+        &server_doc,
+        modules_in(&server),
+    );
+    for entry in std::fs::read_dir(&server).unwrap() {
+        let folder = entry.unwrap().path();
+        if folder.is_dir() {
+            check(
+                "architecture.md, Server modules",
+                &server_doc,
+                modules_in(&folder),
+            );
+        }
+    }
+    let lib = std::fs::read_to_string(server.join("lib.rs")).unwrap();
+    check("server/src/lib.rs", &lib, modules_in(&server));
+    let report = std::fs::read_to_string(server.join("report/mod.rs")).unwrap();
+    check(
+        "server/src/report/mod.rs",
+        &report,
+        modules_in(&server.join("report")),
+    );
+    let method = workspace().join("method/src");
+    check(
+        "architecture.md, The method crate",
+        &layout_section("## The method crate"),
+        modules_in(&method),
+    );
+    let method_lib = std::fs::read_to_string(method.join("lib.rs")).unwrap();
+    check("method/src/lib.rs", &method_lib, modules_in(&method));
+    check(
+        "architecture.md, The command line",
+        &layout_section("## The command line"),
+        modules_in(&workspace().join("src/commands")),
+    );
+    assert!(
+        missing.is_empty(),
+        "modules without a line in their layout docs:\n  {}",
+        missing.join("\n  ")
+    );
+}

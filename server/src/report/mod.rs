@@ -5,9 +5,12 @@
 //! noisy programs: [`noisy`]), recorded ([`record`]), weighed with every
 //! other resolved test of the campaign ([`evidence`]), and the campaign's
 //! resolved prefix folded ([`fold`], with the exploring tests the replay
-//! found kept in [`explored`]) or, for an adaptive campaign, its stages
-//! resolved ([`stages`]). A worker caught is flagged ([`flag`]).
-//! [`receive`] runs them in order.
+//! found kept in [`explored`]; an anytime campaign's sequences in
+//! [`anytime`]) or, for an adaptive campaign, its stages resolved
+//! ([`stages`]), and a paired campaign's pair folded ([`pair_fold`]). A
+//! worker caught is flagged ([`flag`]); an audit run's decision is a
+//! [`verdict`], a contradicted outcome a [`mismatch`]; the replays' counts
+//! for `/metrics` are [`replay_counts`]. [`receive`] runs them in order.
 
 pub mod anytime;
 pub mod audit;
