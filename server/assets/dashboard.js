@@ -87,25 +87,34 @@ function warningMark(warnings) {
   }, ` ⚠ ${warnings.length}`);
 }
 
+// A campaign's line. Its tests are all it used, as the command line and
+// its page count them (an adaptive campaign's library, search and
+// estimation tests). A library build's surrogate runs estimate no failure
+// rate: its line says which library it builds and shows no estimate.
 function campaignRow(c) {
-  const r = c.relative_half_width;
+  const build = !applies(c).estimate;
+  const r = build ? null : c.relative_half_width;
   const halfWidth = el('td', { 'data-field': 'relative_half_width', 'data-value': r ?? '' },
-    bar(progress(c), c.status === 'converged'), `${fmt.ratio(r)} → ${c.beta}`);
+    build ? '–' : bar(progress(c), c.status === 'converged'),
+    build ? '' : `${fmt.ratio(r)} → ${c.beta}`);
+  const tests = c.method === 'adaptive' ? c.indices : c.tests;
+  const kind = build ? `building library ${c.library_id}`
+    : c.method === 'adaptive' ? `adaptive, library ${c.library_id}` : `library ${c.library_id}`;
+  const estimate = build ? null : c.estimate;
   return el('tr', { id: `campaign-${c.id}`, 'data-status': c.status },
     el('td', {}, el('a', { href: `/campaigns/${c.id}` }, c.id)),
     el('td', {}, c.case),
-    el('td', {}, c.method !== 'ndd' && c.library_id != null
-      ? el('a', { href: `/libraries/${c.library_id}` },
-        c.method === 'adaptive' ? `adaptive, library ${c.library_id}` : `library ${c.library_id}`)
+    el('td', { 'data-field': 'method' }, c.method !== 'ndd' && c.library_id != null
+      ? el('a', { href: `/libraries/${c.library_id}` }, kind)
       : c.method),
     el('td', {}, fmt.vehicle(c.vut, c.vut_label)),
     el('td', { class: `status-${c.status}`, 'data-field': 'status' }, c.status,
       warningMark(c.warnings ?? [])),
-    num('tests', c.tests, fmt.count(c.tests)),
+    num('tests', tests, fmt.count(tests)),
     num('events', c.events, fmt.count(c.events)),
-    num('estimate', c.estimate, fmt.sci(c.estimate)),
-    el('td', { 'data-field': 'interval' },
-      fmt.interval(c) + (c.interval === 'anytime' ? ' (anytime)' : '')),
+    num('estimate', estimate, build ? '–' : fmt.sci(estimate)),
+    el('td', { 'data-field': 'interval' }, build ? '–'
+      : fmt.interval(c) + (c.interval === 'anytime' ? ' (anytime)' : '')),
     halfWidth,
     num('tests_per_second', c.tests_per_second, fmt.rate(c.tests_per_second)),
     num('seconds_left', c.seconds_left, fmt.seconds(c.seconds_left)));

@@ -288,6 +288,38 @@ async fn the_dashboard_follows_a_running_campaign_and_agrees_with_the_api() {
         .expect("the build's campaign");
     page_agrees(&browser, &server.url, &build, "build").await;
 
+    // The list counts an adaptive campaign's tests as the command line
+    // does (all it used), and a build's line estimates nothing.
+    browser
+        .goto(&format!("{}/?refresh=300", server.url))
+        .await
+        .unwrap();
+    let cell = |id: i64, field: &str| {
+        format!("document.querySelector('#campaign-{id} [data-field={field}]')")
+    };
+    let adaptive_tests = until(
+        &browser,
+        &format!("{}?.dataset.value", cell(adaptive.id, "tests")),
+        "the adaptive campaign's line",
+    )
+    .await;
+    assert_eq!(number(&adaptive_tests), adaptive.indices);
+    assert!(adaptive.indices > adaptive.tests, "{adaptive:?}");
+    let build_line = eval(
+        &browser,
+        &format!(
+            "[{m}.textContent, {e}.textContent, {e}.dataset.value]",
+            m = cell(build.id, "method"),
+            e = cell(build.id, "estimate")
+        ),
+    )
+    .await;
+    assert_eq!(
+        build_line,
+        json!([format!("building library {}", library.id), "–", ""]),
+        "{build_line}"
+    );
+
     // A paired regression campaign: the FVDM against the IDM on the IDM's
     // library. Its page shows both rates and the difference with the
     // paired interval, as the API gives them.
