@@ -122,6 +122,11 @@ pub struct WorkerView {
     pub last_seen_seconds: f64,
     /// Whether it asked for work within the last minute.
     pub live: bool,
+    /// It said it is leaving (a clean stop: `POST
+    /// /api/v1/workers/{name}/leave`) and has not asked for work since; the
+    /// list drops it ten minutes after it left.
+    #[serde(default)]
+    pub left: bool,
     /// The external programs it offers (`--vut-exec NAME=…`).
     pub offers: Vec<String>,
     /// Empty when every program it runs is healthy.

@@ -123,7 +123,7 @@ function campaignRow(c) {
 function workerRow(w) {
   const share = w.tests > 0 ? w.invalid / w.tests : null;
   const health = w.unhealthy.length === 0
-    ? el('td', {}, w.live ? 'live' : 'not seen for a minute')
+    ? el('td', { 'data-field': 'health' }, w.live ? 'live' : w.left ? 'left' : 'not seen for a minute')
     : el('td', { class: 'unhealthy', title: w.unhealthy.map((u) => `${u.name}: ${u.reason}`).join('\n') },
       `unhealthy: ${w.unhealthy.map((u) => u.name).join(', ')}`);
   return el('tr', { id: `worker-${w.name}` },

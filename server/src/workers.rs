@@ -11,6 +11,9 @@ use tslg_api::{LeaseRequest, UnhealthyProgram, WorkerView};
 
 /// A worker not heard from this long is not live.
 const LIVE: Duration = Duration::from_secs(60);
+/// A worker that left (said so) is listed this long after, then dropped:
+/// a stopped fleet does not stay on the dashboard for ever.
+const LEFT_LISTED: Duration = Duration::from_secs(600);
 /// Workers kept at most; the longest unseen goes first.
 const MAX_WORKERS: usize = 1024;
 /// A counted [`Fleet`] serves the claims of this long, unless a worker
@@ -224,6 +227,7 @@ impl WorkerRegistry {
         let mut workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
         if let Some(entry) = workers.get_mut(worker) {
             entry.left = true;
+            entry.last_seen = Instant::now();
             entry.leavings += 1;
             self.fleet_changed.store(true, Ordering::Release);
         }
@@ -293,9 +297,11 @@ impl WorkerRegistry {
     }
 
     /// Every worker, most recently seen first, with why it is flagged if
-    /// it is in `flagged` (`(name, reason)`).
+    /// it is in `flagged` (`(name, reason)`); one that left more than
+    /// [`LEFT_LISTED`] ago is forgotten.
     pub fn list(&self, flagged: &[(String, String)]) -> Vec<WorkerView> {
-        let workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
+        let mut workers = self.workers.lock().unwrap_or_else(|p| p.into_inner());
+        workers.retain(|_, e| !(e.left && e.last_seen.elapsed() >= LEFT_LISTED));
         let flag = |name: &str| {
             flagged
                 .iter()
@@ -309,6 +315,7 @@ impl WorkerRegistry {
                 threads: e.threads,
                 last_seen_seconds: e.last_seen.elapsed().as_secs_f64(),
                 live: e.is_live(),
+                left: e.left,
                 offers: e.offers.clone(),
                 unhealthy: e.unhealthy.clone(),
                 tests: e.tests,
@@ -373,5 +380,31 @@ mod tests {
         assert_eq!(fleet.serving(Some("p:cut-in:episode")), 2);
         assert_eq!(fleet.serving(Some("q:cut-in:episode")), 4);
         assert_eq!(fleet.serving(None), 6);
+    }
+
+    #[test]
+    fn a_worker_that_left_is_listed_as_left_then_forgotten() {
+        let registry = WorkerRegistry::default();
+        registry.seen(&request("a", 4, &[]));
+        registry.seen(&request("b", 2, &[]));
+        registry.left("a");
+        let list = registry.list(&[]);
+        let a = list.iter().find(|w| w.name == "a").unwrap();
+        assert!(a.left && !a.live, "{a:?}");
+        let b = list.iter().find(|w| w.name == "b").unwrap();
+        assert!(!b.left && b.live, "{b:?}");
+        // Ten minutes after it left, it is gone from the list; a worker
+        // still working is not, however long its test.
+        let long_ago = Instant::now().checked_sub(LEFT_LISTED).unwrap();
+        {
+            let mut workers = registry.workers.lock().unwrap();
+            workers.get_mut("a").unwrap().last_seen = long_ago;
+            workers.get_mut("b").unwrap().last_seen = long_ago;
+        }
+        let names: Vec<String> = registry.list(&[]).into_iter().map(|w| w.name).collect();
+        assert_eq!(names, ["b"]);
+        // Asking for work again brings it back, live.
+        registry.seen(&request("a", 4, &[]));
+        assert!(registry.list(&[]).iter().any(|w| w.name == "a" && w.live && !w.left));
     }
 }
