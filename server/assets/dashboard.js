@@ -91,6 +91,11 @@ function warningMark(warnings) {
 // its page count them (an adaptive campaign's library, search and
 // estimation tests). A library build's surrogate runs estimate no failure
 // rate: its line says which library it builds and shows no estimate.
+// A warning's text with its `quoted` API fields as code, not backticks.
+function prose(text) {
+  return text.split('`').map((part, k) => (k % 2 === 1 ? el('code', {}, part) : part));
+}
+
 function campaignRow(c) {
   const build = !applies(c).estimate;
   const r = build ? null : c.relative_half_width;
@@ -166,7 +171,7 @@ async function indexPage() {
   // status is easy to miss and its hover text unreachable on a touch screen.
   document.getElementById('warnings').replaceChildren(...campaigns.campaigns.flatMap((c) =>
     (c.warnings ?? []).map((w) => el('li', { 'data-campaign': c.id },
-      el('a', { href: `/campaigns/${c.id}` }, `campaign ${c.id}`), `: ${w}`))));
+      el('a', { href: `/campaigns/${c.id}` }, `campaign ${c.id}`), ': ', ...prose(w)))));
   fill('workers', workers.workers.map(workerRow), 'no workers seen yet');
   fill('libraries', libraries.map(libraryRow), 'no libraries yet');
   return true;
@@ -226,7 +231,7 @@ async function campaignPage() {
   set('guarded-interval', c.guarded_ci_high == null ? '–'
     : `[${fmt.sci(c.ci_low)}, ${fmt.sci(c.guarded_ci_high)}]`, c.guarded_ci_high);
   document.getElementById('warnings').replaceChildren(
-    ...(c.warnings ?? []).map((w) => el('li', {}, w)));
+    ...(c.warnings ?? []).map((w) => el('li', {}, ...prose(w))));
   await pairSection(c);
   const share = progress(c);
   document.getElementById('progress').style.width = `${(share * 100).toFixed(1)}%`;
@@ -264,8 +269,11 @@ async function pairSection(c) {
   section.hidden = !p;
   if (!p) return;
   const other = p.campaign_a === c.id ? p.campaign_b : p.campaign_a;
-  const b = await json(`/api/v1/campaigns/${other}`);
-  const [va, vb] = p.campaign_a === c.id ? [c.vut, b.vut] : [b.vut, c.vut];
+  const [b, drawn] = await Promise.all([json(`/api/v1/campaigns/${other}`),
+    text(`/api/v1/campaigns/${other}/figures/estimate.svg`)]);
+  document.getElementById('pair-figure').innerHTML = drawn;
+  const [ca, cb] = p.campaign_a === c.id ? [c, b] : [b, c];
+  const [va, vb] = [fmt.vehicle(ca.vut, ca.vut_label), fmt.vehicle(cb.vut, cb.vut_label)];
   set('pair-status', p.stop ? `${p.status} (${p.stop})` : p.status);
   document.getElementById('pair-status').className = `status-${p.status}`;
   const zero = !p.difference ? 'no interval yet'
@@ -281,7 +289,7 @@ async function pairSection(c) {
   const row = (name, id, vehicle, events, rate) => el('tr', { 'data-row': name },
     el('td', {}, name),
     el('td', {}, id == null ? '' : el('a', { href: `/campaigns/${id}` }, `campaign ${id}`)),
-    el('td', {}, vehicle == null ? '' : JSON.stringify(vehicle)),
+    el('td', { 'data-field': 'vehicle' }, vehicle ?? ''),
     events == null ? el('td') : num('events', events, fmt.count(events)),
     num('estimate', rate?.estimate, fmt.sci(rate?.estimate)),
     el('td', { 'data-field': 'interval' }, interval(rate)));

@@ -405,6 +405,9 @@ mod tests {
         assert_eq!(names, ["b"]);
         // Asking for work again brings it back, live.
         registry.seen(&request("a", 4, &[]));
-        assert!(registry.list(&[]).iter().any(|w| w.name == "a" && w.live && !w.left));
+        assert!(registry
+            .list(&[])
+            .iter()
+            .any(|w| w.name == "a" && w.live && !w.left));
     }
 }

@@ -244,11 +244,20 @@ async fn the_dashboard_follows_a_running_campaign_and_agrees_with_the_api() {
         "[...document.querySelectorAll('#warnings li')].map(li => li.textContent)",
     )
     .await;
+    // Every warning as the API words it, its `quoted` fields set as code.
+    let unquoted: Vec<String> = view.warnings.iter().map(|w| w.replace('`', "")).collect();
     assert_eq!(
         warnings,
-        json!(view.warnings),
+        json!(unquoted),
         "every warning, as the API words it"
     );
+    let quoted = view.warnings.iter().filter(|w| w.contains('`')).count();
+    let code = eval(
+        &browser,
+        "document.querySelectorAll('#warnings li code').length",
+    )
+    .await;
+    assert!(code.as_u64().unwrap() as usize >= quoted, "{code}");
     assert!(!view.warnings.is_empty());
     let unpaired = eval(&browser, "document.getElementById('pair').hidden").await;
     assert_eq!(
@@ -369,6 +378,26 @@ async fn the_dashboard_follows_a_running_campaign_and_agrees_with_the_api() {
     )
     .await;
     assert_eq!(link, json!(format!("/campaigns/{}", pair.campaign_a)));
+    // Both vehicles by name, and the other vehicle's estimate drawn beside
+    // this one's (campaign a's, on campaign b's page).
+    let vehicles = eval(
+        &browser,
+        "[...document.querySelectorAll('#pair-rates [data-field=vehicle]')].map((c) => c.textContent)",
+    )
+    .await;
+    assert_eq!(vehicles, json!(["fvdm", "idm", ""]), "{vehicles}");
+    let other = until(
+        &browser,
+        "document.querySelector('#pair-figure svg text')?.textContent.trim()",
+        "the other vehicle's estimate",
+    )
+    .await;
+    assert!(
+        other
+            .as_str()
+            .is_some_and(|t| t.contains(&format!("Campaign {}", pair.campaign_a))),
+        "{other}"
+    );
     let b = client.campaign(pair.campaign_b).await.unwrap();
     page_agrees(&browser, &server.url, &b, "paired").await;
 
@@ -392,7 +421,7 @@ async fn the_dashboard_follows_a_running_campaign_and_agrees_with_the_api() {
     let worded: Vec<String> = view
         .warnings
         .iter()
-        .map(|w| format!("campaign {id}: {w}"))
+        .map(|w| format!("campaign {id}: {}", w.replace('`', "")))
         .collect();
     assert_eq!(listed, json!(worded));
     let unmarked = eval(

@@ -158,6 +158,10 @@ pub async fn page_agrees(browser: &Browser, url: &str, view: &CampaignView, name
     // The figures, once drawn: each draws its data.
     let figures: Vec<&str> = match (build, adaptive.is_some()) {
         (true, _) => vec![],
+        // A paired campaign's page also draws the other vehicle's estimate.
+        (false, false) if view.pair.is_some() => {
+            vec!["estimate-figure", "half-width-figure", "pair-figure"]
+        }
         (false, false) => vec!["estimate-figure", "half-width-figure"],
         (false, true) => vec![
             "estimate-figure",
@@ -184,7 +188,7 @@ pub async fn page_agrees(browser: &Browser, url: &str, view: &CampaignView, name
         let d = &drawn[figure];
         let line = d["line"].as_u64().unwrap();
         match figure {
-            "estimate-figure" => {
+            "estimate-figure" | "pair-figure" => {
                 assert!(line >= 3, "{name}: the estimate is drawn: {d}");
                 assert!(d["bands"].as_u64().unwrap() >= 1, "{name}: its band: {d}");
             }
