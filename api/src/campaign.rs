@@ -319,6 +319,11 @@ pub struct CampaignView {
     /// otherwise. Absent before two valid tests.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub answer: Option<AnswerView>,
+    /// The verdict in one line: which interval to report and why, or why
+    /// there is none yet (a running, cancelled or failed campaign, a
+    /// build's surrogate runs).
+    #[serde(default)]
+    pub verdict: String,
     /// `P(A)` by enumeration of the grid: present for a built-in vehicle on
     /// a grid case of at most [`EXACT_MAX_SCENARIOS`] scenarios (cut-in,
     /// highway-exit `coarse`), computed when the campaign was created; for

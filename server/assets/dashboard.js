@@ -196,6 +196,7 @@ async function campaignPage() {
   for (const node of document.querySelectorAll('[data-applies]')) {
     node.hidden = !parts[node.dataset.applies];
   }
+  set('verdict', c.verdict ? `Verdict: ${c.verdict}` : '');
   set('status', c.status);
   document.getElementById('status').className = `status-${c.status}`;
   set('tests-label', parts.adaptive ? 'estimation tests'

@@ -238,8 +238,14 @@ pub fn describe(view: &CampaignView) -> String {
         .iter()
         .map(|w| format!("\n  warning: {}", Dialect::Cli.translate(w)))
         .collect();
+    // A coordinator of an earlier release sends no verdict.
+    let verdict = if view.verdict.is_empty() {
+        String::new()
+    } else {
+        format!("\n  verdict: {}", Dialect::Cli.translate(&view.verdict))
+    };
     format!(
-        "campaign {} ({} {}, vehicle {}): {}{}\n  {}\n  \
+        "campaign {} ({} {}, vehicle {}): {}{}{verdict}\n  {}\n  \
          estimate {}  {}interval [{}, {}]  relative half-width {} (β {}, confidence {}){answer}{exact}{inert}{health}{outside}{adaptive}{pair}{warnings}",
         view.id,
         view.case,

@@ -392,6 +392,54 @@ async fn the_report_writes_the_dashboard_figures_as_svg_with_the_numbers_as_csv(
     );
     let served = get(&url).await.text().await.unwrap();
     assert_eq!(served, estimate);
+    // The summary for a reader: the verdict first (an NDD campaign that
+    // converged reports its plain interval), the numbers as the view gives
+    // them, and the figures beside it.
+    let answer = view.answer.as_ref().unwrap();
+    assert!(
+        view.verdict.starts_with(&format!(
+            "report P(A) in [{:.3e}, {:.3e}] at 90% confidence: its interval",
+            answer.low, answer.high
+        )),
+        "{}",
+        view.verdict
+    );
+    let summary = std::fs::read_to_string(out.join("summary.md")).unwrap();
+    for line in [
+        format!("# Campaign {}: fvdm on cut-in (ndd)", view.id),
+        format!("**Verdict:** {}", view.verdict),
+        format!(
+            "| tests used | {} ({} valid, 0 invalid) |",
+            view.indices, view.tests
+        ),
+        format!("| events | {} |", view.events),
+        format!("| estimate | {:.4e} |", view.estimate.unwrap()),
+        format!(
+            "| exact P(A), by enumeration | {:.4e} (inside the answer) |",
+            exact("fvdm")
+        ),
+        "![estimate.svg](estimate.svg)".to_owned(),
+        "![relative-half-width.svg](relative-half-width.svg)".to_owned(),
+    ] {
+        assert!(summary.lines().any(|l| l == line), "{line} in\n{summary}");
+    }
+    // `tslg campaign status` says the verdict after its state.
+    let status = Command::new(env!("CARGO_BIN_EXE_tslg"))
+        .args([
+            "campaign",
+            "status",
+            &view.id.to_string(),
+            "--server",
+            &server.url,
+        ])
+        .output()
+        .unwrap();
+    let status = String::from_utf8_lossy(&status.stdout);
+    assert_eq!(
+        status.lines().nth(1),
+        Some(format!("  verdict: {}", view.verdict).as_str()),
+        "{status}"
+    );
     // The numbers: one row per history point, the last the final estimate.
     let csv = std::fs::read_to_string(out.join("history.csv")).unwrap();
     let rows: Vec<&str> = csv.lines().collect();

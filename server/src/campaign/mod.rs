@@ -1,7 +1,9 @@
-//! A campaign's life on the coordinator: started ([`start`]), its tests
+//! A campaign's life on the coordinator: started ([`start`], an adaptive
+//! one's stage length sized from the fleet by [`stage_size`]), its tests
 //! built once from its plan ([`tests_cache`]), shown ([`views`], with its
-//! [`history`]), its events exported ([`events`]), and ended on request
-//! ([`end`]). What happens to its reports is in `report/`.
+//! [`history`], its [`verdict`] and its [`timeline`]), its events exported
+//! ([`events`]), and ended on request ([`end`]). What happens to its
+//! reports is in `report/`.
 
 pub mod end;
 pub mod events;
@@ -10,4 +12,5 @@ pub mod stage_size;
 pub mod start;
 pub mod tests_cache;
 pub mod timeline;
+pub mod verdict;
 pub mod views;

@@ -143,6 +143,8 @@ pub fn campaign_view(row: &CampaignRow) -> CampaignView {
                 reason: answer.reason.text().to_owned(),
             }
         }),
+        // Set once the view is whole ([`live_view`]).
+        verdict: String::new(),
         exact_probability: row.exact_probability,
         adaptive: (row.method == Method::Adaptive).then(|| AdaptiveView {
             library_tests: row.library_tests as u64,
@@ -340,6 +342,7 @@ pub async fn live_view(state: &AppState, row: &CampaignRow) -> Result<CampaignVi
                 .push(format!("its pair's campaign {partner}: {waiting}"));
         }
     }
+    view.verdict = crate::campaign::verdict::verdict(&view);
     Ok(view)
 }
 

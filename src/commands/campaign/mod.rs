@@ -1,6 +1,7 @@
 //! `tslg campaign …`: clients of a running coordinator's campaigns.
 
 mod start;
+mod summary;
 mod timeline;
 
 use crate::args::{wire_name, ServerArgs};
@@ -41,7 +42,8 @@ pub enum CampaignCommand {
         #[arg(long)]
         json: bool,
     },
-    /// Write the campaign's figures (SVG) and numbers (CSV, JSON) to a directory.
+    /// Write the campaign's figures (SVG), numbers (CSV, JSON) and a summary
+    /// (summary.md: its verdict, numbers, warnings and figures) to a directory.
     Report {
         /// The campaign's id.
         id: i64,
@@ -208,6 +210,13 @@ pub fn report(server: &ServerArgs, id: i64, out: &Path, points: usize) -> anyhow
             ("stages.json", serde_json::to_string_pretty(&stages)? + "\n"),
         ]);
     }
+    let figures: Vec<&str> = files
+        .iter()
+        .map(|(name, _)| *name)
+        .filter(|name| name.ends_with(".svg"))
+        .collect();
+    let summary = summary::markdown(&view, &figures);
+    files.push(("summary.md", summary));
     for (name, content) in files {
         let path = out.join(name);
         std::fs::write(&path, content)
