@@ -52,6 +52,7 @@ fn view() -> CampaignView {
         outside_upper: None,
         guarded_ci_high: None,
         answer: None,
+        verdict: String::new(),
         exact_probability: None,
         adaptive: None,
         warnings: Vec::new(),

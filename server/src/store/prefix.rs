@@ -301,7 +301,6 @@ pub(crate) fn close_stopped(conn: &Connection, campaign: i64, stop: u64) -> Resu
 mod tests {
     use super::*;
     use crate::db::{Database, Durability};
-    use crate::error::ServiceError;
     use crate::store::audits::{self, NewAudit};
     use crate::store::campaigns;
 
@@ -310,7 +309,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let url = format!("sqlite://{}", dir.path().join("db.sqlite").display());
         let db = Database::open(&url, Durability::Full).await.unwrap();
-        db.write(|conn| -> Result<(), ServiceError> {
+        db.write(|conn| -> Result<(), StoreError> {
             for noise in [0, 1] {
                 conn.execute_batch(&format!(
                     "INSERT INTO campaigns (case_name, preset, method, exposure_name, \
