@@ -23,25 +23,11 @@ use tslg_client::Client;
 
 fn request(method: Method, library_id: Option<i64>, vut: &Value, seed: u64) -> CreateCampaign {
     CreateCampaign {
-        case: "cut-in".into(),
-        method,
         library_id,
-        vut: vut.clone(),
-        epsilon: 0.1,
-        beta: 0.2,
-        confidence: 0.9,
         max_tests: 100_000_000,
         seed,
-        n_min: None,
-        min_events: None,
         guard_outside: Some(false),
-        interval: Default::default(),
-        paired_with: None,
-        outside: None,
-        split: None,
-        vehicle_noise: false,
-        adaptive_search: None,
-        stage_tests: None,
+        ..CreateCampaign::new("cut-in", method, vut.clone())
     }
 }
 

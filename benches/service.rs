@@ -20,26 +20,12 @@ use tslg_method::registry::ExposureSource;
 
 fn request(tests: u64) -> CreateCampaign {
     CreateCampaign {
-        case: "cut-in".into(),
-        method: Method::Ndd,
-        library_id: None,
-        vut: serde_json::json!({"model": "idm"}),
-        epsilon: 0.1,
         // Never reached: the campaign runs to its budget.
         beta: MIN_BETA,
-        confidence: 0.9,
         max_tests: tests,
         seed: 1,
-        n_min: None,
-        min_events: None,
         guard_outside: Some(false),
-        interval: Default::default(),
-        paired_with: None,
-        outside: None,
-        split: None,
-        vehicle_noise: false,
-        adaptive_search: None,
-        stage_tests: None,
+        ..CreateCampaign::new("cut-in", Method::Ndd, serde_json::json!({"model": "idm"}))
     }
 }
 

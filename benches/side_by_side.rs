@@ -126,25 +126,12 @@ async fn through_service(seed: u64, threads: usize) -> anyhow::Result<Run> {
     let started = Instant::now();
     let id = client
         .create_campaign(&CreateCampaign {
-            case: "cut-in".into(),
-            method: Method::Ndd,
-            library_id: None,
-            vut: serde_json::json!({"model": "idm"}),
-            epsilon: 0.1,
             beta: BETA,
             confidence: CONFIDENCE,
             max_tests: 1 << 40,
             seed,
-            n_min: None,
-            min_events: None,
             guard_outside: Some(false),
-            interval: Default::default(),
-            paired_with: None,
-            outside: None,
-            split: None,
-            vehicle_noise: false,
-            adaptive_search: None,
-            stage_tests: None,
+            ..CreateCampaign::new("cut-in", Method::Ndd, serde_json::json!({"model": "idm"}))
         })
         .await?
         .id;

@@ -153,6 +153,38 @@ pub struct CreateCampaign {
     pub stage_tests: Option<u64>,
 }
 
+impl CreateCampaign {
+    /// A request with the API's defaults, as a JSON body naming only
+    /// `case`, `method` and `vut` gets them: ε 0.1, β 0.2, confidence 0.9,
+    /// [`DEFAULT_MAX_TESTS`], seed 0, no library, every option unset.
+    /// Other fields by struct update:
+    /// `CreateCampaign { beta: 0.3, ..CreateCampaign::new(case, method, vut) }`,
+    /// so that a new field is written here once.
+    pub fn new(case: impl Into<String>, method: Method, vut: serde_json::Value) -> Self {
+        Self {
+            case: case.into(),
+            method,
+            library_id: None,
+            vut,
+            epsilon: default_epsilon(),
+            outside: None,
+            split: None,
+            beta: default_beta(),
+            confidence: default_confidence(),
+            max_tests: default_max_tests(),
+            seed: 0,
+            n_min: None,
+            min_events: None,
+            guard_outside: None,
+            interval: crate::IntervalKind::default(),
+            paired_with: None,
+            vehicle_noise: false,
+            adaptive_search: None,
+            stage_tests: None,
+        }
+    }
+}
+
 fn default_epsilon() -> f64 {
     0.1
 }
@@ -503,4 +535,25 @@ pub struct CampaignPlan {
     /// when absent).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub build_threshold: Option<crate::ThresholdRequest>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_new_request_has_the_defaults_a_json_body_gets() {
+        let parsed: CreateCampaign = serde_json::from_value(serde_json::json!({
+            "case": "cut-in", "method": "library", "library_id": null, "vut": {"model": "idm"}
+        }))
+        .unwrap();
+        assert_eq!(
+            CreateCampaign::new(
+                "cut-in",
+                Method::Library,
+                serde_json::json!({"model": "idm"})
+            ),
+            parsed
+        );
+    }
 }

@@ -66,24 +66,14 @@ pub fn program_campaign(
     seed: u64,
 ) -> tslg_api::CreateCampaign {
     tslg_api::CreateCampaign {
-        case: "cut-in".into(),
-        method,
         library_id: library,
-        vut: serde_json::json!({"external": program, "mode": "episode"}),
-        epsilon: 0.1,
-        outside: None,
-        split: None,
-        beta: 0.2,
-        confidence: 0.9,
         max_tests: 1_000_000,
         seed,
-        n_min: None,
-        min_events: None,
         guard_outside: Some(false),
-        interval: Default::default(),
-        paired_with: None,
-        vehicle_noise: false,
-        adaptive_search: None,
-        stage_tests: None,
+        ..tslg_api::CreateCampaign::new(
+            "cut-in",
+            method,
+            serde_json::json!({"external": program, "mode": "episode"}),
+        )
     }
 }

@@ -112,27 +112,17 @@ async fn drive(
         library.exposure
     );
     let request = |method| CreateCampaign {
-        case: descriptor.name.to_owned(),
-        method,
         library_id: Some(library.id),
-        vut: vut.clone(),
         epsilon: args.exploration.epsilon,
         outside: args.exploration.outside.map(crate::args::OutsideArg::wire),
         split: Some(args.exploration.split.wire()),
         beta: args.beta,
-        confidence: 0.9,
         max_tests: args.max_tests,
         seed: args.seed,
-        n_min: None,
-        min_events: None,
-        guard_outside: None,
-        interval: Default::default(),
-        paired_with: None,
-        vehicle_noise: false,
-        adaptive_search: None,
         // The demo's numbers are those of stages of 100 on any machine.
         stage_tests: (method == tslg_api::Method::Adaptive)
             .then_some(tslg_method::adaptive::AdaptiveSettings::default().stage_tests),
+        ..CreateCampaign::new(descriptor.name, method, vut.clone())
     };
     // The service runs adaptive campaigns of grid cases; a sequential
     // case's probes the vehicle from grid states, which it cannot lease

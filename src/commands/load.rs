@@ -352,25 +352,11 @@ fn load_campaign(shape: &Shape) -> CreateCampaign {
         .saturating_mul(shape.requests as u64)
         .saturating_mul(shape.lease_tests);
     CreateCampaign {
-        case: "cut-in".into(),
-        method: Method::Ndd,
-        library_id: None,
-        vut: serde_json::json!({"model": "idm"}),
-        epsilon: 0.1,
         beta: MIN_BETA,
-        confidence: 0.9,
         max_tests,
         seed: 1,
         n_min: Some(planned.clamp(DEFAULT_N_MIN, max_tests)),
-        min_events: None,
-        guard_outside: None,
-        interval: Default::default(),
-        paired_with: None,
-        vehicle_noise: false,
-        adaptive_search: None,
-        stage_tests: None,
-        outside: None,
-        split: None,
+        ..CreateCampaign::new("cut-in", Method::Ndd, serde_json::json!({"model": "idm"}))
     }
 }
 

@@ -99,7 +99,11 @@ pub async fn page_agrees(browser: &Browser, url: &str, view: &CampaignView, name
     // The verdict first, as the API words it.
     let verdict = eval(browser, "document.getElementById('verdict').textContent").await;
     assert!(!view.verdict.is_empty(), "{name}");
-    assert_eq!(verdict, json!(format!("Verdict: {}", view.verdict)), "{name}");
+    assert_eq!(
+        verdict,
+        json!(format!("Verdict: {}", view.verdict)),
+        "{name}"
+    );
     assert_eq!(fields["tests"], count(view.tests), "{name}");
     assert_eq!(fields["events"], count(view.events), "{name}");
     assert_eq!(fields["invalid"], count(view.invalid), "{name}");

@@ -14,25 +14,11 @@ use tslg_api::{
 
 fn request(method: Method, library_id: i64, vut: &str, seed: u64) -> CreateCampaign {
     CreateCampaign {
-        case: "car-following".into(),
-        method,
         library_id: Some(library_id),
-        vut: serde_json::json!({ "model": vut }),
-        epsilon: 0.1,
-        outside: None,
-        beta: 0.2,
-        confidence: 0.9,
         max_tests: 5_000_000,
         seed,
-        n_min: None,
-        min_events: None,
         guard_outside: Some(false),
-        interval: Default::default(),
-        paired_with: None,
-        split: None,
-        vehicle_noise: false,
-        adaptive_search: None,
-        stage_tests: None,
+        ..CreateCampaign::new("car-following", method, serde_json::json!({ "model": vut }))
     }
 }
 

@@ -24,25 +24,12 @@ fn request(
     seed: u64,
 ) -> CreateCampaign {
     CreateCampaign {
-        case: "highway-exit".into(),
-        method,
         library_id: Some(library_id),
-        vut: vut.clone(),
-        epsilon: 0.1,
         outside: Some(outside),
-        beta: 0.2,
-        confidence: 0.9,
         max_tests: 2_000_000,
         seed,
-        n_min: None,
-        min_events: None,
         guard_outside: Some(false),
-        interval: Default::default(),
-        paired_with: None,
-        split: None,
-        vehicle_noise: false,
-        adaptive_search: None,
-        stage_tests: None,
+        ..CreateCampaign::new("highway-exit", method, vut.clone())
     }
 }
 

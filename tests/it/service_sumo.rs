@@ -123,25 +123,15 @@ async fn a_sumo_vehicle_is_a_surrogate_and_its_library_and_ndd_campaigns_agree()
 
     // A library campaign and the NDD baseline of the SUMO vehicle.
     let campaign = |method, seed| CreateCampaign {
-        case: "cut-in-sumo".into(),
-        method,
         library_id: Some(library.id),
-        vut: serde_json::json!({"external": "sumo-idm"}),
-        epsilon: 0.1,
-        outside: None,
-        split: None,
-        beta: 0.2,
-        confidence: 0.9,
         max_tests: 1_000_000,
         seed,
-        n_min: None,
-        min_events: None,
         guard_outside: Some(false),
-        interval: Default::default(),
-        paired_with: None,
-        vehicle_noise: false,
-        adaptive_search: None,
-        stage_tests: None,
+        ..CreateCampaign::new(
+            "cut-in-sumo",
+            method,
+            serde_json::json!({"external": "sumo-idm"}),
+        )
     };
     let mut views = Vec::new();
     for (method, seed) in [(Method::Library, 1), (Method::Ndd, 2)] {

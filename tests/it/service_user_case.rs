@@ -123,25 +123,15 @@ async fn a_user_defined_case_is_defined_listed_and_run_by_workers_offering_its_p
     );
     let _worker = WorkerProcess::start_with(&server.url, 2, "py", &["--vut-exec", &exec]);
     let request = CreateCampaign {
-        case: "cut-in-py".into(),
-        method: Method::Ndd,
-        library_id: None,
-        vut: serde_json::json!({"external": "cutin-idm"}),
-        epsilon: 0.1,
-        outside: None,
-        split: None,
         beta: 0.3,
-        confidence: 0.9,
         max_tests: 1_000_000,
         seed: 5,
-        n_min: None,
-        min_events: None,
         guard_outside: Some(false),
-        interval: Default::default(),
-        paired_with: None,
-        vehicle_noise: false,
-        adaptive_search: None,
-        stage_tests: None,
+        ..CreateCampaign::new(
+            "cut-in-py",
+            Method::Ndd,
+            serde_json::json!({"external": "cutin-idm"}),
+        )
     };
     let view = client.create_campaign(&request).await.unwrap();
     assert_eq!(
@@ -366,25 +356,15 @@ async fn a_program_surrogates_library_is_built_by_workers_and_is_the_offline_one
     // A campaign on the library keeps it.
     let user = client
         .create_campaign(&CreateCampaign {
-            case: "cut-in-py".into(),
-            method: Method::Library,
             library_id: Some(library.id),
-            vut: serde_json::json!({"external": "cutin-idm"}),
-            epsilon: 0.1,
-            outside: None,
-            split: None,
-            beta: 0.2,
-            confidence: 0.9,
             max_tests: 100_000,
             seed: 1,
-            n_min: None,
-            min_events: None,
             guard_outside: Some(false),
-            interval: Default::default(),
-            paired_with: None,
-            vehicle_noise: false,
-            adaptive_search: None,
-            stage_tests: None,
+            ..CreateCampaign::new(
+                "cut-in-py",
+                Method::Library,
+                serde_json::json!({"external": "cutin-idm"}),
+            )
         })
         .await
         .unwrap()

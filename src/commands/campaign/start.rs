@@ -91,15 +91,15 @@ pub enum MethodArg {
 /// Runs `tslg campaign start`.
 pub fn start(args: &CampaignStartArgs) -> anyhow::Result<()> {
     let client = client(&args.server)?;
+    let method = match args.method {
+        MethodArg::Library => Method::Library,
+        MethodArg::Adaptive => Method::Adaptive,
+        MethodArg::Ndd => Method::Ndd,
+    };
+    let vut = vehicle_json(&args.vut)?;
+    let case = args.case.clone().unwrap_or_else(|| "cut-in".into());
     let mut request = CreateCampaign {
-        case: args.case.clone().unwrap_or_else(|| "cut-in".into()),
-        method: match args.method {
-            MethodArg::Library => Method::Library,
-            MethodArg::Adaptive => Method::Adaptive,
-            MethodArg::Ndd => Method::Ndd,
-        },
         library_id: args.library_id,
-        vut: vehicle_json(&args.vut)?,
         epsilon: args.exploration.epsilon,
         outside: args.exploration.outside.map(OutsideArg::wire),
         split: Some(args.exploration.split.wire()),
@@ -119,6 +119,7 @@ pub fn start(args: &CampaignStartArgs) -> anyhow::Result<()> {
         )?
         .map(AdaptiveSearchArg::wire),
         stage_tests: args.stage_tests,
+        ..CreateCampaign::new(case, method, vut)
     };
     if let Some(limit) = args.fail_above {
         gate::check_limit(limit)?;

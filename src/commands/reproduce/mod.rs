@@ -230,28 +230,15 @@ impl Vehicle<'_> {
     /// at the case's ε and β.
     fn request(&self, method: Method, seed: u64) -> CreateCampaign {
         CreateCampaign {
-            case: self.setting.case.into(),
-            method,
             library_id: Some(self.library.id),
-            vut: self.vut.clone(),
             epsilon: self.setting.epsilon,
-            outside: None,
-            split: None,
             beta: self.setting.beta,
-            confidence: 0.9,
-            max_tests: 10_000_000,
             seed,
-            n_min: None,
-            min_events: None,
-            guard_outside: None,
-            interval: Default::default(),
-            paired_with: None,
-            vehicle_noise: false,
-            adaptive_search: None,
             // The documented numbers are those of stages of 100, whatever
             // the cores of the machine that reproduces them.
             stage_tests: (method == Method::Adaptive)
                 .then_some(tslg_method::adaptive::AdaptiveSettings::default().stage_tests),
+            ..CreateCampaign::new(self.setting.case, method, self.vut.clone())
         }
     }
 

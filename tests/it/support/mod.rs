@@ -369,25 +369,11 @@ pub fn campaign(
     seed: u64,
 ) -> CreateCampaign {
     CreateCampaign {
-        case: "cut-in".into(),
-        method,
         library_id: Some(library_id),
-        vut: serde_json::json!({ "model": vut }),
-        epsilon: 0.1,
         beta,
-        confidence: 0.9,
-        max_tests: 10_000_000,
         seed,
-        n_min: None,
-        min_events: None,
-        outside: Default::default(),
-        split: None,
         guard_outside: Some(false),
-        interval: Default::default(),
-        paired_with: None,
-        vehicle_noise: false,
-        adaptive_search: None,
-        stage_tests: None,
+        ..CreateCampaign::new("cut-in", method, serde_json::json!({ "model": vut }))
     }
 }
 
