@@ -4,7 +4,8 @@
 
 use crate::error::ServiceError;
 use crate::identity::MAX_REQUESTED_NAME;
-use crate::routes::leases::{admit, worker_name_problem};
+use crate::leasing::request::worker_name_problem;
+use crate::routes::leases::admit;
 use crate::routes::problem::ApiJson;
 use crate::routes::ApiPath;
 use crate::state::AppState;
