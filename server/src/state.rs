@@ -1,9 +1,9 @@
 //! Shared state of the request handlers.
 
 use crate::builds::progress::BuildTracker;
-use crate::campaign::tests_cache::SamplerCache;
 use crate::config::Config;
 use crate::db::Database;
+use crate::report::tests_cache::SamplerCache;
 use crate::telemetry::requests::Metrics;
 use crate::telemetry::throughput::Throughput;
 use crate::workers::WorkerRegistry;

@@ -103,6 +103,51 @@ fn the_coordinator_s_layers_point_down() {
     assert!(graph.crates.iter().any(|c| c.contains("axum")));
 }
 
+/// The coordinator's domain folders (`campaign/`, `report/`, `leasing/`,
+/// `builds/`, `telemetry/`) import each other one way only: a folder is
+/// a concept, and two that need each other are one concept split, or a
+/// piece in the wrong one (issue 69: `report/tests_cache` and
+/// `report/explored`, `leasing/claim` and `report/dodging`).
+#[test]
+fn the_coordinator_s_domain_folders_import_each_other_one_way() {
+    let root = workspace().join("server/src/lib.rs");
+    let graph = ModuleGraph::read(workspace(), &root).unwrap();
+    let folder = |file: &Path| -> Option<String> {
+        let rest = file.strip_prefix("server/src").ok()?;
+        let mut parts = rest.components();
+        let first = parts.next()?.as_os_str().to_string_lossy().into_owned();
+        // A top-level file is its own module, not a folder.
+        parts.next().map(|_| first)
+    };
+    let mut pairs = std::collections::BTreeMap::<(String, String), Vec<String>>::new();
+    for &(from, to) in &graph.edges {
+        let (a, b) = (&graph.files[from], &graph.files[to]);
+        if let (Some(fa), Some(fb)) = (folder(a), folder(b)) {
+            if fa != fb {
+                pairs.entry((fa, fb)).or_default().push(format!(
+                    "{} -> {}",
+                    a.display(),
+                    b.display()
+                ));
+            }
+        }
+    }
+    assert!(pairs.len() >= 5, "folder imports read: {:?}", pairs.keys());
+    let mut both_ways = Vec::new();
+    for ((a, b), files) in &pairs {
+        if a < b {
+            if let Some(back) = pairs.get(&(b.clone(), a.clone())) {
+                both_ways.push(format!("{a}/ <-> {b}/: {files:?} and {back:?}"));
+            }
+        }
+    }
+    assert!(
+        both_ways.is_empty(),
+        "folders importing each other:\n{}",
+        both_ways.join("\n")
+    );
+}
+
 /// The check finds what it is for, in a crate written for the purpose: a
 /// cycle through a parent that uses its child's type, and one made of a
 /// path in code and a path inside a macro. It does not count as an import

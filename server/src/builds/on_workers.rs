@@ -170,7 +170,8 @@ pub async fn insert_build(
         parameters_inert: None,
         vehicle_noise: false,
         adaptive_search: tslg_api::AdaptiveSearch::Grid,
-        stage_tests: crate::campaign::stage_size::DEFAULT_STAGE_TESTS,
+        // A build has no stages; the column holds the default length.
+        stage_tests: tslg_method::adaptive::AdaptiveSettings::default().stage_tests,
         first_stage: None,
     };
     Ok(state

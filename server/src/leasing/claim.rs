@@ -9,7 +9,7 @@ use super::size::{
 use crate::config::Config;
 use crate::db::{now_ms, Database};
 use crate::error::ServiceError;
-use crate::report::dodging;
+use crate::leasing::dodging;
 use crate::store::campaigns::{self, CampaignRow};
 use crate::store::leases::{self, Eligible, LeaseRow, Runs, Taker};
 use crate::store::prefix;

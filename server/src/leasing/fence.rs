@@ -138,7 +138,7 @@ pub async fn release_as(
             // An audit's run given back: it goes to another worker, and it
             // costs its worker (report/dodging.rs).
             leases::cancel(conn, id)?;
-            crate::report::dodging::gave_back(conn, &fence.worker)?;
+            crate::leasing::dodging::gave_back(conn, &fence.worker)?;
         } else {
             leases::expire(conn, id, &fence.worker, fence.attempt)?;
         }

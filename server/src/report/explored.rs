@@ -16,10 +16,17 @@
 //! (not of anything a worker reported), so keeping one longer than needed,
 //! or one from a report whose write failed, changes no result.
 
-use crate::report::replay::Explored;
 use std::collections::{BTreeMap, HashMap};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
+
+/// The exploring tests of `from..to`, sorted.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Explored {
+    pub from: u64,
+    pub to: u64,
+    pub tests: Vec<u64>,
+}
 
 /// Test indices kept in all, over every campaign (8 bytes each: 32 MiB),
 /// a set counting one more for itself (a set of no exploring test is not

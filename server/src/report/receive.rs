@@ -3,7 +3,6 @@
 //! vehicles, the weights and the audits of external programs), recording
 //! it, and the bookkeeping that follows. The route only parses.
 
-use crate::campaign::tests_cache::SamplerCache;
 use crate::config::Config;
 use crate::error::ServiceError;
 use crate::leasing::claim as claiming;
@@ -13,6 +12,7 @@ use crate::report::check::CheckedReport;
 use crate::report::record::{self, AuditPlan, Findings, Recorded};
 use crate::report::replay;
 use crate::report::replay_counts::{Place, ReplayCounts};
+use crate::report::tests_cache::SamplerCache;
 use crate::state::AppState;
 use crate::store::{audits, campaigns, leases};
 use std::sync::Arc;
@@ -308,7 +308,7 @@ fn decide(
     let (lease, campaign) = record::held_lease(conn, lease_id, report)?;
     let tests = samplers
         .cached(campaign.id)
-        .map(|tests| crate::campaign::tests_cache::switched(tests, &campaign));
+        .map(|tests| crate::report::tests_cache::switched(tests, &campaign));
     let Some(tests) = tests.filter(|t| t.external().is_none()) else {
         return Ok(Decided::Declined);
     };
@@ -430,7 +430,7 @@ async fn verify_builtin(
     worker: &str,
     checked: &Arc<CheckedReport>,
     new_from: u64,
-) -> Result<Option<replay::Explored>, ServiceError> {
+) -> Result<Option<crate::report::explored::Explored>, ServiceError> {
     if new_from >= checked.to {
         return Ok(None);
     }
@@ -512,7 +512,7 @@ async fn audit_plan(
         .db
         .read(move |conn| crate::store::standing::get(conn, &name))
         .await?;
-    let share = crate::report::dodging::audit_share(config.audit_share, &standing);
+    let share = crate::leasing::dodging::audit_share(config.audit_share, &standing);
     let chosen = state.sampler.pick(share, checked.from, checked.to);
     let planned = audit::choose_audits(
         checked,

@@ -17,6 +17,7 @@
 //! lowest-indexed one whatever the scheduling.
 
 use crate::report::check::CheckedReport;
+use crate::report::explored::Explored;
 use crate::report::mismatch::Mismatch;
 use crate::report::replay_counts::{Place, ReplayCounts};
 use crate::store::audits;
@@ -66,14 +67,6 @@ pub struct Verified {
     /// when every test was run (a library campaign of a grid case): the
     /// fold then need not draw them again.
     pub explored: Option<Explored>,
-}
-
-/// The exploring tests of `from..to`, sorted.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Explored {
-    pub from: u64,
-    pub to: u64,
-    pub tests: Vec<u64>,
 }
 
 /// A replayed test's outcome as a report lists it: an event with its
