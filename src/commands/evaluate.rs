@@ -241,6 +241,11 @@ fn set_up(args: &EvaluateArgs) -> anyhow::Result<Setup> {
          that holds at every n"
     );
     anyhow::ensure!(
+        (20..=100_000).contains(&args.stage_tests) && args.stage_tests.is_multiple_of(20),
+        "--stage-tests must be a multiple of 20 from 20 to 100000, not {}",
+        args.stage_tests
+    );
+    anyhow::ensure!(
         args.stage_tests == 100 || (args.method == MethodArg::Adaptive && descriptor.is_grid()),
         "--stage-tests sets the length of a grid case's adaptive estimation stages; use it with \
          --method adaptive on cut-in or highway-exit"

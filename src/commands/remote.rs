@@ -55,7 +55,7 @@ pub fn tests_shown(view: &CampaignView) -> u64 {
 /// The campaign's tests, named: all it used (the progress line's count),
 /// and of them the valid ones its estimate reads (an adaptive campaign's
 /// estimation tests), its events and its invalid tests.
-fn counts(view: &CampaignView) -> String {
+pub fn counts(view: &CampaignView) -> String {
     let used = Count(view.indices, "test");
     let events = Count(view.events, "event");
     match &view.adaptive {

@@ -129,6 +129,14 @@ fn library_create_and_campaign_start_status_cancel_drive_a_coordinator() {
     assert!(!String::from_utf8_lossy(&o.stderr).contains("panicked"));
     let o = tslg(&["campaign", "cancel", &ndd.id.to_string(), "--server", url]);
     assert!(String::from_utf8_lossy(&o.stdout).contains("cancelled"));
+    // A cancelled campaign's verdict says it is none.
+    let o = tslg(&["campaign", "status", &ndd.id.to_string(), "--server", url]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        text.lines().any(|l| l.starts_with("  verdict: cancelled")
+            && (l.contains("not a verdict") || l.contains("no verdict"))),
+        "{text}"
+    );
     let o = tslg(&["campaign", "cancel", &ndd.id.to_string(), "--server", url]);
     assert!(clean_refusal(&o));
     assert!(String::from_utf8_lossy(&o.stderr).contains("refused (409)"));

@@ -409,8 +409,8 @@ async fn the_report_writes_the_dashboard_figures_as_svg_with_the_numbers_as_csv(
         format!("# Campaign {}: fvdm on cut-in (ndd)", view.id),
         format!("**Verdict:** {}", view.verdict),
         format!(
-            "| tests used | {} ({} valid, 0 invalid) |",
-            view.indices, view.tests
+            "| tests | {} tests used ({} valid, {} events, 0 invalid) |",
+            view.indices, view.tests, view.events
         ),
         format!("| events | {} |", view.events),
         format!("| estimate | {:.4e} |", view.estimate.unwrap()),

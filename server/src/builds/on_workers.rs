@@ -172,6 +172,7 @@ pub async fn insert_build(
         adaptive_search: tslg_api::AdaptiveSearch::Grid,
         // A build has no stages; the column holds the default length.
         stage_tests: tslg_method::adaptive::AdaptiveSettings::default().stage_tests,
+        search_width: 0,
         first_stage: None,
     };
     Ok(state

@@ -422,6 +422,13 @@ fn new_campaign(
         vehicle_noise: req.vehicle_noise && external,
         adaptive_search: req.adaptive_search.unwrap_or_default(),
         stage_tests: req.stage_tests.unwrap_or(stage_size::DEFAULT_STAGE_TESTS),
+        search_width: if req.method == Method::Adaptive {
+            AdaptiveSettings::fleet_search_width(
+                req.stage_tests.unwrap_or(stage_size::DEFAULT_STAGE_TESTS),
+            )
+        } else {
+            0
+        },
         first_stage: (req.method == Method::Adaptive).then(|| {
             (
                 0,

@@ -20,11 +20,10 @@ pub fn verdict(view: &CampaignView) -> String {
     };
     let Some(answer) = &view.answer else {
         return match view.status {
-            CampaignStatus::Running | CampaignStatus::Pending => {
-                "running: no verdict before its first tests".to_owned()
-            }
+            CampaignStatus::Pending => "waiting for its library: no verdict yet".to_owned(),
+            CampaignStatus::Running => "running: no verdict before its first tests".to_owned(),
             other => format!(
-                "{}: no verdict (too few tests for an interval)",
+                "{}: no verdict (too few tests for an interval){read_warnings}",
                 other.as_str()
             ),
         };
@@ -32,23 +31,24 @@ pub fn verdict(view: &CampaignView) -> String {
     let interval = format!("[{:.3e}, {:.3e}]", answer.low, answer.high);
     let which = format!("the {} interval", answer.interval.as_str());
     match view.status {
-        // The reason names the interval it gives.
+        // The reason names the interval it gives and what it assumes.
         CampaignStatus::Converged => format!(
             "report P(A) in {interval} at {confidence} confidence: {}{read_warnings}",
             answer.reason
         ),
         CampaignStatus::Exhausted => format!(
-            "its budget ran out before β: {interval} at {confidence} ({which}) holds P(A) but is \
-             wider than asked; raise the budget for a verdict within β{read_warnings}"
+            "its budget ran out before β: {interval} at {confidence} confidence is wider than \
+             asked ({}); raise the budget for a verdict within β{read_warnings}",
+            answer.reason
         ),
         CampaignStatus::Running | CampaignStatus::Pending => {
             format!("running: {interval} so far ({which}), not yet within β{read_warnings}")
         }
         CampaignStatus::Cancelled => {
-            format!("cancelled: {interval} when it stopped ({which}), not a verdict")
+            format!("cancelled: {interval} when it stopped ({which}), not a verdict{read_warnings}")
         }
         CampaignStatus::Failed => format!(
-            "failed: no verdict{}",
+            "failed: no verdict{}{read_warnings}",
             view.status_detail
                 .as_ref()
                 .map_or(String::new(), |d| format!(" ({d})"))

@@ -259,9 +259,15 @@ fn audit_warnings(
     }
     if counts.open > 0 && !stopped {
         warnings.push(format!(
-            "{} tests wait to be run again by another worker offering `{program}`; the estimate \
-             stops at the first of them until they are",
-            counts.open
+            "{} tests wait to be run again by another worker offering `{program}`; {}",
+            counts.open,
+            if vehicle_noise {
+                // Only an audit a worker owes holds a noisy program's prefix.
+                "their first runs stand, so the estimate waits only for those a worker owes for \
+                 giving audit runs back"
+            } else {
+                "the estimate stops at the first of them until they are"
+            }
         ));
     }
     if counts.settled >= 2 && !vehicle_noise {

@@ -11,6 +11,7 @@ use anyhow::Context;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use tslg_api::Method;
+use tslg_method::adaptive::AdaptiveSettings;
 use tslg_method::cases::open_case;
 use tslg_method::registry::CampaignTests;
 
@@ -180,11 +181,17 @@ fn build(row: &CampaignRow, file: Option<&[u8]>) -> anyhow::Result<Arc<dyn Campa
             file,
             &vut,
             row.epsilon,
-            tslg_client::wire::adaptive_settings(
-                row.vehicle_noise,
-                row.adaptive_search,
-                row.stage_tests.max(0) as u64,
-            ),
+            // The width stored at creation, not the one its stage length
+            // implies now: a campaign created before the widening keeps
+            // the stages it planned (migrations/…36_search_width.sql).
+            AdaptiveSettings {
+                search_width: row.search_width.max(0) as u64,
+                ..tslg_client::wire::adaptive_settings(
+                    row.vehicle_noise,
+                    row.adaptive_search,
+                    row.stage_tests.max(0) as u64,
+                )
+            },
             &row.rule(),
             row.seed(),
         )?);

@@ -105,6 +105,8 @@ pub struct CampaignRow {
     pub adaptive_search: AdaptiveSearch,
     /// An adaptive campaign's estimation stages' length.
     pub stage_tests: i64,
+    /// An adaptive campaign's search width (0: one ring a search stage).
+    pub search_width: i64,
     pub created_at: String,
     pub updated_at: String,
 }
@@ -124,7 +126,7 @@ pub const COLUMNS: &str = "id, case_name, preset, \
     cost_per_test, worker_seconds, audits_waived, reported_s1, exact_probability, \
     stage_start, stage_end, stage_kind, library_tests, search_tests, stages, support, paired_with, created_at, \
     updated_at, vehicle_noise, interval, sequence_low, sequence_high, explore_from, outside_s2, parameters_inert, \
-    adaptive_search, stage_tests";
+    adaptive_search, stage_tests, search_width";
 
 impl CampaignRow {
     pub fn seed(&self) -> u64 {
@@ -314,12 +316,13 @@ fn from_row(row: &Row<'_>) -> rusqlite::Result<CampaignRow> {
         parameters_inert: at(row, 57)?,
         adaptive_search: named(row, 58)?,
         stage_tests: at(row, 59)?,
+        search_width: at(row, 60)?,
     })
 }
 
 /// The number of columns [`from_row`] reads.
 #[cfg(test)]
-const READ: usize = 60;
+const READ: usize = 61;
 
 #[cfg(test)]
 mod tests {

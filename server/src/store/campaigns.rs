@@ -40,6 +40,10 @@ pub struct NewCampaign {
     /// An adaptive campaign's estimation stages' length (100 for the
     /// others).
     pub stage_tests: u64,
+    /// An adaptive campaign's search width
+    /// (`tslg_method::adaptive::AdaptiveSettings::search_width`; 0 for the
+    /// others).
+    pub search_width: u64,
     /// An adaptive campaign's first stage: its tests `start..end` and kind.
     pub first_stage: Option<(u64, u64, &'static str)>,
 }
@@ -50,8 +54,8 @@ pub fn insert(conn: &Connection, new: &NewCampaign) -> Result<CampaignRow, Store
          exposure_fingerprint, exposure_table, vut, requires, epsilon, outside, beta, confidence, \
          n_min, min_events, max_tests, seed, status, guard_outside, exact_probability, split, \
          adaptive, stage_start, stage_end, stage_kind, enumerate, cost_per_test, vehicle_noise, \
-         interval, outside_s2, parameters_inert, adaptive_search, stage_tests) \
-         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, 0, ?, ?, ?) \
+         interval, outside_s2, parameters_inert, adaptive_search, stage_tests, search_width) \
+         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, 0, ?, ?, ?, ?) \
          RETURNING {COLUMNS}"
     );
     let adaptive = new.method == Method::Adaptive;
@@ -113,6 +117,7 @@ pub fn insert(conn: &Connection, new: &NewCampaign) -> Result<CampaignRow, Store
             new.parameters_inert,
             new.adaptive_search.as_str(),
             new.stage_tests as i64,
+            new.search_width as i64,
         ],
     )?)
 }

@@ -15,9 +15,12 @@ use tslg_method::registry::AdaptiveProgress;
 /// The first index the prefix may not pass: the smallest `resume_at` of
 /// the campaign's active leases (below it every outcome is recorded), its
 /// `next_index`, and its first open audit (a test two workers have not yet
-/// agreed on, `report/audit.rs`). A noisy program's audit holds nothing:
-/// its first run stands whatever the replica gives (`report/noisy.rs`),
-/// so a stage does not wait a test's time for it.
+/// agreed on, `report/audit.rs`). A noisy program's sampled audit holds
+/// nothing: its first run stands whatever the replica gives
+/// (`report/noisy.rs`), so a stage does not wait a test's time for it; an
+/// audit a worker owes for giving audit runs back (`leasing/dodging.rs`)
+/// holds the prefix for every program, so that dodging costs the dodger
+/// its results' place in the prefix.
 pub fn frontier(conn: &Connection, campaign: &CampaignRow) -> Result<u64, StoreError> {
     Ok(bounds(conn, campaign)?.frontier)
 }
@@ -38,18 +41,15 @@ pub fn bounds(conn: &Connection, campaign: &CampaignRow) -> Result<Bounds, Store
             "SELECT (SELECT MIN(resume_at) FROM leases WHERE campaign_id = ?1 \
                      AND state = {LEASE_ACTIVE} AND audit_id IS NULL), \
                     (SELECT MIN(test_index) FROM audits WHERE campaign_id = ?1 \
-                     AND state IN {open}), \
+                     AND state IN {open} AND (owed OR NOT ?2)), \
                     (SELECT MAX(indices) FROM history WHERE campaign_id = ?1)",
             open = crate::store::states::AUDIT_OPEN
         ),
-        [campaign.id],
+        params![campaign.id, campaign.vehicle_noise],
     )?;
     let recorded = open.map_or(campaign.next_index, |r| r.min(campaign.next_index)) as u64;
     Ok(Bounds {
-        frontier: match audited {
-            Some(a) if !campaign.vehicle_noise => (a as u64).min(recorded),
-            _ => recorded,
-        },
+        frontier: audited.map_or(recorded, |a| (a as u64).min(recorded)),
         last_stored: last_stored.map(|i| i as u64),
     })
 }
@@ -282,14 +282,17 @@ pub fn set_explore_from(conn: &Connection, campaign: i64, folded: u64) -> Result
 }
 
 /// A stopped campaign's leases cancelled, and its audits of tests past the
-/// stop index `stop` set aside (they check tests that no longer count).
+/// stop index `stop` set aside (they check tests that no longer count); a
+/// noisy program's sampled audits before it too, which the stop did not
+/// wait for ([`bounds`]) and nobody runs once it has stopped.
 pub(crate) fn close_stopped(conn: &Connection, campaign: i64, stop: u64) -> Result<(), StoreError> {
     leases::cancel_active(conn, campaign)?;
     sql::execute(
         conn,
         &format!(
-            "UPDATE audits SET state = {AUDIT_PAST} WHERE campaign_id = ? AND test_index >= ? \
-             AND state IN {}",
+            "UPDATE audits SET state = {AUDIT_PAST} WHERE campaign_id = ?1 AND state IN {} \
+             AND (test_index >= ?2 OR (NOT owed AND \
+               (SELECT vehicle_noise FROM campaigns WHERE id = ?1)))",
             crate::store::states::AUDIT_OPEN
         ),
         [campaign, stop as i64],
@@ -334,6 +337,23 @@ mod tests {
             // agree on it; a noisy program's first run stands.
             assert_eq!(bounds(conn, &campaigns::get(conn, 1)?)?.frontier, 5);
             assert_eq!(bounds(conn, &campaigns::get(conn, 2)?)?.frontier, 20);
+            // An audit a dodger owes holds a noisy program's prefix too.
+            let owed = NewAudit {
+                test_index: 12,
+                reason: "sample",
+                first_outcome: "none".into(),
+                owed: true,
+            };
+            audits::insert(conn, 2, "a", &[owed])?;
+            assert_eq!(bounds(conn, &campaigns::get(conn, 2)?)?.frontier, 12);
+            // Stopped at 15: the noisy campaign's sampled audit before the
+            // stop is set aside with the rest; the deterministic one's
+            // audit, which the stop waited for, is not touched.
+            close_stopped(conn, 1, 15)?;
+            close_stopped(conn, 2, 15)?;
+            assert!(audits::open_id_at(conn, 1, 5)?.is_some());
+            assert_eq!(audits::open_id_at(conn, 2, 5)?, None);
+            assert!(audits::open_id_at(conn, 2, 12)?.is_some());
             Ok(())
         })
         .await

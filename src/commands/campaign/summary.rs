@@ -33,13 +33,8 @@ pub fn markdown(view: &CampaignView, figures: &[&str]) -> String {
                 None => view.status.as_str().to_owned(),
             },
         ),
-        (
-            "tests used".into(),
-            format!(
-                "{} ({} valid, {} invalid)",
-                view.indices, view.tests, view.invalid
-            ),
-        ),
+        // An adaptive campaign's estimate reads its estimation tests only.
+        ("tests".into(), crate::commands::remote::counts(view)),
         ("events".into(), view.events.to_string()),
         ("estimate".into(), sci(view.estimate)),
         (
