@@ -118,9 +118,15 @@ async fn held_back_noisy_programs_get_answers_that_cover() {
              {ndd:.0} ({:.1}×)",
             ndd / median as f64
         );
+        // The project's coverage plan (`tslg_testkit::coverage_floor`): a
+        // method covering at the nominal 0.9 fails it on at most 1 % of
+        // seed sets. Ten campaigns give a floor of 6; a floor of 8, as
+        // before, failed a sound method 7 % of the time (the radar program
+        // covered 7 of 10 in one CI run, 9 of 10 in others).
+        let floor = tslg_testkit::coverage_floor(10, 0.9, 0.01) as usize;
         assert!(
-            covered >= 8,
-            "{example}: {covered}/10 answers cover {probability:.4e}"
+            covered >= floor,
+            "{example}: {covered}/10 answers cover {probability:.4e} (floor {floor})"
         );
     }
 }
