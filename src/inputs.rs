@@ -13,7 +13,7 @@ use tslg_method::cases::user::file::CaseFile;
 use tslg_method::estimator::StoppingRule;
 use tslg_method::external::{ProgramConversation, ProgramHost};
 use tslg_method::library::{read_head, LibraryHead};
-use tslg_method::registry::{ExposureSource, ScenarioCase};
+use tslg_method::registry::{CaseIdentity, ExposureSource, ScenarioCase};
 use tslg_worker::external::{ProgramSettings, ProgramSpec, Programs};
 
 /// An exposure table file: its name (the file's) and its text.
@@ -227,7 +227,7 @@ pub fn case_of_library(args: &CaseArgs, head: &LibraryHead) -> anyhow::Result<Ca
 /// out in full by `case` (its defaults for what the specification leaves
 /// out), or why `case` cannot run it.
 pub fn vehicle_spec(
-    case: &dyn ScenarioCase,
+    case: &dyn CaseIdentity,
     text: &str,
     what: &str,
 ) -> anyhow::Result<serde_json::Value> {

@@ -1,8 +1,9 @@
 //! Campaigns: start requests, their state and history, and the plan a
 //! worker needs to run their tests.
 
-use crate::campaign_kind::{CampaignStatus, Method, Outside, Split};
+use crate::campaign_kind::{CampaignStatus, Outside, Split};
 use crate::library::ExposureRequest;
+use crate::method::Method;
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
 

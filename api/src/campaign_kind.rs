@@ -1,53 +1,9 @@
-//! What kind of campaign: how its tests are drawn, split and spread
-//! outside the library, and the states it goes through.
+//! What kind of campaign besides its method (api/src/method.rs): how an
+//! adaptive one searches, how tests are split and spread outside the
+//! library, the interval it reads, and the states it goes through.
 
 use serde::{Deserialize, Serialize};
 use utoipa::ToSchema;
-
-/// How tests are drawn.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, ToSchema)]
-#[serde(rename_all = "kebab-case")]
-pub enum Method {
-    /// From the library with ε-greedy exploration, importance-weighted.
-    Library,
-    /// From the naturalistic distribution itself (the baseline), weight 1.
-    Ndd,
-    /// In stages that learn where this vehicle fails: the library's tests,
-    /// a search around the failures and near misses they meet, then
-    /// estimation on the failures found (grid cases; docs/statistics.md,
-    /// "Adaptive campaigns").
-    Adaptive,
-    /// A library build's surrogate runs, which the coordinator leases to
-    /// workers as tests: test `i` runs the surrogate on the `i`-th cell
-    /// with exposure (`build_of` names the library). Created by the
-    /// coordinator for a build whose surrogate is a program, not by
-    /// clients.
-    Enumerate,
-    /// A library build that one worker runs whole (a multistart search, a
-    /// car-following policy): its one test is the build, and the worker
-    /// uploads the library to `POST /api/v1/leases/{id}/library`
-    /// (`build_search` and `build_threshold` in the plan say how to build
-    /// it). Created by the coordinator, not by clients.
-    Build,
-}
-
-impl Method {
-    /// The method's name on the wire (`library`, `ndd`).
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Method::Library => "library",
-            Method::Ndd => "ndd",
-            Method::Adaptive => "adaptive",
-            Method::Enumerate => "enumerate",
-            Method::Build => "build",
-        }
-    }
-
-    /// Whether the campaign draws from a library (`library`, `adaptive`).
-    pub fn uses_library(self) -> bool {
-        matches!(self, Method::Library | Method::Adaptive)
-    }
-}
 
 /// How an adaptive campaign searches around the failures and near misses
 /// it meets (docs/adaptive-design.md, "Fine grids").
@@ -70,12 +26,20 @@ pub enum AdaptiveSearch {
 }
 
 impl AdaptiveSearch {
+    /// Every search.
+    pub const ALL: [AdaptiveSearch; 2] = [AdaptiveSearch::Grid, AdaptiveSearch::Lattice];
+
     /// Its name on the wire (`grid`, `lattice`).
     pub fn as_str(self) -> &'static str {
         match self {
             AdaptiveSearch::Grid => "grid",
             AdaptiveSearch::Lattice => "lattice",
         }
+    }
+
+    /// The search named `name`, if one is.
+    pub fn parse(name: &str) -> Option<Self> {
+        AdaptiveSearch::ALL.into_iter().find(|s| s.as_str() == name)
     }
 }
 

@@ -71,10 +71,7 @@ pub fn guard_outside(req: &tslg_api::CreateCampaign, grid_case: bool) -> bool {
         tslg_method::noise::guards_by_default(
             req.vehicle_noise || tslg_method::noise::spec_is_noisy(&req.vut),
             grid_case
-                && matches!(
-                    req.method,
-                    tslg_api::Method::Library | tslg_api::Method::Adaptive
-                )
+                && req.method.spec().explores
                 && req.paired_with.is_none()
                 && req.interval == tslg_api::IntervalKind::Wald,
         )

@@ -37,10 +37,7 @@ pub(crate) fn vehicle(view: &CampaignView) -> String {
 /// What the estimate's x axis counts: an adaptive campaign's estimate is
 /// over its estimation tests alone.
 fn tests_axis(view: &CampaignView) -> &'static str {
-    match view.method {
-        tslg_api::Method::Adaptive => "estimation tests",
-        _ => "tests",
-    }
+    view.method.spec().tests_axis
 }
 
 /// The points that have a place on a log axis of tests.

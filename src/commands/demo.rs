@@ -111,7 +111,7 @@ async fn drive(
         started.elapsed().as_secs_f64(),
         library.exposure
     );
-    let request = |method| CreateCampaign {
+    let request = |method: Method| CreateCampaign {
         library_id: Some(library.id),
         epsilon: args.exploration.epsilon,
         outside: args.exploration.outside.map(crate::args::OutsideArg::wire),
@@ -120,7 +120,8 @@ async fn drive(
         max_tests: args.max_tests,
         seed: args.seed,
         // The demo's numbers are those of stages of 100 on any machine.
-        stage_tests: (method == tslg_api::Method::Adaptive)
+        stage_tests: method
+            .in_stages()
             .then_some(tslg_method::adaptive::AdaptiveSettings::default().stage_tests),
         ..CreateCampaign::new(descriptor.name, method, vut.clone())
     };
@@ -184,23 +185,6 @@ fn demo_vut(args: &DemoArgs) -> anyhow::Result<String> {
     })
 }
 
-/// What a method's interval rests on, in one line
-/// (docs/statistics.md, "What each answer assumes").
-fn assumes(method: Method) -> &'static str {
-    match method {
-        Method::Library => {
-            "the library holds the vehicle's failures: the surrogate fails where it does"
-        }
-        Method::Adaptive => {
-            "the vehicle's failures outside the library are reachable through failures and \
-             near misses from what its tests met"
-        }
-        Method::Ndd => "nothing beyond the exposure model: every scenario sampled as it occurs",
-        Method::Enumerate => "no estimate: a library build's surrogate runs, every scenario once",
-        Method::Build => "no estimate: a library built whole on one worker",
-    }
-}
-
 fn print_table(args: &DemoArgs, views: &[CampaignView], report: Option<&ExactReport>) {
     let by_library = &views[0];
     let by_ndd = &views[views.len() - 1];
@@ -244,7 +228,11 @@ fn print_table(args: &DemoArgs, views: &[CampaignView], report: Option<&ExactRep
     }
     outln!();
     for v in views {
-        outln!("{:<8} assumes {}", v.method.as_str(), assumes(v.method));
+        outln!(
+            "{:<8} assumes {}",
+            v.method.as_str(),
+            v.method.spec().rests_on
+        );
         if let Some(a) = &v.adaptive {
             outln!(
                 "{:<8}   ({} library and {} search tests found where the vehicle fails; {} \
@@ -266,7 +254,7 @@ fn print_table(args: &DemoArgs, views: &[CampaignView], report: Option<&ExactRep
     }
     print_outside(by_library, exact);
     let measured = by_ndd.tests as f64 / by_library.indices.max(1) as f64;
-    if let Some(adaptive) = views.iter().find(|v| v.method == Method::Adaptive) {
+    if let Some(adaptive) = views.iter().find(|v| v.method.in_stages()) {
         outln!(
             "\nNDD tests / adaptive tests: {} measured",
             crate::output::ratio(by_ndd.tests as f64 / adaptive.indices.max(1) as f64)
@@ -335,7 +323,7 @@ fn print_table(args: &DemoArgs, views: &[CampaignView], report: Option<&ExactRep
 fn print_takeaway(views: &[CampaignView], exact: Option<f64>) {
     let by_library = &views[0];
     let by_ndd = &views[views.len() - 1];
-    let Some(adaptive) = views.iter().find(|v| v.method == Method::Adaptive) else {
+    let Some(adaptive) = views.iter().find(|v| v.method.in_stages()) else {
         return;
     };
     let holds = |v: &CampaignView| match (exact, v.ci_low, v.ci_high) {

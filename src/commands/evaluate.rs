@@ -3,14 +3,17 @@
 //! adaptive one. On a grid case small enough to enumerate
 //! ([`tslg_api::EXACT_MAX_SCENARIOS`]) the exact P(A) is printed beside it.
 
-use crate::args::{AdaptiveSearchArg, CaseArgs, ExplorationArgs, OutsideArg, RuleArgs};
+use crate::args::{
+    search_for_method, search_parser, CaseArgs, ExplorationArgs, OutsideArg, RuleArgs,
+};
 use crate::commands::exact::exact_answer;
 use crate::inputs::{
     case_of_library, check_epsilon, open, read_library_file, stopping_rule, vehicle_spec,
 };
-use clap::{Args, ValueEnum};
+use clap::Args;
 use serde::Serialize;
 use std::path::PathBuf;
+use tslg_api::{AdaptiveSearch, Method};
 use tslg_method::campaign::{run_campaign_tests, Answer, AnswerContext, CampaignResult};
 use tslg_method::estimator::{Interval, StoppingRule};
 use tslg_method::registry::{AdaptiveRun, ScenarioCase};
@@ -24,12 +27,10 @@ pub struct EvaluateArgs {
     /// The vehicle under test: a built-in name or a JSON specification.
     #[arg(long)]
     pub vut: String,
-    /// `library` (importance sampling from a library), `adaptive` (search
-    /// from the library's failures and the near misses, then sample the
-    /// failures found; docs/adaptive-design.md) or `ndd` (the naturalistic
-    /// baseline).
-    #[arg(long, value_enum, default_value = "library")]
-    pub method: MethodArg,
+    /// How the campaign draws its tests (docs/statistics.md,
+    /// docs/adaptive-design.md).
+    #[arg(long, value_parser = crate::args::method_parser(), default_value = "library")]
+    pub method: Method,
     /// The library file (methods `library` and `adaptive`), as `tslg
     /// library build` writes it: the campaign runs on its case and preset
     /// (with `ndd`, the baseline runs on them too).
@@ -38,8 +39,8 @@ pub struct EvaluateArgs {
     /// How an adaptive campaign searches: `grid` (the default) or
     /// `lattice` (a fine grid's coarser lattice, whole blocks into the
     /// support; docs/adaptive-design.md, "Fine grids").
-    #[arg(long, value_enum)]
-    pub adaptive_search: Option<AdaptiveSearchArg>,
+    #[arg(long, value_parser = search_parser())]
+    pub adaptive_search: Option<AdaptiveSearch>,
     /// Tests of an adaptive campaign's estimation stages (a multiple of 20,
     /// 20 to 100000): a service campaign's `stage_tests`, to replay it.
     #[arg(long, default_value_t = 100)]
@@ -60,14 +61,6 @@ pub struct EvaluateArgs {
     /// Print the result as JSON.
     #[arg(long)]
     pub json: bool,
-}
-
-/// How `tslg evaluate` draws its tests.
-#[derive(Debug, Clone, Copy, ValueEnum, PartialEq, Eq)]
-pub enum MethodArg {
-    Library,
-    Adaptive,
-    Ndd,
 }
 
 #[derive(Serialize)]
@@ -158,10 +151,7 @@ struct Setup {
 pub fn run(args: &EvaluateArgs) -> anyhow::Result<()> {
     let setup = set_up(args)?;
     if let Some(other) = &args.paired_with {
-        let file = setup
-            .file
-            .as_deref()
-            .filter(|_| args.method == MethodArg::Library);
+        let file = setup.file.as_deref().filter(|_| args.method.uses_library());
         let plan = crate::commands::paired::Plan {
             case: setup.case.as_ref(),
             file,
@@ -191,20 +181,20 @@ fn set_up(args: &EvaluateArgs) -> anyhow::Result<Setup> {
         crate::inputs::case_descriptor(&args.case)?;
     }
     check_epsilon(args.exploration.epsilon)?;
-    AdaptiveSearchArg::for_method(args.adaptive_search, args.method == MethodArg::Adaptive)?;
+    search_for_method(args.adaptive_search, args.method)?;
     anyhow::ensure!(
-        args.paired_with.is_none() || args.method != MethodArg::Adaptive,
+        args.paired_with.is_none() || args.method.spec().pairs,
         "--paired-with runs library and ndd campaigns: an adaptive campaign's stages follow \
          one vehicle's failures"
     );
-    let library = match (args.method, &args.library) {
-        (MethodArg::Library | MethodArg::Adaptive, None) => {
-            anyhow::bail!("--library is required with --method library and adaptive")
+    let library = match (args.method.uses_library(), &args.library) {
+        (true, None) => {
+            anyhow::bail!("--library is required with --method {}", args.method)
         }
         // An NDD baseline beside a library runs on the library's case and
         // preset (it samples the exposure, not the library).
         (_, Some(path)) => Some(read_library_file(path)?),
-        (MethodArg::Ndd, None) => None,
+        (false, None) => None,
     };
     // The tests run on the case and simulation the library was built on.
     let case_args = match &library {
@@ -214,17 +204,18 @@ fn set_up(args: &EvaluateArgs) -> anyhow::Result<Setup> {
     let case = open(&case_args)?;
     let descriptor = case.descriptor().clone();
     let vut = vehicle_spec(case.as_ref(), &args.vut, "vehicle under test")?;
-    let guardable = descriptor.is_grid()
-        && args.method != MethodArg::Ndd
-        && args.rule.interval == Interval::Wald;
+    let guardable =
+        descriptor.is_grid() && args.method.spec().explores && args.rule.interval == Interval::Wald;
     let rule = stopping_rule(
         &args.rule,
-        descriptor.exploring_share(args.method == MethodArg::Library, args.exploration.epsilon),
+        descriptor.exploring_share(
+            args.method.spec().waits_for_explorers,
+            args.exploration.epsilon,
+        ),
         tslg_method::noise::guards_by_default(tslg_method::noise::spec_is_noisy(&vut), guardable),
     )?;
     anyhow::ensure!(
-        rule.interval == Interval::Wald
-            || (descriptor.is_grid() && args.method != MethodArg::Adaptive),
+        rule.interval == Interval::Wald || (descriptor.is_grid() && args.method.spec().anytime),
         "--interval anytime applies to the library and ndd campaigns of the grid cases: {}",
         if descriptor.is_grid() {
             "an adaptive campaign's stages have no confidence sequence yet"
@@ -234,7 +225,7 @@ fn set_up(args: &EvaluateArgs) -> anyhow::Result<Setup> {
     );
     anyhow::ensure!(
         rule.interval == Interval::Wald
-            || args.method != MethodArg::Library
+            || !args.method.spec().explores
             || args.exploration.split == crate::args::SplitArg::Stratified,
         "--interval anytime reads one sequence per stratum of a library campaign, which needs \
          --split stratified (the default): under the random split the outside has no bound \
@@ -246,7 +237,7 @@ fn set_up(args: &EvaluateArgs) -> anyhow::Result<Setup> {
         args.stage_tests
     );
     anyhow::ensure!(
-        args.stage_tests == 100 || (args.method == MethodArg::Adaptive && descriptor.is_grid()),
+        args.stage_tests == 100 || (args.method.in_stages() && descriptor.is_grid()),
         "--stage-tests sets the length of a grid case's adaptive estimation stages; use it with \
          --method adaptive on cut-in or highway-exit"
     );
@@ -267,7 +258,7 @@ fn set_up(args: &EvaluateArgs) -> anyhow::Result<Setup> {
         OutsideArg::spread,
     );
     let file = library
-        .filter(|_| args.method != MethodArg::Ndd)
+        .filter(|_| args.method.uses_library())
         .map(|(bytes, _)| bytes);
     Ok(Setup {
         case,
@@ -292,14 +283,16 @@ fn run_campaign(
         outside,
         ..
     } = setup;
+    // The in-process campaign's tests: the one place here a method's
+    // sampler is chosen.
     Ok(match (args.method, setup.file.as_deref()) {
-        (MethodArg::Adaptive, Some(file)) => {
-            let search = args.adaptive_search.unwrap_or(AdaptiveSearchArg::Grid);
+        (Method::Adaptive, Some(file)) => {
+            let search = args.adaptive_search.unwrap_or_default();
             let run = case.adaptive_campaign(
                 file,
                 vut,
                 args.exploration.epsilon,
-                tslg_client::wire::adaptive_settings(false, search.wire(), args.stage_tests),
+                tslg_client::wire::adaptive_settings(false, search, args.stage_tests),
                 rule,
                 args.seed,
             )?;
@@ -321,12 +314,12 @@ fn run_campaign(
                 support_cells: support.len(),
                 assumes,
                 search_kind,
-                adaptive_search: setup.descriptor.is_grid().then(|| search.wire().as_str()),
+                adaptive_search: setup.descriptor.is_grid().then(|| search.as_str()),
             };
             (result, Some(search))
         }
         (_, file) => {
-            let file = file.filter(|_| args.method == MethodArg::Library);
+            let file = file.filter(|_| args.method.uses_library());
             let tests = case.campaign(
                 file,
                 vut,
@@ -353,18 +346,14 @@ fn report(
         AnswerContext {
             guard_outside: setup.rule.guard_outside,
             noisy: tslg_method::noise::spec_is_noisy(&setup.vut),
-            adaptive: args.method == MethodArg::Adaptive,
+            adaptive: args.method.in_stages(),
         },
     );
     Report {
         case: setup.descriptor.name,
         grid: setup.descriptor.is_grid(),
         preset: setup.case.preset(),
-        method: match args.method {
-            MethodArg::Library => "library",
-            MethodArg::Adaptive => "adaptive",
-            MethodArg::Ndd => "ndd",
-        },
+        method: args.method.as_str(),
         vut: setup.vut.clone(),
         result,
         search,
@@ -380,10 +369,10 @@ fn report(
                 beta: setup.rule.beta,
                 guard_outside: setup.rule.guard_outside,
                 dialect: Dialect::Cli,
-                unexplored: matches!(args.method, MethodArg::Library)
+                unexplored: args.method.spec().waits_for_explorers
                     && args.exploration.epsilon == 0.0,
                 uniform_spread: setup.outside == tslg_method::sampling::OutsideSpread::Uniform,
-                adaptive: matches!(args.method, MethodArg::Adaptive),
+                adaptive: args.method.in_stages(),
                 noisy: tslg_method::noise::spec_is_noisy(&setup.vut),
             },
         ),

@@ -38,7 +38,7 @@ pub struct ExactArgs {
 
 /// P(A) by enumeration of the grid, where the case has one and it is
 /// small enough to run here in a few seconds.
-pub fn exact_answer(case: &dyn ScenarioCase, vut: &serde_json::Value) -> Option<f64> {
+pub fn exact_answer(case: &dyn ExactAnswers, vut: &serde_json::Value) -> Option<f64> {
     let small = case.total_scenarios() <= tslg_api::EXACT_MAX_SCENARIOS;
     (case.descriptor().is_grid() && small)
         .then(|| case.exact_event_probability(vut).ok())
@@ -54,7 +54,7 @@ use clap::Args;
 use tslg_method::estimator::StoppingRule;
 use tslg_method::guard_floor::GuardFloors;
 use tslg_method::library::{LibrarySearch, SearchMethod};
-use tslg_method::registry::{BuildRequest, ScenarioCase};
+use tslg_method::registry::{BuildRequest, ExactAnswers, ScenarioCase};
 
 pub fn run(args: &ExactArgs) -> anyhow::Result<()> {
     check_epsilon(args.epsilon)?;

@@ -35,7 +35,8 @@ use tslg_method::adaptive::{AdaptiveResult, AdaptiveSettings, TestResult};
 use tslg_method::estimator::StoppingRule;
 use tslg_method::external::{DriverError, ExternalMode, ExternalVehicle, ExternalVut};
 use tslg_method::outside::OutsideMass;
-use tslg_method::registry::{CampaignTests, PlannedTest, ScenarioCase, TestOutcome};
+use tslg_method::registry::{CampaignSampler, ScenarioCase};
+use tslg_method::registry::{CampaignTests, PlannedTest, TestOutcome};
 use tslg_method::sampling::{OutsideSpread, Split};
 use tslg_worker::external::{ProgramRun, ProgramSettings, Programs};
 
@@ -304,7 +305,7 @@ impl CampaignTests for TabulatedTests {
 /// ([`ScenarioCase::adaptive_tests`]) resolved stage by stage from the
 /// table, as it is from workers' reports.
 pub fn adaptive_campaign(
-    case: &dyn ScenarioCase,
+    case: &dyn CampaignSampler,
     library: &[u8],
     table: &ProgramTable,
     (epsilon, settings): (f64, AdaptiveSettings),

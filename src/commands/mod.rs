@@ -19,4 +19,5 @@ pub mod progress;
 pub mod remote;
 pub mod reproduce;
 pub mod validate;
+pub mod validate_method;
 pub mod worker;

@@ -14,11 +14,11 @@
 //! ε-greedy split makes the curve a lattice; docs/statistics.md).
 
 use crate::commands::held_out::{self, ProgramTable, TabulatedTests};
+use crate::commands::validate_method::ValidateMethod;
 use rayon::prelude::*;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::sync::Arc;
-use tslg_method::adaptive::AdaptiveSettings;
 use tslg_method::campaign::{answer, run_campaign_tests_watched, AnswerContext, CampaignResult};
 use tslg_method::cases::open_case;
 use tslg_method::estimator::{default_n_min, Decision, Interval, StoppingRule};
@@ -71,7 +71,7 @@ pub struct ValidateArgs {
     /// β), adaptive-lattice (searching a fine grid's coarser lattice;
     /// docs/adaptive-design.md, "Fine grids"), adaptive-lattice-guarded
     /// (the lattice search under the guard). Writes methods.csv.
-    #[arg(long, value_delimiter = ',', value_enum, default_values_t = [ValidateMethod::Plain])]
+    #[arg(long, value_delimiter = ',', value_parser = ValidateMethod::parser(), default_values_t = [ValidateMethod::PLAIN])]
     pub methods: Vec<ValidateMethod>,
     /// The intervals to compare (comma-separated): wald (valid at the
     /// stop), anytime (a confidence sequence, valid at every n). Each row
@@ -135,84 +135,6 @@ pub struct ValidateArgs {
     /// tested with the library of the case's first surrogate; repeatable.
     #[arg(long, value_name = "SPEC")]
     pub vut: Vec<String>,
-}
-
-/// A way of running a pairing's campaigns.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum ValidateMethod {
-    /// A library campaign.
-    Plain,
-    /// A library campaign with the outside guard.
-    Guarded,
-    /// An adaptive campaign.
-    Adaptive,
-    /// An adaptive campaign with the outside guard: it explores until the
-    /// bound on the failure mass outside its support is within β.
-    AdaptiveGuarded,
-    /// An adaptive campaign whose search walks a fine grid's coarser
-    /// lattice (highway-exit's paper grid: its coarse grid) and puts whole
-    /// blocks in its support (docs/adaptive-design.md, "Fine grids").
-    AdaptiveLattice,
-    /// The lattice search under the outside guard.
-    AdaptiveLatticeGuarded,
-}
-
-impl ValidateMethod {
-    fn name(self) -> &'static str {
-        match self {
-            ValidateMethod::Plain => "plain",
-            ValidateMethod::Guarded => "guarded",
-            ValidateMethod::Adaptive => "adaptive",
-            ValidateMethod::AdaptiveGuarded => "adaptive-guarded",
-            ValidateMethod::AdaptiveLattice => "adaptive-lattice",
-            ValidateMethod::AdaptiveLatticeGuarded => "adaptive-lattice-guarded",
-        }
-    }
-
-    /// The settings of its adaptive campaigns, with estimation stages of
-    /// `stage_tests` and the search width they imply.
-    fn settings(self, stage_tests: u64) -> AdaptiveSettings {
-        AdaptiveSettings {
-            stage_tests,
-            search_width: AdaptiveSettings::fleet_search_width(stage_tests),
-            lattice: matches!(
-                self,
-                ValidateMethod::AdaptiveLattice | ValidateMethod::AdaptiveLatticeGuarded
-            ),
-            ..AdaptiveSettings::default()
-        }
-    }
-
-    /// Whether its campaigns are adaptive.
-    fn adaptive(self) -> bool {
-        matches!(
-            self,
-            ValidateMethod::Adaptive
-                | ValidateMethod::AdaptiveGuarded
-                | ValidateMethod::AdaptiveLattice
-                | ValidateMethod::AdaptiveLatticeGuarded
-        )
-    }
-
-    /// The same method without the guard.
-    fn unguarded(self) -> Self {
-        match self {
-            ValidateMethod::Guarded => ValidateMethod::Plain,
-            ValidateMethod::AdaptiveGuarded => ValidateMethod::Adaptive,
-            ValidateMethod::AdaptiveLatticeGuarded => ValidateMethod::AdaptiveLattice,
-            other => other,
-        }
-    }
-
-    /// Whether it stops under the outside guard whatever the vehicle.
-    fn guarded(self) -> bool {
-        matches!(
-            self,
-            ValidateMethod::Guarded
-                | ValidateMethod::AdaptiveGuarded
-                | ValidateMethod::AdaptiveLatticeGuarded
-        )
-    }
 }
 
 /// One configuration: a case, a library's surrogate, a vehicle and a rule.
@@ -588,30 +510,32 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
             Some(t) => t.name.clone(),
             None => crate::inputs::vehicle_name(&vut, case_name),
         };
-        let mut variants = Vec::new();
-        if args.methods.contains(&ValidateMethod::Plain) {
-            variants.push((ValidateMethod::Plain, args.epsilon, case.default_outside()));
-        }
-        if args.guard || args.methods.contains(&ValidateMethod::Guarded) {
-            // The allocation switches to exploring once the library stratum
-            // is known, so the guard needs no large ε (docs/statistics.md).
-            variants.push((ValidateMethod::Guarded, args.epsilon, OutsideSpread::Ndd));
-        }
-        for adaptive in [
-            ValidateMethod::Adaptive,
-            ValidateMethod::AdaptiveGuarded,
-            ValidateMethod::AdaptiveLattice,
-            ValidateMethod::AdaptiveLatticeGuarded,
-        ] {
-            if args.methods.contains(&adaptive) {
-                variants.push((adaptive, args.epsilon, case.default_outside()));
-            }
-        }
+        // `--guard` asks for the guarded library campaign too. Its
+        // allocation switches to exploring once the library stratum is
+        // known, so the guard needs no large ε (docs/statistics.md); it
+        // spreads ε by the exposure.
+        let guarded_library = ValidateMethod {
+            guarded: true,
+            ..ValidateMethod::PLAIN
+        };
+        let variants: Vec<(ValidateMethod, f64, OutsideSpread)> = ValidateMethod::all()
+            .into_iter()
+            .filter(|m| args.methods.contains(m) || (args.guard && *m == guarded_library))
+            .map(|m| {
+                let outside = if m == guarded_library {
+                    OutsideSpread::Ndd
+                } else {
+                    case.default_outside()
+                };
+                (m, args.epsilon, outside)
+            })
+            .collect();
         // A noisy vehicle's campaigns run under the guard unless told not
         // to, as the service runs them: its plain and guarded variants are
         // then one campaign, run once under the unguarded one's name.
         let noisy =
             tslg_method::noise::spec_is_noisy(&vut) || table.as_ref().is_some_and(|t| t.noisy());
+        let mut variants = variants;
         if noisy {
             let asked: Vec<ValidateMethod> = variants.iter().map(|v| v.0).collect();
             variants.retain(|v| !asked.contains(&v.0.unguarded()) || v.0.unguarded() == v.0);
@@ -641,7 +565,7 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
                     {
                         continue;
                     }
-                    let guard_outside = method.guarded()
+                    let guard_outside = method.guarded
                         || tslg_method::noise::guards_by_default(noisy, interval == Interval::Wald);
                     let rule = StoppingRule {
                         beta: args.beta,
@@ -655,9 +579,10 @@ fn setups(case_name: &str, args: &ValidateArgs) -> anyhow::Result<Vec<Setup>> {
                     rule.validate()?;
                     // A plain campaign gets the spread a campaign of this
                     // rule gets by default (ndd for an anytime interval).
-                    let outside = match method {
-                        ValidateMethod::Plain => default_outside(case.default_outside(), &rule),
-                        _ => outside,
+                    let outside = if method == ValidateMethod::PLAIN {
+                        default_outside(case.default_outside(), &rule)
+                    } else {
+                        outside
                     };
                     setups.push(Setup {
                         method,
@@ -885,7 +810,7 @@ fn cells(row: &Row) -> Vec<String> {
         format!("{:.3}", row.coverage(|r| r.guarded_covers(row.truth))),
         format!("{:+.3} ± {:.3}", bias, se),
         flag,
-        row.method.name().into(),
+        row.method.name(),
         row.rule.interval.name().into(),
         row.coverage_every_n()
             .map_or("-".into(), |c| format!("{c:.3}")),
@@ -953,7 +878,7 @@ fn method_cells(row: &Row) -> [String; 13] {
         row.exposure.clone(),
         row.surrogate.into(),
         row.vut.clone(),
-        row.method.name().into(),
+        row.method.name(),
         row.runs.len().to_string(),
         format!("{:.4}", row.answer_coverage()),
         row.tests_quantile(0.5).to_string(),

@@ -5,6 +5,7 @@
 mod support;
 
 mod architecture;
+mod method_home;
 mod module_graph;
 
 mod browser_dashboard;

@@ -4,16 +4,16 @@
 
 use std::collections::HashMap;
 use std::sync::Arc;
-use tslg_api::{CampaignPlan, Method};
+use tslg_api::CampaignPlan;
 use tslg_client::{wire, CallError, Client};
 use tslg_method::cases::open_case;
 use tslg_method::cases::user;
 use tslg_method::external::ProgramHost;
 use tslg_method::progress::Progress;
-use tslg_method::registry::{BuildRequest, CampaignTests, ScenarioCase};
+use tslg_method::registry::{BuildRequest, CampaignTests, CaseIdentity, ScenarioCase};
 
 /// Refuses a case whose exposure is not the coordinator's.
-fn same_exposure(case: &dyn ScenarioCase, plan: &CampaignPlan) -> anyhow::Result<()> {
+fn same_exposure(case: &dyn CaseIdentity, plan: &CampaignPlan) -> anyhow::Result<()> {
     let fingerprint = case.exposure_fingerprint();
     anyhow::ensure!(
         fingerprint == plan.exposure_fingerprint,
@@ -51,7 +51,10 @@ impl PreparedCampaign {
         same_exposure(case.as_ref(), plan)?;
         let outside = wire::outside_spread(plan.outside);
         let split = wire::split(plan.split);
-        let tests = if plan.method == Method::Enumerate {
+        // The worker's copy of the campaign's tests: the one place here a
+        // method's sampler is chosen (an adaptive campaign's leases list
+        // theirs; its draws from the library serve the checks).
+        let tests = if plan.method.enumerates_cells() {
             // A library build's surrogate runs.
             case.enumeration(&plan.vut)?
         } else {
@@ -167,18 +170,19 @@ impl Cache {
             return Ok(p.clone());
         }
         let plan = client.plan(campaign).await?;
-        let library = match (plan.method, plan.library_id) {
-            (Method::Library | Method::Adaptive, Some(id)) => Some(self.library(client, id).await?),
-            (Method::Library | Method::Adaptive, None) => {
-                return Err(PrepareError::Unusable(
-                    "library campaign without a library".into(),
-                ))
+        let library = match (plan.method.uses_library(), plan.library_id) {
+            (true, Some(id)) => Some(self.library(client, id).await?),
+            (true, None) => {
+                return Err(PrepareError::Unusable(format!(
+                    "{} campaign without a library",
+                    plan.method
+                )))
             }
-            (Method::Ndd | Method::Enumerate | Method::Build, _) => None,
+            (false, _) => None,
         };
         let host = self.host.clone();
         let prepared = tokio::task::spawn_blocking(move || {
-            if plan.method == Method::Build {
+            if plan.method.runs_whole() {
                 return WholeBuild::new(&plan, host).map(|b| Prepared::Build(Arc::new(b)));
             }
             PreparedCampaign::new(&plan, library.as_deref().map(Vec::as_slice))

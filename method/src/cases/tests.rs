@@ -4,7 +4,7 @@ use crate::cases::carfollow::PolicySolver;
 use crate::cases::cutin::{CutIn, CutInPreset};
 use crate::exact::event_cells;
 use crate::library::{Library, SearchMethod};
-use crate::registry::{BuildRequest, LibrarySearch};
+use crate::registry::{BuildRequest, LibraryBuilder, LibrarySearch};
 use crate::sampling::{OutsideSpread, Split};
 use serde_json::json;
 
@@ -242,7 +242,7 @@ fn the_car_following_case_learns_a_policy_file_and_replays_reported_accidents() 
 
 #[test]
 fn the_coordinators_replay_gives_every_tests_outcome_and_nothing_for_programs() {
-    let library = |case: &dyn ScenarioCase, surrogate: &str| {
+    let library = |case: &dyn LibraryBuilder, surrogate: &str| {
         case.build_library(
             &json!({ "model": surrogate }),
             &BuildRequest {

@@ -3,14 +3,14 @@
 //! paper-code preset gets exactly the plain IDM's answer (no accident
 //! there depends on the free-road term), and should be told once.
 
-use super::ScenarioCase;
+use super::ExactAnswers;
 
 /// Whether `vut`'s parameters that differ from its model's defaults on
 /// `case` leave its exact `P(A)` (`exact`, already enumerated) unchanged to
 /// the bit; `None` when it sets none (or is a program), or the defaults'
 /// `P(A)` cannot be enumerated.
 pub fn parameters_inert(
-    case: &dyn ScenarioCase,
+    case: &dyn ExactAnswers,
     vut: &serde_json::Value,
     exact: f64,
 ) -> Option<bool> {

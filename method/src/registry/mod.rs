@@ -22,5 +22,7 @@ pub use campaign_tests::{CampaignTests, PlannedTest, TestOutcome};
 pub use error::{CaseError, ExposureSource};
 pub use inert::parameters_inert;
 pub use picture::PictureMap;
-pub use scenario_case::{CampaignSampler, CaseViews, ExactAnswers, LibraryBuilder, ScenarioCase};
+pub use scenario_case::{
+    CampaignSampler, CaseIdentity, CaseViews, ExactAnswers, LibraryBuilder, ScenarioCase,
+};
 pub use stages::{AdaptiveProgress, AdaptiveRun, AdaptiveStages};

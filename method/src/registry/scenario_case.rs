@@ -1,9 +1,10 @@
 //! A case opened for a service: everything the coordinator, the worker and
 //! the command line need, without knowing which case it is. The interface
-//! is split by who calls it:
+//! is split by who calls it, and a caller takes the part it uses (trait
+//! upcasting turns an `&dyn ScenarioCase` into any of them):
 //!
-//! - [`ScenarioCase`]: what the case is (its name, preset, exposure,
-//!   descriptor) and the vehicles it runs, which every caller needs;
+//! - [`CaseIdentity`]: what the case is (its name, preset, exposure,
+//!   descriptor) and the vehicles it runs, which every part builds on;
 //! - [`LibraryBuilder`]: building and reading libraries (the coordinator's
 //!   builds, `tslg library`, a worker's whole build);
 //! - [`CampaignSampler`]: a campaign's tests, their draws and weights (the
@@ -14,9 +15,11 @@
 //! - [`CaseViews`]: a scenario's parameters, a library's picture, an
 //!   OpenSCENARIO file (the dashboard, event export).
 //!
-//! A case implements all five (the last two and the enumeration have
-//! defaults that say the case has none), so a new sequential case
-//! implements what it needs: identity, vehicles, libraries and sampling.
+//! [`ScenarioCase`] is all five, for what holds a whole case (an opened
+//! campaign, a worker's prepared one). A case implements the five (the
+//! last two and the enumeration have defaults that say the case has none),
+//! so a new sequential case implements what it needs: identity, vehicles,
+//! libraries and sampling; it is a `ScenarioCase` by the blanket impl.
 
 use super::build::{BuildRequest, BuiltLibrary, LibrarySummary};
 use super::campaign_tests::CampaignTests;
@@ -33,10 +36,13 @@ use crate::sampling::{OutsideSpread, Split};
 use std::collections::HashMap;
 use std::sync::Arc;
 
+/// A whole case: every part of the interface.
+pub trait ScenarioCase: LibraryBuilder + CampaignSampler + ExactAnswers + CaseViews {}
+
+impl<T: LibraryBuilder + CampaignSampler + ExactAnswers + CaseViews + ?Sized> ScenarioCase for T {}
+
 /// What a case is, and the vehicles it runs.
-pub trait ScenarioCase:
-    LibraryBuilder + CampaignSampler + ExactAnswers + CaseViews + Send + Sync
-{
+pub trait CaseIdentity: Send + Sync {
     /// `cut-in`, …
     fn name(&self) -> &'static str;
     /// The simulation preset in force.
@@ -71,7 +77,7 @@ pub trait ScenarioCase:
 }
 
 /// Building and reading a case's libraries.
-pub trait LibraryBuilder {
+pub trait LibraryBuilder: CaseIdentity {
     /// Checks a build request before it is queued.
     fn check_request(&self, request: &BuildRequest) -> Result<(), CaseError>;
     /// Builds a library of `surrogate` (CPU-heavy: call off any async runtime).
@@ -141,7 +147,7 @@ fn not_enumerated() -> CaseError {
 
 /// A campaign's tests: their draws and weights, and adaptive campaigns'
 /// stages.
-pub trait CampaignSampler {
+pub trait CampaignSampler: CaseIdentity {
     /// The tests of a campaign of `vut`: from the library `file` with
     /// exploration `epsilon` spread by `outside` and tests split by `split`
     /// (grid cases; car-following explores per decision), or from the NDD
@@ -183,7 +189,7 @@ pub trait CampaignSampler {
 }
 
 /// Exact answers by enumeration of the grid.
-pub trait ExactAnswers {
+pub trait ExactAnswers: CaseIdentity {
     /// The exact `P(A)` of a vehicle by enumeration of the grid.
     fn exact_event_probability(&self, vehicle: &serde_json::Value) -> Result<f64, CaseError>;
     /// `P(x)` of every grid cell, in cell order: with a vehicle's outcome
@@ -205,7 +211,7 @@ pub trait ExactAnswers {
 }
 
 /// What a case shows of its scenarios and libraries.
-pub trait CaseViews {
+pub trait CaseViews: CaseIdentity {
     /// The names of a scenario's parameters, in the order
     /// [`super::PlannedTest::scenario`] lists them (a grid case's axes);
     /// empty for sequential cases, whose scenarios are drawn while they

@@ -22,7 +22,7 @@ use tslg_api::{CampaignStatus, CreateLibrary, LibraryStatus, Method, Outside, Sp
 use tslg_method::estimator::StoppingRule;
 use tslg_method::external::ExternalVut;
 use tslg_method::prefix::SparseOutcome;
-use tslg_method::registry::{BuildRequest, ScenarioCase};
+use tslg_method::registry::{BuildRequest, LibraryBuilder};
 
 /// Whether a build request's surrogate is a program, which only workers
 /// can run.
@@ -50,7 +50,7 @@ pub enum Placement {
 /// worker.
 pub fn placement(
     place: crate::config::BuildPlace,
-    case: &dyn ScenarioCase,
+    case: &dyn LibraryBuilder,
     request: &BuildRequest,
     surrogate: &serde_json::Value,
 ) -> Result<Placement, String> {
@@ -82,7 +82,7 @@ pub fn placement(
 /// Checks that a program surrogate's build can run on workers: a grid case
 /// and exhaustive search (the search the cells' runs make; multistart with
 /// a program runs offline, `tslg library build --case-file`).
-pub fn check(case: &dyn ScenarioCase, request: &BuildRequest) -> Result<(), String> {
+pub fn check(case: &dyn LibraryBuilder, request: &BuildRequest) -> Result<(), String> {
     if !case.descriptor().is_grid() {
         return Err(format!(
             "a library of case {} is learned from a built-in surrogate; programs drive its \
@@ -108,7 +108,7 @@ pub fn check(case: &dyn ScenarioCase, request: &BuildRequest) -> Result<(), Stri
 pub async fn start(
     state: &AppState,
     library: &LibraryRow,
-    case: Arc<dyn ScenarioCase>,
+    case: Arc<dyn LibraryBuilder>,
     surrogate: &serde_json::Value,
 ) -> Result<CampaignRow, ServiceError> {
     let spec = surrogate.clone();
@@ -199,7 +199,7 @@ pub async fn finish(state: &AppState, campaign_id: i64) -> Result<(), ServiceErr
         .await?;
     let Some(id) = campaign
         .library_id
-        .filter(|_| matches!(campaign.method, Method::Enumerate | Method::Build))
+        .filter(|_| campaign.method.builds_library())
     else {
         return Ok(());
     };
@@ -221,7 +221,7 @@ pub async fn finish(state: &AppState, campaign_id: i64) -> Result<(), ServiceErr
         );
         return mark_failed(state, id, reason).await;
     }
-    if campaign.method == Method::Build {
+    if campaign.method.runs_whole() {
         // Its upload recorded the library with the campaign's end.
         return Ok(());
     }
@@ -301,7 +301,7 @@ pub async fn progress(
     let Some(campaign) = campaign_of(state, view.id).await? else {
         return Ok(());
     };
-    if campaign.method == Method::Build {
+    if campaign.method.runs_whole() {
         view.status_detail = Some(if state.workers.counts().0 == 0 {
             "waiting for a worker: the coordinator leases this build whole to one worker \
              (--library-builds workers)"

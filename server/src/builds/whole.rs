@@ -96,7 +96,7 @@ fn holder_of(
     let lease = fence::get_unless_flagged(conn, id, &upload.worker)?;
     fence::check_fence(&lease, &upload.worker, upload.attempt, upload.key.as_str())?;
     let campaign = campaigns::get(conn, lease.campaign_id)?;
-    if campaign.method != Method::Build {
+    if !campaign.method.runs_whole() {
         return Err(ServiceError::Conflict(format!(
             "lease {id} is of campaign {} of method {}: its results go to POST \
              /api/v1/leases/{id}/results",

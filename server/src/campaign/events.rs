@@ -12,16 +12,17 @@ use anyhow::Context;
 use std::collections::{BTreeMap, HashMap};
 use tslg_api::{CampaignEvent, EventPage, DEFAULT_EVENTS_PAGE, MAX_EVENTS_PAGE};
 use tslg_method::cases::open_case;
-use tslg_method::registry::ScenarioCase;
+use tslg_method::registry::CaseViews;
 
 async fn campaign(state: &AppState, id: i64) -> Result<CampaignRow, ServiceError> {
     Ok(state.db.read(move |conn| campaigns::get(conn, id)).await?)
 }
 
-fn case_of(row: &CampaignRow) -> Result<std::sync::Arc<dyn ScenarioCase>, ServiceError> {
-    open_case(&row.case_name, Some(&row.preset), &row.exposure_source())
+fn case_of(row: &CampaignRow) -> Result<std::sync::Arc<dyn CaseViews>, ServiceError> {
+    let case = open_case(&row.case_name, Some(&row.preset), &row.exposure_source())
         .with_context(|| format!("campaign {} cannot open its case", row.id))
-        .map_err(ServiceError::Internal)
+        .map_err(ServiceError::Internal)?;
+    Ok(case)
 }
 
 /// The page of campaign `id`'s events after test index `after` (from the

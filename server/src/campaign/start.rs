@@ -41,7 +41,8 @@ fn grid_cases() -> String {
 /// every number checked against the method's ranges; pure.
 pub fn rule_of(req: &CreateCampaign) -> Result<StoppingRule, ServiceError> {
     check_name("case", &req.case, 64)?;
-    if matches!(req.method, Method::Enumerate | Method::Build) {
+    let method = req.method.spec();
+    if !method.requestable {
         return Err(bad(format!(
             "method `{}` is the coordinator's own, for library builds on workers: POST \
              /api/v1/libraries starts one",
@@ -57,7 +58,7 @@ pub fn rule_of(req: &CreateCampaign) -> Result<StoppingRule, ServiceError> {
         confidence: req.confidence,
         n_min: req.n_min.unwrap_or_else(|| {
             default_n_min(
-                case.exploring_share(req.method == Method::Library, req.epsilon),
+                case.exploring_share(method.waits_for_explorers, req.epsilon),
                 req.max_tests,
             )
         }),
@@ -67,13 +68,13 @@ pub fn rule_of(req: &CreateCampaign) -> Result<StoppingRule, ServiceError> {
         interval: wire::interval(req.interval),
     };
     rule.validate().map_err(|e| bad(e.to_string()))?;
-    if guard_outside && req.method == Method::Ndd {
+    if guard_outside && !method.explores {
         return Err(bad(
             "guard_outside bounds the failure mass outside a library; an ndd campaign samples \
              every scenario by its exposure and has no outside to guard",
         ));
     }
-    if req.method == Method::Adaptive && !case.is_grid() {
+    if method.in_stages && !case.is_grid() {
         return Err(bad(format!(
             "method `adaptive` runs through the service on the grid cases ({}); a {} adaptive \
              campaign probes the vehicle from grid states, which workers cannot be leased yet: \
@@ -84,7 +85,7 @@ pub fn rule_of(req: &CreateCampaign) -> Result<StoppingRule, ServiceError> {
             req.case
         )));
     }
-    if req.adaptive_search.is_some() && req.method != Method::Adaptive {
+    if req.adaptive_search.is_some() && !method.in_stages {
         return Err(bad(format!(
             "adaptive_search chooses how an adaptive campaign searches around its failures; method \
              `{}` does not search: leave it out, or use method `adaptive`",
@@ -92,7 +93,7 @@ pub fn rule_of(req: &CreateCampaign) -> Result<StoppingRule, ServiceError> {
         )));
     }
     match req.stage_tests {
-        Some(_) if req.method != Method::Adaptive => {
+        Some(_) if !method.in_stages => {
             return Err(bad(format!(
                 "stage_tests sets the length of an adaptive campaign's estimation stages; \
                  method `{}` has no stages: leave it out, or use method `adaptive`",
@@ -107,7 +108,7 @@ pub fn rule_of(req: &CreateCampaign) -> Result<StoppingRule, ServiceError> {
         }
         _ => {}
     }
-    if req.paired_with.is_some() && !matches!(req.method, Method::Library | Method::Ndd) {
+    if req.paired_with.is_some() && !method.pairs {
         return Err(bad(format!(
             "paired_with runs methods `library` and `ndd`: an {} campaign's stages follow \
              one vehicle's failures, so two vehicles would not draw the same tests",
@@ -121,9 +122,7 @@ pub fn rule_of(req: &CreateCampaign) -> Result<StoppingRule, ServiceError> {
              guarded campaigns separately",
         ));
     }
-    if req.interval == IntervalKind::Anytime
-        && !(case.is_grid() && matches!(req.method, Method::Library | Method::Ndd))
-    {
+    if req.interval == IntervalKind::Anytime && !(case.is_grid() && method.anytime) {
         return Err(bad(format!(
             "interval `anytime` applies to the library and ndd campaigns of the grid cases ({}): {}",
             grid_cases(),
@@ -135,7 +134,7 @@ pub fn rule_of(req: &CreateCampaign) -> Result<StoppingRule, ServiceError> {
         )));
     }
     if req.interval == IntervalKind::Anytime
-        && req.method == Method::Library
+        && method.explores
         && req.split == Some(tslg_api::Split::Random)
     {
         return Err(bad(
@@ -165,21 +164,21 @@ async fn library_of(
     state: &AppState,
     req: &CreateCampaign,
 ) -> Result<Option<LibraryRow>, ServiceError> {
-    let library = match (req.method, req.library_id) {
-        (Method::Library | Method::Adaptive, None) => {
+    let library = match req.library_id {
+        None if req.method.uses_library() => {
             return Err(bad(format!(
                 "method `{}` needs a library_id",
                 req.method.as_str()
             )))
         }
-        (_, Some(id)) => Some(
+        None => None,
+        Some(id) => Some(
             state
                 .db
                 .read(move |conn| libraries::get(conn, id))
                 .await
                 .map_err(|_| bad(format!("library_id {id} does not name a library")))?,
         ),
-        (Method::Ndd | Method::Enumerate | Method::Build, None) => None,
     };
     if let Some(lib) = &library {
         if lib.case_name != req.case {
@@ -226,6 +225,9 @@ fn open(
         None => default_outside(case.default_outside(), rule),
     };
     let split = req.split.map_or(Split::default(), wire::split);
+    // The coordinator's copy of the campaign's tests: the one place a
+    // method's sampler is chosen (a build's tests come from its library's
+    // build, builds/on_workers.rs).
     let tests = match (req.method, file) {
         (Method::Adaptive, Some(file)) => Some(case.adaptive_tests(
             file,
@@ -275,8 +277,8 @@ pub async fn start(state: &AppState, req: CreateCampaign) -> Result<CampaignRow,
     let rule = rule_of(&req)?;
     // An adaptive campaign's stages keep the fleet that offers its vehicle
     // busy ([`stage_size`]), unless the request fixes their length.
-    let req = match (req.method, req.stage_tests) {
-        (Method::Adaptive, None) => {
+    let req = match (req.method.in_stages(), req.stage_tests) {
+        (true, None) => {
             let requires = requirement(&tslg_api::vehicle_spec(&req.vut), &req.case);
             let threads = state.workers.fleet().serving(requires.as_deref());
             CreateCampaign {
@@ -422,14 +424,14 @@ fn new_campaign(
         vehicle_noise: req.vehicle_noise && external,
         adaptive_search: req.adaptive_search.unwrap_or_default(),
         stage_tests: req.stage_tests.unwrap_or(stage_size::DEFAULT_STAGE_TESTS),
-        search_width: if req.method == Method::Adaptive {
+        search_width: if req.method.in_stages() {
             AdaptiveSettings::fleet_search_width(
                 req.stage_tests.unwrap_or(stage_size::DEFAULT_STAGE_TESTS),
             )
         } else {
             0
         },
-        first_stage: (req.method == Method::Adaptive).then(|| {
+        first_stage: req.method.in_stages().then(|| {
             (
                 0,
                 AdaptiveSettings::default()

@@ -5,11 +5,11 @@
 //! (`answer`, the interval the method says to report), the status and the
 //! warnings.
 
-use tslg_api::{CampaignStatus, CampaignView, Method};
+use tslg_api::{CampaignStatus, CampaignView};
 
 /// The verdict on `view`, from its answer, status and warnings.
 pub fn verdict(view: &CampaignView) -> String {
-    if matches!(view.method, Method::Enumerate | Method::Build) {
+    if view.method.builds_library() {
         return "a library build's surrogate runs: no failure rate to report".to_owned();
     }
     let confidence = format!("{:.0}%", 100.0 * view.confidence);

@@ -14,8 +14,8 @@ use crate::store::libraries::LibraryRow;
 use crate::store::pairs::{self, PairRow};
 use rusqlite::Connection;
 use tslg_api::{
-    AdaptiveView, AuditCounts, CampaignStatus, CampaignView, HistoryPoint, LibraryView, Method,
-    PairStop, PairView, PairedInterval, RunningStage,
+    AdaptiveView, AuditCounts, CampaignStatus, CampaignView, HistoryPoint, LibraryView, PairStop,
+    PairView, PairedInterval, RunningStage,
 };
 use tslg_method::campaign::CampaignResult;
 use tslg_method::estimator::{Decision, StoppingRule};
@@ -41,7 +41,7 @@ fn predicted_tests(rule: &StoppingRule, point: &HistoryPoint, row: &CampaignRow)
     // the switch on.
     let switches = fold.within_strata
         || (fold.strata.is_some() && row.interval() == tslg_method::estimator::Interval::Anytime)
-        || (row.method == Method::Adaptive && row.guard_outside);
+        || (row.method.in_stages() && row.guard_outside);
     let share = if switches {
         tslg_method::sampling::LATE_SHARE
     } else {
@@ -81,7 +81,7 @@ pub fn campaign_view(row: &CampaignRow) -> CampaignView {
         tslg_method::campaign::AnswerContext {
             guard_outside: row.guard_outside,
             noisy,
-            adaptive: row.method == Method::Adaptive,
+            adaptive: row.method.in_stages(),
         },
     );
     CampaignView {
@@ -146,7 +146,7 @@ pub fn campaign_view(row: &CampaignRow) -> CampaignView {
         // Set once the view is whole ([`live_view`]).
         verdict: String::new(),
         exact_probability: row.exact_probability,
-        adaptive: (row.method == Method::Adaptive).then(|| AdaptiveView {
+        adaptive: (row.method.in_stages()).then(|| AdaptiveView {
             library_tests: row.library_tests as u64,
             search_tests: row.search_tests as u64,
             stages: row.stages as u64,
@@ -171,9 +171,9 @@ pub fn campaign_view(row: &CampaignRow) -> CampaignView {
                     beta: row.beta,
                     guard_outside: row.guard_outside,
                     dialect: Dialect::Api,
-                    unexplored: row.method == Method::Library && row.epsilon == 0.0,
+                    unexplored: row.method.spec().waits_for_explorers && row.epsilon == 0.0,
                     uniform_spread: row.outside == tslg_api::Outside::Uniform,
-                    adaptive: row.method == Method::Adaptive,
+                    adaptive: row.method.in_stages(),
                     noisy,
                 },
             );

@@ -376,9 +376,10 @@ fn new_lease_size(
         next_index,
         resolved: campaign.indices.max(0) as u64,
         limit: lease_limit(campaign, frontier),
-        max_lease: match campaign.method {
-            tslg_api::Method::Library => LIBRARY_MAX_LEASE,
-            _ => MAX_LEASE,
+        max_lease: if campaign.method.folds_by_redrawing() {
+            LIBRARY_MAX_LEASE
+        } else {
+            MAX_LEASE
         },
     });
     size.min(budget_end.saturating_sub(next_index))

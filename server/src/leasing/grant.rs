@@ -9,7 +9,7 @@ use crate::leasing::claim as claiming;
 use crate::leasing::fence;
 use crate::state::AppState;
 use crate::store::campaigns;
-use tslg_api::{Lease, LeaseFence, LeaseKey, LeaseRequest, Method, TestCase};
+use tslg_api::{Lease, LeaseFence, LeaseKey, LeaseRequest, TestCase};
 
 /// Why a held lease request ended without a lease.
 pub enum Ended {
@@ -105,7 +105,7 @@ async fn make_lease(
     };
     // An adaptive campaign's tests are planned by the coordinator stage by
     // stage: every lease names its tests' cells and weights.
-    let tests = if req.include_tests || campaign.method == Method::Adaptive {
+    let tests = if req.include_tests || campaign.method.in_stages() {
         let tests = state.samplers.get(&state.db, &campaign).await?;
         let (from, to) = (row.resume_at as u64, row.end_index as u64);
         let list = tokio::task::spawn_blocking(move || {

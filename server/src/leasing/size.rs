@@ -35,7 +35,7 @@
 //! gives each about 13, not 256.
 
 use crate::store::campaign_row::CampaignRow;
-use tslg_api::Method;
+use tslg_api::{LeaseReach, Method};
 
 /// Most tests in a lease: far above what the time target gives a test of
 /// the fastest kernels (2 s on 2 threads at 40 ns a test is 10⁸), so the
@@ -125,9 +125,10 @@ pub fn lease_limit(row: &CampaignRow, frontier: Option<u64>) -> u64 {
         beta: rule.beta,
         // An adaptive campaign's row counts every index it resolved, its
         // estimate only the estimation tests' (valid and invalid).
-        resolved: match row.method {
-            Method::Adaptive => fold.estimator.tests() + fold.invalid,
-            _ => fold.indices,
+        resolved: if row.method.in_stages() {
+            fold.estimator.tests() + fold.invalid
+        } else {
+            fold.indices
         },
         tests: fold.estimator.tests(),
         events: fold.estimator.events(),
@@ -173,10 +174,10 @@ pub struct RunningStage {
 /// [`lease_limit`] of what a campaign's row says.
 pub fn limit(input: &LimitInput) -> u64 {
     let max = input.max_tests;
-    match input.method {
-        Method::Enumerate | Method::Build => return max,
-        Method::Adaptive => return stage_limit(input),
-        Method::Library | Method::Ndd => {}
+    match input.method.spec().lease_reach {
+        LeaseReach::All => return max,
+        LeaseReach::Stage => return stage_limit(input),
+        LeaseReach::Predicted => {}
     }
     let resolved = input.resolved;
     let wanted = match input.predicted() {

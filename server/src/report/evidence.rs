@@ -39,7 +39,6 @@ use crate::store::test_pairing_walks;
 use rusqlite::Connection;
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
-use tslg_api::Method;
 use tslg_api::NearMiss;
 use tslg_method::discordance::{worker_evidence, FLAG_AT};
 use tslg_method::prefix::SparseOutcome;
@@ -65,7 +64,7 @@ pub fn criticality_below(campaign: &CampaignRow) -> Option<f64> {
 fn weighed(campaign: &CampaignRow) -> bool {
     let external = serde_json::from_str::<serde_json::Value>(&campaign.vut)
         .is_ok_and(|vut| vut.get("external").is_some());
-    external && matches!(campaign.method, Method::Library | Method::Ndd)
+    external && campaign.method.draws_independently()
 }
 
 /// The criticalities of a report's tests from `new_from` on, rounded to
@@ -106,7 +105,7 @@ pub fn weigh(
     // A library campaign's tests give its cells; a fold without them (a
     // campaign read as stopped, running again since) leaves the walk for
     // the next.
-    if frontier <= walked_to || (campaign.method == Method::Library && tests.is_none()) {
+    if frontier <= walked_to || (campaign.method.uses_library() && tests.is_none()) {
         return Ok(None);
     }
     let mut walk: Walk = match stored {

@@ -75,7 +75,7 @@ fn take_back(conn: &Connection, id: i64, worker: &str) -> Result<bool, ServiceEr
         reports::delete_range(conn, id, from, to)?;
         leases::insert_redo(conn, id, from as u64, to as u64)?;
     }
-    if campaign.method == tslg_api::Method::Adaptive && campaign.indices > first {
+    if campaign.method.in_stages() && campaign.indices > first {
         // Later stages were planned from those results: they cannot be
         // planned again without running the campaign again.
         let detail = format!(

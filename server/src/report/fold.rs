@@ -21,7 +21,7 @@ use crate::store::prefix::{self, Charge};
 use crate::store::reports;
 use rusqlite::Connection;
 use std::sync::Arc;
-use tslg_api::{CampaignStatus, Method};
+use tslg_api::CampaignStatus;
 use tslg_method::anytime::outside_bound;
 use tslg_method::estimator::{Decision, Interval, StoppingRule};
 use tslg_method::outside::OutsideMass;
@@ -198,7 +198,7 @@ fn fold_charging(
     fresh: Option<&CheckedReport>,
     charge: &mut Option<Charge>,
 ) -> Result<Option<CampaignStatus>, ServiceError> {
-    if campaign.method == Method::Adaptive {
+    if campaign.method.in_stages() {
         // Resolving stages reads the campaign's row: charged first.
         if let Some(charge) = charge.take() {
             prefix::charge(conn, campaign.id, &charge)?;

@@ -16,7 +16,7 @@ use crate::report::tests_cache::SamplerCache;
 use crate::state::AppState;
 use crate::store::{audits, campaigns, leases};
 use std::sync::Arc;
-use tslg_api::{Method, ResultAck, ResultReport};
+use tslg_api::{ResultAck, ResultReport};
 use tslg_method::registry::CampaignTests;
 
 /// Replays a report may take on the async runtime, in expectation (the
@@ -150,7 +150,7 @@ async fn receive_in_parts(
             })
             .await?
     };
-    if campaign.method == Method::Build {
+    if campaign.method.runs_whole() {
         return Err(ServiceError::Conflict(format!(
             "lease {lease_id} is a library build: its worker uploads the library to POST \
              /api/v1/leases/{lease_id}/library"
@@ -204,7 +204,7 @@ async fn receive_in_parts(
     // report that failed may have resolved a stage it did not persist, so
     // the copy is rebuilt from what is stored.
     let (recorded, claimed) = recorded.inspect_err(|_| {
-        if campaign.method == Method::Adaptive {
+        if campaign.method.in_stages() {
             state.samplers.forget(campaign.id);
         }
     })?;
@@ -312,7 +312,7 @@ fn decide(
     let Some(tests) = tests.filter(|t| t.external().is_none()) else {
         return Ok(Decided::Declined);
     };
-    if lease.audit_id.is_some() || campaign.method == Method::Build || campaign.status.is_final() {
+    if lease.audit_id.is_some() || campaign.method.runs_whole() || campaign.status.is_final() {
         return Ok(Decided::Declined);
     }
     let new = checked.from.max(lease.resume_at as u64);
@@ -372,7 +372,7 @@ fn forget_adaptive(state: &AppState, lease_id: i64) {
             })
             .await;
         if let Ok(campaign) = campaign {
-            if campaign.method == Method::Adaptive {
+            if campaign.method.in_stages() {
                 samplers.forget(campaign.id);
             }
         }

@@ -28,7 +28,7 @@ use crate::store::reports::{self, NewReport};
 use crate::store::work_spans;
 use rusqlite::Connection;
 use std::sync::Arc;
-use tslg_api::{CampaignStatus, Method, ResultAck, ResultReport};
+use tslg_api::{CampaignStatus, ResultAck, ResultReport};
 use tslg_method::number::Num;
 use tslg_method::prefix::SparseOutcome;
 use tslg_method::registry::CampaignTests;
@@ -304,7 +304,7 @@ fn store_new_part(
             handed_again: lease.attempt > 1,
         },
     )?;
-    if campaign.method == Method::Adaptive {
+    if campaign.method.in_stages() {
         near_misses::insert(conn, campaign.id, &report.near_misses, new_from)?;
     }
     work_spans::insert(conn, lease, false, (new_from, checked.to))?;

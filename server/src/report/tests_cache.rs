@@ -10,7 +10,6 @@ use crate::store::{campaigns, leases, libraries};
 use anyhow::Context;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
-use tslg_api::Method;
 use tslg_method::adaptive::AdaptiveSettings;
 use tslg_method::cases::open_case;
 use tslg_method::registry::CampaignTests;
@@ -172,10 +171,10 @@ async fn fail_diverged(
 fn build(row: &CampaignRow, file: Option<&[u8]>) -> anyhow::Result<Arc<dyn CampaignTests>> {
     let case = open_case(&row.case_name, Some(&row.preset), &row.exposure_source())?;
     let vut: serde_json::Value = serde_json::from_str(&row.vut)?;
-    if row.method == Method::Enumerate {
+    if row.method.enumerates_cells() {
         return Ok(case.enumeration(&vut)?);
     }
-    if row.method == Method::Adaptive {
+    if row.method.in_stages() {
         let file = file.context("an adaptive campaign needs its library file")?;
         return Ok(case.adaptive_tests(
             file,

@@ -15,7 +15,7 @@ use axum::response::IntoResponse;
 use axum::Json;
 use tslg_api::{
     AdaptiveStages, CampaignList, CampaignPlan, CampaignTimeline, CampaignView, CreateCampaign,
-    History, Method, Problem,
+    History, Problem,
 };
 
 /// Starts a campaign. It runs as soon as its library is ready.
@@ -197,8 +197,8 @@ pub async fn plan(
         .db
         .read(move |conn| -> Result<_, ServiceError> {
             let row = campaigns::get(conn, id)?;
-            let library = match (row.method, row.library_id) {
-                (Method::Build, Some(library)) => {
+            let library = match row.library_id {
+                Some(library) if row.method.runs_whole() => {
                     Some(crate::store::libraries::get(conn, library)?)
                 }
                 _ => None,
@@ -232,7 +232,7 @@ pub async fn plan(
         split: row.split,
         seed: row.seed(),
         vut: serde_json::from_str(&row.vut).map_err(|e| ServiceError::Internal(e.into()))?,
-        near_miss: (row.method == Method::Adaptive)
+        near_miss: (row.method.in_stages())
             .then(|| tslg_method::adaptive::AdaptiveSettings::default().near_miss),
         criticality_below: crate::report::evidence::criticality_below(&row),
         user_case: user_case.map(|d| tslg_api::UserCaseDefinition {

@@ -111,14 +111,10 @@ pub struct CampaignRow {
     pub updated_at: String,
 }
 
-/// An adaptive campaign is stored as method 'library' with `adaptive = 1`
-/// (migrations/…14_adaptive.sql) and read as `adaptive`; a library build's
-/// enumeration as 'ndd' with `enumerate = 1` (…17_enumerate.sql), a
-/// build one worker runs whole as 'ndd' with `enumerate = 2`.
-pub const COLUMNS: &str = "id, case_name, preset, \
-    CASE WHEN adaptive = 1 THEN 'adaptive' WHEN enumerate = 1 THEN 'enumerate' \
-    WHEN enumerate = 2 THEN 'build' ELSE method END \
-    AS method, library_id, exposure_name, \
+/// The columns a campaign is read with, in [`from_row`]'s order. The
+/// method is its name (`tslg_api::Method::as_str`, one column since
+/// migrations/…37_method_column.sql).
+pub const COLUMNS: &str = "id, case_name, preset, method, library_id, exposure_name, \
     exposure_fingerprint, exposure_table, vut, requires, epsilon, outside, split, strata_epsilon, \
     beta, confidence, n_min, min_events, max_tests, seed, status, status_detail, next_index, indices, tests, events, invalid, s1, s2, \
     largest, guard_outside, outside_tests, outside_events, outside_s1, outside_upper, \
@@ -127,6 +123,22 @@ pub const COLUMNS: &str = "id, case_name, preset, \
     stage_start, stage_end, stage_kind, library_tests, search_tests, stages, support, paired_with, created_at, \
     updated_at, vehicle_noise, interval, sequence_low, sequence_high, explore_from, outside_s2, parameters_inert, \
     adaptive_search, stage_tests, search_width";
+
+/// The names of the methods `keep` keeps, as an SQL list (`('enumerate',
+/// 'build')`) for `method IN …`: queries ask the method's spec instead of
+/// naming methods. Never empty (`('')` matches no campaign).
+pub fn methods_where(keep: impl Fn(tslg_api::MethodSpec) -> bool) -> String {
+    let names: Vec<String> = Method::ALL
+        .into_iter()
+        .filter(|m| keep(m.spec()))
+        .map(|m| format!("'{}'", m.as_str()))
+        .collect();
+    if names.is_empty() {
+        "('')".into()
+    } else {
+        format!("({})", names.join(", "))
+    }
+}
 
 impl CampaignRow {
     pub fn seed(&self) -> u64 {
@@ -343,12 +355,12 @@ mod tests {
                     "INSERT INTO campaigns (case_name, preset, method, exposure_name, \
                      exposure_fingerprint, vut, epsilon, beta, confidence, n_min, min_events, \
                      max_tests, seed, status, next_index, requires, exposure_table, \
-                     strata_epsilon, cost_per_test, guard_outside, outside, split, adaptive, \
+                     strata_epsilon, cost_per_test, guard_outside, outside, split, \
                      stage_start, stage_end, stage_kind, exact_probability, outside_upper, \
                      status_detail, adaptive_search) \
-                     VALUES ('cut-in', 'paper-code', 'library', 'builtin', 'fp', \
+                     VALUES ('cut-in', 'paper-code', 'adaptive', 'builtin', 'fp', \
                      '{\"model\":\"idm\"}', 0.1, 0.05, 0.9, 100, 10, 1000000, 7, 'running', \
-                     300, 'py:cut-in:step', 'table', 0.1, 2.5e-7, 1, 'ndd', 'stratified', 1, 0, \
+                     300, 'py:cut-in:step', 'table', 0.1, 2.5e-7, 1, 'ndd', 'stratified', 0, \
                      4096, 'search', 9.3e-4, 1e-5, 'why', 'lattice')",
                 )?;
                 let text = format!("SELECT {COLUMNS} FROM campaigns");
@@ -367,5 +379,87 @@ mod tests {
             by_position.adaptive_search,
             tslg_api::AdaptiveSearch::Lattice
         );
+    }
+
+    /// A database of the release before, whose adaptive campaigns were
+    /// stored as 'library' with `adaptive = 1` and whose builds as 'ndd'
+    /// with `enumerate` 1 or 2, reads every campaign as the method it is
+    /// once the one-column migration ran, and then takes a method's name
+    /// the old CHECK refused.
+    #[test]
+    fn the_method_column_migration_keeps_every_campaign_s_method() {
+        let dir = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../migrations"));
+        let mut files: Vec<_> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| p.extension().is_some_and(|x| x == "sql"))
+            .collect();
+        files.sort();
+        let (before, after): (Vec<_>, Vec<_>) = files
+            .iter()
+            .partition(|p| p.file_name().unwrap().to_string_lossy().as_ref() < "20261207000037");
+        assert!(after[0].ends_with("20261207000037_method_column.sql"));
+        let conn = Connection::open_in_memory().unwrap();
+        conn.execute_batch("PRAGMA foreign_keys = ON").unwrap();
+        for file in &before {
+            conn.execute_batch(&std::fs::read_to_string(file).unwrap())
+                .unwrap();
+        }
+        let stored = [
+            ("library", 0, 0, Method::Library),
+            ("ndd", 0, 0, Method::Ndd),
+            ("library", 1, 0, Method::Adaptive),
+            ("ndd", 0, 1, Method::Enumerate),
+            ("ndd", 0, 2, Method::Build),
+        ];
+        for (method, adaptive, enumerate, _) in stored {
+            conn.execute(
+                "INSERT INTO campaigns (case_name, preset, method, exposure_name, \
+                 exposure_fingerprint, vut, epsilon, beta, confidence, n_min, min_events, \
+                 max_tests, seed, status, adaptive, enumerate) VALUES ('cut-in', 'paper-code', \
+                 ?, 'builtin', 'fp', '{}', 0.1, 0.2, 0.9, 100, 10, 1000, 7, 'running', ?, ?)",
+                rusqlite::params![method, adaptive, enumerate],
+            )
+            .unwrap();
+        }
+        for file in &after {
+            conn.execute_batch(&std::fs::read_to_string(file).unwrap())
+                .unwrap();
+        }
+        let text = format!("SELECT {COLUMNS} FROM campaigns ORDER BY id");
+        let rows: Vec<CampaignRow> = conn
+            .prepare(&text)
+            .unwrap()
+            .query_map([], from_row)
+            .unwrap()
+            .collect::<Result<_, _>>()
+            .unwrap();
+        let read: Vec<Method> = rows.iter().map(|r| r.method).collect();
+        assert_eq!(read, stored.map(|s| s.3));
+        // The builds are found by the spec's list, as the store asks.
+        let builds: i64 = conn
+            .query_row(
+                &format!(
+                    "SELECT COUNT(*) FROM campaigns WHERE method IN {}",
+                    methods_where(|m| m.builds.is_some())
+                ),
+                [],
+                |r| r.get(0),
+            )
+            .unwrap();
+        assert_eq!(builds, 2);
+        assert_eq!(methods_where(|_| false), "('')");
+        // No CHECK holds the names any more: a new method needs no
+        // migration (the service refuses a name it does not know on read).
+        conn.execute("UPDATE campaigns SET method = 'adaptive' WHERE id = 1", [])
+            .unwrap();
+        conn.execute("UPDATE campaigns SET method = 'lattice' WHERE id = 2", [])
+            .unwrap();
+        let unknown = conn.query_row(
+            &format!("SELECT {COLUMNS} FROM campaigns WHERE id = 2"),
+            [],
+            from_row,
+        );
+        assert!(unknown.is_err(), "an unknown method must not read as one");
     }
 }

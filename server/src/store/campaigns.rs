@@ -3,6 +3,7 @@
 pub use crate::store::campaign_row::{CampaignRow, COLUMNS};
 
 use crate::db::sql;
+use crate::store::campaign_row::methods_where;
 use crate::store::costs;
 use crate::store::error::StoreError;
 use crate::store::states::{CAMPAIGN_CANCELLED, CAMPAIGN_FAILED, CAMPAIGN_RUNNING};
@@ -53,22 +54,11 @@ pub fn insert(conn: &Connection, new: &NewCampaign) -> Result<CampaignRow, Store
         "INSERT INTO campaigns (case_name, preset, method, library_id, exposure_name, \
          exposure_fingerprint, exposure_table, vut, requires, epsilon, outside, beta, confidence, \
          n_min, min_events, max_tests, seed, status, guard_outside, exact_probability, split, \
-         adaptive, stage_start, stage_end, stage_kind, enumerate, cost_per_test, vehicle_noise, \
+         stage_start, stage_end, stage_kind, cost_per_test, vehicle_noise, \
          interval, outside_s2, parameters_inert, adaptive_search, stage_tests, search_width) \
-         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, 0, ?, ?, ?, ?) \
+         VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, 0, ?, ?, ?, ?) \
          RETURNING {COLUMNS}"
     );
-    let adaptive = new.method == Method::Adaptive;
-    let enumerate = match new.method {
-        Method::Enumerate => 1,
-        Method::Build => 2,
-        _ => 0,
-    };
-    let stored_method = match new.method {
-        Method::Adaptive => Method::Library,
-        Method::Enumerate | Method::Build => Method::Ndd,
-        other => other,
-    };
     let first_stage = new.first_stage.as_ref();
     // What its vehicle's tests cost in earlier campaigns: its first leases
     // are sized in seconds of work.
@@ -87,7 +77,7 @@ pub fn insert(conn: &Connection, new: &NewCampaign) -> Result<CampaignRow, Store
         params![
             new.case_name,
             new.preset,
-            stored_method.as_str(),
+            new.method.as_str(),
             new.library_id,
             new.exposure_name,
             new.exposure_fingerprint,
@@ -106,11 +96,9 @@ pub fn insert(conn: &Connection, new: &NewCampaign) -> Result<CampaignRow, Store
             new.rule.guard_outside,
             new.exact_probability,
             new.split.as_str(),
-            adaptive,
             first_stage.map(|s| s.0 as i64),
             first_stage.map(|s| s.1 as i64),
             first_stage.map(|s| s.2),
-            enumerate,
             cost,
             new.vehicle_noise,
             new.rule.interval.name(),
@@ -261,8 +249,9 @@ pub fn building_library(
     Ok(sql::optional(
         conn,
         &format!(
-            "SELECT {COLUMNS} FROM campaigns WHERE library_id = ? AND enumerate >= 1 \
-             ORDER BY id DESC LIMIT 1"
+            "SELECT {COLUMNS} FROM campaigns WHERE library_id = ? AND method IN {} \
+             ORDER BY id DESC LIMIT 1",
+            methods_where(|m| m.builds.is_some())
         ),
         [library],
     )?)

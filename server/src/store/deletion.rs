@@ -4,6 +4,7 @@
 //! campaign is cancelled first, a building library waits for its build.
 
 use crate::db::sql;
+use crate::store::campaign_row::methods_where;
 use crate::store::error::StoreError;
 use rusqlite::Connection;
 use tslg_api::LibraryStatus;
@@ -55,10 +56,7 @@ pub fn delete_campaign(conn: &Connection, id: i64) -> Result<Option<i64>, StoreE
             row.status.as_str()
         )));
     }
-    if matches!(
-        row.method,
-        tslg_api::Method::Enumerate | tslg_api::Method::Build
-    ) {
+    if row.method.builds_library() {
         if let Some(library) = row.library_id {
             return Err(StoreError::Conflict(format!(
                 "campaign {id} built library {library}: it goes with the library \
@@ -94,7 +92,10 @@ pub fn delete_library(conn: &Connection, id: i64) -> Result<(), StoreError> {
     }
     let users: Vec<(i64,)> = sql::all(
         conn,
-        "SELECT id FROM campaigns WHERE library_id = ? AND enumerate = 0 ORDER BY id",
+        &format!(
+            "SELECT id FROM campaigns WHERE library_id = ? AND method NOT IN {} ORDER BY id",
+            methods_where(|m| m.builds.is_some())
+        ),
         [id],
     )?;
     if !users.is_empty() {
@@ -107,7 +108,10 @@ pub fn delete_library(conn: &Connection, id: i64) -> Result<(), StoreError> {
     }
     let builds: Vec<(i64,)> = sql::all(
         conn,
-        "SELECT id FROM campaigns WHERE library_id = ? AND enumerate >= 1",
+        &format!(
+            "SELECT id FROM campaigns WHERE library_id = ? AND method IN {}",
+            methods_where(|m| m.builds.is_some())
+        ),
         [id],
     )?;
     for (campaign,) in builds {

@@ -5,6 +5,7 @@
 
 use crate::db::sql;
 use crate::store::audits;
+use crate::store::campaign_row::methods_where;
 use crate::store::campaign_row::CampaignRow;
 use crate::store::error::StoreError;
 pub use crate::store::states::LeaseState;
@@ -45,7 +46,7 @@ fn new_key() -> String {
 
 /// Which campaigns a worker may be leased: those whose program it offers
 /// and, when its lease lists its tests, none whose scenarios are drawn
-/// while a test runs and no whole library build (`enumerate = 2`).
+/// while a test runs and no whole library build (method `build`).
 #[derive(Debug, Clone)]
 pub struct Eligible {
     /// The cases whose scenarios are drawn while a test runs, as a JSON
@@ -59,12 +60,17 @@ impl Eligible {
     /// The SQL that keeps campaigns (`c`) this worker cannot take; binds
     /// the sequential cases (when listed) and the offered programs, in
     /// order ([`Self::values`]).
-    fn filters(&self) -> &'static str {
+    /// A whole build is the one test such a worker cannot list.
+    fn filters(&self) -> String {
+        let programs = "AND (c.requires IS NULL OR c.requires IN (SELECT value FROM json_each(?)))";
         if self.sequential.is_some() {
-            "AND c.case_name NOT IN (SELECT value FROM json_each(?)) AND c.enumerate != 2 \
-             AND (c.requires IS NULL OR c.requires IN (SELECT value FROM json_each(?)))"
+            format!(
+                "AND c.case_name NOT IN (SELECT value FROM json_each(?)) AND c.method NOT IN {} \
+                 {programs}",
+                methods_where(|m| m.builds == Some(tslg_api::BuildWork::Whole))
+            )
         } else {
-            "AND (c.requires IS NULL OR c.requires IN (SELECT value FROM json_each(?)))"
+            programs.into()
         }
     }
 

@@ -173,8 +173,8 @@ pub fn report(server: &ServerArgs, id: i64, out: &Path, points: usize) -> anyhow
         ))
     })?;
     // A coordinator older than the stages' list answers 404: no stages.
-    let stages = match view.method {
-        tslg_api::Method::Adaptive => block_on(async {
+    let stages = match view.method.in_stages() {
+        true => block_on(async {
             match client.stages(id).await {
                 Ok(stages) => Ok(Some(stages)),
                 Err(tslg_client::CallError::Refused { status: 404, .. }) => Ok(None),

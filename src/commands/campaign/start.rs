@@ -2,13 +2,15 @@
 //! coordinator, and watched with a progress bar until it stops, as a gate
 //! when `--fail-above` is given.
 
-use crate::args::{AdaptiveSearchArg, ExplorationArgs, OutsideArg, RuleArgs, ServerArgs};
+use crate::args::{
+    search_for_method, search_parser, ExplorationArgs, OutsideArg, RuleArgs, ServerArgs,
+};
 use crate::commands::gate;
 use crate::commands::progress::CampaignBars;
 use crate::commands::remote::{block_on, client, print_campaign as print, vehicle_json};
-use clap::{Args, ValueEnum};
+use clap::Args;
 use std::time::Duration;
-use tslg_api::{CreateCampaign, Method};
+use tslg_api::{AdaptiveSearch, CreateCampaign, Method};
 use tslg_client::Client;
 
 #[derive(Debug, Args)]
@@ -19,10 +21,9 @@ pub struct CampaignStartArgs {
     /// `cut-in`).
     #[arg(long)]
     pub case: Option<String>,
-    /// `library`, `adaptive` (stages that learn where this vehicle fails,
-    /// from the library; grid cases) or `ndd`.
-    #[arg(long, value_enum, default_value = "library")]
-    pub method: MethodArg,
+    /// How the campaign draws its tests (docs/statistics.md).
+    #[arg(long, value_parser = crate::args::method_parser(), default_value = "library")]
+    pub method: Method,
     /// The library (on the coordinator) to sample from; for `ndd`, the exposure to use.
     #[arg(long)]
     pub library_id: Option<i64>,
@@ -53,8 +54,8 @@ pub struct CampaignStartArgs {
     /// coarser lattice, whole blocks into the support: far cheaper on
     /// highway-exit's paper grid, blind to failures in sheets thinner than
     /// a block; docs/adaptive-design.md, "Fine grids").
-    #[arg(long, value_enum)]
-    pub adaptive_search: Option<AdaptiveSearchArg>,
+    #[arg(long, value_parser = search_parser())]
+    pub adaptive_search: Option<AdaptiveSearch>,
     /// Tests of an adaptive campaign's estimation stages (a multiple of 20,
     /// 20 to 100000); by default 100, or about five rounds of the live
     /// workers offering its vehicle when they have more than 20 threads.
@@ -81,21 +82,10 @@ pub struct CampaignStartArgs {
     pub json: bool,
 }
 
-#[derive(Debug, Clone, Copy, ValueEnum, PartialEq, Eq)]
-pub enum MethodArg {
-    Library,
-    Adaptive,
-    Ndd,
-}
-
 /// Runs `tslg campaign start`.
 pub fn start(args: &CampaignStartArgs) -> anyhow::Result<()> {
     let client = client(&args.server)?;
-    let method = match args.method {
-        MethodArg::Library => Method::Library,
-        MethodArg::Adaptive => Method::Adaptive,
-        MethodArg::Ndd => Method::Ndd,
-    };
+    let method = args.method;
     let vut = vehicle_json(&args.vut)?;
     let case = args.case.clone().unwrap_or_else(|| "cut-in".into());
     let mut request = CreateCampaign {
@@ -113,11 +103,7 @@ pub fn start(args: &CampaignStartArgs) -> anyhow::Result<()> {
         interval: tslg_client::wire::wire_interval(args.rule.interval),
         paired_with: args.paired_with.as_deref().map(vehicle_json).transpose()?,
         vehicle_noise: args.vehicle_noise,
-        adaptive_search: AdaptiveSearchArg::for_method(
-            args.adaptive_search,
-            args.method == MethodArg::Adaptive,
-        )?
-        .map(AdaptiveSearchArg::wire),
+        adaptive_search: search_for_method(args.adaptive_search, args.method)?,
         stage_tests: args.stage_tests,
         ..CreateCampaign::new(case, method, vut)
     };

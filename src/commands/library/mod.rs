@@ -18,7 +18,7 @@ use std::time::Instant;
 use tslg_method::cases::open_case;
 use tslg_method::library::{Library, LibrarySearch, SearchMethod};
 use tslg_method::registry::cells::grid_library_summary;
-use tslg_method::registry::{BuildRequest, ExposureSource, LibrarySummary, ScenarioCase};
+use tslg_method::registry::{BuildRequest, ExposureSource, LibraryBuilder, LibrarySummary};
 
 #[derive(Debug, Subcommand)]
 pub enum LibraryCommand {
@@ -141,7 +141,7 @@ fn build(args: &BuildArgs) -> anyhow::Result<()> {
 /// The grid library `file` with the recall of its multistart search against
 /// an exhaustive search of the same surrogate.
 fn with_recall(
-    case: &dyn ScenarioCase,
+    case: &dyn LibraryBuilder,
     surrogate: &serde_json::Value,
     request: &BuildRequest,
     file: &[u8],

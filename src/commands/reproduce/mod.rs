@@ -236,7 +236,8 @@ impl Vehicle<'_> {
             seed,
             // The documented numbers are those of stages of 100, whatever
             // the cores of the machine that reproduces them.
-            stage_tests: (method == Method::Adaptive)
+            stage_tests: method
+                .in_stages()
                 .then_some(tslg_method::adaptive::AdaptiveSettings::default().stage_tests),
             ..CreateCampaign::new(self.setting.case, method, self.vut.clone())
         }

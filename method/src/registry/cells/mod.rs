@@ -14,7 +14,7 @@ use crate::case::Case;
 use crate::descriptor::CaseDescriptor;
 use crate::library::{Library, SearchMethod};
 use crate::registry::vut::CampaignVehicle;
-use crate::registry::{BuildRequest, CaseError, LibrarySearch, ScenarioCase};
+use crate::registry::{BuildRequest, CaseError, CaseIdentity, LibrarySearch};
 use serde::de::DeserializeOwned;
 use serde::Serialize;
 use std::sync::Arc;
@@ -134,7 +134,7 @@ where
     }
 }
 
-impl<C> ScenarioCase for Registered<C>
+impl<C> CaseIdentity for Registered<C>
 where
     C: Case + Send + 'static,
     C::Vehicle: DeserializeOwned + Serialize + Send + Sync + 'static,

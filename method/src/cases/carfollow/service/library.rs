@@ -6,7 +6,7 @@ use crate::cases::carfollow::file::{PolicyHeader, PolicyLibraryFile, MEDIA_TYPE,
 use crate::library::ExposureRef;
 use crate::progress::Progress;
 use crate::registry::LibraryBuilder;
-use crate::registry::{BuildRequest, BuiltLibrary, CaseError, LibrarySummary, ScenarioCase};
+use crate::registry::{BuildRequest, BuiltLibrary, CaseError, CaseIdentity, LibrarySummary};
 
 use super::FollowScenarioCase;
 use crate::cases::carfollow::descriptor::NAME;

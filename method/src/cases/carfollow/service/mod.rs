@@ -17,7 +17,7 @@ use crate::external::NOMINAL_LENGTH;
 use crate::library::LibraryFileError;
 use crate::registry::picture::PictureMap;
 use crate::registry::vut::CampaignVehicle;
-use crate::registry::{BuildRequest, CaseError, LibrarySearch, ScenarioCase};
+use crate::registry::{BuildRequest, CaseError, CaseIdentity, LibrarySearch};
 use crate::registry::{CaseViews, ExactAnswers};
 use crate::sampling::OutsideSpread;
 use crate::vehicle::VehicleModel;
@@ -173,7 +173,7 @@ impl FollowScenarioCase {
     }
 }
 
-impl ScenarioCase for FollowScenarioCase {
+impl CaseIdentity for FollowScenarioCase {
     fn name(&self) -> &'static str {
         NAME
     }
