@@ -32,6 +32,40 @@ pub struct AdaptiveView {
     pub stage_tests: u64,
 }
 
+/// What a campaign's method means for a page (from [`crate::MethodSpec`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, ToSchema)]
+pub struct MethodFacts {
+    /// Whether it estimates a failure rate: false for a library build's
+    /// surrogate runs (methods `enumerate` and `build`).
+    pub estimates: bool,
+    /// Whether it draws from its library (an NDD campaign's `library_id`
+    /// names only the exposure it samples).
+    pub uses_library: bool,
+    /// Whether ε of its tests explore outside the library, drawn afresh
+    /// (the library method; an adaptive campaign's stages say their own).
+    pub splits_by_epsilon: bool,
+    /// What its estimate's tests are called (`tests`, `estimation tests`).
+    pub tests_axis: String,
+}
+
+impl Default for MethodFacts {
+    /// A coordinator from before the field: its campaigns estimate.
+    fn default() -> Self {
+        Method::Library.into()
+    }
+}
+
+impl From<Method> for MethodFacts {
+    fn from(method: Method) -> Self {
+        MethodFacts {
+            estimates: !method.builds_library(),
+            uses_library: method.uses_library(),
+            splits_by_epsilon: method.folds_by_redrawing(),
+            tests_axis: method.spec().tests_axis.to_owned(),
+        }
+    }
+}
+
 /// Estimation stages' length of campaigns before it was chosen.
 fn default_stage_tests() -> u64 {
     100
@@ -226,6 +260,10 @@ pub struct CampaignView {
     pub case: String,
     /// How tests are drawn.
     pub method: Method,
+    /// What its method means for a page, from the method's spec
+    /// ([`crate::MethodSpec`]), so a client need not know every method.
+    #[serde(default)]
+    pub method_facts: MethodFacts,
     /// The library sampled from (or whose exposure an NDD campaign samples).
     pub library_id: Option<i64>,
     /// The vehicle under test as given at creation (`{"model": …}` or `{"external": …}`).

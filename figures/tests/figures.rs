@@ -13,6 +13,7 @@ fn view() -> CampaignView {
         id: 7,
         case: "cut-in".into(),
         method: Method::Library,
+        method_facts: Method::Library.into(),
         library_id: Some(1),
         vut: serde_json::json!({"model": "idm"}),
         vut_label: "idm".into(),

@@ -102,14 +102,14 @@ function campaignRow(c) {
   const halfWidth = el('td', { 'data-field': 'relative_half_width', 'data-value': r ?? '' },
     build ? '–' : bar(progress(c), c.status === 'converged'),
     build ? '' : `${fmt.ratio(r)} → ${c.beta}`);
-  const tests = c.method === 'adaptive' ? c.indices : c.tests;
+  const tests = c.adaptive ? c.indices : c.tests;
   const kind = build ? `building library ${c.library_id}`
-    : c.method === 'adaptive' ? `adaptive, library ${c.library_id}` : `library ${c.library_id}`;
+    : c.adaptive ? `${c.method}, library ${c.library_id}` : `library ${c.library_id}`;
   const estimate = build ? null : c.estimate;
   return el('tr', { id: `campaign-${c.id}`, 'data-status': c.status },
     el('td', {}, el('a', { href: `/campaigns/${c.id}` }, c.id)),
     el('td', {}, c.case),
-    el('td', { 'data-field': 'method' }, c.method !== 'ndd' && c.library_id != null
+    el('td', { 'data-field': 'method' }, (c.method_facts.uses_library || build) && c.library_id != null
       ? el('a', { href: `/libraries/${c.library_id}` }, kind)
       : c.method),
     el('td', {}, fmt.vehicle(c.vut, c.vut_label)),
@@ -179,12 +179,13 @@ async function indexPage() {
 
 // Which of a campaign page's parts (`data-applies`) apply to `c`: a
 // library build's surrogate runs estimate nothing; only an adaptive
-// campaign has stages; only a campaign with an outside bound shows it.
+// campaign (one whose method runs in stages) has stages; only a campaign
+// with an outside bound shows it. The page asks the view, never a
+// method's name (docs/architecture.md, "Adding a campaign method").
 function applies(c) {
-  const build = c.method === 'enumerate' || c.method === 'build';
   return {
-    estimate: !build,
-    adaptive: c.method === 'adaptive',
+    estimate: c.method_facts.estimates,
+    adaptive: c.adaptive != null,
     outside: c.outside_upper != null || c.guarded_ci_high != null,
     answer: c.answer != null,
   };
@@ -199,8 +200,7 @@ async function campaignPage() {
   set('verdict', c.verdict ? `Verdict: ${c.verdict}` : '');
   set('status', c.status);
   document.getElementById('status').className = `status-${c.status}`;
-  set('tests-label', parts.adaptive ? 'estimation tests'
-    : parts.estimate ? 'tests' : 'surrogate runs');
+  set('tests-label', parts.estimate ? c.method_facts.tests_axis : 'surrogate runs');
   set('tests', fmt.count(c.tests), c.tests);
   set('indices', fmt.count(c.indices), c.indices);
   set('events', fmt.count(c.events), c.events);
@@ -218,7 +218,7 @@ async function campaignPage() {
   set('rate', fmt.rate(c.tests_per_second), c.tests_per_second);
   set('left', fmt.seconds(c.seconds_left), c.seconds_left);
   const a = c.adaptive;
-  const sampling = c.method === 'library' ? `, ε ${c.epsilon} (${c.split} split)`
+  const sampling = c.method_facts.splits_by_epsilon ? `, ε ${c.epsilon} (${c.split} split)`
     : a ? `: ${a.library_tests} library and ${a.search_tests} search tests, ${a.stages} stages`
       + (a.running ? `, running a ${a.running.kind} stage` : '') : '';
   const what = parts.estimate ? `${c.case}, ${c.method}${sampling}`

@@ -72,10 +72,30 @@ impl ValidateMethod {
         Self::all().into_iter().find(|m| m.name() == name)
     }
 
+    /// What it runs, in a line of `--help`.
+    pub fn help(self) -> String {
+        let mut help = match self.method {
+            Method::Library => "the library campaign".to_owned(),
+            other => format!("an {other} campaign"),
+        };
+        if self.method.in_stages() && self.search != AdaptiveSearch::Grid {
+            help += &format!(
+                ", its search on the {} (docs/adaptive-design.md, \"Fine grids\")",
+                self.search.as_str()
+            );
+        }
+        if self.guarded {
+            help += ", under the outside guard (docs/statistics.md)";
+        }
+        help
+    }
+
     /// `--methods`' parser: the names of [`Self::all`].
     pub fn parser() -> impl clap::builder::TypedValueParser<Value = Self> {
         use clap::builder::TypedValueParser as _;
-        let names: Vec<String> = Self::all().into_iter().map(Self::name).collect();
+        let names = Self::all()
+            .into_iter()
+            .map(|m| clap::builder::PossibleValue::new(m.name()).help(m.help()));
         clap::builder::PossibleValuesParser::new(names)
             .map(|name: String| Self::parse(&name).expect("the parser offers names of ways alone"))
     }

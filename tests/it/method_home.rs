@@ -76,6 +76,28 @@ impl<'ast> Visit<'ast> for Namer<'_> {
         syn::visit::visit_path(self, path);
     }
 
+    fn visit_use_path(&mut self, path: &'ast syn::UsePath) {
+        // `use tslg_api::Method::{Adaptive, Ndd}`, `Method::*`, `as`.
+        if path.ident == "Method" {
+            let mut trees = vec![&*path.tree];
+            while let Some(tree) = trees.pop() {
+                match tree {
+                    syn::UseTree::Name(n) => self.note(&n.ident.to_string()),
+                    syn::UseTree::Rename(r) => self.note(&r.ident.to_string()),
+                    syn::UseTree::Glob(_) => {
+                        let variants = self.variants;
+                        for v in variants {
+                            self.note(v);
+                        }
+                    }
+                    syn::UseTree::Group(g) => trees.extend(g.items.iter()),
+                    syn::UseTree::Path(_) => {}
+                }
+            }
+        }
+        syn::visit::visit_use_path(self, path);
+    }
+
     fn visit_macro(&mut self, mac: &'ast syn::Macro) {
         let tokens: Vec<String> = mac.tokens.clone().into_iter().flat_map(flatten).collect();
         for window in tokens.windows(4) {
@@ -220,4 +242,36 @@ fn the_method_check_sees_paths_and_macros_but_not_tests() {
     assert!(names("fn f(m: Method) -> bool { m.in_stages() }").is_empty());
     assert!(names("#[cfg(test)]\nmod tests { fn t() { let _ = Method::Ndd; } }").is_empty());
     assert!(names("fn f() { let _ = SearchMethod::Library; }").is_empty());
+    assert_eq!(
+        names("use tslg_api::Method::{Adaptive, Ndd as N};"),
+        ["Ndd", "Adaptive"]
+    );
+    assert_eq!(names("use tslg_api::Method::*;").len(), 3);
+}
+
+/// The dashboard's scripts compare no campaign's method to a name: they
+/// read the view's `method_facts` and `adaptive` stages, so a new method
+/// shows as what its spec says.
+#[test]
+fn the_dashboard_asks_a_campaign_s_facts_not_its_method_s_name() {
+    let assets = workspace().join("server/assets");
+    let mut found = Vec::new();
+    for entry in std::fs::read_dir(&assets).unwrap() {
+        let path = entry.unwrap().path();
+        let text = std::fs::read_to_string(&path).unwrap();
+        for (k, line) in text.lines().enumerate() {
+            let compact: String = line.split_whitespace().collect();
+            if ["method===", "method!==", "method==", "method!="]
+                .iter()
+                .any(|op| compact.contains(op))
+            {
+                found.push(format!("{}:{}: {}", path.display(), k + 1, line.trim()));
+            }
+        }
+    }
+    assert!(
+        found.is_empty(),
+        "method names compared in the dashboard:\n  {}",
+        found.join("\n  ")
+    );
 }

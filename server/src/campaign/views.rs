@@ -88,6 +88,7 @@ pub fn campaign_view(row: &CampaignRow) -> CampaignView {
         id: row.id,
         case: row.case_name.clone(),
         method: row.method,
+        method_facts: row.method.into(),
         library_id: row.library_id,
         vut_label: tslg_method::cases::vehicle_label(&vut, &row.case_name),
         vut,

@@ -12,6 +12,7 @@ pub use crate::store::states::LeaseState;
 use crate::store::states::{CAMPAIGN_RUNNING, LEASE_ACTIVE, LEASE_CANCELLED, LEASE_DONE};
 use const_format::formatcp;
 use rusqlite::{params, Connection};
+use std::sync::LazyLock;
 
 #[derive(Debug, Clone, serde::Deserialize)]
 pub struct LeaseRow {
@@ -61,16 +62,20 @@ impl Eligible {
     /// the sequential cases (when listed) and the offered programs, in
     /// order ([`Self::values`]).
     /// A whole build is the one test such a worker cannot list.
-    fn filters(&self) -> String {
-        let programs = "AND (c.requires IS NULL OR c.requires IN (SELECT value FROM json_each(?)))";
-        if self.sequential.is_some() {
+    fn filters(&self) -> &'static str {
+        static LISTED: LazyLock<String> = LazyLock::new(|| {
             format!(
                 "AND c.case_name NOT IN (SELECT value FROM json_each(?)) AND c.method NOT IN {} \
-                 {programs}",
+                 {PROGRAMS}",
                 methods_where(|m| m.builds == Some(tslg_api::BuildWork::Whole))
             )
+        });
+        const PROGRAMS: &str =
+            "AND (c.requires IS NULL OR c.requires IN (SELECT value FROM json_each(?)))";
+        if self.sequential.is_some() {
+            LISTED.as_str()
         } else {
-            programs.into()
+            PROGRAMS
         }
     }
 
