@@ -310,7 +310,8 @@ fn names(text: &str, module: &str) -> bool {
 /// folders in `server/src/lib.rs`'s layout), each of the method crate's
 /// modules in "The method crate" and `method/src/lib.rs`'s layout, each
 /// command module in "The command line", and each of `report/`'s files in
-/// its `mod.rs`. A module added without a line fails here.
+/// its `mod.rs`, each file of the API, client, figures and worker crates in
+/// "The smaller crates' files". A module added without a line fails here.
 #[test]
 fn every_module_is_in_the_layout_docs() {
     let mut missing = Vec::new();
@@ -366,6 +367,25 @@ fn every_module_is_in_the_layout_docs() {
         &layout_section("## The command line"),
         modules_in(&workspace().join("src/commands")),
     );
+    // The smaller crates, a row each (and the worker's `external/`).
+    let smaller = layout_section("### The smaller crates' files");
+    for (krate, dir) in [
+        ("tslg-api", "api/src"),
+        ("tslg-client", "client/src"),
+        ("tslg-figures", "figures/src"),
+        ("tslg-worker", "worker/src"),
+        ("tslg-worker", "worker/src/external"),
+    ] {
+        let row = smaller
+            .lines()
+            .find(|l| l.starts_with(&format!("| `{krate}`")))
+            .unwrap_or_else(|| panic!("no row of `{krate}` in The smaller crates' files"));
+        check(
+            &format!("architecture.md, The smaller crates' files, {krate}"),
+            row,
+            modules_in(&workspace().join(dir)),
+        );
+    }
     assert!(
         missing.is_empty(),
         "modules without a line in their layout docs:\n  {}",
