@@ -70,13 +70,20 @@ async fn anytime_campaigns_stop_on_their_sequence_and_survive_a_coordinator_rest
             Method::Library => {
                 let from = view.explore_from.expect("the library campaign switched");
                 // At the first test not yet leased when the library
-                // stratum was known: here the end of the first lease.
+                // stratum was known: the end of a lease, the first or a
+                // later one (when the first report lands depends on the
+                // machine's load: a CI run once switched at 40,000).
                 assert!(
-                    from < view.indices,
+                    from < view.indices && from % 20_000 == 0,
                     "switched at {from} of {}",
                     view.indices
                 );
-                assert!(view.outside_tests > view.tests / 3, "{view:?}");
+                // Before the switch ε of the tests explore, from it on the
+                // late share (the in-process replay below checks the
+                // count exactly; this bound reads it in numbers).
+                let late = tslg_method::sampling::LATE_SHARE;
+                let explored = 0.1 * from as f64 + 0.9 * late * (view.indices - from) as f64;
+                assert!(view.outside_tests as f64 >= explored - 1.0, "{view:?}");
                 in_process_switched("idm", request, Some(from))
             }
             _ => {
