@@ -176,7 +176,7 @@ impl OutsideArg {
 }
 
 /// `--method`: the methods a client may ask for, by their names
-/// ([`Method::requestable`]), each with what its answer rests on in the
+/// ([`Method::requestable`]), each with how it draws its tests in the
 /// help: a new method in `tslg_api::Method` is offered here without an
 /// edit.
 pub fn method_parser() -> impl clap::builder::TypedValueParser<Value = Method> {

@@ -7,8 +7,9 @@
 //! campaign method") lists.
 //!
 //! The database stores the name ([`Method::as_str`]) in one column,
-//! `campaigns.method` (migrations/…37_method_column.sql), read back with
-//! [`Method::parse`]: a new method needs no migration. The command line's
+//! `campaigns.method` (migrations/…37_method_column.sql), read back by its
+//! serde name, which is that name (a test holds them equal): a new method
+//! needs no migration. The command line's
 //! `--method` offers [`Method::requestable`], so it needs no edit either.
 
 use serde::{Deserialize, Serialize};
